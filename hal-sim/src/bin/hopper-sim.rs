@@ -1,0 +1,222 @@
+//! `hopper-sim`: run the vertical hopper in simulation, print parameter sets.
+//!
+//! ```text
+//! hopper-sim run [--params design|identified|PATH.toml] [--controller passive]
+//!                [--start-apex M] [--duration S] [--out DIR] [--json]
+//! hopper-sim params show design|identified
+//! ```
+
+use anyhow::{bail, Context, Result};
+use clap::{Parser, Subcommand};
+use hal_sim::controller::{self, CONTROLLER_NAMES};
+use hal_sim::params::Params;
+use hal_sim::params_toml;
+use hal_sim::run::{self, RunConfig};
+use std::path::PathBuf;
+
+#[derive(Parser)]
+#[command(
+    name = "hopper-sim",
+    version,
+    about = "Simulate the electrically actuated one-legged hopper (vertical model, thesis ch. 2.1)"
+)]
+struct Cli {
+    #[command(subcommand)]
+    cmd: Cmd,
+}
+
+#[derive(Subcommand)]
+enum Cmd {
+    /// Drop the hopper from a start apex and run a controller; prints a summary.
+    Run(RunArgs),
+    /// Parameter sets.
+    Params {
+        #[command(subcommand)]
+        cmd: ParamsCmd,
+    },
+}
+
+#[derive(Subcommand)]
+enum ParamsCmd {
+    /// Print a preset as TOML that `--params PATH.toml` accepts.
+    Show {
+        /// Preset: design | identified
+        preset: String,
+    },
+}
+
+#[derive(Parser)]
+struct RunArgs {
+    /// Plant parameters: a preset (design, identified) or a TOML file.
+    #[arg(long, default_value = "design")]
+    params: String,
+    /// Controller: passive.
+    #[arg(long, default_value = "passive")]
+    controller: String,
+    /// Start toe height above the ground (released at rest), m.
+    #[arg(long, default_value_t = 0.15, allow_negative_numbers = true)]
+    start_apex: f64,
+    /// Simulated time, s.
+    #[arg(long, default_value_t = 5.0, allow_negative_numbers = true)]
+    duration: f64,
+    /// Control rate, Hz.
+    #[arg(long, default_value_t = 10_000.0)]
+    control_hz: f64,
+    /// Trajectory sample rate for the CSV and plot, Hz.
+    #[arg(long, default_value_t = 1000.0)]
+    sample_hz: f64,
+    /// Directory for trajectory.csv and hop.png (created if missing).
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Print exactly one JSON object (the summary) on stdout.
+    #[arg(long)]
+    json: bool,
+}
+
+fn main() {
+    let cli = Cli::parse();
+    let result = match cli.cmd {
+        Cmd::Run(args) => cmd_run(args),
+        Cmd::Params {
+            cmd: ParamsCmd::Show { preset },
+        } => cmd_params_show(&preset),
+    };
+    if let Err(e) = result {
+        eprintln!("hopper-sim: error: {e:#}");
+        std::process::exit(2);
+    }
+}
+
+fn cmd_params_show(preset: &str) -> Result<()> {
+    let Some(p) = Params::preset(preset) else {
+        bail!(
+            "unknown preset `{preset}`: expected one of {:?}",
+            Params::PRESET_NAMES
+        );
+    };
+    print!("{}", params_toml::to_toml(&p, preset));
+    Ok(())
+}
+
+fn cmd_run(a: RunArgs) -> Result<()> {
+    // Validate everything before touching the file system.
+    let (params, params_name) = params_toml::load(&a.params).map_err(anyhow::Error::msg)?;
+    let Some(mut ctl) = controller::by_name(&a.controller) else {
+        bail!(
+            "unknown controller `{}`: expected one of {CONTROLLER_NAMES:?}",
+            a.controller
+        );
+    };
+    if !(a.control_hz.is_finite() && a.control_hz > 0.0) {
+        bail!(
+            "--control-hz {} must be a positive number of Hz",
+            a.control_hz
+        );
+    }
+    if !(a.sample_hz.is_finite() && a.sample_hz > 0.0) {
+        bail!(
+            "--sample-hz {} must be a positive number of Hz",
+            a.sample_hz
+        );
+    }
+    let cfg = RunConfig {
+        params,
+        start_apex_m: a.start_apex,
+        duration_s: a.duration,
+        control_dt_s: 1.0 / a.control_hz,
+        sample_dt_s: if a.out.is_some() {
+            1.0 / a.sample_hz
+        } else {
+            0.0
+        },
+    };
+    cfg.validate().map_err(anyhow::Error::msg)?;
+    let result = run::run(&cfg, &params_name, ctl.as_mut()).map_err(anyhow::Error::msg)?;
+    let s = &result.summary;
+
+    let mut written = Vec::new();
+    if let Some(dir) = &a.out {
+        std::fs::create_dir_all(dir)
+            .with_context(|| format!("cannot create output directory {}", dir.display()))?;
+        let csv_path = dir.join("trajectory.csv");
+        let mut f = std::io::BufWriter::new(
+            std::fs::File::create(&csv_path)
+                .with_context(|| format!("cannot create {}", csv_path.display()))?,
+        );
+        run::write_csv(&result.samples, &mut f)
+            .with_context(|| format!("cannot write {}", csv_path.display()))?;
+        std::io::Write::flush(&mut f)
+            .with_context(|| format!("cannot write {}", csv_path.display()))?;
+        written.push(csv_path);
+        let png = dir.join("hop.png");
+        let title = format!(
+            "{} hopping, {} parameters, start apex {:.3} m",
+            s.controller, s.params, s.start_apex_m
+        );
+        hal_sim::plot::hop_plot(&result.samples, &title, &png).map_err(anyhow::Error::msg)?;
+        written.push(png);
+    }
+
+    if a.json {
+        println!("{}", serde_json::to_string(s)?);
+        return Ok(());
+    }
+    let l = &s.ledger;
+    let fmt_opt = |v: Option<f64>, unit: &str, scale: f64| match v {
+        Some(x) => format!("{:.4} {unit}", x * scale),
+        None => "-".to_string(),
+    };
+    println!(
+        "hopper-sim: {} controller, {} parameters, released from {:.3} m, {:.2} s simulated",
+        s.controller, s.params, s.start_apex_m, s.duration_s
+    );
+    let apexes: Vec<String> = s
+        .apex_heights_m
+        .iter()
+        .take(12)
+        .map(|h| format!("{:.4}", h))
+        .collect();
+    let more = if s.apex_heights_m.len() > 12 {
+        " ..."
+    } else {
+        ""
+    };
+    println!("  hops (stances)     {}", s.hops);
+    println!(
+        "  apex heights [m]   {}{more}",
+        if apexes.is_empty() {
+            "-".into()
+        } else {
+            apexes.join(" ")
+        }
+    );
+    println!(
+        "  steady apex        {}",
+        fmt_opt(s.steady_apex_m, "m", 1.0)
+    );
+    println!(
+        "  mean stance time   {}",
+        fmt_opt(s.stance_time_s, "ms", 1000.0)
+    );
+    println!("  hopping stopped at {}", fmt_opt(s.stopped_at_s, "s", 1.0));
+    println!(
+        "  energy [J]         start {:.3}, end {:.3}; motor work {:+.3}, friction {:.3}, damping {:.3},",
+        s.initial_energy_j, s.final_energy_j, l.motor_work_j, l.friction_j, l.damping_j
+    );
+    println!(
+        "                     touchdown {:.3}, liftoff {:.3}, stop impacts {:.3}, settling {:.3}; residual {:.2e}",
+        l.touchdown_loss_j, l.liftoff_loss_j, l.stop_impact_loss_j, l.settle_loss_j, s.energy_residual_j
+    );
+    println!(
+        "  motor              peak speed {:.0} rad/s ({:.0}% of no-load {:.0} rad/s), peak current {:.1} A, peak stroke {:.1} mm",
+        s.peak_motor_speed_rad_s,
+        100.0 * s.peak_motor_speed_rad_s / s.no_load_speed_rad_s,
+        s.no_load_speed_rad_s,
+        s.peak_current_a,
+        s.peak_stroke_m * 1000.0
+    );
+    for p in &written {
+        println!("  wrote {}", p.display());
+    }
+    Ok(())
+}

@@ -1,0 +1,378 @@
+//! Physical parameters of the vertical hopper and its actuator, the thesis's
+//! named parameter sets, and validation.
+//!
+//! Every field is in SI units, named with its unit. One table, [`FIELDS`],
+//! describes each field (unit, meaning, allowed range, accessor): validation,
+//! the TOML printer and the TOML reader all use it, so they cannot drift apart.
+
+use core::fmt;
+
+/// Parameters of the plant (thesis Table 2.1 and section 4.5, MODEL.md).
+///
+/// Coordinates: `z` body height (`z = leg_length_m` at touchdown), `p` nut
+/// displacement, positive down (compressing the spring), `0 ..= stroke_m`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Params {
+    /// Sprung (body) mass `M`, kg.
+    pub body_mass_kg: f64,
+    /// Unsprung mass `m_u` (lower leg and toe), kg.
+    pub unsprung_mass_kg: f64,
+    /// Sliding mass `m_s` (ball nut plus a share of the spring), kg.
+    pub nut_mass_kg: f64,
+    /// Rotor + screw moment of inertia `J`, kg m^2.
+    pub rotor_inertia_kg_m2: f64,
+    /// Ball-screw lead, metres of nut travel per motor revolution.
+    pub screw_lead_m: f64,
+    /// Leg spring stiffness `k`, N/m.
+    pub spring_stiffness_n_per_m: f64,
+    /// Viscous spring damping `c`, N s/m.
+    pub spring_damping_ns_per_m: f64,
+    /// Spring preload `delta0` with the nut at `p = 0` and the leg fully
+    /// extended, m (MODEL.md: the thesis's `s0 - l0` read as a compression).
+    pub spring_preload_m: f64,
+    /// Leg free length `l0`: body coordinate at touchdown, m.
+    pub leg_length_m: f64,
+    /// Motor + ball-screw efficiency `eta` (the nut sees `eta tau / r`).
+    pub efficiency: f64,
+    /// Planarizer dry friction `F_fp` on the body, both phases, N.
+    pub planarizer_friction_n: f64,
+    /// Leg sliding dry friction `F_fs`, stance only, N.
+    pub leg_friction_n: f64,
+    /// Ball-screw stroke between the mechanical stops, m (`0 <= p <= stroke`).
+    pub stroke_m: f64,
+    /// Gravitational acceleration, m/s^2.
+    pub gravity_mps2: f64,
+    /// Motor torque constant (= back-EMF constant in SI), N m/A.
+    pub torque_constant_nm_per_a: f64,
+    /// Motor winding resistance, ohm.
+    pub winding_resistance_ohm: f64,
+    /// Servo-amplifier supply voltage, V.
+    pub supply_voltage_v: f64,
+    /// Servo-amplifier current limit, A.
+    pub current_limit_a: f64,
+}
+
+/// Torque constant chosen so that the thesis's DC-motor plant gain
+/// `A = k_m / J_e = 110` (eq 4.3, eq 4.13's worked numbers) holds with
+/// Table 2.1's `J = 2.7e-4 kg m^2`: `k_m = 110 * 2.7e-4`.
+const KT_NM_PER_A: f64 = 110.0 * 2.7e-4;
+
+impl Params {
+    /// The "design" set: thesis Table 2.1 (vertical hopper simulation).
+    ///
+    /// The motor is the 80 W Maxon class of section 3.1: stall torque 2.0 N m
+    /// (Table 3.1) at 24 V sets the winding resistance
+    /// (`R = k_t V / tau_stall`); the amplifier limit gives the 1.0 N m of
+    /// Table 2.1. The thesis gives no preload; 5 mm keeps the nut seated on
+    /// its upper stop when the motor is off.
+    pub const fn design() -> Self {
+        Params {
+            body_mass_kg: 9.0,
+            unsprung_mass_kg: 0.6,
+            nut_mass_kg: 0.25,
+            rotor_inertia_kg_m2: 2.7e-4,
+            screw_lead_m: 0.005,
+            spring_stiffness_n_per_m: 11_000.0,
+            spring_damping_ns_per_m: 0.0,
+            spring_preload_m: 0.005,
+            leg_length_m: 0.61,
+            efficiency: 0.9,
+            planarizer_friction_n: 5.0,
+            leg_friction_n: 5.0,
+            stroke_m: 0.05,
+            gravity_mps2: 9.81,
+            torque_constant_nm_per_a: KT_NM_PER_A,
+            winding_resistance_ohm: KT_NM_PER_A * 24.0 / 2.0,
+            supply_voltage_v: 24.0,
+            current_limit_a: 1.0 / KT_NM_PER_A,
+        }
+    }
+
+    /// The "identified" set: thesis section 4.5 (eqs 4.19-4.20). Planarizer
+    /// friction 13 N, total stance friction 28 N (so leg sliding 15 N), nut
+    /// mass 300 g, and the effective stance torque 0.62 N m expressed as the
+    /// amplifier current limit.
+    pub const fn identified() -> Self {
+        let d = Self::design();
+        Params {
+            planarizer_friction_n: 13.0,
+            leg_friction_n: 15.0,
+            nut_mass_kg: 0.30,
+            current_limit_a: 0.62 / KT_NM_PER_A,
+            ..d
+        }
+    }
+
+    /// Look a named preset up: `"design"` or `"identified"`.
+    pub fn preset(name: &str) -> Option<Self> {
+        match name {
+            "design" => Some(Self::design()),
+            "identified" => Some(Self::identified()),
+            _ => None,
+        }
+    }
+
+    /// Names of the presets [`Params::preset`] accepts.
+    pub const PRESET_NAMES: [&'static str; 2] = ["design", "identified"];
+
+    /// Screw transmission `r = lead / (2 pi)`, m/rad (`theta = p / r`, eq 2.4).
+    pub fn screw_m_per_rad(&self) -> f64 {
+        self.screw_lead_m / (2.0 * core::f64::consts::PI)
+    }
+
+    /// Maximum motor torque the amplifier can produce at standstill, N m.
+    pub fn max_torque_nm(&self) -> f64 {
+        let stall_a = self.supply_voltage_v / self.winding_resistance_ohm;
+        self.torque_constant_nm_per_a * self.current_limit_a.min(stall_a)
+    }
+
+    /// Motor no-load speed `V / k_e`, rad/s.
+    pub fn no_load_speed_rad_s(&self) -> f64 {
+        self.supply_voltage_v / self.torque_constant_nm_per_a
+    }
+
+    /// Check every field against its documented range.
+    pub fn validate(&self) -> Result<(), ParamError> {
+        for f in FIELDS.iter() {
+            let v = (f.get)(self);
+            if !v.is_finite() || v < f.min || v > f.max {
+                return Err(ParamError {
+                    field: f.name,
+                    value: v,
+                    min: f.min,
+                    max: f.max,
+                    unit: f.unit,
+                });
+            }
+        }
+        Ok(())
+    }
+}
+
+impl Default for Params {
+    fn default() -> Self {
+        Self::design()
+    }
+}
+
+/// A parameter outside its allowed range: names the field, the value and the
+/// range.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ParamError {
+    /// Field name as in TOML.
+    pub field: &'static str,
+    /// The offending value.
+    pub value: f64,
+    /// Smallest allowed value.
+    pub min: f64,
+    /// Largest allowed value.
+    pub max: f64,
+    /// Unit of the field.
+    pub unit: &'static str,
+}
+
+impl fmt::Display for ParamError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(
+            f,
+            "parameter `{}` = {} is out of range: allowed {} ..= {} {}",
+            self.field, self.value, self.min, self.max, self.unit
+        )
+    }
+}
+
+/// Description of one parameter field.
+#[derive(Clone, Copy)]
+pub struct FieldSpec {
+    /// Field name (TOML key).
+    pub name: &'static str,
+    /// Unit, as printed in comments.
+    pub unit: &'static str,
+    /// What it is, and where it comes from.
+    pub doc: &'static str,
+    /// Smallest allowed value (inclusive).
+    pub min: f64,
+    /// Largest allowed value (inclusive).
+    pub max: f64,
+    /// Read the field.
+    pub get: fn(&Params) -> f64,
+    /// Write the field.
+    pub set: fn(&mut Params, f64),
+}
+
+macro_rules! field {
+    ($name:ident, $unit:expr, $doc:expr, $min:expr, $max:expr) => {
+        FieldSpec {
+            name: stringify!($name),
+            unit: $unit,
+            doc: $doc,
+            min: $min,
+            max: $max,
+            get: |p| p.$name,
+            set: |p, v| p.$name = v,
+        }
+    };
+}
+
+/// Every parameter field, in TOML order.
+pub const FIELDS: [FieldSpec; 18] = [
+    field!(body_mass_kg, "kg", "sprung (body) mass M", 0.1, 1000.0),
+    field!(
+        unsprung_mass_kg,
+        "kg",
+        "unsprung mass m_u (lower leg, toe)",
+        0.0,
+        100.0
+    ),
+    field!(
+        nut_mass_kg,
+        "kg",
+        "sliding mass m_s (ball nut + share of spring)",
+        0.0,
+        100.0
+    ),
+    field!(
+        rotor_inertia_kg_m2,
+        "kg m^2",
+        "rotor + screw inertia J",
+        1e-7,
+        1.0
+    ),
+    field!(screw_lead_m, "m/rev", "ball-screw lead", 1e-4, 0.1),
+    field!(
+        spring_stiffness_n_per_m,
+        "N/m",
+        "leg spring stiffness k",
+        10.0,
+        1e7
+    ),
+    field!(
+        spring_damping_ns_per_m,
+        "N s/m",
+        "viscous spring damping c",
+        0.0,
+        1e4
+    ),
+    field!(
+        spring_preload_m,
+        "m",
+        "spring preload delta0 (nut at p = 0, leg extended)",
+        0.0,
+        0.5
+    ),
+    field!(
+        leg_length_m,
+        "m",
+        "leg free length l0 (body height at touchdown)",
+        0.05,
+        5.0
+    ),
+    field!(
+        efficiency,
+        "1",
+        "motor + ball-screw efficiency eta",
+        0.05,
+        1.0
+    ),
+    field!(
+        planarizer_friction_n,
+        "N",
+        "planarizer dry friction F_fp (both phases)",
+        0.0,
+        1e4
+    ),
+    field!(
+        leg_friction_n,
+        "N",
+        "leg sliding dry friction F_fs (stance only)",
+        0.0,
+        1e4
+    ),
+    field!(
+        stroke_m,
+        "m",
+        "ball-screw stroke between the mechanical stops",
+        1e-3,
+        0.5
+    ),
+    field!(
+        gravity_mps2,
+        "m/s^2",
+        "gravitational acceleration",
+        0.1,
+        100.0
+    ),
+    field!(
+        torque_constant_nm_per_a,
+        "N m/A",
+        "motor torque constant (= back-EMF constant)",
+        1e-4,
+        10.0
+    ),
+    field!(
+        winding_resistance_ohm,
+        "ohm",
+        "motor winding resistance",
+        1e-3,
+        100.0
+    ),
+    field!(
+        supply_voltage_v,
+        "V",
+        "amplifier supply voltage",
+        1.0,
+        1000.0
+    ),
+    field!(current_limit_a, "A", "amplifier current limit", 0.0, 1000.0),
+];
+
+/// Look a field up by its TOML name.
+pub fn field(name: &str) -> Option<&'static FieldSpec> {
+    FIELDS.iter().find(|f| f.name == name)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn presets_are_valid_and_match_the_thesis() {
+        let d = Params::design();
+        d.validate().unwrap();
+        assert!((d.max_torque_nm() - 1.0).abs() < 1e-12);
+        // MODEL.md: J / r^2 is about 426 kg.
+        let r = d.screw_m_per_rad();
+        assert!((r - 7.96e-4).abs() < 1e-6);
+        let reflected = d.rotor_inertia_kg_m2 / (r * r);
+        assert!((reflected - 426.0).abs() < 1.0, "{reflected}");
+        let i = Params::identified();
+        i.validate().unwrap();
+        assert!((i.max_torque_nm() - 0.62).abs() < 1e-12);
+        assert_eq!(i.planarizer_friction_n + i.leg_friction_n, 28.0);
+    }
+
+    #[test]
+    fn validation_names_field_value_and_range() {
+        let mut p = Params::design();
+        p.body_mass_kg = -1.0;
+        let e = p.validate().unwrap_err();
+        assert_eq!(e.field, "body_mass_kg");
+        assert_eq!(e.value, -1.0);
+        let msg = std::format!("{e}");
+        assert!(msg.contains("body_mass_kg") && msg.contains("-1") && msg.contains("0.1"));
+        p = Params::design();
+        p.efficiency = f64::NAN;
+        assert_eq!(p.validate().unwrap_err().field, "efficiency");
+    }
+
+    #[test]
+    fn field_table_round_trips_every_field() {
+        let mut p = Params::design();
+        for (i, f) in FIELDS.iter().enumerate() {
+            (f.set)(&mut p, i as f64 + 0.5);
+        }
+        for (i, f) in FIELDS.iter().enumerate() {
+            assert_eq!((f.get)(&p), i as f64 + 0.5, "{}", f.name);
+        }
+    }
+}

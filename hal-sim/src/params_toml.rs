@@ -1,0 +1,224 @@
+//! Parameter sets as TOML: the printer `hopper-sim params show` uses and the
+//! reader behind `--params PATH.toml`.
+//!
+//! A file may start from a preset (`base = "identified"`) and override any
+//! field; without `base` every field must be given. Unknown keys, non-numeric
+//! values and out-of-range values are errors that name the file, line and
+//! field.
+
+use crate::params::{field, Params, FIELDS};
+use std::fmt::Write as _;
+use std::path::Path;
+
+/// A parameter file could not be used.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ParamsFileError {
+    /// Where: `file:line` (or just the file).
+    pub location: String,
+    /// What went wrong.
+    pub message: String,
+}
+
+impl std::fmt::Display for ParamsFileError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}: {}", self.location, self.message)
+    }
+}
+
+impl std::error::Error for ParamsFileError {}
+
+/// Render a parameter set as commented TOML that [`from_toml_str`] reads back.
+pub fn to_toml(params: &Params, title: &str) -> String {
+    let mut out = String::new();
+    let _ = writeln!(out, "# Vertical hopper parameters: {title}");
+    let _ = writeln!(
+        out,
+        "# SI units throughout; each line gives the unit and the allowed range."
+    );
+    let _ = writeln!(
+        out,
+        "# Optionally start from a preset and override only some fields:\n# base = \"design\"   # or \"identified\""
+    );
+    for f in FIELDS.iter() {
+        let _ = writeln!(
+            out,
+            "\n# {} [{}], allowed {} ..= {}",
+            f.doc, f.unit, f.min, f.max
+        );
+        let _ = writeln!(out, "{} = {:?}", f.name, (f.get)(params));
+    }
+    out
+}
+
+fn line_of(text: &str, offset: usize) -> usize {
+    text[..offset.min(text.len())].matches('\n').count() + 1
+}
+
+/// Parse a parameter file's text. `origin` names it in errors.
+pub fn from_toml_str(text: &str, origin: &str) -> Result<Params, ParamsFileError> {
+    let err = |line: Option<usize>, message: String| ParamsFileError {
+        location: match line {
+            Some(l) => format!("{origin}:{l}"),
+            None => origin.to_string(),
+        },
+        message,
+    };
+    let table: toml::Spanned<toml::Table> = toml::from_str(text).map_err(|e| {
+        let line = e.span().map(|s| line_of(text, s.start));
+        err(line, format!("malformed TOML: {}", e.message()))
+    })?;
+    // Spans per key: re-parse keys as spanned values.
+    let spanned: std::collections::BTreeMap<String, toml::Spanned<toml::Value>> =
+        toml::from_str(text).map_err(|e| err(None, format!("malformed TOML: {}", e.message())))?;
+    let line_for = |key: &str| spanned.get(key).map(|v| line_of(text, v.span().start));
+
+    let table = table.into_inner();
+    let params = match table.get("base") {
+        None => None,
+        Some(toml::Value::String(name)) => Some(Params::preset(name).ok_or_else(|| {
+            err(
+                line_for("base"),
+                format!(
+                    "unknown preset `base = \"{name}\"`: expected one of {:?}",
+                    Params::PRESET_NAMES
+                ),
+            )
+        })?),
+        Some(other) => {
+            return Err(err(
+                line_for("base"),
+                format!("`base` must be a preset name string, got {other}"),
+            ))
+        }
+    };
+    let mut seen = Vec::new();
+    let mut p = params.unwrap_or_default();
+    let has_base = table.contains_key("base");
+    for (key, value) in table.iter() {
+        if key == "base" {
+            continue;
+        }
+        let spec = field(key).ok_or_else(|| {
+            err(
+                line_for(key),
+                format!("unknown parameter `{key}` (see `hopper-sim params show design` for the fields)"),
+            )
+        })?;
+        let v = match value {
+            toml::Value::Float(f) => *f,
+            toml::Value::Integer(i) => *i as f64,
+            other => {
+                return Err(err(
+                    line_for(key),
+                    format!(
+                        "parameter `{key}` must be a number in {}, got {other}",
+                        spec.unit
+                    ),
+                ))
+            }
+        };
+        if !v.is_finite() || v < spec.min || v > spec.max {
+            return Err(err(
+                line_for(key),
+                format!(
+                    "parameter `{key}` = {v} is out of range: allowed {} ..= {} {}",
+                    spec.min, spec.max, spec.unit
+                ),
+            ));
+        }
+        (spec.set)(&mut p, v);
+        seen.push(spec.name);
+    }
+    if !has_base {
+        if let Some(missing) = FIELDS.iter().find(|f| !seen.contains(&f.name)) {
+            return Err(err(
+                None,
+                format!(
+                    "missing parameter `{}` [{}] (give every field, or start from a preset with `base = \"design\"`)",
+                    missing.name, missing.unit
+                ),
+            ));
+        }
+    }
+    p.validate()
+        .map_err(|e| err(line_for(e.field), e.to_string()))?;
+    Ok(p)
+}
+
+/// Resolve `--params`: a preset name or a path to a TOML file.
+pub fn load(spec: &str) -> Result<(Params, String), ParamsFileError> {
+    if let Some(p) = Params::preset(spec) {
+        return Ok((p, spec.to_string()));
+    }
+    let path = Path::new(spec);
+    let looks_like_file = spec.ends_with(".toml") || spec.contains('/') || path.exists();
+    if !looks_like_file {
+        return Err(ParamsFileError {
+            location: "--params".into(),
+            message: format!(
+                "unknown preset `{spec}`: expected one of {:?} or a path to a .toml file",
+                Params::PRESET_NAMES
+            ),
+        });
+    }
+    let text = std::fs::read_to_string(path).map_err(|e| ParamsFileError {
+        location: spec.to_string(),
+        message: format!("cannot read parameter file: {e}"),
+    })?;
+    Ok((from_toml_str(&text, spec)?, spec.to_string()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn presets_round_trip_through_toml() {
+        for name in Params::PRESET_NAMES {
+            let p = Params::preset(name).unwrap();
+            let text = to_toml(&p, name);
+            assert!(text.contains("[kg]") && text.contains("[N/m]"));
+            assert_eq!(from_toml_str(&text, "x.toml").unwrap(), p);
+        }
+    }
+
+    #[test]
+    fn base_and_override() {
+        let p = from_toml_str("base = \"identified\"\nbody_mass_kg = 10\n", "f.toml").unwrap();
+        assert_eq!(p.body_mass_kg, 10.0);
+        assert_eq!(p.planarizer_friction_n, 13.0);
+    }
+
+    #[test]
+    fn errors_name_file_line_and_field() {
+        let e = from_toml_str("base = \"design\"\n\nbody_mass_kg = -3.0\n", "f.toml").unwrap_err();
+        assert_eq!(e.location, "f.toml:3");
+        assert!(
+            e.message.contains("body_mass_kg") && e.message.contains("-3"),
+            "{e}"
+        );
+
+        let e = from_toml_str("base = \"design\"\nbody_mas_kg = 3.0\n", "f.toml").unwrap_err();
+        assert_eq!(e.location, "f.toml:2");
+        assert!(e.message.contains("unknown parameter `body_mas_kg`"), "{e}");
+
+        let e = from_toml_str("base = \"design\"\nbody_mass_kg = [1\n", "f.toml").unwrap_err();
+        assert!(e.message.contains("malformed TOML"), "{e}");
+        assert!(e.location.starts_with("f.toml:"), "{e}");
+
+        let e = from_toml_str("body_mass_kg = 3.0\n", "f.toml").unwrap_err();
+        assert!(e.message.contains("missing parameter"), "{e}");
+
+        let e = from_toml_str("base = \"moon\"\n", "f.toml").unwrap_err();
+        assert!(e.message.contains("unknown preset"), "{e}");
+
+        let e = from_toml_str("base = \"design\"\nstroke_m = \"long\"\n", "f.toml").unwrap_err();
+        assert!(e.message.contains("must be a number"), "{e}");
+    }
+
+    #[test]
+    fn load_rejects_unknown_preset() {
+        let e = load("designn").unwrap_err();
+        assert!(e.message.contains("unknown preset `designn`"));
+    }
+}

@@ -1,0 +1,102 @@
+//! Trajectory plots (PNG), laid out like the thesis's Figure 4.7/4.8:
+//! hopping height, actuator position and total energy over time.
+
+use crate::run::Sample;
+use plotters::prelude::*;
+use std::path::Path;
+use std::sync::OnceLock;
+
+/// TrueType fonts tried in order (Debian's fonts-dejavu-core is on the
+/// project's machines; the others cover common distributions).
+const FONT_CANDIDATES: [&str; 4] = [
+    "/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf",
+    "/usr/share/fonts/dejavu/DejaVuSans.ttf",
+    "/usr/share/fonts/TTF/DejaVuSans.ttf",
+    "/usr/share/fonts/truetype/liberation/LiberationSans-Regular.ttf",
+];
+
+/// Load a system font once and register it as "sans-serif" for plotters'
+/// pure-Rust text renderer (no fontconfig needed at build time).
+fn ensure_font() -> Result<(), String> {
+    static FONT: OnceLock<Result<(), String>> = OnceLock::new();
+    FONT.get_or_init(|| {
+        let env = std::env::var("HOPPER_SIM_FONT").ok();
+        let candidates = env.iter().map(String::as_str).chain(FONT_CANDIDATES);
+        for path in candidates {
+            if let Ok(bytes) = std::fs::read(path) {
+                // Fonts live for the whole process; leaking one buffer is the
+                // 'static lifetime plotters asks for.
+                let bytes: &'static [u8] = Box::leak(bytes.into_boxed_slice());
+                if plotters::style::register_font("sans-serif", FontStyle::Normal, bytes).is_ok() {
+                    return Ok(());
+                }
+            }
+        }
+        Err(format!(
+            "no TrueType font for plot labels: install fonts-dejavu-core or set HOPPER_SIM_FONT to a .ttf file (tried {FONT_CANDIDATES:?})"
+        ))
+    })
+    .clone()
+}
+
+type Series<'a> = (&'a str, &'a str, fn(&Sample) -> f64);
+
+/// Draw toe height (cm), actuator position (mm) and total energy (J) against
+/// time into a PNG at `path`.
+pub fn hop_plot(samples: &[Sample], title: &str, path: &Path) -> Result<(), String> {
+    if samples.len() < 2 {
+        return Err("not enough samples to plot (is the sample rate 0?)".into());
+    }
+    ensure_font()?;
+    let panels: [Series; 3] = [
+        ("Hopping height", "toe height [cm]", |s| {
+            s.toe_height_m * 100.0
+        }),
+        ("Actuator position", "nut p [mm]", |s| s.p_m * 1000.0),
+        ("Total energy", "energy [J]", |s| s.energy_j),
+    ];
+    let root = BitMapBackend::new(path, (1000, 900)).into_drawing_area();
+    let res = (|| -> Result<(), Box<dyn std::error::Error>> {
+        root.fill(&WHITE)?;
+        let (head, body) = root.split_vertically(40);
+        head.titled(title, ("sans-serif", 22))?;
+        let t_end = samples.last().map(|s| s.t_s).unwrap_or(1.0);
+        for (area, (name, ylabel, get)) in body.split_evenly((3, 1)).iter().zip(panels) {
+            let (mut lo, mut hi) = samples
+                .iter()
+                .map(get)
+                .fold((f64::MAX, f64::MIN), |(a, b), v| (a.min(v), b.max(v)));
+            let pad = ((hi - lo) * 0.05).max(0.5);
+            lo -= pad;
+            hi += pad;
+            let mut chart = ChartBuilder::on(area)
+                .caption(name, ("sans-serif", 18))
+                .margin(8)
+                .x_label_area_size(36)
+                .y_label_area_size(70)
+                .build_cartesian_2d(0.0..t_end, lo..hi)?;
+            chart
+                .configure_mesh()
+                .x_desc("time [s]")
+                .y_desc(ylabel)
+                .light_line_style(WHITE.mix(0.0))
+                .draw()?;
+            chart
+                .draw_series(LineSeries::new(
+                    samples.iter().map(|s| (s.t_s, get(s))),
+                    BLUE.stroke_width(2),
+                ))?
+                .label(ylabel)
+                .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLUE.stroke_width(2)));
+            chart
+                .configure_series_labels()
+                .position(SeriesLabelPosition::UpperRight)
+                .background_style(WHITE.mix(0.8))
+                .border_style(BLACK)
+                .draw()?;
+        }
+        root.present()?;
+        Ok(())
+    })();
+    res.map_err(|e| format!("cannot draw plot {}: {e}", path.display()))
+}

@@ -1,0 +1,358 @@
+//! Scenario runner: a controller against the plant at a fixed control rate,
+//! with trajectory sampling and the per-run summary `hopper-sim` prints.
+
+use crate::controller::Controller;
+use crate::params::Params;
+use crate::plant::{Event, Ledger, Mode, Plant, PlantError};
+use serde::Serialize;
+
+/// Toe height bounds accepted for a start apex, m.
+pub const START_APEX_RANGE_M: (f64, f64) = (0.0, 2.0);
+
+/// Longest simulated duration a run accepts, s.
+pub const MAX_DURATION_S: f64 = 3600.0;
+
+/// A hopper counts as stopped when it stays on the ground at least this long
+/// after its last touchdown (several stance times), s.
+pub const STOPPED_AFTER_S: f64 = 0.5;
+
+/// What to run.
+#[derive(Clone, Debug)]
+pub struct RunConfig {
+    /// Plant parameters.
+    pub params: Params,
+    /// Initial toe height at rest, m.
+    pub start_apex_m: f64,
+    /// Simulated time, s.
+    pub duration_s: f64,
+    /// Control period, s (10 kHz default).
+    pub control_dt_s: f64,
+    /// Trajectory sample period, s (0 records nothing).
+    pub sample_dt_s: f64,
+}
+
+impl RunConfig {
+    /// Defaults: design parameters, 0.15 m drop, 5 s, 10 kHz control, 1 kHz samples.
+    pub fn new(params: Params) -> Self {
+        RunConfig {
+            params,
+            start_apex_m: 0.15,
+            duration_s: 5.0,
+            control_dt_s: 1e-4,
+            sample_dt_s: 1e-3,
+        }
+    }
+
+    /// Check the run settings, naming the bad one.
+    pub fn validate(&self) -> Result<(), String> {
+        self.params.validate().map_err(|e| e.to_string())?;
+        let (lo, hi) = START_APEX_RANGE_M;
+        if !(self.start_apex_m.is_finite() && self.start_apex_m > lo && self.start_apex_m <= hi) {
+            return Err(format!(
+                "start apex {} m is out of range: allowed > {lo} and <= {hi} m",
+                self.start_apex_m
+            ));
+        }
+        if !(self.duration_s.is_finite()
+            && self.duration_s > 0.0
+            && self.duration_s <= MAX_DURATION_S)
+        {
+            return Err(format!(
+                "duration {} s is out of range: allowed > 0 and <= {MAX_DURATION_S} s",
+                self.duration_s
+            ));
+        }
+        if !(self.control_dt_s.is_finite()
+            && self.control_dt_s >= 1e-6
+            && self.control_dt_s <= 0.01)
+        {
+            return Err(format!(
+                "control period {} s is out of range: allowed 1e-6 ..= 0.01 s",
+                self.control_dt_s
+            ));
+        }
+        if !(self.sample_dt_s.is_finite() && self.sample_dt_s >= 0.0) {
+            return Err(format!("sample period {} s must be >= 0", self.sample_dt_s));
+        }
+        Ok(())
+    }
+}
+
+/// One trajectory sample (a CSV row).
+#[derive(Clone, Copy, Debug, Serialize)]
+pub struct Sample {
+    /// Time, s.
+    pub t_s: f64,
+    /// Contact mode.
+    #[serde(serialize_with = "mode_name")]
+    pub phase: Mode,
+    /// Body coordinate `z`, m.
+    pub z_m: f64,
+    /// Body velocity, m/s.
+    pub zd_mps: f64,
+    /// Nut displacement `p`, m.
+    pub p_m: f64,
+    /// Nut velocity, m/s.
+    pub pd_mps: f64,
+    /// Toe height above ground, m.
+    pub toe_height_m: f64,
+    /// Spring force, N.
+    pub spring_force_n: f64,
+    /// Motor torque, N m.
+    pub torque_nm: f64,
+    /// Total mechanical energy, J.
+    pub energy_j: f64,
+}
+
+fn mode_name<S: serde::Serializer>(m: &Mode, s: S) -> Result<S::Ok, S::Error> {
+    s.serialize_str(m.name())
+}
+
+impl Sample {
+    fn of(plant: &Plant) -> Self {
+        let s = plant.state();
+        Sample {
+            t_s: plant.time_s(),
+            phase: plant.mode(),
+            z_m: s.z_m,
+            zd_mps: s.zd_mps,
+            p_m: s.p_m,
+            pd_mps: s.pd_mps,
+            toe_height_m: plant.toe_height_m(),
+            spring_force_n: plant.spring_force_n(),
+            torque_nm: plant.motor_torque_nm(),
+            energy_j: plant.energy_j(),
+        }
+    }
+}
+
+/// Per-run summary; its JSON form is `hopper-sim run --json`'s contract.
+#[derive(Clone, Debug, Serialize)]
+pub struct Summary {
+    /// Controller name.
+    pub controller: String,
+    /// Parameter set (preset name or file).
+    pub params: String,
+    /// Start toe height, m.
+    pub start_apex_m: f64,
+    /// Simulated time, s.
+    pub duration_s: f64,
+    /// Toe height at each flight apex after a liftoff, in order, m.
+    pub apex_heights_m: Vec<f64>,
+    /// Number of stance phases (touchdowns).
+    pub hops: usize,
+    /// Mean of the last 5 apexes if they are within 2% of each other, m.
+    pub steady_apex_m: Option<f64>,
+    /// Mean duration of completed stance phases, s.
+    pub stance_time_s: Option<f64>,
+    /// Time of the last touchdown, if the toe then stayed on the ground for
+    /// at least [`STOPPED_AFTER_S`] until the end of the run, s.
+    pub stopped_at_s: Option<f64>,
+    /// Ledger residual `E - E0 - W_motor + losses` at the end, J.
+    pub energy_residual_j: f64,
+    /// Largest |residual| seen at any control step, J.
+    pub max_abs_energy_residual_j: f64,
+    /// Total energy at the start, J.
+    pub initial_energy_j: f64,
+    /// Total energy at the end, J.
+    pub final_energy_j: f64,
+    /// Where the energy went, J.
+    pub ledger: Ledger,
+    /// Fastest motor speed reached, rad/s.
+    pub peak_motor_speed_rad_s: f64,
+    /// Motor no-load speed at the supply voltage, rad/s.
+    pub no_load_speed_rad_s: f64,
+    /// Largest nut displacement, m.
+    pub peak_stroke_m: f64,
+    /// Largest |motor current|, A.
+    pub peak_current_a: f64,
+    /// Number of nut impacts on the mechanical stops.
+    pub stop_impacts: usize,
+}
+
+/// Everything a run produced.
+#[derive(Clone, Debug)]
+pub struct RunResult {
+    /// Trajectory samples at the sample period.
+    pub samples: Vec<Sample>,
+    /// Every transition, in order.
+    pub events: Vec<Event>,
+    /// The summary.
+    pub summary: Summary,
+}
+
+/// Mean of the last 5 apexes if they agree within 2% (of the largest).
+pub fn steady_apex(apexes: &[f64]) -> Option<f64> {
+    if apexes.len() < 5 {
+        return None;
+    }
+    let last = &apexes[apexes.len() - 5..];
+    let max = last.iter().copied().fold(f64::MIN, f64::max);
+    let min = last.iter().copied().fold(f64::MAX, f64::min);
+    (max > 0.0 && max - min <= 0.02 * max).then(|| last.iter().sum::<f64>() / 5.0)
+}
+
+/// Run a controller against the plant.
+pub fn run(
+    cfg: &RunConfig,
+    params_name: &str,
+    controller: &mut dyn Controller,
+) -> Result<RunResult, String> {
+    cfg.validate()?;
+    let mut plant = Plant::new(cfg.params, cfg.start_apex_m).map_err(|e| e.to_string())?;
+    let steps = (cfg.duration_s / cfg.control_dt_s).round() as u64;
+    let sample_every = if cfg.sample_dt_s > 0.0 {
+        ((cfg.sample_dt_s / cfg.control_dt_s).round() as u64).max(1)
+    } else {
+        0
+    };
+    let mut samples = Vec::new();
+    let mut events = Vec::new();
+    let mut max_residual: f64 = 0.0;
+    let mut peak_speed: f64 = 0.0;
+    let mut peak_stroke: f64 = 0.0;
+    let mut peak_current: f64 = 0.0;
+    if sample_every > 0 {
+        samples.push(Sample::of(&plant));
+    }
+    for k in 1..=steps {
+        let cmd = controller.current_command_a(&plant);
+        plant
+            .advance(cfg.control_dt_s, cmd, &mut |e| events.push(e))
+            .map_err(|e: PlantError| format!("simulation failed: {e}"))?;
+        max_residual = max_residual.max(plant.energy_residual_j().abs());
+        peak_speed = peak_speed.max(plant.motor_speed_rad_s().abs());
+        peak_stroke = peak_stroke.max(plant.state().p_m);
+        peak_current = peak_current.max(plant.motor_current_a().abs());
+        if sample_every > 0 && k % sample_every == 0 {
+            samples.push(Sample::of(&plant));
+        }
+    }
+    let summary = summarize(
+        cfg,
+        params_name,
+        controller.name(),
+        &plant,
+        &events,
+        max_residual,
+    );
+    Ok(RunResult {
+        samples,
+        events,
+        summary: Summary {
+            peak_motor_speed_rad_s: peak_speed,
+            peak_stroke_m: peak_stroke,
+            peak_current_a: peak_current,
+            ..summary
+        },
+    })
+}
+
+fn summarize(
+    cfg: &RunConfig,
+    params_name: &str,
+    controller: &str,
+    plant: &Plant,
+    events: &[Event],
+    max_residual: f64,
+) -> Summary {
+    let mut apexes = Vec::new();
+    let mut stance_times = Vec::new();
+    let mut hops = 0;
+    let mut last_td: Option<f64> = None;
+    let mut in_stance_since: Option<f64> = None;
+    let mut stop_impacts = 0;
+    for e in events {
+        match *e {
+            Event::Apex { toe_height_m, .. } => apexes.push(toe_height_m),
+            Event::Touchdown { t_s, .. } => {
+                hops += 1;
+                last_td = Some(t_s);
+                in_stance_since = Some(t_s);
+            }
+            Event::Liftoff { t_s, .. } => {
+                if let Some(t0) = in_stance_since.take() {
+                    stance_times.push(t_s - t0);
+                }
+                last_td = None;
+            }
+            Event::StopImpact { .. } => stop_impacts += 1,
+            _ => {}
+        }
+    }
+    let end = plant.time_s();
+    let stopped_at_s = match (plant.mode(), last_td) {
+        (Mode::Flight, _) | (_, None) => None,
+        (_, Some(t)) => (end - t >= STOPPED_AFTER_S).then_some(t),
+    };
+    Summary {
+        controller: controller.to_string(),
+        params: params_name.to_string(),
+        start_apex_m: cfg.start_apex_m,
+        duration_s: cfg.duration_s,
+        steady_apex_m: steady_apex(&apexes),
+        apex_heights_m: apexes,
+        hops,
+        stance_time_s: (!stance_times.is_empty())
+            .then(|| stance_times.iter().sum::<f64>() / stance_times.len() as f64),
+        stopped_at_s,
+        energy_residual_j: plant.energy_residual_j(),
+        max_abs_energy_residual_j: max_residual,
+        initial_energy_j: plant.initial_energy_j(),
+        final_energy_j: plant.energy_j(),
+        ledger: *plant.ledger(),
+        peak_motor_speed_rad_s: 0.0,
+        no_load_speed_rad_s: plant.params().no_load_speed_rad_s(),
+        peak_stroke_m: 0.0,
+        peak_current_a: 0.0,
+        stop_impacts,
+    }
+}
+
+/// Write the trajectory as CSV.
+pub fn write_csv(samples: &[Sample], w: &mut impl std::io::Write) -> std::io::Result<()> {
+    writeln!(
+        w,
+        "time_s,phase,z_m,zd_mps,p_m,pd_mps,toe_height_m,spring_force_n,torque_nm,energy_j"
+    )?;
+    for s in samples {
+        writeln!(
+            w,
+            "{:.6},{},{:.9},{:.9},{:.9},{:.9},{:.9},{:.6},{:.6},{:.9}",
+            s.t_s,
+            s.phase.name(),
+            s.z_m,
+            s.zd_mps,
+            s.p_m,
+            s.pd_mps,
+            s.toe_height_m,
+            s.spring_force_n,
+            s.torque_nm,
+            s.energy_j
+        )?;
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn steady_apex_needs_five_within_two_percent() {
+        assert_eq!(steady_apex(&[0.1, 0.1, 0.1, 0.1]), None);
+        let s = steady_apex(&[0.3, 0.1, 0.1, 0.1, 0.101, 0.1]).unwrap();
+        assert!((s - 0.1002).abs() < 1e-12);
+        assert_eq!(steady_apex(&[0.1, 0.1, 0.1, 0.1, 0.11]), None);
+    }
+
+    #[test]
+    fn run_config_rejects_bad_settings() {
+        let mut c = RunConfig::new(Params::design());
+        c.start_apex_m = -0.1;
+        assert!(c.validate().unwrap_err().contains("start apex"));
+        c.start_apex_m = 0.1;
+        c.duration_s = f64::NAN;
+        assert!(c.validate().unwrap_err().contains("duration"));
+    }
+}

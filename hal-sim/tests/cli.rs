@@ -1,0 +1,173 @@
+//! The `hopper-sim` command-line contract (issue 2): flags, JSON keys,
+//! output files, and clear errors for bad input.
+
+// Test helpers may panic on impossible setup errors: that is a failed test.
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+fn sim(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_hopper-sim"))
+        .args(args)
+        .output()
+        .expect("run hopper-sim")
+}
+
+fn json(out: &Output) -> serde_json::Value {
+    assert!(
+        out.status.success(),
+        "stderr: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = String::from_utf8(out.stdout.clone()).unwrap();
+    assert_eq!(
+        text.trim().lines().count(),
+        1,
+        "exactly one JSON line: {text}"
+    );
+    serde_json::from_str(&text).unwrap()
+}
+
+#[test]
+fn run_json_has_the_contract_keys() {
+    let v = json(&sim(&[
+        "run",
+        "--params",
+        "identified",
+        "--controller",
+        "passive",
+        "--start-apex",
+        "0.15",
+        "--json",
+    ]));
+    for key in [
+        "apex_heights_m",
+        "hops",
+        "steady_apex_m",
+        "stance_time_s",
+        "stopped_at_s",
+        "energy_residual_j",
+    ] {
+        assert!(v.get(key).is_some(), "missing key {key} in {v}");
+    }
+    let apexes = v["apex_heights_m"].as_array().unwrap();
+    assert!(!apexes.is_empty());
+    assert_eq!(v["hops"].as_u64().unwrap() as usize, apexes.len() + 1);
+    // Identified friction: hopping stops within a few seconds (thesis: ~1.5 s).
+    let stopped = v["stopped_at_s"].as_f64().unwrap();
+    assert!((0.5..3.0).contains(&stopped), "stopped at {stopped}");
+    assert!(v["steady_apex_m"].is_null());
+    let stance = v["stance_time_s"].as_f64().unwrap();
+    assert!((0.08..0.12).contains(&stance), "stance {stance}");
+    assert!(v["energy_residual_j"].as_f64().unwrap().abs() < 1e-6);
+}
+
+#[test]
+fn out_dir_gets_csv_and_plot() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("run");
+    let o = sim(&["run", "--duration", "1", "--out", out.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        stdout.contains("hops") && stdout.contains("steady apex"),
+        "{stdout}"
+    );
+    let csv = std::fs::read_to_string(out.join("trajectory.csv")).unwrap();
+    let mut lines = csv.lines();
+    assert_eq!(
+        lines.next().unwrap(),
+        "time_s,phase,z_m,zd_mps,p_m,pd_mps,toe_height_m,spring_force_n,torque_nm,energy_j"
+    );
+    let rows: Vec<&str> = lines.collect();
+    assert_eq!(rows.len(), 1001, "1 s at 1 kHz plus the start");
+    assert!(rows.iter().any(|r| r.contains(",stance,")));
+    let png = std::fs::read(out.join("hop.png")).unwrap();
+    assert_eq!(&png[1..4], b"PNG");
+    assert!(png.len() > 10_000);
+}
+
+#[test]
+fn params_show_prints_toml_that_run_accepts() {
+    let o = sim(&["params", "show", "identified"]);
+    assert!(o.status.success());
+    let text = String::from_utf8(o.stdout).unwrap();
+    assert!(text.contains("planarizer_friction_n = 13.0"));
+    assert!(text.contains("[N]") && text.contains("[kg]"));
+    let dir = tempfile::tempdir().unwrap();
+    let f = dir.path().join("mine.toml");
+    std::fs::write(&f, &text).unwrap();
+    let a = json(&sim(&["run", "--params", f.to_str().unwrap(), "--json"]));
+    let b = json(&sim(&["run", "--params", "identified", "--json"]));
+    assert_eq!(a["apex_heights_m"], b["apex_heights_m"]);
+}
+
+fn assert_clean_failure(args: &[&str], out_dir: &Path, needle: &str) {
+    let mut all: Vec<&str> = args.to_vec();
+    let out_s = out_dir.to_str().unwrap().to_string();
+    all.extend(["--out", &out_s]);
+    let o = sim(&all);
+    assert!(!o.status.success(), "{args:?} should fail");
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(err.trim().lines().count(), 1, "one error line: {err}");
+    assert!(
+        err.contains(needle),
+        "{args:?}: expected `{needle}` in: {err}"
+    );
+    assert!(!err.contains("panicked"), "{err}");
+    assert!(o.stdout.is_empty());
+    assert!(!out_dir.exists(), "no output may be written on bad input");
+}
+
+#[test]
+fn bad_input_is_one_clear_error_and_writes_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("never");
+    assert_clean_failure(&["run", "--params", "moon"], &out, "unknown preset `moon`");
+    assert_clean_failure(
+        &["run", "--controller", "magic"],
+        &out,
+        "unknown controller `magic`",
+    );
+    assert_clean_failure(
+        &["run", "--start-apex", "-0.1"],
+        &out,
+        "start apex -0.1 m is out of range",
+    );
+    assert_clean_failure(
+        &["run", "--start-apex", "5"],
+        &out,
+        "start apex 5 m is out of range",
+    );
+    assert_clean_failure(
+        &["run", "--duration", "0"],
+        &out,
+        "duration 0 s is out of range",
+    );
+
+    let bad = dir.path().join("bad.toml");
+    std::fs::write(&bad, "base = \"design\"\nbody_mass_kg = [1\n").unwrap();
+    assert_clean_failure(
+        &["run", "--params", bad.to_str().unwrap()],
+        &out,
+        "malformed TOML",
+    );
+
+    std::fs::write(&bad, "base = \"design\"\n\nbody_mass_kg = -9.0\n").unwrap();
+    assert_clean_failure(
+        &["run", "--params", bad.to_str().unwrap()],
+        &out,
+        "bad.toml:3: parameter `body_mass_kg` = -9 is out of range",
+    );
+    let missing = dir.path().join("missing.toml");
+    assert_clean_failure(
+        &["run", "--params", missing.to_str().unwrap()],
+        &out,
+        "cannot read parameter file",
+    );
+
+    let o = sim(&["params", "show", "moon"]);
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("unknown preset `moon`"));
+}

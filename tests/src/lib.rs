@@ -1,0 +1,1 @@
+//! Host hardware-in-the-loop tests live in `tests/`; this library is empty.

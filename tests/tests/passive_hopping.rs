@@ -1,0 +1,84 @@
+//! System-level checks of the simulated hopper against what the thesis
+//! reports for passive hopping (sections 4.4.1 and 4.5.1), through the same
+//! runner `hopper-sim run` uses.
+
+// Test helpers may panic on impossible setup errors: that is a failed test.
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
+use hal_sim::controller::Passive;
+use hal_sim::run::{run, RunConfig};
+use hal_sim::{Event, Params};
+
+fn energy_at_events(params: Params, start: f64, duration: f64) -> Vec<(&'static str, f64, f64)> {
+    // (event, time, total energy right after the control step holding it)
+    let mut plant = hal_sim::Plant::new(params, start).unwrap();
+    let mut out = Vec::new();
+    let steps = (duration / 1e-4) as usize;
+    for _ in 0..steps {
+        let mut seen = None;
+        plant
+            .advance(1e-4, 0.0, &mut |e| {
+                seen = match e {
+                    Event::Touchdown { .. } => Some("td"),
+                    Event::Liftoff { .. } => Some("lo"),
+                    _ => seen,
+                }
+            })
+            .unwrap();
+        if let Some(kind) = seen {
+            out.push((kind, plant.time_s(), plant.energy_j()));
+        }
+    }
+    out
+}
+
+#[test]
+fn identified_passive_hopper_stops_within_a_few_seconds() {
+    let mut cfg = RunConfig::new(Params::identified());
+    cfg.start_apex_m = 0.15;
+    cfg.duration_s = 5.0;
+    let r = run(&cfg, "identified", &mut Passive).unwrap();
+    let s = &r.summary;
+    // Thesis Fig 4.7: stationary after about 1.5 s.
+    let stopped = s.stopped_at_s.unwrap();
+    assert!((0.8..2.0).contains(&stopped), "stopped at {stopped} s");
+    assert!(s.apex_heights_m.windows(2).all(|w| w[1] < w[0]));
+    // ~100 ms stance (section 4.4.2).
+    let stance = s.stance_time_s.unwrap();
+    assert!((0.09..0.115).contains(&stance), "{stance}");
+    assert!(s.energy_residual_j.abs() < 1e-6);
+    assert_eq!(s.ledger.motor_work_j, 0.0);
+}
+
+#[test]
+fn identified_friction_costs_joules_per_phase_like_the_thesis() {
+    // Thesis 4.4.1: about 4 J lost in the first stance and about 4 J in the
+    // first flight (its own drop height is not given; 0.15 m here).
+    let ev = energy_at_events(Params::identified(), 0.15, 1.0);
+    let td1 = ev.iter().find(|e| e.0 == "td").unwrap();
+    let lo1 = ev.iter().find(|e| e.0 == "lo").unwrap();
+    let td2 = ev.iter().filter(|e| e.0 == "td").nth(1).unwrap();
+    let stance_loss = td1.2 - lo1.2;
+    let flight_loss = lo1.2 - td2.2;
+    assert!(
+        (1.5..6.0).contains(&stance_loss),
+        "first stance lost {stance_loss} J"
+    );
+    assert!(
+        (1.5..6.0).contains(&flight_loss),
+        "first flight lost {flight_loss} J"
+    );
+}
+
+#[test]
+fn design_friction_decays_slower_than_identified() {
+    let run_one = |p: Params| {
+        let mut cfg = RunConfig::new(p);
+        cfg.duration_s = 5.0;
+        run(&cfg, "x", &mut Passive).unwrap().summary
+    };
+    let d = run_one(Params::design());
+    let i = run_one(Params::identified());
+    assert!(d.hops > i.hops, "{} vs {}", d.hops, i.hops);
+    assert!(d.apex_heights_m[0] > i.apex_heights_m[0]);
+}

@@ -1,0 +1,233 @@
+//! Project automation, run from the workspace root as `cargo xtask <task>`.
+//!
+//! * `cargo xtask test`: everything CI checks, in order: toolchain set-up
+//!   (rustup target and components from `rust-toolchain.toml`), formatting,
+//!   clippy on the host and on the MCU target, the `no_std` builds of the
+//!   control crate and the plant, the firmware release build with its size
+//!   budget, and the whole host test suite. It ends with a
+//!   `xtask: N passed, M failed` line counting the tests run.
+//! * `cargo xtask size`: build the firmware and check the size budget only.
+
+use std::io::{BufRead, BufReader};
+use std::path::{Path, PathBuf};
+use std::process::{Command, ExitCode, Stdio};
+
+const TARGET: &str = "thumbv7em-none-eabihf";
+
+/// Flash budget for the firmware image (text + data), bytes. The STM32F405RG
+/// has 1 MiB; the controller should stay small enough for a bootloader and
+/// calibration pages beside it.
+const FLASH_BUDGET_BYTES: u64 = 128 * 1024;
+/// Static RAM budget (data + bss), bytes, of the 128 KiB SRAM: the rest is
+/// stack and the capture buffer later issues add.
+const RAM_BUDGET_BYTES: u64 = 32 * 1024;
+
+fn main() -> ExitCode {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let root = workspace_root();
+    let result = match args.first().map(String::as_str) {
+        Some("test") => test(&root),
+        Some("size") => setup(&root).and_then(|_| size(&root)),
+        _ => {
+            eprintln!("usage: cargo xtask <test|size>");
+            return ExitCode::from(2);
+        }
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("xtask: FAILED: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn workspace_root() -> PathBuf {
+    let manifest = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+    manifest.parent().map(Path::to_path_buf).unwrap_or(manifest)
+}
+
+fn cargo() -> Command {
+    Command::new(std::env::var("CARGO").unwrap_or_else(|_| "cargo".into()))
+}
+
+fn run(root: &Path, what: &str, cmd: &mut Command) -> Result<(), String> {
+    eprintln!("xtask: {what}");
+    let status = cmd
+        .current_dir(root)
+        .status()
+        .map_err(|e| format!("{what}: cannot start: {e}"))?;
+    if status.success() {
+        Ok(())
+    } else {
+        Err(format!("{what} ({status})"))
+    }
+}
+
+/// Install what a fresh machine lacks: the MCU target and the components
+/// `rust-toolchain.toml` names (rustup does not add them to an installed
+/// toolchain by itself). Idempotent.
+fn setup(root: &Path) -> Result<(), String> {
+    if Command::new("rustup").arg("--version").output().is_err() {
+        eprintln!("xtask: rustup not found; assuming the toolchain is complete");
+        return Ok(());
+    }
+    run(
+        root,
+        "rustup target add",
+        Command::new("rustup").args(["target", "add", TARGET]),
+    )?;
+    run(
+        root,
+        "rustup component add",
+        Command::new("rustup").args(["component", "add", "rustfmt", "clippy", "llvm-tools"]),
+    )
+}
+
+fn test(root: &Path) -> Result<(), String> {
+    setup(root)?;
+    run(
+        root,
+        "cargo fmt --check",
+        cargo().args(["fmt", "--all", "--", "--check"]),
+    )?;
+    run(
+        root,
+        "clippy (host)",
+        cargo().args([
+            "clippy",
+            "--workspace",
+            "--all-targets",
+            "--",
+            "-D",
+            "warnings",
+        ]),
+    )?;
+    run(
+        root,
+        "clippy (MCU target)",
+        cargo().args([
+            "clippy",
+            "-p",
+            "hopper-app",
+            "-p",
+            "hopper-control",
+            "--target",
+            TARGET,
+            "--",
+            "-D",
+            "warnings",
+        ]),
+    )?;
+    run(
+        root,
+        "no_std plant build (MCU target)",
+        cargo().args([
+            "build",
+            "-p",
+            "hal-sim",
+            "--lib",
+            "--no-default-features",
+            "--target",
+            TARGET,
+        ]),
+    )?;
+    size(root)?;
+    cargo_test(root)
+}
+
+fn size(root: &Path) -> Result<(), String> {
+    run(
+        root,
+        "firmware release build",
+        cargo().args(["build", "-p", "hopper-app", "--release", "--target", TARGET]),
+    )?;
+    let elf = root
+        .join("target")
+        .join(TARGET)
+        .join("release")
+        .join("hopper-fw");
+    let tool = llvm_size()?;
+    let out = Command::new(&tool)
+        .arg(&elf)
+        .output()
+        .map_err(|e| format!("cannot run {}: {e}", tool.display()))?;
+    if !out.status.success() {
+        return Err(format!(
+            "llvm-size failed: {}",
+            String::from_utf8_lossy(&out.stderr)
+        ));
+    }
+    // Berkeley format: "text data bss dec hex filename".
+    let text = String::from_utf8_lossy(&out.stdout);
+    let nums: Vec<u64> = text
+        .lines()
+        .nth(1)
+        .unwrap_or("")
+        .split_whitespace()
+        .take(3)
+        .filter_map(|s| s.parse().ok())
+        .collect();
+    let [t, d, b] = nums[..] else {
+        return Err(format!("cannot parse llvm-size output: {text}"));
+    };
+    let (flash, ram) = (t + d, d + b);
+    println!(
+        "size: flash={flash} B (budget {FLASH_BUDGET_BYTES}) ram={ram} B (budget {RAM_BUDGET_BYTES}) text={t} data={d} bss={b}"
+    );
+    if flash > FLASH_BUDGET_BYTES || ram > RAM_BUDGET_BYTES {
+        return Err("firmware exceeds its size budget".into());
+    }
+    Ok(())
+}
+
+fn llvm_size() -> Result<PathBuf, String> {
+    let out = Command::new("rustc")
+        .args(["--print", "sysroot"])
+        .output()
+        .map_err(|e| format!("rustc --print sysroot: {e}"))?;
+    let sysroot = PathBuf::from(String::from_utf8_lossy(&out.stdout).trim());
+    let lib = sysroot.join("lib").join("rustlib");
+    let found = std::fs::read_dir(&lib)
+        .map_err(|e| format!("{}: {e}", lib.display()))?
+        .filter_map(Result::ok)
+        .map(|d| d.path().join("bin").join("llvm-size"))
+        .find(|p| p.exists());
+    found.ok_or_else(|| "llvm-size not found: run `rustup component add llvm-tools`".into())
+}
+
+/// Run the host test suite, echoing its output and counting the results.
+fn cargo_test(root: &Path) -> Result<(), String> {
+    eprintln!("xtask: cargo test --workspace");
+    let mut child = cargo()
+        .args(["test", "--workspace"])
+        .current_dir(root)
+        .stdout(Stdio::piped())
+        .spawn()
+        .map_err(|e| format!("cannot start cargo test: {e}"))?;
+    let (mut passed, mut failed) = (0u64, 0u64);
+    if let Some(out) = child.stdout.take() {
+        for line in BufReader::new(out).lines().map_while(Result::ok) {
+            println!("{line}");
+            if let Some(rest) = line.strip_prefix("test result: ") {
+                let mut words = rest.split([' ', ';']).filter(|w| !w.is_empty());
+                while let Some(w) = words.next() {
+                    if let Ok(n) = w.parse::<u64>() {
+                        match words.next() {
+                            Some("passed") => passed += n,
+                            Some("failed") => failed += n,
+                            _ => {}
+                        }
+                    }
+                }
+            }
+        }
+    }
+    let status = child.wait().map_err(|e| format!("cargo test: {e}"))?;
+    println!("xtask: {passed} passed, {failed} failed");
+    if status.success() && failed == 0 {
+        Ok(())
+    } else {
+        Err(format!("cargo test ({status})"))
+    }
+}
