@@ -198,6 +198,17 @@ pub fn run(
     params_name: &str,
     controller: &mut dyn Controller,
 ) -> Result<RunResult, String> {
+    run_with_progress(cfg, params_name, controller, &mut |_, _| {})
+}
+
+/// [`run`], calling `progress(done, total)` with control steps done about
+/// every simulated 0.1 s.
+pub fn run_with_progress(
+    cfg: &RunConfig,
+    params_name: &str,
+    controller: &mut dyn Controller,
+    progress: &mut dyn FnMut(u64, u64),
+) -> Result<RunResult, String> {
     cfg.validate()?;
     let mut plant = Plant::new(cfg.params, cfg.start_apex_m).map_err(|e| e.to_string())?;
     let steps = (cfg.duration_s / cfg.control_dt_s).round() as u64;
@@ -215,7 +226,11 @@ pub fn run(
     if sample_every > 0 {
         samples.push(Sample::of(&plant));
     }
+    let report_every = ((0.1 / cfg.control_dt_s).round() as u64).max(1);
     for k in 1..=steps {
+        if k % report_every == 0 {
+            progress(k, steps);
+        }
         let cmd = controller.current_command_a(&plant);
         plant
             .advance(cfg.control_dt_s, cmd, &mut |e| events.push(e))

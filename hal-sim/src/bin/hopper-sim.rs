@@ -131,7 +131,29 @@ fn cmd_run(a: RunArgs) -> Result<()> {
         },
     };
     cfg.validate().map_err(anyhow::Error::msg)?;
-    let result = run::run(&cfg, &params_name, ctl.as_mut()).map_err(anyhow::Error::msg)?;
+    // A progress bar on stderr for runs long enough to wait for; indicatif
+    // draws nothing when stderr is not a terminal.
+    let bar = indicatif::ProgressBar::new(1000);
+    bar.set_style(
+        indicatif::ProgressStyle::with_template(
+            "{spinner} simulating [{bar:40}] {msg} ({eta} left)",
+        )
+        .map_err(anyhow::Error::msg)?
+        .progress_chars("=> "),
+    );
+    if cfg.duration_s < 60.0 {
+        bar.set_draw_target(indicatif::ProgressDrawTarget::hidden());
+    }
+    let duration_s = cfg.duration_s;
+    let result = run::run_with_progress(&cfg, &params_name, ctl.as_mut(), &mut |done, total| {
+        bar.set_position(done * 1000 / total.max(1));
+        bar.set_message(format!(
+            "{:.1} / {duration_s} s",
+            duration_s * done as f64 / total.max(1) as f64
+        ));
+    })
+    .map_err(anyhow::Error::msg)?;
+    bar.finish_and_clear();
     let s = &result.summary;
 
     let mut written = Vec::new();
