@@ -11,6 +11,7 @@
 
 pub mod params;
 pub mod plant;
+pub mod sensors;
 
 #[cfg(feature = "std")]
 pub mod controller;
