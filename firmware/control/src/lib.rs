@@ -20,5 +20,13 @@
 //! control laws, and the supervisor (phase detection, limits, fault handling).
 #![no_std]
 
+pub mod calibration;
+pub mod energy;
+pub mod estimator;
 pub mod filter;
+pub mod hal;
+pub mod laws;
+pub mod model;
 pub mod pd_design;
+pub mod supervisor;
+pub mod telemetry;

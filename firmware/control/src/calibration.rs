@@ -1,0 +1,607 @@
+//! Sensor and actuator calibration: raw counts and codes to SI, current to DAC code.
+//!
+//! Coordinates are MODEL.md's: `p` is the ball-nut displacement, positive
+//! down, `p = theta * lead / (2 pi)`; `z` is the body height coordinate with
+//! `z = l0 = 0.61 m` at touchdown.
+//!
+//! The thesis names the sensors (section 3: two optical encoders, motor angle
+//! and body height via a pulley and rope; a load cell for the spring force; a
+//! linear potentiometer for the leg compression) but not their scale factors.
+//! Defaults marked *placeholder* are plausible values to be replaced by the
+//! identified ones of the real board.
+
+use core::f32::consts::PI;
+
+/// Which sensor channel a conversion error refers to.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Channel {
+    /// Motor quadrature encoder.
+    MotorEncoder,
+    /// Body-height quadrature encoder.
+    HeightEncoder,
+    /// Load cell (spring force).
+    LoadCell,
+    /// Leg-compression potentiometer.
+    Pot,
+}
+
+/// Why a calibration was rejected or a sample could not be converted.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum CalError {
+    /// A [`Calibration`] field is out of its documented range (the field's name).
+    InvalidField(&'static str),
+    /// A raw count or code does not fit the configured counter or converter width.
+    RawOutOfRange(Channel),
+    /// The accumulated encoder position left the range where `f32` is exact (2^24 counts).
+    PositionOutOfRange(Channel),
+    /// A converted value is NaN or infinite.
+    NonFinite(Channel),
+}
+
+/// Calibration of the hopper's sensors and current command. All fields SI unless stated.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Calibration {
+    /// Motor encoder counts per motor revolution (lines x 4). Default 2000 (500 lines, x4). `> 0`.
+    pub motor_counts_per_rev: u32,
+    /// Motor counter width in bits, for wrap-around. Default 16. `8..=32`.
+    pub motor_counter_bits: u8,
+    /// Motor counts increase when the nut moves down (`true`) or up (`false`). Default `true`.
+    pub motor_counts_positive_down: bool,
+    /// Ball-screw lead, m per motor revolution. Default 0.005 (Table 2.1). Finite, `> 0`.
+    pub lead_m_per_rev: f32,
+    /// Height encoder counts per pulley revolution. Default 2000 (*placeholder*). `> 0`.
+    pub height_counts_per_rev: u32,
+    /// Height counter width in bits. Default 16. `8..=32`.
+    pub height_counter_bits: u8,
+    /// Height counts increase when the body moves up (`true`). Default `true`.
+    pub height_counts_positive_up: bool,
+    /// Radius of the height-sensor pulley, m. Default 0.02 (*placeholder*). Finite, `> 0`.
+    pub height_pulley_radius_m: f32,
+    /// Body height `z` at the first sample after [`Converter::new`] / re-zero, m.
+    /// Default 0.61 (`l0`: started standing on the uncompressed leg). Finite.
+    pub height_at_origin_m: f32,
+    /// Load-cell gain, N per ADC code (compression positive). Default 0.25 (*placeholder*: 1024 N full scale). Finite, non-zero.
+    pub loadcell_gain_n_per_code: f32,
+    /// Load-cell code at zero force. Default 0 (*placeholder*). Finite.
+    pub loadcell_offset_code: f32,
+    /// Potentiometer gain, m of leg compression per ADC code. Default 0.1 / 4096 (*placeholder*: 100 mm full scale). Finite, non-zero.
+    pub pot_gain_m_per_code: f32,
+    /// Potentiometer code at zero leg compression. Default 0 (*placeholder*). Finite.
+    pub pot_offset_code: f32,
+    /// ADC resolution, bits. Default 12. `1..=16`.
+    pub adc_bits: u8,
+    /// DAC resolution, bits. Default 12. `1..=16`.
+    pub dac_bits: u8,
+    /// DAC code for zero current. Default 2048 (mid-scale). `<= 2^dac_bits - 1`.
+    pub dac_zero_code: u16,
+    /// Amplifier current per DAC code, A (current command positive = torque pushing the nut down).
+    /// Default 40 / 2048 (±10 V to ±40 A, *placeholder*). Finite, `> 0`.
+    pub dac_amps_per_code: f32,
+    /// Amplifier current limit, A. Default 33.7 (1.0 N m at 0.0297 N m/A). Finite, `> 0`.
+    pub current_limit_a: f32,
+    /// Motor torque constant, N m/A. Default 0.0297 (README). Finite, `> 0`.
+    pub torque_constant_nm_per_a: f32,
+}
+
+impl Default for Calibration {
+    fn default() -> Self {
+        Self {
+            motor_counts_per_rev: 2000,
+            motor_counter_bits: 16,
+            motor_counts_positive_down: true,
+            lead_m_per_rev: 0.005,
+            height_counts_per_rev: 2000,
+            height_counter_bits: 16,
+            height_counts_positive_up: true,
+            height_pulley_radius_m: 0.02,
+            height_at_origin_m: 0.61,
+            loadcell_gain_n_per_code: 0.25,
+            loadcell_offset_code: 0.0,
+            pot_gain_m_per_code: 0.1 / 4096.0,
+            pot_offset_code: 0.0,
+            adc_bits: 12,
+            dac_bits: 12,
+            dac_zero_code: 2048,
+            dac_amps_per_code: 40.0 / 2048.0,
+            current_limit_a: 33.7,
+            torque_constant_nm_per_a: 0.0297,
+        }
+    }
+}
+
+fn finite_positive(x: f32) -> bool {
+    x.is_finite() && x > 0.0
+}
+
+fn finite_nonzero(x: f32) -> bool {
+    x.is_finite() && x != 0.0
+}
+
+/// Largest code of a converter with `bits` bits (`bits` in `1..=16`).
+fn max_code(bits: u8) -> u16 {
+    let shift = u32::from(bits.clamp(1, 16));
+    // shift <= 16: 1 << 16 fits u32, minus 1 fits u16.
+    u16::try_from((1_u32 << shift) - 1).unwrap_or(u16::MAX)
+}
+
+/// Largest accumulated count magnitude converted to `f32` (exact below 2^24).
+const MAX_ACCUMULATED_COUNTS: i64 = 1 << 24;
+
+impl Calibration {
+    /// Checks every field against its documented range; the error names the first bad field.
+    pub fn validate(&self) -> Result<(), CalError> {
+        let checks: [(bool, &'static str); 16] = [
+            (self.motor_counts_per_rev > 0, "motor_counts_per_rev"),
+            (
+                (8..=32).contains(&self.motor_counter_bits),
+                "motor_counter_bits",
+            ),
+            (finite_positive(self.lead_m_per_rev), "lead_m_per_rev"),
+            (self.height_counts_per_rev > 0, "height_counts_per_rev"),
+            (
+                (8..=32).contains(&self.height_counter_bits),
+                "height_counter_bits",
+            ),
+            (
+                finite_positive(self.height_pulley_radius_m),
+                "height_pulley_radius_m",
+            ),
+            (self.height_at_origin_m.is_finite(), "height_at_origin_m"),
+            (
+                finite_nonzero(self.loadcell_gain_n_per_code),
+                "loadcell_gain_n_per_code",
+            ),
+            (
+                self.loadcell_offset_code.is_finite(),
+                "loadcell_offset_code",
+            ),
+            (
+                finite_nonzero(self.pot_gain_m_per_code),
+                "pot_gain_m_per_code",
+            ),
+            (self.pot_offset_code.is_finite(), "pot_offset_code"),
+            ((1..=16).contains(&self.adc_bits), "adc_bits"),
+            ((1..=16).contains(&self.dac_bits), "dac_bits"),
+            (
+                (1..=16).contains(&self.dac_bits) && self.dac_zero_code <= max_code(self.dac_bits),
+                "dac_zero_code",
+            ),
+            (finite_positive(self.dac_amps_per_code), "dac_amps_per_code"),
+            (finite_positive(self.current_limit_a), "current_limit_a"),
+        ];
+        for (ok, name) in checks {
+            if !ok {
+                return Err(CalError::InvalidField(name));
+            }
+        }
+        if !finite_positive(self.torque_constant_nm_per_a) {
+            return Err(CalError::InvalidField("torque_constant_nm_per_a"));
+        }
+        Ok(())
+    }
+
+    /// Nut displacement per motor encoder count, m (positive down).
+    pub fn nut_m_per_count(&self) -> f32 {
+        let m = self.lead_m_per_rev / count_f32(self.motor_counts_per_rev);
+        if self.motor_counts_positive_down {
+            m
+        } else {
+            -m
+        }
+    }
+
+    /// Motor angle per encoder count, rad (same sign as [`nut_m_per_count`](Self::nut_m_per_count)).
+    pub fn motor_rad_per_count(&self) -> f32 {
+        let r = 2.0 * PI / count_f32(self.motor_counts_per_rev);
+        if self.motor_counts_positive_down {
+            r
+        } else {
+            -r
+        }
+    }
+
+    /// Body height change per height encoder count, m (positive up).
+    pub fn height_m_per_count(&self) -> f32 {
+        let m = 2.0 * PI * self.height_pulley_radius_m / count_f32(self.height_counts_per_rev);
+        if self.height_counts_positive_up {
+            m
+        } else {
+            -m
+        }
+    }
+
+    /// DAC code for a current command, A.
+    ///
+    /// The current is first clamped to `±current_limit_a`, then converted to
+    /// `dac_zero_code + current / dac_amps_per_code` rounded to the nearest
+    /// code (halves away from zero), then clamped to `0..=2^dac_bits - 1`.
+    /// NaN gives the zero-current code (fail-safe). Assumes a validated calibration;
+    /// an invalid one still returns a code in range.
+    pub fn current_to_dac_code(&self, current_a: f32) -> u16 {
+        let max = max_code(self.dac_bits);
+        let zero = self.dac_zero_code.min(max);
+        if current_a.is_nan() || !finite_positive(self.dac_amps_per_code) {
+            return zero;
+        }
+        let limit = if finite_positive(self.current_limit_a) {
+            self.current_limit_a
+        } else {
+            0.0
+        };
+        let i = current_a.clamp(-limit, limit);
+        let code = f32::from(zero) + libm::roundf(i / self.dac_amps_per_code);
+        let code = code.clamp(0.0, f32::from(max));
+        // `code` is finite and in 0..=65535 after the clamp, so the
+        // saturating float-to-int `as` is exact here.
+        code as u16
+    }
+
+    /// Current commanded by a DAC code, A (codes above the DAC range are clamped to it).
+    pub fn dac_code_to_current_a(&self, code: u16) -> f32 {
+        let max = max_code(self.dac_bits);
+        let c = code.min(max);
+        (f32::from(c) - f32::from(self.dac_zero_code)) * self.dac_amps_per_code
+    }
+
+    /// Motor torque for a current, N m.
+    pub fn torque_nm(&self, current_a: f32) -> f32 {
+        current_a * self.torque_constant_nm_per_a
+    }
+}
+
+/// Counts as `f32`: exact below 2^24, which covers every sensible counts-per-rev.
+fn count_f32(counts: u32) -> f32 {
+    // A u32 to f32 `as` conversion rounds to nearest; no wrap or panic.
+    counts as f32
+}
+
+/// Signed difference `new - old` of a `bits`-wide wrapping counter (`bits` in `8..=32`).
+///
+/// The result is in `-2^(bits-1) .. 2^(bits-1)`: a real change of half the
+/// counter range or more in one period is indistinguishable from the opposite
+/// change, which is what the supervisor's encoder-jump check is for.
+pub fn wrapping_count_delta(new: u32, old: u32, bits: u8) -> i32 {
+    let bits = u32::from(bits.clamp(8, 32));
+    let raw = new.wrapping_sub(old);
+    if bits == 32 {
+        // Two's-complement reinterpretation is the modular signed difference.
+        return i32::from_ne_bytes(raw.to_ne_bytes());
+    }
+    let modulus = 1_u32 << bits;
+    let d = raw & (modulus - 1);
+    let half = modulus >> 1;
+    // bits <= 31: d and modulus fit i64 without loss.
+    let d = i64::from(d);
+    let signed = if d >= i64::from(half) {
+        d - i64::from(modulus)
+    } else {
+        d
+    };
+    i32::try_from(signed).unwrap_or(0)
+}
+
+/// A converted sample, SI, MODEL.md coordinates.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Measurements {
+    /// Motor angle `theta` since the origin, rad (positive drives the nut down).
+    pub motor_angle_rad: f32,
+    /// Nut displacement `p = theta * lead / (2 pi)`, m, positive down; 0 at the origin.
+    pub nut_position_m: f32,
+    /// Body height coordinate `z`, m (`z = l0` at touchdown).
+    pub body_height_m: f32,
+    /// Spring force from the load cell, N (compression positive).
+    pub spring_force_n: f32,
+    /// Leg compression from the potentiometer, m.
+    pub leg_compression_m: f32,
+    /// Raw motor counter change since the previous sample (0 for the first).
+    pub motor_delta_counts: i32,
+    /// Raw height counter change since the previous sample (0 for the first).
+    pub height_delta_counts: i32,
+    /// The emergency stop is pressed.
+    pub estop_pressed: bool,
+    /// The servo amplifier reports a fault.
+    pub amp_fault: bool,
+}
+
+/// Turns [`crate::hal::RawSample`]s into [`Measurements`], unwrapping the encoder counters.
+///
+/// The first sample after [`new`](Self::new) or [`rezero`](Self::rezero) is
+/// the origin: `p = 0` (nut on its upper stop, the start position) and
+/// `z = height_at_origin_m`. Positions are accumulated in `i64` counts (no
+/// overflow in any conceivable run: 2^63 counts at 10^6 counts/s is 290 000
+/// years) and converted to `f32` only while within ±2^24 counts, where the
+/// conversion is exact: with the defaults that is ±8388 motor revolutions
+/// (±42 m of nut travel, far beyond the 50 mm stroke) and ±1054 m of height.
+/// Beyond that the conversion returns [`CalError::PositionOutOfRange`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Converter {
+    cal: Calibration,
+    last: Option<(u32, u32)>,
+    motor_counts: i64,
+    height_counts: i64,
+}
+
+impl Converter {
+    /// Creates a converter; the calibration is validated first.
+    pub fn new(cal: Calibration) -> Result<Self, CalError> {
+        cal.validate()?;
+        Ok(Self {
+            cal,
+            last: None,
+            motor_counts: 0,
+            height_counts: 0,
+        })
+    }
+
+    /// The calibration in use.
+    pub const fn calibration(&self) -> &Calibration {
+        &self.cal
+    }
+
+    /// Makes the next sample the origin again.
+    pub fn rezero(&mut self) {
+        self.last = None;
+        self.motor_counts = 0;
+        self.height_counts = 0;
+    }
+
+    /// Converts one raw sample. On error the converter state is unchanged.
+    pub fn convert(&mut self, raw: &crate::hal::RawSample) -> Result<Measurements, CalError> {
+        let cal = &self.cal;
+        let counter_max = |bits: u8| -> u32 {
+            let bits = u32::from(bits.clamp(8, 32));
+            u32::MAX >> (32 - bits)
+        };
+        if raw.motor_counts > counter_max(cal.motor_counter_bits) {
+            return Err(CalError::RawOutOfRange(Channel::MotorEncoder));
+        }
+        if raw.height_counts > counter_max(cal.height_counter_bits) {
+            return Err(CalError::RawOutOfRange(Channel::HeightEncoder));
+        }
+        let adc_max = max_code(cal.adc_bits);
+        if raw.loadcell_code > adc_max {
+            return Err(CalError::RawOutOfRange(Channel::LoadCell));
+        }
+        if raw.pot_code > adc_max {
+            return Err(CalError::RawOutOfRange(Channel::Pot));
+        }
+        let (dm, dh) = match self.last {
+            Some((m, h)) => (
+                wrapping_count_delta(raw.motor_counts, m, cal.motor_counter_bits),
+                wrapping_count_delta(raw.height_counts, h, cal.height_counter_bits),
+            ),
+            None => (0, 0),
+        };
+        let motor = self.motor_counts.saturating_add(i64::from(dm));
+        let height = self.height_counts.saturating_add(i64::from(dh));
+        let in_range = |c: i64| (-MAX_ACCUMULATED_COUNTS..=MAX_ACCUMULATED_COUNTS).contains(&c);
+        if !in_range(motor) {
+            return Err(CalError::PositionOutOfRange(Channel::MotorEncoder));
+        }
+        if !in_range(height) {
+            return Err(CalError::PositionOutOfRange(Channel::HeightEncoder));
+        }
+        // |c| <= 2^24 (checked above): the i64 to f32 `as` conversion is exact.
+        let motor_f = motor as f32;
+        let height_f = height as f32;
+        let m = Measurements {
+            motor_angle_rad: motor_f * cal.motor_rad_per_count(),
+            nut_position_m: motor_f * cal.nut_m_per_count(),
+            body_height_m: cal.height_at_origin_m + height_f * cal.height_m_per_count(),
+            spring_force_n: (f32::from(raw.loadcell_code) - cal.loadcell_offset_code)
+                * cal.loadcell_gain_n_per_code,
+            leg_compression_m: (f32::from(raw.pot_code) - cal.pot_offset_code)
+                * cal.pot_gain_m_per_code,
+            motor_delta_counts: dm,
+            height_delta_counts: dh,
+            estop_pressed: raw.estop_pressed,
+            amp_fault: raw.amp_fault,
+        };
+        if !(m.motor_angle_rad.is_finite() && m.nut_position_m.is_finite()) {
+            return Err(CalError::NonFinite(Channel::MotorEncoder));
+        }
+        if !m.body_height_m.is_finite() {
+            return Err(CalError::NonFinite(Channel::HeightEncoder));
+        }
+        if !m.spring_force_n.is_finite() {
+            return Err(CalError::NonFinite(Channel::LoadCell));
+        }
+        if !m.leg_compression_m.is_finite() {
+            return Err(CalError::NonFinite(Channel::Pot));
+        }
+        self.last = Some((raw.motor_counts, raw.height_counts));
+        self.motor_counts = motor;
+        self.height_counts = height;
+        Ok(m)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::hal::RawSample;
+
+    fn close(a: f32, b: f32, tol: f32) -> bool {
+        (a - b).abs() <= tol
+    }
+
+    #[test]
+    fn default_is_valid() {
+        assert_eq!(Calibration::default().validate(), Ok(()));
+    }
+
+    #[test]
+    fn validate_names_field() {
+        let mut c = Calibration {
+            lead_m_per_rev: f32::NAN,
+            ..Calibration::default()
+        };
+        assert_eq!(c.validate(), Err(CalError::InvalidField("lead_m_per_rev")));
+        c = Calibration {
+            motor_counter_bits: 33,
+            ..Calibration::default()
+        };
+        assert_eq!(
+            c.validate(),
+            Err(CalError::InvalidField("motor_counter_bits"))
+        );
+        c = Calibration {
+            dac_zero_code: 4096,
+            ..Calibration::default()
+        };
+        assert_eq!(c.validate(), Err(CalError::InvalidField("dac_zero_code")));
+        c = Calibration {
+            torque_constant_nm_per_a: 0.0,
+            ..Calibration::default()
+        };
+        assert_eq!(
+            c.validate(),
+            Err(CalError::InvalidField("torque_constant_nm_per_a"))
+        );
+        assert!(Converter::new(c).is_err());
+    }
+
+    #[test]
+    fn wrap_around_16_and_32_bits() {
+        assert_eq!(wrapping_count_delta(2, 65534, 16), 4);
+        assert_eq!(wrapping_count_delta(65534, 2, 16), -4);
+        assert_eq!(wrapping_count_delta(1, u32::MAX, 32), 2);
+        assert_eq!(wrapping_count_delta(u32::MAX, 1, 32), -2);
+        assert_eq!(wrapping_count_delta(100, 40, 16), 60);
+        assert_eq!(wrapping_count_delta(0x8000, 0, 16), -32768);
+    }
+
+    #[test]
+    fn converter_unwraps_and_scales() -> Result<(), CalError> {
+        let cal = Calibration::default();
+        let mut conv = Converter::new(cal)?;
+        let mut raw = RawSample {
+            motor_counts: 65000,
+            ..RawSample::default()
+        };
+        let m0 = conv.convert(&raw)?;
+        assert_eq!(m0.nut_position_m, 0.0);
+        assert!(close(m0.body_height_m, 0.61, 1e-6));
+        // Forward 2000 counts (one revolution) across the 16-bit wrap.
+        let mut c = 65000_u32;
+        for _ in 0..20 {
+            c = (c + 100) % 65536;
+            raw.motor_counts = c;
+            conv.convert(&raw)?;
+        }
+        let m = conv.convert(&raw)?;
+        assert!(close(m.nut_position_m, 0.005, 1e-7), "{}", m.nut_position_m);
+        assert!(close(m.motor_angle_rad, 2.0 * PI, 1e-5));
+        Ok(())
+    }
+
+    #[test]
+    fn converter_height_and_analog() -> Result<(), CalError> {
+        let cal = Calibration::default();
+        let mut conv = Converter::new(cal)?;
+        conv.convert(&RawSample::default())?;
+        let m = conv.convert(&RawSample {
+            height_counts: 65536 - 2000, // one pulley revolution down
+            loadcell_code: 400,
+            pot_code: 1024,
+            ..RawSample::default()
+        })?;
+        let expect_z = 0.61 - 2.0 * PI * 0.02;
+        assert!(close(m.body_height_m, expect_z, 1e-6));
+        assert!(close(m.spring_force_n, 100.0, 1e-4));
+        assert!(close(m.leg_compression_m, 0.025, 1e-6));
+        assert_eq!(m.height_delta_counts, -2000);
+        Ok(())
+    }
+
+    #[test]
+    fn converter_rejects_out_of_range_and_keeps_state() -> Result<(), CalError> {
+        let mut conv = Converter::new(Calibration::default())?;
+        conv.convert(&RawSample::default())?;
+        let before = conv;
+        assert_eq!(
+            conv.convert(&RawSample {
+                loadcell_code: 4096,
+                ..RawSample::default()
+            }),
+            Err(CalError::RawOutOfRange(Channel::LoadCell))
+        );
+        assert_eq!(
+            conv.convert(&RawSample {
+                motor_counts: 65536,
+                ..RawSample::default()
+            }),
+            Err(CalError::RawOutOfRange(Channel::MotorEncoder))
+        );
+        assert_eq!(conv, before);
+        Ok(())
+    }
+
+    #[test]
+    fn converter_rejects_non_finite() -> Result<(), CalError> {
+        let cal = Calibration {
+            loadcell_gain_n_per_code: f32::MAX,
+            loadcell_offset_code: -f32::MAX,
+            ..Calibration::default()
+        };
+        let mut conv = Converter::new(cal)?;
+        assert_eq!(
+            conv.convert(&RawSample::default()),
+            Err(CalError::NonFinite(Channel::LoadCell))
+        );
+        Ok(())
+    }
+
+    #[test]
+    fn position_range_is_enforced() -> Result<(), CalError> {
+        let cal = Calibration {
+            motor_counter_bits: 32,
+            ..Calibration::default()
+        };
+        let mut conv = Converter::new(cal)?;
+        let mut raw = RawSample::default();
+        conv.convert(&raw)?;
+        let step = 1_u32 << 22;
+        let mut result = Ok(Measurements::default());
+        for _ in 0..5 {
+            raw.motor_counts = raw.motor_counts.wrapping_add(step);
+            result = conv.convert(&raw);
+        }
+        assert_eq!(
+            result,
+            Err(CalError::PositionOutOfRange(Channel::MotorEncoder))
+        );
+        Ok(())
+    }
+
+    #[test]
+    fn dac_round_trip_and_clamps() {
+        let cal = Calibration::default();
+        assert_eq!(cal.current_to_dac_code(0.0), 2048);
+        assert_eq!(cal.current_to_dac_code(f32::NAN), 2048);
+        // 10 A / (40/2048 A) = 512 codes.
+        assert_eq!(cal.current_to_dac_code(10.0), 2560);
+        assert_eq!(cal.current_to_dac_code(-10.0), 1536);
+        // Clamped to the 33.7 A limit: 33.7 * 51.2 = 1725.44 -> 1725.
+        assert_eq!(cal.current_to_dac_code(1e9), 2048 + 1725);
+        assert_eq!(cal.current_to_dac_code(f32::NEG_INFINITY), 2048 - 1725);
+        assert!(close(cal.dac_code_to_current_a(2560), 10.0, 1e-5));
+        assert!(close(
+            cal.dac_code_to_current_a(cal.current_to_dac_code(5.0)),
+            5.0,
+            0.5 * cal.dac_amps_per_code
+        ));
+        // DAC range clamp when the limit exceeds the DAC's reach.
+        let wide = Calibration {
+            current_limit_a: 1000.0,
+            ..cal
+        };
+        assert_eq!(wide.current_to_dac_code(1000.0), 4095);
+        assert_eq!(wide.current_to_dac_code(-1000.0), 0);
+        assert!(close(cal.torque_nm(33.7), 1.0, 1e-3));
+    }
+}

@@ -1,0 +1,513 @@
+//! Phase estimator: flight/stance with hysteresis and debounce, plus the
+//! touchdown, liftoff, apex and bottom events, and the filtered velocities.
+//!
+//! Contact evidence uses two independent sensors that must agree:
+//! - the load cell's *excess* force `F - k (delta0 + p)`: in flight the lower
+//!   leg rests on its stop and the load cell reads the spring force the stop
+//!   carries, `k (delta0 + p)` (55 N at `p = 0` with the design preload, up to
+//!   605 N with the nut at the bottom), so the raw force is no contact signal;
+//!   the excess is `k (l0 - z)` in stance and 0 in flight;
+//! - the leg potentiometer's compression `l0 - z` (0 in flight).
+//!
+//! Touchdown needs both above their *enter* thresholds, liftoff both below
+//! their lower *exit* thresholds (hysteresis), each for `debounce_samples`
+//! consecutive samples (debounce). Touchdown and liftoff therefore strictly
+//! alternate, whatever the input.
+//!
+//! Velocities come from the filtered derivative of eq 4.1
+//! ([`FilteredDerivative`]) of the body height and motor angle. Apex: in
+//! flight, once the filtered body velocity has exceeded `+apex_arm_velocity`,
+//! the first sample with velocity `<= 0` reports the apex, at most once per
+//! flight; its height is the peak body height seen since liftoff (not the
+//! lagging filtered crossing) minus `l0`. Bottom: the same in stance,
+//! armed below `-bottom_arm_velocity`, reported at the first velocity `>= 0`.
+
+use crate::filter::{FilterError, FilteredDerivative};
+use crate::model::{ModelError, ModelParams};
+
+/// Contact phase.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Phase {
+    /// Toe off the ground.
+    Flight,
+    /// Toe on the ground.
+    Stance,
+}
+
+/// Events reported by [`PhaseEstimator::update`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum PhaseEvent {
+    /// Flight -> stance.
+    Touchdown,
+    /// Stance -> flight.
+    Liftoff,
+    /// Top of a flight (after a liftoff); toe height of the peak, m.
+    Apex {
+        /// Peak toe height above the ground, `max z - l0` since liftoff, m (>= 0).
+        toe_height_m: f32,
+    },
+    /// Maximum leg compression in stance (body velocity turning upward): `t1` of eqs 2.49-2.50.
+    Bottom,
+}
+
+/// One sample of the sensors the estimator uses.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct PhaseInput {
+    /// Body height coordinate `z`, m (`l0` at touchdown).
+    pub body_height_m: f32,
+    /// Motor angle `theta`, rad (`p = r theta`; 0 at the nut's upper stop).
+    pub motor_angle_rad: f32,
+    /// Load-cell spring force, N (compression positive).
+    pub spring_force_n: f32,
+    /// Leg potentiometer compression `l0 - z`, m (0 in flight).
+    pub leg_compression_m: f32,
+}
+
+/// Filtered velocities (eq 4.1).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Velocities {
+    /// Body velocity `zd`, m/s, up positive.
+    pub body_mps: f32,
+    /// Motor rate `theta dot`, rad/s.
+    pub motor_rad_s: f32,
+}
+
+/// Estimator tuning.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct EstimatorConfig {
+    /// Excess load-cell force `F - k (delta0 + p)` above which touchdown is
+    /// considered, N, > `liftoff_force_n`. Default 40 (8 sigma of 5 N noise).
+    pub touchdown_force_n: f32,
+    /// Excess force below which liftoff is considered, N. Default 20.
+    pub liftoff_force_n: f32,
+    /// Potentiometer compression above which touchdown is considered, m,
+    /// > `liftoff_compression_m`. Default 0.002.
+    pub touchdown_compression_m: f32,
+    /// Potentiometer compression below which liftoff is considered, m. Default 0.001.
+    pub liftoff_compression_m: f32,
+    /// Consecutive agreeing samples needed to change phase, in 1..=255. Default 3.
+    pub debounce_samples: u8,
+    /// Filter gain `G` of eq 4.1 for both velocities, in [0, 1). Default 0.9.
+    pub velocity_filter_gain: f32,
+    /// Upward body velocity that arms apex detection in flight, m/s, > 0. Default 0.1.
+    pub apex_arm_velocity_mps: f32,
+    /// Downward body speed that arms bottom detection in stance, m/s, > 0. Default 0.1.
+    pub bottom_arm_velocity_mps: f32,
+}
+
+impl Default for EstimatorConfig {
+    fn default() -> Self {
+        Self {
+            touchdown_force_n: 40.0,
+            liftoff_force_n: 20.0,
+            touchdown_compression_m: 0.002,
+            liftoff_compression_m: 0.001,
+            debounce_samples: 3,
+            velocity_filter_gain: 0.9,
+            apex_arm_velocity_mps: 0.1,
+            bottom_arm_velocity_mps: 0.1,
+        }
+    }
+}
+
+/// Why a [`PhaseEstimator`] could not be built.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum EstimatorError {
+    /// Force thresholds non-finite or not `touchdown_force_n > liftoff_force_n`.
+    ForceThresholds,
+    /// Compression thresholds non-finite or not `touchdown > liftoff`.
+    CompressionThresholds,
+    /// `debounce_samples` is 0.
+    Debounce,
+    /// `velocity_filter_gain` outside [0, 1).
+    FilterGain(FilterError),
+    /// An arming velocity is not a finite positive number.
+    ArmVelocity,
+    /// The model parameters are invalid.
+    Model(ModelError),
+}
+
+/// Flight/stance estimator with event detection. See the module doc.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PhaseEstimator {
+    cfg: EstimatorConfig,
+    stiffness_n_per_m: f32,
+    preload_m: f32,
+    screw_m_per_rad: f32,
+    leg_length_m: f32,
+    phase: Phase,
+    pending: u8,
+    body_filter: FilteredDerivative,
+    motor_filter: FilteredDerivative,
+    extremum_armed: bool,
+    extremum_done: bool,
+    peak_height_m: f32,
+    last_apex_m: Option<f32>,
+    rejected_samples: u32,
+}
+
+impl PhaseEstimator {
+    /// Builds an estimator that starts in [`Phase::Flight`].
+    pub fn new(cfg: EstimatorConfig, model: &ModelParams) -> Result<Self, EstimatorError> {
+        model.validate().map_err(EstimatorError::Model)?;
+        if !(cfg.touchdown_force_n > cfg.liftoff_force_n
+            && cfg.touchdown_force_n.is_finite()
+            && cfg.liftoff_force_n.is_finite())
+        {
+            return Err(EstimatorError::ForceThresholds);
+        }
+        if !(cfg.touchdown_compression_m > cfg.liftoff_compression_m
+            && cfg.touchdown_compression_m.is_finite()
+            && cfg.liftoff_compression_m.is_finite())
+        {
+            return Err(EstimatorError::CompressionThresholds);
+        }
+        if cfg.debounce_samples == 0 {
+            return Err(EstimatorError::Debounce);
+        }
+        let arm_ok = |v: f32| v > 0.0 && v.is_finite();
+        if !(arm_ok(cfg.apex_arm_velocity_mps) && arm_ok(cfg.bottom_arm_velocity_mps)) {
+            return Err(EstimatorError::ArmVelocity);
+        }
+        let filter = FilteredDerivative::new(cfg.velocity_filter_gain)
+            .map_err(EstimatorError::FilterGain)?;
+        Ok(Self {
+            cfg,
+            stiffness_n_per_m: model.spring_stiffness_n_per_m,
+            preload_m: model.preload_m,
+            screw_m_per_rad: model.screw_m_per_rad(),
+            leg_length_m: model.leg_length_m,
+            phase: Phase::Flight,
+            pending: 0,
+            body_filter: filter,
+            motor_filter: filter,
+            extremum_armed: false,
+            extremum_done: false,
+            peak_height_m: f32::NEG_INFINITY,
+            last_apex_m: None,
+            rejected_samples: 0,
+        })
+    }
+
+    /// The current phase estimate.
+    pub fn phase(&self) -> Phase {
+        self.phase
+    }
+
+    /// Forces the phase (e.g. at start-up standing on the ground) and clears the
+    /// debounce and event state; the velocity filters are kept.
+    pub fn set_phase(&mut self, phase: Phase) {
+        self.phase = phase;
+        self.reset_phase_state();
+    }
+
+    /// The latest filtered velocities (eq 4.1).
+    pub fn velocities(&self) -> Velocities {
+        Velocities {
+            body_mps: self.body_filter.value(),
+            motor_rad_s: self.motor_filter.value(),
+        }
+    }
+
+    /// Toe height of the last reported apex, m (`None` before the first).
+    pub fn last_apex_m(&self) -> Option<f32> {
+        self.last_apex_m
+    }
+
+    /// Samples ignored because an input or `dt_s` was non-finite/non-positive.
+    pub fn rejected_samples(&self) -> u32 {
+        self.rejected_samples
+    }
+
+    fn reset_phase_state(&mut self) {
+        self.pending = 0;
+        self.extremum_armed = false;
+        self.extremum_done = false;
+        self.peak_height_m = f32::NEG_INFINITY;
+    }
+
+    /// Feeds one sample taken `dt_s` seconds after the previous and returns
+    /// the event it completes, if any (at most one per sample; a phase change
+    /// takes precedence). A sample with a non-finite value or a non-positive
+    /// `dt_s` is ignored entirely (counted in [`rejected_samples`](Self::rejected_samples)).
+    pub fn update(&mut self, m: &PhaseInput, dt_s: f32) -> Option<PhaseEvent> {
+        let finite = m.body_height_m.is_finite()
+            && m.motor_angle_rad.is_finite()
+            && m.spring_force_n.is_finite()
+            && m.leg_compression_m.is_finite();
+        if !(finite && dt_s > 0.0 && dt_s.is_finite()) {
+            self.rejected_samples = self.rejected_samples.saturating_add(1);
+            return None;
+        }
+        // Update both filters or neither (each leaves its state unchanged on error).
+        let mut body = self.body_filter;
+        let mut motor = self.motor_filter;
+        let (Ok(body_v), Ok(_)) = (
+            body.update(m.body_height_m, dt_s),
+            motor.update(m.motor_angle_rad, dt_s),
+        ) else {
+            self.rejected_samples = self.rejected_samples.saturating_add(1);
+            return None;
+        };
+        self.body_filter = body;
+        self.motor_filter = motor;
+
+        let nut_m = self.screw_m_per_rad * m.motor_angle_rad;
+        let excess_n = m.spring_force_n - self.stiffness_n_per_m * (self.preload_m + nut_m);
+        let c = &self.cfg;
+        let evidence = match self.phase {
+            Phase::Flight => {
+                excess_n >= c.touchdown_force_n && m.leg_compression_m >= c.touchdown_compression_m
+            }
+            Phase::Stance => {
+                excess_n <= c.liftoff_force_n && m.leg_compression_m <= c.liftoff_compression_m
+            }
+        };
+        self.pending = if evidence {
+            self.pending.saturating_add(1)
+        } else {
+            0
+        };
+        if self.pending >= c.debounce_samples {
+            let (next, event) = match self.phase {
+                Phase::Flight => (Phase::Stance, PhaseEvent::Touchdown),
+                Phase::Stance => (Phase::Flight, PhaseEvent::Liftoff),
+            };
+            self.set_phase(next);
+            return Some(event);
+        }
+
+        match self.phase {
+            Phase::Flight => {
+                self.peak_height_m = self.peak_height_m.max(m.body_height_m);
+                if self.extremum_done {
+                    return None;
+                }
+                if body_v >= self.cfg.apex_arm_velocity_mps {
+                    self.extremum_armed = true;
+                }
+                if self.extremum_armed && body_v <= 0.0 {
+                    self.extremum_done = true;
+                    let toe_height_m = (self.peak_height_m - self.leg_length_m).max(0.0);
+                    self.last_apex_m = Some(toe_height_m);
+                    return Some(PhaseEvent::Apex { toe_height_m });
+                }
+            }
+            Phase::Stance => {
+                if self.extremum_done {
+                    return None;
+                }
+                if body_v <= -self.cfg.bottom_arm_velocity_mps {
+                    self.extremum_armed = true;
+                }
+                if self.extremum_armed && body_v >= 0.0 {
+                    self.extremum_done = true;
+                    return Some(PhaseEvent::Bottom);
+                }
+            }
+        }
+        None
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    extern crate std;
+    use super::*;
+    use std::vec::Vec;
+
+    const L0: f32 = 0.61;
+    const K: f32 = 11_000.0;
+    const D0: f32 = 0.005;
+    const G: f32 = 9.81;
+
+    /// Tiny deterministic LCG (Knuth MMIX constants).
+    struct Lcg(u64);
+    impl Lcg {
+        fn uniform(&mut self) -> f32 {
+            self.0 = self
+                .0
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            ((self.0 >> 40) as f32) / ((1_u64 << 24) as f32)
+        }
+        /// Approximately normal, unit variance (sum of 12 uniforms).
+        fn normal(&mut self) -> f32 {
+            (0..12).map(|_| self.uniform()).sum::<f32>() - 6.0
+        }
+    }
+
+    /// Noise-free synthetic hop trajectory: (z, p, compression) at time t.
+    /// Segments: descent from `apex[i]`, sinusoidal stance (100 ms), ascent to `apex[i+1]`.
+    fn trajectory(apexes: &[f32], dt: f32) -> Vec<(f32, f32, f32)> {
+        let mut out = Vec::new();
+        let stance_s = 0.1_f32;
+        let mut push = |z: f32, p: f32| out.push((z, p, (L0 - z).max(0.0)));
+        for (i, &h) in apexes.iter().enumerate() {
+            let v = libm::sqrtf(2.0 * G * h);
+            // Descent from h.
+            let mut t = 0.0;
+            while t < v / G {
+                push(L0 + h - 0.5 * G * t * t, 0.0);
+                t += dt;
+            }
+            if i + 1 == apexes.len() {
+                break;
+            }
+            // Stance: half sine of compression; nut pushed down 5 mm and back.
+            let v_next = libm::sqrtf(2.0 * G * apexes[i + 1]);
+            let amp = 0.5 * (v + v_next) * stance_s / core::f32::consts::PI;
+            let mut t = 0.0;
+            while t < stance_s {
+                let s = libm::sinf(core::f32::consts::PI * t / stance_s);
+                push(L0 - amp * s, 0.005 * s);
+                t += dt;
+            }
+            // Ascent to the next apex.
+            let mut t = 0.0;
+            while t < v_next / G {
+                push(L0 + v_next * t - 0.5 * G * t * t, 0.0);
+                t += dt;
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn one_event_of_each_kind_per_hop_under_noise() -> Result<(), EstimatorError> {
+        let model = ModelParams::default();
+        let r = model.screw_m_per_rad();
+        let dt = 1e-3_f32;
+        let apexes = [0.15, 0.12, 0.10, 0.08, 0.05, 0.03, 0.02];
+        let traj = trajectory(&apexes, dt);
+        for seed in [12_345_u64, 1, 987_654_321, 42] {
+            let mut est = PhaseEstimator::new(EstimatorConfig::default(), &model)?;
+            let mut rng = Lcg(seed);
+            let count_per_rad = 2000.0 / (2.0 * core::f32::consts::PI); // 500-line quadrature
+            let mut events = Vec::new();
+            for &(z, p, comp) in &traj {
+                let theta = p / r;
+                let input = PhaseInput {
+                    // Body height from an encoder with 0.1 mm resolution.
+                    body_height_m: libm::roundf(z / 1e-4) * 1e-4,
+                    motor_angle_rad: libm::roundf(theta * count_per_rad) / count_per_rad,
+                    spring_force_n: K * (D0 + comp + p) + 5.0 * rng.normal(),
+                    leg_compression_m: comp + 2e-4 * rng.normal(),
+                };
+                if let Some(e) = est.update(&input, dt) {
+                    events.push(e);
+                }
+            }
+            let hops = apexes.len() - 1;
+            assert_eq!(events.len(), 4 * hops, "{events:?}");
+            for (i, chunk) in events.chunks(4).enumerate() {
+                assert_eq!(chunk[0], PhaseEvent::Touchdown);
+                assert_eq!(chunk[1], PhaseEvent::Bottom);
+                assert_eq!(chunk[2], PhaseEvent::Liftoff);
+                let PhaseEvent::Apex { toe_height_m } = chunk[3] else {
+                    panic!("expected apex, got {:?}", chunk[3]);
+                };
+                let want = apexes[i + 1];
+                assert!(
+                    (toe_height_m - want).abs() < 0.005,
+                    "{toe_height_m} vs {want}"
+                );
+            }
+            assert_eq!(est.phase(), Phase::Flight);
+        }
+        Ok(())
+    }
+
+    #[test]
+    fn rejects_bad_config_and_bad_samples() -> Result<(), EstimatorError> {
+        let model = ModelParams::default();
+        let cfg = EstimatorConfig {
+            liftoff_force_n: 50.0,
+            ..EstimatorConfig::default()
+        };
+        assert_eq!(
+            PhaseEstimator::new(cfg, &model).err(),
+            Some(EstimatorError::ForceThresholds)
+        );
+        let cfg = EstimatorConfig {
+            debounce_samples: 0,
+            ..EstimatorConfig::default()
+        };
+        assert_eq!(
+            PhaseEstimator::new(cfg, &model).err(),
+            Some(EstimatorError::Debounce)
+        );
+        let mut est = PhaseEstimator::new(EstimatorConfig::default(), &model)?;
+        let bad = PhaseInput {
+            body_height_m: f32::NAN,
+            motor_angle_rad: 0.0,
+            spring_force_n: 1000.0,
+            leg_compression_m: 0.05,
+        };
+        for _ in 0..10 {
+            assert_eq!(est.update(&bad, 1e-3), None);
+        }
+        assert_eq!(est.rejected_samples(), 10);
+        assert_eq!(est.phase(), Phase::Flight);
+        Ok(())
+    }
+
+    mod prop {
+        use super::*;
+        use proptest::prelude::*;
+
+        proptest! {
+            #[test]
+            fn touchdown_and_liftoff_alternate(
+                samples in proptest::collection::vec(
+                    (0.0_f32..700.0, -0.002_f32..0.01, 0.55_f32..0.8), 1..600),
+            ) {
+                let model = ModelParams::default();
+                let mut est = PhaseEstimator::new(EstimatorConfig::default(), &model)
+                    .map_err(|e| TestCaseError::fail(std::format!("{e:?}")))?;
+                let mut phase = Phase::Flight;
+                let mut bottoms = 0;
+                let mut apexes = 0;
+                for (force, comp, z) in samples {
+                    let input = PhaseInput {
+                        body_height_m: z,
+                        motor_angle_rad: 0.0,
+                        spring_force_n: force,
+                        leg_compression_m: comp,
+                    };
+                    match est.update(&input, 1e-3) {
+                        Some(PhaseEvent::Touchdown) => {
+                            prop_assert_eq!(phase, Phase::Flight);
+                            phase = Phase::Stance;
+                            bottoms = 0;
+                        }
+                        Some(PhaseEvent::Liftoff) => {
+                            prop_assert_eq!(phase, Phase::Stance);
+                            phase = Phase::Flight;
+                            apexes = 0;
+                        }
+                        Some(PhaseEvent::Bottom) => {
+                            prop_assert_eq!(phase, Phase::Stance);
+                            bottoms += 1;
+                            prop_assert!(bottoms <= 1);
+                        }
+                        Some(PhaseEvent::Apex { toe_height_m }) => {
+                            prop_assert_eq!(phase, Phase::Flight);
+                            prop_assert!(toe_height_m >= 0.0);
+                            apexes += 1;
+                            prop_assert!(apexes <= 1);
+                        }
+                        None => {}
+                    }
+                    prop_assert_eq!(est.phase(), phase);
+                }
+            }
+        }
+    }
+}

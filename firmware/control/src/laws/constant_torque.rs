@@ -1,0 +1,47 @@
+//! Open-loop constant torque (thesis section 2.1.3.4, Figures 2.8-2.9 and
+//! section 4.4.2): a fixed motor torque for the whole stance.
+
+use super::{check_finite, Actuator, LawError};
+
+/// Configuration of the constant-torque law.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Config {
+    /// Stance torque, N m (positive compresses the spring). Default 1.0 (Table 2.1).
+    pub torque_nm: f32,
+}
+
+impl Default for Config {
+    fn default() -> Self {
+        Self { torque_nm: 1.0 }
+    }
+}
+
+/// Current command `tau / k_m`, A, clamped.
+pub fn command(c: &Config, act: &Actuator) -> Result<f32, LawError> {
+    check_finite(&[c.torque_nm])?;
+    act.torque_to_current(c.torque_nm)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::test_util::close;
+    use super::*;
+
+    #[test]
+    fn torque_to_current_and_saturation() -> Result<(), LawError> {
+        let act = Actuator::default();
+        assert!(close(command(&Config::default(), &act)?, 33.67, 1e-2));
+        let half = Config { torque_nm: 0.5 };
+        assert!(close(command(&half, &act)?, 16.835, 1e-2));
+        let over = Config { torque_nm: 3.0 };
+        assert_eq!(command(&over, &act)?, act.current_limit_a);
+        let neg = Config { torque_nm: -3.0 };
+        assert_eq!(command(&neg, &act)?, -act.current_limit_a);
+        let bad = Config {
+            torque_nm: f32::NAN,
+        };
+        assert_eq!(command(&bad, &act), Err(LawError::NonFiniteInput));
+        Ok(())
+    }
+}

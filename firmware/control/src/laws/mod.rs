@@ -1,0 +1,348 @@
+//! Control laws (thesis sections 2.1.3, 4.3, 4.4.3). Every law returns a motor
+//! **current command in A**, positive drives the nut down (compresses the
+//! spring), clamped to the actuator's usable current limit. A non-finite input
+//! gives `Err(LawError::NonFiniteInput)`; the caller must then command 0 A
+//! (see [`or_zero`]). Nothing here can return NaN.
+//!
+//! Torque and current: `i = tau / k_m`. Where a law computes a force on the
+//! nut (position and velocity loops), the motor torque that balances it is
+//! `tau = F r / eta` (the plant's drive force is `eta tau / r`).
+//!
+//! Stance laws ([`StanceLaw`], run by [`StanceController`]):
+//! - [`step_open`]: open-loop position step (eq 2.49);
+//! - [`step_closed`]: closed-loop position step (eqs 2.50-2.51);
+//! - [`constant_torque`]: open-loop constant torque (section 2.1.3.4);
+//! - [`energy_torque`]: energy-feedback torque (eq 2.52);
+//! - [`velocity`]: actuator velocity (eq 2.53);
+//! - [`modified_torque`]: full torque in stance and late in the descent (section 4.4.3).
+//!
+//! Flight law: [`flight_pd`] (section 4.3, eq 4.4).
+
+pub mod constant_torque;
+pub mod energy_torque;
+pub mod flight_pd;
+pub mod modified_torque;
+pub mod step_closed;
+pub mod step_open;
+pub mod velocity;
+
+use crate::model::ModelParams;
+
+/// Why a law refused to produce a command.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum LawError {
+    /// An input or a gain is NaN or infinite; command 0 A.
+    NonFiniteInput,
+}
+
+/// The caller's fallback: the command, or 0 A on error.
+pub fn or_zero(command: Result<f32, LawError>) -> f32 {
+    command.unwrap_or(0.0)
+}
+
+/// Plant constants every law needs (from [`ModelParams`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Actuator {
+    /// Motor torque constant `k_m`, N m/A (> 0).
+    pub torque_constant_nm_per_a: f32,
+    /// Symmetric current clamp, A (>= 0): `min(amplifier limit, torque limit / k_m)`.
+    pub current_limit_a: f32,
+    /// Screw ratio `r`, m/rad.
+    pub screw_m_per_rad: f32,
+    /// Motor + screw efficiency `eta`, in (0, 1].
+    pub efficiency: f32,
+    /// Spring stiffness `k`, N/m (for the eq 2.51 normalisation).
+    pub spring_stiffness_n_per_m: f32,
+    /// Nut stroke, m: position references are clamped to `0..stroke`.
+    pub stroke_m: f32,
+}
+
+impl Actuator {
+    /// Takes the constants from a model (validate it first).
+    pub fn from_model(m: &ModelParams) -> Self {
+        Self {
+            torque_constant_nm_per_a: m.torque_constant_nm_per_a,
+            current_limit_a: m.usable_current_limit_a(),
+            screw_m_per_rad: m.screw_m_per_rad(),
+            efficiency: m.efficiency,
+            spring_stiffness_n_per_m: m.spring_stiffness_n_per_m,
+            stroke_m: m.stroke_m,
+        }
+    }
+
+    /// Clamps a current to `+-current_limit_a`; non-finite gives the error.
+    pub fn clamp_current(&self, current_a: f32) -> Result<f32, LawError> {
+        let limit = if self.current_limit_a.is_finite() {
+            self.current_limit_a.max(0.0)
+        } else {
+            0.0
+        };
+        if current_a.is_nan() {
+            return Err(LawError::NonFiniteInput);
+        }
+        // +-inf (e.g. a huge gain) saturates like any large value.
+        Ok(current_a.clamp(-limit, limit))
+    }
+
+    /// Current for a motor torque, `i = tau / k_m`, A, clamped.
+    pub fn torque_to_current(&self, torque_nm: f32) -> Result<f32, LawError> {
+        if !torque_nm.is_finite() {
+            return Err(LawError::NonFiniteInput);
+        }
+        let kt = self.torque_constant_nm_per_a;
+        if !(kt > 0.0 && kt.is_finite()) {
+            return Err(LawError::NonFiniteInput);
+        }
+        self.clamp_current(torque_nm / kt)
+    }
+
+    /// Current for a force on the nut: `tau = F r / eta`, `i = tau / k_m`, A, clamped.
+    pub fn nut_force_to_current(&self, force_n: f32) -> Result<f32, LawError> {
+        let eta = self.efficiency;
+        if !(eta > 0.0 && eta.is_finite()) {
+            return Err(LawError::NonFiniteInput);
+        }
+        self.torque_to_current(force_n * self.screw_m_per_rad / eta)
+    }
+}
+
+impl Default for Actuator {
+    fn default() -> Self {
+        Self::from_model(&ModelParams::default())
+    }
+}
+
+/// `Ok(())` if every value is finite.
+pub(crate) fn check_finite(values: &[f32]) -> Result<(), LawError> {
+    if values.iter().all(|v| v.is_finite()) {
+        Ok(())
+    } else {
+        Err(LawError::NonFiniteInput)
+    }
+}
+
+/// Position PD on the nut used by the step laws (eqs 2.49-2.50):
+/// `F = F_ff + k_p,f (p_ref - p) - k_v,f pd`, then `tau = F r / eta`, where
+/// the feed-forward `F_ff` is the measured spring force (clamped at >= 0) when
+/// `spring_feedforward` is set, else 0. Without it the PD settles where
+/// `k_p,f (p_ref - p)` balances the spring (~500 N at the bottom of stance:
+/// 6 mm short of a 10 mm step), so the step is not tracked.
+///
+/// Table 2.1 gives `k_p,f = 8e4` and `k_v,f = 300` without units. Read as
+/// N/m and N s/m on the nut they are sensible: a 10 mm error gives 800 N
+/// (0.71 N m, near the 1 N m limit) and 1 m/s gives 300 N. (Read as N m/rad
+/// of motor angle, or per metre in torque, they would saturate at any error.)
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct NutPositionPd {
+    /// Position gain `k_p,f`, N/m (force on the nut per metre of error), >= 0. Default 8e4.
+    pub kp_n_per_m: f32,
+    /// Velocity gain `k_v,f`, N s/m (force per m/s of nut velocity), >= 0. Default 300.
+    pub kd_n_s_per_m: f32,
+    /// Whether to add the measured spring force as feed-forward. Default true.
+    pub spring_feedforward: bool,
+}
+
+impl Default for NutPositionPd {
+    fn default() -> Self {
+        Self {
+            kp_n_per_m: 8e4,
+            kd_n_s_per_m: 300.0,
+            spring_feedforward: true,
+        }
+    }
+}
+
+impl NutPositionPd {
+    /// Current that drives the nut from `p` (m) at `pd` (m/s) to `p_ref` (m)
+    /// against the measured spring force `spring_force_n` (N), A, clamped.
+    pub fn current_a(
+        &self,
+        act: &Actuator,
+        p_ref_m: f32,
+        p_m: f32,
+        pd_mps: f32,
+        spring_force_n: f32,
+    ) -> Result<f32, LawError> {
+        check_finite(&[p_ref_m, p_m, pd_mps, self.kp_n_per_m, self.kd_n_s_per_m])?;
+        check_finite(&[spring_force_n])?;
+        let ff = if self.spring_feedforward {
+            spring_force_n.max(0.0)
+        } else {
+            0.0
+        };
+        let force_n = ff + self.kp_n_per_m * (p_ref_m - p_m) - self.kd_n_s_per_m * pd_mps;
+        act.nut_force_to_current(force_n)
+    }
+}
+
+/// Measurements and targets a stance law uses.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct StanceInput {
+    /// Estimated energy `E`, J (e.g. [`crate::energy::total_energy_j`]).
+    pub energy_j: f32,
+    /// Desired energy `E_D`, J (e.g. [`ModelParams::desired_energy_j`]).
+    pub desired_energy_j: f32,
+    /// Nut position `p`, m (down positive).
+    pub nut_position_m: f32,
+    /// Nut velocity `pd = r theta dot`, m/s.
+    pub nut_velocity_mps: f32,
+    /// Leg compression `l0 - z`, m (equals `z(t_td) - z(t)` of eq 2.51).
+    pub leg_compression_m: f32,
+    /// Load-cell spring force, N (velocity law feed-forward).
+    pub spring_force_n: f32,
+    /// Whether the bottom of stance (`t1`, the `Bottom` event) has passed.
+    pub after_bottom: bool,
+}
+
+/// The stance law in use, with its configuration.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum StanceLaw {
+    /// Open-loop position step, eq 2.49.
+    StepOpen(step_open::Config),
+    /// Closed-loop position step, eqs 2.50-2.51.
+    StepClosed(step_closed::Config),
+    /// Open-loop constant torque.
+    ConstantTorque(constant_torque::Config),
+    /// Energy-feedback torque, eq 2.52.
+    EnergyTorque(energy_torque::Config),
+    /// Actuator velocity, eq 2.53.
+    Velocity(velocity::Config),
+    /// Modified torque (section 4.4.3); in flight see [`modified_torque::flight_active`].
+    ModifiedTorque(modified_torque::Config),
+}
+
+impl Default for StanceLaw {
+    fn default() -> Self {
+        StanceLaw::EnergyTorque(energy_torque::Config::default())
+    }
+}
+
+/// Runs a [`StanceLaw`], holding the per-stance state (the step latched at `t1`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct StanceController {
+    /// The law and its configuration.
+    pub law: StanceLaw,
+    /// Plant constants.
+    pub actuator: Actuator,
+    step: step_closed::Latch,
+}
+
+impl StanceController {
+    /// A controller for `law` on `actuator`.
+    pub fn new(law: StanceLaw, actuator: Actuator) -> Self {
+        Self {
+            law,
+            actuator,
+            step: step_closed::Latch::default(),
+        }
+    }
+
+    /// Call at every touchdown: forgets the step latched in the previous stance.
+    pub fn on_touchdown(&mut self) {
+        self.step = step_closed::Latch::default();
+    }
+
+    /// The stance current command, A (positive compresses the spring), clamped.
+    ///
+    /// Every input field is checked first: any non-finite value gives
+    /// [`LawError::NonFiniteInput`], whichever law is selected.
+    pub fn command(&mut self, x: &StanceInput) -> Result<f32, LawError> {
+        check_finite(&[
+            x.energy_j,
+            x.desired_energy_j,
+            x.nut_position_m,
+            x.nut_velocity_mps,
+            x.leg_compression_m,
+            x.spring_force_n,
+        ])?;
+        let act = &self.actuator;
+        match &self.law {
+            StanceLaw::StepOpen(c) => step_open::command(c, act, x),
+            StanceLaw::StepClosed(c) => self.step.command(c, act, x),
+            StanceLaw::ConstantTorque(c) => constant_torque::command(c, act),
+            StanceLaw::EnergyTorque(c) => energy_torque::command(c, act, x),
+            StanceLaw::Velocity(c) => velocity::command(c, act, x),
+            StanceLaw::ModifiedTorque(c) => modified_torque::command(c, act),
+        }
+    }
+}
+
+#[cfg(test)]
+pub(crate) mod test_util {
+    use super::*;
+
+    /// A neutral stance input: at the target energy, nut at rest at 0.
+    pub fn input() -> StanceInput {
+        StanceInput {
+            energy_j: 70.0,
+            desired_energy_j: 70.0,
+            nut_position_m: 0.0,
+            nut_velocity_mps: 0.0,
+            leg_compression_m: 0.03,
+            spring_force_n: 385.0,
+            after_bottom: false,
+        }
+    }
+
+    pub fn close(a: f32, b: f32, tol: f32) -> bool {
+        (a - b).abs() <= tol
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn conversions_and_clamp() -> Result<(), LawError> {
+        let act = Actuator::default();
+        assert!(test_util::close(
+            act.torque_to_current(0.5)?,
+            0.5 / 0.0297,
+            1e-3
+        ));
+        assert_eq!(act.torque_to_current(5.0)?, act.current_limit_a);
+        assert_eq!(act.torque_to_current(-5.0)?, -act.current_limit_a);
+        assert_eq!(act.clamp_current(f32::INFINITY)?, act.current_limit_a);
+        assert_eq!(act.clamp_current(f32::NAN), Err(LawError::NonFiniteInput));
+        // 100 N on the nut: tau = 100 * 7.9577e-4 / 0.9 = 0.08842 N m -> 2.977 A.
+        assert!(test_util::close(
+            act.nut_force_to_current(100.0)?,
+            2.977,
+            2e-3
+        ));
+        assert_eq!(or_zero(Err(LawError::NonFiniteInput)), 0.0);
+        Ok(())
+    }
+
+    #[test]
+    fn controller_dispatches_and_rejects_nan() {
+        let mut c = StanceController::new(StanceLaw::default(), Actuator::default());
+        let mut x = test_util::input();
+        x.energy_j = f32::NAN;
+        assert_eq!(c.command(&x), Err(LawError::NonFiniteInput));
+        for law in [
+            StanceLaw::StepOpen(step_open::Config::default()),
+            StanceLaw::StepClosed(step_closed::Config::default()),
+            StanceLaw::ConstantTorque(constant_torque::Config::default()),
+            StanceLaw::EnergyTorque(energy_torque::Config::default()),
+            StanceLaw::Velocity(velocity::Config::default()),
+            StanceLaw::ModifiedTorque(modified_torque::Config::default()),
+        ] {
+            let mut c = StanceController::new(law, Actuator::default());
+            let mut x = test_util::input();
+            x.after_bottom = true;
+            x.energy_j = 65.0;
+            let i = or_zero(c.command(&x));
+            assert!((0.0..=33.67).contains(&i), "{law:?}: {i}");
+            x.nut_velocity_mps = f32::NAN;
+            assert_eq!(c.command(&x), Err(LawError::NonFiniteInput), "{law:?}");
+        }
+    }
+}

@@ -1,0 +1,78 @@
+//! Modified torque control (thesis section 4.4.3): the full motor torque in
+//! stance, and already in flight on the way down from the moment the toe
+//! falls below a fraction (the thesis's 40 %) of the last apex height, so the
+//! motor is up to speed at touchdown. Outside that window the flight PD
+//! ([`super::flight_pd`]) drives the nut back.
+
+use super::{check_finite, Actuator, LawError};
+
+/// Configuration of the modified torque law.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Config {
+    /// Torque applied, N m (positive compresses the spring). Default 1.0 (full torque).
+    pub torque_nm: f32,
+    /// Fraction of the last apex toe height below which the descent starts
+    /// the torque, dimensionless in [0, 1]. Default 0.4.
+    pub apex_fraction: f32,
+}
+
+impl Default for Config {
+    fn default() -> Self {
+        Self {
+            torque_nm: 1.0,
+            apex_fraction: 0.4,
+        }
+    }
+}
+
+/// Whether the law is active in flight: descending (`body_velocity_mps < 0`)
+/// with the toe (m) below `apex_fraction * last_apex_m`. False without an
+/// apex, with a non-positive apex, or with any non-finite input.
+pub fn flight_active(
+    c: &Config,
+    toe_height_m: f32,
+    body_velocity_mps: f32,
+    last_apex_m: Option<f32>,
+) -> bool {
+    let Some(apex) = last_apex_m else {
+        return false;
+    };
+    if check_finite(&[c.apex_fraction, toe_height_m, body_velocity_mps, apex]).is_err() {
+        return false;
+    }
+    apex > 0.0 && body_velocity_mps < 0.0 && toe_height_m < c.apex_fraction * apex
+}
+
+/// Current command while active (stance, or flight when
+/// [`flight_active`]), A: `tau / k_m`, clamped.
+pub fn command(c: &Config, act: &Actuator) -> Result<f32, LawError> {
+    check_finite(&[c.torque_nm])?;
+    act.torque_to_current(c.torque_nm)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::test_util::close;
+    use super::*;
+
+    #[test]
+    fn window_and_command() -> Result<(), LawError> {
+        let c = Config::default();
+        let act = Actuator::default();
+        assert!(close(command(&c, &act)?, 33.67, 1e-2));
+        // Apex 0.1 m: threshold 0.04 m.
+        assert!(flight_active(&c, 0.039, -1.0, Some(0.1)));
+        assert!(!flight_active(&c, 0.041, -1.0, Some(0.1)));
+        // Rising through the window: not active.
+        assert!(!flight_active(&c, 0.02, 1.0, Some(0.1)));
+        assert!(!flight_active(&c, 0.02, -1.0, None));
+        assert!(!flight_active(&c, f32::NAN, -1.0, Some(0.1)));
+        let over = Config {
+            torque_nm: 2.0,
+            ..c
+        };
+        assert_eq!(command(&over, &act)?, act.current_limit_a);
+        Ok(())
+    }
+}

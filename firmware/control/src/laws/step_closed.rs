@@ -1,0 +1,185 @@
+//! Closed-loop position step, thesis eqs 2.50-2.51:
+//! `p(t) = k_p (E_D - E(t1)) u(t - t1)`, the step height latched at the bottom
+//! of stance `t1` and tracked by the nut position PD [`NutPositionPd`].
+//!
+//! Units: `k_p` in m/J. Table 2.1's `k_p = 0.2` is read as **0.2 cm/J =
+//! 2e-3 m/J** (a 5 J deficit gives a 10 mm step, Table 2.1's `l1`); in m/J it
+//! would ask for 1 m of stroke per 5 J.
+//!
+//! Eq 2.51 as printed, `k_p = (E_D - E) / (K (z(t1) - z(t_td)))`, has units
+//! of m (and a negative sign, `z(t1) < z(t_td)`), so with eq 2.50 the step
+//! would be `(E_D - E)^2 / (K dz)`. The dimensionally consistent reading of its
+//! derivation from eq 2.48 (`dp = dE / F_s`, with the spring force at the
+//! bottom approximated by `K (z(t_td) - z(t1))`) is
+//! `k_p = 1 / (K (z(t_td) - z(t1)))` in m/J, i.e. `p = (E_D - E) / F_s(t1)`.
+//! That is what [`Gain::Normalised`] implements; with the design spring and
+//! 50 mm compression it gives 1.8e-3 m/J, close to the 2e-3 m/J reading of
+//! the thesis's 0.2.
+
+use super::{check_finite, Actuator, LawError, NutPositionPd, StanceInput};
+
+/// How `k_p` of eq 2.50 is chosen.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Gain {
+    /// A fixed `k_p`, m/J (>= 0). Thesis: 0.2 cm/J = 2e-3 m/J.
+    Fixed {
+        /// `k_p`, m/J.
+        kp_m_per_j: f32,
+    },
+    /// Eq 2.51 read dimensionally: `k_p = 1 / (K (z(t_td) - z(t1)))`, m/J,
+    /// with the leg compression at `t1`; compressions under
+    /// `min_compression_m` (m, > 0) are raised to it to bound `k_p`.
+    Normalised {
+        /// Floor on the compression used, m. Default 0.005.
+        min_compression_m: f32,
+    },
+}
+
+/// Configuration of the closed-loop step.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Config {
+    /// Gain choice. Default `Fixed { kp_m_per_j: 2e-3 }` (Table 2.1's 0.2 in cm/J).
+    pub gain: Gain,
+    /// Position loop tracking the reference (gains in N/m and N s/m on the nut).
+    pub pd: NutPositionPd,
+}
+
+impl Default for Config {
+    fn default() -> Self {
+        Self {
+            gain: Gain::Fixed { kp_m_per_j: 2e-3 },
+            pd: NutPositionPd::default(),
+        }
+    }
+}
+
+/// `k_p` in m/J for a leg compression at `t1` (m), per [`Gain`].
+pub fn gain_m_per_j(c: &Config, act: &Actuator, compression_m: f32) -> Result<f32, LawError> {
+    match c.gain {
+        Gain::Fixed { kp_m_per_j } => {
+            check_finite(&[kp_m_per_j])?;
+            Ok(kp_m_per_j.max(0.0))
+        }
+        Gain::Normalised { min_compression_m } => {
+            check_finite(&[min_compression_m, compression_m])?;
+            let dz = compression_m.max(min_compression_m).max(1e-4);
+            let k = act.spring_stiffness_n_per_m;
+            if !(k > 0.0 && k.is_finite()) {
+                return Err(LawError::NonFiniteInput);
+            }
+            Ok(1.0 / (k * dz))
+        }
+    }
+}
+
+/// Step height of eq 2.50, m: `k_p (E_D - E)`, clamped to `0..=stroke`
+/// (a surplus gives no step: the nut cannot go above its upper stop).
+pub fn step_m(c: &Config, act: &Actuator, x: &StanceInput) -> Result<f32, LawError> {
+    check_finite(&[x.energy_j, x.desired_energy_j])?;
+    let kp = gain_m_per_j(c, act, x.leg_compression_m)?;
+    let step = kp * (x.desired_energy_j - x.energy_j);
+    check_finite(&[step])?;
+    Ok(step.clamp(0.0, act.stroke_m.max(0.0)))
+}
+
+/// Per-stance state: the step latched at `t1`.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Latch {
+    step_m: Option<f32>,
+}
+
+impl Latch {
+    /// The latched step, m, if `t1` has passed this stance.
+    pub fn step_m(&self) -> Option<f32> {
+        self.step_m
+    }
+
+    /// Current command, A (positive compresses the spring), clamped. The first
+    /// call with `after_bottom` latches the step from that sample's energy and
+    /// compression; reset the latch at touchdown (`Latch::default()`).
+    pub fn command(
+        &mut self,
+        c: &Config,
+        act: &Actuator,
+        x: &StanceInput,
+    ) -> Result<f32, LawError> {
+        check_finite(&[x.nut_position_m, x.nut_velocity_mps])?;
+        let p_ref = if x.after_bottom {
+            match self.step_m {
+                Some(s) => s,
+                None => {
+                    let s = step_m(c, act, x)?;
+                    self.step_m = Some(s);
+                    s
+                }
+            }
+        } else {
+            0.0
+        };
+        c.pd.current_a(
+            act,
+            p_ref,
+            x.nut_position_m,
+            x.nut_velocity_mps,
+            x.spring_force_n,
+        )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::test_util::{close, input};
+    use super::*;
+
+    #[test]
+    fn eq_2_50_step_and_latch() -> Result<(), LawError> {
+        let act = Actuator::default();
+        let c = Config {
+            pd: NutPositionPd {
+                spring_feedforward: false,
+                ..NutPositionPd::default()
+            },
+            ..Config::default()
+        };
+        let mut latch = Latch::default();
+        let mut x = input();
+        x.energy_j = 65.0; // 5 J short -> 2e-3 * 5 = 0.01 m
+        assert_eq!(latch.command(&c, &act, &x)?, 0.0);
+        assert_eq!(latch.step_m(), None);
+        x.after_bottom = true;
+        let i = latch.command(&c, &act, &x)?;
+        assert!(close(latch.step_m().unwrap_or(0.0), 0.01, 1e-6));
+        assert!(close(i, 23.82, 0.02));
+        // Latched: later energy changes do not move the reference.
+        x.energy_j = 69.0;
+        assert!(close(latch.command(&c, &act, &x)?, i, 1e-4));
+        // Surplus energy: no step.
+        let mut fresh = Latch::default();
+        x.energy_j = 80.0;
+        assert_eq!(fresh.command(&c, &act, &x)?, 0.0);
+        Ok(())
+    }
+
+    #[test]
+    fn eq_2_51_normalised_gain() -> Result<(), LawError> {
+        let act = Actuator::default();
+        let c = Config {
+            gain: Gain::Normalised {
+                min_compression_m: 0.005,
+            },
+            ..Config::default()
+        };
+        // 1 / (11000 * 0.05) = 1.818e-3 m/J.
+        assert!(close(gain_m_per_j(&c, &act, 0.05)?, 1.818e-3, 1e-6));
+        // Floor at 5 mm: 1 / 55 = 0.01818 m/J.
+        assert!(close(gain_m_per_j(&c, &act, 0.0)?, 0.018_18, 1e-5));
+        // Big deficit saturates at the stroke.
+        let mut x = input();
+        x.energy_j = 0.0;
+        assert_eq!(step_m(&c, &act, &x)?, 0.05);
+        Ok(())
+    }
+}

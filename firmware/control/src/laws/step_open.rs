@@ -1,0 +1,85 @@
+//! Open-loop position step, thesis eq 2.49: `p(t) = l1 u(t - t1)`, with `t1`
+//! the bottom of stance (maximum spring compression). Before `t1` the
+//! reference is the start position `p = 0`. The reference is tracked by the
+//! nut position PD [`NutPositionPd`] (Table 2.1's `k_p,f`, `k_v,f`).
+
+use super::{check_finite, Actuator, LawError, NutPositionPd, StanceInput};
+
+/// Configuration of the open-loop step.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Config {
+    /// Step height `l1`, m, in `0..=stroke` (clamped to the stroke). Default 0.01 (Table 2.1).
+    pub step_m: f32,
+    /// Position loop tracking the reference (gains in N/m and N s/m on the nut).
+    pub pd: NutPositionPd,
+}
+
+impl Default for Config {
+    fn default() -> Self {
+        Self {
+            step_m: 0.01,
+            pd: NutPositionPd::default(),
+        }
+    }
+}
+
+/// Position reference of eq 2.49, m: `l1` after the bottom, 0 before; clamped to `0..=stroke`.
+pub fn reference_m(c: &Config, act: &Actuator, after_bottom: bool) -> f32 {
+    if after_bottom {
+        c.step_m.clamp(0.0, act.stroke_m.max(0.0))
+    } else {
+        0.0
+    }
+}
+
+/// Current command, A (positive compresses the spring), clamped.
+pub fn command(c: &Config, act: &Actuator, x: &StanceInput) -> Result<f32, LawError> {
+    check_finite(&[c.step_m, x.nut_position_m, x.nut_velocity_mps])?;
+    let p_ref = reference_m(c, act, x.after_bottom);
+    c.pd.current_a(
+        act,
+        p_ref,
+        x.nut_position_m,
+        x.nut_velocity_mps,
+        x.spring_force_n,
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::test_util::{close, input};
+    use super::*;
+
+    #[test]
+    fn step_after_bottom_only() -> Result<(), LawError> {
+        let act = Actuator::default();
+        let c = Config {
+            pd: NutPositionPd {
+                spring_feedforward: false,
+                ..NutPositionPd::default()
+            },
+            ..Config::default()
+        };
+        let mut x = input();
+        assert_eq!(command(&c, &act, &x)?, 0.0);
+        x.after_bottom = true;
+        // Error 0.01 m * 8e4 N/m = 800 N -> tau = 800 r / 0.9 = 0.7074 N m -> 23.82 A.
+        assert!(close(command(&c, &act, &x)?, 23.82, 0.02));
+        // Nut past the reference: negative (pull back).
+        x.nut_position_m = 0.02;
+        assert!(command(&c, &act, &x)? < 0.0);
+        // Large error saturates.
+        let big = Config { step_m: 0.05, ..c };
+        x.nut_position_m = 0.0;
+        assert_eq!(command(&big, &act, &x)?, act.current_limit_a);
+        // Reference clamped to the stroke.
+        let huge = Config { step_m: 1.0, ..c };
+        assert_eq!(reference_m(&huge, &act, true), 0.05);
+        // Spring feed-forward (default): at the reference the motor holds the
+        // measured 385 N: tau = 385 r / 0.9 = 0.3404 N m -> 11.46 A.
+        x.nut_position_m = 0.01;
+        assert!(close(command(&Config::default(), &act, &x)?, 11.46, 0.02));
+        Ok(())
+    }
+}

@@ -1,0 +1,809 @@
+//! Safety supervisor: latched faults between the control law and the amplifier.
+//!
+//! Every control period the application passes the latest measurements and
+//! the control law's requested current to [`Supervisor::check`]. The returned
+//! [`Command`] is what goes to the DAC and the amplifier-enable pin. Any fault
+//! latches: from that same call on the command is 0 A with the amplifier
+//! disabled, until [`Supervisor::reset`] succeeds. The output current is
+//! always finite and within `±current_limit_a`.
+//!
+//! The property tests run proptest's default case count (256); set
+//! `PROPTEST_CASES=10000` in the environment for a longer run.
+
+/// One kind of fault the supervisor detects.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[repr(u8)]
+pub enum Fault {
+    /// A measurement is NaN or infinite.
+    SensorNonFinite = 0,
+    /// A measurement is outside its plausible range.
+    SensorRange = 1,
+    /// An encoder counter changed more in one period than the fastest physical motion allows.
+    EncoderJump = 2,
+    /// Load cell and potentiometer disagree about ground contact.
+    ContactDisagree = 3,
+    /// The nut is predicted to reach a stroke soft limit even under full braking.
+    StrokeLimit = 4,
+    /// The requested current is far beyond the limit (runaway law or unit error).
+    Overcurrent = 5,
+    /// The emergency stop is pressed.
+    Estop = 6,
+    /// The servo amplifier reports a fault.
+    AmpFault = 7,
+    /// The control period overran (reported by the application).
+    Overrun = 8,
+    /// Writing the DAC failed (reported by the application).
+    DacError = 9,
+    /// The requested current is NaN or infinite.
+    CommandNonFinite = 10,
+}
+
+impl Fault {
+    /// Every fault, in bit order.
+    pub const ALL: [Fault; 11] = [
+        Fault::SensorNonFinite,
+        Fault::SensorRange,
+        Fault::EncoderJump,
+        Fault::ContactDisagree,
+        Fault::StrokeLimit,
+        Fault::Overcurrent,
+        Fault::Estop,
+        Fault::AmpFault,
+        Fault::Overrun,
+        Fault::DacError,
+        Fault::CommandNonFinite,
+    ];
+
+    /// Short kebab-case name for logs and telemetry.
+    pub const fn name(self) -> &'static str {
+        match self {
+            Fault::SensorNonFinite => "sensor-nonfinite",
+            Fault::SensorRange => "sensor-range",
+            Fault::EncoderJump => "encoder-jump",
+            Fault::ContactDisagree => "contact-disagree",
+            Fault::StrokeLimit => "stroke-limit",
+            Fault::Overcurrent => "overcurrent",
+            Fault::Estop => "estop",
+            Fault::AmpFault => "amp-fault",
+            Fault::Overrun => "overrun",
+            Fault::DacError => "dac-error",
+            Fault::CommandNonFinite => "command-nonfinite",
+        }
+    }
+
+    /// This fault's bit in [`Faults`].
+    pub const fn bit(self) -> u16 {
+        1 << (self as u8)
+    }
+}
+
+/// A set of [`Fault`]s, one bit each (bit `n` is `Fault::ALL[n]`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Faults(pub u16);
+
+impl Faults {
+    /// No fault.
+    pub const NONE: Faults = Faults(0);
+
+    /// Whether no fault is set.
+    pub const fn is_empty(self) -> bool {
+        self.0 == 0
+    }
+
+    /// Whether `fault` is set.
+    pub const fn contains(self, fault: Fault) -> bool {
+        self.0 & fault.bit() != 0
+    }
+
+    /// Sets `fault`.
+    pub fn insert(&mut self, fault: Fault) {
+        self.0 |= fault.bit();
+    }
+
+    /// The union of two sets.
+    pub const fn union(self, other: Faults) -> Faults {
+        Faults(self.0 | other.0)
+    }
+
+    /// Iterates over the set faults in bit order.
+    pub fn iter(self) -> impl Iterator<Item = Fault> {
+        Fault::ALL.into_iter().filter(move |f| self.contains(*f))
+    }
+}
+
+/// What the supervisor needs each period, SI (MODEL.md coordinates).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct SupervisorInput {
+    /// Nut displacement `p`, m, positive down.
+    pub nut_position_m: f32,
+    /// Nut velocity `pd`, m/s.
+    pub nut_velocity_mps: f32,
+    /// Motor speed, rad/s.
+    pub motor_speed_rad_s: f32,
+    /// Body height coordinate `z`, m.
+    pub body_height_m: f32,
+    /// Body velocity `zd`, m/s.
+    pub body_velocity_mps: f32,
+    /// Spring force from the load cell, N (compression positive).
+    pub spring_force_n: f32,
+    /// Leg compression from the potentiometer, m.
+    pub leg_compression_m: f32,
+    /// Raw motor counter change over the last period.
+    pub motor_delta_counts: i32,
+    /// Raw height counter change over the last period.
+    pub height_delta_counts: i32,
+    /// The emergency stop is pressed.
+    pub estop_pressed: bool,
+    /// The servo amplifier reports a fault.
+    pub amp_fault: bool,
+}
+
+impl SupervisorInput {
+    /// Builds the input from a converted sample plus the filtered velocities
+    /// (e.g. from [`crate::filter::FilteredDerivative`]).
+    pub fn from_measurements(
+        m: &crate::calibration::Measurements,
+        nut_velocity_mps: f32,
+        motor_speed_rad_s: f32,
+        body_velocity_mps: f32,
+    ) -> Self {
+        Self {
+            nut_position_m: m.nut_position_m,
+            nut_velocity_mps,
+            motor_speed_rad_s,
+            body_height_m: m.body_height_m,
+            body_velocity_mps,
+            spring_force_n: m.spring_force_n,
+            leg_compression_m: m.leg_compression_m,
+            motor_delta_counts: m.motor_delta_counts,
+            height_delta_counts: m.height_delta_counts,
+            estop_pressed: m.estop_pressed,
+            amp_fault: m.amp_fault,
+        }
+    }
+}
+
+/// A closed range `min..=max` in the unit of the field that holds it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Range {
+    /// Lower bound (inclusive).
+    pub min: f32,
+    /// Upper bound (inclusive).
+    pub max: f32,
+}
+
+impl Range {
+    /// Whether `x` is within the range (NaN is not).
+    pub fn contains(&self, x: f32) -> bool {
+        x >= self.min && x <= self.max
+    }
+}
+
+/// Supervisor limits. Defaults are for the thesis hardware at a 10 kHz control rate.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct SupervisorConfig {
+    /// Output current limit, A: the command is clamped to `±current_limit_a`. Default 33.7 (1.0 N m).
+    pub current_limit_a: f32,
+    /// A request with magnitude above this, A, is an overcurrent fault (requests between
+    /// the limit and this are clamped silently). Default 337 (10x the limit: a runaway law).
+    pub overcurrent_trip_a: f32,
+    /// Largest plausible motor counter change per period, counts. Default 64: 1000 rad/s
+    /// (above the 808 rad/s no-load speed) at 2000 counts/rev and 10 kHz is 32 counts, x2 margin.
+    pub max_motor_delta_counts: u32,
+    /// Largest plausible height counter change per period, counts. Default 32: 10 m/s
+    /// with a 20 mm pulley at 2000 counts/rev and 10 kHz is 16 counts, x2 margin.
+    pub max_height_delta_counts: u32,
+    /// Plausible nut position, m. Default -0.01..=0.06 (stops at 0 and 0.05).
+    pub nut_position_range_m: Range,
+    /// Plausible nut velocity, m/s. Default ±1.0 (1000 rad/s is 0.8 m/s).
+    pub nut_velocity_range_mps: Range,
+    /// Plausible motor speed, rad/s. Default ±1200.
+    pub motor_speed_range_rad_s: Range,
+    /// Plausible body height `z`, m. Default 0.4..=3.0 (`l0` = 0.61, hops up to ~2 m).
+    pub body_height_range_m: Range,
+    /// Plausible body velocity, m/s. Default ±10.
+    pub body_velocity_range_mps: Range,
+    /// Plausible spring force, N. Default -100..=1500 (about 600 N at full stroke in flight).
+    pub spring_force_range_n: Range,
+    /// Plausible leg compression, m. Default -0.01..=0.15.
+    pub leg_compression_range_m: Range,
+    /// Spring rate `k`, N/m, for the contact check. Default 11 000 (Table 2.1).
+    pub spring_rate_n_per_m: f32,
+    /// Spring preload `delta0`, m, for the contact check. Default 0.005.
+    pub spring_preload_m: f32,
+    /// Contact force above the flight force `k (delta0 + p)` that means "load cell says contact", N. Default 150.
+    pub contact_force_n: f32,
+    /// Contact force below which the load cell says "no contact", N. Default 40.
+    pub free_force_n: f32,
+    /// Leg compression above which the pot says "contact", m. Default 0.015.
+    pub contact_compression_m: f32,
+    /// Leg compression below which the pot says "no contact", m. Default 0.003.
+    pub free_compression_m: f32,
+    /// Consecutive disagreeing periods before the contact-disagree fault. Default 20 (2 ms).
+    pub contact_disagree_periods: u16,
+    /// Lower stroke soft limit for the predicted stopping point, m. Default -0.005
+    /// (hitting the upper stop at 0 faster than about 0.17 m/s under `brake_decel_mps2`).
+    pub stroke_min_m: f32,
+    /// Upper stroke soft limit for the predicted stopping point, m. Default 0.055 (stop at 0.05).
+    pub stroke_max_m: f32,
+    /// Nut deceleration available for braking, m/s^2, in `p + pd |pd| / (2 a)`. Default 3.0
+    /// (1.0 N m through the 426 kg reflected rotor inertia; spring help ignored). `> 0`.
+    pub brake_decel_mps2: f32,
+}
+
+impl Default for SupervisorConfig {
+    fn default() -> Self {
+        Self {
+            current_limit_a: 33.7,
+            overcurrent_trip_a: 337.0,
+            max_motor_delta_counts: 64,
+            max_height_delta_counts: 32,
+            nut_position_range_m: Range {
+                min: -0.01,
+                max: 0.06,
+            },
+            nut_velocity_range_mps: Range {
+                min: -1.0,
+                max: 1.0,
+            },
+            motor_speed_range_rad_s: Range {
+                min: -1200.0,
+                max: 1200.0,
+            },
+            body_height_range_m: Range { min: 0.4, max: 3.0 },
+            body_velocity_range_mps: Range {
+                min: -10.0,
+                max: 10.0,
+            },
+            spring_force_range_n: Range {
+                min: -100.0,
+                max: 1500.0,
+            },
+            leg_compression_range_m: Range {
+                min: -0.01,
+                max: 0.15,
+            },
+            spring_rate_n_per_m: 11_000.0,
+            spring_preload_m: 0.005,
+            contact_force_n: 150.0,
+            free_force_n: 40.0,
+            contact_compression_m: 0.015,
+            free_compression_m: 0.003,
+            contact_disagree_periods: 20,
+            stroke_min_m: -0.005,
+            stroke_max_m: 0.055,
+            brake_decel_mps2: 3.0,
+        }
+    }
+}
+
+/// What goes to the amplifier this period.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Command {
+    /// Current command, A: finite, within `±current_limit_a`; 0 when faulted.
+    pub current_a: f32,
+    /// Amplifier enable (the `AMP_EN` pin); `false` when faulted.
+    pub amp_enable: bool,
+}
+
+impl Command {
+    /// 0 A, amplifier disabled.
+    pub const SAFE: Command = Command {
+        current_a: 0.0,
+        amp_enable: false,
+    };
+}
+
+/// The safety supervisor. See the module docs.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Supervisor {
+    config: SupervisorConfig,
+    latched: Faults,
+    disagree_periods: u16,
+}
+
+/// A usable current limit: the configured one if finite and positive, else 0 (always safe).
+fn sane_limit(limit_a: f32) -> f32 {
+    if limit_a.is_finite() && limit_a > 0.0 {
+        limit_a
+    } else {
+        0.0
+    }
+}
+
+impl Supervisor {
+    /// Creates a supervisor with no fault latched.
+    ///
+    /// A non-finite or non-positive `current_limit_a` is treated as 0 A (the
+    /// output is then always 0), so a bad configuration cannot produce current.
+    pub const fn new(config: SupervisorConfig) -> Self {
+        Self {
+            config,
+            latched: Faults::NONE,
+            disagree_periods: 0,
+        }
+    }
+
+    /// The configuration in use.
+    pub const fn config(&self) -> &SupervisorConfig {
+        &self.config
+    }
+
+    /// The latched faults (empty when running).
+    pub const fn faults(&self) -> Faults {
+        self.latched
+    }
+
+    /// Whether any fault is latched.
+    pub const fn is_faulted(&self) -> bool {
+        !self.latched.is_empty()
+    }
+
+    /// Latches [`Fault::Overrun`] (the application missed a control deadline).
+    pub fn report_overrun(&mut self) {
+        self.latched.insert(Fault::Overrun);
+    }
+
+    /// Latches [`Fault::DacError`] (a DAC write failed).
+    pub fn report_dac_error(&mut self) {
+        self.latched.insert(Fault::DacError);
+    }
+
+    /// Latches an arbitrary fault (e.g. a sensor conversion error seen by the application).
+    pub fn report(&mut self, fault: Fault) {
+        self.latched.insert(fault);
+    }
+
+    /// Faults present in `input` alone (everything but the contact-disagree
+    /// persistence, the command checks and the reported events).
+    fn input_faults(&self, input: &SupervisorInput) -> Faults {
+        let c = &self.config;
+        let mut f = Faults::NONE;
+        let values = [
+            (input.nut_position_m, c.nut_position_range_m),
+            (input.nut_velocity_mps, c.nut_velocity_range_mps),
+            (input.motor_speed_rad_s, c.motor_speed_range_rad_s),
+            (input.body_height_m, c.body_height_range_m),
+            (input.body_velocity_mps, c.body_velocity_range_mps),
+            (input.spring_force_n, c.spring_force_range_n),
+            (input.leg_compression_m, c.leg_compression_range_m),
+        ];
+        for (x, range) in values {
+            if !x.is_finite() {
+                f.insert(Fault::SensorNonFinite);
+            } else if !range.contains(x) {
+                f.insert(Fault::SensorRange);
+            }
+        }
+        if input.motor_delta_counts.unsigned_abs() > c.max_motor_delta_counts
+            || input.height_delta_counts.unsigned_abs() > c.max_height_delta_counts
+        {
+            f.insert(Fault::EncoderJump);
+        }
+        if input.nut_position_m.is_finite() && input.nut_velocity_mps.is_finite() {
+            let p = input.nut_position_m;
+            let pd = input.nut_velocity_mps;
+            // A non-positive or NaN deceleration means no braking is assumed
+            // possible: only the position itself is checked.
+            let stop_m = if c.brake_decel_mps2 > 0.0 && c.brake_decel_mps2.is_finite() {
+                p + pd * pd.abs() / (2.0 * c.brake_decel_mps2)
+            } else {
+                p
+            };
+            // `!(a <= x && x <= b)` also catches NaN from an overflow.
+            if !(stop_m >= c.stroke_min_m && stop_m <= c.stroke_max_m) {
+                f.insert(Fault::StrokeLimit);
+            }
+        }
+        if input.estop_pressed {
+            f.insert(Fault::Estop);
+        }
+        if input.amp_fault {
+            f.insert(Fault::AmpFault);
+        }
+        f
+    }
+
+    /// Whether load cell and pot disagree about contact in this sample.
+    fn contact_disagrees(&self, input: &SupervisorInput) -> bool {
+        let c = &self.config;
+        let flight_force_n = c.spring_rate_n_per_m * (c.spring_preload_m + input.nut_position_m);
+        let contact_force_n = input.spring_force_n - flight_force_n;
+        let x = input.leg_compression_m;
+        let cell_contact = contact_force_n > c.contact_force_n;
+        let cell_free = contact_force_n < c.free_force_n;
+        let pot_contact = x > c.contact_compression_m;
+        let pot_free = x < c.free_compression_m;
+        (cell_contact && pot_free) || (pot_contact && cell_free)
+    }
+
+    /// Checks one period's input and request; returns the command for the amplifier.
+    ///
+    /// Detected faults latch immediately, and the returned command is then
+    /// [`Command::SAFE`] (also in this same call). Otherwise the request is
+    /// clamped to `±current_limit_a` and the amplifier enabled. A NaN or
+    /// infinite request latches [`Fault::CommandNonFinite`]; a request beyond
+    /// `overcurrent_trip_a` latches [`Fault::Overcurrent`].
+    ///
+    /// Contact disagreement must persist `contact_disagree_periods`
+    /// consecutive calls before it latches.
+    pub fn check(&mut self, input: &SupervisorInput, requested_current_a: f32) -> Command {
+        let mut new = self.input_faults(input);
+        if self.contact_disagrees(input) {
+            self.disagree_periods = self.disagree_periods.saturating_add(1);
+            if self.disagree_periods >= self.config.contact_disagree_periods {
+                new.insert(Fault::ContactDisagree);
+            }
+        } else {
+            self.disagree_periods = 0;
+        }
+        if !requested_current_a.is_finite() {
+            new.insert(Fault::CommandNonFinite);
+        } else if requested_current_a.abs() > self.config.overcurrent_trip_a {
+            // A NaN trip level makes this false; the clamp below still limits the output.
+            new.insert(Fault::Overcurrent);
+        }
+        self.latched = self.latched.union(new);
+        if self.is_faulted() {
+            return Command::SAFE;
+        }
+        let limit = sane_limit(self.config.current_limit_a);
+        // Finite request, finite non-negative limit: the clamp is finite and in range.
+        let current_a = requested_current_a.clamp(-limit, limit);
+        Command {
+            current_a,
+            amp_enable: limit > 0.0,
+        }
+    }
+
+    /// Clears the latched faults if their conditions are gone in `input`.
+    ///
+    /// Conditions that are states (sensor non-finite or out of range, encoder
+    /// delta too large, stroke prediction outside the soft limits, e-stop
+    /// pressed, amplifier fault) are re-evaluated on `input`; if any is still
+    /// present, nothing is cleared and the faults still present are returned.
+    /// Event faults (contact disagreement, overcurrent, non-finite command,
+    /// overrun, DAC error) are in the past, so they clear. The
+    /// contact-disagreement counter restarts. Call it with a fresh sample,
+    /// with the amplifier disabled.
+    pub fn reset(&mut self, input: &SupervisorInput) -> Result<(), Faults> {
+        let still = self.input_faults(input);
+        if !still.is_empty() {
+            return Err(still);
+        }
+        self.latched = Faults::NONE;
+        self.disagree_periods = 0;
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    /// Standing still, nut on its upper stop, leg at free length.
+    fn nominal() -> SupervisorInput {
+        SupervisorInput {
+            nut_position_m: 0.0,
+            nut_velocity_mps: 0.0,
+            motor_speed_rad_s: 0.0,
+            body_height_m: 0.61,
+            body_velocity_mps: 0.0,
+            spring_force_n: 55.0, // k * delta0
+            leg_compression_m: 0.0,
+            motor_delta_counts: 0,
+            height_delta_counts: 0,
+            estop_pressed: false,
+            amp_fault: false,
+        }
+    }
+
+    fn sup() -> Supervisor {
+        Supervisor::new(SupervisorConfig::default())
+    }
+
+    /// Applies `bad` once, expects `fault` latched and SAFE at once, stays latched,
+    /// reset fails while `bad` persists (if `state`), succeeds on nominal input.
+    fn fault_case(bad: SupervisorInput, request_a: f32, fault: Fault, state: bool) {
+        let mut s = sup();
+        let ok = s.check(&nominal(), 5.0);
+        assert_eq!(
+            ok,
+            Command {
+                current_a: 5.0,
+                amp_enable: true
+            }
+        );
+        assert_eq!(s.check(&bad, request_a), Command::SAFE, "{}", fault.name());
+        assert!(s.faults().contains(fault), "{:?}", s.faults());
+        for _ in 0..3 {
+            assert_eq!(s.check(&nominal(), 5.0), Command::SAFE);
+        }
+        if state {
+            assert!(s.reset(&bad).is_err(), "{}", fault.name());
+            assert!(s.is_faulted());
+        }
+        assert_eq!(s.reset(&nominal()), Ok(()));
+        assert_eq!(s.check(&nominal(), 5.0).current_a, 5.0);
+    }
+
+    #[test]
+    fn sensor_nonfinite() {
+        let bad = SupervisorInput {
+            spring_force_n: f32::NAN,
+            ..nominal()
+        };
+        fault_case(bad, 0.0, Fault::SensorNonFinite, true);
+    }
+
+    #[test]
+    fn sensor_range() {
+        let bad = SupervisorInput {
+            body_height_m: 5.0,
+            ..nominal()
+        };
+        fault_case(bad, 0.0, Fault::SensorRange, true);
+    }
+
+    #[test]
+    fn encoder_jump() {
+        let bad = SupervisorInput {
+            motor_delta_counts: -65,
+            ..nominal()
+        };
+        fault_case(bad, 0.0, Fault::EncoderJump, true);
+        let bad = SupervisorInput {
+            height_delta_counts: i32::MIN,
+            ..nominal()
+        };
+        fault_case(bad, 0.0, Fault::EncoderJump, true);
+    }
+
+    #[test]
+    fn stroke_limit_predicts_stopping_point() {
+        // 0.03 m + 0.6^2 / 6 = 0.09 m > 0.055.
+        let bad = SupervisorInput {
+            nut_position_m: 0.03,
+            nut_velocity_mps: 0.6,
+            ..nominal()
+        };
+        fault_case(bad, 0.0, Fault::StrokeLimit, true);
+        // 0.03 + 0.3^2/6 = 0.045: fine.
+        let mut s = sup();
+        let fine = SupervisorInput {
+            nut_position_m: 0.03,
+            nut_velocity_mps: 0.3,
+            spring_force_n: 385.0,
+            ..nominal()
+        };
+        assert!(s.check(&fine, 1.0).amp_enable);
+        // Upward: 0.01 - 0.4^2/6 = -0.0167 < -0.005.
+        let up = SupervisorInput {
+            nut_position_m: 0.01,
+            nut_velocity_mps: -0.4,
+            spring_force_n: 165.0,
+            ..nominal()
+        };
+        fault_case(up, 0.0, Fault::StrokeLimit, true);
+    }
+
+    #[test]
+    fn estop_and_amp_fault() {
+        let bad = SupervisorInput {
+            estop_pressed: true,
+            ..nominal()
+        };
+        fault_case(bad, 0.0, Fault::Estop, true);
+        let bad = SupervisorInput {
+            amp_fault: true,
+            ..nominal()
+        };
+        fault_case(bad, 0.0, Fault::AmpFault, true);
+    }
+
+    #[test]
+    fn overcurrent_and_nonfinite_command() {
+        fault_case(nominal(), 400.0, Fault::Overcurrent, false);
+        fault_case(nominal(), f32::NAN, Fault::CommandNonFinite, false);
+        fault_case(nominal(), f32::NEG_INFINITY, Fault::CommandNonFinite, false);
+    }
+
+    #[test]
+    fn request_is_clamped_not_faulted_below_trip() {
+        let mut s = sup();
+        let c = s.check(&nominal(), 100.0);
+        assert_eq!(c.current_a, 33.7);
+        assert!(c.amp_enable);
+        assert_eq!(s.check(&nominal(), -100.0).current_a, -33.7);
+    }
+
+    #[test]
+    fn contact_disagree_needs_persistence() {
+        // Load cell: 55 + 200 N contact force; pot: no compression.
+        let bad = SupervisorInput {
+            spring_force_n: 255.0,
+            ..nominal()
+        };
+        let mut s = sup();
+        for _ in 0..19 {
+            assert!(s.check(&bad, 1.0).amp_enable);
+        }
+        // An agreeing sample restarts the count.
+        assert!(s.check(&nominal(), 1.0).amp_enable);
+        for _ in 0..19 {
+            assert!(s.check(&bad, 1.0).amp_enable);
+        }
+        assert_eq!(s.check(&bad, 1.0), Command::SAFE);
+        assert!(s.faults().contains(Fault::ContactDisagree));
+        assert_eq!(s.check(&nominal(), 1.0), Command::SAFE);
+        assert_eq!(s.reset(&nominal()), Ok(()));
+        // Pot says compressed, load cell says free.
+        let other = SupervisorInput {
+            leg_compression_m: 0.03,
+            ..nominal()
+        };
+        let mut last = Command::SAFE;
+        for _ in 0..20 {
+            last = s.check(&other, 1.0);
+        }
+        assert_eq!(last, Command::SAFE);
+        // Stance where they agree: compression 20 mm, force k (delta0 + 0.02).
+        let mut s = sup();
+        let stance = SupervisorInput {
+            leg_compression_m: 0.02,
+            body_height_m: 0.59,
+            spring_force_n: 275.0,
+            ..nominal()
+        };
+        for _ in 0..100 {
+            assert!(s.check(&stance, 1.0).amp_enable);
+        }
+    }
+
+    #[test]
+    fn reported_events() {
+        let mut s = sup();
+        s.report_overrun();
+        assert_eq!(s.check(&nominal(), 1.0), Command::SAFE);
+        s.report_dac_error();
+        let names: heapless::Vec<&str, 11> = s.faults().iter().map(Fault::name).collect();
+        assert_eq!(names.as_slice(), &["overrun", "dac-error"]);
+        assert_eq!(s.reset(&nominal()), Ok(()));
+        assert!(!s.is_faulted());
+    }
+
+    #[test]
+    fn bad_limit_config_gives_no_current() {
+        let mut s = Supervisor::new(SupervisorConfig {
+            current_limit_a: f32::NAN,
+            ..SupervisorConfig::default()
+        });
+        let c = s.check(&nominal(), 10.0);
+        assert_eq!(c.current_a, 0.0);
+        assert!(!c.amp_enable);
+    }
+
+    #[test]
+    fn from_measurements_copies_fields() {
+        let m = crate::calibration::Measurements {
+            nut_position_m: 0.01,
+            body_height_m: 0.6,
+            spring_force_n: 200.0,
+            leg_compression_m: 0.01,
+            motor_delta_counts: 3,
+            height_delta_counts: -2,
+            estop_pressed: true,
+            ..Default::default()
+        };
+        let i = SupervisorInput::from_measurements(&m, 0.1, 125.0, -1.0);
+        assert_eq!(i.nut_position_m, 0.01);
+        assert_eq!(i.nut_velocity_mps, 0.1);
+        assert_eq!(i.motor_speed_rad_s, 125.0);
+        assert_eq!(i.body_velocity_mps, -1.0);
+        assert_eq!(i.height_delta_counts, -2);
+        assert!(i.estop_pressed && !i.amp_fault);
+    }
+
+    #[test]
+    fn names_unique_and_bits_distinct() {
+        let mut all = Faults::NONE;
+        for f in Fault::ALL {
+            assert!(!all.contains(f));
+            all.insert(f);
+        }
+        assert_eq!(all.iter().count(), Fault::ALL.len());
+        for (i, a) in Fault::ALL.iter().enumerate() {
+            for b in Fault::ALL.iter().skip(i + 1) {
+                assert_ne!(a.name(), b.name());
+            }
+        }
+    }
+
+    fn any_f32() -> impl Strategy<Value = f32> {
+        prop_oneof![
+            8 => -2.0_f32..2.0,
+            2 => -2000.0_f32..2000.0,
+            1 => Just(f32::NAN),
+            1 => Just(f32::INFINITY),
+            1 => Just(f32::NEG_INFINITY),
+            1 => any::<f32>(),
+        ]
+    }
+
+    prop_compose! {
+        fn any_input()(
+            nut_position_m in any_f32(),
+            nut_velocity_mps in any_f32(),
+            motor_speed_rad_s in any_f32(),
+            body_height_m in any_f32(),
+            body_velocity_mps in any_f32(),
+            spring_force_n in any_f32(),
+            leg_compression_m in any_f32(),
+            motor_delta_counts in prop_oneof![4 => -80_i32..80, 1 => any::<i32>()],
+            height_delta_counts in prop_oneof![4 => -40_i32..40, 1 => any::<i32>()],
+            estop_pressed in prop::bool::weighted(0.02),
+            amp_fault in prop::bool::weighted(0.02),
+            nominal_sample in prop::bool::weighted(0.5),
+        ) -> SupervisorInput {
+            if nominal_sample {
+                return nominal();
+            }
+            SupervisorInput {
+                nut_position_m, nut_velocity_mps, motor_speed_rad_s, body_height_m,
+                body_velocity_mps, spring_force_n, leg_compression_m,
+                motor_delta_counts, height_delta_counts, estop_pressed, amp_fault,
+            }
+        }
+    }
+
+    proptest! {
+        #[test]
+        fn output_always_finite_and_limited(
+            steps in prop::collection::vec((any_input(), any_f32(), 0_u8..20), 1..200)
+        ) {
+            let mut s = sup();
+            let limit = s.config().current_limit_a;
+            for (input, request, action) in steps {
+                match action {
+                    0 => s.report_overrun(),
+                    1 => s.report_dac_error(),
+                    2 => { let _ = s.reset(&input); }
+                    _ => {}
+                }
+                let c = s.check(&input, request);
+                prop_assert!(c.current_a.is_finite());
+                prop_assert!(c.current_a.abs() <= limit);
+                if !c.amp_enable {
+                    prop_assert_eq!(c.current_a, 0.0);
+                }
+            }
+        }
+
+        #[test]
+        fn latched_fault_stays_until_reset(
+            steps in prop::collection::vec((any_input(), any_f32()), 1..200)
+        ) {
+            let mut s = sup();
+            let mut latched = false;
+            for (input, request) in steps {
+                let c = s.check(&input, request);
+                if latched {
+                    prop_assert_eq!(c, Command::SAFE);
+                    prop_assert!(s.is_faulted());
+                }
+                if s.is_faulted() {
+                    prop_assert_eq!(c, Command::SAFE);
+                    latched = true;
+                }
+            }
+        }
+    }
+}
