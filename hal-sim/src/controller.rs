@@ -1,21 +1,256 @@
 //! Controllers the simulator can run against the plant.
 //!
-//! For now the simulator runs on the true plant state; the firmware's control
-//! crate, behind the mock HAL and sensor models, plugs in here later.
+//! Every named controller is the firmware's own control crate
+//! ([`hopper_control::hopper::Hopper`]) behind the mock HAL
+//! ([`crate::mock::SimHal`]): the plant is sampled through the sensor models,
+//! the crate computes a DAC code and the amplifier enable, and the plant is
+//! driven with the amplifier's current over the period.
 
+use crate::mock::{model_params, SensorConfig, SimHal};
+use crate::params::Params;
 use crate::plant::Plant;
+use hopper_control::hopper::{ApexLoop, Hopper, HopperConfig, StepOutput, Strategy};
+use hopper_control::laws::{
+    constant_torque, energy_torque, flight_pd, modified_torque, step_closed, step_open, velocity,
+    StanceLaw,
+};
+use hopper_control::supervisor::Fault;
+use hopper_control::telemetry::HopLedger;
+use serde::Serialize;
 
-/// Computes the amplifier current command once per control period.
+/// Computes the amplifier current once per control period.
 pub trait Controller {
     /// Short name, as accepted by `hopper-sim run --controller`.
     fn name(&self) -> &'static str;
-    /// Current command for the coming period, A.
+    /// Current the motor carries over the coming period, A.
     fn current_command_a(&mut self, plant: &Plant) -> f64;
+    /// The apex the controller regulates to, m, if it has one.
+    fn target_apex_m(&self) -> Option<f64> {
+        None
+    }
+    /// Faults latched so far, in order, with the time they latched.
+    fn faults(&self) -> Vec<FaultRecord> {
+        Vec::new()
+    }
+    /// The firmware's per-hop ledgers so far.
+    fn hop_ledgers(&self) -> Vec<HopLedger> {
+        Vec::new()
+    }
 }
 
-/// The thesis's passive hopping (section 4.4.1): the motor is off and the
-/// spring preload holds the ball nut on its upper mechanical stop, its start
-/// position `p = 0`, so the leg acts as a fixed spring.
+/// A latched fault.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct FaultRecord {
+    /// Kebab-case name ([`Fault::name`]).
+    pub name: &'static str,
+    /// Simulated time of the period that latched it, s.
+    pub time_s: f64,
+}
+
+/// Controller names `hopper-sim run --controller` accepts.
+pub const CONTROLLER_NAMES: [&str; 8] = [
+    "passive",
+    "step-open",
+    "step-closed",
+    "open-torque",
+    "energy",
+    "energy-apex",
+    "velocity",
+    "modified-torque",
+];
+
+/// What to build: a controller name and its settings.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ControllerSpec {
+    /// One of [`CONTROLLER_NAMES`].
+    pub name: String,
+    /// Apex target `H_D`, m.
+    pub target_apex_m: f64,
+    /// Torque for `open-torque` and `modified-torque`, N m (None: law default, 1 N m).
+    pub torque_nm: Option<f64>,
+    /// Sensor noise and amplifier lag.
+    pub sensors: SensorConfig,
+    /// The parameters the controller believes (None: the plant's).
+    pub model: Option<Params>,
+    /// A strategy with non-default gains, used instead of the name's default
+    /// (the name still names the run).
+    pub strategy_override: Option<Strategy>,
+    /// Flight PD gains instead of the eq 4.13 default.
+    pub flight_override: Option<flight_pd::Config>,
+}
+
+impl ControllerSpec {
+    /// `name` with the defaults: 0.05 m target, law torque, default noise.
+    pub fn new(name: &str) -> Self {
+        ControllerSpec {
+            name: name.to_string(),
+            target_apex_m: 0.05,
+            torque_nm: None,
+            sensors: SensorConfig::DEFAULT,
+            model: None,
+            strategy_override: None,
+            flight_override: None,
+        }
+    }
+
+    /// The control-crate strategy for this name.
+    pub fn strategy(&self) -> Result<Strategy, String> {
+        if let Some(s) = self.strategy_override {
+            return Ok(s);
+        }
+        let torque = |default: f32| self.torque_nm.map_or(default, |t| t as f32);
+        Ok(match self.name.as_str() {
+            "passive" => Strategy::Passive,
+            "step-open" => Strategy::Thesis(StanceLaw::StepOpen(step_open::Config::default())),
+            "step-closed" => {
+                Strategy::Thesis(StanceLaw::StepClosed(step_closed::Config::default()))
+            }
+            "open-torque" => Strategy::Thesis(StanceLaw::ConstantTorque(constant_torque::Config {
+                torque_nm: torque(constant_torque::Config::default().torque_nm),
+            })),
+            "energy" => Strategy::Thesis(StanceLaw::EnergyTorque(energy_torque::Config::default())),
+            "energy-apex" => Strategy::EnergyApex(ApexLoop::default()),
+            "velocity" => Strategy::Thesis(StanceLaw::Velocity(velocity::Config::default())),
+            "modified-torque" => {
+                Strategy::Thesis(StanceLaw::ModifiedTorque(modified_torque::Config {
+                    torque_nm: torque(modified_torque::Config::default().torque_nm),
+                    ..modified_torque::Config::default()
+                }))
+            }
+            other => {
+                return Err(format!(
+                    "unknown controller `{other}`: expected one of {CONTROLLER_NAMES:?}"
+                ))
+            }
+        })
+    }
+
+    /// Builds the controller for a plant with `plant_params` whose body starts
+    /// at rest `start_apex_m` above the ground, at control period `dt_s`.
+    pub fn build(
+        &self,
+        plant_params: &Params,
+        start_apex_m: f64,
+        dt_s: f64,
+    ) -> Result<FirmwareController, String> {
+        if let Some(t) = self.torque_nm {
+            if !(t.is_finite() && t.abs() <= 10.0) {
+                return Err(format!(
+                    "--torque {t} N m is out of range: allowed -10 ..= 10 N m"
+                ));
+            }
+        }
+        if !(self.target_apex_m.is_finite() && (0.0..=1.0).contains(&self.target_apex_m)) {
+            return Err(format!(
+                "--target-apex {} m is out of range: allowed 0 ..= 1 m",
+                self.target_apex_m
+            ));
+        }
+        let believed = self.model.as_ref().unwrap_or(plant_params);
+        let mut cfg = HopperConfig::for_model(model_params(believed));
+        cfg.strategy = self.strategy()?;
+        if let Some(f) = self.flight_override {
+            cfg.flight = f;
+        }
+        cfg.target_apex_m = self.target_apex_m as f32;
+        // The height encoder is incremental: the firmware is told the height
+        // it starts at (on the real robot, the height of the stand it is
+        // released from).
+        cfg.calibration.height_at_origin_m = (plant_params.leg_length_m + start_apex_m) as f32;
+        let hopper = Hopper::new(cfg).map_err(|e| format!("controller configuration: {e:?}"))?;
+        let hal = SimHal::new(&cfg.calibration, &self.sensors);
+        let name = CONTROLLER_NAMES
+            .iter()
+            .copied()
+            .find(|n| *n == self.name)
+            .unwrap_or("passive");
+        Ok(FirmwareController {
+            name,
+            hopper,
+            hal,
+            dt_s,
+            target_apex_m: (name != "passive").then_some(self.target_apex_m),
+            faults: Vec::new(),
+            hops: Vec::new(),
+            last: None,
+        })
+    }
+}
+
+/// The control crate on the mock HAL.
+pub struct FirmwareController {
+    name: &'static str,
+    hopper: Hopper,
+    /// The sensor, DAC and amplifier models (public for fault injection).
+    pub hal: SimHal,
+    dt_s: f64,
+    target_apex_m: Option<f64>,
+    faults: Vec<FaultRecord>,
+    hops: Vec<HopLedger>,
+    last: Option<StepOutput>,
+}
+
+impl FirmwareController {
+    /// The control crate's state.
+    pub fn hopper(&self) -> &Hopper {
+        &self.hopper
+    }
+
+    /// The control crate's state, mutably (reset, target changes).
+    pub fn hopper_mut(&mut self) -> &mut Hopper {
+        &mut self.hopper
+    }
+
+    /// The last period's output.
+    pub fn last_output(&self) -> Option<&StepOutput> {
+        self.last.as_ref()
+    }
+}
+
+impl Controller for FirmwareController {
+    fn name(&self) -> &'static str {
+        self.name
+    }
+
+    fn current_command_a(&mut self, plant: &Plant) -> f64 {
+        let before = self.hopper.supervisor().faults();
+        let out = {
+            let mut io = self.hal.io(plant);
+            self.hopper.run_period(&mut io, self.dt_s as f32)
+        };
+        let new = out.faults.0 & !before.0;
+        for f in Fault::ALL {
+            if new & f.bit() != 0 {
+                self.faults.push(FaultRecord {
+                    name: f.name(),
+                    time_s: plant.time_s(),
+                });
+            }
+        }
+        if let Some(h) = out.hop {
+            self.hops.push(h);
+        }
+        self.last = Some(out);
+        self.hal.mean_current_a(self.dt_s)
+    }
+
+    fn target_apex_m(&self) -> Option<f64> {
+        self.target_apex_m
+    }
+
+    fn faults(&self) -> Vec<FaultRecord> {
+        self.faults.clone()
+    }
+
+    fn hop_ledgers(&self) -> Vec<HopLedger> {
+        self.hops.clone()
+    }
+}
+
+/// Passive hopping on the ideal plant, without sensors or firmware: 0 A
+/// every period (thesis section 4.4.1). The spring preload holds the nut on
+/// its upper stop, so the leg acts as a fixed spring. For plant-level tests;
+/// `--controller passive` runs the firmware's passive strategy instead.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct Passive;
 
@@ -25,16 +260,5 @@ impl Controller for Passive {
     }
     fn current_command_a(&mut self, _plant: &Plant) -> f64 {
         0.0
-    }
-}
-
-/// Controller names `hopper-sim run --controller` accepts.
-pub const CONTROLLER_NAMES: [&str; 1] = ["passive"];
-
-/// Build a controller by name.
-pub fn by_name(name: &str) -> Option<Box<dyn Controller>> {
-    match name {
-        "passive" => Some(Box::new(Passive)),
-        _ => None,
     }
 }

@@ -168,6 +168,31 @@ pub struct Summary {
     pub peak_current_a: f64,
     /// Number of nut impacts on the mechanical stops.
     pub stop_impacts: usize,
+    /// The controller's apex target, m (null for passive).
+    pub target_apex_m: Option<f64>,
+    /// First hop (1-based index into `apex_heights_m`) from which every later
+    /// apex is within 2% of the target, at least 3 apexes in a row; null if never.
+    pub hops_to_converge: Option<usize>,
+    /// Largest nut displacement, m (same as `peak_stroke_m`).
+    pub max_stroke_m: f64,
+    /// Largest |motor current|, A (same as `peak_current_a`).
+    pub max_current_a: f64,
+    /// Names of the faults the firmware latched, in order; empty when none.
+    pub faults: Vec<String>,
+    /// Time of the first latched fault, s (null when none).
+    pub first_fault_s: Option<f64>,
+}
+
+/// Hops to converge (see [`Summary::hops_to_converge`]): 1-based index of the
+/// first apex from which all later apexes are within `tol` (relative) of
+/// `target`, requiring at least 3 such apexes.
+pub fn hops_to_converge(apexes: &[f64], target: f64, tol: f64) -> Option<usize> {
+    if target.is_nan() || target <= 0.0 {
+        return None;
+    }
+    let within = |h: &f64| (h - target).abs() <= tol * target;
+    let tail = apexes.iter().rev().take_while(|h| within(h)).count();
+    (tail >= 3).then(|| apexes.len() - tail + 1)
 }
 
 /// Everything a run produced.
@@ -254,11 +279,22 @@ pub fn run_with_progress(
     Ok(RunResult {
         samples,
         events,
-        summary: Summary {
-            peak_motor_speed_rad_s: peak_speed,
-            peak_stroke_m: peak_stroke,
-            peak_current_a: peak_current,
-            ..summary
+        summary: {
+            let faults = controller.faults();
+            let target = controller.target_apex_m();
+            Summary {
+                peak_motor_speed_rad_s: peak_speed,
+                peak_stroke_m: peak_stroke,
+                peak_current_a: peak_current,
+                max_stroke_m: peak_stroke,
+                max_current_a: peak_current,
+                target_apex_m: target,
+                hops_to_converge: target
+                    .and_then(|t| hops_to_converge(&summary.apex_heights_m, t, 0.02)),
+                first_fault_s: faults.first().map(|f| f.time_s),
+                faults: faults.iter().map(|f| f.name.to_string()).collect(),
+                ..summary
+            }
         },
     })
 }
@@ -321,6 +357,12 @@ fn summarize(
         peak_stroke_m: 0.0,
         peak_current_a: 0.0,
         stop_impacts,
+        target_apex_m: None,
+        hops_to_converge: None,
+        max_stroke_m: 0.0,
+        max_current_a: 0.0,
+        faults: Vec::new(),
+        first_fault_s: None,
     }
 }
 

@@ -63,13 +63,18 @@ pub struct Calibration {
     /// Body height `z` at the first sample after [`Converter::new`] / re-zero, m.
     /// Default 0.61 (`l0`: started standing on the uncompressed leg). Finite.
     pub height_at_origin_m: f32,
-    /// Load-cell gain, N per ADC code (compression positive). Default 0.25 (*placeholder*: 1024 N full scale). Finite, non-zero.
+    /// Load-cell gain, N per ADC code (compression positive). Default 0.5
+    /// (*placeholder*: with the default offset, -100 N to 1947 N over 12 bits;
+    /// the spring reaches about 1.3 kN with the nut down in a 0.15 m hop). Finite, non-zero.
     pub loadcell_gain_n_per_code: f32,
-    /// Load-cell code at zero force. Default 0 (*placeholder*). Finite.
+    /// Load-cell code at zero force. Default 200 (*placeholder*: a small
+    /// negative range, so a rail reading is distinguishable from 0 N). Finite.
     pub loadcell_offset_code: f32,
-    /// Potentiometer gain, m of leg compression per ADC code. Default 0.1 / 4096 (*placeholder*: 100 mm full scale). Finite, non-zero.
+    /// Potentiometer gain, m of leg compression per ADC code. Default 0.12 / 4096
+    /// (*placeholder*: with the default offset, -6 mm to 114 mm). Finite, non-zero.
     pub pot_gain_m_per_code: f32,
-    /// Potentiometer code at zero leg compression. Default 0 (*placeholder*). Finite.
+    /// Potentiometer code at zero leg compression. Default 205 (*placeholder*:
+    /// both rails lie outside the physical range, so an open wiper is detected). Finite.
     pub pot_offset_code: f32,
     /// ADC resolution, bits. Default 12. `1..=16`.
     pub adc_bits: u8,
@@ -98,10 +103,10 @@ impl Default for Calibration {
             height_counts_positive_up: true,
             height_pulley_radius_m: 0.02,
             height_at_origin_m: 0.61,
-            loadcell_gain_n_per_code: 0.25,
-            loadcell_offset_code: 0.0,
-            pot_gain_m_per_code: 0.1 / 4096.0,
-            pot_offset_code: 0.0,
+            loadcell_gain_n_per_code: 0.5,
+            loadcell_offset_code: 200.0,
+            pot_gain_m_per_code: 0.12 / 4096.0,
+            pot_offset_code: 205.0,
             adc_bits: 12,
             dac_bits: 12,
             dac_zero_code: 2048,
@@ -507,13 +512,13 @@ mod tests {
         let m = conv.convert(&RawSample {
             height_counts: 65536 - 2000, // one pulley revolution down
             loadcell_code: 400,
-            pot_code: 1024,
+            pot_code: 205 + 1024, // 1024 codes above the zero offset
             ..RawSample::default()
         })?;
         let expect_z = 0.61 - 2.0 * PI * 0.02;
         assert!(close(m.body_height_m, expect_z, 1e-6));
         assert!(close(m.spring_force_n, 100.0, 1e-4));
-        assert!(close(m.leg_compression_m, 0.025, 1e-6));
+        assert!(close(m.leg_compression_m, 0.03, 1e-6));
         assert_eq!(m.height_delta_counts, -2000);
         Ok(())
     }

@@ -9,15 +9,18 @@
 //! Equation numbers refer to the thesis (`thesis.md`); where it is ambiguous
 //! or wrong, `MODEL.md` records the reading used here.
 //!
-//! Contents so far:
-//! - [`filter`]: the filtered derivative of thesis eq 4.1, used to turn
-//!   encoder and potentiometer positions into velocities.
-//! - [`pd_design`]: flight-phase PD gain design for the motor position loop,
-//!   plant `A / s^2` (thesis section 4.3, eqs 4.3-4.18).
-//!
-//! Later work adds here the hardware-abstraction trait the firmware and the
-//! simulator both implement, the state/energy estimator, the stance and flight
-//! control laws, and the supervisor (phase detection, limits, fault handling).
+//! Contents:
+//! - [`hal`]: the I/O trait ([`hal::HopperIo`]) the board and the simulator implement;
+//! - [`calibration`]: raw counts and codes to SI, current to DAC code;
+//! - [`filter`]: the filtered derivative of thesis eq 4.1;
+//! - [`estimator`]: flight/stance phase, touchdown, liftoff, apex, bottom;
+//! - [`energy`]: the energy estimate of eqs 2.44-2.45;
+//! - [`model`]: the parameters the controller believes and `E_D` (eq 2.43);
+//! - [`laws`]: every thesis stance law and the flight PD (eq 4.4);
+//! - [`pd_design`]: flight PD gain design (eqs 4.3-4.18);
+//! - [`supervisor`]: latched faults and the current clamp;
+//! - [`telemetry`]: the per-step record ring and the per-hop ledger;
+//! - [`hopper`]: the whole control period, [`hopper::Hopper::step`].
 #![no_std]
 
 pub mod calibration;
@@ -25,6 +28,7 @@ pub mod energy;
 pub mod estimator;
 pub mod filter;
 pub mod hal;
+pub mod hopper;
 pub mod laws;
 pub mod model;
 pub mod pd_design;

@@ -1,14 +1,16 @@
 //! `hopper-sim`: run the vertical hopper in simulation, print parameter sets.
 //!
 //! ```text
-//! hopper-sim run [--params design|identified|PATH.toml] [--controller passive]
+//! hopper-sim run [--params design|identified|PATH.toml] [--controller NAME]
+//!                [--target-apex M] [--torque NM] [--noise off|default] [--seed N]
 //!                [--start-apex M] [--duration S] [--out DIR] [--json]
 //! hopper-sim params show design|identified
 //! ```
 
 use anyhow::{bail, Context, Result};
 use clap::{Parser, Subcommand};
-use hal_sim::controller::{self, CONTROLLER_NAMES};
+use hal_sim::controller::{ControllerSpec, CONTROLLER_NAMES};
+use hal_sim::mock::SensorConfig;
 use hal_sim::params::Params;
 use hal_sim::params_toml;
 use hal_sim::run::{self, RunConfig};
@@ -50,9 +52,23 @@ struct RunArgs {
     /// Plant parameters: a preset (design, identified) or a TOML file.
     #[arg(long, default_value = "design")]
     params: String,
-    /// Controller: passive.
+    /// Controller: passive, step-open, step-closed, open-torque, energy,
+    /// energy-apex (apex-regulating energy law), velocity, modified-torque.
+    /// Each is the firmware's control crate on the simulated sensors.
     #[arg(long, default_value = "passive")]
     controller: String,
+    /// Desired apex (toe height) H_D, m; sets the energy target E_D.
+    #[arg(long, default_value_t = 0.05, allow_negative_numbers = true)]
+    target_apex: f64,
+    /// Motor torque for open-torque and modified-torque, N m (default 1.0).
+    #[arg(long, allow_negative_numbers = true)]
+    torque: Option<f64>,
+    /// Sensor noise: default (load cell 2 N, potentiometer 0.1 mm, 1 sigma) or off.
+    #[arg(long, default_value = "default", value_parser = ["default", "off"])]
+    noise: String,
+    /// Seed of the sensor noise (same seed, same run).
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
     /// Start toe height above the ground (released at rest), m.
     #[arg(long, default_value_t = 0.15, allow_negative_numbers = true)]
     start_apex: f64,
@@ -101,12 +117,12 @@ fn cmd_params_show(preset: &str) -> Result<()> {
 fn cmd_run(a: RunArgs) -> Result<()> {
     // Validate everything before touching the file system.
     let (params, params_name) = params_toml::load(&a.params).map_err(anyhow::Error::msg)?;
-    let Some(mut ctl) = controller::by_name(&a.controller) else {
+    if !CONTROLLER_NAMES.contains(&a.controller.as_str()) {
         bail!(
             "unknown controller `{}`: expected one of {CONTROLLER_NAMES:?}",
             a.controller
         );
-    };
+    }
     if !(a.control_hz.is_finite() && a.control_hz > 0.0) {
         bail!(
             "--control-hz {} must be a positive number of Hz",
@@ -131,6 +147,19 @@ fn cmd_run(a: RunArgs) -> Result<()> {
         },
     };
     cfg.validate().map_err(anyhow::Error::msg)?;
+    let spec = ControllerSpec {
+        target_apex_m: a.target_apex,
+        torque_nm: a.torque,
+        sensors: SensorConfig {
+            noise: a.noise == "default",
+            seed: a.seed,
+            ..SensorConfig::DEFAULT
+        },
+        ..ControllerSpec::new(&a.controller)
+    };
+    let mut ctl = spec
+        .build(&cfg.params, cfg.start_apex_m, cfg.control_dt_s)
+        .map_err(anyhow::Error::msg)?;
     // A progress bar on stderr for runs long enough to wait for; indicatif
     // draws nothing when stderr is not a terminal.
     let bar = indicatif::ProgressBar::new(1000);
@@ -145,7 +174,7 @@ fn cmd_run(a: RunArgs) -> Result<()> {
         bar.set_draw_target(indicatif::ProgressDrawTarget::hidden());
     }
     let duration_s = cfg.duration_s;
-    let result = run::run_with_progress(&cfg, &params_name, ctl.as_mut(), &mut |done, total| {
+    let result = run::run_with_progress(&cfg, &params_name, &mut ctl, &mut |done, total| {
         bar.set_position(done * 1000 / total.max(1));
         bar.set_message(format!(
             "{:.1} / {duration_s} s",

@@ -1,0 +1,589 @@
+//! The whole control period in one place: raw sample in, DAC code and
+//! amplifier enable out.
+//!
+//! [`Hopper::step`] is what the firmware's control task and the simulator
+//! both call once per period:
+//!
+//! 1. convert the raw sample to SI ([`crate::calibration::Converter`]);
+//! 2. run the phase estimator and the filtered derivatives of eq 4.1
+//!    ([`crate::estimator::PhaseEstimator`]);
+//! 3. estimate the energy (eq 2.44 with the eq 2.45 spring term);
+//! 4. run the selected stance law, or in flight the PD back-drive (eq 4.4)
+//!    (or the modified-torque window, section 4.4.3);
+//! 5. let the [`Supervisor`] check the sample and the request;
+//! 6. turn the approved current into a DAC code, and update the per-hop
+//!    ledger and the telemetry record.
+//!
+//! [`Hopper::run_period`] wraps it around a [`HopperIo`]: read, step, write the
+//! DAC, set the enable, and latch a fault if the I/O itself fails.
+
+use crate::calibration::{CalError, Calibration, Converter, Measurements};
+use crate::energy::{body_energy_j, total_energy_j, EnergyInput};
+use crate::estimator::{
+    EstimatorConfig, EstimatorError, Phase, PhaseEstimator, PhaseEvent, PhaseInput,
+};
+use crate::hal::{HopperIo, RawSample};
+use crate::laws::{
+    energy_torque, flight_pd, modified_torque, or_zero, Actuator, StanceController, StanceInput,
+    StanceLaw,
+};
+use crate::model::{ModelError, ModelParams};
+use crate::supervisor::{Command, Fault, Faults, Supervisor, SupervisorConfig, SupervisorInput};
+use crate::telemetry::{HopLedger, HopLedgerBuilder, StepRecord};
+
+/// Which energy an apex-regulating law feeds back.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum EnergyMeasure {
+    /// Total mechanical energy, eq 2.44 (rotor and nut motion included).
+    Total,
+    /// Body energy only ([`crate::energy::body_energy_j`]): what reaches the apex.
+    Body,
+}
+
+/// The apex-regulating energy law (`energy-apex`): eq 2.52 in stance, with
+/// `E_D` corrected after every flight apex from the measured apex height.
+///
+/// The thesis's eq 2.52 settles where the torque it asks for balances the
+/// losses, i.e. below `E_D`, and it counts energy that never reaches the
+/// apex (rotor kinetic energy, spring energy stored by the actuator). An
+/// outer per-hop loop removes both biases: after apex `k` with toe height
+/// `H_k`,
+///
+/// ```text
+/// offset_{k+1} = clamp(offset_k + K_i (E_D(H_target) - E_D(H_k)), ±max_offset)
+/// E_D,eff = E_D(H_target) + offset
+/// ```
+///
+/// an integral action on the apex error in energy units (J per J).
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct ApexLoop {
+    /// The inner law, eq 2.52 (`K_e` in N m/J). Default `K_e = 3` (full
+    /// torque for a 0.33 J deficit) and no negative torque: with the 1 N m
+    /// motor the Table 2.1 gain of 0.2 leaves the law short of torque
+    /// exactly when the hop is low, and pulling energy out with negative
+    /// torque from a high start drives the hop into the low, lossy regime
+    /// (below about 0.02 m, where full stance torque cannot sustain hopping
+    /// with the eq 4.13 flight PD); passive decay brings a high hop down
+    /// gently instead. Tuned in simulation (design parameters, targets
+    /// 0.03-0.05 m, starts 0.02-0.25 m).
+    pub law: energy_torque::Config,
+    /// The energy fed back.
+    pub measure: EnergyMeasure,
+    /// Integral gain `K_i`, dimensionless (J of offset per J of apex error), in (0, 10). Default 0.6.
+    pub gain: f32,
+    /// Bound on the offset, J (>= 0). Default 30.
+    pub max_offset_j: f32,
+    /// Lower bound on the offset, J (<= 0). Default -5: the inner law only
+    /// ever falls short of `E_D` (losses, rotor energy counted), so a large
+    /// negative offset can only be wind-up from a high start.
+    pub min_offset_j: f32,
+    /// Pre-touchdown spin-up (section 4.4.3's idea): on the way down, once
+    /// the toe is below this fraction of the target apex, the stance law's
+    /// command is applied in flight already, so the motor is moving at
+    /// touchdown. In `[0, 1]`; 0 disables it. Default 0 (off: in simulation it
+    /// did not widen the range of starts that converge).
+    pub spin_up_fraction: f32,
+}
+
+impl Default for ApexLoop {
+    fn default() -> Self {
+        Self {
+            law: energy_torque::Config {
+                gain_nm_per_j: 3.0,
+                allow_negative: false,
+            },
+            measure: EnergyMeasure::Total,
+            gain: 0.6,
+            max_offset_j: 30.0,
+            min_offset_j: -5.0,
+            spin_up_fraction: 0.0,
+        }
+    }
+}
+
+/// What runs in stance and in flight.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Strategy {
+    /// Motor off: 0 A in every phase (thesis section 4.4.1, passive hopping).
+    Passive,
+    /// A thesis stance law, with the flight PD back-drive in flight.
+    Thesis(StanceLaw),
+    /// The apex-regulating energy law, with the flight PD in flight.
+    EnergyApex(ApexLoop),
+}
+
+impl Default for Strategy {
+    fn default() -> Self {
+        Strategy::EnergyApex(ApexLoop::default())
+    }
+}
+
+/// Largest nut speed at a mechanical stop the default supervisor limits
+/// tolerate, m/s. The thesis's laws hit the stops at up to about 0.3 m/s
+/// (flight PD return, full-torque stance; measured in simulation); a nut
+/// faster than 0.4 m/s means a runaway (the motor's no-load speed gives
+/// 0.64 m/s) or a bad velocity estimate. With the 3 m/s^2 braking assumed,
+/// the soft limits sit 26.7 mm outside the stops.
+pub const STOP_IMPACT_SPEED_MPS: f32 = 0.4;
+
+/// Everything the control period needs. Each part documents its units.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct HopperConfig {
+    /// The model the controller believes (energy, `E_D`, actuator constants).
+    pub model: ModelParams,
+    /// Raw-to-SI conversion.
+    pub calibration: Calibration,
+    /// Phase estimator and velocity filters.
+    pub estimator: EstimatorConfig,
+    /// Safety limits.
+    pub supervisor: SupervisorConfig,
+    /// Flight back-drive (eq 4.4 with the eq 4.13 gains by default).
+    pub flight: flight_pd::Config,
+    /// Stance and flight laws.
+    pub strategy: Strategy,
+    /// Desired apex toe height `H_D`, m, in `0..=1`. Default 0.05.
+    pub target_apex_m: f32,
+}
+
+impl HopperConfig {
+    /// Defaults for `model`: the supervisor's current limit, spring and
+    /// stroke limits follow the model; everything else is the default.
+    pub fn for_model(model: ModelParams) -> Self {
+        let mut supervisor = SupervisorConfig::default();
+        let limit_a = model.usable_current_limit_a();
+        supervisor.current_limit_a = limit_a;
+        supervisor.overcurrent_trip_a = 10.0 * limit_a;
+        supervisor.spring_rate_n_per_m = model.spring_stiffness_n_per_m;
+        supervisor.spring_preload_m = model.preload_m;
+        // Soft limits outside the mechanical stops by the braking distance
+        // from the largest stop-impact speed tolerated (see
+        // `STOP_IMPACT_SPEED_MPS`): a nut that cannot be slowed below it
+        // before a stop trips the supervisor.
+        let a = supervisor.brake_decel_mps2;
+        let margin_m = STOP_IMPACT_SPEED_MPS * STOP_IMPACT_SPEED_MPS / (2.0 * a);
+        supervisor.stroke_min_m = -margin_m;
+        supervisor.stroke_max_m = model.stroke_m + margin_m;
+        let calibration = Calibration {
+            current_limit_a: limit_a,
+            torque_constant_nm_per_a: model.torque_constant_nm_per_a,
+            lead_m_per_rev: model.screw_lead_m,
+            height_at_origin_m: model.leg_length_m,
+            ..Calibration::default()
+        };
+        Self {
+            model,
+            calibration,
+            estimator: EstimatorConfig::default(),
+            supervisor,
+            flight: flight_pd::Config::default(),
+            strategy: Strategy::default(),
+            target_apex_m: 0.05,
+        }
+    }
+}
+
+impl Default for HopperConfig {
+    fn default() -> Self {
+        Self::for_model(ModelParams::default())
+    }
+}
+
+/// Why a [`Hopper`] could not be built.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum ConfigError {
+    /// The model is invalid.
+    Model(ModelError),
+    /// The calibration is invalid.
+    Calibration(CalError),
+    /// The estimator configuration is invalid.
+    Estimator(EstimatorError),
+    /// The target apex is not in `0..=1` m.
+    TargetApex,
+    /// The apex loop gain is not in `(0, 2)` or its bound is negative.
+    ApexLoop,
+}
+
+/// What one control period produced.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct StepOutput {
+    /// The DAC code to write (the zero-current code when faulted).
+    pub dac_code: u16,
+    /// The approved command.
+    pub command: Command,
+    /// What the laws asked for before the supervisor, A.
+    pub requested_a: f32,
+    /// Phase estimate after this sample.
+    pub phase: Phase,
+    /// The event this sample completed.
+    pub event: Option<PhaseEvent>,
+    /// The completed hop's ledger, at the apex that ends it.
+    pub hop: Option<HopLedger>,
+    /// Energy estimate, J (NaN when the sample was rejected).
+    pub energy_j: f32,
+    /// Latched faults after this period.
+    pub faults: Faults,
+    /// Compact record for the telemetry ring.
+    pub record: StepRecord,
+}
+
+/// The controller: owns the estimator, laws, supervisor and ledger state.
+#[derive(Debug, Clone, Copy)]
+pub struct Hopper {
+    cfg: HopperConfig,
+    converter: Converter,
+    estimator: PhaseEstimator,
+    stance: StanceController,
+    actuator: Actuator,
+    supervisor: Supervisor,
+    ledger: HopLedgerBuilder,
+    desired_energy_j: f32,
+    offset_j: f32,
+    after_bottom: bool,
+    steps: u32,
+}
+
+fn cal_fault(e: CalError) -> Fault {
+    match e {
+        CalError::NonFinite(_) => Fault::SensorNonFinite,
+        _ => Fault::SensorRange,
+    }
+}
+
+impl Hopper {
+    /// Validates `cfg` and builds the controller (in flight, no fault).
+    pub fn new(cfg: HopperConfig) -> Result<Self, ConfigError> {
+        cfg.model.validate().map_err(ConfigError::Model)?;
+        let converter = Converter::new(cfg.calibration).map_err(ConfigError::Calibration)?;
+        let estimator =
+            PhaseEstimator::new(cfg.estimator, &cfg.model).map_err(ConfigError::Estimator)?;
+        if let Strategy::EnergyApex(a) = &cfg.strategy {
+            if !(a.gain > 0.0
+                && a.gain < 10.0
+                && a.max_offset_j >= 0.0
+                && a.max_offset_j.is_finite()
+                && a.min_offset_j <= 0.0
+                && a.min_offset_j.is_finite()
+                && (0.0..=1.0).contains(&a.spin_up_fraction))
+            {
+                return Err(ConfigError::ApexLoop);
+            }
+        }
+        let desired_energy_j = Self::desired_for(&cfg.model, cfg.target_apex_m)?;
+        let actuator = Actuator::from_model(&cfg.model);
+        let law = match cfg.strategy {
+            Strategy::Thesis(law) => law,
+            Strategy::EnergyApex(a) => StanceLaw::EnergyTorque(a.law),
+            Strategy::Passive => StanceLaw::default(),
+        };
+        Ok(Self {
+            cfg,
+            converter,
+            estimator,
+            stance: StanceController::new(law, actuator),
+            actuator,
+            supervisor: Supervisor::new(cfg.supervisor),
+            ledger: HopLedgerBuilder::new(),
+            desired_energy_j,
+            offset_j: 0.0,
+            after_bottom: false,
+            steps: 0,
+        })
+    }
+
+    fn desired_for(model: &ModelParams, apex_m: f32) -> Result<f32, ConfigError> {
+        if !(0.0..=1.0).contains(&apex_m) {
+            return Err(ConfigError::TargetApex);
+        }
+        model
+            .desired_energy_j(apex_m)
+            .map_err(|_| ConfigError::TargetApex)
+    }
+
+    /// The configuration in use.
+    pub fn config(&self) -> &HopperConfig {
+        &self.cfg
+    }
+
+    /// Changes the apex target `H_D` (m, `0..=1`); the apex loop's offset is kept.
+    pub fn set_target_apex(&mut self, apex_m: f32) -> Result<(), ConfigError> {
+        self.desired_energy_j = Self::desired_for(&self.cfg.model, apex_m)?;
+        self.cfg.target_apex_m = apex_m;
+        Ok(())
+    }
+
+    /// `E_D` for the target apex, J (eq 2.43 in this crate's coordinates).
+    pub fn desired_energy_j(&self) -> f32 {
+        self.desired_energy_j
+    }
+
+    /// The apex loop's current correction of `E_D`, J (0 for other strategies).
+    pub fn apex_offset_j(&self) -> f32 {
+        self.offset_j
+    }
+
+    /// The supervisor (faults, configuration).
+    pub fn supervisor(&self) -> &Supervisor {
+        &self.supervisor
+    }
+
+    /// The supervisor, mutably (report overruns, reset).
+    pub fn supervisor_mut(&mut self) -> &mut Supervisor {
+        &mut self.supervisor
+    }
+
+    /// The phase estimate.
+    pub fn phase(&self) -> Phase {
+        self.estimator.phase()
+    }
+
+    /// One control period of `dt_s` seconds. `raw` is `None` when the sensors
+    /// could not be read (latches [`Fault::SensorRange`]).
+    pub fn step(&mut self, raw: Option<&RawSample>, dt_s: f32) -> StepOutput {
+        self.steps = self.steps.wrapping_add(1);
+        let m = match raw.map(|r| self.converter.convert(r)) {
+            Some(Ok(m)) => m,
+            Some(Err(e)) => return self.safe_output(cal_fault(e)),
+            None => return self.safe_output(Fault::SensorRange),
+        };
+        let event = self.estimator.update(
+            &PhaseInput {
+                body_height_m: m.body_height_m,
+                motor_angle_rad: m.motor_angle_rad,
+                spring_force_n: m.spring_force_n,
+                leg_compression_m: m.leg_compression_m,
+            },
+            dt_s,
+        );
+        let v = self.estimator.velocities();
+        let phase = self.estimator.phase();
+        let nut_velocity_mps = v.motor_rad_s * self.actuator.screw_m_per_rad;
+        let e_in = EnergyInput {
+            body_height_m: m.body_height_m,
+            body_velocity_mps: v.body_mps,
+            motor_rate_rad_s: v.motor_rad_s,
+            nut_position_m: m.nut_position_m,
+            spring_force_n: m.spring_force_n,
+            phase,
+        };
+        let energy_j = total_energy_j(&self.cfg.model, &e_in).unwrap_or(f32::NAN);
+        let hop = self.on_event(event, energy_j);
+
+        let requested_a = self.law_current_a(&m, &e_in, energy_j, nut_velocity_mps, phase);
+        let sup_in =
+            SupervisorInput::from_measurements(&m, nut_velocity_mps, v.motor_rad_s, v.body_mps);
+        let mut command = self.supervisor.check(&sup_in, requested_a);
+        if !energy_j.is_finite() {
+            // The inputs were finite (checked by the supervisor's ranges), so
+            // this is an overflow: treat it as a bad sensor value.
+            self.supervisor.report(Fault::SensorNonFinite);
+            command = Command::SAFE;
+        }
+        let cal = self.converter.calibration();
+        let dac_code = cal.current_to_dac_code(command.current_a);
+        self.ledger.step(
+            dt_s,
+            command.current_a,
+            cal.torque_nm(command.current_a),
+            v.motor_rad_s,
+            m.nut_position_m,
+        );
+        let faults = self.supervisor.faults();
+        StepOutput {
+            dac_code,
+            command,
+            requested_a,
+            phase,
+            event,
+            hop,
+            energy_j,
+            faults,
+            record: StepRecord {
+                step: self.steps,
+                phase: phase as u8,
+                faults: faults.0,
+                dac_code,
+                body_height_m: m.body_height_m,
+                nut_position_m: m.nut_position_m,
+                spring_force_n: m.spring_force_n,
+                energy_j,
+                command_a: command.current_a,
+            },
+        }
+    }
+
+    /// Reads `io`, steps, writes the DAC code and the enable. An I/O error
+    /// latches a fault and the amplifier is disabled in the same period.
+    pub fn run_period<Io: HopperIo>(&mut self, io: &mut Io, dt_s: f32) -> StepOutput {
+        let raw = io.read().ok();
+        let mut out = self.step(raw.as_ref(), dt_s);
+        if io.write_dac(out.dac_code).is_err() {
+            self.supervisor.report_dac_error();
+            out.command = Command::SAFE;
+            out.faults = self.supervisor.faults();
+        }
+        if io.set_amp_enabled(out.command.amp_enable).is_err() {
+            // The enable pin failed: we cannot know the amplifier's state, so
+            // make sure the command is zero and ask for "off" once more.
+            self.supervisor.report(Fault::AmpFault);
+            let zero = self.converter.calibration().current_to_dac_code(0.0);
+            let _ = io.write_dac(zero);
+            let _ = io.set_amp_enabled(false);
+            out.command = Command::SAFE;
+            out.dac_code = zero;
+            out.faults = self.supervisor.faults();
+        }
+        out.record.faults = out.faults.0;
+        out
+    }
+
+    fn safe_output(&mut self, fault: Fault) -> StepOutput {
+        self.supervisor.report(fault);
+        let dac_code = self.converter.calibration().current_to_dac_code(0.0);
+        let faults = self.supervisor.faults();
+        let phase = self.estimator.phase();
+        StepOutput {
+            dac_code,
+            command: Command::SAFE,
+            requested_a: 0.0,
+            phase,
+            event: None,
+            hop: None,
+            energy_j: f32::NAN,
+            faults,
+            record: StepRecord {
+                step: self.steps,
+                phase: phase as u8,
+                faults: faults.0,
+                dac_code,
+                body_height_m: f32::NAN,
+                nut_position_m: f32::NAN,
+                spring_force_n: f32::NAN,
+                energy_j: f32::NAN,
+                command_a: 0.0,
+            },
+        }
+    }
+
+    /// Ledger and per-hop bookkeeping for an estimator event.
+    fn on_event(&mut self, event: Option<PhaseEvent>, energy_j: f32) -> Option<HopLedger> {
+        match event? {
+            PhaseEvent::Touchdown => {
+                self.stance.on_touchdown();
+                self.after_bottom = false;
+                self.ledger.touchdown(energy_j);
+                None
+            }
+            PhaseEvent::Liftoff => {
+                self.ledger.liftoff(energy_j);
+                None
+            }
+            PhaseEvent::Bottom => {
+                self.after_bottom = true;
+                None
+            }
+            PhaseEvent::Apex { toe_height_m } => {
+                let hop = self.ledger.apex(toe_height_m);
+                if hop.is_some() {
+                    self.apex_loop_update(toe_height_m);
+                }
+                hop
+            }
+        }
+    }
+
+    /// The outer loop of [`ApexLoop`], once per completed hop.
+    fn apex_loop_update(&mut self, toe_height_m: f32) {
+        let Strategy::EnergyApex(a) = self.cfg.strategy else {
+            return;
+        };
+        let Ok(measured_j) = self
+            .cfg
+            .model
+            .desired_energy_j(toe_height_m.clamp(0.0, 1.0))
+        else {
+            return;
+        };
+        let next = self.offset_j + a.gain * (self.desired_energy_j - measured_j);
+        if next.is_finite() {
+            self.offset_j = next.clamp(a.min_offset_j.min(0.0), a.max_offset_j);
+        }
+    }
+
+    /// The laws' request, A (before the supervisor).
+    fn law_current_a(
+        &mut self,
+        m: &Measurements,
+        e_in: &EnergyInput,
+        energy_j: f32,
+        nut_velocity_mps: f32,
+        phase: Phase,
+    ) -> f32 {
+        let strategy = self.cfg.strategy;
+        if let Strategy::Passive = strategy {
+            return 0.0;
+        }
+        if phase == Phase::Flight {
+            if let Strategy::Thesis(StanceLaw::ModifiedTorque(c)) = strategy {
+                let toe_m = m.body_height_m - self.cfg.model.leg_length_m;
+                let v = self.estimator.velocities();
+                if modified_torque::flight_active(
+                    &c,
+                    toe_m,
+                    v.body_mps,
+                    self.estimator.last_apex_m(),
+                ) {
+                    return or_zero(modified_torque::command(&c, &self.actuator));
+                }
+            }
+            let v = self.estimator.velocities();
+            if let Strategy::EnergyApex(a) = strategy {
+                let toe_m = m.body_height_m - self.cfg.model.leg_length_m;
+                if v.body_mps < 0.0 && toe_m < a.spin_up_fraction * self.cfg.target_apex_m {
+                    return self.stance_current_a(m, e_in, energy_j, nut_velocity_mps);
+                }
+            }
+            return or_zero(flight_pd::command(
+                &self.cfg.flight,
+                &self.actuator,
+                m.motor_angle_rad,
+                v.motor_rad_s,
+            ));
+        }
+        self.stance_current_a(m, e_in, energy_j, nut_velocity_mps)
+    }
+
+    /// The stance law's request, A.
+    fn stance_current_a(
+        &mut self,
+        m: &Measurements,
+        e_in: &EnergyInput,
+        energy_j: f32,
+        nut_velocity_mps: f32,
+    ) -> f32 {
+        let (fed_back_j, desired_j) = match self.cfg.strategy {
+            Strategy::EnergyApex(a) => {
+                let e = match a.measure {
+                    EnergyMeasure::Total => energy_j,
+                    EnergyMeasure::Body => body_energy_j(&self.cfg.model, e_in).unwrap_or(f32::NAN),
+                };
+                (e, self.desired_energy_j + self.offset_j)
+            }
+            _ => (energy_j, self.desired_energy_j),
+        };
+        or_zero(self.stance.command(&StanceInput {
+            energy_j: fed_back_j,
+            desired_energy_j: desired_j,
+            nut_position_m: m.nut_position_m,
+            nut_velocity_mps,
+            leg_compression_m: m.leg_compression_m,
+            spring_force_n: m.spring_force_n,
+            after_bottom: self.after_bottom,
+        }))
+    }
+}

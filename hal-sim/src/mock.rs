@@ -1,0 +1,244 @@
+//! The mock HAL: the plant seen through the hopper's sensors and driven
+//! through its DAC and amplifier, behind the firmware's own
+//! [`HopperIo`] trait.
+//!
+//! [`SimHal`] holds the sensor, DAC and amplifier models; [`SimHal::io`]
+//! lends it, with the plant, as a [`HopperIo`] for one control period, and
+//! [`SimHal::mean_current_a`] gives the current the plant then sees over
+//! the period (the amplifier's first-order lag, the enable, the DAC
+//! resolution). The sensor models are the inverse of the firmware's
+//! [`Calibration`], so a perfect sensor converts back to the plant's value
+//! within one quantum.
+//!
+//! `no_std`: this also runs inside the QEMU image.
+
+use crate::params::Params;
+use crate::plant::{Mode, Plant};
+use crate::sensors::{AdcChannel, Amplifier, Encoder, Noise};
+use hopper_control::calibration::Calibration;
+use hopper_control::hal::{HopperIo, IoError, RawSample};
+use hopper_control::model::ModelParams;
+
+/// The plant parameters as the control crate's model (`f32`, what the
+/// controller believes when it knows the plant exactly).
+pub fn model_params(p: &Params) -> ModelParams {
+    ModelParams {
+        body_mass_kg: p.body_mass_kg as f32,
+        unsprung_mass_kg: p.unsprung_mass_kg as f32,
+        nut_mass_kg: p.nut_mass_kg as f32,
+        rotor_inertia_kg_m2: p.rotor_inertia_kg_m2 as f32,
+        screw_lead_m: p.screw_lead_m as f32,
+        spring_stiffness_n_per_m: p.spring_stiffness_n_per_m as f32,
+        leg_length_m: p.leg_length_m as f32,
+        preload_m: p.spring_preload_m as f32,
+        stroke_m: p.stroke_m as f32,
+        efficiency: p.efficiency as f32,
+        gravity_mps2: p.gravity_mps2 as f32,
+        torque_limit_nm: p.max_torque_nm() as f32,
+        torque_constant_nm_per_a: p.torque_constant_nm_per_a as f32,
+        current_limit_a: p.current_limit_a as f32,
+    }
+}
+
+/// Sensor noise and amplifier settings of the mock HAL.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SensorConfig {
+    /// Draw Gaussian noise (`false`: quantisation only).
+    pub noise: bool,
+    /// Seed of the noise generator (same seed, same run).
+    pub seed: u64,
+    /// Load-cell noise, N (1 sigma). Default 2.0 (4 codes at the default 0.5 N/code).
+    pub loadcell_sigma_n: f64,
+    /// Potentiometer noise, m (1 sigma). Default 1e-4 (about 3.4 codes).
+    pub pot_sigma_m: f64,
+    /// Amplifier current-loop time constant, s. Default 1.5e-4 (about 1 kHz bandwidth).
+    pub amp_tau_s: f64,
+}
+
+impl SensorConfig {
+    /// The default noise levels.
+    pub const DEFAULT: SensorConfig = SensorConfig {
+        noise: true,
+        seed: 1,
+        loadcell_sigma_n: 2.0,
+        pot_sigma_m: 1e-4,
+        amp_tau_s: 1.5e-4,
+    };
+
+    /// No noise (quantisation and lag stay).
+    pub const QUIET: SensorConfig = SensorConfig {
+        noise: false,
+        ..SensorConfig::DEFAULT
+    };
+}
+
+impl Default for SensorConfig {
+    fn default() -> Self {
+        Self::DEFAULT
+    }
+}
+
+/// A one-shot or persistent fault in the mock I/O (for fault-injection tests).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub struct IoFaults {
+    /// The e-stop input reads pressed.
+    pub estop: bool,
+    /// The amplifier's fault output is asserted.
+    pub amp_fault: bool,
+    /// Every DAC write fails.
+    pub dac_error: bool,
+    /// Every sensor read fails.
+    pub read_error: bool,
+}
+
+/// Sensor, DAC and amplifier models for one hopper.
+#[derive(Clone, Debug)]
+pub struct SimHal {
+    motor: Encoder,
+    height: Encoder,
+    height_origin_m: f64,
+    loadcell: AdcChannel,
+    pot: AdcChannel,
+    noise: Noise,
+    amp: Amplifier,
+    amp_enabled: bool,
+    dac_code: u16,
+    /// Injected I/O faults.
+    pub faults: IoFaults,
+}
+
+impl SimHal {
+    /// Models matching `cal` (the firmware's calibration), with `cfg`'s noise.
+    pub fn new(cal: &Calibration, cfg: &SensorConfig) -> Self {
+        let two_pi = 2.0 * core::f64::consts::PI;
+        let motor_sign = if cal.motor_counts_positive_down {
+            1.0
+        } else {
+            -1.0
+        };
+        let height_sign = if cal.height_counts_positive_up {
+            1.0
+        } else {
+            -1.0
+        };
+        let noise_or_zero = |s: f64| if cfg.noise { s } else { 0.0 };
+        SimHal {
+            motor: Encoder {
+                counts_per_unit: motor_sign * f64::from(cal.motor_counts_per_rev) / two_pi,
+                bits: u32::from(cal.motor_counter_bits),
+            },
+            height: Encoder {
+                counts_per_unit: height_sign * f64::from(cal.height_counts_per_rev)
+                    / (two_pi * f64::from(cal.height_pulley_radius_m)),
+                bits: u32::from(cal.height_counter_bits),
+            },
+            height_origin_m: f64::from(cal.height_at_origin_m),
+            loadcell: AdcChannel {
+                bits: u32::from(cal.adc_bits),
+                units_per_code: f64::from(cal.loadcell_gain_n_per_code),
+                offset_code: f64::from(cal.loadcell_offset_code),
+                noise_sigma: noise_or_zero(cfg.loadcell_sigma_n),
+            },
+            pot: AdcChannel {
+                bits: u32::from(cal.adc_bits),
+                units_per_code: f64::from(cal.pot_gain_m_per_code),
+                offset_code: f64::from(cal.pot_offset_code),
+                noise_sigma: noise_or_zero(cfg.pot_sigma_m),
+            },
+            noise: Noise::new(cfg.seed, cfg.noise),
+            amp: Amplifier {
+                dac_bits: u32::from(cal.dac_bits),
+                zero_code: cal.dac_zero_code,
+                amps_per_code: f64::from(cal.dac_amps_per_code),
+                tau_s: cfg.amp_tau_s,
+                current_a: 0.0,
+            },
+            amp_enabled: false,
+            dac_code: cal.dac_zero_code,
+            faults: IoFaults::default(),
+        }
+    }
+
+    /// The raw sample the sensors give for the plant's present state.
+    pub fn sample(&mut self, plant: &Plant) -> RawSample {
+        let s = plant.state();
+        let p = plant.params();
+        let leg_compression_m = match plant.mode() {
+            Mode::Flight => 0.0,
+            _ => (p.leg_length_m - s.z_m).max(0.0),
+        };
+        RawSample {
+            motor_counts: self.motor.counter(plant.motor_angle_rad()),
+            height_counts: self.height.counter(s.z_m - self.height_origin_m),
+            loadcell_code: self.loadcell.code(plant.spring_force_n(), &mut self.noise),
+            pot_code: self.pot.code(leg_compression_m, &mut self.noise),
+            estop_pressed: self.faults.estop,
+            amp_fault: self.faults.amp_fault,
+        }
+    }
+
+    /// This period's I/O on `plant`.
+    pub fn io<'a>(&'a mut self, plant: &'a Plant) -> SimIo<'a> {
+        SimIo { hal: self, plant }
+    }
+
+    /// The last DAC code written.
+    pub fn dac_code(&self) -> u16 {
+        self.dac_code
+    }
+
+    /// Whether the amplifier is enabled.
+    pub fn amp_enabled(&self) -> bool {
+        self.amp_enabled
+    }
+
+    /// The current command the DAC and enable ask of the amplifier, A.
+    pub fn commanded_current_a(&self) -> f64 {
+        if self.amp_enabled {
+            self.amp.command_a(self.dac_code)
+        } else {
+            0.0
+        }
+    }
+
+    /// Advances the amplifier's current loop by `dt_s` and returns the mean
+    /// motor current over it, A (what to hand to [`Plant::advance`]).
+    pub fn mean_current_a(&mut self, dt_s: f64) -> f64 {
+        let cmd = self.commanded_current_a();
+        self.amp.follow(cmd, dt_s)
+    }
+}
+
+/// [`SimHal`] and the plant, as the firmware's [`HopperIo`] for one period.
+pub struct SimIo<'a> {
+    hal: &'a mut SimHal,
+    plant: &'a Plant,
+}
+
+/// The mock HAL has no pins that can fail on their own.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct NoPinError;
+
+impl HopperIo for SimIo<'_> {
+    type Error = NoPinError;
+
+    fn read(&mut self) -> Result<RawSample, IoError<NoPinError>> {
+        if self.hal.faults.read_error {
+            return Err(IoError::Sensor);
+        }
+        Ok(self.hal.sample(self.plant))
+    }
+
+    fn write_dac(&mut self, code: u16) -> Result<(), IoError<NoPinError>> {
+        if self.hal.faults.dac_error {
+            return Err(IoError::Dac);
+        }
+        self.hal.dac_code = code;
+        Ok(())
+    }
+
+    fn set_amp_enabled(&mut self, on: bool) -> Result<(), IoError<NoPinError>> {
+        self.hal.amp_enabled = on;
+        Ok(())
+    }
+}
