@@ -9,6 +9,7 @@
 use crate::mock::{model_params, SensorConfig, SimHal};
 use crate::params::Params;
 use crate::plant::Plant;
+use hopper_control::estimator::PhaseEvent;
 use hopper_control::hopper::{ApexLoop, Hopper, HopperConfig, StepOutput, Strategy};
 use hopper_control::laws::{
     constant_torque, energy_torque, flight_pd, modified_torque, step_closed, step_open, velocity,
@@ -36,6 +37,21 @@ pub trait Controller {
     fn hop_ledgers(&self) -> Vec<HopLedger> {
         Vec::new()
     }
+    /// Events the firmware's phase estimator reported, if it has one.
+    fn estimator_events(&self) -> Option<EstimatorEvents> {
+        None
+    }
+}
+
+/// How many of each event the firmware's phase estimator reported.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+pub struct EstimatorEvents {
+    /// Touchdowns.
+    pub touchdowns: usize,
+    /// Liftoffs.
+    pub liftoffs: usize,
+    /// Flight apexes.
+    pub apexes: usize,
 }
 
 /// A latched fault.
@@ -173,6 +189,7 @@ impl ControllerSpec {
             faults: Vec::new(),
             hops: Vec::new(),
             last: None,
+            events: EstimatorEvents::default(),
         })
     }
 }
@@ -188,6 +205,7 @@ pub struct FirmwareController {
     faults: Vec<FaultRecord>,
     hops: Vec<HopLedger>,
     last: Option<StepOutput>,
+    events: EstimatorEvents,
 }
 
 impl FirmwareController {
@@ -230,6 +248,12 @@ impl Controller for FirmwareController {
         if let Some(h) = out.hop {
             self.hops.push(h);
         }
+        match out.event {
+            Some(PhaseEvent::Touchdown) => self.events.touchdowns += 1,
+            Some(PhaseEvent::Liftoff) => self.events.liftoffs += 1,
+            Some(PhaseEvent::Apex { .. }) => self.events.apexes += 1,
+            _ => {}
+        }
         self.last = Some(out);
         self.hal.mean_current_a(self.dt_s)
     }
@@ -244,6 +268,10 @@ impl Controller for FirmwareController {
 
     fn hop_ledgers(&self) -> Vec<HopLedger> {
         self.hops.clone()
+    }
+
+    fn estimator_events(&self) -> Option<EstimatorEvents> {
+        Some(self.events)
     }
 }
 

@@ -89,6 +89,13 @@ pub struct IoFaults {
     pub dac_error: bool,
     /// Every sensor read fails.
     pub read_error: bool,
+    /// Added (wrapping) to the motor encoder counter: a step here is an
+    /// encoder glitch, a ramp a runaway the plant does not follow.
+    pub motor_counts_offset: u32,
+    /// The load-cell ADC reads this code (stuck or saturated sensor).
+    pub loadcell_code: Option<u16>,
+    /// The potentiometer ADC reads this code (e.g. a rail: open wiper).
+    pub pot_code: Option<u16>,
 }
 
 /// Sensor, DAC and amplifier models for one hopper.
@@ -167,11 +174,19 @@ impl SimHal {
             Mode::Flight => 0.0,
             _ => (p.leg_length_m - s.z_m).max(0.0),
         };
+        let motor_counts = self.motor.counter(plant.motor_angle_rad());
+        let wrap_mask = if self.motor.bits >= 32 {
+            u32::MAX
+        } else {
+            (1u32 << self.motor.bits) - 1
+        };
+        let loadcell_code = self.loadcell.code(plant.spring_force_n(), &mut self.noise);
+        let pot_code = self.pot.code(leg_compression_m, &mut self.noise);
         RawSample {
-            motor_counts: self.motor.counter(plant.motor_angle_rad()),
+            motor_counts: motor_counts.wrapping_add(self.faults.motor_counts_offset) & wrap_mask,
             height_counts: self.height.counter(s.z_m - self.height_origin_m),
-            loadcell_code: self.loadcell.code(plant.spring_force_n(), &mut self.noise),
-            pot_code: self.pot.code(leg_compression_m, &mut self.noise),
+            loadcell_code: self.faults.loadcell_code.unwrap_or(loadcell_code),
+            pot_code: self.faults.pot_code.unwrap_or(pot_code),
             estop_pressed: self.faults.estop,
             amp_fault: self.faults.amp_fault,
         }
@@ -180,6 +195,11 @@ impl SimHal {
     /// This period's I/O on `plant`.
     pub fn io<'a>(&'a mut self, plant: &'a Plant) -> SimIo<'a> {
         SimIo { hal: self, plant }
+    }
+
+    /// The load-cell and potentiometer ADC channels' largest code.
+    pub fn adc_full_scale(&self) -> u16 {
+        self.loadcell.full_scale()
     }
 
     /// The last DAC code written.

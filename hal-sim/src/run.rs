@@ -1,9 +1,10 @@
 //! Scenario runner: a controller against the plant at a fixed control rate,
 //! with trajectory sampling and the per-run summary `hopper-sim` prints.
 
-use crate::controller::Controller;
+use crate::controller::{Controller, EstimatorEvents};
 use crate::params::Params;
 use crate::plant::{Event, Ledger, Mode, Plant, PlantError};
+use hopper_control::telemetry::HopLedger;
 use serde::Serialize;
 
 /// Toe height bounds accepted for a start apex, m.
@@ -181,6 +182,46 @@ pub struct Summary {
     pub faults: Vec<String>,
     /// Time of the first latched fault, s (null when none).
     pub first_fault_s: Option<f64>,
+    /// Events the firmware's phase estimator reported (null without firmware).
+    pub estimated_events: Option<EstimatorEvents>,
+    /// The firmware's per-hop ledger, one entry per completed hop.
+    pub firmware_hops: Vec<FirmwareHop>,
+}
+
+/// One hop of the firmware's ledger ([`HopLedger`]), from its own estimates.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct FirmwareHop {
+    /// Hop number, from 1.
+    pub hop: u32,
+    /// Apex toe height that ended the hop, m.
+    pub apex_height_m: f32,
+    /// Energy estimate at touchdown, J.
+    pub energy_at_touchdown_j: f32,
+    /// Energy estimate at liftoff, J.
+    pub energy_at_liftoff_j: f32,
+    /// Motor work in stance (commanded torque x estimated speed), J.
+    pub stance_work_j: f32,
+    /// Stance duration, s.
+    pub stance_duration_s: f32,
+    /// Largest |command|, A.
+    pub peak_current_a: f32,
+    /// Largest nut displacement, m.
+    pub peak_stroke_m: f32,
+}
+
+impl From<HopLedger> for FirmwareHop {
+    fn from(h: HopLedger) -> Self {
+        FirmwareHop {
+            hop: h.hop,
+            apex_height_m: h.apex_height_m,
+            energy_at_touchdown_j: h.energy_at_touchdown_j,
+            energy_at_liftoff_j: h.energy_at_liftoff_j,
+            stance_work_j: h.stance_work_j,
+            stance_duration_s: h.stance_duration_s,
+            peak_current_a: h.peak_current_a,
+            peak_stroke_m: h.peak_stroke_m,
+        }
+    }
 }
 
 /// Hops to converge (see [`Summary::hops_to_converge`]): 1-based index of the
@@ -293,6 +334,12 @@ pub fn run_with_progress(
                     .and_then(|t| hops_to_converge(&summary.apex_heights_m, t, 0.02)),
                 first_fault_s: faults.first().map(|f| f.time_s),
                 faults: faults.iter().map(|f| f.name.to_string()).collect(),
+                estimated_events: controller.estimator_events(),
+                firmware_hops: controller
+                    .hop_ledgers()
+                    .into_iter()
+                    .map(FirmwareHop::from)
+                    .collect(),
                 ..summary
             }
         },
@@ -363,6 +410,8 @@ fn summarize(
         max_current_a: 0.0,
         faults: Vec::new(),
         first_fault_s: None,
+        estimated_events: None,
+        firmware_hops: Vec::new(),
     }
 }
 

@@ -71,6 +71,9 @@ pub struct ApexLoop {
     pub law: energy_torque::Config,
     /// The energy fed back.
     pub measure: EnergyMeasure,
+    /// Proportional gain `K_p`, dimensionless (J of correction per J of the
+    /// last apex error), >= 0: damps the slow outer loop. Default 0.
+    pub proportional: f32,
     /// Integral gain `K_i`, dimensionless (J of offset per J of apex error), in (0, 10). Default 0.6.
     pub gain: f32,
     /// Bound on the offset, J (>= 0). Default 30.
@@ -95,6 +98,7 @@ impl Default for ApexLoop {
                 allow_negative: false,
             },
             measure: EnergyMeasure::Total,
+            proportional: 0.0,
             gain: 0.6,
             max_offset_j: 30.0,
             min_offset_j: -5.0,
@@ -244,6 +248,7 @@ pub struct Hopper {
     ledger: HopLedgerBuilder,
     desired_energy_j: f32,
     offset_j: f32,
+    last_error_j: f32,
     after_bottom: bool,
     steps: u32,
 }
@@ -268,6 +273,8 @@ impl Hopper {
                 && a.max_offset_j >= 0.0
                 && a.max_offset_j.is_finite()
                 && a.min_offset_j <= 0.0
+                && a.proportional >= 0.0
+                && a.proportional.is_finite()
                 && a.min_offset_j.is_finite()
                 && (0.0..=1.0).contains(&a.spin_up_fraction))
             {
@@ -291,6 +298,7 @@ impl Hopper {
             ledger: HopLedgerBuilder::new(),
             desired_energy_j,
             offset_j: 0.0,
+            last_error_j: 0.0,
             after_bottom: false,
             steps: 0,
         })
@@ -509,7 +517,11 @@ impl Hopper {
         else {
             return;
         };
-        let next = self.offset_j + a.gain * (self.desired_energy_j - measured_j);
+        let error_j = self.desired_energy_j - measured_j;
+        let next = self.offset_j + a.gain * error_j;
+        if error_j.is_finite() {
+            self.last_error_j = error_j.clamp(-a.max_offset_j, a.max_offset_j);
+        }
         if next.is_finite() {
             self.offset_j = next.clamp(a.min_offset_j.min(0.0), a.max_offset_j);
         }
@@ -572,7 +584,10 @@ impl Hopper {
                     EnergyMeasure::Total => energy_j,
                     EnergyMeasure::Body => body_energy_j(&self.cfg.model, e_in).unwrap_or(f32::NAN),
                 };
-                (e, self.desired_energy_j + self.offset_j)
+                (
+                    e,
+                    self.desired_energy_j + self.offset_j + a.proportional * self.last_error_j,
+                )
             }
             _ => (energy_j, self.desired_energy_j),
         };
@@ -585,5 +600,237 @@ impl Hopper {
             spring_force_n: m.spring_force_n,
             after_bottom: self.after_bottom,
         }))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::Strategy;
+    use super::*;
+    use crate::hal::IoError;
+    use proptest::prelude::{
+        any, prop_assert, prop_assert_eq, prop_oneof, proptest, Just, ProptestConfig,
+    };
+    use proptest::strategy::Strategy as _;
+
+    /// A hopper at rest in flight at the origin: nut on its stop, spring at preload.
+    fn rest_sample(cal: &Calibration) -> RawSample {
+        let preload_n = 11_000.0 * 0.005;
+        RawSample {
+            loadcell_code: (cal.loadcell_offset_code + preload_n / cal.loadcell_gain_n_per_code)
+                as u16,
+            pot_code: cal.pot_offset_code as u16,
+            ..RawSample::default()
+        }
+    }
+
+    fn hopper(strategy: Strategy) -> Hopper {
+        let cfg = HopperConfig {
+            strategy,
+            ..HopperConfig::default()
+        };
+        Hopper::new(cfg).unwrap_or_else(|e| panic!("{e:?}"))
+    }
+
+    #[test]
+    fn passive_commands_zero_with_the_amplifier_enabled() {
+        let mut h = hopper(Strategy::Passive);
+        let raw = rest_sample(&h.config().calibration);
+        for _ in 0..10 {
+            let out = h.step(Some(&raw), 1e-4);
+            assert_eq!(out.command.current_a, 0.0);
+            assert!(out.command.amp_enable);
+            assert_eq!(out.dac_code, 2048);
+            assert!(out.faults.is_empty());
+        }
+    }
+
+    #[test]
+    fn flight_pd_pulls_a_displaced_nut_home() {
+        let mut h = hopper(Strategy::default());
+        let mut raw = rest_sample(&h.config().calibration);
+        h.step(Some(&raw), 1e-4);
+        // Ease the nut 400 counts down (1 mm) at 0.1 m/s, then hold: the PD
+        // asks for current upwards (< 0).
+        let mut out = h.step(Some(&raw), 1e-4);
+        for k in 1..=50 {
+            raw.motor_counts = (40 * k).min(400);
+            out = h.step(Some(&raw), 1e-4);
+        }
+        assert!(out.command.current_a < -10.0, "{out:?}");
+        assert!(out.dac_code < 2048);
+    }
+
+    #[test]
+    fn a_fault_is_safe_in_the_same_period_and_stays_latched() {
+        let mut h = hopper(Strategy::default());
+        let mut raw = rest_sample(&h.config().calibration);
+        h.step(Some(&raw), 1e-4);
+        raw.estop_pressed = true;
+        let out = h.step(Some(&raw), 1e-4);
+        assert_eq!(out.command, Command::SAFE);
+        assert_eq!(out.dac_code, 2048);
+        assert!(out.faults.contains(Fault::Estop));
+        raw.estop_pressed = false;
+        let out = h.step(Some(&raw), 1e-4);
+        assert_eq!(out.command, Command::SAFE, "latched after release");
+    }
+
+    #[test]
+    fn unreadable_or_non_finite_sensors_trip() {
+        let mut h = hopper(Strategy::default());
+        let out = h.step(None, 1e-4);
+        assert!(out.faults.contains(Fault::SensorRange));
+        assert_eq!(out.command, Command::SAFE);
+
+        // A calibration that overflows f32 on a real code: converted value is inf.
+        let mut cfg = HopperConfig::default();
+        cfg.calibration.loadcell_gain_n_per_code = f32::MAX;
+        let mut h = Hopper::new(cfg).unwrap_or_else(|e| panic!("{e:?}"));
+        let raw = RawSample {
+            loadcell_code: 4000,
+            ..RawSample::default()
+        };
+        let out = h.step(Some(&raw), 1e-4);
+        assert!(out.faults.contains(Fault::SensorNonFinite), "{out:?}");
+        assert_eq!(out.command, Command::SAFE);
+    }
+
+    #[test]
+    fn overrun_reported_by_the_application_makes_the_next_period_safe() {
+        let mut h = hopper(Strategy::default());
+        let raw = rest_sample(&h.config().calibration);
+        assert!(h.step(Some(&raw), 1e-4).command.amp_enable);
+        h.supervisor_mut().report_overrun();
+        let out = h.step(Some(&raw), 1e-4);
+        assert_eq!(out.command, Command::SAFE);
+        assert!(out.faults.contains(Fault::Overrun));
+    }
+
+    struct FailingDac(RawSample, bool);
+    impl HopperIo for FailingDac {
+        type Error = ();
+        fn read(&mut self) -> Result<RawSample, IoError<()>> {
+            Ok(self.0)
+        }
+        fn write_dac(&mut self, _code: u16) -> Result<(), IoError<()>> {
+            Err(IoError::Dac)
+        }
+        fn set_amp_enabled(&mut self, on: bool) -> Result<(), IoError<()>> {
+            self.1 = on;
+            Ok(())
+        }
+    }
+
+    #[test]
+    fn a_dac_write_error_disables_the_amplifier_in_the_same_period() {
+        let mut h = hopper(Strategy::default());
+        let mut io = FailingDac(rest_sample(&h.config().calibration), true);
+        let out = h.run_period(&mut io, 1e-4);
+        assert!(!io.1, "amplifier left enabled");
+        assert_eq!(out.command, Command::SAFE);
+        assert!(out.faults.contains(Fault::DacError));
+    }
+
+    #[test]
+    fn apex_loop_integrates_the_apex_error_within_bounds() {
+        let mut h = hopper(Strategy::default());
+        assert_eq!(h.apex_offset_j(), 0.0);
+        // Apex 0.03 m for a 0.05 m target: 0.02 m short, (M + m_s + m_u) g 0.02 = 1.939 J.
+        h.apex_loop_update(0.03);
+        let expect = 0.6 * (9.0 + 0.25 + 0.6) * 9.81 * 0.02;
+        assert!(
+            (h.apex_offset_j() - expect).abs() < 1e-3,
+            "{}",
+            h.apex_offset_j()
+        );
+        for _ in 0..100 {
+            h.apex_loop_update(0.0);
+        }
+        assert_eq!(h.apex_offset_j(), 30.0);
+        for _ in 0..100 {
+            h.apex_loop_update(0.5);
+        }
+        assert_eq!(h.apex_offset_j(), -5.0);
+        h.apex_loop_update(f32::NAN);
+        assert_eq!(h.apex_offset_j(), -5.0);
+    }
+
+    #[test]
+    fn bad_configuration_is_refused() {
+        let cfg = HopperConfig {
+            target_apex_m: -0.1,
+            ..HopperConfig::default()
+        };
+        assert_eq!(Hopper::new(cfg).err(), Some(ConfigError::TargetApex));
+        let cfg = HopperConfig {
+            strategy: Strategy::EnergyApex(ApexLoop {
+                gain: 0.0,
+                ..ApexLoop::default()
+            }),
+            ..HopperConfig::default()
+        };
+        assert_eq!(Hopper::new(cfg).err(), Some(ConfigError::ApexLoop));
+        let mut h = hopper(Strategy::default());
+        assert!(h.set_target_apex(f32::NAN).is_err());
+        assert!(h.set_target_apex(0.1).is_ok());
+        // (M + m_s) g (l0 + H) + m_u g H + k delta0^2 / 2 = 64.426 + 0.589 + 0.1375.
+        assert!(
+            (h.desired_energy_j() - 65.153).abs() < 0.01,
+            "{}",
+            h.desired_energy_j()
+        );
+    }
+
+    fn any_raw() -> impl proptest::strategy::Strategy<Value = RawSample> {
+        (
+            any::<u16>(),
+            any::<u16>(),
+            0u16..4096,
+            0u16..4096,
+            any::<bool>(),
+            any::<bool>(),
+        )
+            .prop_map(|(m, z, lc, pot, estop, amp)| RawSample {
+                motor_counts: u32::from(m),
+                height_counts: u32::from(z),
+                loadcell_code: lc,
+                pot_code: pot,
+                estop_pressed: estop,
+                amp_fault: amp,
+            })
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(2000))]
+
+        /// Any raw stream: the command stays within the limit, the DAC code
+        /// in range, and a latched fault stays latched with a zero command.
+        #[test]
+        fn any_sensor_stream_gives_a_bounded_command(
+            stream in proptest::collection::vec(proptest::option::weighted(0.98, any_raw()), 1..60),
+            law in 0usize..3,
+            dt in prop_oneof![Just(1e-4f32), 1e-6f32..1e-2, Just(0.0f32), Just(f32::NAN)],
+        ) {
+            let strategy = match law {
+                0 => Strategy::Passive,
+                1 => Strategy::Thesis(StanceLaw::ModifiedTorque(modified_torque::Config::default())),
+                _ => Strategy::default(),
+            };
+            let mut h = hopper(strategy);
+            let limit = h.config().supervisor.current_limit_a;
+            let mut latched = false;
+            for raw in &stream {
+                let out = h.step(raw.as_ref(), dt);
+                prop_assert!(out.command.current_a.is_finite());
+                prop_assert!(out.command.current_a.abs() <= limit);
+                prop_assert!(out.dac_code <= 4095);
+                if latched {
+                    prop_assert_eq!(out.command, Command::SAFE);
+                    prop_assert_eq!(out.dac_code, 2048);
+                }
+                latched |= !out.faults.is_empty();
+            }
+        }
     }
 }

@@ -208,9 +208,13 @@ pub struct SupervisorConfig {
     pub body_height_range_m: Range,
     /// Plausible body velocity, m/s. Default ±10.
     pub body_velocity_range_mps: Range,
-    /// Plausible spring force, N. Default -100..=1500 (about 600 N at full stroke in flight).
+    /// Plausible spring force, N. Default -50..=1800: about 600 N at full
+    /// stroke in flight, 1.35 kN with the nut down in a 0.25 m hop; both
+    /// rails of the default load-cell calibration (-100 N, 1947 N) are outside.
     pub spring_force_range_n: Range,
-    /// Plausible leg compression, m. Default -0.01..=0.15.
+    /// Plausible leg compression, m. Default -0.004..=0.1: both rails of the
+    /// default potentiometer calibration (-6 mm, 114 mm) are outside, so an
+    /// open or shorted wiper trips.
     pub leg_compression_range_m: Range,
     /// Spring rate `k`, N/m, for the contact check. Default 11 000 (Table 2.1).
     pub spring_rate_n_per_m: f32,
@@ -261,12 +265,12 @@ impl Default for SupervisorConfig {
                 max: 10.0,
             },
             spring_force_range_n: Range {
-                min: -100.0,
-                max: 1500.0,
+                min: -50.0,
+                max: 1800.0,
             },
             leg_compression_range_m: Range {
-                min: -0.01,
-                max: 0.15,
+                min: -0.004,
+                max: 0.1,
             },
             spring_rate_n_per_m: 11_000.0,
             spring_preload_m: 0.005,
