@@ -42,8 +42,14 @@ fn ensure_font() -> Result<(), String> {
 type Series<'a> = (&'a str, &'a str, fn(&Sample) -> f64);
 
 /// Draw toe height (cm), actuator position (mm) and total energy (J) against
-/// time into a PNG at `path`.
-pub fn hop_plot(samples: &[Sample], title: &str, path: &Path) -> Result<(), String> {
+/// time into a PNG at `path`; `target_apex_m` adds the apex target as a
+/// dashed line on the height panel.
+pub fn hop_plot(
+    samples: &[Sample],
+    title: &str,
+    target_apex_m: Option<f64>,
+    path: &Path,
+) -> Result<(), String> {
     if samples.len() < 2 {
         return Err("not enough samples to plot (is the sample rate 0?)".into());
     }
@@ -61,10 +67,14 @@ pub fn hop_plot(samples: &[Sample], title: &str, path: &Path) -> Result<(), Stri
         let (head, body) = root.split_vertically(40);
         head.titled(title, ("sans-serif", 22))?;
         let t_end = samples.last().map(|s| s.t_s).unwrap_or(1.0);
-        for (area, (name, ylabel, get)) in body.split_evenly((3, 1)).iter().zip(panels) {
+        for (k, (area, (name, ylabel, get))) in
+            body.split_evenly((3, 1)).iter().zip(panels).enumerate()
+        {
+            let target_cm = target_apex_m.filter(|_| k == 0).map(|t| t * 100.0);
             let (mut lo, mut hi) = samples
                 .iter()
                 .map(get)
+                .chain(target_cm)
                 .fold((f64::MAX, f64::MIN), |(a, b), v| (a.min(v), b.max(v)));
             let pad = ((hi - lo) * 0.05).max(0.5);
             lo -= pad;
@@ -88,6 +98,13 @@ pub fn hop_plot(samples: &[Sample], title: &str, path: &Path) -> Result<(), Stri
                 ))?
                 .label(ylabel)
                 .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLUE.stroke_width(2)));
+            if let Some(t) = target_cm {
+                let red = RED.stroke_width(2);
+                chart
+                    .draw_series(DashedLineSeries::new([(0.0, t), (t_end, t)], 8, 6, red))?
+                    .label("target apex [cm]")
+                    .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], red));
+            }
             chart
                 .configure_series_labels()
                 .position(SeriesLabelPosition::UpperRight)

@@ -204,7 +204,8 @@ fn cmd_run(a: RunArgs) -> Result<()> {
             "{} hopping, {} parameters, start apex {:.3} m",
             s.controller, s.params, s.start_apex_m
         );
-        hal_sim::plot::hop_plot(&result.samples, &title, &png).map_err(anyhow::Error::msg)?;
+        hal_sim::plot::hop_plot(&result.samples, &title, s.target_apex_m, &png)
+            .map_err(anyhow::Error::msg)?;
         written.push(png);
     }
 
@@ -221,24 +222,44 @@ fn cmd_run(a: RunArgs) -> Result<()> {
         "hopper-sim: {} controller, {} parameters, released from {:.3} m, {:.2} s simulated",
         s.controller, s.params, s.start_apex_m, s.duration_s
     );
-    let apexes: Vec<String> = s
-        .apex_heights_m
-        .iter()
-        .take(12)
-        .map(|h| format!("{:.4}", h))
-        .collect();
-    let more = if s.apex_heights_m.len() > 12 {
-        " ..."
+    let n = s.apex_heights_m.len();
+    let shown: Vec<String> = if n <= 14 {
+        s.apex_heights_m.iter().map(|h| format!("{h:.4}")).collect()
     } else {
-        ""
+        let head = s.apex_heights_m[..10].iter().map(|h| format!("{h:.4}"));
+        let tail = s.apex_heights_m[n - 3..].iter().map(|h| format!("{h:.4}"));
+        head.chain(std::iter::once("...".to_string()))
+            .chain(tail)
+            .collect()
     };
     println!("  hops (stances)     {}", s.hops);
     println!(
-        "  apex heights [m]   {}{more}",
-        if apexes.is_empty() {
+        "  apex heights [m]   {}",
+        if shown.is_empty() {
             "-".into()
         } else {
-            apexes.join(" ")
+            shown.join(" ")
+        }
+    );
+    if let Some(t) = s.target_apex_m {
+        println!(
+            "  target apex        {t:.4} m, {}",
+            match s.hops_to_converge {
+                Some(k) => format!("within 2% from hop {k} on"),
+                None => "not converged (within 2%)".to_string(),
+            }
+        );
+    }
+    println!(
+        "  faults             {}",
+        if s.faults.is_empty() {
+            "none".to_string()
+        } else {
+            format!(
+                "{} (first at {:.4} s)",
+                s.faults.join(", "),
+                s.first_fault_s.unwrap_or(0.0)
+            )
         }
     );
     println!(
