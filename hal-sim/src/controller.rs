@@ -6,11 +6,11 @@
 //! the crate computes a DAC code and the amplifier enable, and the plant is
 //! driven with the amplifier's current over the period.
 
-use crate::mock::{model_params, SensorConfig, SimHal};
+use crate::mock::{firmware_config, SensorConfig, SimHal};
 use crate::params::Params;
 use crate::plant::Plant;
 use hopper_control::estimator::PhaseEvent;
-use hopper_control::hopper::{ApexLoop, Hopper, HopperConfig, StepOutput, Strategy};
+use hopper_control::hopper::{ApexLoop, Hopper, StepOutput, Strategy};
 use hopper_control::laws::{
     constant_torque, energy_torque, flight_pd, modified_torque, step_closed, step_open, velocity,
     StanceLaw,
@@ -163,16 +163,16 @@ impl ControllerSpec {
             ));
         }
         let believed = self.model.as_ref().unwrap_or(plant_params);
-        let mut cfg = HopperConfig::for_model(model_params(believed));
-        cfg.strategy = self.strategy()?;
+        let mut cfg = firmware_config(
+            plant_params,
+            believed,
+            self.strategy()?,
+            self.target_apex_m,
+            start_apex_m,
+        );
         if let Some(f) = self.flight_override {
             cfg.flight = f;
         }
-        cfg.target_apex_m = self.target_apex_m as f32;
-        // The height encoder is incremental: the firmware is told the height
-        // it starts at (on the real robot, the height of the stand it is
-        // released from).
-        cfg.calibration.height_at_origin_m = (plant_params.leg_length_m + start_apex_m) as f32;
         let hopper = Hopper::new(cfg).map_err(|e| format!("controller configuration: {e:?}"))?;
         let hal = SimHal::new(&cfg.calibration, &self.sensors);
         let name = CONTROLLER_NAMES

@@ -9,6 +9,7 @@
 //! the same plant links into the QEMU firmware image.
 #![cfg_attr(not(feature = "std"), no_std)]
 
+pub mod metrics;
 pub mod mock;
 pub mod params;
 pub mod plant;

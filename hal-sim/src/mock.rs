@@ -17,6 +17,7 @@ use crate::plant::{Mode, Plant};
 use crate::sensors::{AdcChannel, Amplifier, Encoder, Noise};
 use hopper_control::calibration::Calibration;
 use hopper_control::hal::{HopperIo, IoError, RawSample};
+use hopper_control::hopper::{HopperConfig, Strategy};
 use hopper_control::model::ModelParams;
 
 /// The plant parameters as the control crate's model (`f32`, what the
@@ -38,6 +39,27 @@ pub fn model_params(p: &Params) -> ModelParams {
         torque_constant_nm_per_a: p.torque_constant_nm_per_a as f32,
         current_limit_a: p.current_limit_a as f32,
     }
+}
+
+/// The firmware configuration for a simulated run: the defaults for the
+/// model the controller believes (`believed`), the given strategy and apex
+/// target, and the height encoder's origin at the release height
+/// `plant.leg_length_m + start_apex_m` (the height encoder is incremental:
+/// on the real robot, the firmware is told the height of the stand it is
+/// released from). The host runner and the QEMU image both build their
+/// controller through this, so they run the same configuration.
+pub fn firmware_config(
+    plant: &Params,
+    believed: &Params,
+    strategy: Strategy,
+    target_apex_m: f64,
+    start_apex_m: f64,
+) -> HopperConfig {
+    let mut cfg = HopperConfig::for_model(model_params(believed));
+    cfg.strategy = strategy;
+    cfg.target_apex_m = target_apex_m as f32;
+    cfg.calibration.height_at_origin_m = (plant.leg_length_m + start_apex_m) as f32;
+    cfg
 }
 
 /// Sensor noise and amplifier settings of the mock HAL.

@@ -224,18 +224,6 @@ impl From<HopLedger> for FirmwareHop {
     }
 }
 
-/// Hops to converge (see [`Summary::hops_to_converge`]): 1-based index of the
-/// first apex from which all later apexes are within `tol` (relative) of
-/// `target`, requiring at least 3 such apexes.
-pub fn hops_to_converge(apexes: &[f64], target: f64, tol: f64) -> Option<usize> {
-    if target.is_nan() || target <= 0.0 {
-        return None;
-    }
-    let within = |h: &f64| (h - target).abs() <= tol * target;
-    let tail = apexes.iter().rev().take_while(|h| within(h)).count();
-    (tail >= 3).then(|| apexes.len() - tail + 1)
-}
-
 /// Everything a run produced.
 #[derive(Clone, Debug)]
 pub struct RunResult {
@@ -247,16 +235,7 @@ pub struct RunResult {
     pub summary: Summary,
 }
 
-/// Mean of the last 5 apexes if they agree within 2% (of the largest).
-pub fn steady_apex(apexes: &[f64]) -> Option<f64> {
-    if apexes.len() < 5 {
-        return None;
-    }
-    let last = &apexes[apexes.len() - 5..];
-    let max = last.iter().copied().fold(f64::MIN, f64::max);
-    let min = last.iter().copied().fold(f64::MAX, f64::min);
-    (max > 0.0 && max - min <= 0.02 * max).then(|| last.iter().sum::<f64>() / 5.0)
-}
+pub use crate::metrics::{hops_to_converge, steady_apex};
 
 /// Run a controller against the plant.
 pub fn run(

@@ -1,38 +1,30 @@
 //! `hopper-fw`: the RTIC 2 controller firmware for the hopper, on an STM32F405.
 //!
-//! Build it with `cargo build -p hopper-app --release --target thumbv7em-none-eabihf`
-//! (`cargo run` with that target runs it on QEMU's `netduinoplus2`, see
-//! `.cargo/config.toml`). On the host this crate compiles to a stub `main`
-//! that says so, which keeps `cargo clippy --workspace --all-targets` working.
+//! Two builds of the same control step ([`hopper_control::hopper::Hopper`]):
 //!
-//! # Clock
-//! The core runs from the 16 MHz HSI oscillator, the reset default, with no
-//! PLL: QEMU does not model the RCC, so the firmware must not wait for PLL
-//! lock. SysTick counts core clock cycles.
+//! * `--features board` (the default): the real board. A hardware timer
+//!   (TIM4) triggers the ADC's injected conversions at `CONTROL_HZ`; their
+//!   end-of-conversion interrupt runs the control task with fresh samples.
+//!   See [`board`] for clocks, pins and the watchdog.
+//! * `--features qemu-sim` (takes precedence): QEMU's `netduinoplus2`. The
+//!   `no_std` plant and sensor models of `hal-sim` stand in for the hardware
+//!   behind the same [`hopper_control::hal::HopperIo`] trait; SysTick paces
+//!   the control task; the scripted scenario ends with a semihosting exit.
 //!
-//! # Pins
-//! | Pin | Direction          | Signal                                 | Safe state            |
-//! |-----|--------------------|----------------------------------------|-----------------------|
-//! | PB0 | output, push-pull  | `AMP_EN`, servo amplifier enable, active high | low (amplifier off) |
-//!
-//! `AMP_EN` needs an external pull-down on the board: between reset and
-//! `init` (and if a panic happens before `init`) the pin is a floating input.
+//! On the host this crate compiles to a stub `main` that says so, which keeps
+//! `cargo clippy --workspace --all-targets` working.
 //!
 //! # Tasks
-//! | Task      | Priority | Trigger                                   |
-//! |-----------|----------|-------------------------------------------|
-//! | `control` | 3 (highest software priority) | SysTick monotonic, every `1 / CONTROL_HZ` s |
-//! | `idle`    | 0        | busy loop                                 |
+//! | Task      | Priority | Trigger |
+//! |-----------|----------|---------|
+//! | `control` | 3 (highest) | board: ADC injected end of conversion (TIM4 at `CONTROL_HZ`); QEMU: SysTick at `CONTROL_HZ` |
+//! | `logger`  | 1        | spawned by `control` when a hop ends, a fault latches or a dump is asked for |
+//! | `idle`    | 0        | busy loop (no `wfi`: QEMU 7.2 loses SysTick ticks while sleeping) |
 //!
-//! For now `control` only runs a [`hopper_control::filter::FilteredDerivative`]
-//! on a zero input and counts periods; the amplifier stays disabled. The
-//! control step (estimator, control laws, supervisor), the HAL I/O (encoders,
-//! ADC, DAC command) and the QEMU-side plant come in later issues.
-//!
-//! # Panics
-//! The panic handler first drives `AMP_EN` low through the PAC, then masks
-//! interrupts, drives it low again (in case a preempting task re-enabled it in
-//! between) and spins forever.
+//! # Safety
+//! At reset the amplifier-enable pin (PB0) floats and the external pull-down
+//! keeps the amplifier off; `init` drives it low before anything else. The
+//! panic handler and the HardFault handler drive it low first thing.
 #![cfg_attr(target_os = "none", no_std, no_main)]
 #![deny(unsafe_code)]
 
@@ -42,36 +34,23 @@ fn main() {
     println!("hopper-fw is firmware: build it with --target thumbv7em-none-eabihf");
 }
 
-/// Control loop rate in Hz (build-time constant); also the SysTick tick rate.
 #[cfg(target_os = "none")]
-const CONTROL_HZ: u32 = 10_000;
+pub mod control;
 
-/// Core clock in Hz: the HSI oscillator, no PLL.
-#[cfg(target_os = "none")]
-const SYSCLK_HZ: u32 = 16_000_000;
+#[cfg(all(target_os = "none", not(feature = "qemu-sim")))]
+mod board;
 
-/// Control period in seconds, `1 / CONTROL_HZ`.
-#[cfg(target_os = "none")]
-#[allow(clippy::cast_precision_loss)] // 10_000 is exact in f32.
-const CONTROL_PERIOD_S: f32 = 1.0 / CONTROL_HZ as f32;
+#[cfg(all(target_os = "none", not(feature = "qemu-sim")))]
+use defmt_rtt as _;
 
-// `Mono::start` panics unless SysTick can tick at exactly CONTROL_HZ with a
-// 24-bit reload of at least 1: check that here so it cannot happen at run time.
-#[cfg(target_os = "none")]
-const _: () = assert!(
-    SYSCLK_HZ.is_multiple_of(CONTROL_HZ)
-        && SYSCLK_HZ / CONTROL_HZ >= 2
-        && SYSCLK_HZ / CONTROL_HZ - 1 <= 0x00FF_FFFF
-);
-
-#[cfg(target_os = "none")]
-rtic_monotonics::systick_monotonic!(Mono, CONTROL_HZ);
+#[cfg(all(target_os = "none", feature = "qemu-sim"))]
+use defmt_semihosting as _;
 
 /// Drives the amplifier-enable pin (PB0) low with one atomic BSRR write.
 ///
-/// Usable from any context, including the panic handler: it needs no owned
-/// peripheral. If GPIOB is not clocked yet the write is ignored and the
-/// external pull-down keeps the amplifier off.
+/// Usable from any context, including the panic and fault handlers: it needs
+/// no owned peripheral. If GPIOB is not clocked yet the write is ignored and
+/// the external pull-down keeps the amplifier off.
 #[cfg(target_os = "none")]
 fn disable_amplifier() {
     // SAFETY: `GPIOB::ptr()` is the fixed address of the GPIOB register block.
@@ -82,82 +61,109 @@ fn disable_amplifier() {
     gpiob.bsrr().write(|w| w.br0().set_bit());
 }
 
-/// Panic: disable the amplifier before anything else, then stop.
+/// Panic: disable the amplifier before anything else, then stop (QEMU: exit
+/// with failure).
 #[cfg(target_os = "none")]
 #[panic_handler]
 fn panic(_info: &core::panic::PanicInfo) -> ! {
     disable_amplifier();
     cortex_m::interrupt::disable();
     disable_amplifier();
+    #[cfg(feature = "qemu-sim")]
+    cortex_m_semihosting::debug::exit(cortex_m_semihosting::debug::EXIT_FAILURE);
     loop {
         cortex_m::asm::nop();
     }
 }
 
-/// The RTIC application.
+/// HardFault: the same as a panic, without touching the (possibly corrupt) stack much.
 #[cfg(target_os = "none")]
+#[cortex_m_rt::exception]
+#[allow(unsafe_code)] // cortex-m-rt requires the HardFault handler to be `unsafe fn`.
+unsafe fn HardFault(_frame: &cortex_m_rt::ExceptionFrame) -> ! {
+    disable_amplifier();
+    #[cfg(feature = "qemu-sim")]
+    cortex_m_semihosting::debug::exit(cortex_m_semihosting::debug::EXIT_FAILURE);
+    loop {
+        cortex_m::asm::nop();
+    }
+}
+
+/// What the control task hands to the logger.
+#[cfg(target_os = "none")]
+#[derive(Clone, Copy, defmt::Format)]
+pub enum LogItem {
+    /// A hop ended (the firmware's own ledger).
+    Hop(hopper_control::telemetry::HopLedger),
+    /// A fault latched, with the control period it latched in.
+    Faults {
+        /// Control period number.
+        step: u32,
+        /// All latched faults (bit set, see `Fault::ALL`).
+        faults: hopper_control::supervisor::Faults,
+    },
+}
+
+/// Messages waiting for the logger.
+#[cfg(target_os = "none")]
+pub type LogQueue = heapless::Deque<LogItem, 16>;
+
+/// The board application.
+#[cfg(all(target_os = "none", not(feature = "qemu-sim")))]
 #[rtic::app(device = stm32f4::stm32f405, peripherals = true, dispatchers = [FSMC])]
 mod app {
-    use super::{Mono, CONTROL_PERIOD_S, SYSCLK_HZ};
-    use hopper_control::filter::FilteredDerivative;
-    use rtic_monotonics::systick::prelude::*;
+    use crate::board::{self, BoardIo, DumpButton, Watchdog};
+    use crate::control::{Capture, CONTROL_HZ, CONTROL_PERIOD_S};
+    use crate::{LogItem, LogQueue};
+    use hopper_control::hopper::{Hopper, HopperConfig};
 
-    /// Filter gain `G` of thesis eq 4.1 for the placeholder velocity estimate.
-    const VELOCITY_FILTER_GAIN: f32 = 0.9;
-
-    /// The placeholder velocity filter, validated at compile time.
-    const VELOCITY_FILTER: FilteredDerivative = match FilteredDerivative::new(VELOCITY_FILTER_GAIN)
-    {
-        Ok(filter) => filter,
-        Err(_) => panic!("VELOCITY_FILTER_GAIN must be in [0, 1)"),
-    };
-
-    /// Resources shared between tasks (none yet).
     #[shared]
-    struct Shared {}
-
-    /// Resources owned by one task.
-    #[local]
-    struct Local {
-        /// Velocity estimate of the (for now zero) measured motor angle.
-        velocity: FilteredDerivative,
-        /// Amplifier current command in A; 0 until the HAL drives the DAC.
-        command_a: f32,
+    struct Shared {
+        /// Per-step records, drained on request.
+        capture: Capture,
+        /// Hop ledgers and faults for the logger.
+        log: LogQueue,
     }
 
-    /// Puts the amplifier in its safe state, starts SysTick and the control task.
+    #[local]
+    struct Local {
+        io: BoardIo,
+        watchdog: Watchdog,
+        dump: DumpButton,
+        hopper: Hopper,
+    }
+
     #[init]
     fn init(cx: init::Context) -> (Shared, Local) {
-        let dp = cx.device;
-
-        // AMP_EN (PB0): clock GPIOB, latch the output low, then make it an output,
-        // so the pin never drives high.
-        dp.RCC.ahb1enr().modify(|_, w| w.gpioben().enabled());
-        // Read back: errata "delay after an RCC peripheral clock enabling" (ES0182).
-        let _ = dp.RCC.ahb1enr().read();
-        dp.GPIOB.bsrr().write(|w| w.br0().set_bit());
-        dp.GPIOB.otyper().modify(|_, w| w.ot0().push_pull());
-        dp.GPIOB.moder().modify(|_, w| w.moder0().output());
-
-        // Cannot panic: the compile-time assert above checks the reload value.
-        Mono::start(cx.core.SYST, SYSCLK_HZ);
-
-        // The first spawn of a task that is not running cannot fail; if it
-        // did, no control task would run and the amplifier would stay off.
-        if control::spawn().is_err() {
-            super::disable_amplifier();
-        }
-
+        let mut cfg = HopperConfig::default();
+        // TIM2 and TIM5 count the encoders over 32 bits.
+        cfg.calibration.motor_counter_bits = board::ENCODER_COUNTER_BITS;
+        cfg.calibration.height_counter_bits = board::ENCODER_COUNTER_BITS;
+        let board = board::init(cx.device, CONTROL_HZ, cfg.calibration.dac_zero_code);
+        // Hopper::new only fails on an invalid configuration; the default is
+        // valid (unit-tested). Should it fail, the control task never runs,
+        // the watchdog is not fed, and the amplifier stays disabled.
+        let Ok(hopper) = Hopper::new(cfg) else {
+            defmt::error!("invalid controller configuration: amplifier stays off");
+            crate::disable_amplifier();
+            #[allow(clippy::empty_loop)]
+            loop {}
+        };
+        defmt::info!("hopper-fw: board build, control at {=u32} Hz", CONTROL_HZ);
         (
-            Shared {},
+            Shared {
+                capture: Capture::new(),
+                log: LogQueue::new(),
+            },
             Local {
-                velocity: VELOCITY_FILTER,
-                command_a: 0.0,
+                io: board.io,
+                watchdog: board.watchdog,
+                dump: board.dump_button,
+                hopper,
             },
         )
     }
 
-    /// Background loop. No `wfi`: QEMU 7.2 loses SysTick ticks while sleeping.
     #[idle]
     fn idle(_: idle::Context) -> ! {
         loop {
@@ -165,28 +171,348 @@ mod app {
         }
     }
 
-    /// Periodic control task at `CONTROL_HZ`, released by the SysTick monotonic
-    /// on an absolute schedule (`delay_until`), so the period does not drift.
-    ///
-    /// Placeholder: filters a zero input and counts periods (and overruns:
-    /// periods whose work ended after the next release time). The control
-    /// step, HAL I/O and QEMU plant come in later issues.
-    #[task(priority = 3, local = [velocity, command_a, periods: u32 = 0, overruns: u32 = 0])]
-    async fn control(cx: control::Context) {
-        let period = <Mono as Monotonic>::Duration::from_ticks(1);
-        let mut release = Mono::now();
-        loop {
-            release += period;
+    /// The control period: fresh ADC samples are in; read, step, write.
+    #[task(binds = ADC, priority = 3, local = [io, watchdog, dump, hopper, polls: u32 = 0], shared = [capture, log])]
+    fn control(mut cx: control::Context) {
+        if !cx.local.io.ack_control_irq() {
+            return;
+        }
+        let before = cx.local.hopper.supervisor().faults();
+        let out = cx.local.hopper.run_period(cx.local.io, CONTROL_PERIOD_S);
+        // Fed only here: if the control task stops, the MCU resets with the
+        // amplifier disabled.
+        cx.local.watchdog.feed();
+        cx.shared.capture.lock(|c| c.push(out.record));
+        let mut item = out.hop.map(LogItem::Hop);
+        if out.faults != before {
+            item = Some(LogItem::Faults {
+                step: out.record.step,
+                faults: out.faults,
+            });
+        }
+        *cx.local.polls = cx.local.polls.wrapping_add(1);
+        let dump = cx.local.polls.is_multiple_of(100) && cx.local.dump.pressed();
+        if let Some(item) = item {
+            cx.shared.log.lock(|q| {
+                let _ = q.push_back(item);
+            });
+        }
+        if item.is_some() || dump {
+            let _ = logger::spawn(dump);
+        }
+    }
 
-            // A constant, finite input with a positive period cannot fail.
-            let _ = cx.local.velocity.update(0.0, CONTROL_PERIOD_S);
-            *cx.local.command_a = 0.0;
-            *cx.local.periods = cx.local.periods.wrapping_add(1);
-
-            if Mono::now() >= release {
-                *cx.local.overruns = cx.local.overruns.wrapping_add(1);
+    /// Logs hop ledgers and faults; on request, dumps the capture buffer.
+    #[task(priority = 1, shared = [capture, log])]
+    async fn logger(mut cx: logger::Context, dump: bool) {
+        while let Some(item) = cx.shared.log.lock(|q| q.pop_front()) {
+            match item {
+                LogItem::Hop(h) => defmt::info!("hop {}", h),
+                LogItem::Faults { step, faults } => {
+                    defmt::warn!("faults latched at step {=u32}: {}", step, faults)
+                }
             }
-            Mono::delay_until(release).await;
+        }
+        if dump {
+            defmt::info!("capture dump begins");
+            while let Some(r) = cx.shared.capture.lock(|c| c.pop()) {
+                defmt::info!("{}", r);
+            }
+            let dropped = cx.shared.capture.lock(|c| c.dropped());
+            defmt::info!("capture dump ends ({=u32} older records dropped)", dropped);
+        }
+    }
+}
+
+/// The QEMU application: the same control step on the simulated hopper.
+#[cfg(all(target_os = "none", feature = "qemu-sim"))]
+#[rtic::app(device = stm32f4::stm32f405, peripherals = true, dispatchers = [FSMC])]
+mod app {
+    use crate::control::{Capture, StepStats, CONTROL_HZ, CONTROL_PERIOD_S};
+    use crate::{LogItem, LogQueue};
+    use cortex_m::peripheral::syst::SystClkSource;
+    use cortex_m::peripheral::{SCB, SYST};
+    use cortex_m_semihosting::debug;
+    use hal_sim::metrics::{hops_to_converge, steady_apex};
+    use hal_sim::mock::{firmware_config, SensorConfig, SimHal};
+    use hal_sim::{Event, Params, Plant};
+    use hopper_control::hal::HopperIo;
+    use hopper_control::hopper::{ApexLoop, Hopper, StepPart, Strategy};
+    use stm32f4::stm32f405::TIM5;
+
+    /// QEMU clocks SysTick (and counts guest time) at the netduinoplus2's
+    /// 168 MHz CPU clock, whatever the RCC says; with `-icount shift=0` one
+    /// tick is 1/168 us of virtual time.
+    const SYSTICK_HZ: u32 = 168_000_000;
+    const _: () = assert!(SYSTICK_HZ.is_multiple_of(CONTROL_HZ));
+
+    /// The scripted scenario: the apex-regulating energy law, design
+    /// parameters, dropped from 0.10 m, 0.05 m target, default sensor noise
+    /// with seed 1; `hopper-sim run --params design --controller energy-apex
+    /// --start-apex 0.10 --target-apex 0.05 --duration 12` on the host is the
+    /// same run.
+    pub const START_APEX_M: f64 = 0.10;
+    /// Apex target, m.
+    pub const TARGET_APEX_M: f64 = 0.05;
+    /// Simulated time, s.
+    pub const DURATION_S: u32 = 12;
+    /// Apexes kept for the summary.
+    const MAX_APEXES: usize = 128;
+
+    /// The simulated hopper and the statistics of the run.
+    pub struct Sim {
+        plant: Plant,
+        hal: SimHal,
+        hopper: Hopper,
+        apexes: heapless::Vec<f64, MAX_APEXES>,
+        step_instr: StepStats,
+        parts: [StepStats; 6],
+        timer_overhead: u32,
+        missed: u32,
+        period: u32,
+    }
+
+    #[shared]
+    struct Shared {
+        capture: Capture,
+        log: LogQueue,
+    }
+
+    #[local]
+    struct Local {
+        sim: Sim,
+        tim5: TIM5,
+        syst: SYST,
+    }
+
+    #[init]
+    fn init(cx: init::Context) -> (Shared, Local) {
+        let dp = cx.device;
+        let mut core = cx.core;
+        // AMP_EN (PB0) low before anything else, as on the board.
+        dp.RCC.ahb1enr().modify(|_, w| w.gpioben().enabled());
+        let _ = dp.RCC.ahb1enr().read();
+        dp.GPIOB.bsrr().write(|w| w.br0().set_bit());
+        dp.GPIOB.moder().modify(|_, w| w.moder0().output());
+
+        // TIM5: free-running 32-bit counter. QEMU runs it at 1 GHz of virtual
+        // time, so under `-icount shift=0` it counts guest instructions.
+        dp.RCC.apb1enr().modify(|_, w| w.tim5en().enabled());
+        let _ = dp.RCC.apb1enr().read();
+        let tim5 = dp.TIM5;
+        tim5.psc().write(|w| w.psc().set(0));
+        tim5.arr().write(|w| w.arr().set(u32::MAX));
+        tim5.egr().write(|w| w.ug().set_bit());
+        tim5.cr1().modify(|_, w| w.cen().enabled());
+        // Cost of reading the counter twice back to back, subtracted from
+        // every measurement.
+        let a = tim5.cnt().read().bits();
+        let b = tim5.cnt().read().bits();
+        let timer_overhead = b.wrapping_sub(a);
+
+        let params = Params::design();
+        let cfg = firmware_config(
+            &params,
+            &params,
+            Strategy::EnergyApex(ApexLoop::default()),
+            TARGET_APEX_M,
+            START_APEX_M,
+        );
+        let (Ok(plant), Ok(hopper)) = (Plant::new(params, START_APEX_M), Hopper::new(cfg)) else {
+            defmt::error!("scenario set-up failed");
+            debug::exit(debug::EXIT_FAILURE);
+            #[allow(clippy::empty_loop)]
+            loop {}
+        };
+        let hal = SimHal::new(&cfg.calibration, &SensorConfig::DEFAULT);
+
+        core.SYST.set_clock_source(SystClkSource::Core);
+        core.SYST.set_reload(SYSTICK_HZ / CONTROL_HZ - 1);
+        core.SYST.clear_current();
+        core.SYST.enable_interrupt();
+        core.SYST.enable_counter();
+        defmt::println!(
+            "hopper-fw: QEMU build, energy-apex scenario, {=u32} Hz, {=u32} s",
+            CONTROL_HZ,
+            DURATION_S
+        );
+        (
+            Shared {
+                capture: Capture::new(),
+                log: LogQueue::new(),
+            },
+            Local {
+                sim: Sim {
+                    plant,
+                    hal,
+                    hopper,
+                    apexes: heapless::Vec::new(),
+                    step_instr: StepStats::new(),
+                    parts: [StepStats::new(); 6],
+                    timer_overhead,
+                    missed: 0,
+                    period: 0,
+                },
+                tim5,
+                syst: core.SYST,
+            },
+        )
+    }
+
+    /// Busy idle: QEMU 7.2 loses SysTick ticks while the core sleeps in `wfi`.
+    #[idle]
+    fn idle(_: idle::Context) -> ! {
+        loop {
+            cortex_m::asm::nop();
+        }
+    }
+
+    /// One control period: sample the simulated sensors, run the control
+    /// step (timed), write the DAC, then integrate the plant to the next tick.
+    ///
+    /// The plant is integrated with SysTick stopped: the simulated world
+    /// takes no time from the firmware's point of view, so it cannot delay
+    /// the next control period however long an event search takes (soft
+    /// `f64` on the M4F). `missed` then counts periods where the firmware's
+    /// own work (control step, I/O, logging) overran.
+    #[task(binds = SysTick, priority = 3, local = [sim, tim5, syst], shared = [capture, log])]
+    fn control(mut cx: control::Context) {
+        let sim = &mut *cx.local.sim;
+        let tim5 = &*cx.local.tim5;
+        let raw = sim.hal.sample(&sim.plant);
+        let before = sim.hopper.supervisor().faults();
+        // Odd periods measure the step as a whole, even ones part by part
+        // (the marks cost a few instructions each, so they are kept out of
+        // the whole-step figure).
+        let out = if sim.period % 2 == 1 {
+            let t0 = tim5.cnt().read().bits();
+            let out = sim.hopper.step(Some(&raw), CONTROL_PERIOD_S);
+            let t1 = tim5.cnt().read().bits();
+            sim.step_instr
+                .add(t1.wrapping_sub(t0).saturating_sub(sim.timer_overhead));
+            out
+        } else {
+            let mut last = tim5.cnt().read().bits();
+            let overhead = sim.timer_overhead;
+            let parts = &mut sim.parts;
+            sim.hopper
+                .step_marked(Some(&raw), CONTROL_PERIOD_S, &mut |p: StepPart| {
+                    let now = tim5.cnt().read().bits();
+                    if let Some(s) = parts.get_mut(p as usize) {
+                        s.add(now.wrapping_sub(last).saturating_sub(overhead));
+                    }
+                    last = tim5.cnt().read().bits();
+                })
+        };
+        {
+            let mut io = sim.hal.io(&sim.plant);
+            // The mock I/O cannot fail unless a test injects a fault.
+            let _ = io.write_dac(out.dac_code);
+            let _ = io.set_amp_enabled(out.command.amp_enable);
+        }
+        cx.shared.capture.lock(|c| c.push(out.record));
+        let mut item = out.hop.map(LogItem::Hop);
+        if out.faults != before {
+            item = Some(LogItem::Faults {
+                step: out.record.step,
+                faults: out.faults,
+            });
+        }
+        if let Some(item) = item {
+            cx.shared.log.lock(|q| {
+                let _ = q.push_back(item);
+            });
+            let _ = logger::spawn();
+        }
+
+        // The plant between this tick and the next (not part of the step).
+        cx.local.syst.disable_counter();
+        let current_a = sim.hal.mean_current_a(f64::from(CONTROL_PERIOD_S));
+        let apexes = &mut sim.apexes;
+        let advanced = sim
+            .plant
+            .advance(f64::from(CONTROL_PERIOD_S), current_a, &mut |e| {
+                if let Event::Apex { toe_height_m, .. } = e {
+                    defmt::println!("apex {=usize} {=f64}", apexes.len() + 1, toe_height_m);
+                    let _ = apexes.push(toe_height_m);
+                }
+            });
+        if advanced.is_err() {
+            defmt::error!("plant integration failed");
+            debug::exit(debug::EXIT_FAILURE);
+        }
+        cx.local.syst.enable_counter();
+        sim.period += 1;
+        if SCB::is_pendst_pending() {
+            // The next tick came before this one finished.
+            sim.missed += 1;
+        }
+        if sim.period >= DURATION_S * CONTROL_HZ {
+            finish(sim, &mut cx.shared.log);
+        }
+    }
+
+    /// Logs the summary and exits QEMU: success only if the hop converged
+    /// and no fault or deadline miss occurred.
+    fn finish(sim: &Sim, log: &mut impl rtic::Mutex<T = LogQueue>) -> ! {
+        while let Some(item) = log.lock(|q| q.pop_front()) {
+            log_item(item);
+        }
+        let steady = steady_apex(&sim.apexes);
+        let converged = hops_to_converge(&sim.apexes, TARGET_APEX_M, 0.02);
+        let faults = sim.hopper.supervisor().faults();
+        let names = [
+            "convert",
+            "estimate",
+            "energy",
+            "law",
+            "supervise",
+            "telemetry",
+        ];
+        for (name, p) in names.iter().zip(&sim.parts) {
+            defmt::println!(
+                "part {=str} min={=u32} mean={=u32} max={=u32}",
+                name,
+                p.min,
+                p.mean(),
+                p.max
+            );
+        }
+        defmt::println!(
+            "summary steady_apex_m={=f64} hops_to_converge={=i32} step_instr_min={=u32} step_instr_mean={=u32} step_instr_max={=u32} missed={=u32} faults={=u16} periods={=u32}",
+            steady.unwrap_or(-1.0),
+            converged.map_or(-1, |k| i32::try_from(k).unwrap_or(i32::MAX)),
+            sim.step_instr.min,
+            sim.step_instr.mean(),
+            sim.step_instr.max,
+            sim.missed,
+            faults.0,
+            sim.period
+        );
+        let ok = converged.is_some() && faults.is_empty() && sim.missed == 0;
+        debug::exit(if ok {
+            debug::EXIT_SUCCESS
+        } else {
+            debug::EXIT_FAILURE
+        });
+        #[allow(clippy::empty_loop)]
+        loop {}
+    }
+
+    fn log_item(item: LogItem) {
+        match item {
+            LogItem::Hop(h) => defmt::println!("hop {}", h),
+            LogItem::Faults { step, faults } => {
+                defmt::println!("faults latched at step {=u32}: {}", step, faults)
+            }
+        }
+    }
+
+    /// Logs hop ledgers and faults as they happen.
+    #[task(priority = 1, shared = [log])]
+    async fn logger(mut cx: logger::Context) {
+        while let Some(item) = cx.shared.log.lock(|q| q.pop_front()) {
+            log_item(item);
         }
     }
 }

@@ -133,7 +133,7 @@ fn max_code(bits: u8) -> u16 {
 }
 
 /// Largest accumulated count magnitude converted to `f32` (exact below 2^24).
-const MAX_ACCUMULATED_COUNTS: i64 = 1 << 24;
+const MAX_ACCUMULATED_COUNTS: i32 = 1 << 24;
 
 impl Calibration {
     /// Checks every field against its documented range; the error names the first bad field.
@@ -269,23 +269,16 @@ fn count_f32(counts: u32) -> f32 {
 /// counter range or more in one period is indistinguishable from the opposite
 /// change, which is what the supervisor's encoder-jump check is for.
 pub fn wrapping_count_delta(new: u32, old: u32, bits: u8) -> i32 {
-    let bits = u32::from(bits.clamp(8, 32));
-    let raw = new.wrapping_sub(old);
-    if bits == 32 {
-        // Two's-complement reinterpretation is the modular signed difference.
-        return i32::from_ne_bytes(raw.to_ne_bytes());
-    }
-    let modulus = 1_u32 << bits;
-    let d = raw & (modulus - 1);
-    let half = modulus >> 1;
-    // bits <= 31: d and modulus fit i64 without loss.
-    let d = i64::from(d);
-    let signed = if d >= i64::from(half) {
-        d - i64::from(modulus)
-    } else {
-        d
-    };
-    i32::try_from(signed).unwrap_or(0)
+    delta_with_shift(new, old, 32 - u32::from(bits.clamp(8, 32)))
+}
+
+/// [`wrapping_count_delta`] with `shift = 32 - bits` precomputed: moving the
+/// counter's top bit to bit 31 and shifting back arithmetically sign-extends
+/// the modular difference (two instructions, no branches).
+#[inline(always)]
+fn delta_with_shift(new: u32, old: u32, shift: u32) -> i32 {
+    let raw = new.wrapping_sub(old) << (shift & 31);
+    i32::from_ne_bytes(raw.to_ne_bytes()) >> (shift & 31)
 }
 
 /// A converted sample, SI, MODEL.md coordinates.
@@ -316,29 +309,50 @@ pub struct Measurements {
 ///
 /// The first sample after [`new`](Self::new) or [`rezero`](Self::rezero) is
 /// the origin: `p = 0` (nut on its upper stop, the start position) and
-/// `z = height_at_origin_m`. Positions are accumulated in `i64` counts (no
-/// overflow in any conceivable run: 2^63 counts at 10^6 counts/s is 290 000
-/// years) and converted to `f32` only while within ±2^24 counts, where the
-/// conversion is exact: with the defaults that is ±8388 motor revolutions
+/// `z = height_at_origin_m`. Positions are accumulated in `i32` counts and
+/// converted to `f32` only while within ±2^24 counts, where the conversion
+/// is exact (and a single `vcvt` on the M4F, where an `i64` would need a
+/// library call): with the defaults that is ±8388 motor revolutions
 /// (±42 m of nut travel, far beyond the 50 mm stroke) and ±1054 m of height.
 /// Beyond that the conversion returns [`CalError::PositionOutOfRange`].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Converter {
     cal: Calibration,
     last: Option<(u32, u32)>,
-    motor_counts: i64,
-    height_counts: i64,
+    motor_counts: i32,
+    height_counts: i32,
+    // Derived from `cal` once, so a period does no divisions or clamps for them.
+    motor_rad_per_count: f32,
+    nut_m_per_count: f32,
+    height_m_per_count: f32,
+    motor_counter_max: u32,
+    height_counter_max: u32,
+    motor_shift: u32,
+    height_shift: u32,
+    adc_max: u16,
 }
 
 impl Converter {
     /// Creates a converter; the calibration is validated first.
     pub fn new(cal: Calibration) -> Result<Self, CalError> {
         cal.validate()?;
+        let counter_max = |bits: u8| -> u32 {
+            let bits = u32::from(bits.clamp(8, 32));
+            u32::MAX >> (32 - bits)
+        };
         Ok(Self {
             cal,
             last: None,
             motor_counts: 0,
             height_counts: 0,
+            motor_rad_per_count: cal.motor_rad_per_count(),
+            nut_m_per_count: cal.nut_m_per_count(),
+            height_m_per_count: cal.height_m_per_count(),
+            motor_counter_max: counter_max(cal.motor_counter_bits),
+            height_counter_max: counter_max(cal.height_counter_bits),
+            motor_shift: 32 - u32::from(cal.motor_counter_bits.clamp(8, 32)),
+            height_shift: 32 - u32::from(cal.height_counter_bits.clamp(8, 32)),
+            adc_max: max_code(cal.adc_bits),
         })
     }
 
@@ -357,46 +371,41 @@ impl Converter {
     /// Converts one raw sample. On error the converter state is unchanged.
     pub fn convert(&mut self, raw: &crate::hal::RawSample) -> Result<Measurements, CalError> {
         let cal = &self.cal;
-        let counter_max = |bits: u8| -> u32 {
-            let bits = u32::from(bits.clamp(8, 32));
-            u32::MAX >> (32 - bits)
-        };
-        if raw.motor_counts > counter_max(cal.motor_counter_bits) {
+        if raw.motor_counts > self.motor_counter_max {
             return Err(CalError::RawOutOfRange(Channel::MotorEncoder));
         }
-        if raw.height_counts > counter_max(cal.height_counter_bits) {
+        if raw.height_counts > self.height_counter_max {
             return Err(CalError::RawOutOfRange(Channel::HeightEncoder));
         }
-        let adc_max = max_code(cal.adc_bits);
-        if raw.loadcell_code > adc_max {
+        if raw.loadcell_code > self.adc_max {
             return Err(CalError::RawOutOfRange(Channel::LoadCell));
         }
-        if raw.pot_code > adc_max {
+        if raw.pot_code > self.adc_max {
             return Err(CalError::RawOutOfRange(Channel::Pot));
         }
         let (dm, dh) = match self.last {
             Some((m, h)) => (
-                wrapping_count_delta(raw.motor_counts, m, cal.motor_counter_bits),
-                wrapping_count_delta(raw.height_counts, h, cal.height_counter_bits),
+                delta_with_shift(raw.motor_counts, m, self.motor_shift),
+                delta_with_shift(raw.height_counts, h, self.height_shift),
             ),
             None => (0, 0),
         };
-        let motor = self.motor_counts.saturating_add(i64::from(dm));
-        let height = self.height_counts.saturating_add(i64::from(dh));
-        let in_range = |c: i64| (-MAX_ACCUMULATED_COUNTS..=MAX_ACCUMULATED_COUNTS).contains(&c);
+        let motor = self.motor_counts.saturating_add(dm);
+        let height = self.height_counts.saturating_add(dh);
+        let in_range = |c: i32| (-MAX_ACCUMULATED_COUNTS..=MAX_ACCUMULATED_COUNTS).contains(&c);
         if !in_range(motor) {
             return Err(CalError::PositionOutOfRange(Channel::MotorEncoder));
         }
         if !in_range(height) {
             return Err(CalError::PositionOutOfRange(Channel::HeightEncoder));
         }
-        // |c| <= 2^24 (checked above): the i64 to f32 `as` conversion is exact.
+        // |c| <= 2^24 (checked above): the i32 to f32 `as` conversion is exact.
         let motor_f = motor as f32;
         let height_f = height as f32;
         let m = Measurements {
-            motor_angle_rad: motor_f * cal.motor_rad_per_count(),
-            nut_position_m: motor_f * cal.nut_m_per_count(),
-            body_height_m: cal.height_at_origin_m + height_f * cal.height_m_per_count(),
+            motor_angle_rad: motor_f * self.motor_rad_per_count,
+            nut_position_m: motor_f * self.nut_m_per_count,
+            body_height_m: cal.height_at_origin_m + height_f * self.height_m_per_count,
             spring_force_n: (f32::from(raw.loadcell_code) - cal.loadcell_offset_code)
                 * cal.loadcell_gain_n_per_code,
             leg_compression_m: (f32::from(raw.pot_code) - cal.pot_offset_code)

@@ -212,6 +212,25 @@ pub enum ConfigError {
     ApexLoop,
 }
 
+/// The parts of a control period, in order, as reported to
+/// [`Hopper::step_marked`]'s `mark` when each one ends.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum StepPart {
+    /// Raw counts and codes converted to SI.
+    Convert = 0,
+    /// Phase estimator and filtered derivatives (eq 4.1).
+    Estimate = 1,
+    /// Energy estimate (eqs 2.44-2.45) and event bookkeeping (ledger, apex loop).
+    Energy = 2,
+    /// Control law.
+    Law = 3,
+    /// Supervisor and DAC code.
+    Supervise = 4,
+    /// Hop ledger and telemetry record.
+    Telemetry = 5,
+}
+
 /// What one control period produced.
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -353,12 +372,25 @@ impl Hopper {
     /// One control period of `dt_s` seconds. `raw` is `None` when the sensors
     /// could not be read (latches [`Fault::SensorRange`]).
     pub fn step(&mut self, raw: Option<&RawSample>, dt_s: f32) -> StepOutput {
+        self.step_marked(raw, dt_s, &mut |_| {})
+    }
+
+    /// [`step`](Self::step), calling `mark` as each part of the period ends
+    /// (for profiling: the QEMU image reads a cycle counter there). With an
+    /// empty closure it compiles to the same code as `step`.
+    pub fn step_marked<M: FnMut(StepPart)>(
+        &mut self,
+        raw: Option<&RawSample>,
+        dt_s: f32,
+        mark: &mut M,
+    ) -> StepOutput {
         self.steps = self.steps.wrapping_add(1);
         let m = match raw.map(|r| self.converter.convert(r)) {
             Some(Ok(m)) => m,
             Some(Err(e)) => return self.safe_output(cal_fault(e)),
             None => return self.safe_output(Fault::SensorRange),
         };
+        mark(StepPart::Convert);
         let event = self.estimator.update(
             &PhaseInput {
                 body_height_m: m.body_height_m,
@@ -368,6 +400,7 @@ impl Hopper {
             },
             dt_s,
         );
+        mark(StepPart::Estimate);
         let v = self.estimator.velocities();
         let phase = self.estimator.phase();
         let nut_velocity_mps = v.motor_rad_s * self.actuator.screw_m_per_rad;
@@ -381,8 +414,10 @@ impl Hopper {
         };
         let energy_j = total_energy_j(&self.cfg.model, &e_in).unwrap_or(f32::NAN);
         let hop = self.on_event(event, energy_j);
+        mark(StepPart::Energy);
 
         let requested_a = self.law_current_a(&m, &e_in, energy_j, nut_velocity_mps, phase);
+        mark(StepPart::Law);
         let sup_in =
             SupervisorInput::from_measurements(&m, nut_velocity_mps, v.motor_rad_s, v.body_mps);
         let mut command = self.supervisor.check(&sup_in, requested_a);
@@ -394,6 +429,7 @@ impl Hopper {
         }
         let cal = self.converter.calibration();
         let dac_code = cal.current_to_dac_code(command.current_a);
+        mark(StepPart::Supervise);
         self.ledger.step(
             dt_s,
             command.current_a,
@@ -402,7 +438,7 @@ impl Hopper {
             m.nut_position_m,
         );
         let faults = self.supervisor.faults();
-        StepOutput {
+        let out = StepOutput {
             dac_code,
             command,
             requested_a,
@@ -422,7 +458,9 @@ impl Hopper {
                 energy_j,
                 command_a: command.current_a,
             },
-        }
+        };
+        mark(StepPart::Telemetry);
+        out
     }
 
     /// Reads `io`, steps, writes the DAC code and the enable. An I/O error

@@ -379,11 +379,21 @@ impl Supervisor {
             (input.spring_force_n, c.spring_force_range_n),
             (input.leg_compression_m, c.leg_compression_range_m),
         ];
-        for (x, range) in values {
-            if !x.is_finite() {
-                f.insert(Fault::SensorNonFinite);
-            } else if !range.contains(x) {
-                f.insert(Fault::SensorRange);
+        // Fast path, every period: all values finite and in range (a NaN
+        // compares false; `is_finite` also catches an infinity inside an
+        // unbounded range). `&` rather than `&&`: no
+        // branch per value.
+        let all_in_range = values.iter().fold(true, |ok, (x, r)| {
+            ok & x.is_finite() & (*x >= r.min) & (*x <= r.max)
+        });
+        if !all_in_range {
+            // Slow path, only on a fault: say which kind.
+            for (x, range) in values {
+                if !x.is_finite() {
+                    f.insert(Fault::SensorNonFinite);
+                } else if !range.contains(x) {
+                    f.insert(Fault::SensorRange);
+                }
             }
         }
         if input.motor_delta_counts.unsigned_abs() > c.max_motor_delta_counts

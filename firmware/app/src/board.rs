@@ -1,0 +1,734 @@
+//! The real board: clocks, encoders, ADC, DAC, amplifier pins and watchdog of
+//! the hopper's STM32F405, at register level with the `stm32f4` PAC.
+//!
+//! [`init`] takes the device peripherals and hands back a [`Board`]:
+//! [`BoardIo`] (the [`HopperIo`] the control step runs on), the independent
+//! [`Watchdog`] (already running) and the [`DumpButton`].
+//!
+//! # Clocks
+//! HSE 8 MHz crystal, PLL M = 4 (2 MHz VCO input, the RM0090 recommendation
+//! against jitter), N = 168 (336 MHz VCO), P = 2 → 168 MHz SYSCLK, Q = 7
+//! (48 MHz, unused). AHB 168 MHz, APB1 42 MHz (its timers 84 MHz), APB2
+//! 84 MHz (its timers 168 MHz). Flash: 5 wait states (168 MHz at 2.7–3.6 V),
+//! prefetch and both caches on.
+//!
+//! Every wait for the hardware (HSE ready, PLL lock, clock switch, LSI ready,
+//! watchdog register update) is a bounded poll. If the crystal does not start
+//! or the PLL does not lock, the core stays on the 16 MHz HSI with all bus
+//! prescalers at 1 and [`BoardIo::sysclk_hz`] says so; every derived rate
+//! (control timer, ADC clock) is computed from the clock actually running.
+//! The clock security system is off: if the crystal dies later the core
+//! clock goes with it, the LSI-clocked watchdog is then not fed and resets
+//! the MCU, which leaves the amplifier disabled.
+//!
+//! # Wiring
+//! | Pin  | Peripheral / AF           | Signal                              | Direction        | Safe state / reset |
+//! |------|---------------------------|-------------------------------------|------------------|--------------------|
+//! | PB0  | GPIO, push-pull           | `AMP_EN`, amplifier enable, active high | output       | low; external pull-down while the pin floats (reset to `init`) |
+//! | PB1  | GPIO, pull-up             | e-stop, normally-closed switch to GND; high = pressed *or* wire broken | input | reads pressed when open |
+//! | PB4  | GPIO, pull-up             | amplifier fault, open-drain, active low | input        | no fault when open (see below) |
+//! | PC13 | GPIO, pull-up             | dump button to GND, active low      | input            | released when open |
+//! | PA4  | DAC channel 1, analog     | amplifier current command, 12 bit, buffered | analog output | zero-current code from the first instruction that touches the DAC |
+//! | PA2  | ADC123_IN2, analog        | load cell                           | analog input     | — |
+//! | PA3  | ADC123_IN3, analog        | leg potentiometer                   | analog input     | — |
+//! | PA15 | TIM2_CH1, AF1, pull-up    | motor encoder A                     | input            | — |
+//! | PB3  | TIM2_CH2, AF1, pull-up    | motor encoder B                     | input            | — |
+//! | PA0  | TIM5_CH1, AF2, pull-up    | height encoder A                    | input            | — |
+//! | PA1  | TIM5_CH2, AF2, pull-up    | height encoder B                    | input            | — |
+//!
+//! PA15, PB3 and PB4 are JTAG pins at reset (JTDI, JTDO/SWO, NJTRST): after
+//! [`init`] the board is debuggable over SWD only (PA13/PA14, untouched) and
+//! has no SWO trace, which defmt over RTT does not need.
+//!
+//! The encoder inputs have the internal pull-ups on so that open-collector
+//! encoders work and an unplugged encoder reads a steady level instead of
+//! counting noise. The amplifier fault line fails *unsafe*: a broken wire
+//! reads "no fault", so it is a diagnostic, not a safety function (the e-stop
+//! wiring is the one that fails safe).
+//!
+//! # Control timing
+//! TIM4 (on APB1, 84 MHz) overflows at `control_hz`; its update event is its
+//! TRGO, which starts ADC1's *injected* group (PA2 then PA3, 56-cycle sample
+//! time at ADCCLK = PCLK2 / 4 = 21 MHz: (56 + 12) / 21 MHz = 3.2 µs each,
+//! 6.5 µs for both). The end of the group (JEOC) raises the `ADC` interrupt,
+//! which the application binds to its control task: the task runs once per
+//! period with fresh samples in JDR1/JDR2 and calls
+//! [`BoardIo::ack_control_irq`] first.
+//!
+//! # Encoders
+//! TIM2 and TIM5 are 32-bit timers in encoder mode 3 (both edges of both
+//! channels, ×4) with ARR = 0xFFFF_FFFF: the raw counts wrap at **32 bits**,
+//! so the calibration must say `motor_counter_bits = 32` and
+//! `height_counter_bits = 32` ([`ENCODER_COUNTER_BITS`]); the 16-bit
+//! defaults would reject every count above 65 535 as out of range.
+//!
+//! # Watchdog
+//! The IWDG runs from the LSI (nominally 32 kHz) with prescaler 4 and reload
+//! 39: timeout 4 × 40 / 32 kHz = **5 ms** (3.4 ms to 9.4 ms over the LSI's
+//! 17–47 kHz datasheet range). It is started at the end of [`init`] and can
+//! then not be stopped by anything but a reset. It is deliberately *not*
+//! frozen while a debugger halts the core: a halted core must not leave the
+//! amplifier enabled with its last current command, so a breakpoint resets
+//! the MCU after ~5 ms.
+
+// The application does not use `ENCODER_COUNTER_BITS` (nor
+// `BoardIo::sysclk_hz` / `BoardIo::control_hz`) yet.
+#![allow(dead_code)]
+
+use core::convert::Infallible;
+
+use hopper_control::hal::{HopperIo, IoError, RawSample};
+use stm32f4::stm32f405::{self as pac, Peripherals};
+
+/// Core clock after `init`, Hz (when the crystal starts; see [`BoardIo::sysclk_hz`]).
+pub const SYSCLK_HZ: u32 = 168_000_000;
+
+/// Width of both encoder counters in bits: the value for the calibration's
+/// `motor_counter_bits` and `height_counter_bits`.
+pub const ENCODER_COUNTER_BITS: u8 = 32;
+
+/// The core clock when the crystal or the PLL fails: the internal HSI oscillator.
+const HSI_HZ: u32 = 16_000_000;
+/// The crystal on the board.
+const HSE_HZ: u32 = 8_000_000;
+/// PLL input divider: 8 MHz / 4 = 2 MHz VCO input.
+const PLL_M: u8 = 4;
+/// PLL multiplier: 2 MHz × 168 = 336 MHz VCO.
+const PLL_N: u16 = 168;
+/// PLL system-clock divider (the PAC's `div2`): 336 / 2 = 168 MHz.
+const PLL_P: u32 = 2;
+/// PLL 48 MHz-domain divider: 336 / 7 = 48 MHz (USB/SDIO, unused, but kept legal).
+const PLL_Q: u8 = 7;
+
+// The PLL figures are the ones RM0090 allows (M 2..=63, N 50..=432, Q 2..=15,
+// VCO input 1–2 MHz, VCO output 100–432 MHz) and give SYSCLK_HZ.
+const _: () = {
+    assert!(PLL_M >= 2 && PLL_M <= 63);
+    assert!(PLL_N >= 50 && PLL_N <= 432);
+    assert!(PLL_Q >= 2 && PLL_Q <= 15);
+    let vco_in = HSE_HZ / PLL_M as u32;
+    assert!(vco_in >= 1_000_000 && vco_in <= 2_000_000);
+    let vco = vco_in * PLL_N as u32;
+    assert!(vco >= 100_000_000 && vco <= 432_000_000);
+    assert!(vco / PLL_P == SYSCLK_HZ);
+    assert!(vco / PLL_Q as u32 <= 48_000_000);
+};
+
+/// APB1 clock with the PLL: SYSCLK / 4 (its maximum is 42 MHz).
+const PLL_PCLK1_HZ: u32 = SYSCLK_HZ / 4;
+
+/// Polls of a ready flag before giving up. One poll is a volatile load, a test
+/// and a branch (at least 4 cycles), so at the 16 MHz HSI this is at least
+/// 100 ms: far more than the crystal start-up (typically 2 ms) or PLL lock
+/// (~0.2 ms) need, and short enough that a dead crystal only delays start-up.
+/// The watchdog's waits run at 168 MHz, where it is still ≥ 9.5 ms against
+/// the LSI's ~0.3 ms.
+const READY_POLLS: u32 = 400_000;
+
+/// Slowest control rate `init` accepts, Hz (slower requests are raised to it).
+const MIN_CONTROL_HZ: u32 = 1;
+/// Fastest control rate `init` accepts, Hz (faster requests are lowered to
+/// it): the two conversions take 6.5 µs at 168 MHz and 34 µs on the HSI
+/// fallback (ADCCLK 4 MHz), both well inside a 50 µs period.
+const MAX_CONTROL_HZ: u32 = 20_000;
+
+/// ADC channel of the load cell (PA2).
+const LOADCELL_CHANNEL: u8 = 2;
+/// ADC channel of the leg potentiometer (PA3).
+const POT_CHANNEL: u8 = 3;
+
+/// Largest 12-bit DAC code.
+const DAC_MAX_CODE: u16 = 0x0FFF;
+/// Zero-current code used when `init` gets an impossible one: mid-scale, the
+/// zero of a symmetric ±10 V amplifier input (and the calibration default).
+const DAC_FALLBACK_ZERO_CODE: u16 = 2048;
+
+/// IWDG reload value: (39 + 1) × 4 / 32 kHz = 5 ms.
+const IWDG_RELOAD: u16 = 39;
+const _: () = assert!(IWDG_RELOAD <= 0x0FFF);
+
+/// Encoder mode 3 (×4) on CH1/CH2 of a 32-bit timer, filtered, wrapping at 32
+/// bits, counter at 0 and running. A macro because TIM2 and TIM5 are
+/// different PAC types with the same registers.
+///
+/// Filter f_DTS/2, N = 8: an edge must be stable 8 samples at 42 MHz (190 ns;
+/// 1 µs on the HSI fallback) to count. The motor encoder's fastest edges
+/// (500 lines ×4 at 10 000 rpm) are 3 µs apart.
+macro_rules! configure_encoder {
+    ($tim:expr) => {{
+        let tim = &$tim;
+        tim.cr1().modify(|_, w| w.cen().disabled());
+        tim.smcr().modify(|_, w| w.sms().disabled());
+        tim.ccmr1_input().write(|w| {
+            w.cc1s()
+                .ti1()
+                .ic1f()
+                .fdts_div2_n8()
+                .ic1psc()
+                .no_prescaler()
+                .cc2s()
+                .ti2()
+                .ic2f()
+                .fdts_div2_n8()
+                .ic2psc()
+                .no_prescaler()
+        });
+        // Non-inverted inputs: CCxP = CCxNP = 0 (both edges are counted by
+        // the encoder mode itself).
+        tim.ccer().write(|w| {
+            w.cc1p()
+                .rising_edge()
+                .cc1np()
+                .clear_bit()
+                .cc2p()
+                .rising_edge()
+                .cc2np()
+                .clear_bit()
+        });
+        tim.arr().write(|w| w.arr().set(u32::MAX));
+        tim.cnt().write(|w| w.cnt().set(0));
+        tim.smcr().modify(|_, w| w.sms().encoder_mode_3());
+        tim.cr1().modify(|_, w| w.ckd().div1().cen().enabled());
+    }};
+}
+
+/// Everything the RTIC app needs from the board.
+#[derive(Debug)]
+pub struct Board {
+    /// Sensors, DAC and amplifier enable: the control step's [`HopperIo`].
+    pub io: BoardIo,
+    /// The running independent watchdog; give it to the control task only.
+    pub watchdog: Watchdog,
+    /// The dump button (PC13).
+    pub dump_button: DumpButton,
+}
+
+/// The clocks `init` ended up with.
+#[derive(Debug, Clone, Copy)]
+struct Clocks {
+    /// Core and AHB clock, Hz.
+    sysclk_hz: u32,
+    /// Clock of the APB1 timers (TIM2..TIM5), Hz.
+    apb1_timer_hz: u32,
+}
+
+/// Configures the board; the amplifier is disabled (AMP_EN low) and the DAC at
+/// the zero-current code before anything else is touched.
+///
+/// `control_hz` is clamped to 1..=20 000 Hz; [`BoardIo::control_hz`] gives the
+/// rate the timer actually runs at. `dac_zero_code` above 4095 (which a
+/// validated calibration never has) is replaced by mid-scale, 2048.
+///
+/// Starts TIM4 (the ADC interrupt then fires every period once the
+/// application unmasks it) and, last, the watchdog: the first
+/// [`Watchdog::feed`] must come within ~5 ms of this function returning.
+pub fn init(dp: Peripherals, control_hz: u32, dac_zero_code: u16) -> Board {
+    let zero_code = if dac_zero_code <= DAC_MAX_CODE {
+        dac_zero_code
+    } else {
+        DAC_FALLBACK_ZERO_CODE
+    };
+
+    // 1. AMP_EN (PB0): latch the output low *before* making the pin an output,
+    //    so it never drives high, not even for one cycle.
+    dp.RCC.ahb1enr().modify(|_, w| {
+        w.gpioaen()
+            .enabled()
+            .gpioben()
+            .enabled()
+            .gpiocen()
+            .enabled()
+    });
+    // Read back: errata ES0182 "delay after an RCC peripheral clock enabling".
+    let _ = dp.RCC.ahb1enr().read();
+    dp.GPIOB.bsrr().write(|w| w.br0().set_bit());
+    dp.GPIOB.otyper().modify(|_, w| w.ot0().push_pull());
+    dp.GPIOB.ospeedr().modify(|_, w| w.ospeedr0().low_speed());
+    dp.GPIOB.pupdr().modify(|_, w| w.pupdr0().floating());
+    dp.GPIOB.moder().modify(|_, w| w.moder0().output());
+
+    // 2. DAC channel 1 (PA4) at the zero-current code. PA4 goes analog first
+    //    (RM0090: avoids the digital input's parasitic consumption); with no
+    //    trigger (TEN1 = 0) DHR moves to the output one APB1 cycle after each
+    //    write, so the code is written before and again after enabling.
+    dp.RCC.apb1enr().modify(|_, w| w.dacen().enabled());
+    let _ = dp.RCC.apb1enr().read();
+    dp.GPIOA.pupdr().modify(|_, w| w.pupdr4().floating());
+    dp.GPIOA.moder().modify(|_, w| w.moder4().analog());
+    dp.DAC.dhr12r1().write(|w| w.daccdhr().set(zero_code));
+    dp.DAC.cr().modify(|_, w| {
+        w.ten1()
+            .disabled()
+            .wave1()
+            .disabled()
+            .dmaen1()
+            .disabled()
+            .boff1()
+            .enabled()
+            .en1()
+            .enabled()
+    });
+    dp.DAC.dhr12r1().write(|w| w.daccdhr().set(zero_code));
+
+    // 3. The other pins.
+    configure_inputs(&dp.GPIOB, &dp.GPIOC);
+    configure_analog_and_encoder_pins(&dp.GPIOA, &dp.GPIOB);
+
+    // 4. Clocks. Everything timed below derives from the clock that runs.
+    let clocks = configure_clocks(&dp.RCC, &dp.FLASH, &dp.PWR);
+
+    // 5. Encoders.
+    dp.RCC
+        .apb1enr()
+        .modify(|_, w| w.tim2en().enabled().tim4en().enabled().tim5en().enabled());
+    dp.RCC.apb2enr().modify(|_, w| w.adc1en().enabled());
+    let _ = dp.RCC.apb2enr().read();
+    configure_encoder!(dp.TIM2);
+    configure_encoder!(dp.TIM5);
+
+    // 6. TIM4 at the control rate, stopped; configured while the ADC's
+    //    trigger input is still disabled, so loading it cannot trigger.
+    let control_hz = configure_control_timer(&dp.TIM4, clocks.apb1_timer_hz, control_hz);
+
+    // 7. ADC1 injected group, triggered by TIM4 TRGO, interrupt at its end.
+    configure_adc(&dp.ADC_COMMON, &dp.ADC1);
+
+    // 8. Start TIM4: the first trigger comes one period later and finds the
+    //    ADC powered and settled.
+    dp.TIM4.cr1().modify(|_, w| w.cen().enabled());
+
+    // 9. The watchdog, last: from here on the control task must run.
+    let watchdog = Watchdog::start(dp.IWDG, &dp.RCC);
+
+    Board {
+        io: BoardIo {
+            tim2: dp.TIM2,
+            tim5: dp.TIM5,
+            adc: dp.ADC1,
+            dac: dp.DAC,
+            gpiob: dp.GPIOB,
+            sysclk_hz: clocks.sysclk_hz,
+            control_hz,
+        },
+        watchdog,
+        dump_button: DumpButton {
+            gpioc: dp.GPIOC,
+            // Start as "held": a button held (or shorted) at boot must be
+            // seen released before a press counts.
+            pressed: true,
+            last_sample: true,
+        },
+    }
+}
+
+/// E-stop (PB1), amplifier fault (PB4) and dump button (PC13): inputs with pull-ups.
+fn configure_inputs(gpiob: &pac::GPIOB, gpioc: &pac::GPIOC) {
+    gpiob
+        .pupdr()
+        .modify(|_, w| w.pupdr1().pull_up().pupdr4().pull_up());
+    gpiob
+        .moder()
+        .modify(|_, w| w.moder1().input().moder4().input());
+    gpioc.pupdr().modify(|_, w| w.pupdr13().pull_up());
+    gpioc.moder().modify(|_, w| w.moder13().input());
+}
+
+/// ADC inputs (PA2, PA3) analog; encoder inputs (PA0, PA1, PA15, PB3) in
+/// their alternate functions with pull-ups. The AF number is written before
+/// the mode, so a pin never sits in the wrong alternate function.
+fn configure_analog_and_encoder_pins(gpioa: &pac::GPIOA, gpiob: &pac::GPIOB) {
+    gpioa.pupdr().modify(|_, w| {
+        w.pupdr2()
+            .floating()
+            .pupdr3()
+            .floating()
+            .pupdr0()
+            .pull_up()
+            .pupdr1()
+            .pull_up()
+            .pupdr15()
+            .pull_up()
+    });
+    gpioa
+        .moder()
+        .modify(|_, w| w.moder2().analog().moder3().analog());
+    gpioa.afrl().modify(|_, w| w.afrl0().af2().afrl1().af2());
+    gpioa.afrh().modify(|_, w| w.afrh15().af1());
+    gpioa.moder().modify(|_, w| {
+        w.moder0()
+            .alternate()
+            .moder1()
+            .alternate()
+            .moder15()
+            .alternate()
+    });
+    gpiob.pupdr().modify(|_, w| w.pupdr3().pull_up());
+    gpiob.afrl().modify(|_, w| w.afrl3().af1());
+    gpiob.moder().modify(|_, w| w.moder3().alternate());
+}
+
+/// Polls `ready` up to [`READY_POLLS`] times; whether it became true.
+fn wait_for(mut ready: impl FnMut() -> bool) -> bool {
+    for _ in 0..READY_POLLS {
+        if ready() {
+            return true;
+        }
+    }
+    ready()
+}
+
+/// HSE → PLL → 168 MHz, or the HSI at 16 MHz if that fails. Never hangs.
+fn configure_clocks(rcc: &pac::RCC, flash: &pac::FLASH, pwr: &pac::PWR) -> Clocks {
+    let hsi = Clocks {
+        sysclk_hz: HSI_HZ,
+        apb1_timer_hz: HSI_HZ,
+    };
+
+    // Start from a known state: on the HSI, PLL off (a debugger or bootloader
+    // may have left the PLL running, and PLLCFGR must not change while it is on).
+    rcc.cr().modify(|_, w| w.hsion().on());
+    if !wait_for(|| rcc.cr().read().hsirdy().is_ready()) {
+        // The HSI is what the core runs on after reset; if it reports not
+        // ready, touch nothing more.
+        return hsi;
+    }
+    rcc.cfgr().modify(|_, w| w.sw().hsi());
+    if !wait_for(|| rcc.cfgr().read().sws().is_hsi()) {
+        return hsi;
+    }
+    rcc.cfgr()
+        .modify(|_, w| w.hpre().div1().ppre1().div1().ppre2().div1());
+    rcc.cr().modify(|_, w| w.pllon().off());
+    if !wait_for(|| rcc.cr().read().pllrdy().is_not_ready()) {
+        return hsi;
+    }
+
+    // Voltage scale 1, needed above 144 MHz (the F405's reset value, set anyway).
+    rcc.apb1enr().modify(|_, w| w.pwren().enabled());
+    let _ = rcc.apb1enr().read();
+    pwr.cr().modify(|_, w| w.vos().scale1());
+
+    // Crystal, not an external clock signal. HSEBYP is only writable while
+    // the HSE is off, so it goes in its own write, before HSEON.
+    rcc.cr().modify(|_, w| w.hsebyp().not_bypassed());
+    rcc.cr().modify(|_, w| w.hseon().on());
+    if !wait_for(|| rcc.cr().read().hserdy().is_ready()) {
+        rcc.cr().modify(|_, w| w.hseon().off());
+        return hsi;
+    }
+
+    write_pll_config(rcc);
+    rcc.cr().modify(|_, w| w.pllon().on());
+    if !wait_for(|| rcc.cr().read().pllrdy().is_ready()) {
+        rcc.cr().modify(|_, w| w.pllon().off().hseon().off());
+        return hsi;
+    }
+
+    // Wait states before the clock goes up, and checked: RM0090 (flash read
+    // access latency) asks to read ACR back before raising the frequency.
+    flash.acr().modify(|_, w| {
+        w.latency()
+            .ws5()
+            .prften()
+            .enabled()
+            .icen()
+            .enabled()
+            .dcen()
+            .enabled()
+    });
+    if !flash.acr().read().latency().is_ws5() {
+        rcc.cr().modify(|_, w| w.pllon().off().hseon().off());
+        return hsi;
+    }
+
+    // Bus prescalers before the switch, so APB1 never exceeds 42 MHz.
+    rcc.cfgr()
+        .modify(|_, w| w.hpre().div1().ppre1().div4().ppre2().div2());
+    rcc.cfgr().modify(|_, w| w.sw().pll());
+    if !wait_for(|| rcc.cfgr().read().sws().is_pll()) {
+        rcc.cfgr().modify(|_, w| w.sw().hsi());
+        // Best effort: if the switch back did not happen either, the PLL and
+        // the bus prescalers stay as they are (turning the PLL off or the
+        // prescalers down under a core on the PLL would stop it or overclock
+        // APB1), and the reported rates are then wrong.
+        if wait_for(|| rcc.cfgr().read().sws().is_hsi()) {
+            rcc.cfgr().modify(|_, w| w.ppre1().div1().ppre2().div1());
+            rcc.cr().modify(|_, w| w.pllon().off().hseon().off());
+        }
+        return hsi;
+    }
+
+    Clocks {
+        sysclk_hz: SYSCLK_HZ,
+        // APB1 prescaler ≠ 1: its timers run at twice PCLK1.
+        apb1_timer_hz: 2 * PLL_PCLK1_HZ,
+    }
+}
+
+/// Writes PLLCFGR: source HSE, M, N, P, Q as the constants above. PLL must be off.
+#[allow(unsafe_code)] // PLLM/PLLN/PLLQ have no safe writer in the PAC.
+fn write_pll_config(rcc: &pac::RCC) {
+    rcc.pllcfgr().modify(|_, w| {
+        // SAFETY: the values are checked at compile time (the `const _`
+        // block above) to be inside the ranges RM0090's RCC_PLLCFGR allows,
+        // and the PLL is off (the caller waited for PLLRDY = 0), the only
+        // time PLLCFGR may be written.
+        unsafe { w.pllm().bits(PLL_M).plln().bits(PLL_N).pllq().bits(PLL_Q) }
+            .pllp()
+            .div2()
+            .pllsrc()
+            .hse()
+    });
+}
+
+/// ADC1: 12 bit, right aligned, injected group PA2 → JDR1, PA3 → JDR2,
+/// triggered by TIM4 TRGO (rising edge), interrupt at the group's end.
+fn configure_adc(common: &pac::ADC_COMMON, adc: &pac::ADC1) {
+    adc.cr2().modify(|_, w| w.adon().disabled());
+    // ADCCLK = PCLK2 / 4: 21 MHz at 168 MHz (the F405's maximum is 36 MHz).
+    common.ccr().modify(|_, w| w.adcpre().div4());
+    adc.smpr2()
+        .modify(|_, w| w.smp2().cycles56().smp3().cycles56());
+    set_injected_sequence(adc);
+    // SCAN: convert the whole injected group on one trigger (JEOC at its end).
+    adc.cr1().modify(|_, w| {
+        w.res()
+            .twelve_bit()
+            .scan()
+            .enabled()
+            .jauto()
+            .disabled()
+            .jdiscen()
+            .disabled()
+            .eocie()
+            .disabled()
+            .jeocie()
+            .enabled()
+    });
+    adc.cr2().modify(|_, w| {
+        w.align()
+            .right()
+            .cont()
+            .single()
+            .exten()
+            .disabled()
+            .jextsel()
+            .tim4trgo()
+            .jexten()
+            .rising_edge()
+    });
+    // A flag left set would fire the interrupt as soon as it is unmasked.
+    adc.sr().write(|w| w.jeoc().clear().jstrt().clear());
+    // Powered on now; it needs t_STAB (3 µs) before converting, far less
+    // than the first control period.
+    adc.cr2().modify(|_, w| w.adon().enabled());
+}
+
+/// JSQR: two conversions (JL = 1). With JL = 1 the ADC converts JSQ3 then
+/// JSQ4 and stores them in JDR1 then JDR2 (RM0090, ADC_JSQR; ST's HAL
+/// places rank 1 of a 2-long group in JSQ3 the same way).
+#[allow(unsafe_code)] // The JSQx fields have no safe writer in the PAC.
+fn set_injected_sequence(adc: &pac::ADC1) {
+    adc.jsqr().write(|w| {
+        // SAFETY: channels 2 and 3 exist on ADC1 (the field takes 0..=18) and
+        // are what JSQ3/JSQ4 hold; the ADC is off (ADON = 0) while it is set.
+        unsafe { w.jsq3().bits(LOADCELL_CHANNEL).jsq4().bits(POT_CHANNEL) }
+            .jl()
+            .set(1)
+    });
+}
+
+/// TIM4 update (and TRGO) at `control_hz` from a `timer_hz` clock, left
+/// stopped; returns the rate it will run at, rounded to the nearest Hz.
+fn configure_control_timer(tim: &pac::TIM4, timer_hz: u32, control_hz: u32) -> u32 {
+    let (psc, arr, actual_hz) = control_timer_setup(timer_hz, control_hz);
+    tim.cr1().modify(|_, w| w.cen().disabled());
+    tim.psc().write(|w| w.psc().set(psc));
+    tim.arr().write(|w| w.arr().set(arr));
+    tim.cnt().write(|w| w.cnt().set(0));
+    // URS: only overflows set the update flag, not the UG below.
+    tim.cr1()
+        .modify(|_, w| w.urs().counter_only().arpe().enabled());
+    // UG loads the prescaler now (it is otherwise only loaded at the first
+    // overflow, which would make the first period 1/(PSC+1) too short).
+    tim.egr().write(|w| w.ug().update());
+    tim.cr2().modify(|_, w| w.mms().update());
+    actual_hz
+}
+
+/// Prescaler, auto-reload and resulting rate for a 16-bit timer: the smallest
+/// prescaler whose period fits 16 bits, for the best rate resolution.
+fn control_timer_setup(timer_hz: u32, control_hz: u32) -> (u16, u16, u32) {
+    let hz = control_hz.clamp(MIN_CONTROL_HZ, MAX_CONTROL_HZ);
+    // timer_hz >= 16 MHz, hz <= 20 kHz: at least 800 ticks per period.
+    let ticks = (timer_hz / hz).max(1);
+    let prescale = (ticks - 1) / 0x1_0000 + 1; // 1..=65_536 for any u32 ticks
+    let period = (ticks / prescale).clamp(1, 0x1_0000);
+    let psc = u16::try_from(prescale - 1).unwrap_or(u16::MAX);
+    let arr = u16::try_from(period - 1).unwrap_or(u16::MAX);
+    let divisor = u64::from(prescale) * u64::from(period);
+    let actual = (u64::from(timer_hz) + divisor / 2) / divisor;
+    (psc, arr, u32::try_from(actual).unwrap_or(u32::MAX))
+}
+
+/// Sensors, DAC and amplifier enable of the real board.
+///
+/// [`HopperIo::read`] is meant for the control task, right after
+/// [`ack_control_irq`](Self::ack_control_irq): then JDR1/JDR2 hold the
+/// samples of this period and the next conversion is a full period away.
+#[derive(Debug)]
+pub struct BoardIo {
+    /// Motor encoder counter.
+    tim2: pac::TIM2,
+    /// Height encoder counter.
+    tim5: pac::TIM5,
+    /// Injected conversions of the load cell and potentiometer.
+    adc: pac::ADC1,
+    /// Current command.
+    dac: pac::DAC,
+    /// AMP_EN (PB0), e-stop (PB1), amplifier fault (PB4).
+    gpiob: pac::GPIOB,
+    /// Core clock that `init` achieved.
+    sysclk_hz: u32,
+    /// Control (TIM4 update) rate that `init` achieved.
+    control_hz: u32,
+}
+
+impl BoardIo {
+    /// Clears the control interrupt's flag (ADC injected end of conversion); returns whether it was set.
+    pub fn ack_control_irq(&mut self) -> bool {
+        let set = self.adc.sr().read().jeoc().is_complete();
+        if set {
+            // rc_w0 register: the PAC writes 1 to the other flags (no effect)
+            // and 0 to JEOC (and JSTRT, which is set with it), so nothing else
+            // is cleared by accident.
+            self.adc.sr().write(|w| w.jeoc().clear().jstrt().clear());
+        }
+        set
+    }
+
+    /// Core clock, Hz: [`SYSCLK_HZ`], or 16 000 000 if the crystal or PLL
+    /// failed at start-up and the board runs on the HSI.
+    pub fn sysclk_hz(&self) -> u32 {
+        self.sysclk_hz
+    }
+
+    /// Control (ADC trigger) rate the timer runs at, Hz, rounded to the
+    /// nearest Hz: the requested rate, clamped to 1..=20 000 Hz, up to the
+    /// timer's integer division.
+    pub fn control_hz(&self) -> u32 {
+        self.control_hz
+    }
+}
+
+impl HopperIo for BoardIo {
+    type Error = Infallible;
+
+    /// Encoder counters, the injected ADC codes of this period, e-stop and fault pins.
+    fn read(&mut self) -> Result<RawSample, IoError<Infallible>> {
+        let pins = self.gpiob.idr().read();
+        Ok(RawSample {
+            motor_counts: self.tim2.cnt().read().bits(),
+            height_counts: self.tim5.cnt().read().bits(),
+            loadcell_code: self.adc.jdr1().read().jdata().bits(),
+            pot_code: self.adc.jdr2().read().jdata().bits(),
+            // Normally-closed to GND with a pull-up: high = pressed or broken.
+            estop_pressed: pins.idr1().is_high(),
+            // Open-drain, active low.
+            amp_fault: pins.idr4().is_low(),
+        })
+    }
+
+    /// Writes DHR12R1; codes above 4095 are rejected, not truncated.
+    fn write_dac(&mut self, code: u16) -> Result<(), IoError<Infallible>> {
+        if code > DAC_MAX_CODE {
+            return Err(IoError::Dac);
+        }
+        self.dac.dhr12r1().write(|w| w.daccdhr().set(code));
+        Ok(())
+    }
+
+    /// Drives AMP_EN (PB0) with one atomic BSRR write.
+    fn set_amp_enabled(&mut self, on: bool) -> Result<(), IoError<Infallible>> {
+        if on {
+            self.gpiob.bsrr().write(|w| w.bs0().set_bit());
+        } else {
+            self.gpiob.bsrr().write(|w| w.br0().set_bit());
+        }
+        Ok(())
+    }
+}
+
+/// The independent watchdog, running (about 5 ms timeout; see the module docs).
+///
+/// Once started it cannot be stopped except by a reset. Only the control
+/// task may own and feed it: then a control task that stops running (hang,
+/// overrun storm, interrupt lost) resets the MCU, and the reset leaves the
+/// amplifier disabled. Feeding it from anywhere else would defeat that.
+#[derive(Debug)]
+pub struct Watchdog {
+    /// The IWDG registers.
+    iwdg: pac::IWDG,
+}
+
+impl Watchdog {
+    /// Unlock (0x5555), prescaler 4, reload 39, start (0xCCCC), first feed.
+    fn start(iwdg: pac::IWDG, rcc: &pac::RCC) -> Self {
+        // The PR/RLR writes reach the watchdog's LSI domain only while the LSI
+        // runs; start it first so the new values apply at once, not after the
+        // default 512 ms timeout. Bounded: if it never reports ready, the
+        // start key below forces it on anyway.
+        rcc.csr().modify(|_, w| w.lsion().on());
+        let _ = wait_for(|| rcc.csr().read().lsirdy().is_ready());
+
+        iwdg.kr().write(|w| w.key().unlock());
+        iwdg.pr().write(|w| w.pr().divide_by4());
+        iwdg.rlr().write(|w| w.rl().set(IWDG_RELOAD));
+        // Up to 5 LSI cycles (~160 µs) each. Bounded: on timeout the watchdog
+        // still starts, only with the previous values for a while.
+        let _ = wait_for(|| {
+            let sr = iwdg.sr().read();
+            !sr.pvu().bit_is_set() && !sr.rvu().bit_is_set()
+        });
+        iwdg.kr().write(|w| w.key().start());
+        // Load the 5 ms reload now rather than counting down from 0xFFF.
+        iwdg.kr().write(|w| w.key().feed());
+        Self { iwdg }
+    }
+
+    /// Reloads the counter (key 0xAAAA). Call once per control period, from
+    /// the control task only.
+    pub fn feed(&mut self) {
+        self.iwdg.kr().write(|w| w.key().feed());
+    }
+}
+
+/// The dump button (PC13 to GND, pull-up), debounced by slow polling.
+#[derive(Debug)]
+pub struct DumpButton {
+    /// PC13's port.
+    gpioc: pac::GPIOC,
+    /// Debounced state: pressed.
+    pressed: bool,
+    /// The previous raw sample: pressed.
+    last_sample: bool,
+}
+
+impl DumpButton {
+    /// true once per press (edge-detected, debounced by polling at a low rate)
+    ///
+    /// Poll at 50–100 Hz: the state changes only when two consecutive samples
+    /// agree, so contact bounce (< 5 ms) and single-sample glitches (motor
+    /// noise) are ignored and a press must last two polls. A button held
+    /// through `init` counts only after it has been released.
+    pub fn pressed(&mut self) -> bool {
+        let sample = self.gpioc.idr().read().idr13().is_low();
+        let agreed = sample == self.last_sample;
+        self.last_sample = sample;
+        if agreed && sample != self.pressed {
+            self.pressed = sample;
+            return sample;
+        }
+        false
+    }
+}
