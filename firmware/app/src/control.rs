@@ -5,7 +5,7 @@ use hopper_control::telemetry::TelemetryRing;
 
 /// Parses a decimal `u32` at compile time; `default` when absent or malformed
 /// (a malformed value then fails the range assert below instead of panicking).
-const fn parse_u32(s: Option<&str>, default: u32) -> u32 {
+pub const fn parse_u32(s: Option<&str>, default: u32) -> u32 {
     let Some(s) = s else {
         return default;
     };

@@ -254,16 +254,17 @@ mod app {
     pub const START_APEX_M: f64 = 0.10;
     /// Apex target, m.
     pub const TARGET_APEX_M: f64 = 0.05;
-    /// Simulated time, s.
-    pub const DURATION_S: u32 = 12;
+    /// Simulated time, s (12; `HOPPER_QEMU_SECONDS` at build time overrides
+    /// it for quick profiling runs).
+    pub const DURATION_S: u32 = crate::control::parse_u32(option_env!("HOPPER_QEMU_SECONDS"), 12);
     /// Apexes kept for the summary.
     const MAX_APEXES: usize = 128;
 
-    /// The simulated hopper and the statistics of the run.
+    /// The simulated hopper and the statistics of the run (the controller
+    /// itself is a resource of its own, as on the board).
     pub struct Sim {
         plant: Plant,
         hal: SimHal,
-        hopper: Hopper,
         apexes: heapless::Vec<f64, MAX_APEXES>,
         step_instr: StepStats,
         parts: [StepStats; 6],
@@ -280,6 +281,7 @@ mod app {
 
     #[local]
     struct Local {
+        hopper: Hopper,
         sim: Sim,
         tim5: TIM5,
         syst: SYST,
@@ -342,10 +344,10 @@ mod app {
                 log: LogQueue::new(),
             },
             Local {
+                hopper,
                 sim: Sim {
                     plant,
                     hal,
-                    hopper,
                     apexes: heapless::Vec::new(),
                     step_instr: StepStats::new(),
                     parts: [StepStats::new(); 6],
@@ -375,34 +377,40 @@ mod app {
     /// the next control period however long an event search takes (soft
     /// `f64` on the M4F). `missed` then counts periods where the firmware's
     /// own work (control step, I/O, logging) overran.
-    #[task(binds = SysTick, priority = 3, local = [sim, tim5, syst], shared = [capture, log])]
+    #[task(binds = SysTick, priority = 3, local = [hopper, sim, tim5, syst], shared = [capture, log])]
     fn control(mut cx: control::Context) {
         let sim = &mut *cx.local.sim;
+        let hopper = &mut *cx.local.hopper;
         let tim5 = &*cx.local.tim5;
         let raw = sim.hal.sample(&sim.plant);
-        let before = sim.hopper.supervisor().faults();
-        // Odd periods measure the step as a whole, even ones part by part
-        // (the marks cost a few instructions each, so they are kept out of
-        // the whole-step figure).
+        let before = hopper.supervisor().faults();
+        // Odd periods time the control step proper, from the raw sample to the
+        // DAC code (the `Supervise` mark; the hop ledger and the telemetry
+        // record come after it); even periods time it part by part (the marks
+        // cost a few instructions each, so they are kept out of the
+        // whole-step figure).
         let out = if sim.period % 2 == 1 {
             let t0 = tim5.cnt().read().bits();
-            let out = sim.hopper.step(Some(&raw), CONTROL_PERIOD_S);
-            let t1 = tim5.cnt().read().bits();
+            let mut t_dac = t0;
+            let out = hopper.step_marked(Some(&raw), CONTROL_PERIOD_S, &mut |p: StepPart| {
+                if p == StepPart::Supervise {
+                    t_dac = tim5.cnt().read().bits();
+                }
+            });
             sim.step_instr
-                .add(t1.wrapping_sub(t0).saturating_sub(sim.timer_overhead));
+                .add(t_dac.wrapping_sub(t0).saturating_sub(sim.timer_overhead));
             out
         } else {
             let mut last = tim5.cnt().read().bits();
             let overhead = sim.timer_overhead;
             let parts = &mut sim.parts;
-            sim.hopper
-                .step_marked(Some(&raw), CONTROL_PERIOD_S, &mut |p: StepPart| {
-                    let now = tim5.cnt().read().bits();
-                    if let Some(s) = parts.get_mut(p as usize) {
-                        s.add(now.wrapping_sub(last).saturating_sub(overhead));
-                    }
-                    last = tim5.cnt().read().bits();
-                })
+            hopper.step_marked(Some(&raw), CONTROL_PERIOD_S, &mut |p: StepPart| {
+                let now = tim5.cnt().read().bits();
+                if let Some(s) = parts.get_mut(p as usize) {
+                    s.add(now.wrapping_sub(last).saturating_sub(overhead));
+                }
+                last = tim5.cnt().read().bits();
+            })
         };
         {
             let mut io = sim.hal.io(&sim.plant);
@@ -448,19 +456,19 @@ mod app {
             sim.missed += 1;
         }
         if sim.period >= DURATION_S * CONTROL_HZ {
-            finish(sim, &mut cx.shared.log);
+            finish(sim, hopper, &mut cx.shared.log);
         }
     }
 
     /// Logs the summary and exits QEMU: success only if the hop converged
     /// and no fault or deadline miss occurred.
-    fn finish(sim: &Sim, log: &mut impl rtic::Mutex<T = LogQueue>) -> ! {
+    fn finish(sim: &Sim, hopper: &Hopper, log: &mut impl rtic::Mutex<T = LogQueue>) -> ! {
         while let Some(item) = log.lock(|q| q.pop_front()) {
             log_item(item);
         }
         let steady = steady_apex(&sim.apexes);
         let converged = hops_to_converge(&sim.apexes, TARGET_APEX_M, 0.02);
-        let faults = sim.hopper.supervisor().faults();
+        let faults = hopper.supervisor().faults();
         let names = [
             "convert",
             "estimate",

@@ -47,12 +47,17 @@ pub struct EnergyInput {
 }
 
 impl EnergyInput {
+    /// Whether every field is finite: one sum, one test (NaN and infinities
+    /// propagate through the sum; finite values whose sum overflows count as
+    /// non-finite, which is the safe side).
+    #[inline(always)]
     fn is_finite(&self) -> bool {
-        self.body_height_m.is_finite()
-            && self.body_velocity_mps.is_finite()
-            && self.motor_rate_rad_s.is_finite()
-            && self.nut_position_m.is_finite()
-            && self.spring_force_n.is_finite()
+        (self.body_height_m
+            + self.body_velocity_mps
+            + self.motor_rate_rad_s
+            + self.nut_position_m
+            + self.spring_force_n)
+            .is_finite()
     }
 }
 
@@ -77,39 +82,103 @@ fn finite(v: f32) -> Result<f32, EnergyError> {
     }
 }
 
-/// Unsprung-mass terms added in flight: `0.5 m_u zd^2 + m_u g (z - l0)`, J.
-fn unsprung_terms_j(m: &ModelParams, x: &EnergyInput) -> f32 {
-    match x.phase {
-        Phase::Flight => {
-            let mu = m.unsprung_mass_kg;
-            0.5 * mu * x.body_velocity_mps * x.body_velocity_mps
-                + mu * m.gravity_mps2 * (x.body_height_m - m.leg_length_m)
-        }
-        Phase::Stance => 0.0,
-    }
-}
-
 /// Total mechanical energy, J: eq 2.44 with the spring term of eq 2.45, plus
 /// the unsprung-mass terms in flight (see the module doc). Matches the
 /// simulator's energy exactly when the load cell reads `k * compression`.
+///
+/// Validates the model on every call; the control step uses an
+/// [`EnergyModel`] built once instead.
 pub fn total_energy_j(m: &ModelParams, x: &EnergyInput) -> Result<f32, EnergyError> {
-    if !x.is_finite() {
-        return Err(EnergyError::NonFiniteInput);
+    EnergyModel::new(m)?.total_j(x)
+}
+
+/// The model's constants of eqs 2.44-2.45 worked out once (products of
+/// masses, `g`, `1/k`), so a period's energy estimate is a dozen
+/// multiply-adds.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct EnergyModel {
+    r: f32,
+    half_j: f32,
+    half_m_body: f32,
+    half_m_nut: f32,
+    m_body_g: f32,
+    m_nut_g: f32,
+    half_inv_k: f32,
+    half_m_unsprung: f32,
+    m_unsprung_g: f32,
+    leg_length_m: f32,
+}
+
+impl EnergyModel {
+    /// The constants of `m`; the spring stiffness must be positive and finite.
+    pub fn new(m: &ModelParams) -> Result<Self, EnergyError> {
+        let k = m.spring_stiffness_n_per_m;
+        if !(k > 0.0 && k.is_finite()) {
+            return Err(EnergyError::NonPositiveStiffness);
+        }
+        let g = m.gravity_mps2;
+        Ok(EnergyModel {
+            r: m.screw_m_per_rad(),
+            half_j: 0.5 * m.rotor_inertia_kg_m2,
+            half_m_body: 0.5 * m.body_mass_kg,
+            half_m_nut: 0.5 * m.nut_mass_kg,
+            m_body_g: m.body_mass_kg * g,
+            m_nut_g: m.nut_mass_kg * g,
+            half_inv_k: 0.5 / k,
+            half_m_unsprung: 0.5 * m.unsprung_mass_kg,
+            m_unsprung_g: m.unsprung_mass_kg * g,
+            leg_length_m: m.leg_length_m,
+        })
     }
-    let r = m.screw_m_per_rad();
-    let g = m.gravity_mps2;
-    let thd = x.motor_rate_rad_s;
-    let zd = x.body_velocity_mps;
-    let z = x.body_height_m;
-    let nut_abs_velocity = zd - r * thd; // nut velocity over ground, m/s
-    let e = 0.5 * m.rotor_inertia_kg_m2 * thd * thd
-        + 0.5 * m.body_mass_kg * zd * zd
-        + 0.5 * m.nut_mass_kg * nut_abs_velocity * nut_abs_velocity
-        + m.body_mass_kg * g * z
-        + m.nut_mass_kg * g * (z - x.nut_position_m)
-        + spring_energy_j(x.spring_force_n, m.spring_stiffness_n_per_m)?
-        + unsprung_terms_j(m, x);
-    finite(e)
+
+    /// Total energy of [`total_energy_j`], J.
+    #[inline]
+    pub fn total_j(&self, x: &EnergyInput) -> Result<f32, EnergyError> {
+        if !x.is_finite() {
+            return Err(EnergyError::NonFiniteInput);
+        }
+        let thd = x.motor_rate_rad_s;
+        let zd = x.body_velocity_mps;
+        let z = x.body_height_m;
+        let nut_abs_velocity = zd - self.r * thd; // nut velocity over ground, m/s
+        let f = x.spring_force_n.max(0.0);
+        let e = self.half_j * thd * thd
+            + self.half_m_body * zd * zd
+            + self.half_m_nut * nut_abs_velocity * nut_abs_velocity
+            + self.m_body_g * z
+            + self.m_nut_g * (z - x.nut_position_m)
+            + self.half_inv_k * f * f
+            + self.unsprung_j(x);
+        finite(e)
+    }
+
+    /// Body energy of [`body_energy_j`], J.
+    #[inline]
+    pub fn body_j(&self, x: &EnergyInput) -> Result<f32, EnergyError> {
+        if !x.is_finite() {
+            return Err(EnergyError::NonFiniteInput);
+        }
+        let zd = x.body_velocity_mps;
+        let f = x.spring_force_n.max(0.0);
+        let e = (self.half_m_body + self.half_m_nut) * zd * zd
+            + (self.m_body_g + self.m_nut_g) * x.body_height_m
+            + self.half_inv_k * f * f
+            + self.unsprung_j(x);
+        finite(e)
+    }
+
+    /// Unsprung-mass terms in flight: `0.5 m_u zd^2 + m_u g (z - l0)`, J.
+    #[inline(always)]
+    fn unsprung_j(&self, x: &EnergyInput) -> f32 {
+        match x.phase {
+            Phase::Flight => {
+                self.half_m_unsprung * x.body_velocity_mps * x.body_velocity_mps
+                    + self.m_unsprung_g * (x.body_height_m - self.leg_length_m)
+            }
+            Phase::Stance => 0.0,
+        }
+    }
 }
 
 /// Energy of the vertical (body) motion only, J: the body and nut treated as
@@ -129,16 +198,7 @@ pub fn total_energy_j(m: &ModelParams, x: &EnergyInput) -> Result<f32, EnergyErr
 /// energy stored by the actuator and still in the spring at liftoff is lost
 /// (the leg's extension stop takes it); that is the caller's margin.
 pub fn body_energy_j(m: &ModelParams, x: &EnergyInput) -> Result<f32, EnergyError> {
-    if !x.is_finite() {
-        return Err(EnergyError::NonFiniteInput);
-    }
-    let m_sprung = m.body_mass_kg + m.nut_mass_kg;
-    let zd = x.body_velocity_mps;
-    let e = 0.5 * m_sprung * zd * zd
-        + m_sprung * m.gravity_mps2 * x.body_height_m
-        + spring_energy_j(x.spring_force_n, m.spring_stiffness_n_per_m)?
-        + unsprung_terms_j(m, x);
-    finite(e)
+    EnergyModel::new(m)?.body_j(x)
 }
 
 #[cfg(test)]

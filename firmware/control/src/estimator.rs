@@ -237,20 +237,21 @@ impl PhaseEstimator {
     /// takes precedence). A sample with a non-finite value or a non-positive
     /// `dt_s` is ignored entirely (counted in [`rejected_samples`](Self::rejected_samples)).
     pub fn update(&mut self, m: &PhaseInput, dt_s: f32) -> Option<PhaseEvent> {
-        let finite = m.body_height_m.is_finite()
-            && m.motor_angle_rad.is_finite()
-            && m.spring_force_n.is_finite()
-            && m.leg_compression_m.is_finite();
-        if !(finite && dt_s > 0.0 && dt_s.is_finite()) {
+        // One sum, one test: NaN and infinities propagate (finite values whose
+        // sum overflows are rejected too, the safe side).
+        let finite =
+            (m.body_height_m + m.motor_angle_rad + m.spring_force_n + m.leg_compression_m + dt_s)
+                .is_finite();
+        if !(finite && dt_s > 0.0) {
             self.rejected_samples = self.rejected_samples.saturating_add(1);
             return None;
         }
         // Update both filters or neither (each leaves its state unchanged on error).
         let mut body = self.body_filter;
         let mut motor = self.motor_filter;
-        let (Ok(body_v), Ok(_)) = (
-            body.update(m.body_height_m, dt_s),
-            motor.update(m.motor_angle_rad, dt_s),
+        let (Some(body_v), Some(_)) = (
+            body.advance(m.body_height_m, dt_s),
+            motor.advance(m.motor_angle_rad, dt_s),
         ) else {
             self.rejected_samples = self.rejected_samples.saturating_add(1);
             return None;

@@ -92,21 +92,30 @@ impl FilteredDerivative {
         if !(dt_s > 0.0 && dt_s.is_finite()) {
             return Err(FilterError::NonPositivePeriod);
         }
+        self.advance(sample, dt_s).ok_or(FilterError::Overflow)
+    }
+
+    /// [`update`](Self::update) for a caller that has already checked that
+    /// `sample` is finite and `dt_s` finite and positive (the phase
+    /// estimator checks all its inputs at once). `None` on overflow, with
+    /// the state unchanged.
+    #[inline(always)]
+    pub(crate) fn advance(&mut self, sample: f32, dt_s: f32) -> Option<f32> {
         let Some(last) = self.last_sample else {
             self.last_sample = Some(sample);
             self.rate_per_s = 0.0;
-            return Ok(0.0);
+            return Some(0.0);
         };
         // dt_s > 0 and finite, both samples finite: the quotient is finite or
         // +-inf (never NaN); the weighted sum is checked before it is stored.
         let difference_rate = (sample - last) / dt_s;
         let rate = self.gain * self.rate_per_s + (1.0 - self.gain) * difference_rate;
         if !rate.is_finite() {
-            return Err(FilterError::Overflow);
+            return None;
         }
         self.last_sample = Some(sample);
         self.rate_per_s = rate;
-        Ok(rate)
+        Some(rate)
     }
 }
 

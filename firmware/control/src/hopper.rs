@@ -17,8 +17,8 @@
 //! [`Hopper::run_period`] wraps it around a [`HopperIo`]: read, step, write the
 //! DAC, set the enable, and latch a fault if the I/O itself fails.
 
-use crate::calibration::{CalError, Calibration, Converter, Measurements};
-use crate::energy::{body_energy_j, total_energy_j, EnergyInput};
+use crate::calibration::{CalError, Calibration, Converter, DacMap, Measurements};
+use crate::energy::{EnergyInput, EnergyModel};
 use crate::estimator::{
     EstimatorConfig, EstimatorError, Phase, PhaseEstimator, PhaseEvent, PhaseInput,
 };
@@ -260,9 +260,15 @@ pub struct StepOutput {
 pub struct Hopper {
     cfg: HopperConfig,
     converter: Converter,
+    dac: DacMap,
+    energy: EnergyModel,
     estimator: PhaseEstimator,
     stance: StanceController,
     actuator: Actuator,
+    /// The flight PD and the energy law with their constants worked out once
+    /// (`None`: the configuration makes the generic law refuse, 0 A).
+    flight_fast: Option<flight_pd::Prepared>,
+    energy_fast: Option<energy_torque::Prepared>,
     supervisor: Supervisor,
     ledger: HopLedgerBuilder,
     desired_energy_j: f32,
@@ -307,9 +313,22 @@ impl Hopper {
             Strategy::EnergyApex(a) => StanceLaw::EnergyTorque(a.law),
             Strategy::Passive => StanceLaw::default(),
         };
+        let energy_law = match cfg.strategy {
+            Strategy::EnergyApex(a) => Some(a.law),
+            Strategy::Thesis(StanceLaw::EnergyTorque(c)) => Some(c),
+            _ => None,
+        };
         Ok(Self {
+            flight_fast: flight_pd::Prepared::new(&cfg.flight, &actuator),
+            energy_fast: energy_law.and_then(|c| energy_torque::Prepared::new(&c, &actuator)),
             cfg,
             converter,
+            dac: DacMap::new(&cfg.calibration),
+            energy: EnergyModel::new(&cfg.model).map_err(|_| {
+                ConfigError::Model(ModelError::OutOfRange(
+                    crate::model::ModelField::SpringStiffness,
+                ))
+            })?,
             estimator,
             stance: StanceController::new(law, actuator),
             actuator,
@@ -412,7 +431,7 @@ impl Hopper {
             spring_force_n: m.spring_force_n,
             phase,
         };
-        let energy_j = total_energy_j(&self.cfg.model, &e_in).unwrap_or(f32::NAN);
+        let energy_j = self.energy.total_j(&e_in).unwrap_or(f32::NAN);
         let hop = self.on_event(event, energy_j);
         mark(StepPart::Energy);
 
@@ -427,9 +446,9 @@ impl Hopper {
             self.supervisor.report(Fault::SensorNonFinite);
             command = Command::SAFE;
         }
-        let cal = self.converter.calibration();
-        let dac_code = cal.current_to_dac_code(command.current_a);
+        let dac_code = self.dac.code(command.current_a);
         mark(StepPart::Supervise);
+        let cal = self.converter.calibration();
         self.ledger.step(
             dt_s,
             command.current_a,
@@ -477,7 +496,7 @@ impl Hopper {
             // The enable pin failed: we cannot know the amplifier's state, so
             // make sure the command is zero and ask for "off" once more.
             self.supervisor.report(Fault::AmpFault);
-            let zero = self.converter.calibration().current_to_dac_code(0.0);
+            let zero = self.dac.code(0.0);
             let _ = io.write_dac(zero);
             let _ = io.set_amp_enabled(false);
             out.command = Command::SAFE;
@@ -490,7 +509,7 @@ impl Hopper {
 
     fn safe_output(&mut self, fault: Fault) -> StepOutput {
         self.supervisor.report(fault);
-        let dac_code = self.converter.calibration().current_to_dac_code(0.0);
+        let dac_code = self.dac.code(0.0);
         let faults = self.supervisor.faults();
         let phase = self.estimator.phase();
         StepOutput {
@@ -598,12 +617,10 @@ impl Hopper {
                     return self.stance_current_a(m, e_in, energy_j, nut_velocity_mps);
                 }
             }
-            return or_zero(flight_pd::command(
-                &self.cfg.flight,
-                &self.actuator,
-                m.motor_angle_rad,
-                v.motor_rad_s,
-            ));
+            return match &self.flight_fast {
+                Some(pd) => pd.current_a(m.motor_angle_rad, v.motor_rad_s),
+                None => 0.0,
+            };
         }
         self.stance_current_a(m, e_in, energy_j, nut_velocity_mps)
     }
@@ -620,7 +637,7 @@ impl Hopper {
             Strategy::EnergyApex(a) => {
                 let e = match a.measure {
                     EnergyMeasure::Total => energy_j,
-                    EnergyMeasure::Body => body_energy_j(&self.cfg.model, e_in).unwrap_or(f32::NAN),
+                    EnergyMeasure::Body => self.energy.body_j(e_in).unwrap_or(f32::NAN),
                 };
                 (
                     e,
@@ -629,6 +646,9 @@ impl Hopper {
             }
             _ => (energy_j, self.desired_energy_j),
         };
+        if let Some(law) = &self.energy_fast {
+            return law.current_a(fed_back_j, desired_j);
+        }
         or_zero(self.stance.command(&StanceInput {
             energy_j: fed_back_j,
             desired_energy_j: desired_j,

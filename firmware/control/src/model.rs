@@ -154,6 +154,7 @@ impl ModelParams {
     }
 
     /// Screw transmission ratio `r = lead / (2 pi)`, m/rad (`p = r theta`). Design: 7.96e-4.
+    #[inline(always)]
     pub fn screw_m_per_rad(&self) -> f32 {
         self.screw_lead_m / (2.0 * PI)
     }

@@ -38,6 +38,57 @@ pub fn command(c: &Config, act: &Actuator, x: &StanceInput) -> Result<f32, LawEr
     act.torque_to_current(torque_nm(c, x.energy_j, x.desired_energy_j)?)
 }
 
+/// [`command`] with its constants checked once, for the control step.
+/// Gives exactly [`command`]'s current for finite energies, and 0 A for
+/// non-finite ones (like `or_zero(command(..))`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Prepared {
+    gain_nm_per_j: f32,
+    allow_negative: bool,
+    torque_constant_nm_per_a: f32,
+    limit_a: f32,
+}
+
+impl Prepared {
+    /// `None` when [`command`] would refuse every input (non-finite gain,
+    /// unusable torque constant).
+    pub fn new(c: &Config, act: &Actuator) -> Option<Self> {
+        let kt = act.torque_constant_nm_per_a;
+        if !(c.gain_nm_per_j.is_finite() && kt > 0.0 && kt.is_finite()) {
+            return None;
+        }
+        let limit_a = if act.current_limit_a.is_finite() {
+            act.current_limit_a.max(0.0)
+        } else {
+            0.0
+        };
+        Some(Prepared {
+            gain_nm_per_j: c.gain_nm_per_j,
+            allow_negative: c.allow_negative,
+            torque_constant_nm_per_a: kt,
+            limit_a,
+        })
+    }
+
+    /// Current command, A (see [`command`]).
+    #[inline]
+    pub fn current_a(&self, energy_j: f32, desired_energy_j: f32) -> f32 {
+        let tau = -self.gain_nm_per_j * (energy_j - desired_energy_j);
+        if !tau.is_finite() {
+            return 0.0;
+        }
+        let tau = if self.allow_negative {
+            tau
+        } else {
+            tau.max(0.0)
+        };
+        (tau / self.torque_constant_nm_per_a)
+            .max(-self.limit_a)
+            .min(self.limit_a)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::super::test_util::{close, input};
@@ -62,5 +113,20 @@ mod tests {
         x.energy_j = f32::INFINITY;
         assert_eq!(command(&c, &act, &x), Err(LawError::NonFiniteInput));
         Ok(())
+    }
+
+    proptest::proptest! {
+        #[test]
+        fn prepared_equals_command(
+            e in 0.0f32..200.0, ed in 0.0f32..200.0, k in 0.0f32..10.0, neg in proptest::bool::ANY,
+        ) {
+            let c = Config { gain_nm_per_j: k, allow_negative: neg };
+            let act = Actuator::default();
+            let mut x = input();
+            x.energy_j = e;
+            x.desired_energy_j = ed;
+            let fast = Prepared::new(&c, &act).map(|p| p.current_a(e, ed));
+            proptest::prop_assert_eq!(fast, Some(super::super::or_zero(command(&c, &act, &x))));
+        }
     }
 }

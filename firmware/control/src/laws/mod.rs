@@ -115,8 +115,13 @@ impl Default for Actuator {
 }
 
 /// `Ok(())` if every value is finite.
+///
+/// One addition per value and one test: the sum is non-finite if any value
+/// is NaN or infinite. Finite values so large that their sum overflows are
+/// refused too, which is the safe side (the caller commands 0 A).
+#[inline(always)]
 pub(crate) fn check_finite(values: &[f32]) -> Result<(), LawError> {
-    if values.iter().all(|v| v.is_finite()) {
+    if values.iter().fold(0.0_f32, |acc, v| acc + v).is_finite() {
         Ok(())
     } else {
         Err(LawError::NonFiniteInput)
