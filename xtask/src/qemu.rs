@@ -42,10 +42,8 @@ const HOST_SCENARIO: [&str; 12] = [
 /// and the runs drift apart by a few hundredths of a millimetre.
 const GOLDEN_TOLERANCE_M: f64 = 5e-4;
 
-/// Mean control-step instructions allowed. Issue 4's target is 600; the
-/// step is at about 1,100 today, so the check holds it below 1,200 until
-/// the optimisation lands (see the summary printed by `cargo xtask qemu`).
-const STEP_MEAN_BUDGET: u64 = 1_200;
+/// Mean control-step instructions allowed (issue 4's target).
+const STEP_MEAN_BUDGET: u64 = 600;
 /// Hard ceiling per step: 10% of a 168 MHz core at 10 kHz.
 const STEP_MAX_CEILING: u64 = 1_680;
 

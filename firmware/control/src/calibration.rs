@@ -294,8 +294,9 @@ impl DacMap {
         let x = (self.zero_f + i * self.codes_per_amp)
             .max(0.0)
             .min(self.max_f);
-        // 0 <= x <= 65535: truncating x + 0.5 rounds to nearest, exactly.
-        (x + 0.5) as u16
+        // 0 <= x <= 65535: truncating x + 0.5 rounds to nearest, exactly, and
+        // the result fits u16 (going through u32 saves the u16 saturation).
+        (x + 0.5) as u32 as u16
     }
 }
 

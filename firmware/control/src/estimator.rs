@@ -239,25 +239,35 @@ impl PhaseEstimator {
     pub fn update(&mut self, m: &PhaseInput, dt_s: f32) -> Option<PhaseEvent> {
         // One sum, one test: NaN and infinities propagate (finite values whose
         // sum overflows are rejected too, the safe side).
-        let finite =
-            (m.body_height_m + m.motor_angle_rad + m.spring_force_n + m.leg_compression_m + dt_s)
-                .is_finite();
-        if !(finite && dt_s > 0.0) {
+        let finite = (m.body_height_m + m.motor_angle_rad + m.spring_force_n + m.leg_compression_m)
+            .is_finite();
+        if !finite {
             self.rejected_samples = self.rejected_samples.saturating_add(1);
             return None;
         }
-        // Update both filters or neither (each leaves its state unchanged on error).
-        let mut body = self.body_filter;
-        let mut motor = self.motor_filter;
-        let (Some(body_v), Some(_)) = (
-            body.advance(m.body_height_m, dt_s),
-            motor.advance(m.motor_angle_rad, dt_s),
+        self.update_of_finite(m, dt_s)
+    }
+
+    /// [`update`](Self::update) for a sample the caller knows to be finite
+    /// (the control step's converter returns finite values only); `dt_s` is
+    /// still checked.
+    #[inline(always)]
+    pub(crate) fn update_of_finite(&mut self, m: &PhaseInput, dt_s: f32) -> Option<PhaseEvent> {
+        // NaN fails `dt_s > 0.0`; +inf fails `dt_s < f32::INFINITY`.
+        if !(dt_s > 0.0 && dt_s < f32::INFINITY) {
+            self.rejected_samples = self.rejected_samples.saturating_add(1);
+            return None;
+        }
+        // Update both filters or neither.
+        let (Some(body_v), Some(motor_v)) = (
+            self.body_filter.peek(m.body_height_m, dt_s),
+            self.motor_filter.peek(m.motor_angle_rad, dt_s),
         ) else {
             self.rejected_samples = self.rejected_samples.saturating_add(1);
             return None;
         };
-        self.body_filter = body;
-        self.motor_filter = motor;
+        self.body_filter.commit(m.body_height_m, body_v);
+        self.motor_filter.commit(m.motor_angle_rad, motor_v);
 
         let nut_m = self.screw_m_per_rad * m.motor_angle_rad;
         let excess_n = m.spring_force_n - self.stiffness_n_per_m * (self.preload_m + nut_m);

@@ -101,21 +101,30 @@ impl FilteredDerivative {
     /// the state unchanged.
     #[inline(always)]
     pub(crate) fn advance(&mut self, sample: f32, dt_s: f32) -> Option<f32> {
+        let rate = self.peek(sample, dt_s)?;
+        self.commit(sample, rate);
+        Some(rate)
+    }
+
+    /// The output `sample` would give, without changing the state: `None` on
+    /// overflow. Inputs checked by the caller as for [`advance`](Self::advance).
+    #[inline(always)]
+    pub(crate) fn peek(&self, sample: f32, dt_s: f32) -> Option<f32> {
         let Some(last) = self.last_sample else {
-            self.last_sample = Some(sample);
-            self.rate_per_s = 0.0;
             return Some(0.0);
         };
         // dt_s > 0 and finite, both samples finite: the quotient is finite or
         // +-inf (never NaN); the weighted sum is checked before it is stored.
         let difference_rate = (sample - last) / dt_s;
         let rate = self.gain * self.rate_per_s + (1.0 - self.gain) * difference_rate;
-        if !rate.is_finite() {
-            return None;
-        }
+        rate.is_finite().then_some(rate)
+    }
+
+    /// Stores `sample` and the `rate` [`peek`](Self::peek) gave for it.
+    #[inline(always)]
+    pub(crate) fn commit(&mut self, sample: f32, rate: f32) {
         self.last_sample = Some(sample);
         self.rate_per_s = rate;
-        Some(rate)
     }
 }
 

@@ -410,7 +410,8 @@ impl Hopper {
             None => return self.safe_output(Fault::SensorRange),
         };
         mark(StepPart::Convert);
-        let event = self.estimator.update(
+        // The converter returns finite values only.
+        let event = self.estimator.update_of_finite(
             &PhaseInput {
                 body_height_m: m.body_height_m,
                 motor_angle_rad: m.motor_angle_rad,
@@ -431,8 +432,15 @@ impl Hopper {
             spring_force_n: m.spring_force_n,
             phase,
         };
-        let energy_j = self.energy.total_j(&e_in).unwrap_or(f32::NAN);
-        let hop = self.on_event(event, energy_j);
+        // The converter returns finite values only and the filters keep finite
+        // velocities, so the input check of `total_j` can be skipped.
+        let energy_j = self.energy.total_j_of_finite(&e_in).unwrap_or(f32::NAN);
+        // Events come a few times per hop (every ~700th period): keep their
+        // bookkeeping out of line.
+        let hop = match event {
+            Some(e) => self.on_event(e, energy_j),
+            None => None,
+        };
         mark(StepPart::Energy);
 
         let requested_a = self.law_current_a(&m, &e_in, energy_j, nut_velocity_mps, phase);
@@ -536,8 +544,10 @@ impl Hopper {
     }
 
     /// Ledger and per-hop bookkeeping for an estimator event.
-    fn on_event(&mut self, event: Option<PhaseEvent>, energy_j: f32) -> Option<HopLedger> {
-        match event? {
+    #[inline(never)]
+    #[cold]
+    fn on_event(&mut self, event: PhaseEvent, energy_j: f32) -> Option<HopLedger> {
+        match event {
             PhaseEvent::Touchdown => {
                 self.stance.on_touchdown();
                 self.after_bottom = false;
@@ -585,6 +595,7 @@ impl Hopper {
     }
 
     /// The laws' request, A (before the supervisor).
+    #[inline]
     fn law_current_a(
         &mut self,
         m: &Measurements,
@@ -593,25 +604,24 @@ impl Hopper {
         nut_velocity_mps: f32,
         phase: Phase,
     ) -> f32 {
-        let strategy = self.cfg.strategy;
-        if let Strategy::Passive = strategy {
+        if let Strategy::Passive = self.cfg.strategy {
             return 0.0;
         }
         if phase == Phase::Flight {
-            if let Strategy::Thesis(StanceLaw::ModifiedTorque(c)) = strategy {
+            if let Strategy::Thesis(StanceLaw::ModifiedTorque(c)) = &self.cfg.strategy {
                 let toe_m = m.body_height_m - self.cfg.model.leg_length_m;
                 let v = self.estimator.velocities();
                 if modified_torque::flight_active(
-                    &c,
+                    c,
                     toe_m,
                     v.body_mps,
                     self.estimator.last_apex_m(),
                 ) {
-                    return or_zero(modified_torque::command(&c, &self.actuator));
+                    return or_zero(modified_torque::command(c, &self.actuator));
                 }
             }
             let v = self.estimator.velocities();
-            if let Strategy::EnergyApex(a) = strategy {
+            if let Strategy::EnergyApex(a) = &self.cfg.strategy {
                 let toe_m = m.body_height_m - self.cfg.model.leg_length_m;
                 if v.body_mps < 0.0 && toe_m < a.spin_up_fraction * self.cfg.target_apex_m {
                     return self.stance_current_a(m, e_in, energy_j, nut_velocity_mps);

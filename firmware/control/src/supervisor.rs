@@ -144,6 +144,7 @@ pub struct SupervisorInput {
 impl SupervisorInput {
     /// Builds the input from a converted sample plus the filtered velocities
     /// (e.g. from [`crate::filter::FilteredDerivative`]).
+    #[inline(always)]
     pub fn from_measurements(
         m: &crate::calibration::Measurements,
         nut_velocity_mps: f32,
@@ -510,7 +511,7 @@ impl Supervisor {
     /// the full path whenever it returns `Some` (unit-tested), at about a
     /// third of its cost on the M4F.
     #[inline(always)]
-    fn fast_path(&mut self, input: &SupervisorInput, requested_current_a: f32) -> Option<Command> {
+    fn fast_path(&mut self, input: SupervisorInput, requested_current_a: f32) -> Option<Command> {
         let c = &self.config;
         let f = &self.fast;
         if !f.usable {
@@ -547,7 +548,7 @@ impl Supervisor {
         {
             return None;
         }
-        if self.contact_disagrees(input) {
+        if self.contact_disagrees(&input) {
             return None;
         }
         self.disagree_periods = 0;
@@ -561,7 +562,7 @@ impl Supervisor {
     /// [`check`](Self::check) on a converted sample and the filtered
     /// velocities, without building a [`SupervisorInput`] in the common case
     /// (what the control step calls).
-    #[inline]
+    #[inline(always)]
     pub fn check_measurements(
         &mut self,
         m: &crate::calibration::Measurements,
@@ -570,13 +571,20 @@ impl Supervisor {
         body_velocity_mps: f32,
         requested_current_a: f32,
     ) -> Command {
+        // Built by value and used by value on the fast path, so the compiler
+        // keeps it in registers; only the cold full path needs it in memory.
         let input = SupervisorInput::from_measurements(
             m,
             nut_velocity_mps,
             motor_speed_rad_s,
             body_velocity_mps,
         );
-        self.check(&input, requested_current_a)
+        if self.latched.is_empty() {
+            if let Some(command) = self.fast_path(input, requested_current_a) {
+                return command;
+            }
+        }
+        self.check_full(&input, requested_current_a)
     }
 
     /// Checks one period's input and request; returns the command for the amplifier.
@@ -589,12 +597,22 @@ impl Supervisor {
     ///
     /// Contact disagreement must persist `contact_disagree_periods`
     /// consecutive calls before it latches.
+    #[inline]
     pub fn check(&mut self, input: &SupervisorInput, requested_current_a: f32) -> Command {
         if self.latched.is_empty() {
-            if let Some(command) = self.fast_path(input, requested_current_a) {
+            if let Some(command) = self.fast_path(*input, requested_current_a) {
                 return command;
             }
         }
+        self.check_full(input, requested_current_a)
+    }
+
+    /// The full checks of [`check`](Self::check), out of line: they run only
+    /// when something is off, and keeping them out of the every-period path
+    /// keeps that path's register spills and stack frame small.
+    #[inline(never)]
+    #[cold]
+    fn check_full(&mut self, input: &SupervisorInput, requested_current_a: f32) -> Command {
         let mut new = self.input_faults(input);
         if self.contact_disagrees(input) {
             self.disagree_periods = self.disagree_periods.saturating_add(1);
