@@ -237,12 +237,14 @@ impl Controller for FirmwareController {
             self.hopper.run_period(&mut io, self.dt_s as f32)
         };
         let new = out.faults.0 & !before.0;
-        for f in Fault::ALL {
-            if new & f.bit() != 0 {
-                self.faults.push(FaultRecord {
-                    name: f.name(),
-                    time_s: plant.time_s(),
-                });
+        if new != 0 {
+            for f in Fault::ALL {
+                if new & f.bit() != 0 {
+                    self.faults.push(FaultRecord {
+                        name: f.name(),
+                        time_s: plant.time_s(),
+                    });
+                }
             }
         }
         if let Some(h) = out.hop {

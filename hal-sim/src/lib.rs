@@ -18,11 +18,17 @@ pub mod sensors;
 #[cfg(feature = "std")]
 pub mod controller;
 #[cfg(feature = "std")]
+pub mod figures;
+#[cfg(feature = "std")]
 pub mod params_toml;
 #[cfg(feature = "std")]
 pub mod plot;
 #[cfg(feature = "std")]
 pub mod run;
+#[cfg(feature = "std")]
+pub mod scenario;
+#[cfg(feature = "std")]
+pub mod sweep;
 
 pub use params::{ParamError, Params};
 pub use plant::{Event, Ledger, Mode, NutStop, Plant, PlantError, State};

@@ -14,7 +14,7 @@
 
 use crate::params::Params;
 use crate::plant::{Mode, Plant};
-use crate::sensors::{AdcChannel, Amplifier, Encoder, Noise};
+use crate::sensors::{AdcChannel, Amplifier, Encoder, LagFactor, Noise};
 use hopper_control::calibration::Calibration;
 use hopper_control::hal::{HopperIo, IoError, RawSample};
 use hopper_control::hopper::{HopperConfig, Strategy};
@@ -130,6 +130,7 @@ pub struct SimHal {
     pot: AdcChannel,
     noise: Noise,
     amp: Amplifier,
+    amp_lag: LagFactor,
     amp_enabled: bool,
     dac_code: u16,
     /// Injected I/O faults.
@@ -182,6 +183,7 @@ impl SimHal {
                 tau_s: cfg.amp_tau_s,
                 current_a: 0.0,
             },
+            amp_lag: LagFactor::default(),
             amp_enabled: false,
             dac_code: cal.dac_zero_code,
             faults: IoFaults::default(),
@@ -247,7 +249,7 @@ impl SimHal {
     /// motor current over it, A (what to hand to [`Plant::advance`]).
     pub fn mean_current_a(&mut self, dt_s: f64) -> f64 {
         let cmd = self.commanded_current_a();
-        self.amp.follow(cmd, dt_s)
+        self.amp.follow_cached(cmd, dt_s, &mut self.amp_lag)
     }
 }
 

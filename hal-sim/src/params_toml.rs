@@ -72,14 +72,33 @@ pub fn from_toml_str(text: &str, origin: &str) -> Result<Params, ParamsFileError
         toml::from_str(text).map_err(|e| err(None, format!("malformed TOML: {}", e.message())))?;
     let line_for = |key: &str| spanned.get(key).map(|v| line_of(text, v.span().start));
 
-    let table = table.into_inner();
+    params_from_table(&table.into_inner(), origin, "", &line_for)
+}
+
+/// Build a parameter set from a parsed TOML table with the rules of a
+/// parameter file (`base`, no unknown keys, numbers in range, every field
+/// without `base`). `section` prefixes key names in messages (`"plant."` for
+/// a table inside a scenario file); `line_for` gives a key's line in the file.
+pub fn params_from_table(
+    table: &toml::Table,
+    origin: &str,
+    section: &str,
+    line_for: &dyn Fn(&str) -> Option<usize>,
+) -> Result<Params, ParamsFileError> {
+    let err = |line: Option<usize>, message: String| ParamsFileError {
+        location: match line {
+            Some(l) => format!("{origin}:{l}"),
+            None => origin.to_string(),
+        },
+        message,
+    };
     let params = match table.get("base") {
         None => None,
         Some(toml::Value::String(name)) => Some(Params::preset(name).ok_or_else(|| {
             err(
                 line_for("base"),
                 format!(
-                    "unknown preset `base = \"{name}\"`: expected one of {:?}",
+                    "unknown preset `{section}base = \"{name}\"`: expected one of {:?}",
                     Params::PRESET_NAMES
                 ),
             )
@@ -87,7 +106,7 @@ pub fn from_toml_str(text: &str, origin: &str) -> Result<Params, ParamsFileError
         Some(other) => {
             return Err(err(
                 line_for("base"),
-                format!("`base` must be a preset name string, got {other}"),
+                format!("`{section}base` must be a preset name string, got {other}"),
             ))
         }
     };
@@ -101,7 +120,7 @@ pub fn from_toml_str(text: &str, origin: &str) -> Result<Params, ParamsFileError
         let spec = field(key).ok_or_else(|| {
             err(
                 line_for(key),
-                format!("unknown parameter `{key}` (see `hopper-sim params show design` for the fields)"),
+                format!("unknown parameter `{section}{key}` (see `hopper-sim params show design` for the fields)"),
             )
         })?;
         let v = match value {
@@ -111,7 +130,7 @@ pub fn from_toml_str(text: &str, origin: &str) -> Result<Params, ParamsFileError
                 return Err(err(
                     line_for(key),
                     format!(
-                        "parameter `{key}` must be a number in {}, got {other}",
+                        "parameter `{section}{key}` must be a number in {}, got {other}",
                         spec.unit
                     ),
                 ))
@@ -121,7 +140,7 @@ pub fn from_toml_str(text: &str, origin: &str) -> Result<Params, ParamsFileError
             return Err(err(
                 line_for(key),
                 format!(
-                    "parameter `{key}` = {v} is out of range: allowed {} ..= {} {}",
+                    "parameter `{section}{key}` = {v} is out of range: allowed {} ..= {} {}",
                     spec.min, spec.max, spec.unit
                 ),
             ));
@@ -134,14 +153,21 @@ pub fn from_toml_str(text: &str, origin: &str) -> Result<Params, ParamsFileError
             return Err(err(
                 None,
                 format!(
-                    "missing parameter `{}` [{}] (give every field, or start from a preset with `base = \"design\"`)",
+                    "missing parameter `{section}{}` [{}] (give every field, or start from a preset with `base = \"design\"`)",
                     missing.name, missing.unit
                 ),
             ));
         }
     }
-    p.validate()
-        .map_err(|e| err(line_for(e.field), e.to_string()))?;
+    p.validate().map_err(|e| {
+        let table = section.trim_end_matches('.');
+        let within = if table.is_empty() {
+            String::new()
+        } else {
+            format!(" (in table `{table}`)")
+        };
+        err(line_for(e.field), format!("{e}{within}"))
+    })?;
     Ok(p)
 }
 

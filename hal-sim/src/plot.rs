@@ -17,7 +17,7 @@ const FONT_CANDIDATES: [&str; 4] = [
 
 /// Load a system font once and register it as "sans-serif" for plotters'
 /// pure-Rust text renderer (no fontconfig needed at build time).
-fn ensure_font() -> Result<(), String> {
+pub(crate) fn ensure_font() -> Result<(), String> {
     static FONT: OnceLock<Result<(), String>> = OnceLock::new();
     FONT.get_or_init(|| {
         let env = std::env::var("HOPPER_SIM_FONT").ok();

@@ -186,6 +186,11 @@ pub struct Summary {
     pub estimated_events: Option<EstimatorEvents>,
     /// The firmware's per-hop ledger, one entry per completed hop.
     pub firmware_hops: Vec<FirmwareHop>,
+    /// Motor work (plant ledger) from the first touchdown to the first
+    /// liftoff: the energy the motor adds in the first stance, the quantity
+    /// of the thesis's ball-screw lead study (Figures 3.1-3.3), J. Null if
+    /// the run has no complete stance.
+    pub first_stance_motor_work_j: Option<f64>,
 }
 
 /// One hop of the firmware's ledger ([`HopLedger`]), from its own estimates.
@@ -272,14 +277,36 @@ pub fn run_with_progress(
         samples.push(Sample::of(&plant));
     }
     let report_every = ((0.1 / cfg.control_dt_s).round() as u64).max(1);
+    // Motor work at the first touchdown, then over the first stance.
+    let mut first_touchdown_work_j: Option<f64> = None;
+    let mut first_stance_work_j: Option<f64> = None;
     for k in 1..=steps {
         if k % report_every == 0 {
             progress(k, steps);
         }
         let cmd = controller.current_command_a(&plant);
+        let (t0_s, w0_j, n_events) = (plant.time_s(), plant.ledger().motor_work_j, events.len());
         plant
             .advance(cfg.control_dt_s, cmd, &mut |e| events.push(e))
             .map_err(|e: PlantError| format!("simulation failed: {e}"))?;
+        if first_stance_work_j.is_none() && events.len() > n_events {
+            // Events fire inside the period, where the ledger cannot be read:
+            // interpolate the work linearly in time (the current is constant
+            // over the period, so the error is a fraction of one period's work).
+            let (t1_s, w1_j) = (plant.time_s(), plant.ledger().motor_work_j);
+            let work_at = |t_s: f64| w0_j + (w1_j - w0_j) * (t_s - t0_s) / (t1_s - t0_s);
+            for e in &events[n_events..] {
+                match (*e, first_touchdown_work_j) {
+                    (Event::Touchdown { t_s, .. }, None) => {
+                        first_touchdown_work_j = Some(work_at(t_s));
+                    }
+                    (Event::Liftoff { t_s, .. }, Some(w_td)) => {
+                        first_stance_work_j.get_or_insert(work_at(t_s) - w_td);
+                    }
+                    _ => {}
+                }
+            }
+        }
         max_residual = max_residual.max(plant.energy_residual_j().abs());
         peak_speed = peak_speed.max(plant.motor_speed_rad_s().abs());
         peak_stroke = peak_stroke.max(plant.state().p_m);
@@ -319,6 +346,7 @@ pub fn run_with_progress(
                     .into_iter()
                     .map(FirmwareHop::from)
                     .collect(),
+                first_stance_motor_work_j: first_stance_work_j,
                 ..summary
             }
         },
@@ -391,6 +419,7 @@ fn summarize(
         first_fault_s: None,
         estimated_events: None,
         firmware_hops: Vec::new(),
+        first_stance_motor_work_j: None,
     }
 }
 

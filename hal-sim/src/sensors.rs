@@ -50,9 +50,8 @@ impl Encoder {
     /// The counter value for a true position: quantised down to whole counts
     /// (as an edge counter does) and wrapped to the counter width.
     pub fn counter(&self, value: f64) -> u32 {
-        let counts = libm::floor(value * self.counts_per_unit);
         // Positions of this machine stay far inside i64; wrap like hardware.
-        let c = counts as i64;
+        let c = floor_to_i64(value * self.counts_per_unit);
         let mask: u64 = if self.bits >= 32 {
             u32::MAX as u64
         } else {
@@ -60,6 +59,36 @@ impl Encoder {
         };
         ((c as u64) & mask) as u32
     }
+}
+
+/// `libm::floor(x) as i64`, without the software `floor` (the host's
+/// baseline x86-64 has no rounding instruction): truncate, then step down
+/// for negative non-integers. Same result for every `x`, NaN (0) and the
+/// saturated ends included.
+#[inline]
+fn floor_to_i64(x: f64) -> i64 {
+    let t = x as i64;
+    if (t as f64) > x {
+        t.saturating_sub(1)
+    } else {
+        t
+    }
+}
+
+/// `libm::round(x).clamp(0.0, max) as u16` for `max < 2^16` (NaN gives 0),
+/// without the software `round`: clamp first (rounding is monotonic and
+/// the bounds are whole numbers), then round half away from zero by
+/// truncating and looking at the (exactly computed) fraction.
+#[inline]
+fn round_clamped_u16(x: f64, max: u16) -> u16 {
+    if x.is_nan() {
+        return 0;
+    }
+    let x = x.clamp(0.0, f64::from(max));
+    let t = x as u16; // x >= 0: truncation is floor
+                      // Branch-free: with noise the fraction is random, a branch would be
+                      // mispredicted half the time.
+    t + u16::from(x - f64::from(t) >= 0.5)
 }
 
 /// An ADC channel: `code = offset + value / gain + noise`, rounded and
@@ -86,11 +115,10 @@ impl AdcChannel {
     /// Convert a true value to a code, with noise drawn from `noise`.
     pub fn code(&self, value: f64, noise: &mut Noise) -> u16 {
         let v = value + noise.gaussian(self.noise_sigma);
-        let code = libm::round(self.offset_code + v / self.units_per_code);
-        if code.is_nan() {
-            return 0;
-        }
-        code.clamp(0.0, f64::from(self.full_scale())) as u16
+        round_clamped_u16(
+            self.offset_code + v / self.units_per_code,
+            self.full_scale(),
+        )
     }
 }
 
@@ -123,17 +151,48 @@ impl Amplifier {
     /// the same as with the continuous lag). Exact for a first-order lag
     /// with a held command.
     pub fn follow(&mut self, command_a: f64, dt_s: f64) -> f64 {
+        let mut lag = LagFactor::default();
+        self.follow_cached(command_a, dt_s, &mut lag)
+    }
+
+    /// [`Self::follow`], taking `exp(-dt/tau)` and the mean's factor from
+    /// `lag` when they were worked out for the same `dt_s` and time constant
+    /// (a fixed control period pays for the `exp` and the division once).
+    pub fn follow_cached(&mut self, command_a: f64, dt_s: f64, lag: &mut LagFactor) -> f64 {
         if self.tau_s <= 0.0 || dt_s <= 0.0 {
             self.current_a = command_a;
             return command_a;
         }
-        let x = dt_s / self.tau_s;
-        let decay = libm::exp(-x);
+        if !(lag.valid && lag.dt_s == dt_s && lag.tau_s == self.tau_s) {
+            let x = dt_s / self.tau_s;
+            let decay = libm::exp(-x);
+            *lag = LagFactor {
+                valid: true,
+                dt_s,
+                tau_s: self.tau_s,
+                mean_factor: (1.0 - decay) / x,
+                decay,
+            };
+        }
+        let (mean_factor, decay) = (lag.mean_factor, lag.decay);
         let i0 = self.current_a;
-        let mean = command_a + (i0 - command_a) * (1.0 - decay) / x;
+        // Mean of `command + (i0 - command) exp(-t/tau)` over the step.
+        let mean = command_a + (i0 - command_a) * mean_factor;
         self.current_a = command_a + (i0 - command_a) * decay;
         mean
     }
+}
+
+/// `dt / tau` and `exp(-dt / tau)` of an [`Amplifier`] step, kept between
+/// steps by [`Amplifier::follow_cached`].
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct LagFactor {
+    valid: bool,
+    dt_s: f64,
+    tau_s: f64,
+    /// `(1 - exp(-dt/tau)) / (dt/tau)`.
+    mean_factor: f64,
+    decay: f64,
 }
 
 #[cfg(test)]
@@ -169,6 +228,69 @@ mod tests {
             bits: 32,
         };
         assert_eq!(e32.counter(-1.0), u32::MAX);
+    }
+
+    #[test]
+    fn fast_floor_and_round_match_libm() {
+        let mut xs = std::vec![
+            0.0,
+            -0.0,
+            0.5,
+            -0.5,
+            1.5,
+            2.5,
+            -1.5,
+            0.49999999999999994,
+            4094.5,
+            4095.4,
+            4095.5,
+            1e300,
+            -1e300,
+            9.3e18,
+            -9.3e18,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::NAN,
+            f64::MIN_POSITIVE,
+            -f64::MIN_POSITIVE,
+        ];
+        let mut n = Noise::new(3, true);
+        for _ in 0..100_000 {
+            xs.push(n.gaussian(3000.0));
+            xs.push(2048.0 + n.gaussian(0.7));
+            let k = libm::round(n.gaussian(100.0));
+            xs.push(k + 0.5);
+            xs.push(k);
+        }
+        for &x in &xs {
+            assert_eq!(floor_to_i64(x), libm::floor(x) as i64, "floor {x}");
+            let r = libm::round(x);
+            let want = if r.is_nan() {
+                0
+            } else {
+                r.clamp(0.0, 4095.0) as u16
+            };
+            assert_eq!(round_clamped_u16(x, 4095), want, "round {x}");
+        }
+    }
+
+    #[test]
+    fn cached_amplifier_lag_is_the_same() {
+        let mut a = Amplifier {
+            dac_bits: 12,
+            zero_code: 2048,
+            amps_per_code: 0.02,
+            tau_s: 1.5e-4,
+            current_a: 0.0,
+        };
+        let mut b = a;
+        let mut lag = LagFactor::default();
+        for k in 0..1000 {
+            let cmd = f64::from(k % 37) - 18.0;
+            let dt = if k % 100 == 99 { 2e-4 } else { 1e-4 };
+            assert_eq!(a.follow(cmd, dt), b.follow_cached(cmd, dt, &mut lag));
+            assert_eq!(a.current_a, b.current_a);
+        }
     }
 
     #[test]

@@ -4,16 +4,20 @@
 //! hopper-sim run [--params design|identified|PATH.toml] [--controller NAME]
 //!                [--target-apex M] [--torque NM] [--noise off|default] [--seed N]
 //!                [--start-apex M] [--duration S] [--out DIR] [--json]
+//!                [--scenario FILE]   (flags override the file)
+//! hopper-sim sweep --param NAME=START:END:N [--param ...] [--metric NAME]
+//!                  [--scenario FILE | --preset lead-study | run's flags] --out DIR
 //! hopper-sim params show design|identified
+//! hopper-sim figures --out DIR
 //! ```
 
 use anyhow::{bail, Context, Result};
-use clap::{Parser, Subcommand};
-use hal_sim::controller::{ControllerSpec, CONTROLLER_NAMES};
-use hal_sim::mock::SensorConfig;
+use clap::{Args, Parser, Subcommand};
 use hal_sim::params::Params;
 use hal_sim::params_toml;
-use hal_sim::run::{self, RunConfig};
+use hal_sim::run;
+use hal_sim::scenario::{self, Overrides, Scenario, Settings};
+use hal_sim::sweep::{self, Sweep};
 use std::path::PathBuf;
 
 #[derive(Parser)]
@@ -31,10 +35,23 @@ struct Cli {
 enum Cmd {
     /// Drop the hopper from a start apex and run a controller; prints a summary.
     Run(RunArgs),
+    /// Run a grid of runs (one or two swept parameters) in parallel; writes
+    /// sweep.csv and a plot (sweep.png, sweep.svg).
+    Sweep(SweepArgs),
     /// Parameter sets.
     Params {
         #[command(subcommand)]
         cmd: ParamsCmd,
+    },
+    /// Regenerate the simulation counterparts of the thesis's Figures 2.4-2.13
+    /// and 4.4-4.9 as PNG and SVG (see docs/thesis-comparison.md).
+    Figures {
+        /// Directory for fig-2-4.png, fig-2-4.svg, ... (created if missing).
+        #[arg(long)]
+        out: PathBuf,
+        /// Short runs (0.3 s of hopping) for quick checks.
+        #[arg(long, hide = true)]
+        quick: bool,
     },
 }
 
@@ -47,37 +64,104 @@ enum ParamsCmd {
     },
 }
 
-#[derive(Parser)]
-struct RunArgs {
-    /// Plant parameters: a preset (design, identified) or a TOML file.
-    #[arg(long, default_value = "design")]
-    params: String,
+/// The settings of one run, shared by `run` and `sweep`. Each is an
+/// `Option` so that a scenario file's value survives when the flag is not
+/// given; the defaults live in `hal_sim::scenario` and apply when neither
+/// sets a value.
+#[derive(Args)]
+struct BaseArgs {
+    /// Scenario file (TOML: plant, controller, sensors, start apex,
+    /// duration; see scenarios/). Flags given as well override it.
+    #[arg(long)]
+    scenario: Option<PathBuf>,
+    /// Plant parameters: a preset (design, identified) or a TOML file
+    /// [default: design].
+    #[arg(long)]
+    params: Option<String>,
     /// Controller: passive, step-open, step-closed, open-torque, energy,
     /// energy-apex (apex-regulating energy law), velocity, modified-torque.
-    /// Each is the firmware's control crate on the simulated sensors.
-    #[arg(long, default_value = "passive")]
-    controller: String,
-    /// Desired apex (toe height) H_D, m; sets the energy target E_D.
-    #[arg(long, default_value_t = 0.05, allow_negative_numbers = true)]
-    target_apex: f64,
+    /// Each is the firmware's control crate on the simulated sensors
+    /// [default: passive].
+    #[arg(long)]
+    controller: Option<String>,
+    /// Desired apex (toe height) H_D, m; sets the energy target E_D
+    /// [default: 0.05].
+    #[arg(long, allow_negative_numbers = true)]
+    target_apex: Option<f64>,
     /// Motor torque for open-torque and modified-torque, N m (default 1.0).
     #[arg(long, allow_negative_numbers = true)]
     torque: Option<f64>,
-    /// Sensor noise: default (load cell 2 N, potentiometer 0.1 mm, 1 sigma) or off.
-    #[arg(long, default_value = "default", value_parser = ["default", "off"])]
-    noise: String,
-    /// Seed of the sensor noise (same seed, same run).
-    #[arg(long, default_value_t = 1)]
-    seed: u64,
-    /// Start toe height above the ground (released at rest), m.
-    #[arg(long, default_value_t = 0.15, allow_negative_numbers = true)]
-    start_apex: f64,
-    /// Simulated time, s.
-    #[arg(long, default_value_t = 5.0, allow_negative_numbers = true)]
-    duration: f64,
-    /// Control rate, Hz.
-    #[arg(long, default_value_t = 10_000.0)]
-    control_hz: f64,
+    /// Energy-law gain K_e for energy and energy-apex, N m/J (default: the
+    /// law's, 0.2 for energy, 3 for energy-apex).
+    #[arg(long, allow_negative_numbers = true)]
+    ke: Option<f64>,
+    /// Flight PD proportional gain, A/rad (default eq 4.13: 20.3152).
+    #[arg(long, allow_negative_numbers = true)]
+    flight_kp: Option<f64>,
+    /// Flight PD derivative gain, A s/rad (default eq 4.13: 0.6077).
+    #[arg(long, allow_negative_numbers = true)]
+    flight_kd: Option<f64>,
+    /// Sensor noise: default (load cell 2 N, potentiometer 0.1 mm, 1 sigma)
+    /// or off [default: default].
+    #[arg(long, value_parser = ["default", "off"])]
+    noise: Option<String>,
+    /// Seed of the sensor noise (same seed, same run) [default: 1].
+    #[arg(long)]
+    seed: Option<u64>,
+    /// Start toe height above the ground (released at rest), m [default: 0.15].
+    #[arg(long, allow_negative_numbers = true)]
+    start_apex: Option<f64>,
+    /// Simulated time, s [default: 5].
+    #[arg(long, allow_negative_numbers = true)]
+    duration: Option<f64>,
+    /// Control rate, Hz [default: 10000].
+    #[arg(long)]
+    control_hz: Option<f64>,
+}
+
+impl BaseArgs {
+    /// The flags that were given, as overrides.
+    fn overrides(&self) -> Result<Overrides> {
+        Ok(Overrides {
+            plant: match &self.params {
+                Some(p) => Some(params_toml::load(p).map_err(anyhow::Error::msg)?),
+                None => None,
+            },
+            controller: self.controller.clone(),
+            target_apex_m: self.target_apex,
+            torque_nm: self.torque,
+            energy_gain_nm_per_j: self.ke,
+            flight_kp_a_per_rad: self.flight_kp,
+            flight_kd_a_s_per_rad: self.flight_kd,
+            noise: self.noise.as_deref().map(|n| n == "default"),
+            seed: self.seed,
+            start_apex_m: self.start_apex,
+            duration_s: self.duration,
+            control_hz: self.control_hz,
+            ..Overrides::default()
+        })
+    }
+
+    /// The scenario file, if one was given.
+    fn scenario(&self) -> Result<Option<Scenario>> {
+        self.scenario
+            .as_deref()
+            .map(scenario::load)
+            .transpose()
+            .map_err(anyhow::Error::msg)
+    }
+}
+
+/// Flags over the scenario's settings over the defaults.
+fn resolve(file: Option<&Scenario>, base: &BaseArgs) -> Result<Settings> {
+    let cli = base.overrides()?;
+    Ok(Settings::resolve(file.map(|s| &s.settings), &cli))
+}
+
+#[derive(Parser)]
+struct RunArgs {
+    #[command(flatten)]
+    base: BaseArgs,
     /// Trajectory sample rate for the CSV and plot, Hz.
     #[arg(long, default_value_t = 1000.0)]
     sample_hz: f64,
@@ -89,13 +173,38 @@ struct RunArgs {
     json: bool,
 }
 
+#[derive(Parser)]
+struct SweepArgs {
+    #[command(flatten)]
+    base: BaseArgs,
+    /// A swept parameter, NAME=START:END:N (N values from START to END);
+    /// repeat for a second one. NAME: a plant parameter (e.g. screw_lead_m)
+    /// or torque, target_apex, start_apex, ke, flight_kp, flight_kd.
+    #[arg(long = "param")]
+    param: Vec<String>,
+    /// A named sweep instead of --scenario: lead-study (thesis Figures
+    /// 3.1-3.3, the energy the motor adds in the first stance against the
+    /// ball-screw lead).
+    #[arg(long, conflicts_with = "scenario")]
+    preset: Option<String>,
+    /// Metric to plot: a sweep.csv column [default: the scenario's, else
+    /// steady_apex_m, falling back to the last apex where not steady].
+    #[arg(long)]
+    metric: Option<String>,
+    /// Directory for sweep.csv, sweep.png and sweep.svg (created if missing).
+    #[arg(long)]
+    out: PathBuf,
+}
+
 fn main() {
     let cli = Cli::parse();
     let result = match cli.cmd {
         Cmd::Run(args) => cmd_run(args),
+        Cmd::Sweep(args) => cmd_sweep(args),
         Cmd::Params {
             cmd: ParamsCmd::Show { preset },
         } => cmd_params_show(&preset),
+        Cmd::Figures { out, quick } => cmd_figures(&out, quick),
     };
     if let Err(e) = result {
         eprintln!("hopper-sim: error: {e:#}");
@@ -114,51 +223,40 @@ fn cmd_params_show(preset: &str) -> Result<()> {
     Ok(())
 }
 
+fn cmd_figures(out: &std::path::Path, quick: bool) -> Result<()> {
+    let opts = hal_sim::figures::FigureOptions { quick };
+    let report = hal_sim::figures::write_all(out, &opts).map_err(anyhow::Error::msg)?;
+    for n in &report.notes {
+        println!("{n}");
+    }
+    println!(
+        "hopper-sim: wrote {} files to {}",
+        report.files.len(),
+        out.display()
+    );
+    Ok(())
+}
+
 fn cmd_run(a: RunArgs) -> Result<()> {
     // Validate everything before touching the file system.
-    let (params, params_name) = params_toml::load(&a.params).map_err(anyhow::Error::msg)?;
-    if !CONTROLLER_NAMES.contains(&a.controller.as_str()) {
-        bail!(
-            "unknown controller `{}`: expected one of {CONTROLLER_NAMES:?}",
-            a.controller
-        );
-    }
-    if !(a.control_hz.is_finite() && a.control_hz > 0.0) {
-        bail!(
-            "--control-hz {} must be a positive number of Hz",
-            a.control_hz
-        );
-    }
+    let file = a.base.scenario()?;
+    let settings = resolve(file.as_ref(), &a.base)?;
+    let params_name = settings.params_name.clone();
     if !(a.sample_hz.is_finite() && a.sample_hz > 0.0) {
         bail!(
             "--sample-hz {} must be a positive number of Hz",
             a.sample_hz
         );
     }
-    let cfg = RunConfig {
-        params,
-        start_apex_m: a.start_apex,
-        duration_s: a.duration,
-        control_dt_s: 1.0 / a.control_hz,
-        sample_dt_s: if a.out.is_some() {
-            1.0 / a.sample_hz
-        } else {
-            0.0
-        },
-    };
-    cfg.validate().map_err(anyhow::Error::msg)?;
-    let spec = ControllerSpec {
-        target_apex_m: a.target_apex,
-        torque_nm: a.torque,
-        sensors: SensorConfig {
-            noise: a.noise == "default",
-            seed: a.seed,
-            ..SensorConfig::DEFAULT
-        },
-        ..ControllerSpec::new(&a.controller)
-    };
-    let mut ctl = spec
-        .build(&cfg.params, cfg.start_apex_m, cfg.control_dt_s)
+    settings.check().map_err(anyhow::Error::msg)?;
+    let cfg = settings.run_config(if a.out.is_some() {
+        1.0 / a.sample_hz
+    } else {
+        0.0
+    });
+    let mut ctl = settings
+        .controller_spec()
+        .and_then(|spec| spec.build(&cfg.params, cfg.start_apex_m, cfg.control_dt_s))
         .map_err(anyhow::Error::msg)?;
     // A progress bar on stderr for runs long enough to wait for; indicatif
     // draws nothing when stderr is not a terminal.
@@ -287,6 +385,102 @@ fn cmd_run(a: RunArgs) -> Result<()> {
         s.peak_current_a,
         s.peak_stroke_m * 1000.0
     );
+    for p in &written {
+        println!("  wrote {}", p.display());
+    }
+    Ok(())
+}
+
+fn cmd_sweep(a: SweepArgs) -> Result<()> {
+    // Everything is parsed and every grid point checked before any run or
+    // any file: bad input writes nothing.
+    let file = match &a.preset {
+        Some(name) => {
+            let Some((_, text)) = sweep::PRESETS.iter().find(|(n, _)| n == name) else {
+                let names: Vec<&str> = sweep::PRESETS.iter().map(|(n, _)| *n).collect();
+                bail!("unknown sweep preset `{name}`: expected one of {names:?}");
+            };
+            Some(
+                scenario::from_toml_str(text, &format!("scenarios/{name}.toml"))
+                    .map_err(anyhow::Error::msg)?,
+            )
+        }
+        None => a.base.scenario()?,
+    };
+    let base = resolve(file.as_ref(), &a.base)?;
+    let specs: Vec<String> = if a.param.is_empty() {
+        file.as_ref()
+            .map(|f| f.sweep.params.clone())
+            .unwrap_or_default()
+    } else {
+        a.param.clone()
+    };
+    if specs.is_empty() {
+        bail!(
+            "nothing to sweep: give --param NAME=START:END:N (or a scenario with a [sweep] table)"
+        );
+    }
+    let axes = specs
+        .iter()
+        .map(|s| sweep::parse_axis(s))
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(anyhow::Error::msg)?;
+    let metric = a
+        .metric
+        .clone()
+        .or_else(|| file.as_ref().and_then(|f| f.sweep.metric.clone()))
+        .unwrap_or_else(|| sweep::DEFAULT_METRIC.to_string());
+    let sw = Sweep { base, axes, metric };
+    let runs = sw.points().map_err(anyhow::Error::msg)?.len();
+
+    // A progress bar for sweeps worth waiting for; indicatif also draws
+    // nothing when stderr is not a terminal.
+    let bar = indicatif::ProgressBar::new(runs as u64);
+    bar.set_style(
+        indicatif::ProgressStyle::with_template(
+            "{spinner} sweep [{bar:40}] {pos}/{len} runs ({eta} left)",
+        )
+        .map_err(anyhow::Error::msg)?
+        .progress_chars("=> "),
+    );
+    if runs as f64 * sw.base.duration_s < 60.0 {
+        bar.set_draw_target(indicatif::ProgressDrawTarget::hidden());
+    }
+    let started = std::time::Instant::now();
+    let rows = sw.run(&|| bar.inc(1)).map_err(anyhow::Error::msg)?;
+    bar.finish_and_clear();
+    let elapsed_s = started.elapsed().as_secs_f64();
+
+    let swept: Vec<&str> = sw.axes.iter().map(|x| x.knob.column()).collect();
+    let title = format!(
+        "{} sweep: {} controller, {} parameters",
+        swept.join(" x "),
+        sw.base.controller,
+        sw.base.params_name
+    );
+    let written = sw
+        .write(&rows, &a.out, &title)
+        .map_err(anyhow::Error::msg)?;
+
+    println!(
+        "hopper-sim sweep: {runs} runs of {} s ({} controller, {} parameters) in {elapsed_s:.1} s on {} threads",
+        sw.base.duration_s,
+        sw.base.controller,
+        sw.base.params_name,
+        rayon::current_num_threads()
+    );
+    if rows.len() <= 40 {
+        println!("  {:>24} {}", swept.join(", "), sw.metric);
+        for r in &rows {
+            let vals: Vec<String> = r.values.iter().map(|v| format!("{v:.6}")).collect();
+            let m = match sw.plotted(&r.metrics) {
+                Some((v, false)) => format!("{v:.4}"),
+                Some((v, true)) => format!("{v:.4} (last apex, never steady)"),
+                None => "-".to_string(),
+            };
+            println!("  {:>24} {m}", vals.join(", "));
+        }
+    }
     for p in &written {
         println!("  wrote {}", p.display());
     }

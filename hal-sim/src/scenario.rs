@@ -1,0 +1,828 @@
+//! Scenario files: everything one `hopper-sim run` needs, in one TOML file
+//! (`hopper-sim run --scenario FILE`), and how file, flags and defaults
+//! combine.
+//!
+//! ```toml
+//! description = "what this scenario shows"
+//! plant = { base = "design", spring_stiffness_n_per_m = 10000.0 }  # or plant = "identified"
+//! model = "design"          # optional: what the controller believes (default: the plant)
+//! start_apex_m = 0.10
+//! duration_s = 15.0
+//! control_hz = 10000.0
+//!
+//! [controller]              # or controller = "energy-apex"
+//! name = "energy-apex"
+//! target_apex_m = 0.05
+//! torque_nm = 1.0           # open-torque, modified-torque
+//! energy_gain_nm_per_j = 3.0     # K_e of eq 2.52 (energy, energy-apex)
+//! flight_kp_a_per_rad = 20.3152  # flight PD (eq 4.13 default)
+//! flight_kd_a_s_per_rad = 0.6077
+//!
+//! [sensors]
+//! noise = true
+//! seed = 1
+//! loadcell_sigma_n = 2.0
+//! pot_sigma_m = 1e-4
+//!
+//! [sweep]                   # only `hopper-sim sweep` reads this
+//! param = ["screw_lead_m=0.002:0.010:9"]
+//! metric = "first_stance_motor_work_j"
+//! ```
+//!
+//! Every key is optional. Precedence: a command-line flag, then the file,
+//! then the documented default of `hopper-sim run`. Unknown keys, wrong types
+//! and out-of-range values are errors naming the file, the line and the key.
+
+use crate::controller::{ControllerSpec, CONTROLLER_NAMES};
+use crate::mock::SensorConfig;
+use crate::params::Params;
+use crate::params_toml::{self, ParamsFileError};
+use crate::run::RunConfig;
+use hopper_control::hopper::{ApexLoop, Strategy};
+use hopper_control::laws::{energy_torque, flight_pd, StanceLaw};
+use hopper_control::pd_design::PdGains;
+use std::collections::HashMap;
+use std::path::Path;
+
+/// Controller run when neither file nor flag names one.
+pub const DEFAULT_CONTROLLER: &str = "passive";
+/// Plant preset used when neither file nor flag gives one.
+pub const DEFAULT_PARAMS: &str = "design";
+/// Default apex target, m.
+pub const DEFAULT_TARGET_APEX_M: f64 = 0.05;
+/// Default start toe height, m.
+pub const DEFAULT_START_APEX_M: f64 = 0.15;
+/// Default simulated time, s.
+pub const DEFAULT_DURATION_S: f64 = 5.0;
+/// Default control rate, Hz.
+pub const DEFAULT_CONTROL_HZ: f64 = 10_000.0;
+
+/// Allowed ranges of the numeric settings, inclusive unless noted, in the
+/// units of their names. Shared by the file reader and [`Settings::check`],
+/// so a flag and a file key are held to the same limits.
+pub mod limits {
+    /// Apex target, m.
+    pub const TARGET_APEX_M: (f64, f64) = (0.0, 1.0);
+    /// Open-loop torque, N m.
+    pub const TORQUE_NM: (f64, f64) = (-10.0, 10.0);
+    /// Energy-law gain `K_e`, N m/J.
+    pub const ENERGY_GAIN_NM_PER_J: (f64, f64) = (0.0, 100.0);
+    /// Flight PD proportional gain, A/rad.
+    pub const FLIGHT_KP_A_PER_RAD: (f64, f64) = (0.0, 1000.0);
+    /// Flight PD derivative gain, A s/rad.
+    pub const FLIGHT_KD_A_S_PER_RAD: (f64, f64) = (0.0, 100.0);
+    /// Load-cell noise, N (1 sigma).
+    pub const LOADCELL_SIGMA_N: (f64, f64) = (0.0, 1000.0);
+    /// Potentiometer noise, m (1 sigma).
+    pub const POT_SIGMA_M: (f64, f64) = (0.0, 0.1);
+    /// Control rate, Hz (the runner's 1e-6 ..= 0.01 s period).
+    pub const CONTROL_HZ: (f64, f64) = (100.0, 1e6);
+}
+
+/// Settings that may or may not be given: by a scenario file or by flags.
+/// `None` means "not given here".
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Overrides {
+    /// Plant parameters and the name they are reported under.
+    pub plant: Option<(Params, String)>,
+    /// What the controller believes (default: the plant).
+    pub model: Option<Params>,
+    /// Controller name, one of [`CONTROLLER_NAMES`].
+    pub controller: Option<String>,
+    /// Apex target, m.
+    pub target_apex_m: Option<f64>,
+    /// Torque of open-torque / modified-torque, N m.
+    pub torque_nm: Option<f64>,
+    /// Energy-law gain `K_e` (energy, energy-apex), N m/J.
+    pub energy_gain_nm_per_j: Option<f64>,
+    /// Flight PD proportional gain, A/rad.
+    pub flight_kp_a_per_rad: Option<f64>,
+    /// Flight PD derivative gain, A s/rad.
+    pub flight_kd_a_s_per_rad: Option<f64>,
+    /// Sensor noise on or off.
+    pub noise: Option<bool>,
+    /// Noise seed.
+    pub seed: Option<u64>,
+    /// Load-cell noise, N (1 sigma).
+    pub loadcell_sigma_n: Option<f64>,
+    /// Potentiometer noise, m (1 sigma).
+    pub pot_sigma_m: Option<f64>,
+    /// Start toe height, m.
+    pub start_apex_m: Option<f64>,
+    /// Simulated time, s.
+    pub duration_s: Option<f64>,
+    /// Control rate, Hz.
+    pub control_hz: Option<f64>,
+}
+
+impl Overrides {
+    /// `self` with every setting `over` gives replaced by `over`'s.
+    pub fn overridden_by(&self, over: &Overrides) -> Overrides {
+        Overrides {
+            plant: over.plant.clone().or_else(|| self.plant.clone()),
+            model: over.model.or(self.model),
+            controller: over.controller.clone().or_else(|| self.controller.clone()),
+            target_apex_m: over.target_apex_m.or(self.target_apex_m),
+            torque_nm: over.torque_nm.or(self.torque_nm),
+            energy_gain_nm_per_j: over.energy_gain_nm_per_j.or(self.energy_gain_nm_per_j),
+            flight_kp_a_per_rad: over.flight_kp_a_per_rad.or(self.flight_kp_a_per_rad),
+            flight_kd_a_s_per_rad: over.flight_kd_a_s_per_rad.or(self.flight_kd_a_s_per_rad),
+            noise: over.noise.or(self.noise),
+            seed: over.seed.or(self.seed),
+            loadcell_sigma_n: over.loadcell_sigma_n.or(self.loadcell_sigma_n),
+            pot_sigma_m: over.pot_sigma_m.or(self.pot_sigma_m),
+            start_apex_m: over.start_apex_m.or(self.start_apex_m),
+            duration_s: over.duration_s.or(self.duration_s),
+            control_hz: over.control_hz.or(self.control_hz),
+        }
+    }
+}
+
+/// Every setting of a run, resolved.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Settings {
+    /// Plant parameters.
+    pub params: Params,
+    /// Name the parameters are reported under (preset, file or scenario).
+    pub params_name: String,
+    /// What the controller believes (None: the plant).
+    pub model: Option<Params>,
+    /// Controller name.
+    pub controller: String,
+    /// Apex target, m.
+    pub target_apex_m: f64,
+    /// Torque of open-torque / modified-torque (None: the law's 1 N m), N m.
+    pub torque_nm: Option<f64>,
+    /// Energy-law gain (None: the law's default), N m/J.
+    pub energy_gain_nm_per_j: Option<f64>,
+    /// Flight PD proportional gain (None: eq 4.13), A/rad.
+    pub flight_kp_a_per_rad: Option<f64>,
+    /// Flight PD derivative gain (None: eq 4.13), A s/rad.
+    pub flight_kd_a_s_per_rad: Option<f64>,
+    /// Sensor noise and amplifier lag.
+    pub sensors: SensorConfig,
+    /// Start toe height, m.
+    pub start_apex_m: f64,
+    /// Simulated time, s.
+    pub duration_s: f64,
+    /// Control rate, Hz.
+    pub control_hz: f64,
+}
+
+impl Settings {
+    /// Layer `cli` over `file` over the defaults.
+    pub fn resolve(file: Option<&Overrides>, cli: &Overrides) -> Settings {
+        let o = file.cloned().unwrap_or_default().overridden_by(cli);
+        let d = SensorConfig::DEFAULT;
+        let (params, params_name) = o.plant.unwrap_or_else(|| {
+            // The default preset always exists; `design()` is the same set.
+            (Params::design(), DEFAULT_PARAMS.to_string())
+        });
+        Settings {
+            params,
+            params_name,
+            model: o.model,
+            controller: o.controller.unwrap_or_else(|| DEFAULT_CONTROLLER.into()),
+            target_apex_m: o.target_apex_m.unwrap_or(DEFAULT_TARGET_APEX_M),
+            torque_nm: o.torque_nm,
+            energy_gain_nm_per_j: o.energy_gain_nm_per_j,
+            flight_kp_a_per_rad: o.flight_kp_a_per_rad,
+            flight_kd_a_s_per_rad: o.flight_kd_a_s_per_rad,
+            sensors: SensorConfig {
+                noise: o.noise.unwrap_or(d.noise),
+                seed: o.seed.unwrap_or(d.seed),
+                loadcell_sigma_n: o.loadcell_sigma_n.unwrap_or(d.loadcell_sigma_n),
+                pot_sigma_m: o.pot_sigma_m.unwrap_or(d.pot_sigma_m),
+                ..d
+            },
+            start_apex_m: o.start_apex_m.unwrap_or(DEFAULT_START_APEX_M),
+            duration_s: o.duration_s.unwrap_or(DEFAULT_DURATION_S),
+            control_hz: o.control_hz.unwrap_or(DEFAULT_CONTROL_HZ),
+        }
+    }
+
+    /// The runner's configuration; `sample_dt_s = 0` records no trajectory.
+    pub fn run_config(&self, sample_dt_s: f64) -> RunConfig {
+        RunConfig {
+            params: self.params,
+            start_apex_m: self.start_apex_m,
+            duration_s: self.duration_s,
+            control_dt_s: 1.0 / self.control_hz,
+            sample_dt_s,
+        }
+    }
+
+    /// The controller to build, with the gains overridden where given.
+    pub fn controller_spec(&self) -> Result<ControllerSpec, String> {
+        let mut spec = ControllerSpec {
+            target_apex_m: self.target_apex_m,
+            torque_nm: self.torque_nm,
+            sensors: self.sensors,
+            model: self.model,
+            ..ControllerSpec::new(&self.controller)
+        };
+        if let Some(ke) = self.energy_gain_nm_per_j {
+            check_range(
+                "energy_gain_nm_per_j",
+                ke,
+                limits::ENERGY_GAIN_NM_PER_J,
+                "N m/J",
+            )?;
+            spec.strategy_override = Some(match self.controller.as_str() {
+                "energy" => Strategy::Thesis(StanceLaw::EnergyTorque(energy_torque::Config {
+                    gain_nm_per_j: ke as f32,
+                    ..energy_torque::Config::default()
+                })),
+                "energy-apex" => {
+                    let d = ApexLoop::default();
+                    Strategy::EnergyApex(ApexLoop {
+                        law: energy_torque::Config {
+                            gain_nm_per_j: ke as f32,
+                            ..d.law
+                        },
+                        ..d
+                    })
+                }
+                other => {
+                    return Err(format!(
+                        "the energy-law gain (ke, energy_gain_nm_per_j) applies to the energy and energy-apex controllers only, not `{other}`"
+                    ))
+                }
+            });
+        }
+        if self.flight_kp_a_per_rad.is_some() || self.flight_kd_a_s_per_rad.is_some() {
+            let d = flight_pd::Config::default();
+            let kp = self.flight_kp_a_per_rad.unwrap_or(f64::from(d.gains.kp));
+            let kd = self.flight_kd_a_s_per_rad.unwrap_or(f64::from(d.gains.kd));
+            check_range(
+                "flight_kp_a_per_rad",
+                kp,
+                limits::FLIGHT_KP_A_PER_RAD,
+                "A/rad",
+            )?;
+            check_range(
+                "flight_kd_a_s_per_rad",
+                kd,
+                limits::FLIGHT_KD_A_S_PER_RAD,
+                "A s/rad",
+            )?;
+            spec.flight_override = Some(flight_pd::Config {
+                gains: PdGains {
+                    kp: kp as f32,
+                    kd: kd as f32,
+                },
+                ..d
+            });
+        }
+        Ok(spec)
+    }
+
+    /// Check everything a run needs, without running: the run settings, the
+    /// controller name and settings, and that the firmware accepts its
+    /// configuration.
+    pub fn check(&self) -> Result<(), String> {
+        if !CONTROLLER_NAMES.contains(&self.controller.as_str()) {
+            return Err(format!(
+                "unknown controller `{}`: expected one of {CONTROLLER_NAMES:?}",
+                self.controller
+            ));
+        }
+        if !(self.control_hz.is_finite() && self.control_hz > 0.0) {
+            // The runner checks the period's range; this catches 0 and NaN first.
+            return Err(format!(
+                "--control-hz {} must be a positive number of Hz",
+                self.control_hz
+            ));
+        }
+        let s = &self.sensors;
+        check_range(
+            "loadcell_sigma_n",
+            s.loadcell_sigma_n,
+            limits::LOADCELL_SIGMA_N,
+            "N",
+        )?;
+        check_range("pot_sigma_m", s.pot_sigma_m, limits::POT_SIGMA_M, "m")?;
+        let cfg = self.run_config(0.0);
+        cfg.validate()?;
+        self.controller_spec()?
+            .build(&cfg.params, cfg.start_apex_m, cfg.control_dt_s)
+            .map(|_| ())
+    }
+}
+
+fn check_range(name: &str, v: f64, (lo, hi): (f64, f64), unit: &str) -> Result<(), String> {
+    if v.is_finite() && v >= lo && v <= hi {
+        Ok(())
+    } else {
+        Err(format!(
+            "{name} = {v} is out of range: allowed {lo} ..= {hi} {unit}"
+        ))
+    }
+}
+
+/// The `[sweep]` table of a scenario file.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct SweepSection {
+    /// `NAME=START:END:N` specs, as for `hopper-sim sweep --param`.
+    pub params: Vec<String>,
+    /// Metric to plot.
+    pub metric: Option<String>,
+}
+
+/// A parsed scenario file.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Scenario {
+    /// Where it came from (file name), for messages.
+    pub origin: String,
+    /// Free text.
+    pub description: Option<String>,
+    /// The settings the file gives.
+    pub settings: Overrides,
+    /// Its `[sweep]` table.
+    pub sweep: SweepSection,
+}
+
+/// A scenario file could not be used: where (`file:line` or the file) and what.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ScenarioError {
+    /// `file:line`, or the file when no line applies.
+    pub location: String,
+    /// What went wrong, naming the key.
+    pub message: String,
+}
+
+impl std::fmt::Display for ScenarioError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}: {}", self.location, self.message)
+    }
+}
+
+impl std::error::Error for ScenarioError {}
+
+impl From<ParamsFileError> for ScenarioError {
+    fn from(e: ParamsFileError) -> Self {
+        ScenarioError {
+            location: e.location,
+            message: e.message,
+        }
+    }
+}
+
+/// Read and parse a scenario file.
+pub fn load(path: &Path) -> Result<Scenario, ScenarioError> {
+    let origin = path.display().to_string();
+    let text = std::fs::read_to_string(path).map_err(|e| ScenarioError {
+        location: origin.clone(),
+        message: format!("cannot read scenario file: {e}"),
+    })?;
+    from_toml_str(&text, &origin)
+}
+
+fn line_of(text: &str, offset: usize) -> usize {
+    text[..offset.min(text.len())].matches('\n').count() + 1
+}
+
+/// Line of every key, by dotted path (`controller.name`), from the spanned parse.
+fn key_lines(
+    text: &str,
+    table: &toml::de::DeTable<'_>,
+    prefix: &str,
+    out: &mut HashMap<String, usize>,
+) {
+    for (k, v) in table.iter() {
+        let path = format!("{prefix}{}", k.get_ref());
+        out.insert(path.clone(), line_of(text, k.span().start));
+        if let toml::de::DeValue::Table(t) = v.get_ref() {
+            key_lines(text, t, &format!("{path}."), out);
+        }
+    }
+}
+
+/// The keys each table accepts.
+const TOP_KEYS: [&str; 9] = [
+    "description",
+    "plant",
+    "model",
+    "start_apex_m",
+    "duration_s",
+    "control_hz",
+    "controller",
+    "sensors",
+    "sweep",
+];
+const CONTROLLER_KEYS: [&str; 6] = [
+    "name",
+    "target_apex_m",
+    "torque_nm",
+    "energy_gain_nm_per_j",
+    "flight_kp_a_per_rad",
+    "flight_kd_a_s_per_rad",
+];
+const SENSOR_KEYS: [&str; 4] = ["noise", "seed", "loadcell_sigma_n", "pot_sigma_m"];
+const SWEEP_KEYS: [&str; 2] = ["param", "metric"];
+
+struct Reader<'a> {
+    origin: &'a str,
+    lines: HashMap<String, usize>,
+}
+
+impl Reader<'_> {
+    fn err(&self, path: &str, message: String) -> ScenarioError {
+        ScenarioError {
+            location: match self.lines.get(path) {
+                Some(l) => format!("{}:{l}", self.origin),
+                None => self.origin.to_string(),
+            },
+            message,
+        }
+    }
+
+    fn check_keys(
+        &self,
+        table: &toml::Table,
+        prefix: &str,
+        allowed: &[&str],
+    ) -> Result<(), ScenarioError> {
+        for key in table.keys() {
+            if !allowed.contains(&key.as_str()) {
+                let path = format!("{prefix}{key}");
+                return Err(self.err(
+                    &path,
+                    format!("unknown key `{path}`: expected one of {allowed:?}"),
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    fn number(
+        &self,
+        table: &toml::Table,
+        prefix: &str,
+        key: &str,
+        (lo, hi): (f64, f64),
+        lo_exclusive: bool,
+        unit: &str,
+    ) -> Result<Option<f64>, ScenarioError> {
+        let path = format!("{prefix}{key}");
+        let v = match table.get(key) {
+            None => return Ok(None),
+            Some(toml::Value::Float(f)) => *f,
+            Some(toml::Value::Integer(i)) => *i as f64,
+            Some(other) => {
+                return Err(self.err(
+                    &path,
+                    format!("`{path}` must be a number in {unit}, got {other}"),
+                ))
+            }
+        };
+        let above_lo = if lo_exclusive { v > lo } else { v >= lo };
+        if !(v.is_finite() && above_lo && v <= hi) {
+            let op = if lo_exclusive { ">" } else { ">=" };
+            return Err(self.err(
+                &path,
+                format!("`{path}` = {v} is out of range: allowed {op} {lo} and <= {hi} {unit}"),
+            ));
+        }
+        Ok(Some(v))
+    }
+
+    fn string<'t>(
+        &self,
+        table: &'t toml::Table,
+        prefix: &str,
+        key: &str,
+    ) -> Result<Option<&'t str>, ScenarioError> {
+        let path = format!("{prefix}{key}");
+        match table.get(key) {
+            None => Ok(None),
+            Some(toml::Value::String(s)) => Ok(Some(s)),
+            Some(other) => Err(self.err(&path, format!("`{path}` must be a string, got {other}"))),
+        }
+    }
+
+    /// A parameter set: a preset name or a table read like a parameter file.
+    fn params(
+        &self,
+        table: &toml::Table,
+        key: &str,
+    ) -> Result<Option<(Params, String)>, ScenarioError> {
+        match table.get(key) {
+            None => Ok(None),
+            Some(toml::Value::String(name)) => match Params::preset(name) {
+                Some(p) => Ok(Some((p, name.clone()))),
+                None => Err(self.err(
+                    key,
+                    format!(
+                        "unknown preset `{key} = \"{name}\"`: expected one of {:?} or a table of parameters",
+                        Params::PRESET_NAMES
+                    ),
+                )),
+            },
+            Some(toml::Value::Table(t)) => {
+                let prefix = format!("{key}.");
+                let line_for = |k: &str| self.lines.get(&format!("{prefix}{k}")).copied();
+                let p = params_toml::params_from_table(t, self.origin, &prefix, &line_for)?;
+                Ok(Some((p, self.origin.to_string())))
+            }
+            Some(other) => Err(self.err(
+                key,
+                format!("`{key}` must be a preset name or a table of parameters, got {other}"),
+            )),
+        }
+    }
+}
+
+/// Parse a scenario file's text. `origin` names it in errors and is the
+/// name the plant parameters are reported under when the file gives them as
+/// a table.
+pub fn from_toml_str(text: &str, origin: &str) -> Result<Scenario, ScenarioError> {
+    let spanned = toml::de::DeTable::parse(text).map_err(|e| ScenarioError {
+        location: match e.span() {
+            Some(s) => format!("{origin}:{}", line_of(text, s.start)),
+            None => origin.to_string(),
+        },
+        message: format!("malformed TOML: {}", e.message()),
+    })?;
+    let mut lines = HashMap::new();
+    key_lines(text, spanned.get_ref(), "", &mut lines);
+    let r = Reader { origin, lines };
+    let top: toml::Table =
+        toml::from_str(text).map_err(|e| r.err("", format!("malformed TOML: {}", e.message())))?;
+    r.check_keys(&top, "", &TOP_KEYS)?;
+
+    let mut s = Overrides {
+        plant: r.params(&top, "plant")?,
+        model: r.params(&top, "model")?.map(|(p, _)| p),
+        start_apex_m: r.number(
+            &top,
+            "",
+            "start_apex_m",
+            crate::run::START_APEX_RANGE_M,
+            true,
+            "m",
+        )?,
+        duration_s: r.number(
+            &top,
+            "",
+            "duration_s",
+            (0.0, crate::run::MAX_DURATION_S),
+            true,
+            "s",
+        )?,
+        control_hz: r.number(&top, "", "control_hz", limits::CONTROL_HZ, false, "Hz")?,
+        ..Overrides::default()
+    };
+    let description = r.string(&top, "", "description")?.map(str::to_string);
+
+    match top.get("controller") {
+        None => {}
+        Some(toml::Value::String(name)) => s.controller = Some(name.clone()),
+        Some(toml::Value::Table(t)) => {
+            let p = "controller.";
+            r.check_keys(t, p, &CONTROLLER_KEYS)?;
+            s.controller = r.string(t, p, "name")?.map(str::to_string);
+            s.target_apex_m = r.number(t, p, "target_apex_m", limits::TARGET_APEX_M, false, "m")?;
+            s.torque_nm = r.number(t, p, "torque_nm", limits::TORQUE_NM, false, "N m")?;
+            s.energy_gain_nm_per_j = r.number(
+                t,
+                p,
+                "energy_gain_nm_per_j",
+                limits::ENERGY_GAIN_NM_PER_J,
+                false,
+                "N m/J",
+            )?;
+            s.flight_kp_a_per_rad = r.number(
+                t,
+                p,
+                "flight_kp_a_per_rad",
+                limits::FLIGHT_KP_A_PER_RAD,
+                false,
+                "A/rad",
+            )?;
+            s.flight_kd_a_s_per_rad = r.number(
+                t,
+                p,
+                "flight_kd_a_s_per_rad",
+                limits::FLIGHT_KD_A_S_PER_RAD,
+                false,
+                "A s/rad",
+            )?;
+        }
+        Some(other) => {
+            return Err(r.err(
+                "controller",
+                format!("`controller` must be a controller name or a table, got {other}"),
+            ))
+        }
+    }
+    if let Some(name) = &s.controller {
+        if !CONTROLLER_NAMES.contains(&name.as_str()) {
+            let path = if top.get("controller").is_some_and(toml::Value::is_table) {
+                "controller.name"
+            } else {
+                "controller"
+            };
+            return Err(r.err(
+                path,
+                format!(
+                    "unknown controller `{name}` in `{path}`: expected one of {CONTROLLER_NAMES:?}"
+                ),
+            ));
+        }
+    }
+
+    match top.get("sensors") {
+        None => {}
+        Some(toml::Value::Table(t)) => {
+            let p = "sensors.";
+            r.check_keys(t, p, &SENSOR_KEYS)?;
+            s.noise = match t.get("noise") {
+                None => None,
+                Some(toml::Value::Boolean(b)) => Some(*b),
+                Some(other) => {
+                    return Err(r.err(
+                        "sensors.noise",
+                        format!("`sensors.noise` must be true or false, got {other}"),
+                    ))
+                }
+            };
+            s.seed = match t.get("seed") {
+                None => None,
+                Some(toml::Value::Integer(i)) if *i >= 0 => Some(*i as u64),
+                Some(other) => {
+                    return Err(r.err(
+                        "sensors.seed",
+                        format!("`sensors.seed` must be a non-negative integer, got {other}"),
+                    ))
+                }
+            };
+            s.loadcell_sigma_n = r.number(
+                t,
+                p,
+                "loadcell_sigma_n",
+                limits::LOADCELL_SIGMA_N,
+                false,
+                "N",
+            )?;
+            s.pot_sigma_m = r.number(t, p, "pot_sigma_m", limits::POT_SIGMA_M, false, "m")?;
+        }
+        Some(other) => {
+            return Err(r.err("sensors", format!("`sensors` must be a table, got {other}")))
+        }
+    }
+
+    let mut sweep = SweepSection::default();
+    match top.get("sweep") {
+        None => {}
+        Some(toml::Value::Table(t)) => {
+            r.check_keys(t, "sweep.", &SWEEP_KEYS)?;
+            sweep.metric = r.string(t, "sweep.", "metric")?.map(str::to_string);
+            sweep.params = match t.get("param") {
+                None => Vec::new(),
+                Some(toml::Value::Array(items)) => items
+                    .iter()
+                    .map(|v| match v {
+                        toml::Value::String(s) => Ok(s.clone()),
+                        other => Err(r.err(
+                            "sweep.param",
+                            format!("`sweep.param` entries must be strings NAME=START:END:N, got {other}"),
+                        )),
+                    })
+                    .collect::<Result<_, _>>()?,
+                Some(toml::Value::String(one)) => vec![one.clone()],
+                Some(other) => {
+                    return Err(r.err(
+                        "sweep.param",
+                        format!("`sweep.param` must be a list of NAME=START:END:N strings, got {other}"),
+                    ))
+                }
+            };
+        }
+        Some(other) => return Err(r.err("sweep", format!("`sweep` must be a table, got {other}"))),
+    }
+
+    Ok(Scenario {
+        origin: origin.to_string(),
+        description,
+        settings: s,
+        sweep,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parse_err(text: &str) -> ScenarioError {
+        match from_toml_str(text, "s.toml") {
+            Ok(s) => panic!("parsed: {s:?}"),
+            Err(e) => e,
+        }
+    }
+
+    #[test]
+    fn full_scenario_parses() {
+        let s = from_toml_str(
+            "plant = { base = \"design\", spring_stiffness_n_per_m = 10000 }\nmodel = \"identified\"\nstart_apex_m = 0.1\nduration_s = 15\n[controller]\nname = \"energy-apex\"\ntarget_apex_m = 0.04\nenergy_gain_nm_per_j = 2\n[sensors]\nnoise = false\nseed = 7\n[sweep]\nparam = [\"torque=0.5:1:2\"]\n",
+            "s.toml",
+        )
+        .unwrap();
+        let o = &s.settings;
+        let (p, name) = o.plant.clone().unwrap();
+        assert_eq!(p.spring_stiffness_n_per_m, 10_000.0);
+        assert_eq!(name, "s.toml");
+        assert_eq!(o.model, Some(Params::identified()));
+        assert_eq!(o.controller.as_deref(), Some("energy-apex"));
+        assert_eq!(o.target_apex_m, Some(0.04));
+        assert_eq!(o.energy_gain_nm_per_j, Some(2.0));
+        assert_eq!((o.noise, o.seed), (Some(false), Some(7)));
+        assert_eq!((o.start_apex_m, o.duration_s), (Some(0.1), Some(15.0)));
+        assert_eq!(s.sweep.params, vec!["torque=0.5:1:2".to_string()]);
+        let set = Settings::resolve(Some(o), &Overrides::default());
+        set.check().unwrap();
+        assert!(set.controller_spec().unwrap().strategy_override.is_some());
+    }
+
+    #[test]
+    fn errors_name_file_line_and_key() {
+        let e = parse_err("duration_s = 1\n[controller]\nname = \"energy\"\ntagret_apex_m = 0.1\n");
+        assert_eq!(e.location, "s.toml:4");
+        assert!(e.message.contains("controller.tagret_apex_m"), "{e}");
+
+        let e = parse_err("start_apex_m = 0.1\n\n[controller]\ntarget_apex_m = 3.0\n");
+        assert_eq!(e.location, "s.toml:4");
+        assert!(
+            e.message.contains("controller.target_apex_m") && e.message.contains('3'),
+            "{e}"
+        );
+
+        let e = parse_err("[plant]\nbase = \"design\"\nbody_mas_kg = 1\n");
+        assert_eq!(e.location, "s.toml:3");
+        assert!(e.message.contains("plant.body_mas_kg"), "{e}");
+
+        let e = parse_err("plant = { base = \"design\", stroke_m = 9.0 }\n");
+        assert_eq!(e.location, "s.toml:1");
+        assert!(e.message.contains("plant.stroke_m"), "{e}");
+
+        let e = parse_err("duration_s = \"long\"\n");
+        assert_eq!(e.location, "s.toml:1");
+        assert!(
+            e.message.contains("duration_s") && e.message.contains("number"),
+            "{e}"
+        );
+
+        let e = parse_err("\ncontroller = \"rocket\"\n");
+        assert_eq!(e.location, "s.toml:2");
+        assert!(e.message.contains("unknown controller `rocket`"), "{e}");
+
+        let e = parse_err("[sensors]\nnoise = \"yes\"\n");
+        assert_eq!(e.location, "s.toml:2");
+        assert!(e.message.contains("sensors.noise"), "{e}");
+
+        let e = parse_err("speed = 1\n");
+        assert_eq!(e.location, "s.toml:1");
+        assert!(e.message.contains("unknown key `speed`"), "{e}");
+
+        let e = parse_err("duration_s = [1\n");
+        assert!(e.location.starts_with("s.toml:"), "{e}");
+        assert!(e.message.contains("malformed TOML"), "{e}");
+    }
+
+    #[test]
+    fn flags_override_file_override_defaults() {
+        let file = Overrides {
+            controller: Some("energy-apex".into()),
+            target_apex_m: Some(0.04),
+            duration_s: Some(15.0),
+            seed: Some(3),
+            ..Overrides::default()
+        };
+        let cli = Overrides {
+            target_apex_m: Some(0.06),
+            seed: Some(9),
+            ..Overrides::default()
+        };
+        let s = Settings::resolve(Some(&file), &cli);
+        assert_eq!(s.controller, "energy-apex");
+        assert_eq!(s.target_apex_m, 0.06);
+        assert_eq!(s.duration_s, 15.0);
+        assert_eq!(s.sensors.seed, 9);
+        assert_eq!(s.start_apex_m, DEFAULT_START_APEX_M);
+        assert_eq!(s.params_name, DEFAULT_PARAMS);
+        let d = Settings::resolve(None, &Overrides::default());
+        assert_eq!(d.controller, DEFAULT_CONTROLLER);
+        assert_eq!(d.target_apex_m, DEFAULT_TARGET_APEX_M);
+        assert_eq!(d.sensors, SensorConfig::DEFAULT);
+        assert_eq!(d.control_hz, DEFAULT_CONTROL_HZ);
+    }
+
+    #[test]
+    fn energy_gain_needs_an_energy_controller() {
+        let s = Settings {
+            energy_gain_nm_per_j: Some(1.0),
+            ..Settings::resolve(None, &Overrides::default())
+        };
+        assert!(s.check().unwrap_err().contains("energy-apex"));
+    }
+}

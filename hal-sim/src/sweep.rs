@@ -1,0 +1,721 @@
+//! Parameter sweeps (`hopper-sim sweep`): a grid of runs around a base
+//! scenario, run in parallel on every core, summarised one CSV row per run
+//! and plotted (a line for one swept parameter, a heat map for two).
+//!
+//! A swept parameter is `NAME=START:END:N` (`N` evenly spaced values from
+//! `START` to `END`, both included). `NAME` is a plant parameter field
+//! ([`crate::params::FIELDS`], e.g. `screw_lead_m`) or a controller setting:
+//! `torque`, `target_apex`, `start_apex`, `ke` (energy-law gain),
+//! `flight_kp`, `flight_kd` (or their column names, e.g. `torque_nm`).
+
+use crate::params::{field, FieldSpec, FIELDS};
+use crate::run::{self, Summary};
+use crate::scenario::Settings;
+use plotters::coord::Shift;
+use plotters::prelude::*;
+use rayon::prelude::*;
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+/// Most values one swept parameter may take.
+pub const MAX_VALUES: usize = 1000;
+/// Most runs one sweep may make.
+pub const MAX_RUNS: usize = 100_000;
+
+/// Built-in named sweeps (`hopper-sim sweep --preset NAME`): the scenario
+/// files of `scenarios/`, compiled in so they work from any directory.
+pub const PRESETS: [(&str, &str); 1] = [(
+    "lead-study",
+    include_str!("../../scenarios/lead-study.toml"),
+)];
+
+/// What one swept value changes.
+#[derive(Clone, Copy)]
+pub enum Knob {
+    /// A plant parameter field.
+    Plant(&'static FieldSpec),
+    /// Torque of open-torque / modified-torque, N m.
+    Torque,
+    /// Apex target, m.
+    TargetApex,
+    /// Start toe height, m.
+    StartApex,
+    /// Energy-law gain `K_e`, N m/J.
+    EnergyGain,
+    /// Flight PD proportional gain, A/rad.
+    FlightKp,
+    /// Flight PD derivative gain, A s/rad.
+    FlightKd,
+}
+
+/// Controller settings a sweep accepts: (short name, column name, knob).
+const SETTING_KNOBS: [(&str, &str, Knob); 6] = [
+    ("torque", "torque_nm", Knob::Torque),
+    ("target_apex", "target_apex_m", Knob::TargetApex),
+    ("start_apex", "start_apex_m", Knob::StartApex),
+    ("ke", "energy_gain_nm_per_j", Knob::EnergyGain),
+    ("flight_kp", "flight_kp_a_per_rad", Knob::FlightKp),
+    ("flight_kd", "flight_kd_a_s_per_rad", Knob::FlightKd),
+];
+
+impl Knob {
+    /// Look a name up: a plant field, or a setting's short or column name.
+    pub fn parse(name: &str) -> Option<Knob> {
+        if let Some(f) = field(name) {
+            return Some(Knob::Plant(f));
+        }
+        SETTING_KNOBS
+            .iter()
+            .find(|(short, column, _)| *short == name || *column == name)
+            .map(|(_, _, k)| *k)
+    }
+
+    /// CSV column name (with its unit).
+    pub fn column(&self) -> &'static str {
+        match self {
+            Knob::Plant(f) => f.name,
+            other => SETTING_KNOBS
+                .iter()
+                .find(|(_, _, k)| std::mem::discriminant(k) == std::mem::discriminant(other))
+                .map_or("?", |(_, column, _)| column),
+        }
+    }
+
+    /// Set the value in `s`.
+    pub fn apply(&self, s: &mut Settings, v: f64) {
+        match self {
+            Knob::Plant(f) => (f.set)(&mut s.params, v),
+            Knob::Torque => s.torque_nm = Some(v),
+            Knob::TargetApex => s.target_apex_m = v,
+            Knob::StartApex => s.start_apex_m = v,
+            Knob::EnergyGain => s.energy_gain_nm_per_j = Some(v),
+            Knob::FlightKp => s.flight_kp_a_per_rad = Some(v),
+            Knob::FlightKd => s.flight_kd_a_s_per_rad = Some(v),
+        }
+    }
+
+    /// Why sweeping this knob would change nothing for `controller`, if so.
+    fn unused_by(&self, controller: &str) -> Option<&'static str> {
+        match self {
+            Knob::Torque if !matches!(controller, "open-torque" | "modified-torque") => {
+                Some("open-torque and modified-torque")
+            }
+            Knob::EnergyGain if !matches!(controller, "energy" | "energy-apex") => {
+                Some("energy and energy-apex")
+            }
+            Knob::FlightKp | Knob::FlightKd | Knob::TargetApex if controller == "passive" => {
+                Some("every controller but passive")
+            }
+            _ => None,
+        }
+    }
+}
+
+/// One swept parameter and its values.
+#[derive(Clone)]
+pub struct Axis {
+    /// The spec as given.
+    pub spec: String,
+    /// What it changes.
+    pub knob: Knob,
+    /// The values, in order.
+    pub values: Vec<f64>,
+}
+
+/// Parse `NAME=START:END:N`.
+pub fn parse_axis(spec: &str) -> Result<Axis, String> {
+    let bad = |why: String| {
+        format!("bad --param `{spec}`: {why} (expected NAME=START:END:N, e.g. screw_lead_m=0.002:0.010:9)")
+    };
+    let (name, range) = spec.split_once('=').ok_or_else(|| bad("no `=`".into()))?;
+    let name = name.trim();
+    let knob = Knob::parse(name).ok_or_else(|| {
+        let plant: Vec<&str> = FIELDS.iter().map(|f| f.name).collect();
+        let settings: Vec<&str> = SETTING_KNOBS.iter().map(|(s, _, _)| *s).collect();
+        bad(format!(
+            "unknown parameter `{name}`: expected a controller setting {settings:?} or a plant parameter {plant:?}"
+        ))
+    })?;
+    let parts: Vec<&str> = range.split(':').map(str::trim).collect();
+    let [start, end, n] = parts[..] else {
+        return Err(bad(format!("`{range}` is not START:END:N")));
+    };
+    let num = |s: &str, what: &str| -> Result<f64, String> {
+        s.parse::<f64>()
+            .ok()
+            .filter(|v| v.is_finite())
+            .ok_or_else(|| bad(format!("{what} `{s}` is not a finite number")))
+    };
+    let (start, end) = (num(start, "START")?, num(end, "END")?);
+    let n: usize = n
+        .parse()
+        .ok()
+        .filter(|n| (1..=MAX_VALUES).contains(n))
+        .ok_or_else(|| bad(format!("N `{n}` is not a count in 1 ..= {MAX_VALUES}")))?;
+    if n == 1 && start != end {
+        return Err(bad("N = 1 needs START = END".into()));
+    }
+    let values = (0..n)
+        .map(|i| {
+            let v = if n == 1 {
+                start
+            } else {
+                start + (end - start) * i as f64 / (n - 1) as f64
+            };
+            // Round off the last bits of the step arithmetic (0.009 rather
+            // than 0.009000000000000001) so the CSV shows the values meant.
+            format!("{v:.12e}").parse().unwrap_or(v)
+        })
+        .collect();
+    Ok(Axis {
+        spec: spec.to_string(),
+        knob,
+        values,
+    })
+}
+
+/// Summary metrics of one run, as CSV columns.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Metrics {
+    /// Mean of the last 5 apexes if steady, m.
+    pub steady_apex_m: Option<f64>,
+    /// First hop from which the apex stays within 2% of the target.
+    pub hops_to_converge: Option<usize>,
+    /// Last apex of the run, m.
+    pub last_apex_m: Option<f64>,
+    /// Stance phases.
+    pub hops: usize,
+    /// Net motor work over the run, J.
+    pub motor_work_j: f64,
+    /// Energy lost in nut impacts on the stops, J.
+    pub stop_impact_loss_j: f64,
+    /// Motor work per stance (motor work / hops), J.
+    pub energy_per_stance_j: Option<f64>,
+    /// Motor work in the first stance, J.
+    pub first_stance_motor_work_j: Option<f64>,
+    /// Largest |motor current|, A.
+    pub max_current_a: f64,
+    /// Largest nut displacement, m.
+    pub max_stroke_m: f64,
+    /// Faults the firmware latched.
+    pub fault_count: usize,
+    /// First apex after a liftoff, m: with the start apex, what the first
+    /// stance did to the hop (the motor's work also spins the rotor, and
+    /// that part does not lift the body).
+    pub first_apex_m: Option<f64>,
+}
+
+/// Metric columns, in CSV order, with the label plots use.
+pub const METRICS: [(&str, &str); 12] = [
+    ("steady_apex_m", "steady apex [m]"),
+    ("hops_to_converge", "hops to converge"),
+    ("last_apex_m", "last apex [m]"),
+    ("hops", "hops"),
+    ("motor_work_j", "motor work [J]"),
+    ("stop_impact_loss_j", "stop-impact loss [J]"),
+    ("energy_per_stance_j", "motor work per stance [J]"),
+    (
+        "first_stance_motor_work_j",
+        "energy added in the first stance [J]",
+    ),
+    ("max_current_a", "max current [A]"),
+    ("max_stroke_m", "max stroke [m]"),
+    ("fault_count", "faults"),
+    ("first_apex_m", "first apex [m]"),
+];
+
+/// The metric plotted when none is asked for.
+pub const DEFAULT_METRIC: &str = "steady_apex_m";
+
+impl Metrics {
+    /// From a run's summary.
+    pub fn of(s: &Summary) -> Metrics {
+        Metrics {
+            steady_apex_m: s.steady_apex_m,
+            hops_to_converge: s.hops_to_converge,
+            last_apex_m: s.apex_heights_m.last().copied(),
+            hops: s.hops,
+            motor_work_j: s.ledger.motor_work_j,
+            stop_impact_loss_j: s.ledger.stop_impact_loss_j,
+            energy_per_stance_j: (s.hops > 0).then(|| s.ledger.motor_work_j / s.hops as f64),
+            first_stance_motor_work_j: s.first_stance_motor_work_j,
+            max_current_a: s.max_current_a,
+            max_stroke_m: s.max_stroke_m,
+            fault_count: s.faults.len(),
+            first_apex_m: s.apex_heights_m.first().copied(),
+        }
+    }
+
+    /// Every metric in [`METRICS`] order (None: not defined for this run).
+    pub fn values(&self) -> [Option<f64>; METRICS.len()] {
+        [
+            self.steady_apex_m,
+            self.hops_to_converge.map(|h| h as f64),
+            self.last_apex_m,
+            Some(self.hops as f64),
+            Some(self.motor_work_j),
+            Some(self.stop_impact_loss_j),
+            self.energy_per_stance_j,
+            self.first_stance_motor_work_j,
+            Some(self.max_current_a),
+            Some(self.max_stroke_m),
+            Some(self.fault_count as f64),
+            self.first_apex_m,
+        ]
+    }
+
+    /// One metric by column name.
+    pub fn get(&self, name: &str) -> Option<f64> {
+        METRICS
+            .iter()
+            .position(|(n, _)| *n == name)
+            .and_then(|i| self.values()[i])
+    }
+}
+
+/// A sweep to run.
+pub struct Sweep {
+    /// The settings every run starts from.
+    pub base: Settings,
+    /// One or two swept parameters.
+    pub axes: Vec<Axis>,
+    /// Column of [`METRICS`] to plot.
+    pub metric: String,
+}
+
+/// One run of the grid.
+#[derive(Clone, Debug)]
+pub struct Row {
+    /// The swept values, in axis order.
+    pub values: Vec<f64>,
+    /// What the run gave.
+    pub metrics: Metrics,
+}
+
+impl Sweep {
+    /// Every grid point's swept values (first axis outermost) and settings,
+    /// each checked: an error names the point and what is wrong with it.
+    pub fn points(&self) -> Result<Vec<(Vec<f64>, Settings)>, String> {
+        if self.axes.is_empty() || self.axes.len() > 2 {
+            return Err(format!(
+                "a sweep needs one or two --param, got {}",
+                self.axes.len()
+            ));
+        }
+        if let [a, b] = &self.axes[..] {
+            if a.knob.column() == b.knob.column() {
+                return Err(format!(
+                    "`{}` is swept twice (`{}`, `{}`)",
+                    a.knob.column(),
+                    a.spec,
+                    b.spec
+                ));
+            }
+        }
+        if !METRICS.iter().any(|(n, _)| *n == self.metric) {
+            let names: Vec<&str> = METRICS.iter().map(|(n, _)| *n).collect();
+            return Err(format!(
+                "unknown --metric `{}`: expected one of {names:?}",
+                self.metric
+            ));
+        }
+        for a in &self.axes {
+            if let Some(users) = a.knob.unused_by(&self.base.controller) {
+                return Err(format!(
+                    "--param `{}`: `{}` is used by {users} only, not by the `{}` controller",
+                    a.spec,
+                    a.knob.column(),
+                    self.base.controller
+                ));
+            }
+        }
+        let runs: usize = self.axes.iter().map(|a| a.values.len()).product();
+        if runs > MAX_RUNS {
+            return Err(format!(
+                "{runs} runs is too many for one sweep (at most {MAX_RUNS})"
+            ));
+        }
+        let mut points = vec![(Vec::new(), self.base.clone())];
+        for a in &self.axes {
+            points = points
+                .into_iter()
+                .flat_map(|(vals, s)| {
+                    a.values.iter().map(move |&v| {
+                        let mut s = s.clone();
+                        a.knob.apply(&mut s, v);
+                        let mut vals = vals.clone();
+                        vals.push(v);
+                        (vals, s)
+                    })
+                })
+                .collect();
+        }
+        for (vals, s) in &points {
+            s.check()
+                .map_err(|e| format!("sweep point {}: {e}", self.describe(vals)))?;
+        }
+        Ok(points)
+    }
+
+    /// `name=value, ...` of a point, for messages.
+    pub fn describe(&self, values: &[f64]) -> String {
+        self.axes
+            .iter()
+            .zip(values)
+            .map(|(a, v)| format!("{}={v}", a.knob.column()))
+            .collect::<Vec<_>>()
+            .join(", ")
+    }
+
+    /// Run the grid on every core (rayon). `progress` is called once per
+    /// finished run, from the worker threads. Rows come back in grid order.
+    pub fn run(&self, progress: &(dyn Fn() + Sync)) -> Result<Vec<Row>, String> {
+        let points = self.points()?;
+        points
+            .par_iter()
+            .map(|(vals, s)| {
+                let cfg = s.run_config(0.0);
+                let mut ctl = s
+                    .controller_spec()
+                    .and_then(|spec| spec.build(&cfg.params, cfg.start_apex_m, cfg.control_dt_s))
+                    .map_err(|e| format!("sweep point {}: {e}", self.describe(vals)))?;
+                let result = run::run(&cfg, &s.params_name, &mut ctl)
+                    .map_err(|e| format!("sweep point {}: {e}", self.describe(vals)))?;
+                progress();
+                Ok(Row {
+                    values: vals.clone(),
+                    metrics: Metrics::of(&result.summary),
+                })
+            })
+            .collect()
+    }
+
+    /// The CSV text: the swept columns, then [`METRICS`]; empty cells for
+    /// undefined metrics.
+    pub fn csv(&self, rows: &[Row]) -> String {
+        let mut out = String::new();
+        let header: Vec<&str> = self
+            .axes
+            .iter()
+            .map(|a| a.knob.column())
+            .chain(METRICS.iter().map(|(n, _)| *n))
+            .collect();
+        let _ = writeln!(out, "{}", header.join(","));
+        for r in rows {
+            let cells: Vec<String> = r
+                .values
+                .iter()
+                .map(|v| format!("{v}"))
+                .chain(r.metrics.values().iter().map(|m| match m {
+                    Some(v) => format!("{v}"),
+                    None => String::new(),
+                }))
+                .collect();
+            let _ = writeln!(out, "{}", cells.join(","));
+        }
+        out
+    }
+
+    /// The plotted value of a row: the metric, except that the default
+    /// metric falls back to the last apex where the run never became steady.
+    /// The flag says a fallback was used.
+    pub fn plotted(&self, m: &Metrics) -> Option<(f64, bool)> {
+        match m.get(&self.metric) {
+            Some(v) => Some((v, false)),
+            None if self.metric == DEFAULT_METRIC => m.last_apex_m.map(|v| (v, true)),
+            None => None,
+        }
+    }
+
+    /// Write `sweep.csv`, `sweep.png` and `sweep.svg` into `dir` (created if
+    /// missing). The CSV and SVG are made in memory and the PNG is drawn to a
+    /// temporary name first, so a failure removes what it wrote and leaves no
+    /// partial output.
+    pub fn write(&self, rows: &[Row], dir: &Path, title: &str) -> Result<Vec<PathBuf>, String> {
+        crate::plot::ensure_font()?;
+        let csv = self.csv(rows);
+        let mut svg = String::new();
+        self.draw(
+            SVGBackend::with_string(&mut svg, PLOT_SIZE).into_drawing_area(),
+            rows,
+            title,
+        )?;
+        let existed = dir.exists();
+        std::fs::create_dir_all(dir)
+            .map_err(|e| format!("cannot create output directory {}: {e}", dir.display()))?;
+        let paths = [
+            dir.join("sweep.csv"),
+            dir.join("sweep.png"),
+            dir.join("sweep.svg"),
+        ];
+        // The bitmap backend picks the format from the extension: keep `.png`.
+        let png_tmp = dir.join(".sweep.partial.png");
+        let written = (|| -> Result<(), String> {
+            let io = |p: &Path, e: std::io::Error| format!("cannot write {}: {e}", p.display());
+            self.draw(
+                BitMapBackend::new(&png_tmp, PLOT_SIZE).into_drawing_area(),
+                rows,
+                title,
+            )?;
+            std::fs::write(&paths[0], &csv).map_err(|e| io(&paths[0], e))?;
+            std::fs::write(&paths[2], &svg).map_err(|e| io(&paths[2], e))?;
+            std::fs::rename(&png_tmp, &paths[1]).map_err(|e| io(&paths[1], e))?;
+            Ok(())
+        })();
+        if let Err(e) = written {
+            for p in paths.iter().chain([&png_tmp]) {
+                let _ = std::fs::remove_file(p);
+            }
+            if !existed {
+                let _ = std::fs::remove_dir(dir);
+            }
+            return Err(e);
+        }
+        Ok(paths.to_vec())
+    }
+
+    fn draw<DB: DrawingBackend>(
+        &self,
+        root: DrawingArea<DB, Shift>,
+        rows: &[Row],
+        title: &str,
+    ) -> Result<(), String>
+    where
+        DB::ErrorType: 'static,
+    {
+        let res = match self.axes.len() {
+            1 => self.line_plot(&root, rows, title),
+            _ => self.heat_map(&root, rows, title),
+        };
+        res.and_then(|()| root.present().map_err(Into::into))
+            .map_err(|e| format!("cannot draw the sweep plot: {e}"))
+    }
+
+    fn metric_label(&self) -> &'static str {
+        METRICS
+            .iter()
+            .find(|(n, _)| *n == self.metric)
+            .map_or("", |(_, l)| l)
+    }
+
+    fn line_plot<DB: DrawingBackend>(
+        &self,
+        root: &DrawingArea<DB, Shift>,
+        rows: &[Row],
+        title: &str,
+    ) -> Result<(), Box<dyn std::error::Error>>
+    where
+        DB::ErrorType: 'static,
+    {
+        root.fill(&WHITE)?;
+        let pts: Vec<(f64, f64, bool)> = rows
+            .iter()
+            .filter_map(|r| self.plotted(&r.metrics).map(|(v, fb)| (r.values[0], v, fb)))
+            .collect();
+        let (x_lo, x_hi) = padded(self.axes[0].values.iter().copied(), 0.03);
+        let (y_lo, y_hi) = padded(pts.iter().map(|p| p.1), 0.08);
+        let mut chart = ChartBuilder::on(root)
+            .caption(title, ("sans-serif", 20))
+            .margin(16)
+            .margin_top(24)
+            .x_label_area_size(48)
+            .y_label_area_size(80)
+            .build_cartesian_2d(x_lo..x_hi, y_lo..y_hi)?;
+        chart
+            .configure_mesh()
+            .x_desc(self.axes[0].knob.column())
+            .y_desc(self.metric_label())
+            .label_style(("sans-serif", 14))
+            .axis_desc_style(("sans-serif", 16))
+            .light_line_style(WHITE.mix(0.0))
+            .draw()?;
+        chart.draw_series(LineSeries::new(
+            pts.iter().map(|p| (p.0, p.1)),
+            BLUE.stroke_width(2),
+        ))?;
+        chart
+            .draw_series(
+                pts.iter()
+                    .filter(|p| !p.2)
+                    .map(|p| Circle::new((p.0, p.1), 5, BLUE.filled())),
+            )?
+            .label(self.metric_label())
+            .legend(|(x, y)| Circle::new((x + 10, y), 5, BLUE.filled()));
+        if pts.iter().any(|p| p.2) {
+            chart
+                .draw_series(
+                    pts.iter()
+                        .filter(|p| p.2)
+                        .map(|p| Cross::new((p.0, p.1), 6, RED.stroke_width(2))),
+                )?
+                .label("last apex (never steady)")
+                .legend(|(x, y)| Cross::new((x + 10, y), 6, RED.stroke_width(2)));
+        }
+        chart
+            .configure_series_labels()
+            .position(SeriesLabelPosition::UpperRight)
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .draw()?;
+        Ok(())
+    }
+
+    fn heat_map<DB: DrawingBackend>(
+        &self,
+        root: &DrawingArea<DB, Shift>,
+        rows: &[Row],
+        title: &str,
+    ) -> Result<(), Box<dyn std::error::Error>>
+    where
+        DB::ErrorType: 'static,
+    {
+        root.fill(&WHITE)?;
+        let (main, bar) = root.split_horizontally(PLOT_SIZE.0 - 150);
+        let xe = cell_edges(&self.axes[0].values);
+        let ye = cell_edges(&self.axes[1].values);
+        let range = |e: &[f64]| {
+            e.iter()
+                .fold((f64::MAX, f64::MIN), |(a, b), v| (a.min(*v), b.max(*v)))
+        };
+        let ((x_lo, x_hi), (y_lo, y_hi)) = (range(&xe), range(&ye));
+        let vals: Vec<Option<(f64, bool)>> =
+            rows.iter().map(|r| self.plotted(&r.metrics)).collect();
+        let (v_lo, v_hi) = vals
+            .iter()
+            .flatten()
+            .fold((f64::MAX, f64::MIN), |(a, b), (v, _)| {
+                (a.min(*v), b.max(*v))
+            });
+        let (v_lo, v_hi) = if v_lo > v_hi {
+            (0.0, 1.0)
+        } else if v_hi - v_lo < 1e-12 {
+            (v_lo - 0.5, v_hi + 0.5)
+        } else {
+            (v_lo, v_hi)
+        };
+        let mut chart = ChartBuilder::on(&main)
+            .caption(title, ("sans-serif", 20))
+            .margin(16)
+            .margin_top(24)
+            .x_label_area_size(48)
+            .y_label_area_size(80)
+            .build_cartesian_2d(x_lo..x_hi, y_lo..y_hi)?;
+        chart
+            .configure_mesh()
+            .x_desc(self.axes[0].knob.column())
+            .y_desc(self.axes[1].knob.column())
+            .label_style(("sans-serif", 14))
+            .axis_desc_style(("sans-serif", 16))
+            .disable_mesh()
+            .draw()?;
+        let n1 = self.axes[1].values.len();
+        chart.draw_series(rows.iter().zip(&vals).enumerate().map(|(k, (_, v))| {
+            let (i, j) = (k / n1, k % n1);
+            let color = match v {
+                Some((v, _)) => viridis((v - v_lo) / (v_hi - v_lo)),
+                None => RGBColor(200, 200, 200),
+            };
+            Rectangle::new([(xe[i], ye[j]), (xe[i + 1], ye[j + 1])], color.filled())
+        }))?;
+        // Runs that never became steady, plotted with their last apex.
+        chart.draw_series(rows.iter().zip(&vals).filter_map(|(r, v)| match v {
+            Some((_, true)) => Some(Cross::new(
+                (r.values[0], r.values[1]),
+                5,
+                WHITE.stroke_width(2),
+            )),
+            _ => None,
+        }))?;
+        if vals.iter().flatten().any(|(_, fallback)| *fallback) {
+            chart
+                .draw_series(std::iter::once(Cross::new(
+                    (x_lo, y_lo),
+                    0,
+                    WHITE.stroke_width(2),
+                )))?
+                .label("x: never steady, last apex shown")
+                .legend(|(x, y)| Cross::new((x + 8, y), 5, BLACK.stroke_width(2)));
+            chart
+                .configure_series_labels()
+                .position(SeriesLabelPosition::UpperRight)
+                .label_font(("sans-serif", 14))
+                .background_style(WHITE.mix(0.85))
+                .border_style(BLACK)
+                .draw()?;
+        }
+        let mut scale = ChartBuilder::on(&bar)
+            .margin_top(60)
+            .margin_bottom(64)
+            .margin_right(8)
+            .y_label_area_size(100)
+            .build_cartesian_2d(0.0..1.0, v_lo..v_hi)?;
+        scale
+            .configure_mesh()
+            .disable_x_axis()
+            .disable_mesh()
+            .y_desc(self.metric_label())
+            .y_label_style(("sans-serif", 14))
+            .axis_desc_style(("sans-serif", 15))
+            .draw()?;
+        const STEPS: usize = 100;
+        scale.draw_series((0..STEPS).map(|k| {
+            let a = v_lo + (v_hi - v_lo) * k as f64 / STEPS as f64;
+            let b = v_lo + (v_hi - v_lo) * (k + 1) as f64 / STEPS as f64;
+            Rectangle::new(
+                [(0.0, a), (1.0, b)],
+                viridis(k as f64 / STEPS as f64).filled(),
+            )
+        }))?;
+        Ok(())
+    }
+}
+
+/// Plot size, pixels.
+const PLOT_SIZE: (u32, u32) = (1000, 700);
+
+/// Value range with `frac` of its span added on each side (never empty).
+fn padded(values: impl Iterator<Item = f64>, frac: f64) -> (f64, f64) {
+    let (lo, hi) = values.fold((f64::MAX, f64::MIN), |(a, b), v| (a.min(v), b.max(v)));
+    if lo > hi {
+        return (0.0, 1.0);
+    }
+    let pad = ((hi - lo) * frac)
+        .max(lo.abs().max(hi.abs()) * 0.01)
+        .max(1e-9);
+    (lo - pad, hi + pad)
+}
+
+/// Cell boundaries around evenly spaced values (one value: a cell of 10%
+/// of its size, or of 1 around zero).
+fn cell_edges(values: &[f64]) -> Vec<f64> {
+    let half = match values {
+        [a, b, ..] => (b - a) / 2.0,
+        [a] => (a.abs() * 0.05).max(0.5 * f64::from(u8::from(*a == 0.0))),
+        [] => 0.5,
+    };
+    let mut e: Vec<f64> = values.iter().map(|v| v - half).collect();
+    e.push(values.last().map_or(half, |v| v + half));
+    e
+}
+
+/// The viridis colour map at `t` in 0..=1 (five anchors, linear between).
+fn viridis(t: f64) -> RGBColor {
+    const ANCHORS: [(f64, f64, f64); 5] = [
+        (68.0, 1.0, 84.0),
+        (59.0, 82.0, 139.0),
+        (33.0, 145.0, 140.0),
+        (94.0, 201.0, 98.0),
+        (253.0, 231.0, 37.0),
+    ];
+    let t = if t.is_finite() {
+        t.clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    let x = t * (ANCHORS.len() - 1) as f64;
+    let i = (x.floor() as usize).min(ANCHORS.len() - 2);
+    let f = x - i as f64;
+    let (a, b) = (ANCHORS[i], ANCHORS[i + 1]);
+    let mix = |p: f64, q: f64| (p + (q - p) * f).round() as u8;
+    RGBColor(mix(a.0, b.0), mix(a.1, b.1), mix(a.2, b.2))
+}

@@ -1,0 +1,321 @@
+//! `hopper-sim run --scenario` and `hopper-sim sweep` (issue 5): scenario
+//! files, flag precedence, sweep output and clean failures on bad input.
+
+// Test helpers may panic on impossible setup errors: that is a failed test.
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn sim(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_hopper-sim"))
+        .args(args)
+        .output()
+        .expect("run hopper-sim")
+}
+
+fn scenario(name: &str) -> String {
+    let p: PathBuf = [env!("CARGO_MANIFEST_DIR"), "..", "scenarios", name]
+        .iter()
+        .collect();
+    p.to_str().unwrap().to_string()
+}
+
+fn json(out: &Output) -> serde_json::Value {
+    assert!(
+        out.status.success(),
+        "stderr: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_slice(&out.stdout).unwrap()
+}
+
+/// Fails with exit status 2, one error line containing `needle`, nothing on
+/// stdout, and `out_dir` not created.
+fn assert_clean_failure(args: &[&str], out_dir: &Path, needle: &str) {
+    let o = sim(args);
+    assert_eq!(o.status.code(), Some(2), "{args:?} should fail with 2");
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(err.trim().lines().count(), 1, "one error line: {err}");
+    assert!(
+        err.contains(needle),
+        "{args:?}: expected `{needle}` in: {err}"
+    );
+    assert!(!err.contains("panicked"), "{err}");
+    assert!(o.stdout.is_empty());
+    assert!(!out_dir.exists(), "no output may be written on bad input");
+}
+
+#[test]
+fn shipped_scenarios_parse() {
+    for name in [
+        "energy-apex-design.toml",
+        "passive-identified.toml",
+        "lead-study.toml",
+    ] {
+        let s = hal_sim::scenario::load(Path::new(&scenario(name)))
+            .unwrap_or_else(|e| panic!("{name}: {e}"));
+        let settings = hal_sim::scenario::Settings::resolve(Some(&s.settings), &Default::default());
+        settings.check().unwrap_or_else(|e| panic!("{name}: {e}"));
+    }
+}
+
+#[test]
+fn flags_override_the_scenario_and_defaults_stay() {
+    let file = scenario("energy-apex-design.toml");
+    let v = json(&sim(&[
+        "run",
+        "--scenario",
+        &file,
+        "--duration",
+        "1",
+        "--target-apex",
+        "0.04",
+        "--json",
+    ]));
+    assert_eq!(v["controller"], "energy-apex");
+    assert_eq!(v["params"], "design");
+    assert_eq!(v["start_apex_m"], 0.1);
+    assert_eq!(v["duration_s"], 1.0);
+    assert_eq!(v["target_apex_m"], 0.04);
+    assert!(v.get("first_stance_motor_work_j").is_some(), "{v}");
+
+    // The file alone, and the same settings as flags, give the same run.
+    let a = json(&sim(&[
+        "run",
+        "--scenario",
+        &file,
+        "--duration",
+        "2",
+        "--json",
+    ]));
+    let b = json(&sim(&[
+        "run",
+        "--params",
+        "design",
+        "--controller",
+        "energy-apex",
+        "--start-apex",
+        "0.10",
+        "--target-apex",
+        "0.05",
+        "--duration",
+        "2",
+        "--json",
+    ]));
+    assert_eq!(a["apex_heights_m"], b["apex_heights_m"]);
+
+    // No scenario: the documented defaults.
+    let d = json(&sim(&["run", "--duration", "0.5", "--json"]));
+    assert_eq!(d["controller"], "passive");
+    assert_eq!(d["params"], "design");
+    assert_eq!(d["start_apex_m"], 0.15);
+    assert!(d["target_apex_m"].is_null());
+}
+
+#[test]
+fn bad_scenario_names_file_line_and_key_and_writes_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("never");
+    let out_s = out.to_str().unwrap();
+    let bad = dir.path().join("bad.toml");
+    let bad_s = bad.to_str().unwrap();
+
+    std::fs::write(
+        &bad,
+        "duration_s = 2\n[controller]\nname = \"energy\"\ntarget_apex_m = 7\n",
+    )
+    .unwrap();
+    assert_clean_failure(
+        &["run", "--scenario", bad_s, "--out", out_s],
+        &out,
+        "bad.toml:4: `controller.target_apex_m` = 7 is out of range",
+    );
+    std::fs::write(&bad, "[plant]\nbase = \"design\"\nlead_m = 0.005\n").unwrap();
+    assert_clean_failure(
+        &["run", "--scenario", bad_s, "--out", out_s],
+        &out,
+        "bad.toml:3: unknown parameter `plant.lead_m`",
+    );
+    std::fs::write(&bad, "start_apex_m = 0.1\nstart_apexx_m = 0.1\n").unwrap();
+    assert_clean_failure(
+        &[
+            "sweep",
+            "--scenario",
+            bad_s,
+            "--param",
+            "torque=0.5:1:2",
+            "--out",
+            out_s,
+        ],
+        &out,
+        "bad.toml:2: unknown key `start_apexx_m`",
+    );
+    let missing = dir.path().join("missing.toml");
+    assert_clean_failure(
+        &[
+            "run",
+            "--scenario",
+            missing.to_str().unwrap(),
+            "--out",
+            out_s,
+        ],
+        &out,
+        "cannot read scenario file",
+    );
+}
+
+#[test]
+fn two_by_two_sweep_writes_four_rows_and_a_plot() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("sw");
+    let o = sim(&[
+        "sweep",
+        "--controller",
+        "open-torque",
+        "--noise",
+        "off",
+        "--duration",
+        "0.6",
+        "--param",
+        "torque=0.5:1:2",
+        "--param",
+        "spring_stiffness_n_per_m=10000:11000:2",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let csv = std::fs::read_to_string(out.join("sweep.csv")).unwrap();
+    let mut lines = csv.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    for col in [
+        "torque_nm",
+        "spring_stiffness_n_per_m",
+        "steady_apex_m",
+        "hops_to_converge",
+        "last_apex_m",
+        "hops",
+        "motor_work_j",
+        "stop_impact_loss_j",
+        "energy_per_stance_j",
+        "first_stance_motor_work_j",
+        "max_current_a",
+        "max_stroke_m",
+        "fault_count",
+    ] {
+        assert!(header.contains(&col), "missing column {col}: {header:?}");
+    }
+    assert_eq!(&header[..2], &["torque_nm", "spring_stiffness_n_per_m"]);
+    let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
+    assert_eq!(rows.len(), 4, "{csv}");
+    let swept: Vec<(&str, &str)> = rows.iter().map(|r| (r[0], r[1])).collect();
+    assert_eq!(
+        swept,
+        [
+            ("0.5", "10000"),
+            ("0.5", "11000"),
+            ("1", "10000"),
+            ("1", "11000")
+        ]
+    );
+    for r in &rows {
+        assert_eq!(r.len(), header.len());
+    }
+    // More torque adds more energy in the first stance.
+    let w = |r: &Vec<&str>| -> f64 { r[9].parse().unwrap() };
+    assert_eq!(header[9], "first_stance_motor_work_j");
+    assert!(w(&rows[2]) > w(&rows[0]), "{csv}");
+    for f in ["sweep.png", "sweep.svg"] {
+        assert!(std::fs::metadata(out.join(f)).unwrap().len() > 1000, "{f}");
+    }
+}
+
+#[test]
+fn lead_study_preset_matches_its_scenario_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let a = dir.path().join("a");
+    let b = dir.path().join("b");
+    let o = sim(&[
+        "sweep",
+        "--preset",
+        "lead-study",
+        "--out",
+        a.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let o = sim(&[
+        "sweep",
+        "--scenario",
+        &scenario("lead-study.toml"),
+        "--out",
+        b.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let csv = std::fs::read_to_string(a.join("sweep.csv")).unwrap();
+    assert_eq!(csv, std::fs::read_to_string(b.join("sweep.csv")).unwrap());
+    let leads: Vec<&str> = csv
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').next().unwrap())
+        .collect();
+    assert_eq!(leads.len(), 9);
+    assert_eq!((leads[0], leads[3], leads[8]), ("0.002", "0.005", "0.01"));
+}
+
+#[test]
+fn bad_sweep_input_is_one_clear_error_and_writes_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("never");
+    let o = out.to_str().unwrap();
+    let sweep = |param: &str| -> Vec<String> {
+        [
+            "sweep",
+            "--controller",
+            "open-torque",
+            "--param",
+            param,
+            "--out",
+            o,
+        ]
+        .iter()
+        .map(|s| s.to_string())
+        .collect()
+    };
+    for (param, needle) in [
+        ("torque", "bad --param `torque`: no `=`"),
+        ("torque=0.5:1", "is not START:END:N"),
+        ("torque=0.5:x:3", "END `x` is not a finite number"),
+        ("torque=0.5:1:0", "N `0` is not a count"),
+        ("lead=1:2:3", "unknown parameter `lead`"),
+        (
+            "screw_lead_m=0:0.01:3",
+            "sweep point screw_lead_m=0: parameter `screw_lead_m` = 0 is out of range",
+        ),
+        ("ke=1:2:2", "not by the `open-torque` controller"),
+    ] {
+        let args = sweep(param);
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        assert_clean_failure(&args, &out, needle);
+    }
+    assert_clean_failure(&["sweep", "--out", o], &out, "nothing to sweep");
+    assert_clean_failure(
+        &["sweep", "--preset", "moon", "--out", o],
+        &out,
+        "unknown sweep preset `moon`",
+    );
+    assert_clean_failure(
+        &[
+            "sweep",
+            "--param",
+            "torque=1:1:1",
+            "--controller",
+            "open-torque",
+            "--metric",
+            "speed",
+            "--out",
+            o,
+        ],
+        &out,
+        "unknown --metric `speed`",
+    );
+}
