@@ -6,11 +6,14 @@
 //! the crate computes a DAC code and the amplifier enable, and the plant is
 //! driven with the amplifier's current over the period.
 
+use crate::inject::{
+    InjectKind, Injection, ENCODER_JUMP_COUNTS, NOISE_BURST_DURATION_S, NOISE_BURST_SIGMA_CODES,
+};
 use crate::mock::{firmware_config, SensorConfig, SimHal};
 use crate::params::Params;
 use crate::plant::Plant;
 use hopper_control::estimator::PhaseEvent;
-use hopper_control::hopper::{ApexLoop, Hopper, StepOutput, Strategy};
+use hopper_control::hopper::{ApexLoop, Hopper, MeasurementOverride, StepOutput, Strategy};
 use hopper_control::laws::{
     constant_torque, energy_torque, flight_pd, modified_torque, step_closed, step_open, velocity,
     StanceLaw,
@@ -32,6 +35,11 @@ pub trait Controller {
     /// Faults latched so far, in order, with the time they latched.
     fn faults(&self) -> Vec<FaultRecord> {
         Vec::new()
+    }
+    /// Largest |current| commanded to the amplifier (DAC and enable) from
+    /// the period the first fault latched on, A; `None` without a fault.
+    fn max_abs_current_after_fault_a(&self) -> Option<f64> {
+        None
     }
     /// The firmware's per-hop ledgers so far.
     fn hop_ledgers(&self) -> Vec<HopLedger> {
@@ -93,6 +101,8 @@ pub struct ControllerSpec {
     pub strategy_override: Option<Strategy>,
     /// Flight PD gains instead of the eq 4.13 default.
     pub flight_override: Option<flight_pd::Config>,
+    /// Faults to inject (`hopper-sim run --inject`).
+    pub injections: Vec<Injection>,
 }
 
 impl ControllerSpec {
@@ -106,6 +116,7 @@ impl ControllerSpec {
             model: None,
             strategy_override: None,
             flight_override: None,
+            injections: Vec::new(),
         }
     }
 
@@ -190,6 +201,12 @@ impl ControllerSpec {
             hops: Vec::new(),
             last: None,
             events: EstimatorEvents::default(),
+            injections: self
+                .injections
+                .iter()
+                .map(|&i| (i, InjectState::Pending))
+                .collect(),
+            max_abs_current_after_fault_a: None,
         })
     }
 }
@@ -206,6 +223,19 @@ pub struct FirmwareController {
     hops: Vec<HopLedger>,
     last: Option<StepOutput>,
     events: EstimatorEvents,
+    injections: Vec<(Injection, InjectState)>,
+    max_abs_current_after_fault_a: Option<f64>,
+}
+
+/// Where an injection is in its life.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum InjectState {
+    /// Its time has not come.
+    Pending,
+    /// Applied, and ends later (a noise burst).
+    Active,
+    /// Applied for good (or over).
+    Done,
 }
 
 impl FirmwareController {
@@ -223,6 +253,51 @@ impl FirmwareController {
     pub fn last_output(&self) -> Option<&StepOutput> {
         self.last.as_ref()
     }
+
+    /// Applies the injections due in the period starting at `plant.time_s()`.
+    /// An injection at `t` is due in the first period that starts no
+    /// earlier than half a period before `t` (the plant's clock is a sum of
+    /// periods, so `t` itself may be missed by a rounding error).
+    fn apply_injections(&mut self, plant: &Plant) {
+        let now_s = plant.time_s() + 0.5 * self.dt_s;
+        for (inj, state) in &mut self.injections {
+            match *state {
+                InjectState::Pending if now_s >= inj.time_s => {}
+                InjectState::Active if now_s >= inj.time_s + NOISE_BURST_DURATION_S => {
+                    self.hal.faults.adc_burst_sigma_codes = 0;
+                    *state = InjectState::Done;
+                    continue;
+                }
+                _ => continue,
+            }
+            *state = InjectState::Done;
+            let full_scale = self.hal.adc_full_scale();
+            let f = &mut self.hal.faults;
+            match inj.kind {
+                InjectKind::EncoderJump => {
+                    f.motor_counts_offset = f.motor_counts_offset.wrapping_add(ENCODER_JUMP_COUNTS);
+                }
+                InjectKind::EncoderFrozen => self.hal.freeze_motor_encoder(plant),
+                InjectKind::LoadcellStuck => self.hal.freeze_loadcell(plant),
+                InjectKind::LoadcellSaturated => f.loadcell_code = Some(full_scale),
+                InjectKind::PotOpen => f.pot_code = Some(0),
+                InjectKind::Nan => self.hopper.set_measurement_override(MeasurementOverride {
+                    spring_force_n: Some(f32::NAN),
+                    ..MeasurementOverride::default()
+                }),
+                InjectKind::NoiseBurst => {
+                    f.adc_burst_sigma_codes = NOISE_BURST_SIGMA_CODES;
+                    *state = InjectState::Active;
+                }
+                InjectKind::Estop => f.estop = true,
+                InjectKind::AmpFault => f.amp_fault = true,
+                InjectKind::DacError => f.dac_error = true,
+                // The RTIC app finds the overrun at the start of the next
+                // period and reports it before stepping: do the same.
+                InjectKind::Overrun => self.hopper.supervisor_mut().report_overrun(),
+            }
+        }
+    }
 }
 
 impl Controller for FirmwareController {
@@ -231,7 +306,12 @@ impl Controller for FirmwareController {
     }
 
     fn current_command_a(&mut self, plant: &Plant) -> f64 {
+        // Before the injections: an overrun is reported into the supervisor
+        // there, and must count as latched in this period.
         let before = self.hopper.supervisor().faults();
+        if !self.injections.is_empty() {
+            self.apply_injections(plant);
+        }
         let out = {
             let mut io = self.hal.io(plant);
             self.hopper.run_period(&mut io, self.dt_s as f32)
@@ -257,6 +337,11 @@ impl Controller for FirmwareController {
             _ => {}
         }
         self.last = Some(out);
+        if !self.faults.is_empty() {
+            let i = self.hal.commanded_current_a().abs();
+            let max = self.max_abs_current_after_fault_a.get_or_insert(0.0);
+            *max = max.max(i);
+        }
         self.hal.mean_current_a(self.dt_s)
     }
 
@@ -266,6 +351,10 @@ impl Controller for FirmwareController {
 
     fn faults(&self) -> Vec<FaultRecord> {
         self.faults.clone()
+    }
+
+    fn max_abs_current_after_fault_a(&self) -> Option<f64> {
+        self.max_abs_current_after_fault_a
     }
 
     fn hop_ledgers(&self) -> Vec<HopLedger> {

@@ -118,6 +118,12 @@ pub struct IoFaults {
     pub loadcell_code: Option<u16>,
     /// The potentiometer ADC reads this code (e.g. a rail: open wiper).
     pub pot_code: Option<u16>,
+    /// The motor encoder counter reads this value (a frozen encoder).
+    pub motor_counts: Option<u32>,
+    /// Extra Gaussian noise on both ADC channels, codes (1 sigma; 0: none):
+    /// an interference burst. Drawn from its own generator, so runs without
+    /// a burst keep their noise sequence.
+    pub adc_burst_sigma_codes: u16,
 }
 
 /// Sensor, DAC and amplifier models for one hopper.
@@ -133,6 +139,10 @@ pub struct SimHal {
     amp_lag: LagFactor,
     amp_enabled: bool,
     dac_code: u16,
+    /// The generator of [`IoFaults::adc_burst_sigma_codes`]'s noise.
+    burst_noise: Noise,
+    /// The last sample read (what a frozen channel keeps reading).
+    last_sample: Option<RawSample>,
     /// Injected I/O faults.
     pub faults: IoFaults,
 }
@@ -186,6 +196,9 @@ impl SimHal {
             amp_lag: LagFactor::default(),
             amp_enabled: false,
             dac_code: cal.dac_zero_code,
+            // Enabled even with `noise: false`: a burst is a fault, not sensor noise.
+            burst_noise: Noise::new(cfg.seed ^ 0x6275_7273_7400_0000, true),
+            last_sample: None,
             faults: IoFaults::default(),
         }
     }
@@ -204,16 +217,65 @@ impl SimHal {
         } else {
             (1u32 << self.motor.bits) - 1
         };
-        let loadcell_code = self.loadcell.code(plant.spring_force_n(), &mut self.noise);
-        let pot_code = self.pot.code(leg_compression_m, &mut self.noise);
-        RawSample {
-            motor_counts: motor_counts.wrapping_add(self.faults.motor_counts_offset) & wrap_mask,
-            height_counts: self.height.counter(s.z_m - self.height_origin_m),
-            loadcell_code: self.faults.loadcell_code.unwrap_or(loadcell_code),
-            pot_code: self.faults.pot_code.unwrap_or(pot_code),
-            estop_pressed: self.faults.estop,
-            amp_fault: self.faults.amp_fault,
+        let mut loadcell_code = self.loadcell.code(plant.spring_force_n(), &mut self.noise);
+        let mut pot_code = self.pot.code(leg_compression_m, &mut self.noise);
+        if self.faults.adc_burst_sigma_codes > 0 {
+            let sigma = f64::from(self.faults.adc_burst_sigma_codes);
+            let full = f64::from(self.loadcell.full_scale());
+            let mut burst = |code: u16| {
+                let c = f64::from(code) + self.burst_noise.gaussian(sigma);
+                // In 0..=full scale (an ADC cannot read outside its rails).
+                libm::round(c.clamp(0.0, full)) as u16
+            };
+            loadcell_code = burst(loadcell_code);
+            pot_code = burst(pot_code);
         }
+        let f = &self.faults;
+        let sample = RawSample {
+            motor_counts: f
+                .motor_counts
+                .unwrap_or(motor_counts.wrapping_add(f.motor_counts_offset) & wrap_mask),
+            height_counts: self.height.counter(s.z_m - self.height_origin_m),
+            loadcell_code: f.loadcell_code.unwrap_or(loadcell_code),
+            pot_code: f.pot_code.unwrap_or(pot_code),
+            estop_pressed: f.estop,
+            amp_fault: f.amp_fault,
+        };
+        self.last_sample = Some(sample);
+        sample
+    }
+
+    /// The last sample [`sample`](Self::sample) returned (`None` before the
+    /// first): the value a channel that freezes now keeps reading.
+    pub fn last_sample(&self) -> Option<RawSample> {
+        self.last_sample
+    }
+
+    /// Freezes the motor encoder at the value it last read (or, before the
+    /// first read, at the plant's present angle): an encoder that stops counting.
+    pub fn freeze_motor_encoder(&mut self, plant: &Plant) {
+        let counts = match self.last_sample {
+            Some(s) => s.motor_counts,
+            None => self.motor.counter(plant.motor_angle_rad()),
+        };
+        self.faults.motor_counts = Some(counts);
+    }
+
+    /// Sticks the load cell at the code it last read (or, before the first
+    /// read, at the plant's present force without noise).
+    pub fn freeze_loadcell(&mut self, plant: &Plant) {
+        let code = match self.last_sample {
+            Some(s) => s.loadcell_code,
+            None => self
+                .loadcell
+                .code(plant.spring_force_n(), &mut Noise::new(0, false)),
+        };
+        self.faults.loadcell_code = Some(code);
+    }
+
+    /// The DAC code for 0 A.
+    pub fn dac_zero_code(&self) -> u16 {
+        self.amp.zero_code
     }
 
     /// This period's I/O on `plant`.

@@ -1,7 +1,7 @@
 //! Scenario runner: a controller against the plant at a fixed control rate,
 //! with trajectory sampling and the per-run summary `hopper-sim` prints.
 
-use crate::controller::{Controller, EstimatorEvents};
+use crate::controller::{Controller, EstimatorEvents, FaultRecord};
 use crate::params::Params;
 use crate::plant::{Event, Ledger, Mode, Plant, PlantError};
 use hopper_control::telemetry::HopLedger;
@@ -178,10 +178,15 @@ pub struct Summary {
     pub max_stroke_m: f64,
     /// Largest |motor current|, A (same as `peak_current_a`).
     pub max_current_a: f64,
-    /// Names of the faults the firmware latched, in order; empty when none.
-    pub faults: Vec<String>,
+    /// The faults the firmware latched, in order, each with the time of the
+    /// period that latched it; empty when none.
+    pub faults: Vec<FaultRecord>,
     /// Time of the first latched fault, s (null when none).
     pub first_fault_s: Option<f64>,
+    /// Largest |current| commanded to the amplifier (DAC code with the
+    /// enable) from the period the first fault latched on, A; null when no
+    /// fault latched. The supervisor makes it 0.
+    pub max_abs_current_after_fault_a: Option<f64>,
     /// Events the firmware's phase estimator reported (null without firmware).
     pub estimated_events: Option<EstimatorEvents>,
     /// The firmware's per-hop ledger, one entry per completed hop.
@@ -339,7 +344,8 @@ pub fn run_with_progress(
                 hops_to_converge: target
                     .and_then(|t| hops_to_converge(&summary.apex_heights_m, t, 0.02)),
                 first_fault_s: faults.first().map(|f| f.time_s),
-                faults: faults.iter().map(|f| f.name.to_string()).collect(),
+                max_abs_current_after_fault_a: controller.max_abs_current_after_fault_a(),
+                faults,
                 estimated_events: controller.estimator_events(),
                 firmware_hops: controller
                     .hop_ledgers()
@@ -417,6 +423,7 @@ fn summarize(
         max_current_a: 0.0,
         faults: Vec::new(),
         first_fault_s: None,
+        max_abs_current_after_fault_a: None,
         estimated_events: None,
         firmware_hops: Vec::new(),
         first_stance_motor_work_j: None,

@@ -9,6 +9,7 @@
 //! start_apex_m = 0.10
 //! duration_s = 15.0
 //! control_hz = 10000.0
+//! inject = ["estop@1.0"]    # faults to inject, KIND@TIME (as `--inject`)
 //!
 //! [controller]              # or controller = "energy-apex"
 //! name = "energy-apex"
@@ -34,6 +35,7 @@
 //! and out-of-range values are errors naming the file, the line and the key.
 
 use crate::controller::{ControllerSpec, CONTROLLER_NAMES};
+use crate::inject::Injection;
 use crate::mock::SensorConfig;
 use crate::params::Params;
 use crate::params_toml::{self, ParamsFileError};
@@ -113,6 +115,8 @@ pub struct Overrides {
     pub duration_s: Option<f64>,
     /// Control rate, Hz.
     pub control_hz: Option<f64>,
+    /// Faults to inject (a given list replaces the other layer's whole list).
+    pub inject: Option<Vec<Injection>>,
 }
 
 impl Overrides {
@@ -134,6 +138,7 @@ impl Overrides {
             start_apex_m: over.start_apex_m.or(self.start_apex_m),
             duration_s: over.duration_s.or(self.duration_s),
             control_hz: over.control_hz.or(self.control_hz),
+            inject: over.inject.clone().or_else(|| self.inject.clone()),
         }
     }
 }
@@ -167,6 +172,8 @@ pub struct Settings {
     pub duration_s: f64,
     /// Control rate, Hz.
     pub control_hz: f64,
+    /// Faults to inject.
+    pub inject: Vec<Injection>,
 }
 
 impl Settings {
@@ -198,6 +205,7 @@ impl Settings {
             start_apex_m: o.start_apex_m.unwrap_or(DEFAULT_START_APEX_M),
             duration_s: o.duration_s.unwrap_or(DEFAULT_DURATION_S),
             control_hz: o.control_hz.unwrap_or(DEFAULT_CONTROL_HZ),
+            inject: o.inject.unwrap_or_default(),
         }
     }
 
@@ -219,6 +227,7 @@ impl Settings {
             torque_nm: self.torque_nm,
             sensors: self.sensors,
             model: self.model,
+            injections: self.inject.clone(),
             ..ControllerSpec::new(&self.controller)
         };
         if let Some(ke) = self.energy_gain_nm_per_j {
@@ -304,6 +313,12 @@ impl Settings {
         check_range("pot_sigma_m", s.pot_sigma_m, limits::POT_SIGMA_M, "m")?;
         let cfg = self.run_config(0.0);
         cfg.validate()?;
+        if let Some(late) = self.inject.iter().find(|i| i.time_s >= self.duration_s) {
+            return Err(format!(
+                "fault injection `{late}` is at or after the end of the run ({} s)",
+                self.duration_s
+            ));
+        }
         self.controller_spec()?
             .build(&cfg.params, cfg.start_apex_m, cfg.control_dt_s)
             .map(|_| ())
@@ -399,8 +414,9 @@ fn key_lines(
 }
 
 /// The keys each table accepts.
-const TOP_KEYS: [&str; 9] = [
+const TOP_KEYS: [&str; 10] = [
     "description",
+    "inject",
     "plant",
     "model",
     "start_apex_m",
@@ -574,6 +590,28 @@ pub fn from_toml_str(text: &str, origin: &str) -> Result<Scenario, ScenarioError
         ..Overrides::default()
     };
     let description = r.string(&top, "", "description")?.map(str::to_string);
+    match top.get("inject") {
+        None => {}
+        Some(toml::Value::Array(items)) => {
+            let mut list = Vec::new();
+            for item in items {
+                let toml::Value::String(spec) = item else {
+                    return Err(r.err(
+                        "inject",
+                        format!("`inject` must be a list of \"KIND@TIME\" strings, got {item}"),
+                    ));
+                };
+                list.push(Injection::parse(spec).map_err(|e| r.err("inject", e))?);
+            }
+            s.inject = Some(list);
+        }
+        Some(other) => {
+            return Err(r.err(
+                "inject",
+                format!("`inject` must be a list of \"KIND@TIME\" strings, got {other}"),
+            ))
+        }
+    }
 
     match top.get("controller") {
         None => {}
@@ -742,6 +780,30 @@ mod tests {
         let set = Settings::resolve(Some(o), &Overrides::default());
         set.check().unwrap();
         assert!(set.controller_spec().unwrap().strategy_override.is_some());
+    }
+
+    #[test]
+    fn inject_list_parses_and_flags_replace_it() {
+        let s = from_toml_str(
+            "duration_s = 2\ninject = [\"estop@1.0\", \"nan@0.5\"]\n",
+            "s.toml",
+        )
+        .unwrap();
+        let list = s.settings.inject.clone().unwrap();
+        assert_eq!(list.len(), 2);
+        assert_eq!(list[1].kind, crate::inject::InjectKind::Nan);
+        let settings = Settings::resolve(Some(&s.settings), &Overrides::default());
+        assert_eq!(settings.controller_spec().unwrap().injections, list);
+        let cli = Overrides {
+            inject: Some(Vec::new()),
+            ..Overrides::default()
+        };
+        assert!(Settings::resolve(Some(&s.settings), &cli).inject.is_empty());
+        let e = parse_err("\n\ninject = [\"boom@1\"]\n");
+        assert_eq!(e.location, "s.toml:3");
+        assert!(e.message.contains("unknown fault kind `boom`"), "{e}");
+        let e = parse_err("inject = \"estop@1\"\n");
+        assert!(e.message.contains("must be a list"), "{e}");
     }
 
     #[test]

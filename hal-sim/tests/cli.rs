@@ -171,3 +171,55 @@ fn bad_input_is_one_clear_error_and_writes_nothing() {
     assert!(!o.status.success());
     assert!(String::from_utf8_lossy(&o.stderr).contains("unknown preset `moon`"));
 }
+
+#[test]
+fn inject_estop_latches_and_reports_in_json() {
+    let v = json(&sim(&[
+        "run",
+        "--controller",
+        "open-torque",
+        "--start-apex",
+        "0.10",
+        "--duration",
+        "1",
+        "--inject",
+        "estop@0.5",
+        "--json",
+    ]));
+    let faults = v["faults"].as_array().unwrap();
+    assert_eq!(faults[0]["name"], "estop", "{faults:?}");
+    let t = faults[0]["time_s"].as_f64().unwrap();
+    assert!((t - 0.5).abs() < 1e-3, "{t}");
+    assert_eq!(v["max_abs_current_after_fault_a"].as_f64(), Some(0.0));
+    assert!((v["first_fault_s"].as_f64().unwrap() - 0.5).abs() < 1e-3);
+    // Without an injection: no fault, and nothing commanded after one.
+    let clean = json(&sim(&["run", "--duration", "0.5", "--json"]));
+    assert_eq!(clean["faults"].as_array().map(Vec::len), Some(0));
+    assert!(clean["max_abs_current_after_fault_a"].is_null());
+}
+
+#[test]
+fn bad_inject_spec_is_one_clear_error_and_writes_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("never");
+    for (spec, needle) in [
+        ("boom@1", "unknown fault kind `boom`"),
+        ("estop@soon", "bad fault injection `estop@soon`"),
+        ("estop", "bad fault injection `estop`"),
+        ("estop@-1", "bad fault injection"),
+    ] {
+        assert_clean_failure(&["run", "--inject", spec], &out, needle);
+        // The message names every accepted kind.
+        let o = sim(&["run", "--inject", spec]);
+        assert_eq!(o.status.code(), Some(2));
+        let err = String::from_utf8_lossy(&o.stderr);
+        for kind in hal_sim::inject::INJECT_KINDS {
+            assert!(err.contains(kind), "{kind} missing from: {err}");
+        }
+    }
+    assert_clean_failure(
+        &["run", "--duration", "1", "--inject", "estop@2"],
+        &out,
+        "at or after the end of the run",
+    );
+}

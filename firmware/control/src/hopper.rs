@@ -170,6 +170,10 @@ impl HopperConfig {
         let a = supervisor.brake_decel_mps2;
         let margin_m = STOP_IMPACT_SPEED_MPS * STOP_IMPACT_SPEED_MPS / (2.0 * a);
         supervisor.stroke_min_m = -margin_m;
+        supervisor.nut_stops_m = crate::supervisor::Range {
+            min: 0.0,
+            max: model.stroke_m,
+        };
         supervisor.stroke_max_m = model.stroke_m + margin_m;
         let calibration = Calibration {
             current_limit_a: limit_a,
@@ -276,6 +280,38 @@ pub struct Hopper {
     last_error_j: f32,
     after_bottom: bool,
     steps: u32,
+    /// Corruption applied to each converted sample (simulated faults only).
+    #[cfg(feature = "fault-injection")]
+    injected: MeasurementOverride,
+}
+
+/// Values that replace the converter's output before the estimator sees it:
+/// simulated sensor faults the converter cannot produce with a valid
+/// calibration (NaN, infinity). `None` leaves a field as converted.
+#[cfg(feature = "fault-injection")]
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct MeasurementOverride {
+    /// Replaces [`Measurements::spring_force_n`], N.
+    pub spring_force_n: Option<f32>,
+    /// Replaces [`Measurements::leg_compression_m`], m.
+    pub leg_compression_m: Option<f32>,
+    /// Replaces [`Measurements::nut_position_m`], m.
+    pub nut_position_m: Option<f32>,
+}
+
+#[cfg(feature = "fault-injection")]
+impl MeasurementOverride {
+    fn apply(&self, m: &mut Measurements) {
+        if let Some(v) = self.spring_force_n {
+            m.spring_force_n = v;
+        }
+        if let Some(v) = self.leg_compression_m {
+            m.leg_compression_m = v;
+        }
+        if let Some(v) = self.nut_position_m {
+            m.nut_position_m = v;
+        }
+    }
 }
 
 fn cal_fault(e: CalError) -> Fault {
@@ -339,7 +375,17 @@ impl Hopper {
             last_error_j: 0.0,
             after_bottom: false,
             steps: 0,
+            #[cfg(feature = "fault-injection")]
+            injected: MeasurementOverride::default(),
         })
+    }
+
+    /// Simulated faults: from the next period on, `o` replaces fields of
+    /// each converted sample before the estimator and the supervisor see it
+    /// (`MeasurementOverride::default()` stops it).
+    #[cfg(feature = "fault-injection")]
+    pub fn set_measurement_override(&mut self, o: MeasurementOverride) {
+        self.injected = o;
     }
 
     fn desired_for(model: &ModelParams, apex_m: f32) -> Result<f32, ConfigError> {
@@ -404,13 +450,21 @@ impl Hopper {
         mark: &mut M,
     ) -> StepOutput {
         self.steps = self.steps.wrapping_add(1);
-        let m = match raw.map(|r| self.converter.convert(r)) {
+        #[cfg_attr(not(feature = "fault-injection"), allow(unused_mut))]
+        let mut m = match raw.map(|r| self.converter.convert(r)) {
             Some(Ok(m)) => m,
             Some(Err(e)) => return self.safe_output(cal_fault(e)),
             None => return self.safe_output(Fault::SensorRange),
         };
+        // Simulator builds only: the converter's output corrupted as a
+        // broken sensor path would (a NaN reaches the estimator, and the
+        // supervisor must catch it in this period).
+        #[cfg(feature = "fault-injection")]
+        self.injected.apply(&mut m);
         mark(StepPart::Convert);
-        // The converter returns finite values only.
+        // The converter returns finite values only (with the
+        // `fault-injection` feature a NaN may be injected: the filters then
+        // go NaN, which is harmless as the supervisor latches this period).
         let event = self.estimator.update_of_finite(
             &PhaseInput {
                 body_height_m: m.body_height_m,
@@ -497,7 +551,13 @@ impl Hopper {
         let mut out = self.step(raw.as_ref(), dt_s);
         if io.write_dac(out.dac_code).is_err() {
             self.supervisor.report_dac_error();
+            // The DAC may hold any code now: ask once more for zero (it may
+            // fail again; the disable below is what makes it safe), and say
+            // zero is what this period commands.
+            let zero = self.dac.code(0.0);
+            let _ = io.write_dac(zero);
             out.command = Command::SAFE;
+            out.dac_code = zero;
             out.faults = self.supervisor.faults();
         }
         if io.set_amp_enabled(out.command.amp_enable).is_err() {
@@ -718,11 +778,12 @@ mod tests {
         let mut h = hopper(Strategy::default());
         let mut raw = rest_sample(&h.config().calibration);
         h.step(Some(&raw), 1e-4);
-        // Ease the nut 400 counts down (1 mm) at 0.1 m/s, then hold: the PD
-        // asks for current upwards (< 0).
+        // Ease the nut 400 counts down (1 mm) at 0.05 m/s (63 rad/s: slow
+        // enough to halt within a period without looking like a frozen
+        // encoder), then hold: the PD asks for current upwards (< 0).
         let mut out = h.step(Some(&raw), 1e-4);
-        for k in 1..=50 {
-            raw.motor_counts = (40 * k).min(400);
+        for k in 1..=250 {
+            raw.motor_counts = (2 * k).min(400);
             out = h.step(Some(&raw), 1e-4);
         }
         assert!(out.command.current_a < -10.0, "{out:?}");

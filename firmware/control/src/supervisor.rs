@@ -7,6 +7,19 @@
 //! disabled, until [`Supervisor::reset`] succeeds. The output current is
 //! always finite and within `±current_limit_a`.
 //!
+//! What each check catches, and how fast (measured in closed loop by
+//! `tests/tests/fault_injection.rs`), is tabulated in `docs/safety.md`. The
+//! sensor cross-check ([`Fault::SensorDisagree`]) exists because a sensor
+//! that sticks at a plausible value, or an encoder that stops counting,
+//! passes every range check: the spring ties the three position/force
+//! sensors together (`F = k (delta0 + p + x)`), so one that stops following
+//! the others shows up as a residual. It costs one multiply-add, an absolute
+//! value and a compare on the every-period path. [`Fault::EncoderFrozen`]
+//! catches an encoder that stops while the motor turns fast (no count in a
+//! period is then physically impossible away from the stops) before the
+//! nut has moved far enough for the residual; its common case (a count
+//! came in) is one integer compare.
+//!
 //! The property tests run proptest's default case count (256); set
 //! `PROPTEST_CASES=10000` in the environment for a longer run.
 
@@ -37,11 +50,17 @@ pub enum Fault {
     DacError = 9,
     /// The requested current is NaN or infinite.
     CommandNonFinite = 10,
+    /// Load cell, potentiometer and motor encoder disagree: the measured
+    /// spring force is not `k (delta0 + p + x)` (a stuck, frozen or noisy sensor).
+    SensorDisagree = 11,
+    /// The motor encoder stopped counting while the motor turned fast, away
+    /// from the mechanical stops (only a stop can halt it within a period).
+    EncoderFrozen = 12,
 }
 
 impl Fault {
     /// Every fault, in bit order.
-    pub const ALL: [Fault; 11] = [
+    pub const ALL: [Fault; 13] = [
         Fault::SensorNonFinite,
         Fault::SensorRange,
         Fault::EncoderJump,
@@ -53,6 +72,8 @@ impl Fault {
         Fault::Overrun,
         Fault::DacError,
         Fault::CommandNonFinite,
+        Fault::SensorDisagree,
+        Fault::EncoderFrozen,
     ];
 
     /// Short kebab-case name for logs and telemetry.
@@ -69,6 +90,8 @@ impl Fault {
             Fault::Overrun => "overrun",
             Fault::DacError => "dac-error",
             Fault::CommandNonFinite => "command-nonfinite",
+            Fault::SensorDisagree => "sensor-disagree",
+            Fault::EncoderFrozen => "encoder-frozen",
         }
     }
 
@@ -231,6 +254,27 @@ pub struct SupervisorConfig {
     pub free_compression_m: f32,
     /// Consecutive disagreeing periods before the contact-disagree fault. Default 20 (2 ms).
     pub contact_disagree_periods: u16,
+    /// Largest plausible `|F - k (delta0 + p + x)|`, N: the load cell's force
+    /// against the spring compression the motor encoder (`p`) and the
+    /// potentiometer (`x`) give. Beyond it [`Fault::SensorDisagree`] latches
+    /// in the same period. Default 30: the residual is noise only (load cell
+    /// 2 N and `k` x pot 1.1 N, 1 sigma: 2.3 N, so 30 N is 13 sigma) when the
+    /// spring has no damping and the model's `k` and `delta0` are the
+    /// plant's; 30 N is 2.7 mm of nut or leg travel the other sensors do not
+    /// see. `f32::INFINITY` disables the check (e.g. a spring with damping,
+    /// or a `k` known only roughly).
+    pub spring_mismatch_n: f32,
+    /// Filtered motor speed, rad/s, above which a period without a single
+    /// motor count is impossible away from the stops: [`Fault::EncoderFrozen`].
+    /// Default 100: 3.2 counts per period at 2000 counts/rev and 10 kHz, and
+    /// the motor (2 N m stall, 1 N m of spring through the screw, 2.7e-4
+    /// kg m^2) loses at most about 1.1 rad/s in a period; the eq 4.1 filter's
+    /// lag adds about 10 rad/s. `f32::INFINITY` disables the check.
+    pub frozen_speed_rad_s: f32,
+    /// The nut's mechanical stops, m (`min`: upper stop, `max`: lower stop).
+    /// Within [`STOP_BAND_M`] of one a nut may halt at once, so
+    /// [`Fault::EncoderFrozen`] is not checked there. Default 0..=0.05.
+    pub nut_stops_m: Range,
     /// Lower stroke soft limit for the predicted stopping point, m. Default -0.005
     /// (hitting the upper stop at 0 faster than about 0.17 m/s under `brake_decel_mps2`).
     pub stroke_min_m: f32,
@@ -280,12 +324,23 @@ impl Default for SupervisorConfig {
             contact_compression_m: 0.015,
             free_compression_m: 0.003,
             contact_disagree_periods: 20,
+            spring_mismatch_n: 30.0,
+            frozen_speed_rad_s: 100.0,
+            nut_stops_m: Range {
+                min: 0.0,
+                max: 0.05,
+            },
             stroke_min_m: -0.005,
             stroke_max_m: 0.055,
             brake_decel_mps2: 3.0,
         }
     }
 }
+
+/// Distance from a mechanical stop within which the nut may halt in one
+/// period (a stop impact), m: the frozen-encoder check is off there. 0.5 mm
+/// is six periods of travel at the 0.8 m/s the no-load speed allows.
+pub const STOP_BAND_M: f32 = 0.0005;
 
 /// What goes to the amplifier this period.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -318,6 +373,10 @@ pub struct Supervisor {
     half_inv_decel: f32,
     /// The fast path's ranges as centre and half-width (see [`FastRanges`]).
     fast: FastRanges,
+    /// Centre of the stops and the half-width that is more than
+    /// [`STOP_BAND_M`] away from both, m (NaN for bad stops: check off).
+    stops_centre_m: f32,
+    stops_inner_half_m: f32,
 }
 
 /// The seven value ranges and the stroke limits as `|x - centre| <= half`:
@@ -399,7 +458,21 @@ impl Supervisor {
                 f32::NAN
             },
             fast: FastRanges::new(&config),
+            stops_centre_m: 0.5 * (config.nut_stops_m.min + config.nut_stops_m.max),
+            stops_inner_half_m: 0.5 * (config.nut_stops_m.max - config.nut_stops_m.min)
+                - STOP_BAND_M,
         }
+    }
+
+    /// Whether the motor encoder gave no count although the motor turns
+    /// faster than `frozen_speed_rad_s`, away from the stops. Every
+    /// comparison is false for NaN (a NaN input is caught by the range
+    /// checks instead).
+    #[inline(always)]
+    fn encoder_frozen(&self, input: &SupervisorInput) -> bool {
+        input.motor_delta_counts == 0
+            && input.motor_speed_rad_s.abs() > self.config.frozen_speed_rad_s
+            && (input.nut_position_m - self.stops_centre_m).abs() < self.stops_inner_half_m
     }
 
     /// The configuration in use.
@@ -489,7 +562,29 @@ impl Supervisor {
         if input.amp_fault {
             f.insert(Fault::AmpFault);
         }
+        // A NaN residual (a non-finite input, already named above) is not a
+        // disagreement; only finite residuals beyond the bound are.
+        if self.encoder_frozen(input) {
+            f.insert(Fault::EncoderFrozen);
+        }
+        let residual_n = self.spring_residual_n(input);
+        // False for a NaN bound too: a bad bound fails safe.
+        let within = residual_n.abs() <= c.spring_mismatch_n;
+        if residual_n.is_finite() && !within {
+            f.insert(Fault::SensorDisagree);
+        }
         f
+    }
+
+    /// `F - k (delta0 + p + x)`, N: what the load cell measures beyond the
+    /// spring compression the motor encoder and the potentiometer give (0
+    /// up to noise when all three work; in flight `x` is 0).
+    #[inline(always)]
+    fn spring_residual_n(&self, input: &SupervisorInput) -> f32 {
+        let c = &self.config;
+        input.spring_force_n
+            - c.spring_rate_n_per_m
+                * (c.spring_preload_m + input.nut_position_m + input.leg_compression_m)
     }
 
     /// Whether load cell and pot disagree about contact in this sample.
@@ -545,10 +640,17 @@ impl Supervisor {
             || input.estop_pressed
             || input.amp_fault
             || !request_ok
+            || self.encoder_frozen(&input)
         {
             return None;
         }
         if self.contact_disagrees(&input) {
+            return None;
+        }
+        // False for NaN too (a NaN bound then always takes the full path,
+        // which trips on it: a bad bound fails safe).
+        let agrees = self.spring_residual_n(&input).abs() <= c.spring_mismatch_n;
+        if !agrees {
             return None;
         }
         self.disagree_periods = 0;
@@ -644,8 +746,9 @@ impl Supervisor {
     /// Clears the latched faults if their conditions are gone in `input`.
     ///
     /// Conditions that are states (sensor non-finite or out of range, encoder
-    /// delta too large, stroke prediction outside the soft limits, e-stop
-    /// pressed, amplifier fault) are re-evaluated on `input`; if any is still
+    /// delta too large, stroke prediction outside the soft limits, load cell
+    /// disagreeing with encoder and potentiometer, e-stop pressed, amplifier
+    /// fault) are re-evaluated on `input`; if any is still
     /// present, nothing is cleared and the faults still present are returned.
     /// Event faults (contact disagreement, overcurrent, non-finite command,
     /// overrun, DAC error) are in the past, so they clear. The
@@ -810,7 +913,13 @@ mod tests {
             spring_force_n: 255.0,
             ..nominal()
         };
-        let mut s = sup();
+        // The cross-check would trip on this at once; this test is about the
+        // debounced contact check alone.
+        let no_cross_check = SupervisorConfig {
+            spring_mismatch_n: f32::INFINITY,
+            ..SupervisorConfig::default()
+        };
+        let mut s = Supervisor::new(no_cross_check);
         for _ in 0..19 {
             assert!(s.check(&bad, 1.0).amp_enable);
         }
@@ -847,12 +956,73 @@ mod tests {
     }
 
     #[test]
+    fn sensor_disagree_when_the_load_cell_leaves_the_spring_model() {
+        // Nut 10 mm down per the encoder, but the load cell still reads the
+        // preload: a frozen encoder or a stuck load cell.
+        let bad = SupervisorInput {
+            nut_position_m: 0.01,
+            ..nominal()
+        };
+        fault_case(bad, 0.0, Fault::SensorDisagree, true);
+        // 25 N off (below the 30 N bound): fine.
+        let mut s = sup();
+        let near = SupervisorInput {
+            spring_force_n: 80.0,
+            ..nominal()
+        };
+        assert!(s.check(&near, 1.0).amp_enable);
+        // A NaN bound fails safe.
+        let mut s = Supervisor::new(SupervisorConfig {
+            spring_mismatch_n: f32::NAN,
+            ..SupervisorConfig::default()
+        });
+        assert_eq!(s.check(&nominal(), 1.0), Command::SAFE);
+        assert!(s.faults().contains(Fault::SensorDisagree));
+    }
+
+    #[test]
+    fn encoder_frozen_at_speed_away_from_the_stops() {
+        // 20 mm down, motor at 150 rad/s per the filter, no count this period.
+        let moving = SupervisorInput {
+            nut_position_m: 0.02,
+            motor_speed_rad_s: 150.0,
+            nut_velocity_mps: 0.12,
+            spring_force_n: 275.0,
+            motor_delta_counts: 0,
+            ..nominal()
+        };
+        fault_case(moving, 0.0, Fault::EncoderFrozen, true);
+        let mut s = sup();
+        // Counting: fine.
+        let counting = SupervisorInput {
+            motor_delta_counts: 4,
+            ..moving
+        };
+        assert!(s.check(&counting, 1.0).amp_enable);
+        // Slow: fine.
+        let slow = SupervisorInput {
+            motor_speed_rad_s: 60.0,
+            nut_velocity_mps: 0.05,
+            ..moving
+        };
+        assert!(s.check(&slow, 1.0).amp_enable);
+        // On the upper stop (an impact halts the nut at once): fine.
+        let on_stop = SupervisorInput {
+            nut_position_m: 0.0002,
+            nut_velocity_mps: 0.0,
+            spring_force_n: 57.2,
+            ..moving
+        };
+        assert!(s.check(&on_stop, 1.0).amp_enable);
+    }
+
+    #[test]
     fn reported_events() {
         let mut s = sup();
         s.report_overrun();
         assert_eq!(s.check(&nominal(), 1.0), Command::SAFE);
         s.report_dac_error();
-        let names: heapless::Vec<&str, 11> = s.faults().iter().map(Fault::name).collect();
+        let names: heapless::Vec<&str, 13> = s.faults().iter().map(Fault::name).collect();
         assert_eq!(names.as_slice(), &["overrun", "dac-error"]);
         assert_eq!(s.reset(&nominal()), Ok(()));
         assert!(!s.is_faulted());

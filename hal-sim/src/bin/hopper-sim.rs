@@ -4,7 +4,7 @@
 //! hopper-sim run [--params design|identified|PATH.toml] [--controller NAME]
 //!                [--target-apex M] [--torque NM] [--noise off|default] [--seed N]
 //!                [--start-apex M] [--duration S] [--out DIR] [--json]
-//!                [--scenario FILE]   (flags override the file)
+//!                [--scenario FILE] [--inject KIND@TIME ...]   (flags override the file)
 //! hopper-sim sweep --param NAME=START:END:N [--param ...] [--metric NAME]
 //!                  [--scenario FILE | --preset lead-study | run's flags] --out DIR
 //! hopper-sim params show design|identified
@@ -13,6 +13,7 @@
 
 use anyhow::{bail, Context, Result};
 use clap::{Args, Parser, Subcommand};
+use hal_sim::inject::Injection;
 use hal_sim::params::Params;
 use hal_sim::params_toml;
 use hal_sim::run;
@@ -117,6 +118,12 @@ struct BaseArgs {
     /// Control rate, Hz [default: 10000].
     #[arg(long)]
     control_hz: Option<f64>,
+    /// Inject a fault, KIND@TIME (s); repeatable. KIND: encoder-jump,
+    /// encoder-frozen, loadcell-stuck, loadcell-saturated, pot-open, nan,
+    /// noise-burst, estop, amp-fault, dac-error, overrun (docs/safety.md).
+    /// Replaces the scenario file's `inject` list.
+    #[arg(long = "inject", value_name = "KIND@TIME")]
+    inject: Vec<String>,
 }
 
 impl BaseArgs {
@@ -138,6 +145,17 @@ impl BaseArgs {
             start_apex_m: self.start_apex,
             duration_s: self.duration,
             control_hz: self.control_hz,
+            inject: if self.inject.is_empty() {
+                None
+            } else {
+                Some(
+                    self.inject
+                        .iter()
+                        .map(|spec| Injection::parse(spec))
+                        .collect::<Result<Vec<_>, _>>()
+                        .map_err(anyhow::Error::msg)?,
+                )
+            },
             ..Overrides::default()
         })
     }
@@ -355,7 +373,11 @@ fn cmd_run(a: RunArgs) -> Result<()> {
         } else {
             format!(
                 "{} (first at {:.4} s)",
-                s.faults.join(", "),
+                s.faults
+                    .iter()
+                    .map(|f| format!("{} at {:.4} s", f.name, f.time_s))
+                    .collect::<Vec<_>>()
+                    .join(", "),
                 s.first_fault_s.unwrap_or(0.0)
             )
         }
