@@ -72,7 +72,7 @@ pub fn run(root: &Path) -> Result<(), String> {
             .arg(&target_dir),
     )?;
     let elf = target_dir.join(TARGET).join("release").join("hopper-fw");
-    let (bytes, status) = run_qemu(&elf)?;
+    let (bytes, status) = run_qemu(&elf, 0)?;
     let lines = decode(&elf, &bytes)?;
     for l in &lines {
         println!("qemu| {l}");
@@ -142,6 +142,9 @@ pub fn run(root: &Path) -> Result<(), String> {
             "control step mean {imean} instructions exceeds the budget {STEP_MEAN_BUDGET}"
         ));
     }
+    if let Err(e) = overrun_check(&elf) {
+        problems.push(format!("overrun check: {e}"));
+    }
     let steady_txt = if steady < 0.0 {
         "none".to_string()
     } else {
@@ -205,10 +208,51 @@ fn ensure_qemu() -> Result<(), String> {
     Ok(())
 }
 
-/// Runs the image; returns its stdout (the defmt stream) and whether it exited with success.
-fn run_qemu(elf: &Path) -> Result<(Vec<u8>, bool), String> {
+/// `-icount` shift of the overrun check: every guest instruction takes
+/// 2^5 = 32 virtual ns, so the 100 us period holds about 3,100 instructions,
+/// fewer than a period's work (sensor models, control step, I/O, logging).
+const OVERRUN_SHIFT: u32 = 5;
+
+/// Timing fault: the same image on a guest slowed down until the control
+/// period overruns. The firmware must count the missed deadlines, latch
+/// `overrun` after `OVERRUN_LIMIT` in a row, disable the amplifier and
+/// command 0 A from then on, and exit with failure.
+fn overrun_check(elf: &Path) -> Result<(), String> {
+    let (bytes, ok) = run_qemu(elf, OVERRUN_SHIFT)?;
+    let lines = decode(elf, &bytes)?;
+    let summary = lines
+        .iter()
+        .rev()
+        .find_map(|l| l.strip_prefix("summary "))
+        .ok_or("the slowed-down run printed no summary")?;
+    let kv: BTreeMap<&str, &str> = summary
+        .split_whitespace()
+        .filter_map(|w| w.split_once('='))
+        .collect();
+    let get = |k: &str| kv.get(k).copied().unwrap_or("");
+    let faults: u32 = get("faults").parse().unwrap_or(0);
+    let missed: u32 = get("missed").parse().unwrap_or(0);
+    let fault_period: i64 = get("fault_period").parse().unwrap_or(-1);
+    let after: f64 = get("max_current_after_fault_a").parse().unwrap_or(f64::NAN);
+    // Bit 8 of the fault set is `Fault::Overrun`.
+    let overrun_latched = faults & (1 << 8) != 0;
+    if ok || !overrun_latched || get("amp_enabled") != "false" || after != 0.0 || missed == 0 {
+        return Err(format!(
+            "expected a failing exit with `overrun` latched, the amplifier off and 0 A after the fault; got exit {}, {summary}",
+            if ok { "success" } else { "failure" }
+        ));
+    }
     eprintln!(
-        "xtask: running {} on qemu-system-arm (netduinoplus2)",
+        "xtask: overrun check (-icount shift={OVERRUN_SHIFT}, guest 32x slower): {missed} missed deadlines, `overrun` latched in period {fault_period}, amplifier disabled, max 0 A after the fault"
+    );
+    Ok(())
+}
+
+/// Runs the image with `-icount shift=SHIFT`; returns its stdout (the defmt
+/// stream) and whether it exited with success.
+fn run_qemu(elf: &Path, shift: u32) -> Result<(Vec<u8>, bool), String> {
+    eprintln!(
+        "xtask: running {} on qemu-system-arm (netduinoplus2, -icount shift={shift})",
         elf.display()
     );
     let started = Instant::now();
@@ -227,7 +271,7 @@ fn run_qemu(elf: &Path) -> Result<(Vec<u8>, bool), String> {
             "-semihosting-config",
             "enable=on,target=native",
             "-icount",
-            "shift=0,sleep=off",
+            &format!("shift={shift},sleep=off"),
             "-kernel",
         ])
         .arg(elf)

@@ -70,6 +70,11 @@
 //! frozen while a debugger halts the core: a halted core must not leave the
 //! amplifier enabled with its last current command, so a breakpoint resets
 //! the MCU after ~5 ms.
+//!
+//! Whether a period feeds it is `hopper_control::watchdog::FeedPolicy`'s
+//! decision (host-tested): every completed control step does, faulted or not,
+//! unless its output contradicts itself. [`Watchdog::caused_last_reset`]
+//! tells the application that the IWDG caused the last reset.
 
 // The application does not use `ENCODER_COUNTER_BITS` (nor
 // `BoardIo::sysclk_hz` / `BoardIo::control_hz`) yet.
@@ -669,6 +674,8 @@ impl HopperIo for BoardIo {
 pub struct Watchdog {
     /// The IWDG registers.
     iwdg: pac::IWDG,
+    /// The reset before this start was the IWDG's (`RCC_CSR.WDGRSTF`).
+    caused_last_reset: bool,
 }
 
 impl Watchdog {
@@ -678,6 +685,10 @@ impl Watchdog {
         // runs; start it first so the new values apply at once, not after the
         // default 512 ms timeout. Bounded: if it never reports ready, the
         // start key below forces it on anyway.
+        // Why the MCU last reset: read the IWDG flag, then clear every reset
+        // flag (RMVF) so that the next reset reports only its own cause.
+        let caused_last_reset = rcc.csr().read().wdgrstf().is_reset();
+        rcc.csr().modify(|_, w| w.rmvf().clear());
         rcc.csr().modify(|_, w| w.lsion().on());
         let _ = wait_for(|| rcc.csr().read().lsirdy().is_ready());
 
@@ -693,7 +704,20 @@ impl Watchdog {
         iwdg.kr().write(|w| w.key().start());
         // Load the 5 ms reload now rather than counting down from 0xFFF.
         iwdg.kr().write(|w| w.key().feed());
-        Self { iwdg }
+        Self {
+            iwdg,
+            caused_last_reset,
+        }
+    }
+
+    /// Whether the IWDG caused the reset the firmware is starting from: the
+    /// control task stopped, or `hopper_control::watchdog::FeedPolicy`
+    /// starved it. The application must then start with a fault latched
+    /// (`Supervisor::report_overrun`), so a watchdog reset never restarts
+    /// the controller by itself. QEMU models no IWDG (nor RCC): there it
+    /// reads `false`.
+    pub fn caused_last_reset(&self) -> bool {
+        self.caused_last_reset
     }
 
     /// Reloads the counter (key 0xAAAA). Call once per control period, from

@@ -41,6 +41,17 @@ const _: () = assert!(
     "HOPPER_CONTROL_HZ must be a whole number of Hz in 100..=20000"
 );
 
+/// Missed control deadlines in a row after which the firmware goes safe
+/// (latches `Fault::Overrun`): 3 unless the build sets `HOPPER_OVERRUN_LIMIT`
+/// (1..=1000). One late period is tolerated (the next one catches up); three
+/// in a row mean the loop cannot keep its rate.
+pub const OVERRUN_LIMIT: u32 = parse_u32(option_env!("HOPPER_OVERRUN_LIMIT"), 3);
+
+const _: () = assert!(
+    OVERRUN_LIMIT >= 1 && OVERRUN_LIMIT <= 1000,
+    "HOPPER_OVERRUN_LIMIT must be in 1..=1000"
+);
+
 /// Control period, s.
 #[allow(clippy::cast_precision_loss)] // CONTROL_HZ <= 20_000 is exact in f32.
 pub const CONTROL_PERIOD_S: f32 = 1.0 / CONTROL_HZ as f32;

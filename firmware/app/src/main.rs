@@ -113,9 +113,13 @@ pub type LogQueue = heapless::Deque<LogItem, 16>;
 #[rtic::app(device = stm32f4::stm32f405, peripherals = true, dispatchers = [FSMC])]
 mod app {
     use crate::board::{self, BoardIo, DumpButton, Watchdog};
-    use crate::control::{Capture, CONTROL_HZ, CONTROL_PERIOD_S};
+    use crate::control::{Capture, CONTROL_HZ, CONTROL_PERIOD_S, OVERRUN_LIMIT};
     use crate::{LogItem, LogQueue};
+    use cortex_m::peripheral::NVIC;
+    use hopper_control::hal::HopperIo;
     use hopper_control::hopper::{Hopper, HopperConfig};
+    use hopper_control::watchdog::{Decision, FeedPolicy};
+    use stm32f4::stm32f405::Interrupt;
 
     #[shared]
     struct Shared {
@@ -131,6 +135,7 @@ mod app {
         watchdog: Watchdog,
         dump: DumpButton,
         hopper: Hopper,
+        feed_policy: FeedPolicy,
     }
 
     #[init]
@@ -143,12 +148,20 @@ mod app {
         // Hopper::new only fails on an invalid configuration; the default is
         // valid (unit-tested). Should it fail, the control task never runs,
         // the watchdog is not fed, and the amplifier stays disabled.
-        let Ok(hopper) = Hopper::new(cfg) else {
+        let Ok(mut hopper) = Hopper::new(cfg) else {
             defmt::error!("invalid controller configuration: amplifier stays off");
             crate::disable_amplifier();
             #[allow(clippy::empty_loop)]
             loop {}
         };
+        let watchdog = board.watchdog;
+        if watchdog.caused_last_reset() {
+            // The control loop stopped or misbehaved last time: start faulted,
+            // amplifier off, until someone looks (a reset of the latch).
+            defmt::error!("watchdog reset: amplifier stays off (overrun latched)");
+            hopper.supervisor_mut().report_overrun();
+        }
+        let feed_policy = FeedPolicy::for_hopper(hopper.config());
         defmt::info!("hopper-fw: board build, control at {=u32} Hz", CONTROL_HZ);
         (
             Shared {
@@ -157,9 +170,10 @@ mod app {
             },
             Local {
                 io: board.io,
-                watchdog: board.watchdog,
+                watchdog,
                 dump: board.dump_button,
                 hopper,
+                feed_policy,
             },
         )
     }
@@ -172,16 +186,34 @@ mod app {
     }
 
     /// The control period: fresh ADC samples are in; read, step, write.
-    #[task(binds = ADC, priority = 3, local = [io, watchdog, dump, hopper, polls: u32 = 0], shared = [capture, log])]
+    #[task(binds = ADC, priority = 3, local = [io, watchdog, dump, hopper, feed_policy, polls: u32 = 0, late_in_a_row: u32 = 0], shared = [capture, log])]
     fn control(mut cx: control::Context) {
         if !cx.local.io.ack_control_irq() {
             return;
         }
         let before = cx.local.hopper.supervisor().faults();
         let out = cx.local.hopper.run_period(cx.local.io, CONTROL_PERIOD_S);
-        // Fed only here: if the control task stops, the MCU resets with the
-        // amplifier disabled.
-        cx.local.watchdog.feed();
+        // The next conversion already finished: this period overran. A few in
+        // a row mean the loop cannot keep its rate: go safe.
+        if NVIC::is_pending(Interrupt::ADC) {
+            *cx.local.late_in_a_row += 1;
+            if *cx.local.late_in_a_row >= OVERRUN_LIMIT {
+                cx.local.hopper.supervisor_mut().report_overrun();
+            }
+        } else {
+            *cx.local.late_in_a_row = 0;
+        }
+        // Fed only here, after a step whose output is consistent (see
+        // `FeedPolicy`): if the control task stops or misbehaves, the MCU
+        // resets with the amplifier disabled.
+        match cx.local.feed_policy.after_step(&out) {
+            Decision::Feed => cx.local.watchdog.feed(),
+            Decision::Starve(_) => {
+                let zero = cx.local.hopper.config().calibration.dac_zero_code;
+                let _ = cx.local.io.write_dac(zero);
+                let _ = cx.local.io.set_amp_enabled(false);
+            }
+        }
         cx.shared.capture.lock(|c| c.push(out.record));
         let mut item = out.hop.map(LogItem::Hop);
         if out.faults != before {
@@ -228,7 +260,7 @@ mod app {
 #[cfg(all(target_os = "none", feature = "qemu-sim"))]
 #[rtic::app(device = stm32f4::stm32f405, peripherals = true, dispatchers = [FSMC])]
 mod app {
-    use crate::control::{Capture, StepStats, CONTROL_HZ, CONTROL_PERIOD_S};
+    use crate::control::{Capture, StepStats, CONTROL_HZ, CONTROL_PERIOD_S, OVERRUN_LIMIT};
     use crate::{LogItem, LogQueue};
     use cortex_m::peripheral::syst::SystClkSource;
     use cortex_m::peripheral::{SCB, SYST};
@@ -259,6 +291,9 @@ mod app {
     pub const DURATION_S: u32 = crate::control::parse_u32(option_env!("HOPPER_QEMU_SECONDS"), 12);
     /// Apexes kept for the summary.
     const MAX_APEXES: usize = 128;
+    /// Periods the run goes on after a fault latched (showing the command
+    /// stays at zero) before it stops.
+    const SAFE_PERIODS_AFTER_FAULT: u32 = 100;
 
     /// The simulated hopper and the statistics of the run (the controller
     /// itself is a resource of its own, as on the board).
@@ -270,6 +305,11 @@ mod app {
         parts: [StepStats; 6],
         timer_overhead: u32,
         missed: u32,
+        missed_in_a_row: u32,
+        /// Period the first fault latched in, if any.
+        fault_period: Option<u32>,
+        /// Largest |current| commanded (DAC and enable) after the first fault, A.
+        max_current_after_fault_a: f32,
         period: u32,
     }
 
@@ -353,6 +393,9 @@ mod app {
                     parts: [StepStats::new(); 6],
                     timer_overhead,
                     missed: 0,
+                    missed_in_a_row: 0,
+                    fault_period: None,
+                    max_current_after_fault_a: 0.0,
                     period: 0,
                 },
                 tim5,
@@ -452,8 +495,26 @@ mod app {
         cx.local.syst.enable_counter();
         sim.period += 1;
         if SCB::is_pendst_pending() {
-            // The next tick came before this one finished.
+            // The next tick came before this one finished: a missed deadline.
             sim.missed += 1;
+            sim.missed_in_a_row += 1;
+            if sim.missed_in_a_row >= OVERRUN_LIMIT {
+                // The loop cannot keep its rate: go safe (latched until reset).
+                hopper.supervisor_mut().report_overrun();
+            }
+        } else {
+            sim.missed_in_a_row = 0;
+        }
+        if hopper.supervisor().is_faulted() {
+            let first = *sim.fault_period.get_or_insert(sim.period);
+            let commanded = sim.hal.commanded_current_a().abs() as f32;
+            if sim.period > first {
+                sim.max_current_after_fault_a = sim.max_current_after_fault_a.max(commanded);
+            }
+            // Keep running a little to show the command stays at zero, then stop.
+            if sim.period >= first + SAFE_PERIODS_AFTER_FAULT {
+                finish(sim, hopper, &mut cx.shared.log);
+            }
         }
         if sim.period >= DURATION_S * CONTROL_HZ {
             finish(sim, hopper, &mut cx.shared.log);
@@ -487,7 +548,7 @@ mod app {
             );
         }
         defmt::println!(
-            "summary steady_apex_m={=f64} hops_to_converge={=i32} step_instr_min={=u32} step_instr_mean={=u32} step_instr_max={=u32} missed={=u32} faults={=u16} periods={=u32}",
+            "summary steady_apex_m={=f64} hops_to_converge={=i32} step_instr_min={=u32} step_instr_mean={=u32} step_instr_max={=u32} missed={=u32} faults={=u16} periods={=u32} fault_period={=i64} amp_enabled={=bool} max_current_after_fault_a={=f32}",
             steady.unwrap_or(-1.0),
             converged.map_or(-1, |k| i32::try_from(k).unwrap_or(i32::MAX)),
             sim.step_instr.min,
@@ -495,7 +556,10 @@ mod app {
             sim.step_instr.max,
             sim.missed,
             faults.0,
-            sim.period
+            sim.period,
+            sim.fault_period.map_or(-1, i64::from),
+            sim.hal.amp_enabled(),
+            sim.max_current_after_fault_a
         );
         let ok = converged.is_some() && faults.is_empty() && sim.missed == 0;
         debug::exit(if ok {

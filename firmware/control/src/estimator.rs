@@ -520,5 +520,185 @@ mod tests {
                 }
             }
         }
+
+        /// One physical stance: samples of rise, dwell and fall of the true
+        /// compression, its peak (m), and how far the nut moves (fraction of
+        /// the compression, m/m).
+        #[derive(Debug, Clone, Copy)]
+        struct Stance {
+            flight_before: usize,
+            rise: usize,
+            dwell: usize,
+            fall: usize,
+            peak_m: f32,
+            nut_per_compression: f32,
+        }
+
+        /// Property 3: on noisy but plausible streams (noise below half of
+        /// each hysteresis gap, isolated glitches of any size when the
+        /// debounce is at least 2, peaks chattering at the thresholds, random
+        /// thresholds, debounce, filter and model) the estimator reports at
+        /// most one touchdown and one liftoff per physical stance, touchdown
+        /// first. 10 000 cases by default ([`crate::proptest_support::cases`]).
+        ///
+        /// Why it must hold: touchdown needs a measured compression above
+        /// `td`, so the true one above `td - n`; liftoff needs it below `lo`,
+        /// so the true one below `lo + n < td - n` (`n` under half the gap).
+        /// A stance's compression rises then falls, so once it has been
+        /// above `td - n` and then below `lo + n`, it never rises again
+        /// before the next stance. A glitch spaced a debounce from the next
+        /// can fill at most one sample of a debounce window.
+        #[test]
+        fn at_most_one_touchdown_and_liftoff_per_stance() {
+            let thresholds = (
+                20.0f32..80.0,
+                0.1f32..0.9,
+                1e-3f32..4e-3,
+                0.1f32..0.9,
+                1u8..=5,
+                0.0f32..0.95,
+            );
+            let model = (5e3f32..3e4, 0.0f32..0.01, 2e-3f32..1e-2);
+            let stance = (
+                0usize..12,
+                1usize..12,
+                0usize..12,
+                1usize..12,
+                0.0f32..1.0,
+                0u8..3,
+                0.0f32..0.5,
+            );
+            let strategy = (
+                thresholds,
+                model,
+                proptest::collection::vec(stance, 1..4),
+                (0.0f32..1.0, 0.0f32..0.2, any::<u64>()),
+            );
+            let result = crate::proptest_support::run(
+                "at_most_one_touchdown_and_liftoff_per_stance",
+                strategy,
+                |(
+                    (td_f, lo_frac_f, td_c, lo_frac_c, debounce, g),
+                    (k, d0, lead),
+                    stances,
+                    (noise, glitch_p, seed),
+                )| {
+                    let cfg = EstimatorConfig {
+                        touchdown_force_n: td_f,
+                        liftoff_force_n: td_f * lo_frac_f,
+                        touchdown_compression_m: td_c,
+                        liftoff_compression_m: td_c * lo_frac_c,
+                        debounce_samples: debounce,
+                        velocity_filter_gain: g,
+                        ..EstimatorConfig::default()
+                    };
+                    let model = ModelParams {
+                        spring_stiffness_n_per_m: k,
+                        preload_m: d0,
+                        screw_lead_m: lead,
+                        ..ModelParams::default()
+                    };
+                    let r = model.screw_m_per_rad();
+                    let mut est = PhaseEstimator::new(cfg, &model)
+                        .map_err(|e| TestCaseError::fail(std::format!("{e:?}")))?;
+                    // Noise bounds: a fraction of half of each hysteresis gap.
+                    let nf = noise * 0.5 * (cfg.touchdown_force_n - cfg.liftoff_force_n);
+                    let nc =
+                        noise * 0.5 * (cfg.touchdown_compression_m - cfg.liftoff_compression_m);
+                    let mut rng = Lcg(seed);
+                    let d = usize::from(debounce);
+                    let mut since_glitch = d;
+                    // (true compression, nut position, stance index or MAX in flight) per sample.
+                    let mut samples: Vec<(f32, f32, usize)> = Vec::new();
+                    for (i, &(fl, rise, dwell, fall, peak_u, kind, nut)) in
+                        stances.iter().enumerate()
+                    {
+                        let st = Stance {
+                            // At least a debounce of flight between stances, as
+                            // any real flight has.
+                            flight_before: if i == 0 { fl } else { fl + d },
+                            rise,
+                            dwell,
+                            fall,
+                            // Peaks chattering at the touchdown or liftoff
+                            // compression, or clearly above.
+                            peak_m: match kind {
+                                0 => cfg.touchdown_compression_m + (peak_u - 0.5) * 4.0 * nc,
+                                1 => cfg.liftoff_compression_m + (peak_u - 0.5) * 4.0 * nc,
+                                _ => cfg.touchdown_compression_m + nc + 1e-4 + peak_u * 0.03,
+                            }
+                            .max(0.0),
+                            nut_per_compression: nut,
+                        };
+                        for _ in 0..st.flight_before {
+                            samples.push((0.0, 0.0, usize::MAX));
+                        }
+                        let up = (1..=st.rise).map(|j| st.peak_m * j as f32 / st.rise as f32);
+                        let hold = core::iter::repeat_n(st.peak_m, st.dwell);
+                        let down = (0..st.fall)
+                            .map(|j| st.peak_m * (st.fall - 1 - j) as f32 / st.fall as f32);
+                        for c in up.chain(hold).chain(down) {
+                            samples.push((c, c * st.nut_per_compression, i));
+                        }
+                    }
+                    // A debounce and one more of flight at the end: the last liftoff.
+                    for _ in 0..=d {
+                        samples.push((0.0, 0.0, usize::MAX));
+                    }
+                    let mut events: Vec<(usize, PhaseEvent)> = Vec::new();
+                    for (n, &(c, p, _)) in samples.iter().enumerate() {
+                        let glitch = debounce >= 2 && since_glitch >= d && rng.uniform() < glitch_p;
+                        since_glitch = if glitch { 0 } else { since_glitch + 1 };
+                        let (force, comp) = if glitch {
+                            (rng.uniform() * 3000.0 - 500.0, rng.uniform() * 0.1 - 0.01)
+                        } else {
+                            (
+                                k * (d0 + p + c) + nf * (2.0 * rng.uniform() - 1.0),
+                                c + nc * (2.0 * rng.uniform() - 1.0),
+                            )
+                        };
+                        let input = PhaseInput {
+                            body_height_m: L0 - c,
+                            motor_angle_rad: p / r,
+                            spring_force_n: force,
+                            leg_compression_m: comp,
+                        };
+                        if let Some(e @ (PhaseEvent::Touchdown | PhaseEvent::Liftoff)) =
+                            est.update(&input, 1e-3)
+                        {
+                            events.push((n, e));
+                        }
+                    }
+                    // Touchdown and liftoff alternate, touchdown first (a
+                    // liftoff belongs to the touchdown before it); every
+                    // touchdown falls in a stance's contact samples, at most
+                    // one per stance. A liftoff may come late (a glitch can
+                    // break the flight's debounce run), so it is counted
+                    // through the alternation, not by position.
+                    let mut per_stance = std::vec![0usize; stances.len()];
+                    for (j, &(n, e)) in events.iter().enumerate() {
+                        let want = if j % 2 == 0 {
+                            PhaseEvent::Touchdown
+                        } else {
+                            PhaseEvent::Liftoff
+                        };
+                        prop_assert_eq!(e, want, "events {:?}", events);
+                        if e == PhaseEvent::Touchdown {
+                            let i = samples[n].2;
+                            prop_assert!(
+                                i < stances.len(),
+                                "touchdown in flight at {}: {:?}",
+                                n,
+                                events
+                            );
+                            per_stance[i] += 1;
+                            prop_assert!(per_stance[i] <= 1, "stance {}: {:?}", i, events);
+                        }
+                    }
+                    Ok(())
+                },
+            );
+            result.unwrap_or_else(|e| panic!("{e}"));
+        }
     }
 }

@@ -962,4 +962,393 @@ mod tests {
             }
         }
     }
+
+    /// Issue 6 properties over random parameter sets, gains, targets and
+    /// sensor streams: 10 000 cases each by default
+    /// ([`crate::proptest_support::cases`]).
+    mod properties {
+        use super::super::*;
+        use crate::hal::IoError;
+        use crate::laws::{constant_torque, step_closed, step_open, velocity, NutPositionPd};
+        use crate::pd_design::PdGains;
+        use crate::supervisor::SupervisorInput;
+        use proptest::prelude::{any, prop_assert, prop_assert_eq, prop_oneof, Just};
+        use proptest::strategy::Strategy as Gen;
+        use proptest::test_runner::TestCaseError;
+
+        /// A valid model around the thesis hardware: every field varied over
+        /// a range a real build of this robot could plausibly have.
+        fn any_model() -> impl Gen<Value = ModelParams> {
+            (
+                (1.0f32..50.0, 0.0f32..5.0, 0.0f32..2.0, 1e-5f32..1e-3),
+                (1e-3f32..0.02, 1e3f32..1e5, 0.3f32..1.5, 0.0f32..0.02),
+                (0.01f32..0.1, 0.3f32..=1.0, 1.0f32..20.0),
+                (0.1f32..5.0, 0.005f32..0.2, 1.0f32..100.0),
+            )
+                .prop_map(
+                    |((m, mu, ms, j), (lead, k, l0, d0), (stroke, eta, g), (tl, kt, il))| {
+                        ModelParams {
+                            body_mass_kg: m,
+                            unsprung_mass_kg: mu,
+                            nut_mass_kg: ms,
+                            rotor_inertia_kg_m2: j,
+                            screw_lead_m: lead,
+                            spring_stiffness_n_per_m: k,
+                            leg_length_m: l0,
+                            preload_m: d0,
+                            stroke_m: stroke,
+                            efficiency: eta,
+                            gravity_mps2: g,
+                            torque_limit_nm: tl,
+                            torque_constant_nm_per_a: kt,
+                            current_limit_a: il,
+                        }
+                    },
+                )
+        }
+
+        /// A gain of any sign and size, NaN and infinities included: the
+        /// bound on the command must not depend on the laws being sane.
+        fn any_gain(typical: f32) -> impl Gen<Value = f32> {
+            prop_oneof![
+                6 => 0.0f32..(10.0 * typical),
+                2 => (-1e4 * typical)..(1e4 * typical),
+                1 => any::<f32>(),
+            ]
+        }
+
+        /// Every strategy: passive, each thesis law, the apex loop.
+        fn any_strategy() -> impl Gen<Value = Strategy> {
+            let apex = (
+                any_gain(3.0),
+                any::<bool>(),
+                any::<bool>(),
+                (
+                    0.0f32..2.0,
+                    1e-3f32..9.99,
+                    0.0f32..60.0,
+                    -10.0f32..=0.0,
+                    0.0f32..=1.0,
+                ),
+            )
+                .prop_map(|(ke, neg, body, (kp, ki, max, min, spin))| {
+                    Strategy::EnergyApex(ApexLoop {
+                        law: energy_torque::Config {
+                            gain_nm_per_j: ke,
+                            allow_negative: neg,
+                        },
+                        measure: if body {
+                            EnergyMeasure::Body
+                        } else {
+                            EnergyMeasure::Total
+                        },
+                        proportional: kp,
+                        gain: ki,
+                        max_offset_j: max,
+                        min_offset_j: min,
+                        spin_up_fraction: spin,
+                    })
+                });
+            let pd = || {
+                (any_gain(8e4), any_gain(300.0), any::<bool>()).prop_map(|(kp, kd, ff)| {
+                    NutPositionPd {
+                        kp_n_per_m: kp,
+                        kd_n_s_per_m: kd,
+                        spring_feedforward: ff,
+                    }
+                })
+            };
+            prop_oneof![
+                Just(Strategy::Passive),
+                (any_gain(0.01), pd()).prop_map(|(step_m, pd)| Strategy::Thesis(
+                    StanceLaw::StepOpen(step_open::Config { step_m, pd })
+                )),
+                (any_gain(2e-3), pd()).prop_map(|(kp_m_per_j, pd)| Strategy::Thesis(
+                    StanceLaw::StepClosed(step_closed::Config {
+                        gain: step_closed::Gain::Fixed { kp_m_per_j },
+                        pd,
+                    })
+                )),
+                any_gain(1.0).prop_map(|torque_nm| Strategy::Thesis(StanceLaw::ConstantTorque(
+                    constant_torque::Config { torque_nm }
+                ))),
+                (any_gain(0.2), any::<bool>()).prop_map(|(g, neg)| Strategy::Thesis(
+                    StanceLaw::EnergyTorque(energy_torque::Config {
+                        gain_nm_per_j: g,
+                        allow_negative: neg,
+                    })
+                )),
+                (any_gain(0.03), any_gain(5000.0), any::<bool>()).prop_map(|(g, l, ff)| {
+                    Strategy::Thesis(StanceLaw::Velocity(velocity::Config {
+                        gain_mps_per_j: g,
+                        loop_gain_n_s_per_m: l,
+                        spring_feedforward: ff,
+                    }))
+                }),
+                (any_gain(1.0), 0.0f32..=1.0).prop_map(|(t, f)| Strategy::Thesis(
+                    StanceLaw::ModifiedTorque(modified_torque::Config {
+                        torque_nm: t,
+                        apex_fraction: f,
+                    })
+                )),
+                apex,
+            ]
+        }
+
+        /// The configuration of one case.
+        #[derive(Debug, Clone)]
+        struct Setup {
+            cfg: HopperConfig,
+        }
+
+        fn any_setup() -> impl Gen<Value = Setup> {
+            (
+                any_model(),
+                any_strategy(),
+                (any_gain(20.3152), any_gain(0.6077), 0.0f32..0.05),
+                0.0f32..=1.0,
+                prop_oneof![3 => Just(1.0f32), 1 => 0.05f32..=1.0],
+            )
+                .prop_map(|(model, strategy, (kp, kd, start), target, scale)| {
+                    let mut cfg = HopperConfig::for_model(model);
+                    cfg.strategy = strategy;
+                    cfg.flight = flight_pd::Config {
+                        gains: PdGains { kp, kd },
+                        start_position_m: start,
+                    };
+                    cfg.target_apex_m = target;
+                    // A supervisor limit below the model's: the command must
+                    // respect the configured limit, not the hardware's.
+                    cfg.supervisor.current_limit_a *= scale;
+                    Setup { cfg }
+                })
+        }
+
+        /// One period's input: a step of a plausible, internally consistent
+        /// sensor walk (load cell, potentiometer and motor encoder agree
+        /// through the spring, plus noise), an arbitrary raw sample, or a
+        /// failed read.
+        #[derive(Debug, Clone, Copy)]
+        enum Item {
+            /// Motor counts, compression in pot codes, height counts, and
+            /// load-cell / pot noise in codes.
+            Walk(i32, i32, i32, i32, i32, bool),
+            Raw(RawSample),
+            Missing,
+        }
+
+        fn any_item() -> impl Gen<Value = Item> {
+            prop_oneof![
+                40 => (-48i32..48, -12i32..12, -24i32..24, -6i32..6, -3i32..3, proptest::bool::weighted(0.002))
+                    .prop_map(|(m, c, z, nl, np, e)| Item::Walk(m, c, z, nl, np, e)),
+                1 => super::any_raw().prop_map(Item::Raw),
+                1 => Just(Item::Missing),
+            ]
+        }
+
+        /// Turns items into raw samples, keeping the walk's state.
+        struct Walker {
+            motor: u32,
+            height: u32,
+            compression_codes: i32,
+        }
+
+        impl Walker {
+            fn new() -> Self {
+                Walker {
+                    motor: 0,
+                    height: 0,
+                    compression_codes: 0,
+                }
+            }
+
+            fn sample(&mut self, cfg: &HopperConfig, item: Item) -> Option<RawSample> {
+                let cal = &cfg.calibration;
+                match item {
+                    Item::Missing => None,
+                    Item::Raw(r) => Some(r),
+                    Item::Walk(dm, dc, dz, nl, np, estop) => {
+                        self.motor = self.motor.wrapping_add_signed(dm);
+                        self.height = self.height.wrapping_add_signed(dz);
+                        self.compression_codes = (self.compression_codes + dc).clamp(0, 3000);
+                        // Counters are `motor_counter_bits` wide: the nut
+                        // position the converter sees is the sign-extended
+                        // accumulation, which this walk keeps small.
+                        let p_m = f32::from(self.motor as u16 as i16) * cal.nut_m_per_count();
+                        let x_m = self.compression_codes as f32 * cal.pot_gain_m_per_code;
+                        let m = &cfg.model;
+                        let force_n =
+                            m.spring_stiffness_n_per_m * (m.preload_m + p_m.max(0.0) + x_m);
+                        let code = |offset: f32, value: f32, noise: i32| {
+                            (offset + value + noise as f32).round().clamp(0.0, 4095.0) as u16
+                        };
+                        Some(RawSample {
+                            motor_counts: self.motor & 0xFFFF,
+                            height_counts: self.height & 0xFFFF,
+                            loadcell_code: code(
+                                cal.loadcell_offset_code,
+                                force_n / cal.loadcell_gain_n_per_code,
+                                nl,
+                            ),
+                            pot_code: code(cal.pot_offset_code, self.compression_codes as f32, np),
+                            estop_pressed: estop,
+                            amp_fault: false,
+                        })
+                    }
+                }
+            }
+        }
+
+        fn any_dt() -> impl Gen<Value = f32> {
+            prop_oneof![8 => Just(1e-4f32), 1 => 1e-6f32..1e-2, 1 => Just(0.0f32), 1 => Just(f32::NAN)]
+        }
+
+        fn fail(e: impl core::fmt::Debug) -> TestCaseError {
+            TestCaseError::fail(std::format!("{e:?}"))
+        }
+
+        extern crate std;
+
+        /// Property 1: whatever the sensors, strategy, gains, target and
+        /// (valid) model, the approved command is finite and within the
+        /// configured current range, the DAC code is the code of a current
+        /// in that range, and a disabled amplifier gets 0 A.
+        #[test]
+        fn command_never_leaves_the_configured_current_range() {
+            let strategy = (
+                any_setup(),
+                proptest::collection::vec(any_item(), 1..40),
+                any_dt(),
+            );
+            let result = crate::proptest_support::run(
+                "command_never_leaves_the_configured_current_range",
+                strategy,
+                |(setup, items, dt)| {
+                    let cfg = setup.cfg;
+                    let mut h = Hopper::new(cfg).map_err(fail)?;
+                    let limit = cfg.supervisor.current_limit_a;
+                    prop_assert!(limit > 0.0 && limit <= cfg.model.usable_current_limit_a());
+                    let (lo, hi) = {
+                        let a = cfg.calibration.current_to_dac_code(-limit);
+                        let b = cfg.calibration.current_to_dac_code(limit);
+                        (a.min(b), a.max(b))
+                    };
+                    let mut walk = Walker::new();
+                    for item in items {
+                        let raw = walk.sample(&cfg, item);
+                        let out = h.step(raw.as_ref(), dt);
+                        let i = out.command.current_a;
+                        prop_assert!(i.is_finite(), "{:?}", out);
+                        prop_assert!(i.abs() <= limit, "{} A beyond {} A", i, limit);
+                        prop_assert!((lo..=hi).contains(&out.dac_code), "{:?}", out);
+                        if !out.command.amp_enable {
+                            prop_assert_eq!(i, 0.0);
+                        }
+                    }
+                    Ok(())
+                },
+            );
+            result.unwrap_or_else(|e| panic!("{e}"));
+        }
+
+        /// What the application does between periods.
+        #[derive(Debug, Clone, Copy)]
+        enum Action {
+            Step(Item),
+            /// `run_period` on an I/O whose DAC write fails.
+            StepDacFails(Item),
+            Overrun,
+            Reset,
+        }
+
+        fn any_action() -> impl Gen<Value = Action> {
+            prop_oneof![
+                30 => any_item().prop_map(Action::Step),
+                1 => any_item().prop_map(Action::StepDacFails),
+                1 => Just(Action::Overrun),
+                2 => Just(Action::Reset),
+            ]
+        }
+
+        struct DacFails(Option<RawSample>);
+        impl HopperIo for DacFails {
+            type Error = ();
+            fn read(&mut self) -> Result<RawSample, IoError<()>> {
+                self.0.ok_or(IoError::Sensor)
+            }
+            fn write_dac(&mut self, _code: u16) -> Result<(), IoError<()>> {
+                Err(IoError::Dac)
+            }
+            fn set_amp_enabled(&mut self, _on: bool) -> Result<(), IoError<()>> {
+                Ok(())
+            }
+        }
+
+        /// Property 2 (control step): a latched fault stays latched, with
+        /// 0 A, the zero code and the amplifier disabled, through any later
+        /// samples, overruns and I/O errors, until a reset succeeds; and only
+        /// a successful reset clears it.
+        #[test]
+        fn hopper_fault_stays_latched_until_reset() {
+            let strategy = (any_setup(), proptest::collection::vec(any_action(), 1..40));
+            let result = crate::proptest_support::run(
+                "hopper_fault_stays_latched_until_reset",
+                strategy,
+                |(setup, actions)| {
+                    let cfg = setup.cfg;
+                    let mut h = Hopper::new(cfg).map_err(fail)?;
+                    let zero = cfg.calibration.current_to_dac_code(0.0);
+                    let m = &cfg.model;
+                    // A clean sample at rest for the reset: nut on its stop,
+                    // leg extended, spring at preload.
+                    let rest = SupervisorInput {
+                        body_height_m: m.leg_length_m,
+                        spring_force_n: m.spring_stiffness_n_per_m * m.preload_m,
+                        ..SupervisorInput::default()
+                    };
+                    let mut walk = Walker::new();
+                    for action in actions {
+                        let before = h.supervisor().faults();
+                        let out = match action {
+                            Action::Overrun => {
+                                h.supervisor_mut().report_overrun();
+                                prop_assert!(h.supervisor().faults().contains(Fault::Overrun));
+                                continue;
+                            }
+                            Action::Reset => {
+                                let ok = h.supervisor_mut().reset(&rest).is_ok();
+                                let after = h.supervisor().faults();
+                                if ok {
+                                    prop_assert!(after.is_empty());
+                                } else {
+                                    // A refused reset clears nothing.
+                                    prop_assert_eq!(after.0 & before.0, before.0);
+                                }
+                                continue;
+                            }
+                            Action::Step(item) => {
+                                let raw = walk.sample(&cfg, item);
+                                h.step(raw.as_ref(), 1e-4)
+                            }
+                            Action::StepDacFails(item) => {
+                                let mut io = DacFails(walk.sample(&cfg, item));
+                                let out = h.run_period(&mut io, 1e-4);
+                                prop_assert!(out.faults.contains(Fault::DacError));
+                                out
+                            }
+                        };
+                        // Faults only accumulate between resets.
+                        prop_assert_eq!(out.faults.0 & before.0, before.0);
+                        prop_assert_eq!(out.faults, h.supervisor().faults());
+                        if !out.faults.is_empty() {
+                            prop_assert_eq!(out.command, Command::SAFE);
+                            prop_assert_eq!(out.dac_code, zero);
+                        }
+                    }
+                    Ok(())
+                },
+            );
+            result.unwrap_or_else(|e| panic!("{e}"));
+        }
+    }
 }

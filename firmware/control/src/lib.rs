@@ -34,3 +34,67 @@ pub mod model;
 pub mod pd_design;
 pub mod supervisor;
 pub mod telemetry;
+pub mod watchdog;
+
+/// Property-test plumbing shared by the modules' tests (host only).
+#[cfg(test)]
+pub(crate) mod proptest_support {
+    extern crate std;
+
+    use core::cell::Cell;
+    use proptest::strategy::Strategy;
+    use proptest::test_runner::{Config, TestCaseError, TestError, TestRunner};
+
+    /// Cases per property in the default run (issue 6 asks for at least 10 000).
+    pub const MIN_CASES: u32 = 10_000;
+
+    /// Cases per property: [`MIN_CASES`], or more when `HOPPER_PROPTEST_CASES`
+    /// or proptest's own `PROPTEST_CASES` asks for more. Taking the maximum
+    /// keeps an environment that sets `PROPTEST_CASES` low for other crates
+    /// from silently thinning these properties.
+    pub fn cases() -> u32 {
+        let from_env = |key: &str| {
+            std::env::var(key)
+                .ok()
+                .and_then(|v| v.trim().parse::<u32>().ok())
+                .unwrap_or(0)
+        };
+        MIN_CASES
+            .max(from_env("HOPPER_PROPTEST_CASES"))
+            .max(from_env("PROPTEST_CASES"))
+    }
+
+    /// Runs `test` on [`cases`] values of `strategy`, reports the number of
+    /// cases that ran (`cargo test -- --nocapture` shows it) and returns it.
+    /// The runner is driven by hand rather than by `proptest!` so the count
+    /// can be checked and printed after the run.
+    pub fn run<S: Strategy>(
+        name: &str,
+        strategy: S,
+        test: impl Fn(S::Value) -> Result<(), TestCaseError>,
+    ) -> Result<u32, TestError<S::Value>> {
+        let wanted = cases();
+        let config = Config {
+            cases: wanted,
+            // No regression files: the crate is `no_std` and proptest cannot
+            // find a source file to sit them next to; a failure prints its
+            // minimal input instead.
+            failure_persistence: None,
+            ..Config::default()
+        };
+        let ran = Cell::new(0_u32);
+        TestRunner::new(config).run(&strategy, |v| {
+            ran.set(ran.get() + 1);
+            test(v)
+        })?;
+        // Successful cases only count once the whole run passed; shrinking
+        // never happens on a passing run, so `ran` is the case count.
+        std::println!("property {name}: {} cases passed", ran.get());
+        assert!(
+            ran.get() >= wanted,
+            "{name}: only {} of {wanted} cases ran",
+            ran.get()
+        );
+        Ok(ran.get())
+    }
+}
