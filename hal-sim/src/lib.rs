@@ -20,6 +20,8 @@ pub mod controller;
 #[cfg(feature = "std")]
 pub mod figures;
 #[cfg(feature = "std")]
+pub mod flight_stability;
+#[cfg(feature = "std")]
 pub mod inject;
 #[cfg(feature = "std")]
 pub mod params_toml;

@@ -35,11 +35,13 @@
 //! and out-of-range values are errors naming the file, the line and the key.
 
 use crate::controller::{ControllerSpec, CONTROLLER_NAMES};
+use crate::flight_stability::{self, FlightLoop};
 use crate::inject::Injection;
 use crate::mock::SensorConfig;
 use crate::params::Params;
 use crate::params_toml::{self, ParamsFileError};
 use crate::run::RunConfig;
+use hopper_control::estimator::EstimatorConfig;
 use hopper_control::hopper::{ApexLoop, Strategy};
 use hopper_control::laws::{energy_torque, flight_pd, StanceLaw};
 use hopper_control::pd_design::PdGains;
@@ -264,13 +266,13 @@ impl Settings {
             let kp = self.flight_kp_a_per_rad.unwrap_or(f64::from(d.gains.kp));
             let kd = self.flight_kd_a_s_per_rad.unwrap_or(f64::from(d.gains.kd));
             check_range(
-                "flight_kp_a_per_rad",
+                "--flight-kp / controller.flight_kp_a_per_rad",
                 kp,
                 limits::FLIGHT_KP_A_PER_RAD,
                 "A/rad",
             )?;
             check_range(
-                "flight_kd_a_s_per_rad",
+                "--flight-kd / controller.flight_kd_a_s_per_rad",
                 kd,
                 limits::FLIGHT_KD_A_S_PER_RAD,
                 "A s/rad",
@@ -313,15 +315,76 @@ impl Settings {
         check_range("pot_sigma_m", s.pot_sigma_m, limits::POT_SIGMA_M, "m")?;
         let cfg = self.run_config(0.0);
         cfg.validate()?;
+        self.check_model_stroke()?;
         if let Some(late) = self.inject.iter().find(|i| i.time_s >= self.duration_s) {
             return Err(format!(
                 "fault injection `{late}` is at or after the end of the run ({} s)",
                 self.duration_s
             ));
         }
-        self.controller_spec()?
-            .build(&cfg.params, cfg.start_apex_m, cfg.control_dt_s)
+        let spec = self.controller_spec()?;
+        self.check_flight_pd(&spec)?;
+        spec.build(&cfg.params, cfg.start_apex_m, cfg.control_dt_s)
             .map(|_| ())
+    }
+
+    /// The believed model may not claim more stroke than the plant has: the
+    /// supervisor's soft limits come from the model's stroke, so a longer one
+    /// would let the firmware drive the nut into the real stop at speed.
+    fn check_model_stroke(&self) -> Result<(), String> {
+        let Some(model) = &self.model else {
+            return Ok(());
+        };
+        if model.stroke_m > self.params.stroke_m {
+            return Err(format!(
+                "model.stroke_m = {} m is larger than the plant's mechanical stroke plant.stroke_m = {} m: the controller's model may not exceed the hardware",
+                model.stroke_m, self.params.stroke_m
+            ));
+        }
+        Ok(())
+    }
+
+    /// Reject flight PD gains (given or default) that make the sampled
+    /// flight loop grow at this control rate on this plant
+    /// ([`crate::flight_stability`]). Checked here, where the rate and the
+    /// plant are known, so `run`, every sweep point and scenario files all
+    /// get it; the passive strategy never runs the flight PD.
+    fn check_flight_pd(&self, spec: &ControllerSpec) -> Result<(), String> {
+        if self.controller == "passive" {
+            return Ok(());
+        }
+        let gains = spec.flight_override.unwrap_or_default().gains;
+        let (kp, kd) = (f64::from(gains.kp), f64::from(gains.kd));
+        let lp = FlightLoop {
+            plant_gain: flight_stability::plant_gain(&self.params),
+            kp,
+            kd,
+            dt_s: 1.0 / self.control_hz,
+            filter_gain: f64::from(EstimatorConfig::default().velocity_filter_gain),
+            amp_tau_s: self.sensors.amp_tau_s,
+        };
+        if (kp == 0.0 && kd == 0.0) || lp.is_stable() {
+            return Ok(());
+        }
+        let hz = self.control_hz;
+        match flight_stability::stable_kd_range(&lp) {
+            Some((lo, hi)) => {
+                let why = if kd == 0.0 {
+                    "position feedback without damping grows"
+                } else {
+                    "the sampled loop grows"
+                };
+                // The gains as f32 (what the firmware runs) print as given.
+                Err(format!(
+                    "--flight-kd / controller.flight_kd_a_s_per_rad = {} A s/rad makes the flight PD unstable ({why}) with kp = {} A/rad at {hz} Hz: stable for kd in {lo:.4} ..= {hi:.4} A s/rad (A = {:.1} rad/s^2/A, eq 4.1 filter G = {})",
+                    gains.kd, gains.kp, lp.plant_gain, EstimatorConfig::default().velocity_filter_gain
+                ))
+            }
+            None => Err(format!(
+                "--flight-kp / controller.flight_kp_a_per_rad = {} A/rad gives an unstable flight PD at --control-hz / control_hz = {hz} Hz for every kd up to 1000 A s/rad: raise the control rate or lower kp",
+                gains.kp
+            )),
+        }
     }
 }
 

@@ -215,7 +215,10 @@ struct SweepArgs {
 }
 
 fn main() {
-    let cli = Cli::parse();
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        Err(e) => bad_command_line(e),
+    };
     let result = match cli.cmd {
         Cmd::Run(args) => cmd_run(args),
         Cmd::Sweep(args) => cmd_sweep(args),
@@ -228,6 +231,32 @@ fn main() {
         eprintln!("hopper-sim: error: {e:#}");
         std::process::exit(2);
     }
+}
+
+/// Help and version go out as clap prints them; any other command-line error
+/// becomes one `hopper-sim: error:` line (clap's first line and its tip, if
+/// any) with exit status 2, like every other bad input, instead of clap's
+/// several-line usage block.
+fn bad_command_line(e: clap::Error) -> ! {
+    use clap::error::ErrorKind;
+    if matches!(
+        e.kind(),
+        ErrorKind::DisplayHelp
+            | ErrorKind::DisplayVersion
+            | ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand
+    ) {
+        e.exit();
+    }
+    let text = e.render().to_string();
+    let mut lines = text.lines().map(str::trim).filter(|l| !l.is_empty());
+    let first = lines.next().unwrap_or("invalid command line");
+    let first = first.strip_prefix("error: ").unwrap_or(first);
+    let tip = lines
+        .find_map(|l| l.strip_prefix("tip: "))
+        .map(|t| format!("; {t}"))
+        .unwrap_or_default();
+    eprintln!("hopper-sim: error: {first}{tip} (see `hopper-sim --help`)");
+    std::process::exit(2);
 }
 
 fn cmd_params_show(preset: &str) -> Result<()> {
