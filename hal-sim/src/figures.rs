@@ -149,6 +149,41 @@ fn line(label: &str, points: Vec<(f64, f64)>, color: RGBColor, kind: Kind) -> Li
     }
 }
 
+/// The actuator (nut) position panel, mm against time.
+fn nut_position_panel(samples: &[Sample]) -> Panel {
+    Panel {
+        caption: "Actuator (nut) position, positive compresses the spring".into(),
+        legend: SeriesLabelPosition::UpperRight,
+        x_label: "time [s]",
+        y_label: "p [mm]",
+        lines: vec![line(
+            "p",
+            time_series(samples, |s| s.p_m * 1e3),
+            C_MAIN,
+            Kind::Solid,
+        )],
+    }
+}
+
+/// The total-energy panel (eq 2.44), J against time, with an optional
+/// reference line (e.g. `E_D`).
+fn energy_panel(samples: &[Sample], reference: Option<Line>) -> Panel {
+    let mut lines = vec![line(
+        "E",
+        time_series(samples, |s| s.energy_j),
+        C_MAIN,
+        Kind::Solid,
+    )];
+    lines.extend(reference);
+    Panel {
+        caption: "Total energy (eq 2.44)".into(),
+        legend: SeriesLabelPosition::UpperRight,
+        x_label: "time [s]",
+        y_label: "E [J]",
+        lines,
+    }
+}
+
 fn time_series(samples: &[Sample], get: fn(&Sample) -> f64) -> Vec<(f64, f64)> {
     samples.iter().map(|s| (s.t_s, get(s))).collect()
 }
@@ -285,18 +320,7 @@ fn chapter2_figures(
                         Kind::Solid,
                     )],
                 },
-                Panel {
-                    caption: "Actuator (nut) position, positive compresses the spring".into(),
-                    legend: SeriesLabelPosition::UpperRight,
-                    x_label: "time [s]",
-                    y_label: "p [mm]",
-                    lines: vec![line(
-                        "p",
-                        time_series(&samples, |s| s.p_m * 1e3),
-                        C_MAIN,
-                        Kind::Solid,
-                    )],
-                },
+                nut_position_panel(&samples),
                 Panel {
                     caption: "Actuator (nut) velocity".into(),
                     legend: SeriesLabelPosition::UpperRight,
@@ -330,26 +354,15 @@ fn chapter2_figures(
                         Kind::Solid,
                     )],
                 },
-                Panel {
-                    caption: "Total energy (eq 2.44)".into(),
-                    legend: SeriesLabelPosition::UpperRight,
-                    x_label: "time [s]",
-                    y_label: "E [J]",
-                    lines: vec![
-                        line(
-                            "E",
-                            time_series(&samples, |s| s.energy_j),
-                            C_MAIN,
-                            Kind::Solid,
-                        ),
-                        line(
-                            "E_D (0.15 m apex)",
-                            vec![(0.0, e_d), (duration_s, e_d)],
-                            C_SECOND,
-                            Kind::Dashed,
-                        ),
-                    ],
-                },
+                energy_panel(
+                    &samples,
+                    Some(line(
+                        "E_D (0.15 m apex)",
+                        vec![(0.0, e_d), (duration_s, e_d)],
+                        C_SECOND,
+                        Kind::Dashed,
+                    )),
+                ),
             ],
         });
     }
@@ -478,31 +491,9 @@ fn chapter4_figures(
             )],
         }];
         if name != "passive" {
-            panels.push(Panel {
-                caption: "Actuator (nut) position, positive compresses the spring".into(),
-                legend: SeriesLabelPosition::UpperRight,
-                x_label: "time [s]",
-                y_label: "p [mm]",
-                lines: vec![line(
-                    "p",
-                    time_series(&samples, |s| s.p_m * 1e3),
-                    C_MAIN,
-                    Kind::Solid,
-                )],
-            });
+            panels.push(nut_position_panel(&samples));
         }
-        panels.push(Panel {
-            caption: "Total energy (eq 2.44)".into(),
-            legend: SeriesLabelPosition::UpperRight,
-            x_label: "time [s]",
-            y_label: "E [J]",
-            lines: vec![line(
-                "E",
-                time_series(&samples, |s| s.energy_j),
-                C_MAIN,
-                Kind::Solid,
-            )],
-        });
+        panels.push(energy_panel(&samples, None));
         panels.push(Panel {
             caption: "Energy change of each phase (incl. touchdown/liftoff losses in stance)"
                 .into(),

@@ -212,11 +212,6 @@ impl SimHal {
             _ => (p.leg_length_m - s.z_m).max(0.0),
         };
         let motor_counts = self.motor.counter(plant.motor_angle_rad());
-        let wrap_mask = if self.motor.bits >= 32 {
-            u32::MAX
-        } else {
-            (1u32 << self.motor.bits) - 1
-        };
         let mut loadcell_code = self.loadcell.code(plant.spring_force_n(), &mut self.noise);
         let mut pot_code = self.pot.code(leg_compression_m, &mut self.noise);
         if self.faults.adc_burst_sigma_codes > 0 {
@@ -232,9 +227,10 @@ impl SimHal {
         }
         let f = &self.faults;
         let sample = RawSample {
-            motor_counts: f
-                .motor_counts
-                .unwrap_or(motor_counts.wrapping_add(f.motor_counts_offset) & wrap_mask),
+            motor_counts: f.motor_counts.unwrap_or(
+                self.motor
+                    .wrap(motor_counts.wrapping_add(f.motor_counts_offset)),
+            ),
             height_counts: self.height.counter(s.z_m - self.height_origin_m),
             loadcell_code: f.loadcell_code.unwrap_or(loadcell_code),
             pot_code: f.pot_code.unwrap_or(pot_code),

@@ -190,48 +190,12 @@ pub struct Summary {
     /// Events the firmware's phase estimator reported (null without firmware).
     pub estimated_events: Option<EstimatorEvents>,
     /// The firmware's per-hop ledger, one entry per completed hop.
-    pub firmware_hops: Vec<FirmwareHop>,
+    pub firmware_hops: Vec<HopLedger>,
     /// Motor work (plant ledger) from the first touchdown to the first
     /// liftoff: the energy the motor adds in the first stance, the quantity
     /// of the thesis's ball-screw lead study (Figures 3.1-3.3), J. Null if
     /// the run has no complete stance.
     pub first_stance_motor_work_j: Option<f64>,
-}
-
-/// One hop of the firmware's ledger ([`HopLedger`]), from its own estimates.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
-pub struct FirmwareHop {
-    /// Hop number, from 1.
-    pub hop: u32,
-    /// Apex toe height that ended the hop, m.
-    pub apex_height_m: f32,
-    /// Energy estimate at touchdown, J.
-    pub energy_at_touchdown_j: f32,
-    /// Energy estimate at liftoff, J.
-    pub energy_at_liftoff_j: f32,
-    /// Motor work in stance (commanded torque x estimated speed), J.
-    pub stance_work_j: f32,
-    /// Stance duration, s.
-    pub stance_duration_s: f32,
-    /// Largest |command|, A.
-    pub peak_current_a: f32,
-    /// Largest nut displacement, m.
-    pub peak_stroke_m: f32,
-}
-
-impl From<HopLedger> for FirmwareHop {
-    fn from(h: HopLedger) -> Self {
-        FirmwareHop {
-            hop: h.hop,
-            apex_height_m: h.apex_height_m,
-            energy_at_touchdown_j: h.energy_at_touchdown_j,
-            energy_at_liftoff_j: h.energy_at_liftoff_j,
-            stance_work_j: h.stance_work_j,
-            stance_duration_s: h.stance_duration_s,
-            peak_current_a: h.peak_current_a,
-            peak_stroke_m: h.peak_stroke_m,
-        }
-    }
 }
 
 /// Everything a run produced.
@@ -347,11 +311,7 @@ pub fn run_with_progress(
                 max_abs_current_after_fault_a: controller.max_abs_current_after_fault_a(),
                 faults,
                 estimated_events: controller.estimator_events(),
-                firmware_hops: controller
-                    .hop_ledgers()
-                    .into_iter()
-                    .map(FirmwareHop::from)
-                    .collect(),
+                firmware_hops: controller.hop_ledgers(),
                 first_stance_motor_work_j: first_stance_work_j,
                 ..summary
             }

@@ -52,12 +52,18 @@ impl Encoder {
     pub fn counter(&self, value: f64) -> u32 {
         // Positions of this machine stay far inside i64; wrap like hardware.
         let c = floor_to_i64(value * self.counts_per_unit);
-        let mask: u64 = if self.bits >= 32 {
-            u32::MAX as u64
+        // Two's complement: the low 32 bits of `c` are the count modulo 2^32.
+        self.wrap(c as u32)
+    }
+
+    /// A count wrapped to the counter width, as the hardware counter holds it.
+    pub fn wrap(&self, counts: u32) -> u32 {
+        let mask = if self.bits >= 32 {
+            u32::MAX
         } else {
-            (1u64 << self.bits) - 1
+            (1u32 << self.bits) - 1
         };
-        ((c as u64) & mask) as u32
+        counts & mask
     }
 }
 

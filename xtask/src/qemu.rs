@@ -77,15 +77,8 @@ pub fn run(root: &Path) -> Result<(), String> {
     for l in &lines {
         println!("qemu| {l}");
     }
-    let summary = lines
-        .iter()
-        .rev()
-        .find_map(|l| l.strip_prefix("summary "))
-        .ok_or("the QEMU run printed no summary (see the log above)")?;
-    let kv: BTreeMap<&str, &str> = summary
-        .split_whitespace()
-        .filter_map(|w| w.split_once('='))
-        .collect();
+    let (summary, kv) =
+        parse_summary(&lines).ok_or("the QEMU run printed no summary (see the log above)")?;
     let num = |k: &str| -> Result<f64, String> {
         kv.get(k)
             .and_then(|v| v.parse::<f64>().ok())
@@ -170,6 +163,19 @@ pub fn run(root: &Path) -> Result<(), String> {
     }
 }
 
+/// The firmware's last `summary key=value ...` line, whole and as a map.
+fn parse_summary(lines: &[String]) -> Option<(&str, BTreeMap<&str, &str>)> {
+    let summary = lines
+        .iter()
+        .rev()
+        .find_map(|l| l.strip_prefix("summary "))?;
+    let kv = summary
+        .split_whitespace()
+        .filter_map(|w| w.split_once('='))
+        .collect();
+    Some((summary, kv))
+}
+
 /// Installs `qemu-system-arm` with apt-get when it is missing.
 fn ensure_qemu() -> Result<(), String> {
     if Command::new("qemu-system-arm")
@@ -220,15 +226,7 @@ const OVERRUN_SHIFT: u32 = 5;
 fn overrun_check(elf: &Path) -> Result<(), String> {
     let (bytes, ok) = run_qemu(elf, OVERRUN_SHIFT)?;
     let lines = decode(elf, &bytes)?;
-    let summary = lines
-        .iter()
-        .rev()
-        .find_map(|l| l.strip_prefix("summary "))
-        .ok_or("the slowed-down run printed no summary")?;
-    let kv: BTreeMap<&str, &str> = summary
-        .split_whitespace()
-        .filter_map(|w| w.split_once('='))
-        .collect();
+    let (summary, kv) = parse_summary(&lines).ok_or("the slowed-down run printed no summary")?;
     let get = |k: &str| kv.get(k).copied().unwrap_or("");
     let faults: u32 = get("faults").parse().unwrap_or(0);
     let missed: u32 = get("missed").parse().unwrap_or(0);

@@ -104,6 +104,24 @@ pub enum LogItem {
     },
 }
 
+#[cfg(target_os = "none")]
+impl LogItem {
+    /// What a period gives the logger: newly latched faults first (they
+    /// matter more than a hop ledger in the same period), else a finished hop.
+    fn after_step(
+        out: &hopper_control::hopper::StepOutput,
+        faults_before: hopper_control::supervisor::Faults,
+    ) -> Option<Self> {
+        if out.faults != faults_before {
+            return Some(LogItem::Faults {
+                step: out.record.step,
+                faults: out.faults,
+            });
+        }
+        out.hop.map(LogItem::Hop)
+    }
+}
+
 /// Messages waiting for the logger.
 #[cfg(target_os = "none")]
 pub type LogQueue = heapless::Deque<LogItem, 16>;
@@ -215,13 +233,7 @@ mod app {
             }
         }
         cx.shared.capture.lock(|c| c.push(out.record));
-        let mut item = out.hop.map(LogItem::Hop);
-        if out.faults != before {
-            item = Some(LogItem::Faults {
-                step: out.record.step,
-                faults: out.faults,
-            });
-        }
+        let item = LogItem::after_step(&out, before);
         *cx.local.polls = cx.local.polls.wrapping_add(1);
         let dump = cx.local.polls.is_multiple_of(100) && cx.local.dump.pressed();
         if let Some(item) = item {
@@ -462,13 +474,7 @@ mod app {
             let _ = io.set_amp_enabled(out.command.amp_enable);
         }
         cx.shared.capture.lock(|c| c.push(out.record));
-        let mut item = out.hop.map(LogItem::Hop);
-        if out.faults != before {
-            item = Some(LogItem::Faults {
-                step: out.record.step,
-                faults: out.faults,
-            });
-        }
+        let item = LogItem::after_step(&out, before);
         if let Some(item) = item {
             cx.shared.log.lock(|q| {
                 let _ = q.push_back(item);

@@ -455,7 +455,7 @@ impl FastRanges {
 }
 
 /// A usable current limit: the configured one if finite and positive, else 0 (always safe).
-const fn sane_limit(limit_a: f32) -> f32 {
+pub(crate) const fn sane_limit(limit_a: f32) -> f32 {
     if limit_a.is_finite() && limit_a > 0.0 {
         limit_a
     } else {
@@ -684,34 +684,6 @@ impl Supervisor {
             current_a: requested_current_a.clamp(-limit, limit),
             amp_enable: limit > 0.0,
         })
-    }
-
-    /// [`check`](Self::check) on a converted sample and the filtered
-    /// velocities, without building a [`SupervisorInput`] in the common case
-    /// (what the control step calls).
-    #[inline(always)]
-    pub fn check_measurements(
-        &mut self,
-        m: &crate::calibration::Measurements,
-        nut_velocity_mps: f32,
-        motor_speed_rad_s: f32,
-        body_velocity_mps: f32,
-        requested_current_a: f32,
-    ) -> Command {
-        // Built by value and used by value on the fast path, so the compiler
-        // keeps it in registers; only the cold full path needs it in memory.
-        let input = SupervisorInput::from_measurements(
-            m,
-            nut_velocity_mps,
-            motor_speed_rad_s,
-            body_velocity_mps,
-        );
-        if self.latched.is_empty() {
-            if let Some(command) = self.fast_path(input, requested_current_a) {
-                return command;
-            }
-        }
-        self.check_full(&input, requested_current_a)
     }
 
     /// Checks one period's input and request; returns the command for the amplifier.
@@ -1254,6 +1226,38 @@ mod tests {
             if s.spring_residual_n(&input).abs() <= s.config.spring_mismatch_n {
                 proptest::prop_assert!(!s.contact_disagrees(&input));
             }
+        }
+    }
+
+    proptest::proptest! {
+        /// The fast path never changes the outcome: for any sample and
+        /// request, `check` (fast path first) and the full checks alone give
+        /// the same command, latched faults and disagreement count.
+        #[test]
+        fn fast_path_agrees_with_the_full_checks(
+            p in -0.05f32..0.1, pd in -2.0f32..2.0, w in -1500.0f32..1500.0,
+            z in 0.3f32..1.0, zd in -12.0f32..12.0, f in -200.0f32..2500.0,
+            x in -0.01f32..0.15, dm in -100i32..100, dh in -50i32..50,
+            estop in proptest::bool::weighted(0.05), amp in proptest::bool::weighted(0.05),
+            req in proptest::prop_oneof![-400.0f32..400.0, proptest::num::f32::ANY],
+        ) {
+            let input = SupervisorInput {
+                nut_position_m: p,
+                nut_velocity_mps: pd,
+                motor_speed_rad_s: w,
+                body_height_m: z,
+                body_velocity_mps: zd,
+                spring_force_n: f,
+                leg_compression_m: x,
+                motor_delta_counts: dm,
+                height_delta_counts: dh,
+                estop_pressed: estop,
+                amp_fault: amp,
+            };
+            let mut fast = Supervisor::new(SupervisorConfig::default());
+            let mut full = fast;
+            proptest::prop_assert_eq!(fast.check(&input, req), full.check_full(&input, req));
+            proptest::prop_assert_eq!(fast, full);
         }
     }
 }

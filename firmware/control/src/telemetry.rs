@@ -90,6 +90,7 @@ impl<const N: usize> TelemetryRing<N> {
 /// Energy bookkeeping of one hop: a stance and the flight up to its apex.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
 pub struct HopLedger {
     /// Hop number (1 = first stance).
     pub hop: u32,

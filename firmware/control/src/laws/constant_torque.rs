@@ -1,7 +1,7 @@
 //! Open-loop constant torque (thesis section 2.1.3.4, Figures 2.8-2.9 and
 //! section 4.4.2): a fixed motor torque for the whole stance.
 
-use super::{check_finite, Actuator, LawError};
+use super::{Actuator, LawError};
 
 /// Configuration of the constant-torque law.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -17,9 +17,9 @@ impl Default for Config {
     }
 }
 
-/// Current command `tau / k_m`, A, clamped.
+/// Current command `tau / k_m`, A, clamped (a non-finite torque is refused
+/// by [`Actuator::torque_to_current`]).
 pub fn command(c: &Config, act: &Actuator) -> Result<f32, LawError> {
-    check_finite(&[c.torque_nm])?;
     act.torque_to_current(c.torque_nm)
 }
 

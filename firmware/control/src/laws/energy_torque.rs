@@ -58,11 +58,7 @@ impl Prepared {
         if !(c.gain_nm_per_j.is_finite() && kt > 0.0 && kt.is_finite()) {
             return None;
         }
-        let limit_a = if act.current_limit_a.is_finite() {
-            act.current_limit_a.max(0.0)
-        } else {
-            0.0
-        };
+        let limit_a = act.usable_limit_a();
         Some(Prepared {
             gain_nm_per_j: c.gain_nm_per_j,
             allow_negative: c.allow_negative,

@@ -84,11 +84,7 @@ impl Prepared {
         if !(r > 0.0 && r.is_finite()) {
             return None;
         }
-        let limit_a = if act.current_limit_a.is_finite() {
-            act.current_limit_a.max(0.0)
-        } else {
-            0.0
-        };
+        let limit_a = act.usable_limit_a();
         Some(Prepared {
             kp: c.gains.kp,
             kd: c.gains.kd,

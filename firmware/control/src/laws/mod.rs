@@ -72,13 +72,15 @@ impl Actuator {
         }
     }
 
+    /// The clamp actually applied, A: `current_limit_a` if finite and
+    /// positive, else 0 (a bad limit can only make the output safer).
+    pub fn usable_limit_a(&self) -> f32 {
+        crate::supervisor::sane_limit(self.current_limit_a)
+    }
+
     /// Clamps a current to `+-current_limit_a`; non-finite gives the error.
     pub fn clamp_current(&self, current_a: f32) -> Result<f32, LawError> {
-        let limit = if self.current_limit_a.is_finite() {
-            self.current_limit_a.max(0.0)
-        } else {
-            0.0
-        };
+        let limit = self.usable_limit_a();
         if current_a.is_nan() {
             return Err(LawError::NonFiniteInput);
         }

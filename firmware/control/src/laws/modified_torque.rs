@@ -45,10 +45,14 @@ pub fn flight_active(
 }
 
 /// Current command while active (stance, or flight when
-/// [`flight_active`]), A: `tau / k_m`, clamped.
+/// [`flight_active`]), A: the constant-torque law's `tau / k_m`, clamped.
 pub fn command(c: &Config, act: &Actuator) -> Result<f32, LawError> {
-    check_finite(&[c.torque_nm])?;
-    act.torque_to_current(c.torque_nm)
+    super::constant_torque::command(
+        &super::constant_torque::Config {
+            torque_nm: c.torque_nm,
+        },
+        act,
+    )
 }
 
 #[cfg(test)]
