@@ -46,16 +46,20 @@ pub enum Knob {
     FlightKp,
     /// Flight PD derivative gain, A s/rad.
     FlightKd,
+    /// Sensor-noise seed (rounded to a whole number): a sweep over seeds
+    /// repeats one scenario under different noise.
+    Seed,
 }
 
 /// Controller settings a sweep accepts: (short name, column name, knob).
-const SETTING_KNOBS: [(&str, &str, Knob); 6] = [
+const SETTING_KNOBS: [(&str, &str, Knob); 7] = [
     ("torque", "torque_nm", Knob::Torque),
     ("target_apex", "target_apex_m", Knob::TargetApex),
     ("start_apex", "start_apex_m", Knob::StartApex),
     ("ke", "energy_gain_nm_per_j", Knob::EnergyGain),
     ("flight_kp", "flight_kp_a_per_rad", Knob::FlightKp),
     ("flight_kd", "flight_kd_a_s_per_rad", Knob::FlightKd),
+    ("seed", "noise_seed", Knob::Seed),
 ];
 
 impl Knob {
@@ -91,6 +95,9 @@ impl Knob {
             Knob::EnergyGain => s.energy_gain_nm_per_j = Some(v),
             Knob::FlightKp => s.flight_kp_a_per_rad = Some(v),
             Knob::FlightKd => s.flight_kd_a_s_per_rad = Some(v),
+            // Axis values are finite (checked when parsed); negative seeds
+            // saturate to 0.
+            Knob::Seed => s.sensors.seed = v.round().max(0.0) as u64,
         }
     }
 
@@ -320,6 +327,12 @@ impl Sweep {
             ));
         }
         for a in &self.axes {
+            if matches!(a.knob, Knob::Seed) && !self.base.sensors.noise {
+                return Err(format!(
+                    "--param `{}`: the noise seed changes nothing with sensor noise off",
+                    a.spec
+                ));
+            }
             if let Some(users) = a.knob.unused_by(&self.base.controller) {
                 return Err(format!(
                     "--param `{}`: `{}` is used by {users} only, not by the `{}` controller",

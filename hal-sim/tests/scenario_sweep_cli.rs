@@ -319,3 +319,57 @@ fn bad_sweep_input_is_one_clear_error_and_writes_nothing() {
         "unknown --metric `speed`",
     );
 }
+
+#[test]
+fn seed_sweep_repeats_a_run_under_different_noise() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("seeds");
+    let o = sim(&[
+        "sweep",
+        "--controller",
+        "energy-apex",
+        "--start-apex",
+        "0.03",
+        "--duration",
+        "0.6",
+        "--param",
+        "seed=1:3:3",
+        "--metric",
+        "first_stance_motor_work_j",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let csv = std::fs::read_to_string(out.join("sweep.csv")).unwrap();
+    let mut lines = csv.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    assert_eq!(header[0], "noise_seed");
+    let col = header
+        .iter()
+        .position(|c| *c == "first_stance_motor_work_j")
+        .unwrap();
+    let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
+    let seeds: Vec<&str> = rows.iter().map(|r| r[0]).collect();
+    assert_eq!(seeds, ["1", "2", "3"]);
+    let work: Vec<f64> = rows.iter().map(|r| r[col].parse().unwrap()).collect();
+    // Same scenario, different noise: close but not identical.
+    assert!(work[0] != work[1] && work[1] != work[2], "{csv}");
+    for w in &work {
+        assert!((w - work[0]).abs() < 0.1 * work[0].abs(), "{csv}");
+    }
+    // With noise off a seed sweep would repeat one run: refused.
+    let off = dir.path().join("off");
+    assert_clean_failure(
+        &[
+            "sweep",
+            "--noise",
+            "off",
+            "--param",
+            "seed=1:3:3",
+            "--out",
+            off.to_str().unwrap(),
+        ],
+        &off,
+        "changes nothing with sensor noise off",
+    );
+}
