@@ -15,8 +15,8 @@ use crate::plant::Plant;
 use hopper_control::estimator::PhaseEvent;
 use hopper_control::hopper::{ApexLoop, Hopper, MeasurementOverride, StepOutput, Strategy};
 use hopper_control::laws::{
-    constant_torque, energy_torque, flight_pd, modified_torque, step_closed, step_open, velocity,
-    StanceLaw,
+    constant_torque, energy_torque, flight_pd, modified_torque, shaped, step_closed, step_open,
+    velocity, StanceLaw,
 };
 use hopper_control::supervisor::Fault;
 use hopper_control::telemetry::HopLedger;
@@ -72,7 +72,7 @@ pub struct FaultRecord {
 }
 
 /// Controller names `hopper-sim run --controller` accepts.
-pub const CONTROLLER_NAMES: [&str; 8] = [
+pub const CONTROLLER_NAMES: [&str; 9] = [
     "passive",
     "step-open",
     "step-closed",
@@ -81,6 +81,7 @@ pub const CONTROLLER_NAMES: [&str; 8] = [
     "energy-apex",
     "velocity",
     "modified-torque",
+    "shaped",
 ];
 
 /// What to build: a controller name and its settings.
@@ -144,6 +145,7 @@ impl ControllerSpec {
                     ..modified_torque::Config::default()
                 }))
             }
+            "shaped" => Strategy::Shaped(shaped::Config::default()),
             other => {
                 return Err(format!(
                     "unknown controller `{other}`: expected one of {CONTROLLER_NAMES:?}"

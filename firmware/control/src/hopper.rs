@@ -24,8 +24,8 @@ use crate::estimator::{
 };
 use crate::hal::{HopperIo, RawSample};
 use crate::laws::{
-    energy_torque, flight_pd, modified_torque, or_zero, Actuator, StanceController, StanceInput,
-    StanceLaw,
+    energy_torque, flight_pd, modified_torque, or_zero, shaped, Actuator, StanceController,
+    StanceInput, StanceLaw,
 };
 use crate::model::{ModelError, ModelParams};
 use crate::supervisor::{Command, Fault, Faults, Supervisor, SupervisorConfig, SupervisorInput};
@@ -117,6 +117,9 @@ pub enum Strategy {
     Thesis(StanceLaw),
     /// The apex-regulating energy law, with the flight PD in flight.
     EnergyApex(ApexLoop),
+    /// Shaped torque with its own braking-curve back-drive in flight and a
+    /// per-hop loop on the torque level ([`shaped`]).
+    Shaped(shaped::Config),
 }
 
 impl Default for Strategy {
@@ -214,6 +217,8 @@ pub enum ConfigError {
     TargetApex,
     /// The apex loop gain is not in `(0, 2)` or its bound is negative.
     ApexLoop,
+    /// A [`shaped::Config`] field is out of its documented range.
+    Shaped,
 }
 
 /// The parts of a control period, in order, as reported to
@@ -273,6 +278,14 @@ pub struct Hopper {
     /// (`None`: the configuration makes the generic law refuse, 0 A).
     flight_fast: Option<flight_pd::Prepared>,
     energy_fast: Option<energy_torque::Prepared>,
+    /// The shaped law (`Some` exactly for [`Strategy::Shaped`]).
+    shaped: Option<shaped::Prepared>,
+    /// Its torque level (fraction of the current limit), time since
+    /// touchdown (s) and whether braking has stopped the nut this stance.
+    shaped_level: f32,
+    shaped_integral: f32,
+    stance_time_s: f32,
+    braked: bool,
     supervisor: Supervisor,
     ledger: HopLedgerBuilder,
     desired_energy_j: f32,
@@ -344,10 +357,16 @@ impl Hopper {
         }
         let desired_energy_j = Self::desired_for(&cfg.model, cfg.target_apex_m)?;
         let actuator = Actuator::from_model(&cfg.model);
+        let shaped = match &cfg.strategy {
+            Strategy::Shaped(c) => {
+                Some(shaped::Prepared::new(c, &actuator, &cfg.model).ok_or(ConfigError::Shaped)?)
+            }
+            _ => None,
+        };
         let law = match cfg.strategy {
             Strategy::Thesis(law) => law,
             Strategy::EnergyApex(a) => StanceLaw::EnergyTorque(a.law),
-            Strategy::Passive => StanceLaw::default(),
+            Strategy::Passive | Strategy::Shaped(_) => StanceLaw::default(),
         };
         let energy_law = match cfg.strategy {
             Strategy::EnergyApex(a) => Some(a.law),
@@ -357,6 +376,11 @@ impl Hopper {
         Ok(Self {
             flight_fast: flight_pd::Prepared::new(&cfg.flight, &actuator),
             energy_fast: energy_law.and_then(|c| energy_torque::Prepared::new(&c, &actuator)),
+            shaped_level: shaped.map_or(0.0, |p| p.config().initial_level),
+            shaped_integral: shaped.map_or(0.0, |p| p.config().initial_level),
+            shaped,
+            stance_time_s: 0.0,
+            braked: false,
             cfg,
             converter,
             dac: DacMap::new(&cfg.calibration),
@@ -497,7 +521,7 @@ impl Hopper {
         };
         mark(StepPart::Energy);
 
-        let requested_a = self.law_current_a(&m, &e_in, energy_j, nut_velocity_mps, phase);
+        let requested_a = self.law_current_a(&m, &e_in, energy_j, nut_velocity_mps, phase, dt_s);
         mark(StepPart::Law);
         let sup_in =
             SupervisorInput::from_measurements(&m, nut_velocity_mps, v.motor_rad_s, v.body_mps);
@@ -611,6 +635,8 @@ impl Hopper {
             PhaseEvent::Touchdown => {
                 self.stance.on_touchdown();
                 self.after_bottom = false;
+                self.stance_time_s = 0.0;
+                self.braked = false;
                 self.ledger.touchdown(energy_j);
                 None
             }
@@ -632,16 +658,26 @@ impl Hopper {
         }
     }
 
-    /// The outer loop of [`ApexLoop`], once per completed hop.
+    /// The outer loop of [`ApexLoop`] or of the shaped law's level, once
+    /// per completed hop.
     fn apex_loop_update(&mut self, toe_height_m: f32) {
-        let Strategy::EnergyApex(a) = self.cfg.strategy else {
-            return;
-        };
         let Ok(measured_j) = self
             .cfg
             .model
             .desired_energy_j(toe_height_m.clamp(0.0, 1.0))
         else {
+            return;
+        };
+        if let Some(p) = &self.shaped {
+            (self.shaped_integral, self.shaped_level) = p.next_level(
+                self.shaped_integral,
+                self.shaped_level,
+                self.desired_energy_j,
+                measured_j,
+            );
+            return;
+        }
+        let Strategy::EnergyApex(a) = self.cfg.strategy else {
             return;
         };
         let error_j = self.desired_energy_j - measured_j;
@@ -663,9 +699,13 @@ impl Hopper {
         energy_j: f32,
         nut_velocity_mps: f32,
         phase: Phase,
+        dt_s: f32,
     ) -> f32 {
         if let Strategy::Passive = self.cfg.strategy {
             return 0.0;
+        }
+        if let Some(p) = &self.shaped {
+            return self.shaped_current_a(*p, m, nut_velocity_mps, phase, dt_s);
         }
         if phase == Phase::Flight {
             if let Strategy::Thesis(StanceLaw::ModifiedTorque(c)) = &self.cfg.strategy {
@@ -693,6 +733,41 @@ impl Hopper {
             };
         }
         self.stance_current_a(m, e_in, energy_j, nut_velocity_mps)
+    }
+
+    /// The shaped law's request, A.
+    #[inline]
+    fn shaped_current_a(
+        &mut self,
+        p: shaped::Prepared,
+        m: &Measurements,
+        nut_velocity_mps: f32,
+        phase: Phase,
+        dt_s: f32,
+    ) -> f32 {
+        if phase == Phase::Flight {
+            let toe_m = m.body_height_m - self.cfg.model.leg_length_m;
+            let v = self.estimator.velocities();
+            if p.spin_up(toe_m, v.body_mps, self.estimator.last_apex_m()) {
+                return p.push_current_a(self.shaped_level);
+            }
+            return p.backdrive_current_a(m.nut_position_m, nut_velocity_mps);
+        }
+        // A non-finite `dt_s` makes the sum NaN: the comparisons in
+        // `stance_current_a` then fall through to braking or 0 A, both safe.
+        self.stance_time_s += dt_s;
+        p.stance_current_a(
+            self.shaped_level,
+            self.stance_time_s,
+            nut_velocity_mps,
+            &mut self.braked,
+        )
+    }
+
+    /// The shaped law's torque level, fraction of the current limit (0 for
+    /// other strategies).
+    pub fn shaped_level(&self) -> f32 {
+        self.shaped_level
     }
 
     /// The stance law's request, A.

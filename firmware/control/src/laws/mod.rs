@@ -22,6 +22,7 @@ pub mod constant_torque;
 pub mod energy_torque;
 pub mod flight_pd;
 pub mod modified_torque;
+pub mod shaped;
 pub mod step_closed;
 pub mod step_open;
 pub mod velocity;

@@ -1,0 +1,366 @@
+//! Shaped torque (`shaped`): the thesis's modified-torque idea (section
+//! 4.4.3) done so that the actuator's energy ends up in the body instead of
+//! in the mechanical stops, with an outer per-hop loop on the measured apex.
+//!
+//! # Why
+//! The reflected rotor inertia `alpha = J / r^2 + m_s` (about 426 kg with
+//! Table 2.1) makes the nut a heavy mass behind the leg spring. Under the
+//! thesis's laws the motor does far more work per hop than friction and the
+//! foot impacts take, but most of it leaves as rotor kinetic energy at
+//! liftoff, which the Table 2.1 flight PD (lightly damped against `alpha`)
+//! then throws into the upper stop. This law
+//!
+//! 1. spins the rotor up on the way down (from `spin_up_fraction` of the last
+//!    apex), where the spring force it works against is small, so the motor's
+//!    work goes into rotor kinetic energy cheaply;
+//! 2. keeps pushing through the first part of stance, where that kinetic
+//!    energy and the motor's force compress the spring under the body;
+//! 3. brakes the nut from `switch_fraction` of the model's stance time
+//!    `T = pi sqrt((M + m_s) / k)` (the body on the leg spring, eqs
+//!    2.32-2.34 without gravity and actuator) until it stops, so less rotor
+//!    energy is carried into flight;
+//! 4. in flight, brings the nut home along a braking curve (below) instead of
+//!    the PD: no stop impact, within the current limit.
+//!
+//! The torque level `u` (fraction of the current limit, both for the
+//! spin-up and the stance push) is the outer loop's output, a PI on the apex
+//! energy error `e_k = E_D(H_target) - E_D(H_k)` (`E_D` of eq 2.43, J) after
+//! each apex `H_k`:
+//!
+//! ```text
+//! b <- clamp(b + K_i e_k, 0, 1),   u = clamp(b + K_p e_k, 0, 1)
+//! ```
+//!
+//! # Braking-curve back-drive
+//! In flight the nut obeys `alpha pdd = eta k_m i / r - k (delta0 + p)`
+//! (eqs 2.12-2.14 with `m_s` small against `alpha`). The largest braking
+//! deceleration of a nut moving up (towards the stop at `p = 0`) is
+//! `a(p) = (eta k_m i_max / r - k (delta0 + p)) / alpha`; the nut can stop in
+//! the distance `p` from speed `sqrt(2 a p)`. The law tracks
+//! `v_ref = -max(sqrt(2 margin a p), v_creep)` (`v_ref = 0` at or above the
+//! stop) with a model-based acceleration command:
+//!
+//! ```text
+//! i = r / (eta k_m) (alpha (v_ref - pd) / t_track + k (delta0 + p))
+//! ```
+//!
+//! clamped to the current limit, so the nut arrives at the stop at the creep
+//! speed. It costs one square root per period in flight.
+
+use super::Actuator;
+use crate::model::ModelParams;
+
+/// Configuration of the shaped-torque law. Times are fractions of the
+/// model's stance time, levels fractions of the current limit.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Config {
+    /// On the way down, the push starts once the toe is below this fraction
+    /// of the last apex height, in `[0, 1]`. Default 0.6 (tuned in
+    /// simulation, design parameters; the thesis used 0.4).
+    pub spin_up_fraction: f32,
+    /// The push ends and braking starts this far into stance, as a fraction
+    /// of the model's stance time `pi sqrt((M + m_s) / k)`, in `[0, 2]`.
+    /// Default 0.66.
+    pub switch_fraction: f32,
+    /// Braking current after the switch, fraction of the current limit, in
+    /// `[0, 1]`. Default 1.0.
+    pub brake_fraction: f32,
+    /// Torque level before the first apex, fraction of the current limit, in
+    /// `[0, 1]`. Default 1.0.
+    pub initial_level: f32,
+    /// Outer-loop integral gain `K_i`, 1/J (level change per J of apex
+    /// energy error), in `[0, 10]`. Default 0.1 (tuned in simulation with
+    /// `K_p`, design parameters, 0.15 m target).
+    pub level_gain_per_j: f32,
+    /// Outer-loop proportional gain `K_p`, 1/J, in `[0, 10]`. Default 0.2.
+    pub level_proportional_per_j: f32,
+    /// Braking-curve margin: the fraction of the largest braking deceleration
+    /// the back-drive plans with, in `(0, 1]`. Default 0.7 (room for a 20 %
+    /// error in `k` and for friction).
+    pub braking_margin: f32,
+    /// Velocity-tracking time constant of the back-drive, s, in
+    /// `[1e-3, 0.1]`. Default 0.005 (50 control periods at 10 kHz; the eq 4.1
+    /// filter lags about 1 ms).
+    pub tracking_time_s: f32,
+    /// Speed at which the nut reaches the stop, m/s, in `[0, 0.1]`. Default
+    /// 0.01 (an impact of 0.02 J with Table 2.1's rotor).
+    pub creep_speed_mps: f32,
+}
+
+impl Default for Config {
+    fn default() -> Self {
+        Self {
+            spin_up_fraction: 0.6,
+            switch_fraction: 0.66,
+            brake_fraction: 1.0,
+            initial_level: 1.0,
+            level_gain_per_j: 0.1,
+            level_proportional_per_j: 0.2,
+            braking_margin: 0.7,
+            tracking_time_s: 0.005,
+            creep_speed_mps: 0.01,
+        }
+    }
+}
+
+impl Config {
+    /// Whether every field is finite and in its documented range.
+    pub fn is_valid(&self) -> bool {
+        let in_range = |v: f32, lo: f32, hi: f32| v.is_finite() && v >= lo && v <= hi;
+        in_range(self.spin_up_fraction, 0.0, 1.0)
+            && in_range(self.switch_fraction, 0.0, 2.0)
+            && in_range(self.brake_fraction, 0.0, 1.0)
+            && in_range(self.initial_level, 0.0, 1.0)
+            && in_range(self.level_gain_per_j, 0.0, 10.0)
+            && in_range(self.level_proportional_per_j, 0.0, 10.0)
+            && in_range(self.braking_margin, 1e-3, 1.0)
+            && in_range(self.tracking_time_s, 1e-3, 0.1)
+            && in_range(self.creep_speed_mps, 0.0, 0.1)
+    }
+}
+
+/// The law with its model constants worked out once.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Prepared {
+    cfg: Config,
+    /// Current limit, A.
+    limit_a: f32,
+    /// Switch time after touchdown, s.
+    switch_s: f32,
+    /// Amps per newton on the nut, `r / (eta k_m)`.
+    a_per_n: f32,
+    /// `alpha / t_track`, N s/m.
+    tracking_n_s_per_m: f32,
+    /// Spring `k`, N/m, and preload force `k delta0`, N.
+    spring_n_per_m: f32,
+    preload_n: f32,
+    /// `2 margin / alpha`, 1/kg: `v^2 = 2 margin a p` with `a = F_brake / alpha`.
+    two_margin_per_alpha: f32,
+    /// Largest braking force on the nut, `eta k_m i_max / r`, N.
+    max_force_n: f32,
+}
+
+impl Prepared {
+    /// `None` if `cfg` is invalid or the model gives no usable constants.
+    pub fn new(cfg: &Config, act: &Actuator, model: &ModelParams) -> Option<Self> {
+        if !cfg.is_valid() {
+            return None;
+        }
+        let r = act.screw_m_per_rad;
+        let torque_per_a = act.efficiency * act.torque_constant_nm_per_a;
+        let alpha = model.reflected_inertia_kg();
+        let k = model.spring_stiffness_n_per_m;
+        let stance_s =
+            core::f32::consts::PI * libm::sqrtf((model.body_mass_kg + model.nut_mass_kg) / k);
+        let limit_a = act.usable_limit_a();
+        let p = Self {
+            cfg: *cfg,
+            limit_a,
+            switch_s: cfg.switch_fraction * stance_s,
+            a_per_n: r / torque_per_a,
+            tracking_n_s_per_m: alpha / cfg.tracking_time_s,
+            spring_n_per_m: k,
+            preload_n: k * model.preload_m,
+            two_margin_per_alpha: 2.0 * cfg.braking_margin / alpha,
+            max_force_n: torque_per_a * limit_a / r,
+        };
+        let all_finite = [
+            p.switch_s,
+            p.a_per_n,
+            p.tracking_n_s_per_m,
+            p.preload_n,
+            p.two_margin_per_alpha,
+            p.max_force_n,
+        ]
+        .iter()
+        .all(|v| v.is_finite() && *v >= 0.0);
+        all_finite.then_some(p)
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &Config {
+        &self.cfg
+    }
+
+    /// Whether the push runs in flight: descending with the toe below
+    /// `spin_up_fraction` of `last_apex_m` (false without an apex).
+    #[inline]
+    pub fn spin_up(
+        &self,
+        toe_height_m: f32,
+        body_velocity_mps: f32,
+        last_apex_m: Option<f32>,
+    ) -> bool {
+        match last_apex_m {
+            Some(apex) => {
+                body_velocity_mps < 0.0 && toe_height_m < self.cfg.spin_up_fraction * apex
+            }
+            None => false,
+        }
+    }
+
+    /// Stance command, A, `stance_time_s` after touchdown with the nut moving
+    /// at `nut_velocity_mps` (down positive). `braked` latches when braking
+    /// has stopped the nut (reset it at touchdown).
+    #[inline]
+    pub fn stance_current_a(
+        &self,
+        level: f32,
+        stance_time_s: f32,
+        nut_velocity_mps: f32,
+        braked: &mut bool,
+    ) -> f32 {
+        if stance_time_s < self.switch_s {
+            return self.push_current_a(level);
+        }
+        if !*braked && nut_velocity_mps > 0.0 {
+            return -self.cfg.brake_fraction * self.limit_a;
+        }
+        *braked = true;
+        0.0
+    }
+
+    /// The push (spin-up and early stance), A.
+    #[inline]
+    pub fn push_current_a(&self, level: f32) -> f32 {
+        // `level` is kept in [0, 1] by `next_level`; clamp anyway (NaN -> 0).
+        let l = if level >= 0.0 { level.min(1.0) } else { 0.0 };
+        l * self.limit_a
+    }
+
+    /// Braking-curve back-drive to the upper stop, A (see the module docs).
+    /// Non-finite inputs give 0 A.
+    #[inline]
+    pub fn backdrive_current_a(&self, nut_position_m: f32, nut_velocity_mps: f32) -> f32 {
+        let p = nut_position_m;
+        let spring_n = self.preload_n + self.spring_n_per_m * p;
+        let v_ref = if p > 0.0 {
+            let brake_n = (self.max_force_n - spring_n).max(0.0);
+            let v = libm::sqrtf(self.two_margin_per_alpha * brake_n * p);
+            -v.max(self.cfg.creep_speed_mps)
+        } else {
+            0.0
+        };
+        let i = self.a_per_n * (self.tracking_n_s_per_m * (v_ref - nut_velocity_mps) + spring_n);
+        if i.is_finite() {
+            i.clamp(-self.limit_a, self.limit_a)
+        } else {
+            0.0
+        }
+    }
+
+    /// The outer loop after an apex whose energy `measured_j` fell short of
+    /// `desired_j` (J): the new integral `b` and the level `u` to use, both
+    /// in `[0, 1]`. A non-finite error leaves both unchanged.
+    pub fn next_level(
+        &self,
+        integral: f32,
+        level: f32,
+        desired_j: f32,
+        measured_j: f32,
+    ) -> (f32, f32) {
+        let e = desired_j - measured_j;
+        let b = integral + self.cfg.level_gain_per_j * e;
+        let u = b + self.cfg.level_proportional_per_j * e;
+        if b.is_finite() && u.is_finite() {
+            let b = b.clamp(0.0, 1.0);
+            (
+                b,
+                (b + self.cfg.level_proportional_per_j * e).clamp(0.0, 1.0),
+            )
+        } else {
+            (integral, level)
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn prepared() -> Prepared {
+        let model = ModelParams::default();
+        Prepared::new(&Config::default(), &Actuator::from_model(&model), &model)
+            .unwrap_or_else(|| panic!("default shaped law"))
+    }
+
+    #[test]
+    fn stance_timing_comes_from_the_model() {
+        let p = prepared();
+        // pi sqrt(9.25 / 11000) = 0.0911 s; 0.66 of it.
+        assert!((p.switch_s - 0.0601).abs() < 2e-4, "{}", p.switch_s);
+        let mut braked = false;
+        assert_eq!(p.stance_current_a(1.0, 0.03, 0.2, &mut braked), p.limit_a);
+        assert_eq!(
+            p.stance_current_a(0.5, 0.03, 0.2, &mut braked),
+            0.5 * p.limit_a
+        );
+        assert_eq!(p.stance_current_a(1.0, 0.07, 0.2, &mut braked), -p.limit_a);
+        assert!(!braked);
+        // Once the nut stops, braking ends for the rest of the stance.
+        assert_eq!(p.stance_current_a(1.0, 0.08, -0.01, &mut braked), 0.0);
+        assert!(braked);
+        assert_eq!(p.stance_current_a(1.0, 0.09, 0.2, &mut braked), 0.0);
+    }
+
+    #[test]
+    fn backdrive_brakes_on_the_curve_and_rests_at_the_stop() {
+        let p = prepared();
+        // At rest on the stop: the spring feed-forward only (no tracking error).
+        let hold = p.backdrive_current_a(0.0, 0.0);
+        assert!((hold - p.a_per_n * p.preload_n).abs() < 1e-4, "{hold}");
+        // 10 mm out, moving up faster than the curve allows: brake (push down).
+        assert!(p.backdrive_current_a(0.01, -0.5) > 0.0);
+        // 10 mm out, at rest: pull up, saturated.
+        assert_eq!(p.backdrive_current_a(0.01, 0.0), -p.limit_a);
+        // Moving down after liftoff: full reverse current.
+        assert_eq!(p.backdrive_current_a(0.02, 0.2), -p.limit_a);
+        assert_eq!(p.backdrive_current_a(f32::NAN, 0.0), 0.0);
+        let i = p.backdrive_current_a(0.01, f32::INFINITY);
+        assert!(i.is_finite() && i.abs() <= p.limit_a);
+    }
+
+    #[test]
+    fn outer_loop_integrates_the_apex_energy_error_within_bounds() {
+        let p = prepared();
+        // 2 J short: integral +0.2, level = integral + 0.4.
+        let (b, u) = p.next_level(0.5, 0.5, 10.0, 8.0);
+        assert!((b - 0.7).abs() < 1e-6 && (u - 1.0).abs() < 1e-6, "{b} {u}");
+        let (b, u) = p.next_level(0.5, 0.5, 10.0, 9.5);
+        assert!(
+            (b - 0.55).abs() < 1e-6 && (u - 0.65).abs() < 1e-6,
+            "{b} {u}"
+        );
+        assert_eq!(p.next_level(0.99, 0.99, 100.0, 0.0), (1.0, 1.0));
+        assert_eq!(p.next_level(0.01, 0.01, 0.0, 100.0), (0.0, 0.0));
+        assert_eq!(p.next_level(0.3, 0.4, f32::NAN, 1.0), (0.3, 0.4));
+    }
+
+    #[test]
+    fn invalid_configs_are_refused() {
+        let model = ModelParams::default();
+        let act = Actuator::from_model(&model);
+        for c in [
+            Config {
+                spin_up_fraction: 1.5,
+                ..Config::default()
+            },
+            Config {
+                braking_margin: 0.0,
+                ..Config::default()
+            },
+            Config {
+                tracking_time_s: f32::NAN,
+                ..Config::default()
+            },
+            Config {
+                level_gain_per_j: -1.0,
+                ..Config::default()
+            },
+        ] {
+            assert!(Prepared::new(&c, &act, &model).is_none(), "{c:?}");
+        }
+    }
+}
