@@ -56,6 +56,12 @@ pub fn firmware_config(
     start_apex_m: f64,
 ) -> HopperConfig {
     let mut cfg = HopperConfig::for_model(model_params(believed));
+    // The supervisor's spring check compares two sensors (load cell against
+    // potentiometer and encoder) through the spring rate and preload: on a
+    // robot those are calibrated on the bench, not taken from the control
+    // model, so a wrong control model (`--model-params`) must not trip it.
+    cfg.supervisor.spring_rate_n_per_m = plant.spring_stiffness_n_per_m as f32;
+    cfg.supervisor.spring_preload_m = plant.spring_preload_m as f32;
     cfg.strategy = strategy;
     cfg.target_apex_m = target_apex_m as f32;
     cfg.calibration.height_at_origin_m = (plant.leg_length_m + start_apex_m) as f32;

@@ -339,8 +339,18 @@ impl Hopper {
     pub fn new(cfg: HopperConfig) -> Result<Self, ConfigError> {
         cfg.model.validate().map_err(ConfigError::Model)?;
         let converter = Converter::new(cfg.calibration).map_err(ConfigError::Calibration)?;
+        // The estimator's contact evidence (load-cell force in excess of
+        // `k (delta0 + p)`) is a cross-check of two sensors through the spring,
+        // like the supervisor's: it uses the spring as calibrated (the
+        // supervisor's rate and preload), not the control model, which may be
+        // wrong by design (model-error studies) without hiding a liftoff.
+        let sensed = ModelParams {
+            spring_stiffness_n_per_m: cfg.supervisor.spring_rate_n_per_m,
+            preload_m: cfg.supervisor.spring_preload_m,
+            ..cfg.model
+        };
         let estimator =
-            PhaseEstimator::new(cfg.estimator, &cfg.model).map_err(ConfigError::Estimator)?;
+            PhaseEstimator::new(cfg.estimator, &sensed).map_err(ConfigError::Estimator)?;
         if let Strategy::EnergyApex(a) = &cfg.strategy {
             if !(a.gain > 0.0
                 && a.gain < 10.0

@@ -79,6 +79,12 @@ struct BaseArgs {
     /// [default: design].
     #[arg(long)]
     params: Option<String>,
+    /// What the controller believes, separately from the plant (`--params`):
+    /// a preset or a TOML file [default: the plant's parameters]. Try model
+    /// error, e.g. a file with `base = "design"` and
+    /// `spring_stiffness_n_per_m = 13200`.
+    #[arg(long, value_name = "PRESET|PATH.toml")]
+    model_params: Option<String>,
     /// Controller: passive, step-open, step-closed, open-torque, energy,
     /// energy-apex (apex-regulating energy law), velocity, modified-torque.
     /// Each is the firmware's control crate on the simulated sensors
@@ -132,6 +138,14 @@ impl BaseArgs {
         Ok(Overrides {
             plant: match &self.params {
                 Some(p) => Some(params_toml::load(p).map_err(anyhow::Error::msg)?),
+                None => None,
+            },
+            model: match &self.model_params {
+                Some(p) => Some(
+                    params_toml::load(p)
+                        .map_err(|e| anyhow::anyhow!("--model-params: {e}"))?
+                        .0,
+                ),
                 None => None,
             },
             controller: self.controller.clone(),

@@ -92,7 +92,7 @@ impl Default for Config {
     fn default() -> Self {
         Self {
             spin_up_fraction: 0.6,
-            switch_fraction: 0.66,
+            switch_fraction: 0.6,
             brake_fraction: 1.0,
             initial_level: 1.0,
             level_gain_per_j: 0.1,
