@@ -61,7 +61,8 @@ pub struct Config {
     pub spin_up_fraction: f32,
     /// The push ends and braking starts this far into stance, as a fraction
     /// of the model's stance time `pi sqrt((M + m_s) / k)`, in `[0, 2]`.
-    /// Default 0.66.
+    /// Default 0.6 (tuned in simulation: 0.66 converges sooner with an exact
+    /// model but fails with the model's `k` 20 % low).
     pub switch_fraction: f32,
     /// Braking current after the switch, fraction of the current limit, in
     /// `[0, 1]`. Default 1.0.
@@ -289,15 +290,15 @@ mod tests {
     #[test]
     fn stance_timing_comes_from_the_model() {
         let p = prepared();
-        // pi sqrt(9.25 / 11000) = 0.0911 s; 0.66 of it.
-        assert!((p.switch_s - 0.0601).abs() < 2e-4, "{}", p.switch_s);
+        // pi sqrt(9.25 / 11000) = 0.0911 s; 0.6 of it.
+        assert!((p.switch_s - 0.05466).abs() < 2e-4, "{}", p.switch_s);
         let mut braked = false;
         assert_eq!(p.stance_current_a(1.0, 0.03, 0.2, &mut braked), p.limit_a);
         assert_eq!(
             p.stance_current_a(0.5, 0.03, 0.2, &mut braked),
             0.5 * p.limit_a
         );
-        assert_eq!(p.stance_current_a(1.0, 0.07, 0.2, &mut braked), -p.limit_a);
+        assert_eq!(p.stance_current_a(1.0, 0.06, 0.2, &mut braked), -p.limit_a);
         assert!(!braked);
         // Once the nut stops, braking ends for the rest of the stance.
         assert_eq!(p.stance_current_a(1.0, 0.08, -0.01, &mut braked), 0.0);
