@@ -196,8 +196,90 @@ pub struct Summary {
     /// of the thesis's ball-screw lead study (Figures 3.1-3.3), J. Null if
     /// the run has no complete stance.
     pub first_stance_motor_work_j: Option<f64>,
+    /// Where the energy went, hop by hop (plant ledger between consecutive
+    /// apexes; `hopper-sim run --ledger` prints it as a table).
+    pub hop_ledger: Vec<HopEnergy>,
+    /// Means over the last (up to) 5 entries of `hop_ledger`: the steady
+    /// hop's energy flows; null without a completed hop.
+    pub steady_hop: Option<HopEnergy>,
 }
 
+/// One hop's energy flows, from the previous apex (or the release) to this
+/// apex, J, from the plant's ledger. Read at the end of the control period
+/// in which the apex fell (within 0.1 ms of it).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct HopEnergy {
+    /// Time of the apex that ends the hop, s.
+    pub apex_time_s: f64,
+    /// Its toe height, m.
+    pub apex_m: f64,
+    /// Net mechanical work of the motor on the nut.
+    pub motor_work_j: f64,
+    /// Dry friction and spring damping.
+    pub friction_j: f64,
+    /// Unsprung mass stopped at touchdown.
+    pub touchdown_loss_j: f64,
+    /// Unsprung mass picked up at liftoff.
+    pub liftoff_loss_j: f64,
+    /// Nut impacts on the stops.
+    pub stop_impact_loss_j: f64,
+    /// Rotor and nut kinetic energy at the apex, `0.5 alpha pd^2`.
+    pub actuator_kinetic_j: f64,
+    /// Spring energy the nut holds at the apex beyond the preload,
+    /// `0.5 k ((delta0 + p)^2 - delta0^2)`.
+    pub actuator_spring_j: f64,
+}
+
+impl HopEnergy {
+    fn mean(hops: &[HopEnergy]) -> Option<HopEnergy> {
+        let n = hops.len() as f64;
+        let last = hops.last()?;
+        let sum = |f: fn(&HopEnergy) -> f64| hops.iter().map(f).sum::<f64>() / n;
+        Some(HopEnergy {
+            apex_time_s: last.apex_time_s,
+            apex_m: sum(|h| h.apex_m),
+            motor_work_j: sum(|h| h.motor_work_j),
+            friction_j: sum(|h| h.friction_j),
+            touchdown_loss_j: sum(|h| h.touchdown_loss_j),
+            liftoff_loss_j: sum(|h| h.liftoff_loss_j),
+            stop_impact_loss_j: sum(|h| h.stop_impact_loss_j),
+            actuator_kinetic_j: sum(|h| h.actuator_kinetic_j),
+            actuator_spring_j: sum(|h| h.actuator_spring_j),
+        })
+    }
+}
+
+/// Per-hop bookkeeping of the plant ledger.
+struct HopTracker {
+    last: Ledger,
+    hops: Vec<HopEnergy>,
+}
+
+impl HopTracker {
+    /// Called after a period in which an apex fell.
+    fn apex(&mut self, plant: &Plant, t_s: f64, apex_m: f64) {
+        let l = *plant.ledger();
+        let p = plant.params();
+        let s = plant.state();
+        let r = p.screw_m_per_rad();
+        let alpha = p.rotor_inertia_kg_m2 / (r * r) + p.nut_mass_kg;
+        let k = p.spring_stiffness_n_per_m;
+        let d0 = p.spring_preload_m;
+        let d = |f: fn(&Ledger) -> f64| f(&l) - f(&self.last);
+        self.hops.push(HopEnergy {
+            apex_time_s: t_s,
+            apex_m,
+            motor_work_j: d(|l| l.motor_work_j),
+            friction_j: d(|l| l.friction_j + l.damping_j),
+            touchdown_loss_j: d(|l| l.touchdown_loss_j),
+            liftoff_loss_j: d(|l| l.liftoff_loss_j),
+            stop_impact_loss_j: d(|l| l.stop_impact_loss_j),
+            actuator_kinetic_j: 0.5 * alpha * s.pd_mps * s.pd_mps,
+            actuator_spring_j: 0.5 * k * ((d0 + s.p_m).powi(2) - d0 * d0),
+        });
+        self.last = l;
+    }
+}
 /// Everything a run produced.
 #[derive(Clone, Debug)]
 pub struct RunResult {
@@ -249,6 +331,10 @@ pub fn run_with_progress(
     // Motor work at the first touchdown, then over the first stance.
     let mut first_touchdown_work_j: Option<f64> = None;
     let mut first_stance_work_j: Option<f64> = None;
+    let mut tracker = HopTracker {
+        last: Ledger::default(),
+        hops: Vec::new(),
+    };
     for k in 1..=steps {
         if k % report_every == 0 {
             progress(k, steps);
@@ -273,6 +359,13 @@ pub fn run_with_progress(
                         first_stance_work_j.get_or_insert(work_at(t_s) - w_td);
                     }
                     _ => {}
+                }
+            }
+        }
+        if events.len() > n_events {
+            for e in &events[n_events..] {
+                if let Event::Apex { t_s, toe_height_m } = *e {
+                    tracker.apex(&plant, t_s, toe_height_m);
                 }
             }
         }
@@ -313,6 +406,8 @@ pub fn run_with_progress(
                 estimated_events: controller.estimator_events(),
                 firmware_hops: controller.hop_ledgers(),
                 first_stance_motor_work_j: first_stance_work_j,
+                steady_hop: HopEnergy::mean(&tracker.hops[tracker.hops.len().saturating_sub(5)..]),
+                hop_ledger: tracker.hops,
                 ..summary
             }
         },
@@ -387,6 +482,8 @@ fn summarize(
         estimated_events: None,
         firmware_hops: Vec::new(),
         first_stance_motor_work_j: None,
+        hop_ledger: Vec::new(),
+        steady_hop: None,
     }
 }
 

@@ -203,6 +203,11 @@ struct RunArgs {
     /// Print exactly one JSON object (the summary) on stdout.
     #[arg(long)]
     json: bool,
+    /// Print the per-hop energy ledger (motor work, friction, touchdown,
+    /// liftoff and stop-impact losses, actuator energy left at the apex) as
+    /// a table. The JSON summary always has it (`hop_ledger`, `steady_hop`).
+    #[arg(long)]
+    ledger: bool,
 }
 
 #[derive(Parser)]
@@ -451,6 +456,50 @@ fn cmd_run(a: RunArgs) -> Result<()> {
         s.peak_current_a,
         s.peak_stroke_m * 1000.0
     );
+    if let Some(h) = &s.steady_hop {
+        println!(
+            "  steady hop [J]     motor work {:.2}, friction {:.2}, touchdown {:.2}, liftoff {:.2}, stop impacts {:.2}; at apex rotor {:.2}, spring {:.2} (mean of the last {} hops)",
+            h.motor_work_j,
+            h.friction_j,
+            h.touchdown_loss_j,
+            h.liftoff_loss_j,
+            h.stop_impact_loss_j,
+            h.actuator_kinetic_j,
+            h.actuator_spring_j,
+            s.hop_ledger.len().min(5)
+        );
+    }
+    if a.ledger {
+        println!("  per-hop energy ledger, J (previous apex to this apex; rotor and spring: actuator energy left at this apex)");
+        println!(
+            "  {:>4} {:>8} {:>8} {:>8} {:>8} {:>9} {:>8} {:>8} {:>8} {:>8}",
+            "hop",
+            "time s",
+            "apex m",
+            "motor",
+            "friction",
+            "touchdown",
+            "liftoff",
+            "stops",
+            "rotor",
+            "spring"
+        );
+        for (i, h) in s.hop_ledger.iter().enumerate() {
+            println!(
+                "  {:>4} {:>8.3} {:>8.4} {:>8.3} {:>8.3} {:>9.3} {:>8.3} {:>8.3} {:>8.3} {:>8.3}",
+                i + 1,
+                h.apex_time_s,
+                h.apex_m,
+                h.motor_work_j,
+                h.friction_j,
+                h.touchdown_loss_j,
+                h.liftoff_loss_j,
+                h.stop_impact_loss_j,
+                h.actuator_kinetic_j,
+                h.actuator_spring_j
+            );
+        }
+    }
     for p in &written {
         println!("  wrote {}", p.display());
     }
