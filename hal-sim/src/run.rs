@@ -213,6 +213,9 @@ pub struct HopEnergy {
     pub apex_time_s: f64,
     /// Its toe height, m.
     pub apex_m: f64,
+    /// The plant's total energy there (eqs 2.43-2.45), J: the hop changed it
+    /// by `motor_work_j` minus the losses.
+    pub total_energy_j: f64,
     /// Net mechanical work of the motor on the nut.
     pub motor_work_j: f64,
     /// Dry friction and spring damping.
@@ -238,6 +241,7 @@ impl HopEnergy {
         Some(HopEnergy {
             apex_time_s: last.apex_time_s,
             apex_m: sum(|h| h.apex_m),
+            total_energy_j: sum(|h| h.total_energy_j),
             motor_work_j: sum(|h| h.motor_work_j),
             friction_j: sum(|h| h.friction_j),
             touchdown_loss_j: sum(|h| h.touchdown_loss_j),
@@ -269,6 +273,7 @@ impl HopTracker {
         self.hops.push(HopEnergy {
             apex_time_s: t_s,
             apex_m,
+            total_energy_j: plant.energy_j(),
             motor_work_j: d(|l| l.motor_work_j),
             friction_j: d(|l| l.friction_j + l.damping_j),
             touchdown_loss_j: d(|l| l.touchdown_loss_j),

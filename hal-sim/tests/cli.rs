@@ -223,3 +223,68 @@ fn bad_inject_spec_is_one_clear_error_and_writes_nothing() {
         "at or after the end of the run",
     );
 }
+
+#[test]
+fn shaped_with_model_params_and_ledger() {
+    let dir = tempfile::tempdir().unwrap();
+    let model = dir.path().join("model.toml");
+    std::fs::write(
+        &model,
+        "base = \"design\"\nspring_stiffness_n_per_m = 13200\n",
+    )
+    .unwrap();
+    let m = model.to_str().unwrap();
+    let common = [
+        "run",
+        "--params",
+        "design",
+        "--model-params",
+        m,
+        "--controller",
+        "shaped",
+        "--target-apex",
+        "0.15",
+        "--start-apex",
+        "0.05",
+        "--duration",
+        "1.5",
+    ];
+    let v = json(&sim(&[&common[..], &["--json"]].concat()));
+    assert_eq!(v["controller"], "shaped");
+    let hops = v["hop_ledger"].as_array().unwrap();
+    assert!(hops.len() >= 3, "{v}");
+    for key in [
+        "apex_time_s",
+        "apex_m",
+        "total_energy_j",
+        "motor_work_j",
+        "friction_j",
+        "touchdown_loss_j",
+        "liftoff_loss_j",
+        "stop_impact_loss_j",
+        "actuator_kinetic_j",
+        "actuator_spring_j",
+    ] {
+        assert!(hops[0].get(key).is_some(), "hop_ledger lacks {key}");
+        assert!(v["steady_hop"].get(key).is_some(), "steady_hop lacks {key}");
+    }
+    // The text report with --ledger: one row per hop under a header.
+    let o = sim(&[&common[..], &["--ledger"]].concat());
+    assert!(o.status.success());
+    let text = String::from_utf8(o.stdout).unwrap();
+    assert!(text.contains("per-hop energy ledger"), "{text}");
+    let rows = text
+        .lines()
+        .filter(|l| {
+            l.split_whitespace().count() == 10 && l.trim_start().starts_with(char::is_numeric)
+        })
+        .count();
+    assert_eq!(rows, hops.len(), "{text}");
+
+    // A bad model file: one clear error naming the flag and the field.
+    std::fs::write(&model, "base = \"design\"\nspring_stiffness_n_per_m = -5\n").unwrap();
+    let out = dir.path().join("out");
+    assert_clean_failure(&common, &out, "spring_stiffness_n_per_m");
+    let o = sim(&[&common[..], &["--json"]].concat());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("--model-params"));
+}

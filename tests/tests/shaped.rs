@@ -1,0 +1,138 @@
+//! The `shaped` controller (issue 7) in the closed loop: the firmware's
+//! control crate on the mock HAL (quantisation, default noise, amplifier
+//! lag) against the plant. Convergence to the thesis's 0.15 m (70 J) apex,
+//! no stop impacts, robustness to a 20 % error between the controller's
+//! model and the plant, and the per-hop energy ledger's bookkeeping.
+
+// Test helpers may panic on impossible setup errors: that is a failed test.
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
+use hal_sim::controller::ControllerSpec;
+use hal_sim::run::{run, RunConfig, Summary};
+use hal_sim::Params;
+
+const TARGET_M: f64 = 0.15;
+
+fn sim(name: &str, plant: Params, model: Option<Params>, start: f64, secs: f64) -> Summary {
+    let mut cfg = RunConfig::new(plant);
+    cfg.start_apex_m = start;
+    cfg.duration_s = secs;
+    cfg.sample_dt_s = 0.0;
+    let spec = ControllerSpec {
+        target_apex_m: TARGET_M,
+        model,
+        ..ControllerSpec::new(name)
+    };
+    let mut c = spec.build(&plant, start, cfg.control_dt_s).unwrap();
+    run(&cfg, "test", &mut c).unwrap().summary
+}
+
+/// The last `n` apexes all within 2 % of the target.
+fn holds_target(s: &Summary, n: usize) -> bool {
+    let a = &s.apex_heights_m;
+    a.len() >= n
+        && a[a.len() - n..]
+            .iter()
+            .all(|h| (h - TARGET_M).abs() <= 0.02 * TARGET_M)
+}
+
+#[test]
+fn shaped_reaches_and_holds_the_thesis_target_without_stop_impacts() {
+    let s = sim("shaped", Params::design(), None, 0.05, 15.0);
+    assert!(holds_target(&s, 10), "{:?}", s.apex_heights_m);
+    let htc = s.hops_to_converge.unwrap();
+    assert!(htc <= 25, "converged at hop {htc}");
+    assert!(s.faults.is_empty(), "{:?}", s.faults);
+    // Within the actuator's limits: current limit, stroke.
+    let p = Params::design();
+    assert!(s.max_current_a <= p.current_limit_a + 1e-9);
+    assert!(s.max_stroke_m < p.stroke_m - 0.01, "{}", s.max_stroke_m);
+    // The braking-curve back-drive lands the nut at creep speed: under
+    // 0.1 J of stop impacts per hop, against several J for the thesis laws
+    // (below).
+    let steady = s.steady_hop.unwrap();
+    assert!(steady.stop_impact_loss_j < 0.1, "{steady:?}");
+}
+
+#[test]
+fn thesis_laws_lose_their_energy_in_stop_impacts() {
+    // Same start and target: the thesis's modified torque (full torque,
+    // eq 4.13 flight PD) throws several J per hop into the upper stop.
+    let s = sim("modified-torque", Params::design(), None, 0.05, 4.0);
+    let h = s.steady_hop.unwrap();
+    assert!(h.stop_impact_loss_j > 5.0, "{h:?}");
+    assert!(h.stop_impact_loss_j > 0.5 * h.motor_work_j, "{h:?}");
+}
+
+#[test]
+fn shaped_is_robust_to_twenty_percent_model_error() {
+    let d = Params::design();
+    let scaled = |f: fn(&mut Params, f64), x: f64| {
+        let mut p = d;
+        f(&mut p, x);
+        p
+    };
+    // (plant, controller's model): the model's k and M off by 20 % either
+    // way, and the plant's friction off by 20 % from the model's.
+    let cases = [
+        (
+            "k model -20%",
+            d,
+            scaled(|p, x| p.spring_stiffness_n_per_m *= x, 0.8),
+        ),
+        (
+            "k model +20%",
+            d,
+            scaled(|p, x| p.spring_stiffness_n_per_m *= x, 1.2),
+        ),
+        ("M model -20%", d, scaled(|p, x| p.body_mass_kg *= x, 0.8)),
+        ("M model +20%", d, scaled(|p, x| p.body_mass_kg *= x, 1.2)),
+        (
+            "friction plant -20%",
+            scaled(
+                |p, x| {
+                    p.planarizer_friction_n *= x;
+                    p.leg_friction_n *= x;
+                },
+                0.8,
+            ),
+            d,
+        ),
+        (
+            "friction plant +20%",
+            scaled(
+                |p, x| {
+                    p.planarizer_friction_n *= x;
+                    p.leg_friction_n *= x;
+                },
+                1.2,
+            ),
+            d,
+        ),
+    ];
+    for (name, plant, model) in cases {
+        let s = sim("shaped", plant, Some(model), 0.05, 15.0);
+        assert!(holds_target(&s, 5), "{name}: {:?}", s.apex_heights_m);
+        assert!(s.faults.is_empty(), "{name}: {:?}", s.faults);
+        let h = s.steady_hop.unwrap();
+        assert!(h.stop_impact_loss_j < 0.1, "{name}: {h:?}");
+    }
+}
+
+#[test]
+fn hop_ledger_balances_the_plant_energy_hop_by_hop() {
+    for name in ["shaped", "modified-torque", "open-torque"] {
+        let s = sim(name, Params::design(), None, 0.05, 3.0);
+        assert!(s.hop_ledger.len() >= 5, "{name}");
+        for w in s.hop_ledger.windows(2) {
+            let (a, b) = (&w[0], &w[1]);
+            let losses =
+                b.friction_j + b.touchdown_loss_j + b.liftoff_loss_j + b.stop_impact_loss_j;
+            let balance = b.total_energy_j - a.total_energy_j - (b.motor_work_j - losses);
+            assert!(balance.abs() < 1e-3, "{name}: {balance} J at {b:?}");
+            assert!(b.apex_time_s > a.apex_time_s);
+        }
+        // Every apex the summary lists has its ledger entry.
+        assert_eq!(s.hop_ledger.len(), s.apex_heights_m.len(), "{name}");
+    }
+}
