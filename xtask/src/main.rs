@@ -9,11 +9,13 @@
 //! * `cargo xtask size`: build the board firmware with defmt and check its size
 //!   budget; the last line is `size: flash=N ram=M capture=C` (bytes).
 //! * `cargo xtask qemu`: build the QEMU variant (`--features qemu-sim`), run
-//!   the closed-loop scenario in `qemu-system-arm` (installing it with apt-get
-//!   if missing), decode its defmt log, check it against the host simulation
-//!   of the same scenario (the golden check) and the instruction budget; the
-//!   last line is `qemu: steady_apex_m=... hops_to_converge=...
-//!   step_instr_min=... step_instr_mean=... step_instr_max=... missed=...`.
+//!   the closed-loop scenarios in `qemu-system-arm` (installing it with
+//!   apt-get if missing), decode their defmt logs, check each against the
+//!   host simulation of the same scenario (the golden check) and the
+//!   instruction budget. The `shaped` scenario prints `qemu-shaped: ...`;
+//!   the last line is `qemu: steady_apex_m=... hops_to_converge=...
+//!   step_instr_min=... step_instr_mean=... step_instr_max=... missed=...`
+//!   (the energy-apex scenario).
 
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};

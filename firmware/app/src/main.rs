@@ -282,6 +282,7 @@ mod app {
     use hal_sim::{Event, Params, Plant};
     use hopper_control::hal::HopperIo;
     use hopper_control::hopper::{ApexLoop, Hopper, StepPart, Strategy};
+    use hopper_control::laws::shaped;
     use stm32f4::stm32f405::TIM5;
 
     /// QEMU clocks SysTick (and counts guest time) at the netduinoplus2's
@@ -290,17 +291,46 @@ mod app {
     const SYSTICK_HZ: u32 = 168_000_000;
     const _: () = assert!(SYSTICK_HZ.is_multiple_of(CONTROL_HZ));
 
-    /// The scripted scenario: the apex-regulating energy law, design
-    /// parameters, dropped from 0.10 m, 0.05 m target, default sensor noise
-    /// with seed 1; `hopper-sim run --params design --controller energy-apex
-    /// --start-apex 0.10 --target-apex 0.05 --duration 12` on the host is the
-    /// same run.
-    pub const START_APEX_M: f64 = 0.10;
+    /// Whether the build asked for the `shaped` scenario
+    /// (`HOPPER_QEMU_SCENARIO=shaped`; anything else: `energy-apex`).
+    const SHAPED: bool = is_shaped(option_env!("HOPPER_QEMU_SCENARIO"));
+
+    const fn is_shaped(s: Option<&str>) -> bool {
+        let Some(s) = s else {
+            return false;
+        };
+        let (a, b) = (s.as_bytes(), b"shaped");
+        if a.len() != b.len() {
+            return false;
+        }
+        let mut i = 0;
+        while i < a.len() {
+            if a[i] != b[i] {
+                return false;
+            }
+            i += 1;
+        }
+        true
+    }
+
+    /// The scripted scenario, default sensor noise with seed 1, design
+    /// parameters. `energy-apex` (default): the apex-regulating energy law
+    /// dropped from 0.10 m, 0.05 m target, 12 s, i.e. `hopper-sim run --params
+    /// design --controller energy-apex --start-apex 0.10 --target-apex 0.05
+    /// --duration 12` on the host. `shaped`: the shaped-torque law from
+    /// 0.05 m to the thesis's 0.15 m, 15 s (`--controller shaped --start-apex
+    /// 0.05 --target-apex 0.15 --duration 15`).
+    pub const START_APEX_M: f64 = if SHAPED { 0.05 } else { 0.10 };
     /// Apex target, m.
-    pub const TARGET_APEX_M: f64 = 0.05;
-    /// Simulated time, s (12; `HOPPER_QEMU_SECONDS` at build time overrides
-    /// it for quick profiling runs).
-    pub const DURATION_S: u32 = crate::control::parse_u32(option_env!("HOPPER_QEMU_SECONDS"), 12);
+    pub const TARGET_APEX_M: f64 = if SHAPED { 0.15 } else { 0.05 };
+    /// Scenario name, as printed.
+    const SCENARIO: &str = if SHAPED { "shaped" } else { "energy-apex" };
+    /// Simulated time, s (12 or 15; `HOPPER_QEMU_SECONDS` at build time
+    /// overrides it for quick profiling runs).
+    pub const DURATION_S: u32 = crate::control::parse_u32(
+        option_env!("HOPPER_QEMU_SECONDS"),
+        if SHAPED { 15 } else { 12 },
+    );
     /// Apexes kept for the summary.
     const MAX_APEXES: usize = 128;
     /// Periods the run goes on after a fault latched (showing the command
@@ -368,7 +398,11 @@ mod app {
         let cfg = firmware_config(
             &params,
             &params,
-            Strategy::EnergyApex(ApexLoop::default()),
+            if SHAPED {
+                Strategy::Shaped(shaped::Config::default())
+            } else {
+                Strategy::EnergyApex(ApexLoop::default())
+            },
             TARGET_APEX_M,
             START_APEX_M,
         );
@@ -386,7 +420,8 @@ mod app {
         core.SYST.enable_interrupt();
         core.SYST.enable_counter();
         defmt::println!(
-            "hopper-fw: QEMU build, energy-apex scenario, {=u32} Hz, {=u32} s",
+            "hopper-fw: QEMU build, {=str} scenario, {=u32} Hz, {=u32} s",
+            SCENARIO,
             CONTROL_HZ,
             DURATION_S
         );
