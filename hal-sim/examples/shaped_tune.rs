@@ -2,7 +2,7 @@
 //! simulated sensors, default noise) with the law's constants from the
 //! command line, printing the apex sequence and the summary.
 //!
-//! `cargo run --release -p hal-sim --example shaped_tune -- PLANT KI KP SPIN SWITCH BRAKE TARGET START SECONDS`
+//! `cargo run --release -p hal-sim --example shaped_tune -- PLANT KI KP SPIN SWITCH BRAKE TARGET START SECONDS MARGIN TRACK_S CURRENT_LIMIT_A`
 //! with PLANT 0 (design) or 1 (identified); omitted values take the defaults.
 use hal_sim::controller::ControllerSpec;
 use hal_sim::mock::SensorConfig;
@@ -19,12 +19,18 @@ fn main() -> Result<(), String> {
     } else {
         Params::design()
     };
+    let mut plant = plant;
+    if let Some(i) = a.get(11).and_then(|s| s.parse::<f64>().ok()) {
+        plant.current_limit_a = i;
+    }
     let mut c = shaped::Config::default();
     c.level_gain_per_j = get(1, c.level_gain_per_j as f64) as f32;
     c.level_proportional_per_j = get(2, c.level_proportional_per_j as f64) as f32;
     c.spin_up_fraction = get(3, c.spin_up_fraction as f64) as f32;
     c.switch_fraction = get(4, c.switch_fraction as f64) as f32;
     c.brake_fraction = get(5, c.brake_fraction as f64) as f32;
+    c.braking_margin = get(9, c.braking_margin as f64) as f32;
+    c.tracking_time_s = get(10, c.tracking_time_s as f64) as f32;
     let target = get(6, 0.15);
     let start = get(7, 0.05);
     let dur = get(8, 15.0);
