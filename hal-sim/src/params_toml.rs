@@ -173,6 +173,12 @@ pub fn params_from_table(
 
 /// Resolve `--params`: a preset name or a path to a TOML file.
 pub fn load(spec: &str) -> Result<(Params, String), ParamsFileError> {
+    load_as(spec, "--params")
+}
+
+/// [`load`] for the command-line flag `flag` (named in the error for an
+/// unknown preset; file errors name the file).
+pub fn load_as(spec: &str, flag: &str) -> Result<(Params, String), ParamsFileError> {
     if let Some(p) = Params::preset(spec) {
         return Ok((p, spec.to_string()));
     }
@@ -180,7 +186,7 @@ pub fn load(spec: &str) -> Result<(Params, String), ParamsFileError> {
     let looks_like_file = spec.ends_with(".toml") || spec.contains('/') || path.exists();
     if !looks_like_file {
         return Err(ParamsFileError {
-            location: "--params".into(),
+            location: flag.into(),
             message: format!(
                 "unknown preset `{spec}`: expected one of {:?} or a path to a .toml file",
                 Params::PRESET_NAMES

@@ -142,8 +142,11 @@ impl BaseArgs {
             },
             model: match &self.model_params {
                 Some(p) => Some(
-                    params_toml::load(p)
-                        .map_err(|e| anyhow::anyhow!("--model-params: {e}"))?
+                    params_toml::load_as(p, "--model-params")
+                        .map_err(|e| match e.location.as_str() {
+                            "--model-params" => anyhow::anyhow!("{e}"),
+                            _ => anyhow::anyhow!("--model-params {e}"),
+                        })?
                         .0,
                 ),
                 None => None,
