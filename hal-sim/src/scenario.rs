@@ -43,7 +43,7 @@ use crate::params_toml::{self, ParamsFileError};
 use crate::run::RunConfig;
 use hopper_control::estimator::EstimatorConfig;
 use hopper_control::hopper::{ApexLoop, Strategy};
-use hopper_control::laws::{energy_torque, flight_pd, StanceLaw};
+use hopper_control::laws::{energy_torque, flight_pd, shaped, StanceLaw};
 use hopper_control::pd_design::PdGains;
 use std::collections::HashMap;
 use std::path::Path;
@@ -168,6 +168,9 @@ pub struct Settings {
     pub flight_kd_a_s_per_rad: Option<f64>,
     /// Sensor noise and amplifier lag.
     pub sensors: SensorConfig,
+    /// The `shaped` law's constants when a sweep changes them (None: the
+    /// law's defaults).
+    pub shaped: Option<shaped::Config>,
     /// Start toe height, m.
     pub start_apex_m: f64,
     /// Simulated time, s.
@@ -204,6 +207,7 @@ impl Settings {
                 pot_sigma_m: o.pot_sigma_m.unwrap_or(d.pot_sigma_m),
                 ..d
             },
+            shaped: None,
             start_apex_m: o.start_apex_m.unwrap_or(DEFAULT_START_APEX_M),
             duration_s: o.duration_s.unwrap_or(DEFAULT_DURATION_S),
             control_hz: o.control_hz.unwrap_or(DEFAULT_CONTROL_HZ),
@@ -232,6 +236,20 @@ impl Settings {
             injections: self.inject.clone(),
             ..ControllerSpec::new(&self.controller)
         };
+        if let Some(c) = self.shaped {
+            if self.controller != "shaped" {
+                return Err(format!(
+                    "the shaped law's constants apply to the shaped controller only, not `{}`",
+                    self.controller
+                ));
+            }
+            if !c.is_valid() {
+                return Err(format!(
+                    "shaped law constants out of range: {c:?} (see hopper_control::laws::shaped::Config)"
+                ));
+            }
+            spec.strategy_override = Some(Strategy::Shaped(c));
+        }
         if let Some(ke) = self.energy_gain_nm_per_j {
             check_range(
                 "energy_gain_nm_per_j",
@@ -262,6 +280,12 @@ impl Settings {
             });
         }
         if self.flight_kp_a_per_rad.is_some() || self.flight_kd_a_s_per_rad.is_some() {
+            if self.controller == "shaped" {
+                return Err(
+                    "the flight PD gains (--flight-kp, --flight-kd) do not apply to the shaped controller: it has its own braking-curve back-drive"
+                        .into(),
+                );
+            }
             let d = flight_pd::Config::default();
             let kp = self.flight_kp_a_per_rad.unwrap_or(f64::from(d.gains.kp));
             let kd = self.flight_kd_a_s_per_rad.unwrap_or(f64::from(d.gains.kd));

@@ -11,6 +11,7 @@
 use crate::params::{field, FieldSpec, FIELDS};
 use crate::run::{self, Summary};
 use crate::scenario::Settings;
+use hopper_control::laws::shaped;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 use rayon::prelude::*;
@@ -49,10 +50,30 @@ pub enum Knob {
     /// Sensor-noise seed (rounded to a whole number): a sweep over seeds
     /// repeats one scenario under different noise.
     Seed,
+    /// A constant of the `shaped` law.
+    Shaped(ShapedField),
+}
+
+/// The `shaped` law's tunable constants (see
+/// `hopper_control::laws::shaped::Config`).
+#[derive(Clone, Copy)]
+pub enum ShapedField {
+    /// Spin-up start, fraction of the last apex.
+    SpinUp,
+    /// Push-to-brake switch, fraction of the model's stance time.
+    Switch,
+    /// Braking current, fraction of the limit.
+    Brake,
+    /// Outer-loop integral gain, 1/J.
+    LevelKi,
+    /// Outer-loop proportional gain, 1/J.
+    LevelKp,
+    /// Braking-curve margin.
+    BrakingMargin,
 }
 
 /// Controller settings a sweep accepts: (short name, column name, knob).
-const SETTING_KNOBS: [(&str, &str, Knob); 7] = [
+const SETTING_KNOBS: [(&str, &str, Knob); 13] = [
     ("torque", "torque_nm", Knob::Torque),
     ("target_apex", "target_apex_m", Knob::TargetApex),
     ("start_apex", "start_apex_m", Knob::StartApex),
@@ -60,6 +81,36 @@ const SETTING_KNOBS: [(&str, &str, Knob); 7] = [
     ("flight_kp", "flight_kp_a_per_rad", Knob::FlightKp),
     ("flight_kd", "flight_kd_a_s_per_rad", Knob::FlightKd),
     ("seed", "noise_seed", Knob::Seed),
+    (
+        "spin_up",
+        "shaped_spin_up_fraction",
+        Knob::Shaped(ShapedField::SpinUp),
+    ),
+    (
+        "switch",
+        "shaped_switch_fraction",
+        Knob::Shaped(ShapedField::Switch),
+    ),
+    (
+        "brake",
+        "shaped_brake_fraction",
+        Knob::Shaped(ShapedField::Brake),
+    ),
+    (
+        "level_ki",
+        "shaped_level_gain_per_j",
+        Knob::Shaped(ShapedField::LevelKi),
+    ),
+    (
+        "level_kp",
+        "shaped_level_proportional_per_j",
+        Knob::Shaped(ShapedField::LevelKp),
+    ),
+    (
+        "braking_margin",
+        "shaped_braking_margin",
+        Knob::Shaped(ShapedField::BrakingMargin),
+    ),
 ];
 
 impl Knob {
@@ -80,7 +131,7 @@ impl Knob {
             Knob::Plant(f) => f.name,
             other => SETTING_KNOBS
                 .iter()
-                .find(|(_, _, k)| std::mem::discriminant(k) == std::mem::discriminant(other))
+                .find(|(_, _, k)| k.same(other))
                 .map_or("?", |(_, column, _)| column),
         }
     }
@@ -98,17 +149,44 @@ impl Knob {
             // Axis values are finite (checked when parsed); negative seeds
             // saturate to 0.
             Knob::Seed => s.sensors.seed = v.round().max(0.0) as u64,
+            Knob::Shaped(f) => {
+                let c = s.shaped.get_or_insert_with(shaped::Config::default);
+                let v = v as f32;
+                match f {
+                    ShapedField::SpinUp => c.spin_up_fraction = v,
+                    ShapedField::Switch => c.switch_fraction = v,
+                    ShapedField::Brake => c.brake_fraction = v,
+                    ShapedField::LevelKi => c.level_gain_per_j = v,
+                    ShapedField::LevelKp => c.level_proportional_per_j = v,
+                    ShapedField::BrakingMargin => c.braking_margin = v,
+                }
+            }
+        }
+    }
+
+    /// Whether two knobs change the same setting.
+    fn same(&self, other: &Knob) -> bool {
+        match (self, other) {
+            (Knob::Shaped(a), Knob::Shaped(b)) => {
+                std::mem::discriminant(a) == std::mem::discriminant(b)
+            }
+            (Knob::Plant(a), Knob::Plant(b)) => a.name == b.name,
+            (a, b) => std::mem::discriminant(a) == std::mem::discriminant(b),
         }
     }
 
     /// Why sweeping this knob would change nothing for `controller`, if so.
     fn unused_by(&self, controller: &str) -> Option<&'static str> {
         match self {
+            Knob::Shaped(_) if controller != "shaped" => Some("the shaped controller"),
             Knob::Torque if !matches!(controller, "open-torque" | "modified-torque") => {
                 Some("open-torque and modified-torque")
             }
             Knob::EnergyGain if !matches!(controller, "energy" | "energy-apex") => {
                 Some("energy and energy-apex")
+            }
+            Knob::FlightKp | Knob::FlightKd if controller == "shaped" => {
+                Some("the controllers with the flight PD (every one but passive and shaped)")
             }
             Knob::FlightKp | Knob::FlightKd | Knob::TargetApex if controller == "passive" => {
                 Some("every controller but passive")

@@ -373,3 +373,58 @@ fn seed_sweep_repeats_a_run_under_different_noise() {
         "changes nothing with sensor noise off",
     );
 }
+
+#[test]
+fn shaped_law_constants_are_sweepable_and_refused_elsewhere() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("sh");
+    let o = sim(&[
+        "sweep",
+        "--controller",
+        "shaped",
+        "--noise",
+        "off",
+        "--start-apex",
+        "0.05",
+        "--target-apex",
+        "0.15",
+        "--duration",
+        "1.5",
+        "--param",
+        "switch=0.5:0.6:2",
+        "--param",
+        "level_ki=0.05:0.1:2",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let csv = std::fs::read_to_string(out.join("sweep.csv")).unwrap();
+    let header: Vec<&str> = csv.lines().next().unwrap().split(',').collect();
+    assert_eq!(
+        &header[..2],
+        &["shaped_switch_fraction", "shaped_level_gain_per_j"]
+    );
+    let work = header.iter().position(|c| *c == "motor_work_j").unwrap();
+    let rows: Vec<Vec<&str>> = csv
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').collect())
+        .collect();
+    assert_eq!(rows.len(), 4);
+    // The switch time changes what the motor does.
+    assert_ne!(rows[0][work], rows[2][work], "{csv}");
+    let other = dir.path().join("other");
+    assert_clean_failure(
+        &[
+            "sweep",
+            "--controller",
+            "energy",
+            "--param",
+            "switch=0.5:0.6:2",
+            "--out",
+            other.to_str().unwrap(),
+        ],
+        &other,
+        "used by the shaped controller only",
+    );
+}

@@ -220,7 +220,9 @@ struct SweepArgs {
     /// A swept parameter, NAME=START:END:N (N values from START to END);
     /// repeat for a second one. NAME: a plant parameter (e.g. screw_lead_m)
     /// or torque, target_apex, start_apex, ke, flight_kp, flight_kd, seed
-    /// (the noise seed: the same run under different noise).
+    /// (the noise seed: the same run under different noise), and for the
+    /// shaped controller spin_up, switch, brake, level_ki, level_kp,
+    /// braking_margin.
     #[arg(long = "param")]
     param: Vec<String>,
     /// A named sweep instead of --scenario: lead-study (thesis Figures
