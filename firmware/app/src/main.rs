@@ -318,18 +318,18 @@ mod app {
     /// dropped from 0.10 m, 0.05 m target, 12 s, i.e. `hopper-sim run --params
     /// design --controller energy-apex --start-apex 0.10 --target-apex 0.05
     /// --duration 12` on the host. `shaped`: the shaped-torque law from
-    /// 0.05 m to the thesis's 0.15 m, 15 s (`--controller shaped --start-apex
-    /// 0.05 --target-apex 0.15 --duration 15`).
+    /// 0.05 m to the thesis's 0.15 m, 10 s (`--controller shaped --start-apex
+    /// 0.05 --target-apex 0.15 --duration 10`).
     pub const START_APEX_M: f64 = if SHAPED { 0.05 } else { 0.10 };
     /// Apex target, m.
     pub const TARGET_APEX_M: f64 = if SHAPED { 0.15 } else { 0.05 };
     /// Scenario name, as printed.
     const SCENARIO: &str = if SHAPED { "shaped" } else { "energy-apex" };
-    /// Simulated time, s (12 or 15; `HOPPER_QEMU_SECONDS` at build time
+    /// Simulated time, s (12 or 10; `HOPPER_QEMU_SECONDS` at build time
     /// overrides it for quick profiling runs).
     pub const DURATION_S: u32 = crate::control::parse_u32(
         option_env!("HOPPER_QEMU_SECONDS"),
-        if SHAPED { 15 } else { 12 },
+        if SHAPED { 10 } else { 12 },
     );
     /// Apexes kept for the summary.
     const MAX_APEXES: usize = 128;
