@@ -197,10 +197,12 @@ pub struct Summary {
     /// the run has no complete stance.
     pub first_stance_motor_work_j: Option<f64>,
     /// Where the energy went, hop by hop (plant ledger between consecutive
-    /// apexes; `hopper-sim run --ledger` prints it as a table).
+    /// apexes, the first entry from the release; `hopper-sim run --ledger`
+    /// prints it as a table).
     pub hop_ledger: Vec<HopEnergy>,
-    /// Means over the last (up to) 5 entries of `hop_ledger`: the steady
-    /// hop's energy flows; null without a completed hop.
+    /// Means over the last 5 entries of `hop_ledger`, whether or not the
+    /// apex is steady; null with fewer than 5 full hops (the entry from the
+    /// release does not count).
     pub steady_hop: Option<HopEnergy>,
 }
 
@@ -226,6 +228,8 @@ pub struct HopEnergy {
     pub liftoff_loss_j: f64,
     /// Nut impacts on the stops.
     pub stop_impact_loss_j: f64,
+    /// Kinetic energy dropped when a crawl-speed liftoff became standing.
+    pub settle_loss_j: f64,
     /// Rotor and nut kinetic energy at the apex, `0.5 alpha pd^2`.
     pub actuator_kinetic_j: f64,
     /// Spring energy the nut holds at the apex beyond the preload,
@@ -247,6 +251,7 @@ impl HopEnergy {
             touchdown_loss_j: sum(|h| h.touchdown_loss_j),
             liftoff_loss_j: sum(|h| h.liftoff_loss_j),
             stop_impact_loss_j: sum(|h| h.stop_impact_loss_j),
+            settle_loss_j: sum(|h| h.settle_loss_j),
             actuator_kinetic_j: sum(|h| h.actuator_kinetic_j),
             actuator_spring_j: sum(|h| h.actuator_spring_j),
         })
@@ -279,6 +284,7 @@ impl HopTracker {
             touchdown_loss_j: d(|l| l.touchdown_loss_j),
             liftoff_loss_j: d(|l| l.liftoff_loss_j),
             stop_impact_loss_j: d(|l| l.stop_impact_loss_j),
+            settle_loss_j: d(|l| l.settle_loss_j),
             actuator_kinetic_j: 0.5 * alpha * s.pd_mps * s.pd_mps,
             actuator_spring_j: 0.5 * k * ((d0 + s.p_m).powi(2) - d0 * d0),
         });
@@ -411,7 +417,10 @@ pub fn run_with_progress(
                 estimated_events: controller.estimator_events(),
                 firmware_hops: controller.hop_ledgers(),
                 first_stance_motor_work_j: first_stance_work_j,
-                steady_hop: HopEnergy::mean(&tracker.hops[tracker.hops.len().saturating_sub(5)..]),
+                steady_hop: match tracker.hops.len() {
+                    n if n >= 6 => HopEnergy::mean(&tracker.hops[n - 5..]),
+                    _ => None,
+                },
                 hop_ledger: tracker.hops,
                 ..summary
             }

@@ -247,7 +247,7 @@ fn shaped_with_model_params_and_ledger() {
         "--start-apex",
         "0.05",
         "--duration",
-        "1.5",
+        "2.5",
     ];
     let v = json(&sim(&[&common[..], &["--json"]].concat()));
     assert_eq!(v["controller"], "shaped");
@@ -262,6 +262,7 @@ fn shaped_with_model_params_and_ledger() {
         "touchdown_loss_j",
         "liftoff_loss_j",
         "stop_impact_loss_j",
+        "settle_loss_j",
         "actuator_kinetic_j",
         "actuator_spring_j",
     ] {

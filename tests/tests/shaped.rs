@@ -124,14 +124,23 @@ fn hop_ledger_balances_the_plant_energy_hop_by_hop() {
     for name in ["shaped", "modified-torque", "open-torque"] {
         let s = sim(name, Params::design(), None, 0.05, 3.0);
         assert!(s.hop_ledger.len() >= 5, "{name}");
-        for w in s.hop_ledger.windows(2) {
-            let (a, b) = (&w[0], &w[1]);
-            let losses =
-                b.friction_j + b.touchdown_loss_j + b.liftoff_loss_j + b.stop_impact_loss_j;
-            let balance = b.total_energy_j - a.total_energy_j - (b.motor_work_j - losses);
+        // From the release (the plant's initial energy) to every apex.
+        let mut energy_before_j = s.initial_energy_j;
+        let mut t_before_s = 0.0;
+        for b in &s.hop_ledger {
+            let losses = b.friction_j
+                + b.touchdown_loss_j
+                + b.liftoff_loss_j
+                + b.stop_impact_loss_j
+                + b.settle_loss_j;
+            let balance = b.total_energy_j - energy_before_j - (b.motor_work_j - losses);
             assert!(balance.abs() < 1e-3, "{name}: {balance} J at {b:?}");
-            assert!(b.apex_time_s > a.apex_time_s);
+            assert!(b.apex_time_s > t_before_s);
+            (energy_before_j, t_before_s) = (b.total_energy_j, b.apex_time_s);
         }
+        // The hops add up to the run's ledger up to the last apex.
+        let stops: f64 = s.hop_ledger.iter().map(|h| h.stop_impact_loss_j).sum();
+        assert!(stops <= s.ledger.stop_impact_loss_j + 1e-9, "{name}");
         // Every apex the summary lists has its ledger entry.
         assert_eq!(s.hop_ledger.len(), s.apex_heights_m.len(), "{name}");
     }

@@ -94,6 +94,12 @@ pub fn run(root: &Path) -> Result<(), String> {
     let mut failed = Vec::new();
     for s in &SCENARIOS {
         if let Err(e) = run_scenario(root, s) {
+            // A failure before the summary (build, QEMU, decoding, the host
+            // run) printed no summary line: print one, so the last line is
+            // still the `qemu:` line whatever happened.
+            if !e.starts_with(&format!("qemu {} scenario failed", s.name)) {
+                println!("{}: error (see above)", s.label);
+            }
             failed.push(e);
         }
     }

@@ -679,6 +679,11 @@ impl Hopper {
             return;
         };
         if let Some(p) = &self.shaped {
+            // With the motor off (a fault latched) the hop decays whatever
+            // the level: integrating that error would only wind up.
+            if self.supervisor.is_faulted() {
+                return;
+            }
             (self.shaped_integral, self.shaped_level) = p.next_level(
                 self.shaped_integral,
                 self.shaped_level,

@@ -86,7 +86,8 @@ struct BaseArgs {
     #[arg(long, value_name = "PRESET|PATH.toml")]
     model_params: Option<String>,
     /// Controller: passive, step-open, step-closed, open-torque, energy,
-    /// energy-apex (apex-regulating energy law), velocity, modified-torque.
+    /// energy-apex (apex-regulating energy law), velocity, modified-torque,
+    /// shaped (docs/beat-the-thesis.md).
     /// Each is the firmware's control crate on the simulated sensors
     /// [default: passive].
     #[arg(long)]

@@ -37,8 +37,10 @@
 //! deceleration of a nut moving up (towards the stop at `p = 0`) is
 //! `a(p) = (eta k_m i_max / r - k (delta0 + p)) / alpha`; the nut can stop in
 //! the distance `p` from speed `sqrt(2 a p)`. The law tracks
-//! `v_ref = -max(sqrt(2 margin a p), v_creep)` (`v_ref = 0` at or above the
-//! stop) with a model-based acceleration command:
+//! `v_ref = -min(max(sqrt(2 margin a p), v_creep), p / t_track)` (`v_ref = 0`
+//! at or above the stop; the last term makes it continuous there, so the nut
+//! settles onto the stop instead of chattering between creep and rest) with
+//! a model-based acceleration command:
 //!
 //! ```text
 //! i = r / (eta k_m) (alpha (v_ref - pd) / t_track + k (delta0 + p))
@@ -136,6 +138,8 @@ pub struct Prepared {
     a_per_n: f32,
     /// `alpha / t_track`, N s/m.
     tracking_n_s_per_m: f32,
+    /// `1 / t_track`, 1/s.
+    per_tracking_s: f32,
     /// Spring `k`, N/m, and preload force `k delta0`, N.
     spring_n_per_m: f32,
     preload_n: f32,
@@ -164,6 +168,7 @@ impl Prepared {
             switch_s: cfg.switch_fraction * stance_s,
             a_per_n: r / torque_per_a,
             tracking_n_s_per_m: alpha / cfg.tracking_time_s,
+            per_tracking_s: 1.0 / cfg.tracking_time_s,
             spring_n_per_m: k,
             preload_n: k * model.preload_m,
             two_margin_per_alpha: 2.0 * cfg.braking_margin / alpha,
@@ -229,7 +234,13 @@ impl Prepared {
     #[inline]
     pub fn push_current_a(&self, level: f32) -> f32 {
         // `level` is kept in [0, 1] by `next_level`; clamp anyway (NaN -> 0).
-        let l = if level >= 0.0 { level.min(1.0) } else { 0.0 };
+        let l = if level >= 1.0 {
+            1.0
+        } else if level >= 0.0 {
+            level
+        } else {
+            0.0
+        };
         l * self.limit_a
     }
 
@@ -239,12 +250,24 @@ impl Prepared {
     pub fn backdrive_current_a(&self, nut_position_m: f32, nut_velocity_mps: f32) -> f32 {
         let p = nut_position_m;
         let spring_n = self.preload_n + self.spring_n_per_m * p;
-        let v_ref = if p > 0.0 {
-            let brake_n = (self.max_force_n - spring_n).max(0.0);
-            let v = sqrt_approx(self.two_margin_per_alpha * brake_n * p);
-            -v.max(self.cfg.creep_speed_mps)
-        } else {
+        // Within the creep zone (the nut resting on or near the stop, most of
+        // the flight) the linear term is the smaller one: skip the root.
+        let linear_mps = p * self.per_tracking_s;
+        let v_ref = if p <= 0.0 {
             0.0
+        } else if linear_mps <= self.cfg.creep_speed_mps {
+            -linear_mps
+        } else {
+            // Plain comparisons: `f32::max`/`min` (NaN-aware) become library
+            // calls on the M4F. `sqrt_approx` gives 0 for a negative force.
+            let brake_n = self.max_force_n - spring_n;
+            let v = sqrt_approx(self.two_margin_per_alpha * brake_n * p);
+            let v = if v > self.cfg.creep_speed_mps {
+                v
+            } else {
+                self.cfg.creep_speed_mps
+            };
+            -(if v < linear_mps { v } else { linear_mps })
         };
         let i = self.a_per_n * (self.tracking_n_s_per_m * (v_ref - nut_velocity_mps) + spring_n);
         if i.is_finite() {
