@@ -464,7 +464,7 @@ fn cmd_run(a: RunArgs) -> Result<()> {
     );
     if let Some(h) = &s.steady_hop {
         println!(
-            "  steady hop [J]     motor work {:.2}, friction {:.2}, touchdown {:.2}, liftoff {:.2}, stop impacts {:.2}; at apex rotor {:.2}, spring {:.2} (mean of the last {} hops)",
+            "  steady hop [J]     motor work {:.2}, friction {:.2}, touchdown {:.2}, liftoff {:.2}, stop impacts {:.2}; at apex rotor {:.2}, spring {:.2} (mean of the last 5 hops)",
             h.motor_work_j,
             h.friction_j,
             h.touchdown_loss_j,
@@ -472,7 +472,6 @@ fn cmd_run(a: RunArgs) -> Result<()> {
             h.stop_impact_loss_j,
             h.actuator_kinetic_j,
             h.actuator_spring_j,
-            s.hop_ledger.len().min(5)
         );
     }
     if a.ledger {
