@@ -41,7 +41,20 @@ pub fn flight_active(
     if check_finite(&[c.apex_fraction, toe_height_m, body_velocity_mps, apex]).is_err() {
         return false;
     }
-    apex > 0.0 && body_velocity_mps < 0.0 && toe_height_m < c.apex_fraction * apex
+    descent_window(c.apex_fraction, toe_height_m, body_velocity_mps, apex)
+}
+
+/// The pre-touchdown window both this law and [`super::shaped`] use:
+/// descending, with the toe (m) below `fraction` of a positive last apex
+/// `apex_m`. False for any NaN input (every comparison fails).
+#[inline]
+pub fn descent_window(
+    fraction: f32,
+    toe_height_m: f32,
+    body_velocity_mps: f32,
+    apex_m: f32,
+) -> bool {
+    apex_m > 0.0 && body_velocity_mps < 0.0 && toe_height_m < fraction * apex_m
 }
 
 /// Current command while active (stance, or flight when

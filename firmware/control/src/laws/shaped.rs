@@ -201,12 +201,14 @@ impl Prepared {
         body_velocity_mps: f32,
         last_apex_m: Option<f32>,
     ) -> bool {
-        match last_apex_m {
-            Some(apex) => {
-                body_velocity_mps < 0.0 && toe_height_m < self.cfg.spin_up_fraction * apex
-            }
-            None => false,
-        }
+        last_apex_m.is_some_and(|apex| {
+            super::modified_torque::descent_window(
+                self.cfg.spin_up_fraction,
+                toe_height_m,
+                body_velocity_mps,
+                apex,
+            )
+        })
     }
 
     /// Stance command, A, `stance_time_s` after touchdown with the nut moving
