@@ -135,11 +135,12 @@ impl Params {
     pub fn validate(&self) -> Result<(), ParamError> {
         for f in FIELDS.iter() {
             let v = (f.get)(self);
-            if !v.is_finite() || v < f.min || v > f.max {
+            if !f.allows(v) {
                 return Err(ParamError {
                     field: f.name,
                     value: v,
                     min: f.min,
+                    min_exclusive: f.min_exclusive,
                     max: f.max,
                     unit: f.unit,
                 });
@@ -163,8 +164,10 @@ pub struct ParamError {
     pub field: &'static str,
     /// The offending value.
     pub value: f64,
-    /// Smallest allowed value.
+    /// Smallest allowed value (or bound from below, see `min_exclusive`).
     pub min: f64,
+    /// `min` itself is refused (the value must be above it).
+    pub min_exclusive: bool,
     /// Largest allowed value.
     pub max: f64,
     /// Unit of the field.
@@ -175,9 +178,40 @@ impl fmt::Display for ParamError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         write!(
             f,
-            "parameter `{}` = {} is out of range: allowed {} ..= {} {}",
-            self.field, self.value, self.min, self.max, self.unit
+            "parameter `{}` = {} is out of range: allowed {}",
+            self.field,
+            self.value,
+            Range {
+                min: self.min,
+                min_exclusive: self.min_exclusive,
+                max: self.max,
+                unit: self.unit
+            }
         )
+    }
+}
+
+/// An allowed range as the messages print it: `0.1 ..= 1000 kg`, or
+/// `> 0 and <= 100 kg` when the lower bound itself is refused.
+pub struct Range {
+    min: f64,
+    min_exclusive: bool,
+    max: f64,
+    unit: &'static str,
+}
+
+impl fmt::Display for Range {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        if self.min_exclusive {
+            write!(f, "> {} and <= {}", self.min, self.max)?;
+        } else {
+            write!(f, "{} ..= {}", self.min, self.max)?;
+        }
+        if self.unit.is_empty() {
+            Ok(())
+        } else {
+            write!(f, " {}", self.unit)
+        }
     }
 }
 
@@ -190,8 +224,11 @@ pub struct FieldSpec {
     pub unit: &'static str,
     /// What it is, and where it comes from.
     pub doc: &'static str,
-    /// Smallest allowed value (inclusive).
+    /// Smallest allowed value (inclusive unless `min_exclusive`).
     pub min: f64,
+    /// `min` itself is refused: the value must be above it (masses, which
+    /// may be small but not zero: a massless part is not a machine).
+    pub min_exclusive: bool,
     /// Largest allowed value (inclusive).
     pub max: f64,
     /// Read the field.
@@ -200,13 +237,50 @@ pub struct FieldSpec {
     pub set: fn(&mut Params, f64),
 }
 
+impl FieldSpec {
+    /// Whether `v` is finite and in the allowed range.
+    pub fn allows(&self, v: f64) -> bool {
+        let above_min = if self.min_exclusive {
+            v > self.min
+        } else {
+            v >= self.min
+        };
+        v.is_finite() && above_min && v <= self.max
+    }
+
+    /// The allowed range with its unit, for messages.
+    pub fn range(&self) -> Range {
+        Range {
+            min: self.min,
+            min_exclusive: self.min_exclusive,
+            max: self.max,
+            unit: self.unit,
+        }
+    }
+
+    /// The allowed range without the unit (printed beside it already).
+    pub fn bounds(&self) -> Range {
+        Range {
+            unit: "",
+            ..self.range()
+        }
+    }
+}
+
 macro_rules! field {
+    ($name:ident, $unit:expr, $doc:expr, > $min:expr, $max:expr) => {
+        field!($name, $unit, $doc, $min, true, $max)
+    };
     ($name:ident, $unit:expr, $doc:expr, $min:expr, $max:expr) => {
+        field!($name, $unit, $doc, $min, false, $max)
+    };
+    ($name:ident, $unit:expr, $doc:expr, $min:expr, $excl:expr, $max:expr) => {
         FieldSpec {
             name: stringify!($name),
             unit: $unit,
             doc: $doc,
             min: $min,
+            min_exclusive: $excl,
             max: $max,
             get: |p| p.$name,
             set: |p, v| p.$name = v,
@@ -221,14 +295,14 @@ pub const FIELDS: [FieldSpec; 18] = [
         unsprung_mass_kg,
         "kg",
         "unsprung mass m_u (lower leg, toe)",
-        0.0,
+        > 0.0,
         100.0
     ),
     field!(
         nut_mass_kg,
         "kg",
         "sliding mass m_s (ball nut + share of spring)",
-        0.0,
+        > 0.0,
         100.0
     ),
     field!(

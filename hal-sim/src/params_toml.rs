@@ -40,11 +40,7 @@ pub fn to_toml(params: &Params, title: &str) -> String {
         "# Optionally start from a preset and override only some fields:\n# base = \"design\"   # or \"identified\""
     );
     for f in FIELDS.iter() {
-        let _ = writeln!(
-            out,
-            "\n# {} [{}], allowed {} ..= {}",
-            f.doc, f.unit, f.min, f.max
-        );
+        let _ = writeln!(out, "\n# {} [{}], allowed {}", f.doc, f.unit, f.bounds());
         let _ = writeln!(out, "{} = {:?}", f.name, (f.get)(params));
     }
     out
@@ -136,12 +132,12 @@ pub fn params_from_table(
                 ))
             }
         };
-        if !v.is_finite() || v < spec.min || v > spec.max {
+        if !spec.allows(v) {
             return Err(err(
                 line_for(key),
                 format!(
-                    "parameter `{section}{key}` = {v} is out of range: allowed {} ..= {} {}",
-                    spec.min, spec.max, spec.unit
+                    "parameter `{section}{key}` = {v} is out of range: allowed {}",
+                    spec.range()
                 ),
             ));
         }

@@ -84,6 +84,32 @@ fn zero_or_negative_mass() {
         ],
         &["body_mass_kg=-1", "body_mass_kg"],
     );
+    // Exactly zero is refused for the lower leg and the nut too: the range
+    // printed says so.
+    let p = c.file("u.toml", "base = \"design\"\nunsprung_mass_kg = 0\n");
+    c.fails(
+        &["run", "--params", &p],
+        &["u.toml:2", "unsprung_mass_kg", "= 0", "> 0"],
+    );
+    let s = c.file("m.toml", "[model]\nbase = \"design\"\nnut_mass_kg = 0.0\n");
+    c.fails(
+        &["run", "--scenario", &s],
+        &["m.toml:3", "model.nut_mass_kg", "> 0"],
+    );
+    c.fails(
+        &["run", "--model-params", &p],
+        &["u.toml:2", "unsprung_mass_kg", "> 0"],
+    );
+    c.fails(
+        &[
+            "sweep",
+            "--controller",
+            "energy",
+            "--param",
+            "nut_mass_kg=0:0.5:3",
+        ],
+        &["nut_mass_kg=0", "nut_mass_kg", "> 0"],
+    );
 }
 
 #[test]
