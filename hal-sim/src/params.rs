@@ -120,6 +120,13 @@ impl Params {
         self.screw_lead_m / (2.0 * core::f64::consts::PI)
     }
 
+    /// Inertia the nut coordinate sees, `alpha = J / r^2 + m_s` (MODEL.md
+    /// eqs 2.12-2.14: the rotor reflected through the screw plus the nut), kg.
+    pub fn reflected_inertia_kg(&self) -> f64 {
+        let r = self.screw_m_per_rad();
+        self.rotor_inertia_kg_m2 / (r * r) + self.nut_mass_kg
+    }
+
     /// Maximum motor torque the amplifier can produce at standstill, N m.
     pub fn max_torque_nm(&self) -> f64 {
         let stall_a = self.supply_voltage_v / self.winding_resistance_ohm;

@@ -359,7 +359,7 @@ impl InvMass {
 impl Coef {
     fn new(p: &Params) -> Self {
         let r = p.screw_m_per_rad();
-        let alpha = p.rotor_inertia_kg_m2 / (r * r) + p.nut_mass_kg;
+        let alpha = p.reflected_inertia_kg();
         let m_body_nut = p.body_mass_kg + p.nut_mass_kg;
         let m_total = p.body_mass_kg + p.nut_mass_kg + p.unsprung_mass_kg;
         let g = p.gravity_mps2;

@@ -270,8 +270,7 @@ impl HopTracker {
         let l = *plant.ledger();
         let p = plant.params();
         let s = plant.state();
-        let r = p.screw_m_per_rad();
-        let alpha = p.rotor_inertia_kg_m2 / (r * r) + p.nut_mass_kg;
+        let alpha = p.reflected_inertia_kg();
         let k = p.spring_stiffness_n_per_m;
         let d0 = p.spring_preload_m;
         let d = |f: fn(&Ledger) -> f64| f(&l) - f(&self.last);
