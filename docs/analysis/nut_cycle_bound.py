@@ -1,4 +1,4 @@
-"""Upper estimate of the energy one hop can gain through the leg spring.
+"""Estimate (not a bound) of the energy one hop can gain through the leg spring.
 
 The body gains `k * integral(x dp)` over a stance (`x` leg compression, `p`
 nut position): see docs/beat-the-thesis.md. This script finds the periodic
@@ -12,9 +12,11 @@ nut motion that maximises it for a hop of apex H, with
 * the flight `2 sqrt(2 H / g)` long, the nut inside its 50 mm stroke, and
   the motion periodic (same nut state at every touchdown).
 
-Design parameters (thesis Table 2.1). It ignores friction on the nut, the
-back-coupling of the nut on the body and the back-EMF limit, all of which
-only lower what is reachable. Usage (needs numpy and scipy):
+Design parameters (thesis Table 2.1). It ignores friction on the nut and the
+back-EMF limit, which only lower what is reachable, but also the upper
+stop's reaction (here the motor must hold the nut off the stop against the
+spring) and the nut's back-action on the body, so its optimum is an
+estimate, not a bound in either direction (docs/beat-the-thesis.md). Usage (needs numpy and scipy):
 
     python3 docs/analysis/nut_cycle_bound.py H [CURRENT_LIMIT_A]
 """
