@@ -41,7 +41,9 @@ fn shaped_reaches_and_holds_the_thesis_target_without_stop_impacts() {
     let s = sim("shaped", Params::design(), None, 0.05, 15.0);
     assert!(holds_target(&s, 10), "{:?}", s.apex_heights_m);
     let htc = s.hops_to_converge.unwrap();
-    assert!(htc <= 25, "converged at hop {htc}");
+    // 14 with the defaults (seeds 1-5); 19 before the outer loop's
+    // anti-windup and the first-descent spin-up.
+    assert!(htc <= 16, "converged at hop {htc}");
     assert!(s.faults.is_empty(), "{:?}", s.faults);
     // Within the actuator's limits: current limit, stroke.
     let p = Params::design();
@@ -113,6 +115,9 @@ fn shaped_is_robust_to_twenty_percent_model_error() {
     for (name, plant, model) in cases {
         let s = sim("shaped", plant, Some(model), 0.05, 15.0);
         assert!(holds_target(&s, 5), "{name}: {:?}", s.apex_heights_m);
+        // 11-26 hops (26: plant friction +20 %).
+        let htc = s.hops_to_converge.unwrap_or(usize::MAX);
+        assert!(htc <= 30, "{name}: converged at hop {htc}");
         assert!(s.faults.is_empty(), "{name}: {:?}", s.faults);
         let h = s.steady_hop.unwrap();
         assert!(h.stop_impact_loss_j < 0.1, "{name}: {h:?}");
@@ -144,4 +149,19 @@ fn hop_ledger_balances_the_plant_energy_hop_by_hop() {
         // Every apex the summary lists has its ledger entry.
         assert_eq!(s.hop_ledger.len(), s.apex_heights_m.len(), "{name}");
     }
+}
+
+#[test]
+fn shaped_leaves_the_nut_alone_once_hopping_dies() {
+    // The identified plant cannot keep hopping under any law here; once it
+    // stands on its extended leg (which the estimator reads as a flight of
+    // zero height) the spin-up must not pump the nut into its stops. It did
+    // before `spin_up_min_apex_m`: 13 J of stop impacts and the nut on the
+    // lower stop (50 mm) in 30 s.
+    let p = Params::identified();
+    let s = sim("shaped", p, None, 0.15, 30.0);
+    assert!(s.stopped_at_s.is_some(), "{:?}", s.apex_heights_m);
+    assert!(s.faults.is_empty(), "{:?}", s.faults);
+    assert!(s.ledger.stop_impact_loss_j < 1.0, "{:?}", s.ledger);
+    assert!(s.max_stroke_m < 0.03, "{}", s.max_stroke_m);
 }

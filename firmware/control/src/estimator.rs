@@ -220,6 +220,18 @@ impl PhaseEstimator {
         self.last_apex_m
     }
 
+    /// Toe height of the highest point of the present flight so far, m
+    /// (`None` in stance, before a sample, or with the toe never above the
+    /// ground). Once the body descends this is the flight's apex, also for
+    /// the first flight after a release from rest, which has no apex event.
+    #[inline]
+    pub fn flight_peak_toe_m(&self) -> Option<f32> {
+        // A plain comparison (-inf and NaN fail it): `f32::max` is a library
+        // call on the M4F, and this runs every flight period.
+        let toe_m = self.peak_height_m - self.leg_length_m;
+        (self.phase == Phase::Flight && toe_m > 0.0).then_some(toe_m)
+    }
+
     /// Samples ignored because an input or `dt_s` was non-finite/non-positive.
     pub fn rejected_samples(&self) -> u32 {
         self.rejected_samples
@@ -388,6 +400,42 @@ mod tests {
             }
         }
         out
+    }
+
+    #[test]
+    fn flight_peak_is_the_release_height_then_each_apex() -> Result<(), EstimatorError> {
+        let model = ModelParams::default();
+        let dt = 1e-3_f32;
+        let mut est = PhaseEstimator::new(EstimatorConfig::default(), &model)?;
+        assert_eq!(est.flight_peak_toe_m(), None);
+        // Released from rest 0.05 m up: no apex event on the way down, but
+        // the flight's peak is the release height from the first sample.
+        let traj = trajectory(&[0.05, 0.04], dt);
+        let mut seen_stance = false;
+        for &(z, p, comp) in &traj {
+            let input = PhaseInput {
+                body_height_m: z,
+                motor_angle_rad: p / model.screw_m_per_rad(),
+                spring_force_n: K * (D0 + comp + p),
+                leg_compression_m: comp,
+            };
+            let _ = est.update(&input, dt);
+            match est.phase() {
+                Phase::Stance => {
+                    seen_stance = true;
+                    assert_eq!(est.flight_peak_toe_m(), None);
+                }
+                Phase::Flight if !seen_stance => {
+                    let peak = est.flight_peak_toe_m().unwrap_or(0.0);
+                    assert!((peak - 0.05).abs() < 1e-4, "{peak}");
+                }
+                Phase::Flight => {}
+            }
+        }
+        // After the next apex, the peak is that apex.
+        let peak = est.flight_peak_toe_m().unwrap_or(0.0);
+        assert!(seen_stance && (peak - 0.04).abs() < 1e-3, "{peak}");
+        Ok(())
     }
 
     #[test]

@@ -387,7 +387,7 @@ impl Hopper {
             flight_fast: flight_pd::Prepared::new(&cfg.flight, &actuator),
             energy_fast: energy_law.and_then(|c| energy_torque::Prepared::new(&c, &actuator)),
             shaped_level: shaped.map_or(0.0, |p| p.config().initial_level),
-            shaped_integral: shaped.map_or(0.0, |p| p.config().initial_level),
+            shaped_integral: shaped.map_or(0.0, |p| p.config().integral_start),
             shaped,
             stance_time_s: 0.0,
             braked: false,
@@ -763,7 +763,10 @@ impl Hopper {
         if phase == Phase::Flight {
             let toe_m = m.body_height_m - self.cfg.model.leg_length_m;
             let v = self.estimator.velocities();
-            if p.spin_up(toe_m, v.body_mps, self.estimator.last_apex_m()) {
+            // The flight's own peak, not the last apex event: the same
+            // height once descending, and it also exists on the first
+            // descent after a release from rest.
+            if p.spin_up(toe_m, v.body_mps, self.estimator.flight_peak_toe_m()) {
                 return p.push_current_a(self.shaped_level);
             }
             return p.backdrive_current_a(m.nut_position_m, nut_velocity_mps);

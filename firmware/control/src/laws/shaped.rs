@@ -10,8 +10,8 @@
 //! liftoff, which the Table 2.1 flight PD (lightly damped against `alpha`)
 //! then throws into the upper stop. This law
 //!
-//! 1. spins the rotor up on the way down (from `spin_up_fraction` of the last
-//!    apex), where the spring force it works against is small, so the motor's
+//! 1. spins the rotor up on the way down (from `spin_up_fraction` of the
+//!    flight's apex, also on the first descent after a release), where the spring force it works against is small, so the motor's
 //!    work goes into rotor kinetic energy cheaply;
 //! 2. keeps pushing through the first part of stance, where that kinetic
 //!    energy and the motor's force compress the spring under the body;
@@ -28,8 +28,14 @@
 //! each apex `H_k`:
 //!
 //! ```text
-//! b <- clamp(b + K_i e_k, 0, 1),   u = clamp(b + K_p e_k, 0, 1)
+//! b <- clamp(b + K_i e_k, 0, 1)  (only while b + K_p e_k is in [0, 1])
+//! u  = clamp(b + K_p e_k, 0, 1)
 //! ```
+//!
+//! with `b` starting at the level expected to hold the target
+//! (`integral_start`): the climb runs at full level on the proportional
+//! term, which lets the level down as the apex nears the target, and the
+//! integral does not wind up meanwhile.
 //!
 //! # Braking-curve back-drive
 //! In flight the nut obeys `alpha pdd = eta k_m i / r - k (delta0 + p)`
@@ -63,6 +69,12 @@ pub struct Config {
     /// of the last apex height, in `[0, 1]`. Default 0.6 (tuned in
     /// simulation, design parameters; the thesis used 0.4).
     pub spin_up_fraction: f32,
+    /// No spin-up in a flight whose apex is below this toe height, m, in
+    /// `[0, 1]`. Default 0.005: a flight that low is too short for the
+    /// back-drive to bring the nut home, and a robot standing on its
+    /// extended leg reads as a flight of zero height (the spin-up would
+    /// pump the nut into its stops).
+    pub spin_up_min_apex_m: f32,
     /// The push ends and braking starts this far into stance, as a fraction
     /// of the model's stance time `pi sqrt((M + m_s) / k)`, in `[0, 2]`.
     /// Default 0.6 (tuned in simulation: 0.66 converges sooner with an exact
@@ -74,6 +86,13 @@ pub struct Config {
     /// Torque level before the first apex, fraction of the current limit, in
     /// `[0, 1]`. Default 1.0.
     pub initial_level: f32,
+    /// The outer loop's integral at start: the level expected to hold the
+    /// target, in `[0, 1]`. Default 0.8 (about what holds 0.15 m with the
+    /// design parameters). Starting it at the steady level rather than at
+    /// full lets the proportional term take the level down as the apex
+    /// nears the target, instead of climbing at full level into an
+    /// overshoot (17 instead of 19 hops to converge from 0.05 m).
+    pub integral_start: f32,
     /// Outer-loop integral gain `K_i`, 1/J (level change per J of apex
     /// energy error), in `[0, 10]`. Default 0.1 (tuned in simulation with
     /// `K_p`, design parameters, 0.15 m target).
@@ -97,9 +116,11 @@ impl Default for Config {
     fn default() -> Self {
         Self {
             spin_up_fraction: 0.6,
+            spin_up_min_apex_m: 0.005,
             switch_fraction: 0.6,
             brake_fraction: 1.0,
             initial_level: 1.0,
+            integral_start: 0.8,
             level_gain_per_j: 0.1,
             level_proportional_per_j: 0.2,
             braking_margin: 0.7,
@@ -114,9 +135,11 @@ impl Config {
     pub fn is_valid(&self) -> bool {
         let in_range = |v: f32, lo: f32, hi: f32| v.is_finite() && v >= lo && v <= hi;
         in_range(self.spin_up_fraction, 0.0, 1.0)
+            && in_range(self.spin_up_min_apex_m, 0.0, 1.0)
             && in_range(self.switch_fraction, 0.0, 2.0)
             && in_range(self.brake_fraction, 0.0, 1.0)
             && in_range(self.initial_level, 0.0, 1.0)
+            && in_range(self.integral_start, 0.0, 1.0)
             && in_range(self.level_gain_per_j, 0.0, 10.0)
             && in_range(self.level_proportional_per_j, 0.0, 10.0)
             && in_range(self.braking_margin, 1e-3, 1.0)
@@ -193,21 +216,18 @@ impl Prepared {
     }
 
     /// Whether the push runs in flight: descending with the toe below
-    /// `spin_up_fraction` of `last_apex_m` (false without an apex).
+    /// `spin_up_fraction` of `apex_m`, the present flight's peak (false
+    /// without one, or with one below `spin_up_min_apex_m`).
     #[inline]
-    pub fn spin_up(
-        &self,
-        toe_height_m: f32,
-        body_velocity_mps: f32,
-        last_apex_m: Option<f32>,
-    ) -> bool {
-        last_apex_m.is_some_and(|apex| {
-            super::modified_torque::descent_window(
-                self.cfg.spin_up_fraction,
-                toe_height_m,
-                body_velocity_mps,
-                apex,
-            )
+    pub fn spin_up(&self, toe_height_m: f32, body_velocity_mps: f32, apex_m: Option<f32>) -> bool {
+        apex_m.is_some_and(|apex| {
+            apex >= self.cfg.spin_up_min_apex_m
+                && super::modified_torque::descent_window(
+                    self.cfg.spin_up_fraction,
+                    toe_height_m,
+                    body_velocity_mps,
+                    apex,
+                )
         })
     }
 
@@ -290,17 +310,20 @@ impl Prepared {
         measured_j: f32,
     ) -> (f32, f32) {
         let e = desired_j - measured_j;
-        let b = integral + self.cfg.level_gain_per_j * e;
-        let u = b + self.cfg.level_proportional_per_j * e;
-        if b.is_finite() && u.is_finite() {
-            let b = b.clamp(0.0, 1.0);
-            (
-                b,
-                (b + self.cfg.level_proportional_per_j * e).clamp(0.0, 1.0),
-            )
-        } else {
-            (integral, level)
+        let kp = self.cfg.level_proportional_per_j;
+        let trial = integral + kp * e;
+        if !trial.is_finite() {
+            return (integral, level);
         }
+        // Conditional integration (anti-windup): the integral only moves
+        // while the level is not saturated, so a long climb at full level
+        // does not wind it up and overshoot the target.
+        let b = if (0.0..=1.0).contains(&trial) {
+            (integral + self.cfg.level_gain_per_j * e).clamp(0.0, 1.0)
+        } else {
+            integral
+        };
+        (b, (b + kp * e).clamp(0.0, 1.0))
     }
 }
 
@@ -350,6 +373,21 @@ mod tests {
     }
 
     #[test]
+    fn spin_up_only_descending_low_in_a_real_flight() {
+        let p = prepared();
+        // 0.10 m apex, descending through 0.05 m (below 0.6 of it): push.
+        assert!(p.spin_up(0.05, -1.0, Some(0.10)));
+        // Still rising, or above 0.6 of the apex, or no flight peak: no.
+        assert!(!p.spin_up(0.05, 1.0, Some(0.10)));
+        assert!(!p.spin_up(0.07, -1.0, Some(0.10)));
+        assert!(!p.spin_up(0.05, -1.0, None));
+        // A "flight" below 5 mm (a micro-hop, or standing on the extended
+        // leg): no spin-up however it moves.
+        assert!(!p.spin_up(0.001, -0.1, Some(0.004)));
+        assert!(!p.spin_up(f32::NAN, -1.0, Some(0.10)));
+    }
+
+    #[test]
     fn stance_timing_comes_from_the_model() {
         let p = prepared();
         // pi sqrt(9.25 / 11000) = 0.0911 s; 0.6 of it.
@@ -396,8 +434,10 @@ mod tests {
             (b - 0.55).abs() < 1e-6 && (u - 0.65).abs() < 1e-6,
             "{b} {u}"
         );
-        assert_eq!(p.next_level(0.99, 0.99, 100.0, 0.0), (1.0, 1.0));
-        assert_eq!(p.next_level(0.01, 0.01, 0.0, 100.0), (0.0, 0.0));
+        // Saturated either way: the level clamps, the integral holds (no
+        // wind-up).
+        assert_eq!(p.next_level(0.99, 0.99, 100.0, 0.0), (0.99, 1.0));
+        assert_eq!(p.next_level(0.01, 0.01, 0.0, 100.0), (0.01, 0.0));
         assert_eq!(p.next_level(0.3, 0.4, f32::NAN, 1.0), (0.3, 0.4));
     }
 
