@@ -33,7 +33,8 @@
 use hopper_control::hal::{HopperIo, IoError, RawSample};
 use hopper_control::hopper::{ApexLoop, Hopper, HopperConfig, Strategy};
 use hopper_control::laws::{
-    constant_torque, energy_torque, modified_torque, step_closed, step_open, velocity, StanceLaw,
+    constant_torque, energy_torque, modified_torque, shaped, step_closed, step_open, velocity,
+    StanceLaw,
 };
 use hopper_control::supervisor::Command;
 use hopper_control::watchdog::{Decision, FeedPolicy};
@@ -83,7 +84,7 @@ fn word(data: &[u8], i: usize) -> u16 {
 }
 
 fn strategy(b: u8) -> Strategy {
-    match b % 9 {
+    match b % 10 {
         0 => Strategy::Passive,
         1 => Strategy::Thesis(StanceLaw::StepOpen(step_open::Config::default())),
         2 => Strategy::Thesis(StanceLaw::StepClosed(step_closed::Config::default())),
@@ -92,6 +93,7 @@ fn strategy(b: u8) -> Strategy {
         5 => Strategy::Thesis(StanceLaw::Velocity(velocity::Config::default())),
         6 => Strategy::Thesis(StanceLaw::ModifiedTorque(modified_torque::Config::default())),
         7 => Strategy::EnergyApex(ApexLoop::default()),
+        8 => Strategy::Shaped(shaped::Config::default()),
         _ => Strategy::EnergyApex(ApexLoop {
             spin_up_fraction: 0.5,
             proportional: 0.3,

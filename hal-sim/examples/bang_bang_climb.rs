@@ -39,6 +39,7 @@ fn climb(p: &Params, start_m: f64, a: f64, b: f64, soft: bool, hops: usize) -> (
     let mut reverse_until = (b - 0.5) * flight(start_m);
     let mut apexes = Vec::new();
     let mut in_stance = false;
+    let mut events = Vec::new();
     while apexes.len() < hops && plant.time_s() < 20.0 {
         let t = plant.time_s();
         let s = plant.state();
@@ -66,11 +67,11 @@ fn climb(p: &Params, start_m: f64, a: f64, b: f64, soft: bool, hops: usize) -> (
                 cmd = i_max;
             }
         }
-        let mut events = Vec::new();
+        events.clear();
         if let Err(e) = plant.advance(DT_S, cmd, &mut |e| events.push(e)) {
             panic!("{e}");
         }
-        for e in events {
+        for &e in &events {
             match e {
                 Event::Touchdown { t_s, .. } => {
                     in_stance = true;

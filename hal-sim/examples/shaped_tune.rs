@@ -2,7 +2,7 @@
 //! simulated sensors, default noise) with the law's constants from the
 //! command line, printing the apex sequence and the summary.
 //!
-//! `cargo run --release -p hal-sim --example shaped_tune -- PLANT KI KP SPIN SWITCH BRAKE TARGET START SECONDS MARGIN TRACK_S CURRENT_LIMIT_A INITIAL_LEVEL`
+//! `cargo run --release -p hal-sim --example shaped_tune -- PLANT KI KP SPIN SWITCH BRAKE TARGET START SECONDS MARGIN TRACK_S CURRENT_LIMIT_A INITIAL_LEVEL INTEGRAL_START`
 //! with PLANT 0 (design) or 1 (identified); omitted values take the defaults.
 use hal_sim::controller::ControllerSpec;
 use hal_sim::mock::SensorConfig;
@@ -32,6 +32,7 @@ fn main() -> Result<(), String> {
     c.braking_margin = get(9, c.braking_margin as f64) as f32;
     c.tracking_time_s = get(10, c.tracking_time_s as f64) as f32;
     c.initial_level = get(12, c.initial_level as f64) as f32;
+    c.integral_start = get(13, c.integral_start as f64) as f32;
     let target = get(6, 0.15);
     let start = get(7, 0.05);
     let dur = get(8, 15.0);

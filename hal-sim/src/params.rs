@@ -146,10 +146,7 @@ impl Params {
                 return Err(ParamError {
                     field: f.name,
                     value: v,
-                    min: f.min,
-                    min_exclusive: f.min_exclusive,
-                    max: f.max,
-                    unit: f.unit,
+                    range: f.range(),
                 });
             }
         }
@@ -171,14 +168,8 @@ pub struct ParamError {
     pub field: &'static str,
     /// The offending value.
     pub value: f64,
-    /// Smallest allowed value (or bound from below, see `min_exclusive`).
-    pub min: f64,
-    /// `min` itself is refused (the value must be above it).
-    pub min_exclusive: bool,
-    /// Largest allowed value.
-    pub max: f64,
-    /// Unit of the field.
-    pub unit: &'static str,
+    /// What is allowed.
+    pub range: Range,
 }
 
 impl fmt::Display for ParamError {
@@ -186,25 +177,47 @@ impl fmt::Display for ParamError {
         write!(
             f,
             "parameter `{}` = {} is out of range: allowed {}",
-            self.field,
-            self.value,
-            Range {
-                min: self.min,
-                min_exclusive: self.min_exclusive,
-                max: self.max,
-                unit: self.unit
-            }
+            self.field, self.value, self.range
         )
     }
 }
 
-/// An allowed range as the messages print it: `0.1 ..= 1000 kg`, or
-/// `> 0 and <= 100 kg` when the lower bound itself is refused.
+/// An allowed range of a number, with its unit: checks a value and prints as
+/// the messages do, `0.1 ..= 1000 kg`, or `> 0 and <= 100 kg` when the lower
+/// bound itself is refused.
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Range {
     min: f64,
     min_exclusive: bool,
     max: f64,
     unit: &'static str,
+}
+
+impl Range {
+    /// `min ..= max` (`min` itself refused if `min_exclusive`), in `unit`.
+    pub const fn new(min: f64, min_exclusive: bool, max: f64, unit: &'static str) -> Self {
+        Self {
+            min,
+            min_exclusive,
+            max,
+            unit,
+        }
+    }
+
+    /// Whether `v` is finite and inside.
+    pub fn allows(&self, v: f64) -> bool {
+        let above_min = if self.min_exclusive {
+            v > self.min
+        } else {
+            v >= self.min
+        };
+        v.is_finite() && above_min && v <= self.max
+    }
+
+    /// The same range printed without its unit (when it is printed beside).
+    pub fn without_unit(self) -> Self {
+        Self { unit: "", ..self }
+    }
 }
 
 impl fmt::Display for Range {
@@ -245,32 +258,14 @@ pub struct FieldSpec {
 }
 
 impl FieldSpec {
+    /// The allowed range, with the unit.
+    pub fn range(&self) -> Range {
+        Range::new(self.min, self.min_exclusive, self.max, self.unit)
+    }
+
     /// Whether `v` is finite and in the allowed range.
     pub fn allows(&self, v: f64) -> bool {
-        let above_min = if self.min_exclusive {
-            v > self.min
-        } else {
-            v >= self.min
-        };
-        v.is_finite() && above_min && v <= self.max
-    }
-
-    /// The allowed range with its unit, for messages.
-    pub fn range(&self) -> Range {
-        Range {
-            min: self.min,
-            min_exclusive: self.min_exclusive,
-            max: self.max,
-            unit: self.unit,
-        }
-    }
-
-    /// The allowed range without the unit (printed beside it already).
-    pub fn bounds(&self) -> Range {
-        Range {
-            unit: "",
-            ..self.range()
-        }
+        self.range().allows(v)
     }
 }
 

@@ -40,7 +40,13 @@ pub fn to_toml(params: &Params, title: &str) -> String {
         "# Optionally start from a preset and override only some fields:\n# base = \"design\"   # or \"identified\""
     );
     for f in FIELDS.iter() {
-        let _ = writeln!(out, "\n# {} [{}], allowed {}", f.doc, f.unit, f.bounds());
+        let _ = writeln!(
+            out,
+            "\n# {} [{}], allowed {}",
+            f.doc,
+            f.unit,
+            f.range().without_unit()
+        );
         let _ = writeln!(out, "{} = {:?}", f.name, (f.get)(params));
     }
     out

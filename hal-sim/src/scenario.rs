@@ -38,7 +38,7 @@ use crate::controller::{ControllerSpec, CONTROLLER_NAMES};
 use crate::flight_stability::{self, FlightLoop};
 use crate::inject::Injection;
 use crate::mock::SensorConfig;
-use crate::params::Params;
+use crate::params::{Params, Range};
 use crate::params_toml::{self, ParamsFileError};
 use crate::run::RunConfig;
 use hopper_control::estimator::EstimatorConfig;
@@ -412,13 +412,12 @@ impl Settings {
     }
 }
 
-fn check_range(name: &str, v: f64, (lo, hi): (f64, f64), unit: &str) -> Result<(), String> {
-    if v.is_finite() && v >= lo && v <= hi {
+fn check_range(name: &str, v: f64, (lo, hi): (f64, f64), unit: &'static str) -> Result<(), String> {
+    let range = Range::new(lo, false, hi, unit);
+    if range.allows(v) {
         Ok(())
     } else {
-        Err(format!(
-            "{name} = {v} is out of range: allowed {lo} ..= {hi} {unit}"
-        ))
+        Err(format!("{name} = {v} is out of range: allowed {range}"))
     }
 }
 
@@ -565,7 +564,7 @@ impl Reader<'_> {
         key: &str,
         (lo, hi): (f64, f64),
         lo_exclusive: bool,
-        unit: &str,
+        unit: &'static str,
     ) -> Result<Option<f64>, ScenarioError> {
         let path = format!("{prefix}{key}");
         let v = match table.get(key) {
@@ -579,12 +578,11 @@ impl Reader<'_> {
                 ))
             }
         };
-        let above_lo = if lo_exclusive { v > lo } else { v >= lo };
-        if !(v.is_finite() && above_lo && v <= hi) {
-            let op = if lo_exclusive { ">" } else { ">=" };
+        let range = Range::new(lo, lo_exclusive, hi, unit);
+        if !range.allows(v) {
             return Err(self.err(
                 &path,
-                format!("`{path}` = {v} is out of range: allowed {op} {lo} and <= {hi} {unit}"),
+                format!("`{path}` = {v} is out of range: allowed {range}"),
             ));
         }
         Ok(Some(v))

@@ -58,7 +58,7 @@ pub enum Knob {
 /// `hopper_control::laws::shaped::Config`).
 #[derive(Clone, Copy)]
 pub enum ShapedField {
-    /// Spin-up start, fraction of the last apex.
+    /// Spin-up start, fraction of the present flight's apex.
     SpinUp,
     /// Push-to-brake switch, fraction of the model's stance time.
     Switch,
@@ -70,10 +70,12 @@ pub enum ShapedField {
     LevelKp,
     /// Braking-curve margin.
     BrakingMargin,
+    /// Outer-loop integral at start, fraction of the limit.
+    IntegralStart,
 }
 
 /// Controller settings a sweep accepts: (short name, column name, knob).
-const SETTING_KNOBS: [(&str, &str, Knob); 13] = [
+const SETTING_KNOBS: [(&str, &str, Knob); 14] = [
     ("torque", "torque_nm", Knob::Torque),
     ("target_apex", "target_apex_m", Knob::TargetApex),
     ("start_apex", "start_apex_m", Knob::StartApex),
@@ -110,6 +112,11 @@ const SETTING_KNOBS: [(&str, &str, Knob); 13] = [
         "braking_margin",
         "shaped_braking_margin",
         Knob::Shaped(ShapedField::BrakingMargin),
+    ),
+    (
+        "integral_start",
+        "shaped_integral_start",
+        Knob::Shaped(ShapedField::IntegralStart),
     ),
 ];
 
@@ -159,6 +166,7 @@ impl Knob {
                     ShapedField::LevelKi => c.level_gain_per_j = v,
                     ShapedField::LevelKp => c.level_proportional_per_j = v,
                     ShapedField::BrakingMargin => c.braking_margin = v,
+                    ShapedField::IntegralStart => c.integral_start = v,
                 }
             }
         }

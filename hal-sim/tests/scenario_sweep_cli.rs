@@ -413,6 +413,38 @@ fn shaped_law_constants_are_sweepable_and_refused_elsewhere() {
     assert_eq!(rows.len(), 4);
     // The switch time changes what the motor does.
     assert_ne!(rows[0][work], rows[2][work], "{csv}");
+    // The outer loop's starting integral, near a target where the level
+    // is not saturated.
+    let out = dir.path().join("is");
+    let o = sim(&[
+        "sweep",
+        "--controller",
+        "shaped",
+        "--noise",
+        "off",
+        "--start-apex",
+        "0.05",
+        "--target-apex",
+        "0.06",
+        "--duration",
+        "1.5",
+        "--param",
+        "integral_start=0.4:0.8:2",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let csv = std::fs::read_to_string(out.join("sweep.csv")).unwrap();
+    assert!(csv.starts_with("shaped_integral_start,"), "{csv}");
+    let header: Vec<&str> = csv.lines().next().unwrap().split(',').collect();
+    let work = header.iter().position(|c| *c == "motor_work_j").unwrap();
+    let rows: Vec<Vec<&str>> = csv
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').collect())
+        .collect();
+    assert_eq!(rows.len(), 2);
+    assert_ne!(rows[0][work], rows[1][work], "{csv}");
     let other = dir.path().join("other");
     assert_clean_failure(
         &[

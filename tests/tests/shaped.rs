@@ -42,8 +42,8 @@ fn shaped_reaches_and_holds_the_thesis_target_without_stop_impacts() {
     assert!(holds_target(&s, 10), "{:?}", s.apex_heights_m);
     let htc = s.hops_to_converge.unwrap();
     // 14 with the defaults (seeds 1-5); 19 before the outer loop's
-    // anti-windup and the first-descent spin-up.
-    assert!(htc <= 16, "converged at hop {htc}");
+    // anti-windup and the first-descent spin-up, 16 with the first alone.
+    assert!(htc <= 15, "converged at hop {htc}");
     assert!(s.faults.is_empty(), "{:?}", s.faults);
     // Within the actuator's limits: current limit, stroke.
     let p = Params::design();

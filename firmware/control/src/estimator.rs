@@ -308,7 +308,11 @@ impl PhaseEstimator {
 
         match self.phase {
             Phase::Flight => {
-                self.peak_height_m = self.peak_height_m.max(m.body_height_m);
+                // A plain comparison: `f32::max` is a library call on the
+                // M4F (the height is finite here).
+                if m.body_height_m > self.peak_height_m {
+                    self.peak_height_m = m.body_height_m;
+                }
                 if self.extremum_done {
                     return None;
                 }

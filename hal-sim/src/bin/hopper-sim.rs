@@ -223,7 +223,7 @@ struct SweepArgs {
     /// or torque, target_apex, start_apex, ke, flight_kp, flight_kd, seed
     /// (the noise seed: the same run under different noise), and for the
     /// shaped controller spin_up, switch, brake, level_ki, level_kp,
-    /// braking_margin.
+    /// braking_margin, integral_start.
     #[arg(long = "param")]
     param: Vec<String>,
     /// A named sweep instead of --scenario: lead-study (thesis Figures

@@ -11,8 +11,10 @@
 //! then throws into the upper stop. This law
 //!
 //! 1. spins the rotor up on the way down (from `spin_up_fraction` of the
-//!    flight's apex, also on the first descent after a release), where the spring force it works against is small, so the motor's
-//!    work goes into rotor kinetic energy cheaply;
+//!    flight's apex, also on the first descent after a release, and only in
+//!    a fall: see [`Prepared::spin_up`]), where the spring force it works
+//!    against is small, so the motor's work goes into rotor kinetic energy
+//!    cheaply;
 //! 2. keeps pushing through the first part of stance, where that kinetic
 //!    energy and the motor's force compress the spring under the body;
 //! 3. brakes the nut from `switch_fraction` of the model's stance time
@@ -66,8 +68,9 @@ use crate::model::ModelParams;
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Config {
     /// On the way down, the push starts once the toe is below this fraction
-    /// of the last apex height, in `[0, 1]`. Default 0.6 (tuned in
-    /// simulation, design parameters; the thesis used 0.4).
+    /// of the present flight's apex (its highest point), in `[0, 1]`.
+    /// Default 0.6 (tuned in simulation, design parameters; the thesis used
+    /// 0.4).
     pub spin_up_fraction: f32,
     /// No spin-up in a flight whose apex is below this toe height, m, in
     /// `[0, 1]`. Default 0.005: a flight that low is too short for the
@@ -87,11 +90,13 @@ pub struct Config {
     /// `[0, 1]`. Default 1.0.
     pub initial_level: f32,
     /// The outer loop's integral at start: the level expected to hold the
-    /// target, in `[0, 1]`. Default 0.8 (about what holds 0.15 m with the
-    /// design parameters). Starting it at the steady level rather than at
-    /// full lets the proportional term take the level down as the apex
-    /// nears the target, instead of climbing at full level into an
-    /// overshoot (17 instead of 19 hops to converge from 0.05 m).
+    /// target, in `[0, 1]`. Default 0.8, about what holds 0.15 m with the
+    /// design parameters (tuned there; for other targets or machines the
+    /// integral moves to its own steady level once the climb is done).
+    /// Starting it at the steady level rather than at full lets the
+    /// proportional term take the level down as the apex nears the target,
+    /// instead of climbing at full level into an overshoot (16 instead of 19
+    /// hops to converge from 0.05 m, with the spin-up otherwise unchanged).
     pub integral_start: f32,
     /// Outer-loop integral gain `K_i`, 1/J (level change per J of apex
     /// energy error), in `[0, 10]`. Default 0.1 (tuned in simulation with
@@ -170,6 +175,9 @@ pub struct Prepared {
     two_margin_per_alpha: f32,
     /// Largest braking force on the nut, `eta k_m i_max / r`, N.
     max_force_n: f32,
+    /// Gravitational acceleration of the model, m/s^2 (the fall test of
+    /// the spin-up).
+    gravity_mps2: f32,
 }
 
 impl Prepared {
@@ -196,6 +204,7 @@ impl Prepared {
             preload_n: k * model.preload_m,
             two_margin_per_alpha: 2.0 * cfg.braking_margin / alpha,
             max_force_n: torque_per_a * limit_a / r,
+            gravity_mps2: model.gravity_mps2,
         };
         let all_finite = [
             p.switch_s,
@@ -204,6 +213,7 @@ impl Prepared {
             p.preload_n,
             p.two_margin_per_alpha,
             p.max_force_n,
+            p.gravity_mps2,
         ]
         .iter()
         .all(|v| v.is_finite() && *v >= 0.0);
@@ -215,13 +225,21 @@ impl Prepared {
         &self.cfg
     }
 
-    /// Whether the push runs in flight: descending with the toe below
+    /// Whether the push runs in flight: falling, with the toe below
     /// `spin_up_fraction` of `apex_m`, the present flight's peak (false
     /// without one, or with one below `spin_up_min_apex_m`).
+    ///
+    /// "Falling": descending at least `1/sqrt(2)` of the free-fall speed
+    /// from the peak, `v^2 >= g (apex - toe)` (free fall gives `2 g`). A
+    /// robot lifted and lowered by hand, or standing on its extended leg
+    /// after a lift (both read as a flight), moves far slower than that, so
+    /// the motor stays off there; a multiply and a comparison, no root.
     #[inline]
     pub fn spin_up(&self, toe_height_m: f32, body_velocity_mps: f32, apex_m: Option<f32>) -> bool {
         apex_m.is_some_and(|apex| {
             apex >= self.cfg.spin_up_min_apex_m
+                && body_velocity_mps * body_velocity_mps
+                    >= self.gravity_mps2 * (apex - toe_height_m)
                 && super::modified_torque::descent_window(
                     self.cfg.spin_up_fraction,
                     toe_height_m,
@@ -375,8 +393,14 @@ mod tests {
     #[test]
     fn spin_up_only_descending_low_in_a_real_flight() {
         let p = prepared();
-        // 0.10 m apex, descending through 0.05 m (below 0.6 of it): push.
+        // 0.10 m apex, falling through 0.05 m (below 0.6 of it; free fall
+        // gives 0.99 m/s there): push.
         assert!(p.spin_up(0.05, -1.0, Some(0.10)));
+        assert!(p.spin_up(0.05, -0.8, Some(0.10)));
+        // Lowered by hand at 0.2 m/s, or creeping down on the extended leg
+        // after a lift: not a fall, no push.
+        assert!(!p.spin_up(0.05, -0.2, Some(0.10)));
+        assert!(!p.spin_up(0.0, -0.05, Some(0.02)));
         // Still rising, or above 0.6 of the apex, or no flight peak: no.
         assert!(!p.spin_up(0.05, 1.0, Some(0.10)));
         assert!(!p.spin_up(0.07, -1.0, Some(0.10)));
@@ -460,6 +484,22 @@ mod tests {
             },
             Config {
                 level_gain_per_j: -1.0,
+                ..Config::default()
+            },
+            Config {
+                integral_start: 1.5,
+                ..Config::default()
+            },
+            Config {
+                integral_start: f32::NAN,
+                ..Config::default()
+            },
+            Config {
+                spin_up_min_apex_m: -0.001,
+                ..Config::default()
+            },
+            Config {
+                spin_up_min_apex_m: f32::INFINITY,
                 ..Config::default()
             },
         ] {
