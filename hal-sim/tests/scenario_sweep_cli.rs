@@ -374,11 +374,14 @@ fn seed_sweep_repeats_a_run_under_different_noise() {
     );
 }
 
-#[test]
-fn shaped_law_constants_are_sweepable_and_refused_elsewhere() {
-    let dir = tempfile::tempdir().unwrap();
-    let out = dir.path().join("sh");
-    let o = sim(&[
+/// A 1.5 s noise-free `shaped` sweep from 0.05 m to `target` over `params`
+/// (each `NAME=START:END:N`): its CSV header and rows.
+fn shaped_sweep(
+    out: &std::path::Path,
+    target: &str,
+    params: &[&str],
+) -> (Vec<String>, Vec<Vec<String>>) {
+    let mut args = vec![
         "sweep",
         "--controller",
         "shaped",
@@ -387,64 +390,52 @@ fn shaped_law_constants_are_sweepable_and_refused_elsewhere() {
         "--start-apex",
         "0.05",
         "--target-apex",
-        "0.15",
+        target,
         "--duration",
         "1.5",
-        "--param",
-        "switch=0.5:0.6:2",
-        "--param",
-        "level_ki=0.05:0.1:2",
         "--out",
         out.to_str().unwrap(),
-    ]);
+    ];
+    for p in params {
+        args.extend(["--param", p]);
+    }
+    let o = sim(&args);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let csv = std::fs::read_to_string(out.join("sweep.csv")).unwrap();
-    let header: Vec<&str> = csv.lines().next().unwrap().split(',').collect();
+    let mut lines = csv
+        .lines()
+        .map(|l| l.split(',').map(String::from).collect());
+    let header = lines.next().unwrap();
+    (header, lines.collect())
+}
+
+#[test]
+fn shaped_law_constants_are_sweepable_and_refused_elsewhere() {
+    let dir = tempfile::tempdir().unwrap();
+    let (header, rows) = shaped_sweep(
+        &dir.path().join("sh"),
+        "0.15",
+        &["switch=0.5:0.6:2", "level_ki=0.05:0.1:2"],
+    );
     assert_eq!(
         &header[..2],
         &["shaped_switch_fraction", "shaped_level_gain_per_j"]
     );
-    let work = header.iter().position(|c| *c == "motor_work_j").unwrap();
-    let rows: Vec<Vec<&str>> = csv
-        .lines()
-        .skip(1)
-        .map(|l| l.split(',').collect())
-        .collect();
+    let work = header.iter().position(|c| c == "motor_work_j").unwrap();
     assert_eq!(rows.len(), 4);
     // The switch time changes what the motor does.
-    assert_ne!(rows[0][work], rows[2][work], "{csv}");
+    assert_ne!(rows[0][work], rows[2][work], "{rows:?}");
     // The outer loop's starting integral, near a target where the level
     // is not saturated.
-    let out = dir.path().join("is");
-    let o = sim(&[
-        "sweep",
-        "--controller",
-        "shaped",
-        "--noise",
-        "off",
-        "--start-apex",
-        "0.05",
-        "--target-apex",
+    let (header, rows) = shaped_sweep(
+        &dir.path().join("is"),
         "0.06",
-        "--duration",
-        "1.5",
-        "--param",
-        "integral_start=0.4:0.8:2",
-        "--out",
-        out.to_str().unwrap(),
-    ]);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let csv = std::fs::read_to_string(out.join("sweep.csv")).unwrap();
-    assert!(csv.starts_with("shaped_integral_start,"), "{csv}");
-    let header: Vec<&str> = csv.lines().next().unwrap().split(',').collect();
-    let work = header.iter().position(|c| *c == "motor_work_j").unwrap();
-    let rows: Vec<Vec<&str>> = csv
-        .lines()
-        .skip(1)
-        .map(|l| l.split(',').collect())
-        .collect();
+        &["integral_start=0.4:0.8:2"],
+    );
+    assert_eq!(header[0], "shaped_integral_start");
+    let work = header.iter().position(|c| c == "motor_work_j").unwrap();
     assert_eq!(rows.len(), 2);
-    assert_ne!(rows[0][work], rows[1][work], "{csv}");
+    assert_ne!(rows[0][work], rows[1][work], "{rows:?}");
     let other = dir.path().join("other");
     assert_clean_failure(
         &[
