@@ -146,7 +146,7 @@ impl Params {
                 return Err(ParamError {
                     field: f.name,
                     value: v,
-                    range: f.range(),
+                    range: f.range,
                 });
             }
         }
@@ -240,17 +240,12 @@ impl fmt::Display for Range {
 pub struct FieldSpec {
     /// Field name (TOML key).
     pub name: &'static str,
-    /// Unit, as printed in comments.
-    pub unit: &'static str,
     /// What it is, and where it comes from.
     pub doc: &'static str,
-    /// Smallest allowed value (inclusive unless `min_exclusive`).
-    pub min: f64,
-    /// `min` itself is refused: the value must be above it (masses, which
-    /// may be small but not zero: a massless part is not a machine).
-    pub min_exclusive: bool,
-    /// Largest allowed value (inclusive).
-    pub max: f64,
+    /// Allowed values and the unit. The masses of the lower leg and the
+    /// nut exclude their lower bound 0: they may be small but not zero (a
+    /// massless part is not a machine).
+    pub range: Range,
     /// Read the field.
     pub get: fn(&Params) -> f64,
     /// Write the field.
@@ -258,14 +253,14 @@ pub struct FieldSpec {
 }
 
 impl FieldSpec {
-    /// The allowed range, with the unit.
-    pub fn range(&self) -> Range {
-        Range::new(self.min, self.min_exclusive, self.max, self.unit)
+    /// Unit, as printed in comments.
+    pub fn unit(&self) -> &'static str {
+        self.range.unit
     }
 
     /// Whether `v` is finite and in the allowed range.
     pub fn allows(&self, v: f64) -> bool {
-        self.range().allows(v)
+        self.range.allows(v)
     }
 }
 
@@ -279,11 +274,8 @@ macro_rules! field {
     ($name:ident, $unit:expr, $doc:expr, $min:expr, $excl:expr, $max:expr) => {
         FieldSpec {
             name: stringify!($name),
-            unit: $unit,
             doc: $doc,
-            min: $min,
-            min_exclusive: $excl,
-            max: $max,
+            range: Range::new($min, $excl, $max, $unit),
             get: |p| p.$name,
             set: |p, v| p.$name = v,
         }

@@ -44,8 +44,8 @@ pub fn to_toml(params: &Params, title: &str) -> String {
             out,
             "\n# {} [{}], allowed {}",
             f.doc,
-            f.unit,
-            f.range().without_unit()
+            f.unit(),
+            f.range.without_unit()
         );
         let _ = writeln!(out, "{} = {:?}", f.name, (f.get)(params));
     }
@@ -133,7 +133,7 @@ pub fn params_from_table(
                     line_for(key),
                     format!(
                         "parameter `{section}{key}` must be a number in {}, got {other}",
-                        spec.unit
+                        spec.unit()
                     ),
                 ))
             }
@@ -143,7 +143,7 @@ pub fn params_from_table(
                 line_for(key),
                 format!(
                     "parameter `{section}{key}` = {v} is out of range: allowed {}",
-                    spec.range()
+                    spec.range
                 ),
             ));
         }
@@ -156,7 +156,7 @@ pub fn params_from_table(
                 None,
                 format!(
                     "missing parameter `{section}{}` [{}] (give every field, or start from a preset with `base = \"design\"`)",
-                    missing.name, missing.unit
+                    missing.name, missing.unit()
                 ),
             ));
         }
