@@ -54,6 +54,15 @@ fn shaped_reaches_and_holds_the_thesis_target_without_stop_impacts() {
     // (below).
     let steady = s.steady_hop.unwrap();
     assert!(steady.stop_impact_loss_j < 0.1, "{steady:?}");
+    // docs/beat-the-thesis.md bounds every hop's rise at 0.0127 m (the
+    // best current schedule with the plant's exact state, example
+    // `one_hop_bound`): a closed-loop hop beating it would mean the plant
+    // or that bound changed. The climb rises at most 0.009 m per hop.
+    let rise = (1..s.apex_heights_m.len())
+        .map(|i| s.apex_heights_m[i] - s.apex_heights_m[i - 1])
+        .fold(f64::NEG_INFINITY, f64::max);
+    assert!(rise <= 0.0127 + 2e-4, "a hop rose {rise} m");
+    assert!(rise > 0.0, "{:?}", s.apex_heights_m);
 }
 
 #[test]
