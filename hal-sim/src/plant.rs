@@ -427,13 +427,22 @@ impl StepMap {
             [0.0; 3],
             [lin.p_drive, lin.p_friction, lin.p0 + lin.p_spring * fs0],
         ];
+        Self::from_affine(&a, &b, h)
+    }
+
+    /// The RK4 step of length `h` for `x' = A x + B u`. Out of line and not
+    /// generic: it runs once per configuration and plant, and one copy of
+    /// it is enough (on the M4, where `f64` is software, eight inlined
+    /// copies took 20 KB of flash).
+    #[inline(never)]
+    fn from_affine(a: &Mat4, b: &[[f64; 3]; 4], h: f64) -> Self {
         let id: Mat4 = [
             [1.0, 0.0, 0.0, 0.0],
             [0.0, 1.0, 0.0, 0.0],
             [0.0, 0.0, 1.0, 0.0],
             [0.0, 0.0, 0.0, 1.0],
         ];
-        let p1 = mat4_comb(&[(h, &a)]);
+        let p1 = mat4_comb(&[(h, a)]);
         let p2 = mat4_mul(&p1, &p1);
         let p3 = mat4_mul(&p2, &p1);
         let p4 = mat4_mul(&p3, &p1);
@@ -449,10 +458,10 @@ impl StepMap {
         let t2 = mat4_comb(&[(0.5 * h, &id)]);
         let t3 = mat4_comb(&[(0.5 * h, &id), (0.25 * h, &p1)]);
         let t4 = mat4_comb(&[(h, &id), (0.5 * h, &p1), (0.25 * h, &p2)]);
-        let pd_row = |t: &Mat4| mat4_mul_43(t, &b)[3];
+        let pd_row = |t: &Mat4| mat4_mul_43(t, b)[3];
         StepMap {
             m,
-            g: mat4_mul_43(&n, &b),
+            g: mat4_mul_43(&n, b),
             stage_x: [s2[3], s3[3], s4[3]],
             stage_u: [pd_row(&t2), pd_row(&t3), pd_row(&t4)],
         }
