@@ -37,51 +37,59 @@
 #![allow(missing_docs)]
 
 use hal_sim::{Event, Mode, Params, Plant, State};
+use rand_distr::{Distribution, StandardUniform};
 use rand_xoshiro::rand_core::{Rng, SeedableRng};
 use rand_xoshiro::Xoshiro256PlusPlus;
 
 const DT_S: f64 = 1e-4;
-/// Segments per phase (descent, stance, ascent): 8, or `SEG` from the
-/// environment (to check that a finer grid finds no more).
-static SEG_ENV: std::sync::OnceLock<usize> = std::sync::OnceLock::new();
-fn seg() -> usize {
-    *SEG_ENV.get_or_init(|| {
-        std::env::var("SEG")
-            .ok()
-            .and_then(|s| s.parse().ok())
-            .filter(|&n| n > 0)
-            .unwrap_or(8)
-    })
-}
-/// `STANCE_SPAN` from the environment: the stance grid's length in model
-/// stance times (default 1), to check that the grid's end does not limit
-/// the result.
-fn stance_span() -> f64 {
-    static SPAN: std::sync::OnceLock<f64> = std::sync::OnceLock::new();
-    *SPAN.get_or_init(|| {
-        std::env::var("STANCE_SPAN")
-            .ok()
-            .and_then(|s| s.parse().ok())
-            .filter(|&x: &f64| x > 0.0 && x.is_finite())
-            .unwrap_or(1.0)
-    })
-}
 const START_M: f64 = 0.05;
 const TARGET_M: f64 = 0.15;
 /// Largest nut speed at the starting apex, m/s (about the
 /// motor's no-load speed through the screw).
 const NUT_SPEED_RANGE_MPS: f64 = 0.8;
 
-/// What a schedule did.
+/// The schedule's grid: `seg` levels per phase (`SEG`, default 8), the
+/// stance's spread over `stance_span` model stance times (`STANCE_SPAN`,
+/// default 1); from the environment, to check that the grid does not limit
+/// the result.
+#[derive(Clone, Copy)]
+struct Grid {
+    seg: usize,
+    stance_span: f64,
+}
+
+impl Grid {
+    fn from_env() -> Self {
+        let env = |name: &str| std::env::var(name).ok();
+        Grid {
+            seg: env("SEG")
+                .and_then(|s| s.parse().ok())
+                .filter(|&n| n > 0)
+                .unwrap_or(8),
+            stance_span: env("STANCE_SPAN")
+                .and_then(|s| s.parse().ok())
+                .filter(|&x: &f64| x > 0.0 && x.is_finite())
+                .unwrap_or(1.0),
+        }
+    }
+
+    /// Levels per hop.
+    fn levels(self) -> usize {
+        3 * self.seg
+    }
+}
+
+/// What one hop's schedule did.
 struct Outcome {
-    apexes: Vec<f64>,
+    /// The apex after the hop's liftoff, m (`None`: no such apex).
+    apex_m: Option<f64>,
     impact_j: f64,
-    /// The plant at the last apex reached.
+    /// The plant at that apex (or where the hop ended).
     plant: Plant,
 }
 
-/// Run `levels` (hop after hop) from `plant`, which must be at an apex.
-fn simulate(plant: &Plant, levels: &[f64], hops: usize) -> Outcome {
+/// Run one hop's `levels` from `plant`, which must be at an apex.
+fn simulate(plant: &Plant, levels: &[f64], grid: Grid) -> Outcome {
     let p = *plant.params();
     let mut plant = plant.clone();
     let impact0 = plant.ledger().stop_impact_loss_j;
@@ -95,15 +103,13 @@ fn simulate(plant: &Plant, levels: &[f64], hops: usize) -> Outcome {
     let mut phase = 0usize;
     let mut phase_t0 = plant.time_s();
     let mut phase_len = (2.0 * plant.toe_height_m().max(1e-4) / g_dn).sqrt();
-    let mut apexes = Vec::new();
-    let mut at_apex = plant.clone();
+    let mut apex_m = None;
     let mut events = Vec::new();
-    let t_end = plant.time_s() + 2.0 * hops as f64;
-    while apexes.len() < hops && plant.time_s() < t_end {
-        let part =
-            (((plant.time_s() - phase_t0) / phase_len * seg() as f64) as usize).min(seg() - 1);
-        let idx = apexes.len() * 3 * seg() + phase * seg() + part;
-        let cmd = levels.get(idx).copied().unwrap_or(0.0) * i_max;
+    let t_end = plant.time_s() + 2.0;
+    while apex_m.is_none() && plant.time_s() < t_end {
+        let part = (((plant.time_s() - phase_t0) / phase_len * grid.seg as f64) as usize)
+            .min(grid.seg - 1);
+        let cmd = levels.get(phase * grid.seg + part).copied().unwrap_or(0.0) * i_max;
         events.clear();
         if plant.advance(DT_S, cmd, &mut |e| events.push(e)).is_err() {
             break;
@@ -113,7 +119,7 @@ fn simulate(plant: &Plant, levels: &[f64], hops: usize) -> Outcome {
                 Event::Touchdown { t_s, .. } => {
                     phase = 1;
                     phase_t0 = t_s;
-                    phase_len = stance_span() * t_stance;
+                    phase_len = grid.stance_span * t_stance;
                 }
                 Event::Liftoff {
                     t_s, zd_after_mps, ..
@@ -122,30 +128,22 @@ fn simulate(plant: &Plant, levels: &[f64], hops: usize) -> Outcome {
                     phase_t0 = t_s;
                     phase_len = zd_after_mps.max(1e-3) / g_up;
                 }
-                // Only the apex after a liftoff ends a hop (a nut started
+                // Only the apex after a liftoff ends the hop (a nut started
                 // moving can lift the body off its starting apex at once).
-                Event::Apex {
-                    t_s, toe_height_m, ..
-                } if phase == 2 => {
-                    apexes.push(toe_height_m);
-                    at_apex = plant.clone();
-                    phase = 0;
-                    phase_t0 = t_s;
-                    phase_len = (2.0 * toe_height_m.max(1e-4) / g_dn).sqrt();
-                }
+                Event::Apex { toe_height_m, .. } if phase == 2 => apex_m = Some(toe_height_m),
                 _ => {}
             }
         }
     }
     Outcome {
-        apexes,
+        apex_m,
         impact_j: plant.ledger().stop_impact_loss_j - impact0,
-        plant: at_apex,
+        plant,
     }
 }
 
 fn uniform(rng: &mut Xoshiro256PlusPlus) -> f64 {
-    (rng.next_u64() >> 11) as f64 / (1u64 << 53) as f64
+    StandardUniform.sample(rng)
 }
 
 /// Differential evolution (rand/1/bin) over `[-1, 1]^dim`, maximising `f`.
@@ -199,12 +197,13 @@ fn maximise(
     (pop[best].clone(), fit[best])
 }
 
-/// The bang-bang structure of the yardstick (`bang_bang_climb`) as levels:
-/// reverse, then push in the descent; push in stance; reverse in the ascent.
-fn bang_bang_levels(hops: usize) -> Vec<f64> {
-    (0..hops * 3 * seg())
-        .map(|i| match (i % (3 * seg())) / seg() {
-            0 if i % seg() < seg() / 2 => -1.0,
+/// The bang-bang structure of the yardstick (`bang_bang_climb`) as one
+/// hop's levels: reverse, then push in the descent; push in stance; reverse
+/// in the ascent.
+fn bang_bang_levels(grid: Grid) -> Vec<f64> {
+    (0..grid.levels())
+        .map(|i| match i / grid.seg {
+            0 if i < grid.seg / 2 => -1.0,
             0 | 1 => 1.0,
             _ => -1.0,
         })
@@ -224,18 +223,31 @@ fn apex_plant(p: &Params, apex_m: f64, nut_pos: f64, nut_speed: f64) -> Plant {
     }
 }
 
-fn gain(p: &Params, penalty: f64, heights: &[f64]) {
+/// What the actuator holds, J: the plant's energy less that of the same
+/// body with the nut at rest on its upper stop.
+fn actuator_energy_j(plant: &Plant) -> f64 {
+    let rest = State {
+        p_m: 0.0,
+        pd_mps: 0.0,
+        ..plant.state()
+    };
+    plant.energy_j()
+        - Plant::with_state(*plant.params(), Mode::Flight, rest)
+            .map_or(f64::NAN, |pl| pl.energy_j())
+}
+
+fn gain(p: &Params, penalty: f64, heights: &[f64], grid: Grid) {
     println!("largest next apex from an apex h, nut state at h free, stop impacts {penalty} m/J");
     println!("   h (m)   next (m)   rise (m)   impacts (J)   nut p (mm)   nut v (m/s)   below best (mm): seeded worst, unseeded best");
     let mut best_rise = f64::NEG_INFINITY;
     for &h in heights {
-        let dim = 3 * seg() + 2;
-        let mut start = bang_bang_levels(1);
+        let dim = grid.levels() + 2;
+        let mut start = bang_bang_levels(grid);
         start.extend([-1.0, 0.0]);
         let score = |x: &[f64]| {
             let plant = apex_plant(p, h, x[dim - 2], x[dim - 1]);
-            let o = simulate(&plant, &x[..dim - 2], 1);
-            o.apexes.first().copied().unwrap_or(-1.0) - penalty * o.impact_j
+            let o = simulate(&plant, &x[..dim - 2], grid);
+            o.apex_m.unwrap_or(-1.0) - penalty * o.impact_j
         };
         // Five searches: three start from the push-reverse-push shape (nut at
         // rest on its upper stop), two from random schedules and states
@@ -263,8 +275,8 @@ fn gain(p: &Params, penalty: f64, heights: &[f64]) {
             continue;
         };
         let plant = apex_plant(p, h, x[dim - 2], x[dim - 1]);
-        let o = simulate(&plant, &x[..dim - 2], 1);
-        let next = o.apexes.first().copied().unwrap_or(f64::NAN);
+        let o = simulate(&plant, &x[..dim - 2], grid);
+        let next = o.apex_m.unwrap_or(f64::NAN);
         best_rise = best_rise.max(next - h);
         println!(
             "  {h:.3}     {next:.4}     {:+.4}     {:8.2}     {:8.1}     {:+.3}     {:.1}     {:.1}",
@@ -276,27 +288,6 @@ fn gain(p: &Params, penalty: f64, heights: &[f64]) {
             1e3 * (hi - unseeded_best)
         );
         let (l0, l1) = (plant.ledger(), o.plant.ledger());
-        let s1 = o.plant.state();
-        // What the actuator holds at the new apex: the plant's energy less
-        // that of the same body with the nut at rest on its upper stop.
-        let rest = State {
-            p_m: 0.0,
-            pd_mps: 0.0,
-            ..s1
-        };
-        let actuator_j = o.plant.energy_j()
-            - Plant::with_state(*p, Mode::Flight, rest).map_or(f64::NAN, |pl| pl.energy_j());
-        let actuator0_j = plant.energy_j()
-            - Plant::with_state(
-                *p,
-                Mode::Flight,
-                State {
-                    p_m: 0.0,
-                    pd_mps: 0.0,
-                    ..plant.state()
-                },
-            )
-            .map_or(f64::NAN, |pl| pl.energy_j());
         println!(
             "          J: motor {:.2}, friction {:.2}, touchdown {:.2}, liftoff {:.2}, stops {:.2}, actuator at apex {:.2} -> {:.2}",
             l1.motor_work_j - l0.motor_work_j,
@@ -304,8 +295,8 @@ fn gain(p: &Params, penalty: f64, heights: &[f64]) {
             l1.touchdown_loss_j - l0.touchdown_loss_j,
             l1.liftoff_loss_j - l0.liftoff_loss_j,
             l1.stop_impact_loss_j - l0.stop_impact_loss_j,
-            actuator0_j,
-            actuator_j
+            actuator_energy_j(&plant),
+            actuator_energy_j(&o.plant)
         );
     }
     let need = 0.98 * TARGET_M - START_M;
@@ -339,5 +330,5 @@ fn main() {
         .get(3)
         .map(|s| s.split(',').filter_map(|h| h.parse().ok()).collect())
         .unwrap_or_else(|| vec![0.01, 0.03, 0.05, 0.07, 0.09, 0.11, 0.13, 0.15]);
-    gain(&p, penalty, &heights);
+    gain(&p, penalty, &heights, Grid::from_env());
 }

@@ -1601,6 +1601,9 @@ impl Plant {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use rand_distr::{Distribution, StandardUniform};
+    use rand_xoshiro::rand_core::SeedableRng;
+    use rand_xoshiro::Xoshiro256PlusPlus;
 
     /// The precomputed RK4 step maps agree with RK4 itself to rounding in
     /// every configuration, on random states and commands; where the supply
@@ -1615,13 +1618,11 @@ mod tests {
         };
         let h = Plant::DEFAULT_MAX_STEP_S;
         let c = plant.c;
-        // xorshift64: reproducible, no dependency.
-        let mut state = 0x9e37_79b9_7f4a_7c15_u64;
+        // The sensor noise's generator, seeded: reproducible.
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(0x9e37_79b9_7f4a_7c15);
         let mut uniform = |lo: f64, hi: f64| {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            lo + (hi - lo) * (state >> 11) as f64 / (1u64 << 53) as f64
+            let u: f64 = StandardUniform.sample(&mut rng);
+            lo + (hi - lo) * u
         };
         // Nut speeds and currents past the supply and amplifier limits.
         let pd_max = 1.2 * c.supply * c.r_over_kt;
