@@ -833,7 +833,14 @@ impl Plant {
 
     /// Motor speed, rad/s.
     pub fn motor_speed_rad_s(&self) -> f64 {
-        self.y[3] / self.c.r
+        self.motor_speed_at_rad_s(self.y[3])
+    }
+
+    /// Motor speed at nut speed `pd_mps`, rad/s (`theta_dot = pd / r`,
+    /// eq 2.4). Monotonic in `pd_mps`, so the fastest motor speed of a run is
+    /// this of its fastest nut speed, one division instead of one per period.
+    pub fn motor_speed_at_rad_s(&self, pd_mps: f64) -> f64 {
+        pd_mps / self.c.r
     }
 
     /// Current the amplifier drives for the last command at the present

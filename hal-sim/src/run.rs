@@ -331,7 +331,9 @@ pub fn run_with_progress(
     let mut samples = Vec::new();
     let mut events = Vec::new();
     let mut max_residual: f64 = 0.0;
-    let mut peak_speed: f64 = 0.0;
+    // |nut speed|, m/s: the motor speed is this over the screw radius (one
+    // division at the end instead of one per period, same value).
+    let mut peak_nut_speed: f64 = 0.0;
     let mut peak_stroke: f64 = 0.0;
     let mut peak_current: f64 = 0.0;
     if sample_every > 0 {
@@ -345,8 +347,13 @@ pub fn run_with_progress(
         last: Ledger::default(),
         hops: Vec::new(),
     };
+    // Count-downs to the next progress report and sample: a `k % n` per
+    // period is an integer division, a noticeable share of a 100 ns period.
+    let (mut to_report, mut to_sample) = (report_every, sample_every);
     for k in 1..=steps {
-        if k % report_every == 0 {
+        to_report -= 1;
+        if to_report == 0 {
+            to_report = report_every;
             progress(k, steps);
         }
         let cmd = controller.current_command_a(&plant);
@@ -379,14 +386,34 @@ pub fn run_with_progress(
                 }
             }
         }
-        max_residual = max_residual.max(plant.energy_residual_j().abs());
-        peak_speed = peak_speed.max(plant.motor_speed_rad_s().abs());
-        peak_stroke = peak_stroke.max(plant.state().p_m);
-        peak_current = peak_current.max(plant.motor_current_a().abs());
-        if sample_every > 0 && k % sample_every == 0 {
-            samples.push(Sample::of(&plant));
+        // Running maxima as compare-and-move: `f64::max` adds the NaN
+        // handling it needs for operands that can be NaN; the plant refuses
+        // a non-finite state, so these are finite (and a NaN would be skipped
+        // all the same).
+        let residual = plant.energy_residual_j().abs();
+        if residual > max_residual {
+            max_residual = residual;
+        }
+        let s = plant.state();
+        if s.pd_mps.abs() > peak_nut_speed {
+            peak_nut_speed = s.pd_mps.abs();
+        }
+        if s.p_m > peak_stroke {
+            peak_stroke = s.p_m;
+        }
+        let current = plant.motor_current_a().abs();
+        if current > peak_current {
+            peak_current = current;
+        }
+        if sample_every > 0 {
+            to_sample -= 1;
+            if to_sample == 0 {
+                to_sample = sample_every;
+                samples.push(Sample::of(&plant));
+            }
         }
     }
+    let peak_speed = plant.motor_speed_at_rad_s(peak_nut_speed);
     let summary = summarize(
         cfg,
         params_name,
