@@ -177,4 +177,15 @@ fn main() {
         "  run() bookkeeping (residual, peaks, events): {:6.1} ns/period",
         ns(whole - loop_only)
     );
+    // The two parts no closed-loop run can skip: the plant's integration and
+    // the firmware's own control step (the code the board runs, unchanged).
+    // Even if the sensor and amplifier models and the bookkeeping cost
+    // nothing, a run cannot be faster than these two replayed back to back.
+    let floor = plant_only + control_only;
+    println!(
+        "  floor (plant + Hopper::step, nothing else): {:6.1} ns/period: at most {:.0}x real time (2,000x needs {:.0} ns)",
+        ns(floor),
+        DURATION_S / floor,
+        DT_S / 2000.0 * 1e9
+    );
 }
