@@ -120,9 +120,23 @@ const SETTING_KNOBS: [(&str, &str, Knob); 14] = [
     ),
 ];
 
+/// Short names of plant parameters, the thesis's symbols (`k`, `c`: the
+/// leg spring's stiffness and damping, section 2.2) and the ball-screw
+/// `lead` (Table 2.1), so `--param k=8000:20000:13` works as written.
+const PLANT_ALIASES: [(&str, &str); 3] = [
+    ("k", "spring_stiffness_n_per_m"),
+    ("c", "spring_damping_ns_per_m"),
+    ("lead", "screw_lead_m"),
+];
+
 impl Knob {
-    /// Look a name up: a plant field, or a setting's short or column name.
+    /// Look a name up: a plant field (or its short name), or a setting's
+    /// short or column name.
     pub fn parse(name: &str) -> Option<Knob> {
+        let name = PLANT_ALIASES
+            .iter()
+            .find(|(short, _)| *short == name)
+            .map_or(name, |(_, full)| full);
         if let Some(f) = field(name) {
             return Some(Knob::Plant(f));
         }
@@ -225,8 +239,13 @@ pub fn parse_axis(spec: &str) -> Result<Axis, String> {
     let knob = Knob::parse(name).ok_or_else(|| {
         let plant: Vec<&str> = FIELDS.iter().map(|f| f.name).collect();
         let settings: Vec<&str> = SETTING_KNOBS.iter().map(|(s, _, _)| *s).collect();
+        let short: Vec<String> = PLANT_ALIASES
+            .iter()
+            .map(|(s, full)| format!("{s} = {full}"))
+            .collect();
         bad(format!(
-            "unknown parameter `{name}`: expected a controller setting {settings:?} or a plant parameter {plant:?}"
+            "unknown parameter `{name}`: expected a controller setting {settings:?} or a plant parameter {plant:?} (short names: {})",
+            short.join(", ")
         ))
     })?;
     let parts: Vec<&str> = range.split(':').map(str::trim).collect();
@@ -817,4 +836,29 @@ fn viridis(t: f64) -> RGBColor {
     let (a, b) = (ANCHORS[i], ANCHORS[i + 1]);
     let mix = |p: f64, q: f64| (p + (q - p) * f).round() as u8;
     RGBColor(mix(a.0, b.0), mix(a.1, b.1), mix(a.2, b.2))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn short_plant_names_sweep_the_full_field() {
+        let k = parse_axis("k=8000:20000:13").unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(k.knob.column(), "spring_stiffness_n_per_m");
+        assert_eq!(k.values.len(), 13);
+        assert_eq!(k.values.first(), Some(&8000.0));
+        assert_eq!(k.values.get(1), Some(&9000.0));
+        assert_eq!(k.values.last(), Some(&20000.0));
+        let lead = parse_axis("lead=0.002:0.010:5").unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(lead.knob.column(), "screw_lead_m");
+        let c = parse_axis("c=0:10:2").unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(c.knob.column(), "spring_damping_ns_per_m");
+        // The short name and the full one are the same knob.
+        let full = parse_axis("spring_stiffness_n_per_m=1:2:2").unwrap_or_else(|e| panic!("{e}"));
+        assert!(k.knob.same(&full.knob));
+        let err = parse_axis("kk=1:2:2").err().unwrap_or_default();
+        assert!(err.contains("unknown parameter `kk`"), "{err}");
+        assert!(err.contains("k = spring_stiffness_n_per_m"), "{err}");
+    }
 }
