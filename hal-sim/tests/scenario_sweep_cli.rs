@@ -286,7 +286,12 @@ fn bad_sweep_input_is_one_clear_error_and_writes_nothing() {
         ("torque=0.5:1", "is not START:END:N"),
         ("torque=0.5:x:3", "END `x` is not a finite number"),
         ("torque=0.5:1:0", "N `0` is not a count"),
-        ("lead=1:2:3", "unknown parameter `lead`"),
+        ("leed=1:2:3", "unknown parameter `leed`"),
+        // `lead` is the short name of `screw_lead_m`: its range applies.
+        (
+            "lead=1:2:3",
+            "sweep point screw_lead_m=1: parameter `screw_lead_m` = 1 is out of range",
+        ),
         (
             "screw_lead_m=0:0.01:3",
             "sweep point screw_lead_m=0: parameter `screw_lead_m` = 0 is out of range",
