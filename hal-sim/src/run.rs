@@ -303,6 +303,17 @@ pub struct RunResult {
 
 pub use crate::metrics::{hops_to_converge, steady_apex};
 
+/// A running maximum as compare-and-move: `f64::max` adds the NaN handling
+/// it needs for operands that can be NaN, once per period and value; the
+/// plant refuses a non-finite state, so these are finite (and a NaN would be
+/// skipped all the same).
+#[inline(always)]
+fn raise(max: &mut f64, v: f64) {
+    if v > *max {
+        *max = v;
+    }
+}
+
 /// Run a controller against the plant.
 pub fn run(
     cfg: &RunConfig,
@@ -386,25 +397,11 @@ pub fn run_with_progress(
                 }
             }
         }
-        // Running maxima as compare-and-move: `f64::max` adds the NaN
-        // handling it needs for operands that can be NaN; the plant refuses
-        // a non-finite state, so these are finite (and a NaN would be skipped
-        // all the same).
-        let residual = plant.energy_residual_j().abs();
-        if residual > max_residual {
-            max_residual = residual;
-        }
+        raise(&mut max_residual, plant.energy_residual_j().abs());
         let s = plant.state();
-        if s.pd_mps.abs() > peak_nut_speed {
-            peak_nut_speed = s.pd_mps.abs();
-        }
-        if s.p_m > peak_stroke {
-            peak_stroke = s.p_m;
-        }
-        let current = plant.motor_current_a().abs();
-        if current > peak_current {
-            peak_current = current;
-        }
+        raise(&mut peak_nut_speed, s.pd_mps.abs());
+        raise(&mut peak_stroke, s.p_m);
+        raise(&mut peak_current, plant.motor_current_a().abs());
         if sample_every > 0 {
             to_sample -= 1;
             if to_sample == 0 {
