@@ -18,6 +18,7 @@ use hopper_control::laws::{
     constant_torque, energy_torque, flight_pd, modified_torque, shaped, step_closed, step_open,
     velocity, StanceLaw,
 };
+use hopper_control::runner::{NoCounter, PeriodRunner, Timing};
 use hopper_control::supervisor::Fault;
 use hopper_control::telemetry::HopLedger;
 use serde::Serialize;
@@ -186,7 +187,12 @@ impl ControllerSpec {
         if let Some(f) = self.flight_override {
             cfg.flight = f;
         }
-        let hopper = Hopper::new(cfg).map_err(|e| format!("controller configuration: {e:?}"))?;
+        let timing = Timing {
+            period_s: dt_s as f32,
+            ..Timing::default()
+        };
+        let runner = PeriodRunner::new(cfg, timing)
+            .map_err(|e| format!("controller configuration: {e:?}"))?;
         let hal = SimHal::new(&cfg.calibration, &self.sensors);
         let name = CONTROLLER_NAMES
             .iter()
@@ -195,7 +201,7 @@ impl ControllerSpec {
             .unwrap_or("passive");
         Ok(FirmwareController {
             name,
-            hopper,
+            runner,
             hal,
             dt_s,
             target_apex_m: (name != "passive").then_some(self.target_apex_m),
@@ -216,7 +222,8 @@ impl ControllerSpec {
 /// The control crate on the mock HAL.
 pub struct FirmwareController {
     name: &'static str,
-    hopper: Hopper,
+    /// The firmware's period runner (the same one the board and QEMU run).
+    runner: PeriodRunner,
     /// The sensor, DAC and amplifier models (public for fault injection).
     pub hal: SimHal,
     dt_s: f64,
@@ -243,12 +250,12 @@ enum InjectState {
 impl FirmwareController {
     /// The control crate's state.
     pub fn hopper(&self) -> &Hopper {
-        &self.hopper
+        self.runner.hopper()
     }
 
     /// The control crate's state, mutably (reset, target changes).
     pub fn hopper_mut(&mut self) -> &mut Hopper {
-        &mut self.hopper
+        self.runner.hopper_mut()
     }
 
     /// The last period's output.
@@ -283,10 +290,14 @@ impl FirmwareController {
                 InjectKind::LoadcellStuck => self.hal.freeze_loadcell(plant),
                 InjectKind::LoadcellSaturated => f.loadcell_code = Some(full_scale),
                 InjectKind::PotOpen => f.pot_code = Some(0),
-                InjectKind::Nan => self.hopper.set_measurement_override(MeasurementOverride {
-                    spring_force_n: Some(f32::NAN),
-                    ..MeasurementOverride::default()
-                }),
+                InjectKind::Nan => {
+                    self.runner
+                        .hopper_mut()
+                        .set_measurement_override(MeasurementOverride {
+                            spring_force_n: Some(f32::NAN),
+                            ..MeasurementOverride::default()
+                        })
+                }
                 InjectKind::NoiseBurst => {
                     f.adc_burst_sigma_codes = NOISE_BURST_SIGMA_CODES;
                     *state = InjectState::Active;
@@ -296,7 +307,7 @@ impl FirmwareController {
                 InjectKind::DacError => f.dac_error = true,
                 // The RTIC app finds the overrun at the start of the next
                 // period and reports it before stepping: do the same.
-                InjectKind::Overrun => self.hopper.supervisor_mut().report_overrun(),
+                InjectKind::Overrun => self.runner.report_overrun(),
             }
         }
     }
@@ -310,14 +321,16 @@ impl Controller for FirmwareController {
     fn current_command_a(&mut self, plant: &Plant) -> f64 {
         // Before the injections: an overrun is reported into the supervisor
         // there, and must count as latched in this period.
-        let before = self.hopper.supervisor().faults();
+        let before = self.runner.hopper().supervisor().faults();
         if !self.injections.is_empty() {
             self.apply_injections(plant);
         }
         let out = {
             let mut io = self.hal.io(plant);
-            self.hopper.run_period(&mut io, self.dt_s as f32)
+            self.runner.run_period(&mut io, &mut NoCounter).out
         };
+        // The host keeps every deadline: the plant takes no time.
+        self.runner.end_period(false);
         let new = out.faults.0 & !before.0;
         if new != 0 {
             for f in Fault::ALL {

@@ -21,7 +21,7 @@
 //! * **Figures 4.4-4.6** (section 4.3): the flight PD's step response, from a
 //!   dedicated simulation of eq 4.2 `theta_dd = (k_m / J_e) i` (no spring, no
 //!   friction, the motor alone as in the thesis's bench test) with the
-//!   firmware's PD ([`flight_pd::Prepared`]) at 10 kHz, the current held over
+//!   firmware's PD ([`flight_pd::FlightPd`]) at 10 kHz, the current held over
 //!   each period and the motor integrated exactly between periods; each with
 //!   and without the amplifier's current limit. The hal-sim plant is not used
 //!   here because in flight its spring preload holds the nut on its stop, so a
@@ -538,7 +538,7 @@ struct StepResponse {
 /// Simulate the PD from rest at 0 rad to a set point `step_rad`.
 ///
 /// `limit_a` is the amplifier's clamp; `None` simulates the thesis's
-/// unlimited theory. The PD is the firmware's [`flight_pd::Prepared`], fed
+/// unlimited theory. The PD is the firmware's [`flight_pd::FlightPd`], fed
 /// the exact angle and speed (the encoder is fine enough that quantisation
 /// would not show at this scale).
 fn step_response(
@@ -563,8 +563,8 @@ fn step_response(
         gains,
         start_position_m: (step_rad * screw_m_per_rad) as f32,
     };
-    let pd = flight_pd::Prepared::new(&cfg, &act)
-        .ok_or_else(|| "flight PD configuration rejected".to_string())?;
+    let pd = flight_pd::FlightPd::new(&cfg, &act)
+        .map_err(|f| format!("flight PD configuration rejected: {}", f.0))?;
     let steps = (duration_s / PD_DT_S).round() as usize;
     let (mut theta, mut omega) = (0.0_f64, 0.0_f64);
     let mut angle = Vec::with_capacity(steps + 1);

@@ -243,9 +243,10 @@ impl Settings {
                     self.controller
                 ));
             }
-            if !c.is_valid() {
+            if let Err(f) = c.validate() {
                 return Err(format!(
-                    "shaped law constants out of range: {c:?} (see hopper_control::laws::shaped::Config)"
+                    "shaped law constant `{}` out of range: {c:?} (see hopper_control::laws::shaped::Config)",
+                    f.0
                 ));
             }
             spec.strategy_override = Some(Strategy::Shaped(c));

@@ -81,8 +81,10 @@ const SCENARIOS: [Scenario; 2] = [
 /// and the runs drift apart by a few hundredths of a millimetre.
 const GOLDEN_TOLERANCE_M: f64 = 5e-4;
 
-/// Mean control-step instructions allowed (issue 4's target).
-const STEP_MEAN_BUDGET: u64 = 600;
+/// Mean control-step instructions allowed: the whole `Hopper::step` (issue
+/// 15: one implementation per computation, no fast paths), 4.8% of a
+/// 168 MHz core at 10 kHz.
+const STEP_MEAN_BUDGET: u64 = 800;
 /// Hard ceiling per step: 10% of a 168 MHz core at 10 kHz.
 const STEP_MAX_CEILING: u64 = 1_680;
 

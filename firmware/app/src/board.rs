@@ -76,14 +76,30 @@
 //! unless its output contradicts itself. [`Watchdog::caused_last_reset`]
 //! tells the application that the IWDG caused the last reset.
 
-// The application does not use `ENCODER_COUNTER_BITS` (nor
-// `BoardIo::sysclk_hz` / `BoardIo::control_hz`) yet.
-#![allow(dead_code)]
-
 use core::convert::Infallible;
 
 use hopper_control::hal::{HopperIo, IoError, RawSample};
 use stm32f4::stm32f405::{self as pac, Peripherals};
+
+/// The DWT cycle counter as the period runner's step timer (core cycles).
+#[derive(Debug)]
+pub struct CycleCounter(());
+
+impl CycleCounter {
+    /// Starts the counter (trace enabled in the DCB, CYCCNT on).
+    pub fn start(dcb: &mut cortex_m::peripheral::DCB, dwt: &mut cortex_m::peripheral::DWT) -> Self {
+        dcb.enable_trace();
+        dwt.enable_cycle_counter();
+        CycleCounter(())
+    }
+}
+
+impl hopper_control::runner::CycleCounter for CycleCounter {
+    #[inline(always)]
+    fn now(&mut self) -> u32 {
+        cortex_m::peripheral::DWT::cycle_count()
+    }
+}
 
 /// Core clock after `init`, Hz (when the crystal starts; see [`BoardIo::sysclk_hz`]).
 pub const SYSCLK_HZ: u32 = 168_000_000;

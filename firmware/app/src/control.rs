@@ -1,6 +1,7 @@
 //! What the board and the QEMU applications share: the build-time control
-//! rate, the telemetry capture size, and the per-step instruction statistics.
+//! rate and overrun limit, the telemetry capture size and the log queue.
 
+use hopper_control::runner::Timing;
 use hopper_control::telemetry::TelemetryRing;
 
 /// Parses a decimal `u32` at compile time; `default` when absent or malformed
@@ -63,50 +64,12 @@ pub const CAPTURE_LEN: usize = 256;
 /// The capture buffer type.
 pub type Capture = TelemetryRing<CAPTURE_LEN>;
 
-/// Min / mean / max of a per-step cost (instructions or cycles).
-#[derive(Clone, Copy, Debug, defmt::Format)]
-pub struct StepStats {
-    /// Smallest sample.
-    pub min: u32,
-    /// Largest sample.
-    pub max: u32,
-    /// Sum of the samples.
-    pub sum: u64,
-    /// Number of samples.
-    pub count: u32,
-}
+/// The runner's pacing: [`CONTROL_PERIOD_S`] and [`OVERRUN_LIMIT`].
+pub const TIMING: Timing = Timing {
+    period_s: CONTROL_PERIOD_S,
+    overrun_limit: OVERRUN_LIMIT,
+};
 
-impl Default for StepStats {
-    fn default() -> Self {
-        Self::new()
-    }
-}
-
-impl StepStats {
-    /// No samples yet.
-    pub const fn new() -> Self {
-        StepStats {
-            min: u32::MAX,
-            max: 0,
-            sum: 0,
-            count: 0,
-        }
-    }
-
-    /// Adds one sample.
-    pub fn add(&mut self, x: u32) {
-        self.min = self.min.min(x);
-        self.max = self.max.max(x);
-        self.sum = self.sum.saturating_add(u64::from(x));
-        self.count = self.count.saturating_add(1);
-    }
-
-    /// Mean, rounded down (0 without samples).
-    pub fn mean(&self) -> u32 {
-        if self.count == 0 {
-            0
-        } else {
-            u32::try_from(self.sum / u64::from(self.count)).unwrap_or(u32::MAX)
-        }
-    }
-}
+/// Log items the control task can queue for the logger before one is
+/// dropped (and counted).
+pub const LOG_CAPACITY: usize = 16;

@@ -1,6 +1,8 @@
 //! `hopper-fw`: the RTIC 2 controller firmware for the hopper, on an STM32F405.
 //!
-//! Two builds of the same control step ([`hopper_control::hopper::Hopper`]):
+//! Two builds of the same control period
+//! ([`hopper_control::runner::PeriodRunner`], which the host simulator runs
+//! too); they differ only in their I/O and what paces them:
 //!
 //! * `--features board` (the default): the real board. A hardware timer
 //!   (TIM4) triggers the ADC's injected conversions at `CONTROL_HZ`; their
@@ -18,7 +20,8 @@
 //! | Task      | Priority | Trigger |
 //! |-----------|----------|---------|
 //! | `control` | 3 (highest) | board: ADC injected end of conversion (TIM4 at `CONTROL_HZ`); QEMU: SysTick at `CONTROL_HZ` |
-//! | `logger`  | 1        | spawned by `control` when a hop ends, a fault latches or a dump is asked for |
+//! | `logger`  | 1        | started in `init`; waits on the log channel (hop ledgers, faults) |
+//! | `dump`    | 1        | board: spawned when the dump button is pressed; drains the capture |
 //! | `idle`    | 0        | busy loop (no `wfi`: QEMU 7.2 loses SysTick ticks while sleeping) |
 //!
 //! # Safety
@@ -89,62 +92,81 @@ unsafe fn HardFault(_frame: &cortex_m_rt::ExceptionFrame) -> ! {
     }
 }
 
-/// What the control task hands to the logger.
+/// The log channel's ends and the count of items it had no room for.
 #[cfg(target_os = "none")]
-#[derive(Clone, Copy, defmt::Format)]
-pub enum LogItem {
-    /// A hop ended (the firmware's own ledger).
-    Hop(hopper_control::telemetry::HopLedger),
-    /// A fault latched, with the control period it latched in.
-    Faults {
-        /// Control period number.
-        step: u32,
-        /// All latched faults (bit set, see `Fault::ALL`).
-        faults: hopper_control::supervisor::Faults,
-    },
-}
+pub mod log {
+    use crate::control::LOG_CAPACITY;
+    use hopper_control::runner::LogItem;
 
-#[cfg(target_os = "none")]
-impl LogItem {
-    /// What a period gives the logger: newly latched faults first (they
-    /// matter more than a hop ledger in the same period), else a finished hop.
-    fn after_step(
-        out: &hopper_control::hopper::StepOutput,
-        faults_before: hopper_control::supervisor::Faults,
-    ) -> Option<Self> {
-        if out.faults != faults_before {
-            return Some(LogItem::Faults {
-                step: out.record.step,
-                faults: out.faults,
-            });
+    /// The control task's end.
+    pub type Sender = rtic_sync::channel::Sender<'static, LogItem, LOG_CAPACITY>;
+    /// The logger's end.
+    pub type Receiver = rtic_sync::channel::Receiver<'static, LogItem, LOG_CAPACITY>;
+
+    /// The control task's side of the log: never blocks; an item that finds
+    /// the channel full is dropped and counted, and the count goes out with
+    /// the next item that fits.
+    pub struct Log {
+        tx: Sender,
+        dropped: u32,
+    }
+
+    impl Log {
+        /// Wraps the sending end.
+        pub fn new(tx: Sender) -> Self {
+            Self { tx, dropped: 0 }
         }
-        out.hop.map(LogItem::Hop)
+
+        /// Queues `item` if there is room.
+        pub fn push(&mut self, item: LogItem) {
+            if self.tx.try_send(item).is_err() {
+                self.dropped = self.dropped.saturating_add(1);
+            }
+        }
+
+        /// Items dropped so far.
+        pub fn dropped(&self) -> u32 {
+            self.dropped
+        }
+    }
+
+    /// Prints one item (board: at info and warn level; QEMU: always, as
+    /// its run's log is the test's evidence).
+    pub fn print(item: &LogItem) {
+        #[cfg(not(feature = "qemu-sim"))]
+        match item {
+            LogItem::Hop(h) => defmt::info!("hop {}", h),
+            LogItem::Faults { step, faults } => {
+                defmt::warn!("faults latched at step {=u32}: {}", step, faults)
+            }
+        }
+        #[cfg(feature = "qemu-sim")]
+        match item {
+            LogItem::Hop(h) => defmt::println!("hop {}", h),
+            LogItem::Faults { step, faults } => {
+                defmt::println!("faults latched at step {=u32}: {}", step, faults)
+            }
+        }
     }
 }
 
-/// Messages waiting for the logger.
-#[cfg(target_os = "none")]
-pub type LogQueue = heapless::Deque<LogItem, 16>;
-
 /// The board application.
 #[cfg(all(target_os = "none", not(feature = "qemu-sim")))]
-#[rtic::app(device = stm32f4::stm32f405, peripherals = true, dispatchers = [FSMC])]
+#[rtic::app(device = stm32f4::stm32f405, peripherals = true, dispatchers = [FSMC, FPU])]
 mod app {
-    use crate::board::{self, BoardIo, DumpButton, Watchdog};
-    use crate::control::{Capture, CONTROL_HZ, CONTROL_PERIOD_S, OVERRUN_LIMIT};
-    use crate::{LogItem, LogQueue};
+    use crate::board::{self, BoardIo, CycleCounter, DumpButton, Watchdog};
+    use crate::control::{Capture, CONTROL_HZ, LOG_CAPACITY, TIMING};
+    use crate::log::{self, Log};
     use cortex_m::peripheral::NVIC;
-    use hopper_control::hal::HopperIo;
-    use hopper_control::hopper::{Hopper, HopperConfig};
-    use hopper_control::watchdog::{Decision, FeedPolicy};
+    use hopper_control::hopper::HopperConfig;
+    use hopper_control::runner::{LogItem, PeriodRunner};
+    use rtic_sync::make_channel;
     use stm32f4::stm32f405::Interrupt;
 
     #[shared]
     struct Shared {
         /// Per-step records, drained on request.
         capture: Capture,
-        /// Hop ledgers and faults for the logger.
-        log: LogQueue,
     }
 
     #[local]
@@ -152,8 +174,9 @@ mod app {
         io: BoardIo,
         watchdog: Watchdog,
         dump: DumpButton,
-        hopper: Hopper,
-        feed_policy: FeedPolicy,
+        runner: PeriodRunner,
+        cycles: CycleCounter,
+        log: Log,
     }
 
     #[init]
@@ -162,36 +185,62 @@ mod app {
         // TIM2 and TIM5 count the encoders over 32 bits.
         cfg.calibration.motor_counter_bits = board::ENCODER_COUNTER_BITS;
         cfg.calibration.height_counter_bits = board::ENCODER_COUNTER_BITS;
-        let board = board::init(cx.device, CONTROL_HZ, cfg.calibration.dac_zero_code);
-        // Hopper::new only fails on an invalid configuration; the default is
-        // valid (unit-tested). Should it fail, the control task never runs,
-        // the watchdog is not fed, and the amplifier stays disabled.
-        let Ok(mut hopper) = Hopper::new(cfg) else {
-            defmt::error!("invalid controller configuration: amplifier stays off");
-            crate::disable_amplifier();
-            #[allow(clippy::empty_loop)]
-            loop {}
+        // Validated before the board (and its watchdog) starts: a refused
+        // configuration leaves the amplifier off (the pin is an input with
+        // its external pull-down) and the MCU parked, not in a reset loop.
+        let mut runner = match PeriodRunner::new(cfg, TIMING) {
+            Ok(r) => r,
+            Err(e) => {
+                crate::disable_amplifier();
+                defmt::error!(
+                    "invalid controller configuration ({}): amplifier stays off",
+                    e
+                );
+                loop {
+                    cortex_m::asm::nop();
+                }
+            }
         };
+        let mut core = cx.core;
+        let cycles = CycleCounter::start(&mut core.DCB, &mut core.DWT);
+        let board = board::init(cx.device, CONTROL_HZ, cfg.calibration.dac_zero_code);
         let watchdog = board.watchdog;
         if watchdog.caused_last_reset() {
             // The control loop stopped or misbehaved last time: start faulted,
             // amplifier off, until someone looks (a reset of the latch).
             defmt::error!("watchdog reset: amplifier stays off (overrun latched)");
-            hopper.supervisor_mut().report_overrun();
+            runner.report_overrun();
         }
-        let feed_policy = FeedPolicy::for_hopper(hopper.config());
-        defmt::info!("hopper-fw: board build, control at {=u32} Hz", CONTROL_HZ);
+        let (tx, rx) = make_channel!(LogItem, LOG_CAPACITY);
+        if logger::spawn(rx).is_err() {
+            defmt::error!("logger did not start: hop and fault logs are off");
+        }
+        if board.io.control_hz() != CONTROL_HZ {
+            // The runner steps with the built-in period: on another rate
+            // every filter and law would be wrong, so the motor stays off.
+            defmt::error!(
+                "control timer at {=u32} Hz, not {=u32} Hz: amplifier stays off (overrun latched)",
+                board.io.control_hz(),
+                CONTROL_HZ
+            );
+            runner.report_overrun();
+        }
+        defmt::info!(
+            "hopper-fw: board build, control at {=u32} Hz, core clock {=u32} Hz",
+            board.io.control_hz(),
+            board.io.sysclk_hz()
+        );
         (
             Shared {
                 capture: Capture::new(),
-                log: LogQueue::new(),
             },
             Local {
                 io: board.io,
                 watchdog,
                 dump: board.dump_button,
-                hopper,
-                feed_policy,
+                runner,
+                cycles,
+                log: Log::new(tx),
             },
         )
     }
@@ -203,86 +252,70 @@ mod app {
         }
     }
 
-    /// The control period: fresh ADC samples are in; read, step, write.
-    #[task(binds = ADC, priority = 3, local = [io, watchdog, dump, hopper, feed_policy, polls: u32 = 0, late_in_a_row: u32 = 0], shared = [capture, log])]
+    /// The control period: fresh ADC samples are in; the runner reads, steps
+    /// and writes; this task only paces it, feeds the watchdog and queues
+    /// the log (neither blocks).
+    #[task(binds = ADC, priority = 3, local = [io, watchdog, dump, runner, cycles, log, polls: u32 = 0], shared = [capture])]
     fn control(mut cx: control::Context) {
         if !cx.local.io.ack_control_irq() {
             return;
         }
-        let before = cx.local.hopper.supervisor().faults();
-        let out = cx.local.hopper.run_period(cx.local.io, CONTROL_PERIOD_S);
-        // The next conversion already finished: this period overran. A few in
-        // a row mean the loop cannot keep its rate: go safe.
-        if NVIC::is_pending(Interrupt::ADC) {
-            *cx.local.late_in_a_row += 1;
-            if *cx.local.late_in_a_row >= OVERRUN_LIMIT {
-                cx.local.hopper.supervisor_mut().report_overrun();
-            }
-        } else {
-            *cx.local.late_in_a_row = 0;
+        let p = cx.local.runner.run_period(cx.local.io, cx.local.cycles);
+        // The next conversion already finished: this period overran.
+        cx.local.runner.end_period(NVIC::is_pending(Interrupt::ADC));
+        if p.feed_watchdog {
+            cx.local.watchdog.feed();
         }
-        // Fed only here, after a step whose output is consistent (see
-        // `FeedPolicy`): if the control task stops or misbehaves, the MCU
-        // resets with the amplifier disabled.
-        match cx.local.feed_policy.after_step(&out) {
-            Decision::Feed => cx.local.watchdog.feed(),
-            Decision::Starve(_) => {
-                let zero = cx.local.hopper.config().calibration.dac_zero_code;
-                let _ = cx.local.io.write_dac(zero);
-                let _ = cx.local.io.set_amp_enabled(false);
-            }
+        cx.shared.capture.lock(|c| c.push(p.out.record));
+        if let Some(item) = p.log {
+            cx.local.log.push(item);
         }
-        cx.shared.capture.lock(|c| c.push(out.record));
-        let item = LogItem::after_step(&out, before);
         *cx.local.polls = cx.local.polls.wrapping_add(1);
-        let dump = cx.local.polls.is_multiple_of(100) && cx.local.dump.pressed();
-        if let Some(item) = item {
-            cx.shared.log.lock(|q| {
-                let _ = q.push_back(item);
-            });
-        }
-        if item.is_some() || dump {
-            let _ = logger::spawn(dump);
+        if cx.local.polls.is_multiple_of(100) && cx.local.dump.pressed() {
+            let _ = dump::spawn(cx.local.log.dropped());
         }
     }
 
-    /// Logs hop ledgers and faults; on request, dumps the capture buffer.
-    #[task(priority = 1, shared = [capture, log])]
-    async fn logger(mut cx: logger::Context, dump: bool) {
-        while let Some(item) = cx.shared.log.lock(|q| q.pop_front()) {
-            match item {
-                LogItem::Hop(h) => defmt::info!("hop {}", h),
-                LogItem::Faults { step, faults } => {
-                    defmt::warn!("faults latched at step {=u32}: {}", step, faults)
-                }
-            }
+    /// Logs hop ledgers and faults as the control task queues them.
+    #[task(priority = 1)]
+    async fn logger(_: logger::Context, mut rx: log::Receiver) {
+        while let Ok(item) = rx.recv().await {
+            log::print(&item);
         }
-        if dump {
-            defmt::info!("capture dump begins");
-            while let Some(r) = cx.shared.capture.lock(|c| c.pop()) {
-                defmt::info!("{}", r);
-            }
-            let dropped = cx.shared.capture.lock(|c| c.dropped());
-            defmt::info!("capture dump ends ({=u32} older records dropped)", dropped);
+    }
+
+    /// Dumps the capture buffer (the dump button).
+    #[task(priority = 1, shared = [capture])]
+    async fn dump(mut cx: dump::Context, log_dropped: u32) {
+        defmt::info!("capture dump begins");
+        while let Some(r) = cx.shared.capture.lock(|c| c.pop()) {
+            defmt::info!("{}", r);
         }
+        let dropped = cx.shared.capture.lock(|c| c.dropped());
+        defmt::info!(
+            "capture dump ends ({=u32} older records dropped; {=u32} log items dropped)",
+            dropped,
+            log_dropped
+        );
     }
 }
 
-/// The QEMU application: the same control step on the simulated hopper.
+/// The QEMU application: the same period runner on the simulated hopper.
 #[cfg(all(target_os = "none", feature = "qemu-sim"))]
 #[rtic::app(device = stm32f4::stm32f405, peripherals = true, dispatchers = [FSMC])]
 mod app {
-    use crate::control::{Capture, StepStats, CONTROL_HZ, CONTROL_PERIOD_S, OVERRUN_LIMIT};
-    use crate::{LogItem, LogQueue};
+    use crate::control::{Capture, CONTROL_HZ, CONTROL_PERIOD_S, LOG_CAPACITY, TIMING};
+    use crate::log::{self, Log};
     use cortex_m::peripheral::syst::SystClkSource;
     use cortex_m::peripheral::{SCB, SYST};
     use cortex_m_semihosting::debug;
     use hal_sim::metrics::{hops_to_converge, steady_apex};
     use hal_sim::mock::{firmware_config, SensorConfig, SimHal};
     use hal_sim::{Event, Params, Plant};
-    use hopper_control::hal::HopperIo;
-    use hopper_control::hopper::{ApexLoop, Hopper, StepPart, Strategy};
+    use hopper_control::hopper::{ApexLoop, Strategy};
     use hopper_control::laws::shaped;
+    use hopper_control::runner::{CycleCounter, LogItem, PeriodRunner};
+    use rtic_sync::make_channel;
     use stm32f4::stm32f405::TIM5;
 
     /// QEMU clocks SysTick (and counts guest time) at the netduinoplus2's
@@ -337,36 +370,47 @@ mod app {
     /// stays at zero) before it stops.
     const SAFE_PERIODS_AFTER_FAULT: u32 = 100;
 
-    /// The simulated hopper and the statistics of the run (the controller
-    /// itself is a resource of its own, as on the board).
+    /// TIM5 as the runner's counter: a free-running 32-bit counter that QEMU
+    /// runs at 1 GHz of virtual time, so under `-icount shift=0` it counts
+    /// guest instructions.
+    pub struct Instructions {
+        tim5: TIM5,
+        overhead: u32,
+    }
+
+    impl CycleCounter for Instructions {
+        #[inline(always)]
+        fn now(&mut self) -> u32 {
+            self.tim5.cnt().read().bits()
+        }
+        fn overhead(&self) -> u32 {
+            self.overhead
+        }
+    }
+
+    /// The simulated hopper and what the summary reports.
     pub struct Sim {
         plant: Plant,
         hal: SimHal,
         apexes: heapless::Vec<f64, MAX_APEXES>,
-        step_instr: StepStats,
-        parts: [StepStats; 6],
-        timer_overhead: u32,
-        missed: u32,
-        missed_in_a_row: u32,
         /// Period the first fault latched in, if any.
         fault_period: Option<u32>,
         /// Largest |current| commanded (DAC and enable) after the first fault, A.
         max_current_after_fault_a: f32,
-        period: u32,
     }
 
     #[shared]
     struct Shared {
         capture: Capture,
-        log: LogQueue,
     }
 
     #[local]
     struct Local {
-        hopper: Hopper,
+        runner: PeriodRunner,
         sim: Sim,
-        tim5: TIM5,
+        counter: Instructions,
         syst: SYST,
+        log: Log,
     }
 
     #[init]
@@ -379,8 +423,6 @@ mod app {
         dp.GPIOB.bsrr().write(|w| w.br0().set_bit());
         dp.GPIOB.moder().modify(|_, w| w.moder0().output());
 
-        // TIM5: free-running 32-bit counter. QEMU runs it at 1 GHz of virtual
-        // time, so under `-icount shift=0` it counts guest instructions.
         dp.RCC.apb1enr().modify(|_, w| w.tim5en().enabled());
         let _ = dp.RCC.apb1enr().read();
         let tim5 = dp.TIM5;
@@ -392,7 +434,10 @@ mod app {
         // every measurement.
         let a = tim5.cnt().read().bits();
         let b = tim5.cnt().read().bits();
-        let timer_overhead = b.wrapping_sub(a);
+        let counter = Instructions {
+            tim5,
+            overhead: b.wrapping_sub(a),
+        };
 
         let params = Params::design();
         let cfg = firmware_config(
@@ -406,13 +451,20 @@ mod app {
             TARGET_APEX_M,
             START_APEX_M,
         );
-        let (Ok(plant), Ok(hopper)) = (Plant::new(params, START_APEX_M), Hopper::new(cfg)) else {
+        let (Ok(plant), Ok(runner)) = (
+            Plant::new(params, START_APEX_M),
+            PeriodRunner::new(cfg, TIMING),
+        ) else {
             defmt::error!("scenario set-up failed");
             debug::exit(debug::EXIT_FAILURE);
             #[allow(clippy::empty_loop)]
             loop {}
         };
         let hal = SimHal::new(&cfg.calibration, &SensorConfig::DEFAULT);
+        let (tx, rx) = make_channel!(LogItem, LOG_CAPACITY);
+        if logger::spawn(rx).is_err() {
+            defmt::error!("logger did not start");
+        }
 
         core.SYST.set_clock_source(SystClkSource::Core);
         core.SYST.set_reload(SYSTICK_HZ / CONTROL_HZ - 1);
@@ -428,25 +480,19 @@ mod app {
         (
             Shared {
                 capture: Capture::new(),
-                log: LogQueue::new(),
             },
             Local {
-                hopper,
+                runner,
                 sim: Sim {
                     plant,
                     hal,
                     apexes: heapless::Vec::new(),
-                    step_instr: StepStats::new(),
-                    parts: [StepStats::new(); 6],
-                    timer_overhead,
-                    missed: 0,
-                    missed_in_a_row: 0,
                     fault_period: None,
                     max_current_after_fault_a: 0.0,
-                    period: 0,
                 },
-                tim5,
+                counter,
                 syst: core.SYST,
+                log: Log::new(tx),
             },
         )
     }
@@ -459,65 +505,28 @@ mod app {
         }
     }
 
-    /// One control period: sample the simulated sensors, run the control
-    /// step (timed), write the DAC, then integrate the plant to the next tick.
+    /// One control period through the runner, on the simulated sensors and
+    /// amplifier, then the plant integrated to the next tick.
     ///
     /// The plant is integrated with SysTick stopped: the simulated world
     /// takes no time from the firmware's point of view, so it cannot delay
     /// the next control period however long an event search takes (soft
-    /// `f64` on the M4F). `missed` then counts periods where the firmware's
-    /// own work (control step, I/O, logging) overran.
-    #[task(binds = SysTick, priority = 3, local = [hopper, sim, tim5, syst], shared = [capture, log])]
+    /// `f64` on the M4F). A missed deadline then means the firmware's own
+    /// work (the period, logging) overran.
+    #[task(binds = SysTick, priority = 3, local = [runner, sim, counter, syst, log], shared = [capture])]
     fn control(mut cx: control::Context) {
         let sim = &mut *cx.local.sim;
-        let hopper = &mut *cx.local.hopper;
-        let tim5 = &*cx.local.tim5;
-        let raw = sim.hal.sample(&sim.plant);
-        let before = hopper.supervisor().faults();
-        // Odd periods time the control step proper, from the raw sample to the
-        // DAC code (the `Supervise` mark; the hop ledger and the telemetry
-        // record come after it); even periods time it part by part (the marks
-        // cost a few instructions each, so they are kept out of the
-        // whole-step figure).
-        let out = if sim.period % 2 == 1 {
-            let t0 = tim5.cnt().read().bits();
-            let mut t_dac = t0;
-            let out = hopper.step_marked(Some(&raw), CONTROL_PERIOD_S, &mut |p: StepPart| {
-                if p == StepPart::Supervise {
-                    t_dac = tim5.cnt().read().bits();
-                }
-            });
-            sim.step_instr
-                .add(t_dac.wrapping_sub(t0).saturating_sub(sim.timer_overhead));
-            out
-        } else {
-            let mut last = tim5.cnt().read().bits();
-            let overhead = sim.timer_overhead;
-            let parts = &mut sim.parts;
-            hopper.step_marked(Some(&raw), CONTROL_PERIOD_S, &mut |p: StepPart| {
-                let now = tim5.cnt().read().bits();
-                if let Some(s) = parts.get_mut(p as usize) {
-                    s.add(now.wrapping_sub(last).saturating_sub(overhead));
-                }
-                last = tim5.cnt().read().bits();
-            })
-        };
-        {
+        let runner = &mut *cx.local.runner;
+        let p = {
             let mut io = sim.hal.io(&sim.plant);
-            // The mock I/O cannot fail unless a test injects a fault.
-            let _ = io.write_dac(out.dac_code);
-            let _ = io.set_amp_enabled(out.command.amp_enable);
-        }
-        cx.shared.capture.lock(|c| c.push(out.record));
-        let item = LogItem::after_step(&out, before);
-        if let Some(item) = item {
-            cx.shared.log.lock(|q| {
-                let _ = q.push_back(item);
-            });
-            let _ = logger::spawn();
+            runner.run_period(&mut io, cx.local.counter)
+        };
+        cx.shared.capture.lock(|c| c.push(p.out.record));
+        if let Some(item) = p.log {
+            cx.local.log.push(item);
         }
 
-        // The plant between this tick and the next (not part of the step).
+        // The plant between this tick and the next (not part of the period).
         cx.local.syst.disable_counter();
         let current_a = sim.hal.mean_current_a(f64::from(CONTROL_PERIOD_S));
         let apexes = &mut sim.apexes;
@@ -534,75 +543,48 @@ mod app {
             debug::exit(debug::EXIT_FAILURE);
         }
         cx.local.syst.enable_counter();
-        sim.period += 1;
-        if SCB::is_pendst_pending() {
-            // The next tick came before this one finished: a missed deadline.
-            sim.missed += 1;
-            sim.missed_in_a_row += 1;
-            if sim.missed_in_a_row >= OVERRUN_LIMIT {
-                // The loop cannot keep its rate: go safe (latched until reset).
-                hopper.supervisor_mut().report_overrun();
-            }
-        } else {
-            sim.missed_in_a_row = 0;
-        }
-        if hopper.supervisor().is_faulted() {
-            let first = *sim.fault_period.get_or_insert(sim.period);
+        // The next tick came before this one finished: a missed deadline.
+        runner.end_period(SCB::is_pendst_pending());
+        let period = runner.periods();
+        if runner.hopper().supervisor().is_faulted() {
+            let first = *sim.fault_period.get_or_insert(period);
             let commanded = sim.hal.commanded_current_a().abs() as f32;
-            if sim.period > first {
+            if period > first {
                 sim.max_current_after_fault_a = sim.max_current_after_fault_a.max(commanded);
             }
             // Keep running a little to show the command stays at zero, then stop.
-            if sim.period >= first + SAFE_PERIODS_AFTER_FAULT {
-                finish(sim, hopper, &mut cx.shared.log);
+            if period >= first + SAFE_PERIODS_AFTER_FAULT {
+                finish(sim, runner, cx.local.log);
             }
         }
-        if sim.period >= DURATION_S * CONTROL_HZ {
-            finish(sim, hopper, &mut cx.shared.log);
+        if period >= DURATION_S * CONTROL_HZ {
+            finish(sim, runner, cx.local.log);
         }
     }
 
     /// Logs the summary and exits QEMU: success only if the hop converged
     /// and no fault or deadline miss occurred.
-    fn finish(sim: &Sim, hopper: &Hopper, log: &mut impl rtic::Mutex<T = LogQueue>) -> ! {
-        while let Some(item) = log.lock(|q| q.pop_front()) {
-            log_item(item);
-        }
+    fn finish(sim: &Sim, runner: &PeriodRunner, log: &Log) -> ! {
         let steady = steady_apex(&sim.apexes);
         let converged = hops_to_converge(&sim.apexes, TARGET_APEX_M, 0.02);
-        let faults = hopper.supervisor().faults();
-        let names = [
-            "convert",
-            "estimate",
-            "energy",
-            "law",
-            "supervise",
-            "telemetry",
-        ];
-        for (name, p) in names.iter().zip(&sim.parts) {
-            defmt::println!(
-                "part {=str} min={=u32} mean={=u32} max={=u32}",
-                name,
-                p.min,
-                p.mean(),
-                p.max
-            );
-        }
+        let faults = runner.hopper().supervisor().faults();
+        let cost = runner.step_cost();
         defmt::println!(
-            "summary steady_apex_m={=f64} hops_to_converge={=i32} step_instr_min={=u32} step_instr_mean={=u32} step_instr_max={=u32} missed={=u32} faults={=u16} periods={=u32} fault_period={=i64} amp_enabled={=bool} max_current_after_fault_a={=f32}",
+            "summary steady_apex_m={=f64} hops_to_converge={=i32} step_instr_min={=u32} step_instr_mean={=u32} step_instr_max={=u32} missed={=u32} faults={=u16} periods={=u32} fault_period={=i64} amp_enabled={=bool} max_current_after_fault_a={=f32} log_dropped={=u32}",
             steady.unwrap_or(-1.0),
             converged.map_or(-1, |k| i32::try_from(k).unwrap_or(i32::MAX)),
-            sim.step_instr.min,
-            sim.step_instr.mean(),
-            sim.step_instr.max,
-            sim.missed,
+            cost.min,
+            cost.mean(),
+            cost.max,
+            runner.missed(),
             faults.0,
-            sim.period,
+            runner.periods(),
             sim.fault_period.map_or(-1, i64::from),
             sim.hal.amp_enabled(),
-            sim.max_current_after_fault_a
+            sim.max_current_after_fault_a,
+            log.dropped()
         );
-        let ok = converged.is_some() && faults.is_empty() && sim.missed == 0;
+        let ok = converged.is_some() && faults.is_empty() && runner.missed() == 0;
         debug::exit(if ok {
             debug::EXIT_SUCCESS
         } else {
@@ -612,20 +594,11 @@ mod app {
         loop {}
     }
 
-    fn log_item(item: LogItem) {
-        match item {
-            LogItem::Hop(h) => defmt::println!("hop {}", h),
-            LogItem::Faults { step, faults } => {
-                defmt::println!("faults latched at step {=u32}: {}", step, faults)
-            }
-        }
-    }
-
     /// Logs hop ledgers and faults as they happen.
-    #[task(priority = 1, shared = [log])]
-    async fn logger(mut cx: logger::Context) {
-        while let Some(item) = cx.shared.log.lock(|q| q.pop_front()) {
-            log_item(item);
+    #[task(priority = 1)]
+    async fn logger(_: logger::Context, mut rx: log::Receiver) {
+        while let Ok(item) = rx.recv().await {
+            log::print(&item);
         }
     }
 }

@@ -218,17 +218,6 @@ impl Calibration {
         }
     }
 
-    /// DAC code for a current command, A.
-    ///
-    /// The current is first clamped to `±current_limit_a`, then converted to
-    /// `dac_zero_code + current / dac_amps_per_code` rounded to the nearest
-    /// code (halves up), then clamped to `0..=2^dac_bits - 1` (see [`DacMap`]).
-    /// NaN gives the zero-current code (fail-safe). Assumes a validated calibration;
-    /// an invalid one still returns a code in range.
-    pub fn current_to_dac_code(&self, current_a: f32) -> u16 {
-        DacMap::new(self).code(current_a)
-    }
-
     /// Current commanded by a DAC code, A (codes above the DAC range are clamped to it).
     pub fn dac_code_to_current_a(&self, code: u16) -> f32 {
         let max = max_code(self.dac_bits);
@@ -242,9 +231,9 @@ impl Calibration {
     }
 }
 
-/// The current-to-DAC-code map of a [`Calibration`] with its constants
-/// worked out once ([`Calibration::current_to_dac_code`] builds one per
-/// call; the control step keeps one): about fifteen instructions on the M4F.
+/// The current-to-DAC-code map of a [`Calibration`], its constants worked
+/// out once when it is built (the control step keeps one): about fifteen
+/// instructions on the M4F.
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct DacMap {
@@ -358,7 +347,7 @@ pub struct Measurements {
 /// library call): with the defaults that is ±8388 motor revolutions
 /// (±42 m of nut travel, far beyond the 50 mm stroke) and ±1054 m of height.
 /// Beyond that the conversion returns [`CalError::PositionOutOfRange`].
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct Converter {
     cal: Calibration,
     last: Option<(u32, u32)>,
@@ -589,7 +578,7 @@ mod tests {
     fn converter_rejects_out_of_range_and_keeps_state() -> Result<(), CalError> {
         let mut conv = Converter::new(Calibration::default())?;
         conv.convert(&RawSample::default())?;
-        let before = conv;
+        let before = conv.clone();
         assert_eq!(
             conv.convert(&RawSample {
                 loadcell_code: 4096,
@@ -648,17 +637,17 @@ mod tests {
     #[test]
     fn dac_round_trip_and_clamps() {
         let cal = Calibration::default();
-        assert_eq!(cal.current_to_dac_code(0.0), 2048);
-        assert_eq!(cal.current_to_dac_code(f32::NAN), 2048);
+        assert_eq!(DacMap::new(&cal).code(0.0), 2048);
+        assert_eq!(DacMap::new(&cal).code(f32::NAN), 2048);
         // 10 A / (40/2048 A) = 512 codes.
-        assert_eq!(cal.current_to_dac_code(10.0), 2560);
-        assert_eq!(cal.current_to_dac_code(-10.0), 1536);
+        assert_eq!(DacMap::new(&cal).code(10.0), 2560);
+        assert_eq!(DacMap::new(&cal).code(-10.0), 1536);
         // Clamped to the 33.7 A limit: 33.7 * 51.2 = 1725.44 -> 1725.
-        assert_eq!(cal.current_to_dac_code(1e9), 2048 + 1725);
-        assert_eq!(cal.current_to_dac_code(f32::NEG_INFINITY), 2048 - 1725);
+        assert_eq!(DacMap::new(&cal).code(1e9), 2048 + 1725);
+        assert_eq!(DacMap::new(&cal).code(f32::NEG_INFINITY), 2048 - 1725);
         assert!(close(cal.dac_code_to_current_a(2560), 10.0, 1e-5));
         assert!(close(
-            cal.dac_code_to_current_a(cal.current_to_dac_code(5.0)),
+            cal.dac_code_to_current_a(DacMap::new(&cal).code(5.0)),
             5.0,
             0.5 * cal.dac_amps_per_code
         ));
@@ -667,8 +656,8 @@ mod tests {
             current_limit_a: 1000.0,
             ..cal
         };
-        assert_eq!(wide.current_to_dac_code(1000.0), 4095);
-        assert_eq!(wide.current_to_dac_code(-1000.0), 0);
+        assert_eq!(DacMap::new(&wide).code(1000.0), 4095);
+        assert_eq!(DacMap::new(&wide).code(-1000.0), 0);
         assert!(close(cal.torque_nm(33.7), 1.0, 1e-3));
     }
 
@@ -690,7 +679,7 @@ mod tests {
                 dac_bits: bits,
                 ..Calibration::default()
             };
-            let code = cal.current_to_dac_code(current);
+            let code = DacMap::new(&cal).code(current);
             proptest::prop_assert!(code <= max_code(bits));
             let sane = amps_per_code.is_finite() && amps_per_code > 0.0 && (1.0 / amps_per_code).is_finite()
                 && limit.is_finite() && limit > 0.0;

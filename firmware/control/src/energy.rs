@@ -132,20 +132,13 @@ impl EnergyModel {
         })
     }
 
-    /// Total energy of [`total_energy_j`], J.
+    /// Total energy of [`total_energy_j`], J. A non-finite input is refused
+    /// (one sum and one test), and so is a result that overflows.
     #[inline]
     pub fn total_j(&self, x: &EnergyInput) -> Result<f32, EnergyError> {
         if !x.is_finite() {
             return Err(EnergyError::NonFiniteInput);
         }
-        self.total_j_of_finite(x)
-    }
-
-    /// [`total_j`](Self::total_j) for inputs the caller knows to be finite
-    /// (the control step's converted sample and filtered velocities are);
-    /// the result is still checked.
-    #[inline]
-    pub(crate) fn total_j_of_finite(&self, x: &EnergyInput) -> Result<f32, EnergyError> {
         let thd = x.motor_rate_rad_s;
         let zd = x.body_velocity_mps;
         let z = x.body_height_m;

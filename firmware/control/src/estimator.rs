@@ -134,7 +134,7 @@ pub enum EstimatorError {
 }
 
 /// Flight/stance estimator with event detection. See the module doc.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct PhaseEstimator {
     cfg: EstimatorConfig,
     stiffness_n_per_m: f32,
@@ -257,14 +257,6 @@ impl PhaseEstimator {
             self.rejected_samples = self.rejected_samples.saturating_add(1);
             return None;
         }
-        self.update_of_finite(m, dt_s)
-    }
-
-    /// [`update`](Self::update) for a sample the caller knows to be finite
-    /// (the control step's converter returns finite values only); `dt_s` is
-    /// still checked.
-    #[inline(always)]
-    pub(crate) fn update_of_finite(&mut self, m: &PhaseInput, dt_s: f32) -> Option<PhaseEvent> {
         // NaN fails `dt_s > 0.0`; +inf fails `dt_s < f32::INFINITY`.
         if !(dt_s > 0.0 && dt_s < f32::INFINITY) {
             self.rejected_samples = self.rejected_samples.saturating_add(1);

@@ -14,119 +14,24 @@
 //! 6. turn the approved current into a DAC code, and update the per-hop
 //!    ledger and the telemetry record.
 //!
-//! [`Hopper::run_period`] wraps it around a [`HopperIo`]: read, step, write the
-//! DAC, set the enable, and latch a fault if the I/O itself fails.
+//! [`crate::runner::PeriodRunner`] wraps it around the I/O: read, step,
+//! write the DAC, set the enable, the watchdog decision and overruns.
 
-use crate::calibration::{CalError, Calibration, Converter, DacMap, Measurements};
+#[cfg(feature = "fault-injection")]
+use crate::calibration::Measurements;
+use crate::calibration::{CalError, Calibration, Converter, DacMap};
 use crate::energy::{EnergyInput, EnergyModel};
 use crate::estimator::{
     EstimatorConfig, EstimatorError, Phase, PhaseEstimator, PhaseEvent, PhaseInput,
 };
-use crate::hal::{HopperIo, RawSample};
-use crate::laws::{
-    energy_torque, flight_pd, modified_torque, or_zero, shaped, Actuator, StanceController,
-    StanceInput, StanceLaw,
-};
+use crate::hal::RawSample;
+use crate::laws::{flight_pd, ControlInput, ControlLaw, Controller, EventInput, InvalidField};
 use crate::model::{ModelError, ModelParams};
 use crate::supervisor::{Command, Fault, Faults, Supervisor, SupervisorConfig, SupervisorInput};
 use crate::telemetry::{HopLedger, HopLedgerBuilder, StepRecord};
 
-/// Which energy an apex-regulating law feeds back.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub enum EnergyMeasure {
-    /// Total mechanical energy, eq 2.44 (rotor and nut motion included).
-    Total,
-    /// Body energy only ([`crate::energy::body_energy_j`]): what reaches the apex.
-    Body,
-}
-
-/// The apex-regulating energy law (`energy-apex`): eq 2.52 in stance, with
-/// `E_D` corrected after every flight apex from the measured apex height.
-///
-/// The thesis's eq 2.52 settles where the torque it asks for balances the
-/// losses, i.e. below `E_D`, and it counts energy that never reaches the
-/// apex (rotor kinetic energy, spring energy stored by the actuator). An
-/// outer per-hop loop removes both biases: after apex `k` with toe height
-/// `H_k`,
-///
-/// ```text
-/// offset_{k+1} = clamp(offset_k + K_i (E_D(H_target) - E_D(H_k)), ±max_offset)
-/// E_D,eff = E_D(H_target) + offset
-/// ```
-///
-/// an integral action on the apex error in energy units (J per J).
-#[derive(Debug, Clone, Copy, PartialEq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct ApexLoop {
-    /// The inner law, eq 2.52 (`K_e` in N m/J). Default `K_e = 3` (full
-    /// torque for a 0.33 J deficit) and no negative torque: with the 1 N m
-    /// motor the Table 2.1 gain of 0.2 leaves the law short of torque
-    /// exactly when the hop is low, and pulling energy out with negative
-    /// torque from a high start drives the hop into the low, lossy regime
-    /// (below about 0.02 m, where full stance torque cannot sustain hopping
-    /// with the eq 4.13 flight PD); passive decay brings a high hop down
-    /// gently instead. Tuned in simulation (design parameters, targets
-    /// 0.03-0.05 m, starts 0.02-0.25 m).
-    pub law: energy_torque::Config,
-    /// The energy fed back.
-    pub measure: EnergyMeasure,
-    /// Proportional gain `K_p`, dimensionless (J of correction per J of the
-    /// last apex error), >= 0: damps the slow outer loop. Default 0.
-    pub proportional: f32,
-    /// Integral gain `K_i`, dimensionless (J of offset per J of apex error), in (0, 10). Default 0.6.
-    pub gain: f32,
-    /// Bound on the offset, J (>= 0). Default 30.
-    pub max_offset_j: f32,
-    /// Lower bound on the offset, J (<= 0). Default -5: the inner law only
-    /// ever falls short of `E_D` (losses, rotor energy counted), so a large
-    /// negative offset can only be wind-up from a high start.
-    pub min_offset_j: f32,
-    /// Pre-touchdown spin-up (section 4.4.3's idea): on the way down, once
-    /// the toe is below this fraction of the target apex, the stance law's
-    /// command is applied in flight already, so the motor is moving at
-    /// touchdown. In `[0, 1]`; 0 disables it. Default 0 (off: in simulation it
-    /// did not widen the range of starts that converge).
-    pub spin_up_fraction: f32,
-}
-
-impl Default for ApexLoop {
-    fn default() -> Self {
-        Self {
-            law: energy_torque::Config {
-                gain_nm_per_j: 3.0,
-                allow_negative: false,
-            },
-            measure: EnergyMeasure::Total,
-            proportional: 0.0,
-            gain: 0.6,
-            max_offset_j: 30.0,
-            min_offset_j: -5.0,
-            spin_up_fraction: 0.0,
-        }
-    }
-}
-
-/// What runs in stance and in flight.
-#[derive(Debug, Clone, Copy, PartialEq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub enum Strategy {
-    /// Motor off: 0 A in every phase (thesis section 4.4.1, passive hopping).
-    Passive,
-    /// A thesis stance law, with the flight PD back-drive in flight.
-    Thesis(StanceLaw),
-    /// The apex-regulating energy law, with the flight PD in flight.
-    EnergyApex(ApexLoop),
-    /// Shaped torque with its own braking-curve back-drive in flight and a
-    /// per-hop loop on the torque level ([`shaped`]).
-    Shaped(shaped::Config),
-}
-
-impl Default for Strategy {
-    fn default() -> Self {
-        Strategy::EnergyApex(ApexLoop::default())
-    }
-}
+pub use crate::laws::energy_apex::{ApexLoop, EnergyMeasure};
+pub use crate::laws::Strategy;
 
 /// Largest nut speed at a mechanical stop the default supervisor limits
 /// tolerate, m/s. The thesis's laws hit the stops at up to about 0.3 m/s
@@ -215,29 +120,14 @@ pub enum ConfigError {
     Estimator(EstimatorError),
     /// The target apex is not in `0..=1` m.
     TargetApex,
-    /// The apex loop gain is not in `(0, 2)` or its bound is negative.
-    ApexLoop,
-    /// A [`shaped::Config`] field is out of its documented range.
-    Shaped,
+    /// A controller or flight-PD field is out of its documented range.
+    Law(InvalidField),
 }
 
-/// The parts of a control period, in order, as reported to
-/// [`Hopper::step_marked`]'s `mark` when each one ends.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub enum StepPart {
-    /// Raw counts and codes converted to SI.
-    Convert = 0,
-    /// Phase estimator and filtered derivatives (eq 4.1).
-    Estimate = 1,
-    /// Energy estimate (eqs 2.44-2.45) and event bookkeeping (ledger, apex loop).
-    Energy = 2,
-    /// Control law.
-    Law = 3,
-    /// Supervisor and DAC code.
-    Supervise = 4,
-    /// Hop ledger and telemetry record.
-    Telemetry = 5,
+impl From<InvalidField> for ConfigError {
+    fn from(f: InvalidField) -> Self {
+        ConfigError::Law(f)
+    }
 }
 
 /// What one control period produced.
@@ -264,34 +154,23 @@ pub struct StepOutput {
     pub record: StepRecord,
 }
 
-/// The controller: owns the estimator, laws, supervisor and ledger state.
-#[derive(Debug, Clone, Copy)]
+/// The control period's state: conversion, estimator, the selected
+/// controller, supervisor and ledger. Not `Copy`: a copy would duplicate
+/// the fault latch.
+#[derive(Debug, Clone)]
 pub struct Hopper {
     cfg: HopperConfig,
     converter: Converter,
     dac: DacMap,
     energy: EnergyModel,
     estimator: PhaseEstimator,
-    stance: StanceController,
-    actuator: Actuator,
-    /// The flight PD and the energy law with their constants worked out once
-    /// (`None`: the configuration makes the generic law refuse, 0 A).
-    flight_fast: Option<flight_pd::Prepared>,
-    energy_fast: Option<energy_torque::Prepared>,
-    /// The shaped law (`Some` exactly for [`Strategy::Shaped`]).
-    shaped: Option<shaped::Prepared>,
-    /// Its torque level (fraction of the current limit), time since
-    /// touchdown (s) and whether braking has stopped the nut this stance.
-    shaped_level: f32,
-    shaped_integral: f32,
-    stance_time_s: f32,
-    braked: bool,
+    controller: Controller,
     supervisor: Supervisor,
     ledger: HopLedgerBuilder,
+    /// `E_D` of the target apex, J (every energy-based law's reference).
     desired_energy_j: f32,
-    offset_j: f32,
-    last_error_j: f32,
-    after_bottom: bool,
+    /// Screw ratio `r`, m/rad: the nut's speed from the motor's rate.
+    screw_m_per_rad: f32,
     steps: u32,
     /// Corruption applied to each converted sample (simulated faults only).
     #[cfg(feature = "fault-injection")]
@@ -354,46 +233,10 @@ impl Hopper {
         };
         let estimator =
             PhaseEstimator::new(cfg.estimator, &sensed).map_err(ConfigError::Estimator)?;
-        if let Strategy::EnergyApex(a) = &cfg.strategy {
-            if !(a.gain > 0.0
-                && a.gain < 10.0
-                && a.max_offset_j >= 0.0
-                && a.max_offset_j.is_finite()
-                && a.min_offset_j <= 0.0
-                && a.proportional >= 0.0
-                && a.proportional.is_finite()
-                && a.min_offset_j.is_finite()
-                && (0.0..=1.0).contains(&a.spin_up_fraction))
-            {
-                return Err(ConfigError::ApexLoop);
-            }
-        }
         let desired_energy_j = Self::desired_for(&cfg.model, cfg.target_apex_m)?;
-        let actuator = Actuator::from_model(&cfg.model);
-        let shaped = match &cfg.strategy {
-            Strategy::Shaped(c) => {
-                Some(shaped::Prepared::new(c, &actuator, &cfg.model).ok_or(ConfigError::Shaped)?)
-            }
-            _ => None,
-        };
-        let law = match cfg.strategy {
-            Strategy::Thesis(law) => law,
-            Strategy::EnergyApex(a) => StanceLaw::EnergyTorque(a.law),
-            Strategy::Passive | Strategy::Shaped(_) => StanceLaw::default(),
-        };
-        let energy_law = match cfg.strategy {
-            Strategy::EnergyApex(a) => Some(a.law),
-            Strategy::Thesis(StanceLaw::EnergyTorque(c)) => Some(c),
-            _ => None,
-        };
+        let controller = Controller::new(&cfg.strategy, &cfg.model, &cfg.flight)?;
         Ok(Self {
-            flight_fast: flight_pd::Prepared::new(&cfg.flight, &actuator),
-            energy_fast: energy_law.and_then(|c| energy_torque::Prepared::new(&c, &actuator)),
-            shaped_level: shaped.map_or(0.0, |p| p.config().initial_level),
-            shaped_integral: shaped.map_or(0.0, |p| p.config().integral_start),
-            shaped,
-            stance_time_s: 0.0,
-            braked: false,
+            controller,
             cfg,
             converter,
             dac: DacMap::new(&cfg.calibration),
@@ -403,14 +246,10 @@ impl Hopper {
                 ))
             })?,
             estimator,
-            stance: StanceController::new(law, actuator),
-            actuator,
             supervisor: Supervisor::new(cfg.supervisor),
             ledger: HopLedgerBuilder::new(),
             desired_energy_j,
-            offset_j: 0.0,
-            last_error_j: 0.0,
-            after_bottom: false,
+            screw_m_per_rad: cfg.model.screw_m_per_rad(),
             steps: 0,
             #[cfg(feature = "fault-injection")]
             injected: MeasurementOverride::default(),
@@ -453,7 +292,12 @@ impl Hopper {
 
     /// The apex loop's current correction of `E_D`, J (0 for other strategies).
     pub fn apex_offset_j(&self) -> f32 {
-        self.offset_j
+        self.controller.apex_offset_j()
+    }
+
+    /// The selected controller and its state.
+    pub fn controller(&self) -> &Controller {
+        &self.controller
     }
 
     /// The supervisor (faults, configuration).
@@ -474,18 +318,6 @@ impl Hopper {
     /// One control period of `dt_s` seconds. `raw` is `None` when the sensors
     /// could not be read (latches [`Fault::SensorRange`]).
     pub fn step(&mut self, raw: Option<&RawSample>, dt_s: f32) -> StepOutput {
-        self.step_marked(raw, dt_s, &mut |_| {})
-    }
-
-    /// [`step`](Self::step), calling `mark` as each part of the period ends
-    /// (for profiling: the QEMU image reads a cycle counter there). With an
-    /// empty closure it compiles to the same code as `step`.
-    pub fn step_marked<M: FnMut(StepPart)>(
-        &mut self,
-        raw: Option<&RawSample>,
-        dt_s: f32,
-        mark: &mut M,
-    ) -> StepOutput {
         self.steps = self.steps.wrapping_add(1);
         let m = match raw.map(|r| self.converter.convert(r)) {
             Some(Ok(m)) => m,
@@ -497,11 +329,7 @@ impl Hopper {
         // supervisor must catch it in this period).
         #[cfg(feature = "fault-injection")]
         let m = self.injected.apply(m);
-        mark(StepPart::Convert);
-        // The converter returns finite values only (with the
-        // `fault-injection` feature a NaN may be injected: the filters then
-        // go NaN, which is harmless as the supervisor latches this period).
-        let event = self.estimator.update_of_finite(
+        let event = self.estimator.update(
             &PhaseInput {
                 body_height_m: m.body_height_m,
                 motor_angle_rad: m.motor_angle_rad,
@@ -510,42 +338,54 @@ impl Hopper {
             },
             dt_s,
         );
-        mark(StepPart::Estimate);
         let v = self.estimator.velocities();
         let phase = self.estimator.phase();
-        let nut_velocity_mps = v.motor_rad_s * self.actuator.screw_m_per_rad;
-        let e_in = EnergyInput {
-            body_height_m: m.body_height_m,
-            body_velocity_mps: v.body_mps,
-            motor_rate_rad_s: v.motor_rad_s,
-            nut_position_m: m.nut_position_m,
-            spring_force_n: m.spring_force_n,
-            phase,
-        };
-        // The converter returns finite values only and the filters keep finite
-        // velocities, so the input check of `total_j` can be skipped.
-        let energy_j = self.energy.total_j_of_finite(&e_in).unwrap_or(f32::NAN);
+        let nut_velocity_mps = v.motor_rad_s * self.screw_m_per_rad;
+        let energy_j = self
+            .energy
+            .total_j(&EnergyInput {
+                body_height_m: m.body_height_m,
+                body_velocity_mps: v.body_mps,
+                motor_rate_rad_s: v.motor_rad_s,
+                nut_position_m: m.nut_position_m,
+                spring_force_n: m.spring_force_n,
+                phase,
+            })
+            .unwrap_or(f32::NAN);
         // Events come a few times per hop (every ~700th period): keep their
         // bookkeeping out of line.
         let hop = match event {
             Some(e) => self.on_event(e, energy_j),
             None => None,
         };
-        mark(StepPart::Energy);
-
-        let requested_a = self.law_current_a(&m, &e_in, energy_j, nut_velocity_mps, phase, dt_s);
-        mark(StepPart::Law);
+        let requested_a = self.controller.current_a(&ControlInput {
+            phase,
+            body_height_m: m.body_height_m,
+            toe_height_m: m.body_height_m - self.cfg.model.leg_length_m,
+            body_velocity_mps: v.body_mps,
+            motor_angle_rad: m.motor_angle_rad,
+            motor_rate_rad_s: v.motor_rad_s,
+            nut_position_m: m.nut_position_m,
+            nut_velocity_mps,
+            spring_force_n: m.spring_force_n,
+            leg_compression_m: m.leg_compression_m,
+            energy_j,
+            desired_energy_j: self.desired_energy_j,
+            target_apex_m: self.cfg.target_apex_m,
+            flight_peak_toe_m: self.estimator.flight_peak_toe_m(),
+            last_apex_m: self.estimator.last_apex_m(),
+            dt_s,
+        });
         let sup_in =
             SupervisorInput::from_measurements(&m, nut_velocity_mps, v.motor_rad_s, v.body_mps);
         let mut command = self.supervisor.check(&sup_in, requested_a);
         if !energy_j.is_finite() {
-            // The inputs were finite (checked by the supervisor's ranges), so
-            // this is an overflow: treat it as a bad sensor value.
+            // A non-finite input latched this period already; a finite one
+            // that overflowed the energy is a bad sensor value too.
             self.supervisor.report(Fault::SensorNonFinite);
             command = Command::SAFE;
         }
         let dac_code = self.dac.code(command.current_a);
-        mark(StepPart::Supervise);
         let cal = self.converter.calibration();
         self.ledger.step(
             dt_s,
@@ -555,7 +395,7 @@ impl Hopper {
             m.nut_position_m,
         );
         let faults = self.supervisor.faults();
-        let out = StepOutput {
+        StepOutput {
             dac_code,
             command,
             requested_a,
@@ -575,40 +415,12 @@ impl Hopper {
                 energy_j,
                 command_a: command.current_a,
             },
-        };
-        mark(StepPart::Telemetry);
-        out
+        }
     }
 
-    /// Reads `io`, steps, writes the DAC code and the enable. An I/O error
-    /// latches a fault and the amplifier is disabled in the same period.
-    pub fn run_period<Io: HopperIo>(&mut self, io: &mut Io, dt_s: f32) -> StepOutput {
-        let raw = io.read().ok();
-        let mut out = self.step(raw.as_ref(), dt_s);
-        if io.write_dac(out.dac_code).is_err() {
-            self.supervisor.report_dac_error();
-            // The DAC may hold any code now: ask once more for zero (it may
-            // fail again; the disable below is what makes it safe), and say
-            // zero is what this period commands.
-            let zero = self.dac.code(0.0);
-            let _ = io.write_dac(zero);
-            out.command = Command::SAFE;
-            out.dac_code = zero;
-            out.faults = self.supervisor.faults();
-        }
-        if io.set_amp_enabled(out.command.amp_enable).is_err() {
-            // The enable pin failed: we cannot know the amplifier's state, so
-            // make sure the command is zero and ask for "off" once more.
-            self.supervisor.report(Fault::AmpFault);
-            let zero = self.dac.code(0.0);
-            let _ = io.write_dac(zero);
-            let _ = io.set_amp_enabled(false);
-            out.command = Command::SAFE;
-            out.dac_code = zero;
-            out.faults = self.supervisor.faults();
-        }
-        out.record.faults = out.faults.0;
-        out
+    /// The zero-current DAC code.
+    pub fn zero_code(&self) -> u16 {
+        self.dac.code(0.0)
     }
 
     fn safe_output(&mut self, fault: Fault) -> StepOutput {
@@ -639,16 +451,12 @@ impl Hopper {
         }
     }
 
-    /// Ledger and per-hop bookkeeping for an estimator event.
+    /// Ledger and controller bookkeeping for an estimator event.
     #[inline(never)]
     #[cold]
     fn on_event(&mut self, event: PhaseEvent, energy_j: f32) -> Option<HopLedger> {
-        match event {
+        let hop = match event {
             PhaseEvent::Touchdown => {
-                self.stance.on_touchdown();
-                self.after_bottom = false;
-                self.stance_time_s = 0.0;
-                self.braked = false;
                 self.ledger.touchdown(energy_j);
                 None
             }
@@ -656,173 +464,32 @@ impl Hopper {
                 self.ledger.liftoff(energy_j);
                 None
             }
-            PhaseEvent::Bottom => {
-                self.after_bottom = true;
-                None
-            }
-            PhaseEvent::Apex { toe_height_m } => {
-                let hop = self.ledger.apex(toe_height_m);
-                if hop.is_some() {
-                    self.apex_loop_update(toe_height_m);
-                }
-                hop
-            }
-        }
-    }
-
-    /// The outer loop of [`ApexLoop`] or of the shaped law's level, once
-    /// per completed hop.
-    fn apex_loop_update(&mut self, toe_height_m: f32) {
-        let Ok(measured_j) = self
-            .cfg
-            .model
-            .desired_energy_j(toe_height_m.clamp(0.0, 1.0))
-        else {
-            return;
+            PhaseEvent::Bottom => None,
+            PhaseEvent::Apex { toe_height_m } => self.ledger.apex(toe_height_m),
         };
-        if let Some(p) = &self.shaped {
-            // With the motor off (a fault latched) the hop decays whatever
-            // the level: integrating that error would only wind up.
-            if self.supervisor.is_faulted() {
-                return;
-            }
-            (self.shaped_integral, self.shaped_level) = p.next_level(
-                self.shaped_integral,
-                self.shaped_level,
-                self.desired_energy_j,
-                measured_j,
-            );
-            return;
-        }
-        let Strategy::EnergyApex(a) = self.cfg.strategy else {
-            return;
+        // `E_D` of the measured apex, for the per-hop loops, only at an apex
+        // that completes a hop.
+        let hop_apex_energy_j = match (event, &hop) {
+            (PhaseEvent::Apex { toe_height_m }, Some(_)) => self
+                .cfg
+                .model
+                .desired_energy_j(toe_height_m.clamp(0.0, 1.0))
+                .ok(),
+            _ => None,
         };
-        let error_j = self.desired_energy_j - measured_j;
-        let next = self.offset_j + a.gain * error_j;
-        if error_j.is_finite() {
-            self.last_error_j = error_j.clamp(-a.max_offset_j, a.max_offset_j);
-        }
-        if next.is_finite() {
-            self.offset_j = next.clamp(a.min_offset_j.min(0.0), a.max_offset_j);
-        }
-    }
-
-    /// The laws' request, A (before the supervisor).
-    #[inline]
-    fn law_current_a(
-        &mut self,
-        m: &Measurements,
-        e_in: &EnergyInput,
-        energy_j: f32,
-        nut_velocity_mps: f32,
-        phase: Phase,
-        dt_s: f32,
-    ) -> f32 {
-        if let Strategy::Passive = self.cfg.strategy {
-            return 0.0;
-        }
-        if let Some(p) = &self.shaped {
-            return self.shaped_current_a(*p, m, nut_velocity_mps, phase, dt_s);
-        }
-        if phase == Phase::Flight {
-            if let Strategy::Thesis(StanceLaw::ModifiedTorque(c)) = &self.cfg.strategy {
-                let toe_m = m.body_height_m - self.cfg.model.leg_length_m;
-                let v = self.estimator.velocities();
-                if modified_torque::flight_active(
-                    c,
-                    toe_m,
-                    v.body_mps,
-                    self.estimator.last_apex_m(),
-                ) {
-                    return or_zero(modified_torque::command(c, &self.actuator));
-                }
-            }
-            let v = self.estimator.velocities();
-            if let Strategy::EnergyApex(a) = &self.cfg.strategy {
-                let toe_m = m.body_height_m - self.cfg.model.leg_length_m;
-                if v.body_mps < 0.0 && toe_m < a.spin_up_fraction * self.cfg.target_apex_m {
-                    return self.stance_current_a(m, e_in, energy_j, nut_velocity_mps);
-                }
-            }
-            return match &self.flight_fast {
-                Some(pd) => pd.current_a(m.motor_angle_rad, v.motor_rad_s),
-                None => 0.0,
-            };
-        }
-        self.stance_current_a(m, e_in, energy_j, nut_velocity_mps)
-    }
-
-    /// The shaped law's request, A.
-    #[inline]
-    fn shaped_current_a(
-        &mut self,
-        p: shaped::Prepared,
-        m: &Measurements,
-        nut_velocity_mps: f32,
-        phase: Phase,
-        dt_s: f32,
-    ) -> f32 {
-        if phase == Phase::Flight {
-            let toe_m = m.body_height_m - self.cfg.model.leg_length_m;
-            let v = self.estimator.velocities();
-            // The flight's own peak, not the last apex event: the same
-            // height once descending, and it also exists on the first
-            // descent after a release from rest.
-            if p.spin_up(toe_m, v.body_mps, self.estimator.flight_peak_toe_m()) {
-                return p.push_current_a(self.shaped_level);
-            }
-            return p.backdrive_current_a(m.nut_position_m, nut_velocity_mps);
-        }
-        // A non-finite `dt_s` makes the sum NaN: the comparisons in
-        // `stance_current_a` then fall through to braking or 0 A, both safe.
-        self.stance_time_s += dt_s;
-        p.stance_current_a(
-            self.shaped_level,
-            self.stance_time_s,
-            nut_velocity_mps,
-            &mut self.braked,
-        )
+        self.controller.on_event(&EventInput {
+            event,
+            hop_apex_energy_j,
+            desired_energy_j: self.desired_energy_j,
+            faulted: self.supervisor.is_faulted(),
+        });
+        hop
     }
 
     /// The shaped law's torque level, fraction of the current limit (0 for
     /// other strategies).
     pub fn shaped_level(&self) -> f32 {
-        self.shaped_level
-    }
-
-    /// The stance law's request, A.
-    fn stance_current_a(
-        &mut self,
-        m: &Measurements,
-        e_in: &EnergyInput,
-        energy_j: f32,
-        nut_velocity_mps: f32,
-    ) -> f32 {
-        let (fed_back_j, desired_j) = match self.cfg.strategy {
-            Strategy::EnergyApex(a) => {
-                let e = match a.measure {
-                    EnergyMeasure::Total => energy_j,
-                    EnergyMeasure::Body => self.energy.body_j(e_in).unwrap_or(f32::NAN),
-                };
-                (
-                    e,
-                    self.desired_energy_j + self.offset_j + a.proportional * self.last_error_j,
-                )
-            }
-            _ => (energy_j, self.desired_energy_j),
-        };
-        if let Some(law) = &self.energy_fast {
-            return law.current_a(fed_back_j, desired_j);
-        }
-        or_zero(self.stance.command(&StanceInput {
-            energy_j: fed_back_j,
-            desired_energy_j: desired_j,
-            nut_position_m: m.nut_position_m,
-            nut_velocity_mps,
-            leg_compression_m: m.leg_compression_m,
-            spring_force_n: m.spring_force_n,
-            after_bottom: self.after_bottom,
-        }))
+        self.controller.shaped_level()
     }
 }
 
@@ -830,7 +497,7 @@ impl Hopper {
 mod tests {
     use super::Strategy;
     use super::*;
-    use crate::hal::IoError;
+    use crate::laws::{modified_torque, StanceLaw};
     use proptest::prelude::{
         any, prop_assert, prop_assert_eq, prop_oneof, proptest, Just, ProptestConfig,
     };
@@ -931,55 +598,6 @@ mod tests {
         assert!(out.faults.contains(Fault::Overrun));
     }
 
-    struct FailingDac(RawSample, bool);
-    impl HopperIo for FailingDac {
-        type Error = ();
-        fn read(&mut self) -> Result<RawSample, IoError<()>> {
-            Ok(self.0)
-        }
-        fn write_dac(&mut self, _code: u16) -> Result<(), IoError<()>> {
-            Err(IoError::Dac)
-        }
-        fn set_amp_enabled(&mut self, on: bool) -> Result<(), IoError<()>> {
-            self.1 = on;
-            Ok(())
-        }
-    }
-
-    #[test]
-    fn a_dac_write_error_disables_the_amplifier_in_the_same_period() {
-        let mut h = hopper(Strategy::default());
-        let mut io = FailingDac(rest_sample(&h.config().calibration), true);
-        let out = h.run_period(&mut io, 1e-4);
-        assert!(!io.1, "amplifier left enabled");
-        assert_eq!(out.command, Command::SAFE);
-        assert!(out.faults.contains(Fault::DacError));
-    }
-
-    #[test]
-    fn apex_loop_integrates_the_apex_error_within_bounds() {
-        let mut h = hopper(Strategy::default());
-        assert_eq!(h.apex_offset_j(), 0.0);
-        // Apex 0.03 m for a 0.05 m target: 0.02 m short, (M + m_s + m_u) g 0.02 = 1.939 J.
-        h.apex_loop_update(0.03);
-        let expect = 0.6 * (9.0 + 0.25 + 0.6) * 9.81 * 0.02;
-        assert!(
-            (h.apex_offset_j() - expect).abs() < 1e-3,
-            "{}",
-            h.apex_offset_j()
-        );
-        for _ in 0..100 {
-            h.apex_loop_update(0.0);
-        }
-        assert_eq!(h.apex_offset_j(), 30.0);
-        for _ in 0..100 {
-            h.apex_loop_update(0.5);
-        }
-        assert_eq!(h.apex_offset_j(), -5.0);
-        h.apex_loop_update(f32::NAN);
-        assert_eq!(h.apex_offset_j(), -5.0);
-    }
-
     #[test]
     fn bad_configuration_is_refused() {
         let cfg = HopperConfig {
@@ -994,7 +612,17 @@ mod tests {
             }),
             ..HopperConfig::default()
         };
-        assert_eq!(Hopper::new(cfg).err(), Some(ConfigError::ApexLoop));
+        assert_eq!(
+            Hopper::new(cfg).err(),
+            Some(ConfigError::Law(InvalidField("energy_apex.integral_gain")))
+        );
+        // Bad flight gains used to run with no nut return (0 A in flight).
+        let mut cfg = HopperConfig::default();
+        cfg.flight.gains.kd = f32::NAN;
+        assert_eq!(
+            Hopper::new(cfg).err(),
+            Some(ConfigError::Law(InvalidField("flight.kd_a_s_per_rad")))
+        );
         let mut h = hopper(Strategy::default());
         assert!(h.set_target_apex(f32::NAN).is_err());
         assert!(h.set_target_apex(0.1).is_ok());
@@ -1063,9 +691,13 @@ mod tests {
     /// ([`crate::proptest_support::cases`]).
     mod properties {
         use super::super::*;
-        use crate::hal::IoError;
-        use crate::laws::{constant_torque, step_closed, step_open, velocity, NutPositionPd};
+        use crate::hal::{HopperIo, IoError};
+        use crate::laws::{
+            constant_torque, energy_torque, modified_torque, step_closed, step_open, velocity,
+            InvalidField, NutPositionPd, StanceLaw,
+        };
         use crate::pd_design::PdGains;
+        use crate::runner::{NoCounter, PeriodRunner, Timing};
         use crate::supervisor::SupervisorInput;
         use proptest::prelude::{any, prop_assert, prop_assert_eq, prop_oneof, Just};
         use proptest::strategy::Strategy as Gen;
@@ -1102,14 +734,27 @@ mod tests {
                 )
         }
 
-        /// A gain of any sign and size, NaN and infinities included: the
-        /// bound on the command must not depend on the laws being sane.
+        /// A gain of any size, and now and then of any sign or NaN or
+        /// infinite: the bound on the command must not depend on the laws
+        /// being sane, and a configuration they refuse must be refused by
+        /// name ([`built`]).
         fn any_gain(typical: f32) -> impl Gen<Value = f32> {
             prop_oneof![
                 6 => 0.0f32..(10.0 * typical),
-                2 => (-1e4 * typical)..(1e4 * typical),
+                2 => 0.0f32..(1e4 * typical),
                 1 => any::<f32>(),
             ]
+        }
+
+        /// The hopper for `cfg`, or `None` when a law field is refused by
+        /// name (any other refusal fails the case: the generated models and
+        /// calibrations are valid).
+        fn built(cfg: HopperConfig) -> Result<Option<Hopper>, TestCaseError> {
+            match Hopper::new(cfg) {
+                Ok(h) => Ok(Some(h)),
+                Err(ConfigError::Law(InvalidField(name))) if !name.is_empty() => Ok(None),
+                Err(e) => Err(fail(e)),
+            }
         }
 
         /// Every strategy: passive, each thesis law, the apex loop.
@@ -1320,12 +965,14 @@ mod tests {
                 strategy,
                 |(setup, items, dt)| {
                     let cfg = setup.cfg;
-                    let mut h = Hopper::new(cfg).map_err(fail)?;
+                    let Some(mut h) = built(cfg)? else {
+                        return Ok(());
+                    };
                     let limit = cfg.supervisor.current_limit_a;
                     prop_assert!(limit > 0.0 && limit <= cfg.model.usable_current_limit_a());
                     let (lo, hi) = {
-                        let a = cfg.calibration.current_to_dac_code(-limit);
-                        let b = cfg.calibration.current_to_dac_code(limit);
+                        let a = DacMap::new(&cfg.calibration).code(-limit);
+                        let b = DacMap::new(&cfg.calibration).code(limit);
                         (a.min(b), a.max(b))
                     };
                     let mut walk = Walker::new();
@@ -1365,14 +1012,19 @@ mod tests {
             ]
         }
 
-        struct DacFails(Option<RawSample>);
-        impl HopperIo for DacFails {
+        /// The sample (or a failed read), and a DAC that fails on request.
+        struct TestIo(Option<RawSample>, bool);
+        impl HopperIo for TestIo {
             type Error = ();
             fn read(&mut self) -> Result<RawSample, IoError<()>> {
                 self.0.ok_or(IoError::Sensor)
             }
             fn write_dac(&mut self, _code: u16) -> Result<(), IoError<()>> {
-                Err(IoError::Dac)
+                if self.1 {
+                    Err(IoError::Dac)
+                } else {
+                    Ok(())
+                }
             }
             fn set_amp_enabled(&mut self, _on: bool) -> Result<(), IoError<()>> {
                 Ok(())
@@ -1391,8 +1043,11 @@ mod tests {
                 strategy,
                 |(setup, actions)| {
                     let cfg = setup.cfg;
-                    let mut h = Hopper::new(cfg).map_err(fail)?;
-                    let zero = cfg.calibration.current_to_dac_code(0.0);
+                    if built(cfg)?.is_none() {
+                        return Ok(());
+                    }
+                    let mut r = PeriodRunner::new(cfg, Timing::default()).map_err(fail)?;
+                    let zero = DacMap::new(&cfg.calibration).code(0.0);
                     let m = &cfg.model;
                     // A clean sample at rest for the reset: nut on its stop,
                     // leg extended, spring at preload.
@@ -1403,16 +1058,20 @@ mod tests {
                     };
                     let mut walk = Walker::new();
                     for action in actions {
-                        let before = h.supervisor().faults();
+                        let before = r.hopper().supervisor().faults();
                         let out = match action {
                             Action::Overrun => {
-                                h.supervisor_mut().report_overrun();
-                                prop_assert!(h.supervisor().faults().contains(Fault::Overrun));
+                                r.report_overrun();
+                                prop_assert!(r
+                                    .hopper()
+                                    .supervisor()
+                                    .faults()
+                                    .contains(Fault::Overrun));
                                 continue;
                             }
                             Action::Reset => {
-                                let ok = h.supervisor_mut().reset(&rest).is_ok();
-                                let after = h.supervisor().faults();
+                                let ok = r.reset_faults(&rest).is_ok();
+                                let after = r.hopper().supervisor().faults();
                                 if ok {
                                     prop_assert!(after.is_empty());
                                 } else {
@@ -1422,19 +1081,23 @@ mod tests {
                                 continue;
                             }
                             Action::Step(item) => {
-                                let raw = walk.sample(&cfg, item);
-                                h.step(raw.as_ref(), 1e-4)
+                                let mut io = TestIo(walk.sample(&cfg, item), false);
+                                let p = r.run_period(&mut io, &mut NoCounter);
+                                // A fault-free period and a safely faulted
+                                // one both keep the watchdog fed.
+                                prop_assert!(p.feed_watchdog);
+                                p.out
                             }
                             Action::StepDacFails(item) => {
-                                let mut io = DacFails(walk.sample(&cfg, item));
-                                let out = h.run_period(&mut io, 1e-4);
+                                let mut io = TestIo(walk.sample(&cfg, item), true);
+                                let out = r.run_period(&mut io, &mut NoCounter).out;
                                 prop_assert!(out.faults.contains(Fault::DacError));
                                 out
                             }
                         };
                         // Faults only accumulate between resets.
                         prop_assert_eq!(out.faults.0 & before.0, before.0);
-                        prop_assert_eq!(out.faults, h.supervisor().faults());
+                        prop_assert_eq!(out.faults, r.hopper().supervisor().faults());
                         if !out.faults.is_empty() {
                             prop_assert_eq!(out.command, Command::SAFE);
                             prop_assert_eq!(out.dac_code, zero);

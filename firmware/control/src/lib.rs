@@ -16,11 +16,14 @@
 //! - [`estimator`]: flight/stance phase, touchdown, liftoff, apex, bottom;
 //! - [`energy`]: the energy estimate of eqs 2.44-2.45;
 //! - [`model`]: the parameters the controller believes and `E_D` (eq 2.43);
-//! - [`laws`]: every thesis stance law and the flight PD (eq 4.4);
+//! - [`laws`]: every controller as a type (passive, each thesis stance law
+//!   with the flight PD of eq 4.4, energy-apex, shaped) behind one enum;
 //! - [`pd_design`]: flight PD gain design (eqs 4.3-4.18);
 //! - [`supervisor`]: latched faults and the current clamp;
 //! - [`telemetry`]: the per-step record ring and the per-hop ledger;
-//! - [`hopper`]: the whole control period, [`hopper::Hopper::step`].
+//! - [`hopper`]: the control step, [`hopper::Hopper::step`];
+//! - [`runner`]: the one period runner the board, QEMU and the host share;
+//! - [`watchdog`]: when the period may feed the hardware watchdog.
 #![no_std]
 
 pub mod calibration;
@@ -32,6 +35,7 @@ pub mod hopper;
 pub mod laws;
 pub mod model;
 pub mod pd_design;
+pub mod runner;
 pub mod supervisor;
 pub mod telemetry;
 pub mod watchdog;

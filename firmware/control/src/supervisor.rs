@@ -58,11 +58,16 @@ pub enum Fault {
     /// The motor encoder stopped counting while the motor turned fast, away
     /// from the mechanical stops (only a stop can halt it within a period).
     EncoderFrozen = 12,
+    /// The period runner's own check of a period's output failed (the
+    /// watchdog feed policy starved: a command out of range, a live output
+    /// while faulted, or a latch that cleared by itself). Latched so that no
+    /// later period can enable the amplifier before the watchdog resets the MCU.
+    SelfCheck = 13,
 }
 
 impl Fault {
     /// Every fault, in bit order.
-    pub const ALL: [Fault; 13] = [
+    pub const ALL: [Fault; 14] = [
         Fault::SensorNonFinite,
         Fault::SensorRange,
         Fault::EncoderJump,
@@ -76,6 +81,7 @@ impl Fault {
         Fault::CommandNonFinite,
         Fault::SensorDisagree,
         Fault::EncoderFrozen,
+        Fault::SelfCheck,
     ];
 
     /// Short kebab-case name for logs and telemetry.
@@ -94,6 +100,7 @@ impl Fault {
             Fault::CommandNonFinite => "command-nonfinite",
             Fault::SensorDisagree => "sensor-disagree",
             Fault::EncoderFrozen => "encoder-frozen",
+            Fault::SelfCheck => "self-check",
         }
     }
 
@@ -362,8 +369,9 @@ impl Command {
     };
 }
 
-/// The safety supervisor. See the module docs.
-#[derive(Debug, Clone, Copy, PartialEq)]
+/// The safety supervisor. See the module docs. Not `Copy`: a copy would
+/// duplicate the fault latch.
+#[derive(Debug, Clone, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Supervisor {
     config: SupervisorConfig,
@@ -373,85 +381,10 @@ pub struct Supervisor {
     limit_a: f32,
     /// `1 / (2 a)` of the braking deceleration, or NaN when no braking is assumed.
     half_inv_decel: f32,
-    /// The fast path's ranges as centre and half-width (see [`FastRanges`]).
-    fast: FastRanges,
     /// Centre of the stops and the half-width that is more than
     /// [`STOP_BAND_M`] away from both, m (NaN for bad stops: check off).
     stops_centre_m: f32,
     stops_inner_half_m: f32,
-    /// Whether passing the spring check (`|F - k (delta0 + p + x)| <=
-    /// spring_mismatch_n`) already rules out a contact disagreement, so the
-    /// fast path can skip that check (see [`contact_implied_by_spring`]).
-    contact_implied: bool,
-}
-
-/// Whether, with `c`'s thresholds, every sample that passes the spring check
-/// also passes the contact-agreement check. With `e = F - k (delta0 + p)`
-/// and the spring residual `r = e - k x`: "cell says contact, pot says free"
-/// means `e > contact_force` and `x < free_compression`, so
-/// `r > contact_force - k free_compression`; "pot says contact, cell says
-/// free" means `-r > k contact_compression - free_force`. If both bounds
-/// exceed `spring_mismatch_n` (with a margin for rounding), `|r| <= mismatch`
-/// excludes both. Defaults: 117 N and 125 N against 30 N.
-const fn contact_implied_by_spring(c: &SupervisorConfig) -> bool {
-    let m = c.spring_mismatch_n;
-    let k = c.spring_rate_n_per_m;
-    let a = c.contact_force_n - k * c.free_compression_m;
-    let b = k * c.contact_compression_m - c.free_force_n;
-    let margin = m * 1e-3 + 1e-3;
-    m.is_finite() && m >= 0.0 && a.is_finite() && b.is_finite() && a > m + margin && b > m + margin
-}
-
-/// The seven value ranges and the stroke limits as `|x - centre| <= half`:
-/// one subtraction, one absolute value and one comparison each (a NaN fails
-/// it; so does an infinity, the half-widths being finite). The half-widths
-/// are shrunk by a few parts per million so that rounding can only send a
-/// value at a boundary to the full checks, never let it through. `usable`
-/// is false when a bound is not finite: the full checks then always run.
-#[derive(Debug, Clone, Copy, PartialEq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-struct FastRanges {
-    centre: [f32; 8],
-    half: [f32; 8],
-    usable: bool,
-}
-
-impl FastRanges {
-    const fn new(c: &SupervisorConfig) -> Self {
-        let ranges = [
-            c.nut_position_range_m,
-            c.nut_velocity_range_mps,
-            c.motor_speed_range_rad_s,
-            c.body_height_range_m,
-            c.body_velocity_range_mps,
-            c.spring_force_range_n,
-            c.leg_compression_range_m,
-            Range {
-                min: c.stroke_min_m,
-                max: c.stroke_max_m,
-            },
-        ];
-        let mut centre = [0.0; 8];
-        let mut half = [-1.0; 8];
-        let mut usable = true;
-        let mut i = 0;
-        while i < 8 {
-            let r = ranges[i];
-            let width = r.max - r.min;
-            if !(r.min.is_finite() && r.max.is_finite() && width.is_finite() && width >= 0.0) {
-                usable = false;
-            } else {
-                centre[i] = r.min + 0.5 * width;
-                half[i] = 0.5 * width * (1.0 - 4e-6) - 4e-6 * centre[i].abs();
-            }
-            i += 1;
-        }
-        FastRanges {
-            centre,
-            half,
-            usable,
-        }
-    }
 }
 
 /// A usable current limit: the configured one if finite and positive, else 0 (always safe).
@@ -480,11 +413,9 @@ impl Supervisor {
             } else {
                 f32::NAN
             },
-            fast: FastRanges::new(&config),
             stops_centre_m: 0.5 * (config.nut_stops_m.min + config.nut_stops_m.max),
             stops_inner_half_m: 0.5 * (config.nut_stops_m.max - config.nut_stops_m.min)
                 - STOP_BAND_M,
-            contact_implied: contact_implied_by_spring(&config),
         }
     }
 
@@ -569,11 +500,12 @@ impl Supervisor {
             let p = input.nut_position_m;
             let pd = input.nut_velocity_mps;
             // A non-positive or NaN deceleration means no braking is assumed
-            // possible: only the position itself is checked.
-            let stop_m = if c.brake_decel_mps2 > 0.0 && c.brake_decel_mps2.is_finite() {
-                p + pd * pd.abs() / (2.0 * c.brake_decel_mps2)
-            } else {
+            // possible (`half_inv_decel` is NaN): only the position itself
+            // is checked.
+            let stop_m = if self.half_inv_decel.is_nan() {
                 p
+            } else {
+                p + pd * pd.abs() * self.half_inv_decel
             };
             // `!(a <= x && x <= b)` also catches NaN from an overflow.
             if !(stop_m >= c.stroke_min_m && stop_m <= c.stroke_max_m) {
@@ -624,68 +556,6 @@ impl Supervisor {
         (cell_contact && pot_free) || (pot_contact && cell_free)
     }
 
-    /// The every-period case, in straight-line code: nothing latched and
-    /// every check passes. Returns `None` as soon as anything is off; the
-    /// full checks then run and name the faults. Gives the same result as
-    /// the full path whenever it returns `Some` (unit-tested), at about a
-    /// third of its cost on the M4F.
-    #[inline(always)]
-    fn fast_path(&mut self, input: SupervisorInput, requested_current_a: f32) -> Option<Command> {
-        let c = &self.config;
-        let f = &self.fast;
-        if !f.usable {
-            return None;
-        }
-        let p = input.nut_position_m;
-        let pd = input.nut_velocity_mps;
-        // NaN without braking: the full path then checks the position alone.
-        let stop_m = p + pd * pd.abs() * self.half_inv_decel;
-        let values = [
-            p,
-            pd,
-            input.motor_speed_rad_s,
-            input.body_height_m,
-            input.body_velocity_mps,
-            input.spring_force_n,
-            input.leg_compression_m,
-            stop_m,
-        ];
-        for ((x, centre), half) in values.iter().zip(&f.centre).zip(&f.half) {
-            // `<=` is false for NaN, so a NaN takes the full path too.
-            let inside = (x - centre).abs() <= *half;
-            if !inside {
-                return None;
-            }
-        }
-        // False for NaN too.
-        let request_ok = requested_current_a.abs() <= c.overcurrent_trip_a;
-        if input.motor_delta_counts.unsigned_abs() > c.max_motor_delta_counts
-            || input.height_delta_counts.unsigned_abs() > c.max_height_delta_counts
-            || input.estop_pressed
-            || input.amp_fault
-            || !request_ok
-            || self.encoder_frozen(&input)
-        {
-            return None;
-        }
-        // False for NaN too (a NaN bound then always takes the full path,
-        // which trips on it: a bad bound fails safe).
-        let agrees = self.spring_residual_n(&input).abs() <= c.spring_mismatch_n;
-        if !agrees {
-            return None;
-        }
-        // Implied by the spring check with sane thresholds (the default).
-        if !self.contact_implied && self.contact_disagrees(&input) {
-            return None;
-        }
-        self.disagree_periods = 0;
-        let limit = self.limit_a;
-        Some(Command {
-            current_a: requested_current_a.clamp(-limit, limit),
-            amp_enable: limit > 0.0,
-        })
-    }
-
     /// Checks one period's input and request; returns the command for the amplifier.
     ///
     /// Detected faults latch immediately, and the returned command is then
@@ -698,20 +568,6 @@ impl Supervisor {
     /// consecutive calls before it latches.
     #[inline]
     pub fn check(&mut self, input: &SupervisorInput, requested_current_a: f32) -> Command {
-        if self.latched.is_empty() {
-            if let Some(command) = self.fast_path(*input, requested_current_a) {
-                return command;
-            }
-        }
-        self.check_full(input, requested_current_a)
-    }
-
-    /// The full checks of [`check`](Self::check), out of line: they run only
-    /// when something is off, and keeping them out of the every-period path
-    /// keeps that path's register spills and stack frame small.
-    #[inline(never)]
-    #[cold]
-    fn check_full(&mut self, input: &SupervisorInput, requested_current_a: f32) -> Command {
         let mut new = self.input_faults(input);
         if self.contact_disagrees(input) {
             self.disagree_periods = self.disagree_periods.saturating_add(1);
@@ -733,9 +589,8 @@ impl Supervisor {
         }
         let limit = self.limit_a;
         // Finite request, finite non-negative limit: the clamp is finite and in range.
-        let current_a = requested_current_a.clamp(-limit, limit);
         Command {
-            current_a,
+            current_a: requested_current_a.clamp(-limit, limit),
             amp_enable: limit > 0.0,
         }
     }
@@ -1194,21 +1049,6 @@ mod tests {
         result.unwrap_or_else(|e| panic!("{e}"));
     }
 
-    #[test]
-    fn spring_check_implies_contact_agreement_with_the_defaults() {
-        assert!(contact_implied_by_spring(&SupervisorConfig::default()));
-        let loose = SupervisorConfig {
-            spring_mismatch_n: 200.0,
-            ..SupervisorConfig::default()
-        };
-        assert!(!contact_implied_by_spring(&loose));
-        let off = SupervisorConfig {
-            spring_mismatch_n: f32::INFINITY,
-            ..SupervisorConfig::default()
-        };
-        assert!(!contact_implied_by_spring(&off));
-    }
-
     proptest::proptest! {
         /// With the default thresholds, no sample passes the spring check
         /// while the load cell and the potentiometer disagree about contact.
@@ -1226,38 +1066,6 @@ mod tests {
             if s.spring_residual_n(&input).abs() <= s.config.spring_mismatch_n {
                 proptest::prop_assert!(!s.contact_disagrees(&input));
             }
-        }
-    }
-
-    proptest::proptest! {
-        /// The fast path never changes the outcome: for any sample and
-        /// request, `check` (fast path first) and the full checks alone give
-        /// the same command, latched faults and disagreement count.
-        #[test]
-        fn fast_path_agrees_with_the_full_checks(
-            p in -0.05f32..0.1, pd in -2.0f32..2.0, w in -1500.0f32..1500.0,
-            z in 0.3f32..1.0, zd in -12.0f32..12.0, f in -200.0f32..2500.0,
-            x in -0.01f32..0.15, dm in -100i32..100, dh in -50i32..50,
-            estop in proptest::bool::weighted(0.05), amp in proptest::bool::weighted(0.05),
-            req in proptest::prop_oneof![-400.0f32..400.0, proptest::num::f32::ANY],
-        ) {
-            let input = SupervisorInput {
-                nut_position_m: p,
-                nut_velocity_mps: pd,
-                motor_speed_rad_s: w,
-                body_height_m: z,
-                body_velocity_mps: zd,
-                spring_force_n: f,
-                leg_compression_m: x,
-                motor_delta_counts: dm,
-                height_delta_counts: dh,
-                estop_pressed: estop,
-                amp_fault: amp,
-            };
-            let mut fast = Supervisor::new(SupervisorConfig::default());
-            let mut full = fast;
-            proptest::prop_assert_eq!(fast.check(&input, req), full.check_full(&input, req));
-            proptest::prop_assert_eq!(fast, full);
         }
     }
 }

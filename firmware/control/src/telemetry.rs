@@ -112,7 +112,7 @@ pub struct HopLedger {
 }
 
 /// Builds [`HopLedger`]s from the estimator's events and per-step data.
-#[derive(Clone, Copy, Debug, Default)]
+#[derive(Clone, Debug, Default)]
 pub struct HopLedgerBuilder {
     cur: HopLedger,
     in_stance: bool,

@@ -117,7 +117,7 @@ pub enum Decision {
 
 /// The feed decision, one call per completed control period. See the
 /// [module documentation](self).
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct FeedPolicy {
     cfg: FeedConfig,

@@ -1,7 +1,11 @@
 //! Open-loop constant torque (thesis section 2.1.3.4, Figures 2.8-2.9 and
 //! section 4.4.2): a fixed motor torque for the whole stance.
 
-use super::{Actuator, LawError};
+use super::{
+    flight_pd::FlightPd, or_zero, require, Actuator, ControlInput, ControlLaw, EventInput,
+    InvalidField, LawError,
+};
+use crate::estimator::Phase;
 
 /// Configuration of the constant-torque law.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -21,6 +25,44 @@ impl Default for Config {
 /// by [`Actuator::torque_to_current`]).
 pub fn command(c: &Config, act: &Actuator) -> Result<f32, LawError> {
     act.torque_to_current(c.torque_nm)
+}
+
+impl Config {
+    /// Checks every field, naming the first one out of range.
+    pub fn validate(&self) -> Result<(), InvalidField> {
+        require(self.torque_nm.is_finite(), "constant_torque.torque_nm")
+    }
+}
+
+/// The thesis's open-loop constant-torque controller: a fixed torque in
+/// stance, the flight PD in flight. No state of its own.
+#[derive(Debug, Clone, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct ConstantTorque {
+    stance_a: f32,
+    flight: FlightPd,
+}
+
+impl ConstantTorque {
+    /// Checks `cfg`.
+    pub fn new(cfg: &Config, act: &Actuator, flight: FlightPd) -> Result<Self, InvalidField> {
+        cfg.validate()?;
+        Ok(Self {
+            stance_a: or_zero(command(cfg, act)),
+            flight,
+        })
+    }
+}
+
+impl ControlLaw for ConstantTorque {
+    fn on_event(&mut self, _event: &EventInput) {}
+
+    fn current_a(&mut self, x: &ControlInput) -> f32 {
+        match x.phase {
+            Phase::Flight => self.flight.current_a(x.motor_angle_rad, x.motor_rate_rad_s),
+            Phase::Stance => self.stance_a,
+        }
+    }
 }
 
 #[cfg(test)]

@@ -3,14 +3,21 @@
 //! `K_e` in N m/J; Table 2.1's 0.2 means a 5 J deficit asks for the full
 //! 1 N m. A surplus gives negative torque (the motor pulls the nut up and
 //! removes energy), as in the thesis; set `allow_negative = false` to only add.
+//!
+//! [`EnergyTorque`] is the thesis's controller (this law in stance, the
+//! flight PD in flight); [`Law`] is the stance law itself, which
+//! [`super::energy_apex`] also runs.
 
-use super::{check_finite, Actuator, LawError, StanceInput};
+use super::{
+    flight_pd::FlightPd, require, Actuator, ControlInput, ControlLaw, EventInput, InvalidField,
+};
+use crate::estimator::Phase;
 
 /// Configuration of the energy-feedback torque law.
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Config {
-    /// `K_e`, N m/J (>= 0). Default 0.2 (Table 2.1).
+    /// `K_e`, N m/J (finite, >= 0). Default 0.2 (Table 2.1).
     pub gain_nm_per_j: f32,
     /// Whether an energy surplus may command negative torque. Default true.
     pub allow_negative: bool,
@@ -25,104 +32,146 @@ impl Default for Config {
     }
 }
 
-/// Torque of eq 2.52, N m (unclamped).
-pub fn torque_nm(c: &Config, energy_j: f32, desired_energy_j: f32) -> Result<f32, LawError> {
-    check_finite(&[c.gain_nm_per_j, energy_j, desired_energy_j])?;
-    let tau = -c.gain_nm_per_j * (energy_j - desired_energy_j);
-    check_finite(&[tau])?;
-    Ok(if c.allow_negative { tau } else { tau.max(0.0) })
-}
-
-/// Current command, A (positive compresses the spring), clamped.
-pub fn command(c: &Config, act: &Actuator, x: &StanceInput) -> Result<f32, LawError> {
-    act.torque_to_current(torque_nm(c, x.energy_j, x.desired_energy_j)?)
-}
-
-/// [`command`] with its constants checked once, for the control step.
-/// Gives exactly [`command`]'s current for finite energies, and 0 A for
-/// non-finite ones (like `or_zero(command(..))`).
-#[derive(Debug, Clone, Copy, PartialEq)]
+/// Eq 2.52 on a given actuator, its configuration checked once.
+#[derive(Debug, Clone, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct Prepared {
+pub struct Law {
     gain_nm_per_j: f32,
     allow_negative: bool,
     torque_constant_nm_per_a: f32,
     limit_a: f32,
 }
 
-impl Prepared {
-    /// `None` when [`command`] would refuse every input (non-finite gain,
-    /// unusable torque constant).
-    pub fn new(c: &Config, act: &Actuator) -> Option<Self> {
+impl Law {
+    /// Checks `c` (`field` names the gain in errors, e.g. `energy.gain_nm_per_j`).
+    pub fn new(c: &Config, act: &Actuator, field: &'static str) -> Result<Self, InvalidField> {
+        require(c.gain_nm_per_j.is_finite() && c.gain_nm_per_j >= 0.0, field)?;
         let kt = act.torque_constant_nm_per_a;
-        if !(c.gain_nm_per_j.is_finite() && kt > 0.0 && kt.is_finite()) {
-            return None;
-        }
-        let limit_a = act.usable_limit_a();
-        Some(Prepared {
+        require(kt > 0.0 && kt.is_finite(), "model.torque_constant_nm_per_a")?;
+        Ok(Law {
             gain_nm_per_j: c.gain_nm_per_j,
             allow_negative: c.allow_negative,
             torque_constant_nm_per_a: kt,
-            limit_a,
+            limit_a: act.usable_limit_a(),
         })
     }
 
-    /// Current command, A (see [`command`]).
+    /// Torque of eq 2.52, N m (unclamped; not finite for a non-finite energy,
+    /// or 0 when only positive torque is allowed).
     #[inline]
-    pub fn current_a(&self, energy_j: f32, desired_energy_j: f32) -> f32 {
+    pub fn torque_nm(&self, energy_j: f32, desired_energy_j: f32) -> f32 {
         let tau = -self.gain_nm_per_j * (energy_j - desired_energy_j);
-        if !tau.is_finite() {
-            return 0.0;
-        }
-        let tau = if self.allow_negative {
+        if self.allow_negative {
             tau
         } else {
             tau.max(0.0)
-        };
+        }
+    }
+
+    /// Current command, A (positive compresses the spring), clamped to the
+    /// current limit; 0 A for a non-finite energy.
+    #[inline]
+    pub fn current_a(&self, energy_j: f32, desired_energy_j: f32) -> f32 {
+        // `f32::max` drops a NaN, so a NaN or infinite energy gives a torque
+        // of 0 or +-inf here, and the test below turns either into 0 A.
+        let tau = self.torque_nm(energy_j, desired_energy_j);
+        if !tau.is_finite() {
+            return 0.0;
+        }
         (tau / self.torque_constant_nm_per_a)
             .max(-self.limit_a)
             .min(self.limit_a)
     }
 }
 
+/// The thesis's energy-feedback controller: eq 2.52 in stance, the flight PD
+/// in flight. No state of its own.
+#[derive(Debug, Clone, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct EnergyTorque {
+    law: Law,
+    flight: FlightPd,
+}
+
+impl EnergyTorque {
+    /// Checks `c`.
+    pub fn new(c: &Config, act: &Actuator, flight: FlightPd) -> Result<Self, InvalidField> {
+        Ok(Self {
+            law: Law::new(c, act, "energy.gain_nm_per_j")?,
+            flight,
+        })
+    }
+}
+
+impl ControlLaw for EnergyTorque {
+    fn on_event(&mut self, _event: &EventInput) {}
+
+    #[inline]
+    fn current_a(&mut self, x: &ControlInput) -> f32 {
+        match x.phase {
+            Phase::Flight => self.flight.current_a(x.motor_angle_rad, x.motor_rate_rad_s),
+            Phase::Stance => self.law.current_a(x.energy_j, x.desired_energy_j),
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
-    use super::super::test_util::{close, input};
+    use super::super::test_util::close;
     use super::*;
 
     #[test]
-    fn eq_2_52_values_sign_and_saturation() -> Result<(), LawError> {
-        let (c, act) = (Config::default(), Actuator::default());
-        let mut x = input();
-        x.energy_j = 68.0; // 2 J short -> 0.4 N m -> 13.47 A
-        assert!(close(torque_nm(&c, 68.0, 70.0)?, 0.4, 1e-5));
-        assert!(close(command(&c, &act, &x)?, 13.468, 1e-2));
-        x.energy_j = 71.0; // surplus -> -0.2 N m
-        assert!(close(command(&c, &act, &x)?, -6.734, 1e-2));
-        let add_only = Config {
-            allow_negative: false,
-            ..c
-        };
-        assert_eq!(command(&add_only, &act, &x)?, 0.0);
-        x.energy_j = 50.0; // 20 J short -> 4 N m -> saturates
-        assert_eq!(command(&c, &act, &x)?, act.current_limit_a);
-        x.energy_j = f32::INFINITY;
-        assert_eq!(command(&c, &act, &x), Err(LawError::NonFiniteInput));
+    fn eq_2_52_values_sign_and_saturation() -> Result<(), InvalidField> {
+        let act = Actuator::default();
+        let law = Law::new(&Config::default(), &act, "k")?;
+        // 2 J short -> 0.4 N m -> 13.47 A.
+        assert!(close(law.torque_nm(68.0, 70.0), 0.4, 1e-5));
+        assert!(close(law.current_a(68.0, 70.0), 13.468, 1e-2));
+        // Surplus -> -0.2 N m.
+        assert!(close(law.current_a(71.0, 70.0), -6.734, 1e-2));
+        let add_only = Law::new(
+            &Config {
+                allow_negative: false,
+                ..Config::default()
+            },
+            &act,
+            "k",
+        )?;
+        assert_eq!(add_only.current_a(71.0, 70.0), 0.0);
+        // 20 J short -> 4 N m -> saturates.
+        assert_eq!(law.current_a(50.0, 70.0), act.current_limit_a);
+        assert_eq!(law.current_a(f32::INFINITY, 70.0), 0.0);
+        assert_eq!(law.current_a(f32::NAN, 70.0), 0.0);
         Ok(())
+    }
+
+    #[test]
+    fn a_bad_gain_is_refused_by_name() {
+        let act = Actuator::default();
+        for k in [f32::NAN, -0.1, f32::INFINITY] {
+            let c = Config {
+                gain_nm_per_j: k,
+                ..Config::default()
+            };
+            assert_eq!(
+                Law::new(&c, &act, "energy.gain_nm_per_j").err(),
+                Some(InvalidField("energy.gain_nm_per_j"))
+            );
+        }
     }
 
     proptest::proptest! {
         #[test]
-        fn prepared_equals_command(
-            e in 0.0f32..200.0, ed in 0.0f32..200.0, k in 0.0f32..10.0, neg in proptest::bool::ANY,
+        fn the_current_is_finite_and_within_the_limit(
+            e in proptest::num::f32::ANY, ed in 0.0f32..200.0, k in 0.0f32..10.0,
+            neg in proptest::bool::ANY,
         ) {
-            let c = Config { gain_nm_per_j: k, allow_negative: neg };
             let act = Actuator::default();
-            let mut x = input();
-            x.energy_j = e;
-            x.desired_energy_j = ed;
-            let fast = Prepared::new(&c, &act).map(|p| p.current_a(e, ed));
-            proptest::prop_assert_eq!(fast, Some(super::super::or_zero(command(&c, &act, &x))));
+            let law = Law::new(&Config { gain_nm_per_j: k, allow_negative: neg }, &act, "k")
+                .map_err(|f| proptest::test_runner::TestCaseError::fail(f.0))?;
+            let i = law.current_a(e, ed);
+            proptest::prop_assert!(i.is_finite() && i.abs() <= act.current_limit_a);
+            proptest::prop_assert!(neg || i >= 0.0);
         }
     }
 }

@@ -12,17 +12,17 @@
 //! thesis (section 4.3) reports the resulting oscillation and lowers the
 //! gains along eq 4.18 (see [`crate::pd_design::kp_over_kd_at_eta_opt`]).
 
-use super::{check_finite, Actuator, LawError};
+use super::{require, Actuator, InvalidField};
 use crate::pd_design::PdGains;
 
 /// Configuration of the flight PD.
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Config {
-    /// PD gains: `kp` in A/rad, `kd` in A s/rad (both >= 0). Default eq 4.13:
+    /// PD gains: `kp` in A/rad, `kd` in A s/rad (both finite, >= 0). Default eq 4.13:
     /// `kp = 20.3152`, `kd = 0.6077` (= `pd_design::pd_gains(110.0, 0.707, 0.1)`).
     pub gains: PdGains,
-    /// Start position of the nut, m (0 = upper stop). Default 0.
+    /// Start position of the nut, m, on the stroke (0 = upper stop). Default 0.
     pub start_position_m: f32,
 }
 
@@ -38,62 +38,41 @@ impl Default for Config {
     }
 }
 
-/// Current command, A (positive compresses the spring), clamped.
-/// `motor_angle_rad` is `theta = p / r`, `motor_rate_rad_s` its filtered rate.
-pub fn command(
-    c: &Config,
-    act: &Actuator,
-    motor_angle_rad: f32,
-    motor_rate_rad_s: f32,
-) -> Result<f32, LawError> {
-    check_finite(&[
-        c.gains.kp,
-        c.gains.kd,
-        c.start_position_m,
-        motor_angle_rad,
-        motor_rate_rad_s,
-    ])?;
-    let r = act.screw_m_per_rad;
-    if !(r > 0.0 && r.is_finite()) {
-        return Err(LawError::NonFiniteInput);
-    }
-    let theta_ref = c.start_position_m / r;
-    let i = c.gains.kp * (theta_ref - motor_angle_rad) - c.gains.kd * motor_rate_rad_s;
-    act.clamp_current(i)
-}
-
-/// [`command`] with its constants checked and worked out once, for the
-/// control step: a dozen instructions instead of re-validating the gains and
-/// dividing by `r` every period. Gives exactly [`command`]'s current for
-/// finite inputs, and 0 A for non-finite ones (like `or_zero(command(..))`).
-#[derive(Debug, Clone, Copy, PartialEq)]
+/// The flight PD on a given actuator, its configuration checked once.
+#[derive(Debug, Clone, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct Prepared {
+pub struct FlightPd {
     kp: f32,
     kd: f32,
     theta_ref_rad: f32,
     limit_a: f32,
 }
 
-impl Prepared {
-    /// `None` when [`command`] would refuse every input (a non-finite gain or
-    /// start position, or an unusable screw ratio).
-    pub fn new(c: &Config, act: &Actuator) -> Option<Self> {
-        check_finite(&[c.gains.kp, c.gains.kd, c.start_position_m]).ok()?;
+impl FlightPd {
+    /// Checks `c`: finite, non-negative gains and a start position on the
+    /// stroke (a bad one is refused by name: with it the nut would not be
+    /// driven home in flight).
+    pub fn new(c: &Config, act: &Actuator) -> Result<Self, InvalidField> {
+        let ok = |v: f32| v.is_finite() && v >= 0.0;
+        require(ok(c.gains.kp), "flight.kp_a_per_rad")?;
+        require(ok(c.gains.kd), "flight.kd_a_s_per_rad")?;
+        require(
+            ok(c.start_position_m) && c.start_position_m <= act.stroke_m,
+            "flight.start_position_m",
+        )?;
         let r = act.screw_m_per_rad;
-        if !(r > 0.0 && r.is_finite()) {
-            return None;
-        }
-        let limit_a = act.usable_limit_a();
-        Some(Prepared {
+        require(r > 0.0 && r.is_finite(), "model.screw_lead_m")?;
+        Ok(FlightPd {
             kp: c.gains.kp,
             kd: c.gains.kd,
             theta_ref_rad: c.start_position_m / r,
-            limit_a,
+            limit_a: act.usable_limit_a(),
         })
     }
 
-    /// Current command, A (see [`command`]).
+    /// Current command, A (positive compresses the spring), clamped to the
+    /// current limit. `motor_angle_rad` is `theta = p / r`,
+    /// `motor_rate_rad_s` its filtered rate; a non-finite one gives 0 A.
     #[inline]
     pub fn current_a(&self, motor_angle_rad: f32, motor_rate_rad_s: f32) -> f32 {
         if !(motor_angle_rad + motor_rate_rad_s).is_finite() {
@@ -122,33 +101,58 @@ mod tests {
     }
 
     #[test]
-    fn sign_values_and_saturation() -> Result<(), LawError> {
-        let (c, act) = (Config::default(), Actuator::default());
-        assert_eq!(command(&c, &act, 0.0, 0.0)?, 0.0);
+    fn sign_values_and_saturation() -> Result<(), InvalidField> {
+        let act = Actuator::default();
+        let pd = FlightPd::new(&Config::default(), &act)?;
+        assert_eq!(pd.current_a(0.0, 0.0), 0.0);
         // 1 rad below the start (nut down): pull back, -20.3152 A.
-        assert!(close(command(&c, &act, 1.0, 0.0)?, -20.3152, 1e-4));
+        assert!(close(pd.current_a(1.0, 0.0), -20.3152, 1e-4));
         // At the target moving up (rate -10 rad/s): -kd * rate = +6.077 A brakes it.
-        assert!(close(command(&c, &act, 0.0, -10.0)?, 6.077, 1e-4));
-        // Large error saturates at the limit.
-        assert_eq!(command(&c, &act, 60.0, 0.0)?, -act.current_limit_a);
-        assert_eq!(command(&c, &act, -60.0, 0.0)?, act.current_limit_a);
-        assert_eq!(
-            command(&c, &act, f32::NAN, 0.0),
-            Err(LawError::NonFiniteInput)
-        );
+        assert!(close(pd.current_a(0.0, -10.0), 6.077, 1e-4));
+        // Large error saturates.
+        assert_eq!(pd.current_a(60.0, 0.0), -act.current_limit_a);
+        assert_eq!(pd.current_a(-60.0, 0.0), act.current_limit_a);
+        assert_eq!(pd.current_a(f32::NAN, 0.0), 0.0);
+        assert_eq!(pd.current_a(0.0, f32::INFINITY), 0.0);
         Ok(())
+    }
+
+    #[test]
+    fn bad_gains_are_refused_by_name() {
+        let act = Actuator::default();
+        let with = |kp: f32, kd: f32, start: f32| Config {
+            gains: PdGains { kp, kd },
+            start_position_m: start,
+        };
+        let refused = |c: Config| FlightPd::new(&c, &act).err().map(|f| f.0);
+        assert_eq!(
+            refused(with(f32::NAN, 0.6, 0.0)),
+            Some("flight.kp_a_per_rad")
+        );
+        assert_eq!(refused(with(-1.0, 0.6, 0.0)), Some("flight.kp_a_per_rad"));
+        assert_eq!(
+            refused(with(20.0, f32::INFINITY, 0.0)),
+            Some("flight.kd_a_s_per_rad")
+        );
+        assert_eq!(
+            refused(with(20.0, 0.6, 0.06)),
+            Some("flight.start_position_m")
+        );
+        assert_eq!(refused(with(20.0, 0.6, 0.01)), None);
     }
 
     proptest::proptest! {
         #[test]
-        fn prepared_equals_command(
-            theta in -100.0f32..100.0, rate in -1000.0f32..1000.0,
+        fn the_current_is_finite_and_within_the_limit(
+            theta in proptest::num::f32::ANY, rate in proptest::num::f32::ANY,
             kp in 0.0f32..200.0, kd in 0.0f32..10.0, start in 0.0f32..0.05,
         ) {
-            let c = Config { gains: crate::pd_design::PdGains { kp, kd }, start_position_m: start };
+            let c = Config { gains: PdGains { kp, kd }, start_position_m: start };
             let act = Actuator::default();
-            let fast = Prepared::new(&c, &act).map(|p| p.current_a(theta, rate));
-            proptest::prop_assert_eq!(fast, Some(super::super::or_zero(command(&c, &act, theta, rate))));
+            let pd = FlightPd::new(&c, &act)
+                .map_err(|f| proptest::test_runner::TestCaseError::fail(f.0))?;
+            let i = pd.current_a(theta, rate);
+            proptest::prop_assert!(i.is_finite() && i.abs() <= act.current_limit_a);
         }
     }
 }

@@ -8,7 +8,13 @@
 //! nut (position and velocity loops), the motor torque that balances it is
 //! `tau = F r / eta` (the plant's drive force is `eta tau / r`).
 //!
-//! Stance laws ([`StanceLaw`], run by [`StanceController`]):
+//! Every controller is one type in one module with its own state, behind
+//! one interface ([`ControlLaw`]: events in, current out), dispatched from
+//! one enum ([`Controller`], built from a [`Strategy`] and validated once):
+//! [`passive`], each thesis law below with the flight PD in flight,
+//! [`energy_apex`] and [`shaped`].
+//!
+//! Stance laws ([`StanceLaw`]):
 //! - [`step_open`]: open-loop position step (eq 2.49);
 //! - [`step_closed`]: closed-loop position step (eqs 2.50-2.51);
 //! - [`constant_torque`]: open-loop constant torque (section 2.1.3.4);
@@ -19,15 +25,41 @@
 //! Flight law: [`flight_pd`] (section 4.3, eq 4.4).
 
 pub mod constant_torque;
+pub mod energy_apex;
 pub mod energy_torque;
 pub mod flight_pd;
 pub mod modified_torque;
+pub mod passive;
 pub mod shaped;
 pub mod step_closed;
 pub mod step_open;
 pub mod velocity;
 
+use crate::estimator::{Phase, PhaseEvent};
 use crate::model::ModelParams;
+
+/// A configuration field outside its documented range, named by its path
+/// in the configuration (e.g. `flight.kp_a_per_rad`): the controller is
+/// refused at construction rather than run with a silent 0 A.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct InvalidField(pub &'static str);
+
+/// `Ok(())` if `ok`, else the field named.
+#[inline]
+pub(crate) fn require(ok: bool, field: &'static str) -> Result<(), InvalidField> {
+    if ok {
+        Ok(())
+    } else {
+        Err(InvalidField(field))
+    }
+}
+
+/// Whether `v` is finite and within `lo..=hi`.
+#[inline]
+pub(crate) fn in_range(v: f32, lo: f32, hi: f32) -> bool {
+    v.is_finite() && v >= lo && v <= hi
+}
 
 /// Why a law refused to produce a command.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -164,6 +196,16 @@ impl Default for NutPositionPd {
 }
 
 impl NutPositionPd {
+    /// Checks the gains (finite, >= 0), naming `kp_field` or `kd_field`.
+    pub fn validate(
+        &self,
+        kp_field: &'static str,
+        kd_field: &'static str,
+    ) -> Result<(), InvalidField> {
+        require(in_range(self.kp_n_per_m, 0.0, f32::MAX), kp_field)?;
+        require(in_range(self.kd_n_s_per_m, 0.0, f32::MAX), kd_field)
+    }
+
     /// Current that drives the nut from `p` (m) at `pd` (m/s) to `p_ref` (m)
     /// against the measured spring force `spring_force_n` (N), A, clamped.
     pub fn current_a(
@@ -230,54 +272,233 @@ impl Default for StanceLaw {
     }
 }
 
-/// Runs a [`StanceLaw`], holding the per-stance state (the step latched at `t1`).
+/// What runs in stance and in flight: the controller's configuration. Each
+/// variant is built into its [`Controller`] (validated once).
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct StanceController {
-    /// The law and its configuration.
-    pub law: StanceLaw,
-    /// Plant constants.
-    pub actuator: Actuator,
-    step: step_closed::Latch,
+pub enum Strategy {
+    /// Motor off: 0 A in every phase (thesis section 4.4.1, passive hopping).
+    Passive,
+    /// A thesis stance law, with the flight PD back-drive in flight.
+    Thesis(StanceLaw),
+    /// The apex-regulating energy law, with the flight PD in flight.
+    EnergyApex(energy_apex::ApexLoop),
+    /// Shaped torque with its own braking-curve back-drive in flight and a
+    /// per-hop loop on the torque level ([`shaped`]).
+    Shaped(shaped::Config),
 }
 
-impl StanceController {
-    /// A controller for `law` on `actuator`.
-    pub fn new(law: StanceLaw, actuator: Actuator) -> Self {
-        Self {
-            law,
-            actuator,
-            step: step_closed::Latch::default(),
+impl Default for Strategy {
+    fn default() -> Self {
+        Strategy::EnergyApex(energy_apex::ApexLoop::default())
+    }
+}
+
+/// What a controller sees every period: the estimator's phase and filtered
+/// rates, the converted sample and the energy estimate, all SI.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct ControlInput {
+    /// Phase estimate after this sample.
+    pub phase: Phase,
+    /// Body height `z`, m.
+    pub body_height_m: f32,
+    /// Toe height `z - l0`, m (the model's leg length).
+    pub toe_height_m: f32,
+    /// Filtered body velocity `zd`, m/s (eq 4.1).
+    pub body_velocity_mps: f32,
+    /// Motor angle `theta = p / r`, rad.
+    pub motor_angle_rad: f32,
+    /// Filtered motor rate, rad/s (eq 4.1).
+    pub motor_rate_rad_s: f32,
+    /// Nut position `p`, m (down positive).
+    pub nut_position_m: f32,
+    /// Nut velocity `r theta dot`, m/s.
+    pub nut_velocity_mps: f32,
+    /// Load-cell spring force, N.
+    pub spring_force_n: f32,
+    /// Leg compression from the potentiometer, m.
+    pub leg_compression_m: f32,
+    /// Total energy estimate, J (eq 2.44 with eq 2.45; NaN if it overflowed).
+    pub energy_j: f32,
+    /// `E_D` of the target apex, J (eq 2.43).
+    pub desired_energy_j: f32,
+    /// The target apex toe height `H_D`, m.
+    pub target_apex_m: f32,
+    /// The flight's highest toe height so far, m (None before any flight
+    /// sample; the same as the apex once descending).
+    pub flight_peak_toe_m: Option<f32>,
+    /// The last apex toe height, m.
+    pub last_apex_m: Option<f32>,
+    /// The control period, s.
+    pub dt_s: f32,
+}
+
+impl ControlInput {
+    /// The stance laws' view of this period.
+    #[inline]
+    pub fn stance(&self, after_bottom: bool) -> StanceInput {
+        StanceInput {
+            energy_j: self.energy_j,
+            desired_energy_j: self.desired_energy_j,
+            nut_position_m: self.nut_position_m,
+            nut_velocity_mps: self.nut_velocity_mps,
+            leg_compression_m: self.leg_compression_m,
+            spring_force_n: self.spring_force_n,
+            after_bottom,
+        }
+    }
+}
+
+/// An estimator event as a controller sees it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct EventInput {
+    /// The event.
+    pub event: PhaseEvent,
+    /// At an apex that completes a hop (a stance came before it): `E_D` of
+    /// the measured apex height, J (eq 2.43), for per-hop loops. `None` at
+    /// every other event.
+    pub hop_apex_energy_j: Option<f32>,
+    /// `E_D` of the target apex, J.
+    pub desired_energy_j: f32,
+    /// Whether a fault is latched (the motor is off whatever is commanded).
+    pub faulted: bool,
+}
+
+/// The one interface of every controller: events in, current out.
+pub trait ControlLaw {
+    /// An estimator event (touchdown, liftoff, bottom, apex), before this
+    /// period's [`current_a`](Self::current_a).
+    fn on_event(&mut self, event: &EventInput);
+
+    /// This period's current request, A (positive compresses the spring),
+    /// before the supervisor. Finite for every input.
+    fn current_a(&mut self, x: &ControlInput) -> f32;
+}
+
+/// Every controller, with its own state; [`Strategy`] says which one.
+#[derive(Debug, Clone, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Controller {
+    /// [`passive::Passive`].
+    Passive(passive::Passive),
+    /// [`step_open::StepOpen`].
+    StepOpen(step_open::StepOpen),
+    /// [`step_closed::StepClosed`].
+    StepClosed(step_closed::StepClosed),
+    /// [`constant_torque::ConstantTorque`].
+    ConstantTorque(constant_torque::ConstantTorque),
+    /// [`energy_torque::EnergyTorque`].
+    EnergyTorque(energy_torque::EnergyTorque),
+    /// [`velocity::Velocity`].
+    Velocity(velocity::Velocity),
+    /// [`modified_torque::ModifiedTorque`].
+    ModifiedTorque(modified_torque::ModifiedTorque),
+    /// [`energy_apex::EnergyApex`].
+    EnergyApex(energy_apex::EnergyApex),
+    /// [`shaped::Shaped`].
+    Shaped(shaped::Shaped),
+}
+
+impl Controller {
+    /// Builds the controller `strategy` names for `model`, with `flight` as
+    /// the thesis laws' flight back-drive. A field out of range is refused
+    /// by name.
+    pub fn new(
+        strategy: &Strategy,
+        model: &ModelParams,
+        flight: &flight_pd::Config,
+    ) -> Result<Self, InvalidField> {
+        let act = Actuator::from_model(model);
+        let pd = || flight_pd::FlightPd::new(flight, &act);
+        Ok(match strategy {
+            Strategy::Passive => Controller::Passive(passive::Passive),
+            Strategy::Thesis(law) => match law {
+                StanceLaw::StepOpen(c) => {
+                    Controller::StepOpen(step_open::StepOpen::new(c, &act, pd()?)?)
+                }
+                StanceLaw::StepClosed(c) => {
+                    Controller::StepClosed(step_closed::StepClosed::new(c, &act, pd()?)?)
+                }
+                StanceLaw::ConstantTorque(c) => Controller::ConstantTorque(
+                    constant_torque::ConstantTorque::new(c, &act, pd()?)?,
+                ),
+                StanceLaw::EnergyTorque(c) => {
+                    Controller::EnergyTorque(energy_torque::EnergyTorque::new(c, &act, pd()?)?)
+                }
+                StanceLaw::Velocity(c) => {
+                    Controller::Velocity(velocity::Velocity::new(c, &act, pd()?)?)
+                }
+                StanceLaw::ModifiedTorque(c) => Controller::ModifiedTorque(
+                    modified_torque::ModifiedTorque::new(c, &act, pd()?)?,
+                ),
+            },
+            Strategy::EnergyApex(a) => {
+                Controller::EnergyApex(energy_apex::EnergyApex::new(a, &act, model, pd()?)?)
+            }
+            Strategy::Shaped(c) => Controller::Shaped(shaped::Shaped::new(c, &act, model)?),
+        })
+    }
+
+    /// The energy-apex loop's current correction of `E_D`, J (0 for other controllers).
+    pub fn apex_offset_j(&self) -> f32 {
+        match self {
+            Controller::EnergyApex(c) => c.offset_j(),
+            _ => 0.0,
         }
     }
 
-    /// Call at every touchdown: forgets the step latched in the previous stance.
-    pub fn on_touchdown(&mut self) {
-        self.step = step_closed::Latch::default();
+    /// The shaped law's torque level, fraction of the current limit (0 for
+    /// other controllers).
+    pub fn shaped_level(&self) -> f32 {
+        match self {
+            Controller::Shaped(c) => c.level(),
+            _ => 0.0,
+        }
+    }
+}
+
+impl ControlLaw for Controller {
+    #[inline]
+    fn on_event(&mut self, event: &EventInput) {
+        match self {
+            Controller::Passive(c) => c.on_event(event),
+            Controller::StepOpen(c) => c.on_event(event),
+            Controller::StepClosed(c) => c.on_event(event),
+            Controller::ConstantTorque(c) => c.on_event(event),
+            Controller::EnergyTorque(c) => c.on_event(event),
+            Controller::Velocity(c) => c.on_event(event),
+            Controller::ModifiedTorque(c) => c.on_event(event),
+            Controller::EnergyApex(c) => c.on_event(event),
+            Controller::Shaped(c) => c.on_event(event),
+        }
     }
 
-    /// The stance current command, A (positive compresses the spring), clamped.
-    ///
-    /// Every input field is checked first: any non-finite value gives
-    /// [`LawError::NonFiniteInput`], whichever law is selected.
-    pub fn command(&mut self, x: &StanceInput) -> Result<f32, LawError> {
-        check_finite(&[
-            x.energy_j,
-            x.desired_energy_j,
-            x.nut_position_m,
-            x.nut_velocity_mps,
-            x.leg_compression_m,
-            x.spring_force_n,
-        ])?;
-        let act = &self.actuator;
-        match &self.law {
-            StanceLaw::StepOpen(c) => step_open::command(c, act, x),
-            StanceLaw::StepClosed(c) => self.step.command(c, act, x),
-            StanceLaw::ConstantTorque(c) => constant_torque::command(c, act),
-            StanceLaw::EnergyTorque(c) => energy_torque::command(c, act, x),
-            StanceLaw::Velocity(c) => velocity::command(c, act, x),
-            StanceLaw::ModifiedTorque(c) => modified_torque::command(c, act),
+    #[inline]
+    fn current_a(&mut self, x: &ControlInput) -> f32 {
+        match self {
+            Controller::Passive(c) => c.current_a(x),
+            Controller::StepOpen(c) => c.current_a(x),
+            Controller::StepClosed(c) => c.current_a(x),
+            Controller::ConstantTorque(c) => c.current_a(x),
+            Controller::EnergyTorque(c) => c.current_a(x),
+            Controller::Velocity(c) => c.current_a(x),
+            Controller::ModifiedTorque(c) => c.current_a(x),
+            Controller::EnergyApex(c) => c.current_a(x),
+            Controller::Shaped(c) => c.current_a(x),
         }
+    }
+}
+
+/// After-bottom tracking shared by the position-step laws: set at the
+/// bottom of stance (`t1`), cleared at touchdown.
+#[inline]
+pub(crate) fn track_bottom(after_bottom: &mut bool, event: &EventInput) {
+    match event.event {
+        PhaseEvent::Touchdown => *after_bottom = false,
+        PhaseEvent::Bottom => *after_bottom = true,
+        _ => {}
     }
 }
 
@@ -327,30 +548,5 @@ mod tests {
         ));
         assert_eq!(or_zero(Err(LawError::NonFiniteInput)), 0.0);
         Ok(())
-    }
-
-    #[test]
-    fn controller_dispatches_and_rejects_nan() {
-        let mut c = StanceController::new(StanceLaw::default(), Actuator::default());
-        let mut x = test_util::input();
-        x.energy_j = f32::NAN;
-        assert_eq!(c.command(&x), Err(LawError::NonFiniteInput));
-        for law in [
-            StanceLaw::StepOpen(step_open::Config::default()),
-            StanceLaw::StepClosed(step_closed::Config::default()),
-            StanceLaw::ConstantTorque(constant_torque::Config::default()),
-            StanceLaw::EnergyTorque(energy_torque::Config::default()),
-            StanceLaw::Velocity(velocity::Config::default()),
-            StanceLaw::ModifiedTorque(modified_torque::Config::default()),
-        ] {
-            let mut c = StanceController::new(law, Actuator::default());
-            let mut x = test_util::input();
-            x.after_bottom = true;
-            x.energy_j = 65.0;
-            let i = or_zero(c.command(&x));
-            assert!((0.0..=33.67).contains(&i), "{law:?}: {i}");
-            x.nut_velocity_mps = f32::NAN;
-            assert_eq!(c.command(&x), Err(LawError::NonFiniteInput), "{law:?}");
-        }
     }
 }

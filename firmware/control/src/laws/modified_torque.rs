@@ -4,7 +4,11 @@
 //! motor is up to speed at touchdown. Outside that window the flight PD
 //! ([`super::flight_pd`]) drives the nut back.
 
-use super::{check_finite, Actuator, LawError};
+use super::{
+    check_finite, flight_pd::FlightPd, in_range, or_zero, require, Actuator, ControlInput,
+    ControlLaw, EventInput, InvalidField, LawError,
+};
+use crate::estimator::Phase;
 
 /// Configuration of the modified torque law.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -66,6 +70,62 @@ pub fn command(c: &Config, act: &Actuator) -> Result<f32, LawError> {
         },
         act,
     )
+}
+
+impl Config {
+    /// Checks every field, naming the first one out of range.
+    pub fn validate(&self) -> Result<(), InvalidField> {
+        require(self.torque_nm.is_finite(), "modified_torque.torque_nm")?;
+        require(
+            in_range(self.apex_fraction, 0.0, 1.0),
+            "modified_torque.apex_fraction",
+        )
+    }
+}
+
+/// The thesis's modified-torque controller: full torque in stance and in the
+/// late descent, the flight PD in the rest of the flight. No state of its
+/// own (the last apex comes from the estimator).
+#[derive(Debug, Clone, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct ModifiedTorque {
+    cfg: Config,
+    active_a: f32,
+    flight: FlightPd,
+}
+
+impl ModifiedTorque {
+    /// Checks `cfg`.
+    pub fn new(cfg: &Config, act: &Actuator, flight: FlightPd) -> Result<Self, InvalidField> {
+        cfg.validate()?;
+        Ok(Self {
+            cfg: *cfg,
+            active_a: or_zero(command(cfg, act)),
+            flight,
+        })
+    }
+}
+
+impl ControlLaw for ModifiedTorque {
+    fn on_event(&mut self, _event: &EventInput) {}
+
+    fn current_a(&mut self, x: &ControlInput) -> f32 {
+        match x.phase {
+            Phase::Flight => {
+                if flight_active(
+                    &self.cfg,
+                    x.toe_height_m,
+                    x.body_velocity_mps,
+                    x.last_apex_m,
+                ) {
+                    self.active_a
+                } else {
+                    self.flight.current_a(x.motor_angle_rad, x.motor_rate_rad_s)
+                }
+            }
+            Phase::Stance => self.active_a,
+        }
+    }
 }
 
 #[cfg(test)]

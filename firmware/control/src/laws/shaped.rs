@@ -12,7 +12,7 @@
 //!
 //! 1. spins the rotor up on the way down (from `spin_up_fraction` of the
 //!    flight's apex, also on the first descent after a release, and only in
-//!    a fall: see [`Prepared::spin_up`]), where the spring force it works
+//!    a fall: see [`Constants::spin_up`]), where the spring force it works
 //!    against is small, so the motor's work goes into rotor kinetic energy
 //!    cheaply;
 //! 2. keeps pushing through the first part of stance, where that kinetic
@@ -59,7 +59,8 @@
 //! instructions; `libm::sqrtf` costs several times that on the M4F without
 //! `vsqrt.f32`).
 
-use super::Actuator;
+use super::{in_range, require, Actuator, ControlInput, ControlLaw, EventInput, InvalidField};
+use crate::estimator::{Phase, PhaseEvent};
 use crate::model::ModelParams;
 
 /// Configuration of the shaped-torque law. Times are fractions of the
@@ -136,27 +137,129 @@ impl Default for Config {
 }
 
 impl Config {
-    /// Whether every field is finite and in its documented range.
-    pub fn is_valid(&self) -> bool {
-        let in_range = |v: f32, lo: f32, hi: f32| v.is_finite() && v >= lo && v <= hi;
-        in_range(self.spin_up_fraction, 0.0, 1.0)
-            && in_range(self.spin_up_min_apex_m, 0.0, 1.0)
-            && in_range(self.switch_fraction, 0.0, 2.0)
-            && in_range(self.brake_fraction, 0.0, 1.0)
-            && in_range(self.initial_level, 0.0, 1.0)
-            && in_range(self.integral_start, 0.0, 1.0)
-            && in_range(self.level_gain_per_j, 0.0, 10.0)
-            && in_range(self.level_proportional_per_j, 0.0, 10.0)
-            && in_range(self.braking_margin, 1e-3, 1.0)
-            && in_range(self.tracking_time_s, 1e-3, 0.1)
-            && in_range(self.creep_speed_mps, 0.0, 0.1)
+    /// Checks every field (finite and in its documented range), naming the
+    /// first one out of range.
+    pub fn validate(&self) -> Result<(), InvalidField> {
+        let fields = [
+            (self.spin_up_fraction, 0.0, 1.0, "shaped.spin_up_fraction"),
+            (
+                self.spin_up_min_apex_m,
+                0.0,
+                1.0,
+                "shaped.spin_up_min_apex_m",
+            ),
+            (self.switch_fraction, 0.0, 2.0, "shaped.switch_fraction"),
+            (self.brake_fraction, 0.0, 1.0, "shaped.brake_fraction"),
+            (self.initial_level, 0.0, 1.0, "shaped.initial_level"),
+            (self.integral_start, 0.0, 1.0, "shaped.integral_start"),
+            (self.level_gain_per_j, 0.0, 10.0, "shaped.level_gain_per_j"),
+            (
+                self.level_proportional_per_j,
+                0.0,
+                10.0,
+                "shaped.level_proportional_per_j",
+            ),
+            (self.braking_margin, 1e-3, 1.0, "shaped.braking_margin"),
+            (self.tracking_time_s, 1e-3, 0.1, "shaped.tracking_time_s"),
+            (self.creep_speed_mps, 0.0, 0.1, "shaped.creep_speed_mps"),
+        ];
+        for (v, lo, hi, name) in fields {
+            require(in_range(v, lo, hi), name)?;
+        }
+        Ok(())
+    }
+}
+
+/// The shaped controller: its constants ([`Constants`]) and its state, the
+/// torque level of the per-hop loop and the stance's clock and braking flag.
+#[derive(Debug, Clone, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Shaped {
+    k: Constants,
+    /// Torque level `u`, fraction of the current limit.
+    level: f32,
+    /// The per-hop loop's integral `b`.
+    integral: f32,
+    /// Time since touchdown, s.
+    stance_time_s: f32,
+    /// Whether braking has stopped the nut this stance.
+    braked: bool,
+}
+
+impl Shaped {
+    /// Checks `cfg` and works out its constants for `model`.
+    pub fn new(cfg: &Config, act: &Actuator, model: &ModelParams) -> Result<Self, InvalidField> {
+        let k = Constants::new(cfg, act, model)?;
+        Ok(Self {
+            level: cfg.initial_level,
+            integral: cfg.integral_start,
+            k,
+            stance_time_s: 0.0,
+            braked: false,
+        })
+    }
+
+    /// The torque level, fraction of the current limit.
+    pub fn level(&self) -> f32 {
+        self.level
+    }
+}
+
+impl ControlLaw for Shaped {
+    fn on_event(&mut self, event: &EventInput) {
+        match event.event {
+            PhaseEvent::Touchdown => {
+                self.stance_time_s = 0.0;
+                self.braked = false;
+            }
+            PhaseEvent::Apex { .. } => {
+                // With the motor off (a fault latched) the hop decays whatever
+                // the level: integrating that error would only wind up.
+                if let (Some(measured_j), false) = (event.hop_apex_energy_j, event.faulted) {
+                    (self.integral, self.level) = self.k.next_level(
+                        self.integral,
+                        self.level,
+                        event.desired_energy_j,
+                        measured_j,
+                    );
+                }
+            }
+            _ => {}
+        }
+    }
+
+    #[inline]
+    fn current_a(&mut self, x: &ControlInput) -> f32 {
+        if x.phase == Phase::Flight {
+            // The flight's own peak, not the last apex event: the same
+            // height once descending, and it also exists on the first
+            // descent after a release from rest.
+            if self
+                .k
+                .spin_up(x.toe_height_m, x.body_velocity_mps, x.flight_peak_toe_m)
+            {
+                return self.k.push_current_a(self.level);
+            }
+            return self
+                .k
+                .backdrive_current_a(x.nut_position_m, x.nut_velocity_mps);
+        }
+        // A non-finite `dt_s` makes the sum NaN: the comparisons in
+        // `stance_current_a` then fall through to braking or 0 A, both safe.
+        self.stance_time_s += x.dt_s;
+        self.k.stance_current_a(
+            self.level,
+            self.stance_time_s,
+            x.nut_velocity_mps,
+            &mut self.braked,
+        )
     }
 }
 
 /// The law with its model constants worked out once.
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct Prepared {
+pub struct Constants {
     cfg: Config,
     /// Current limit, A.
     limit_a: f32,
@@ -180,12 +283,10 @@ pub struct Prepared {
     gravity_mps2: f32,
 }
 
-impl Prepared {
+impl Constants {
     /// `None` if `cfg` is invalid or the model gives no usable constants.
-    pub fn new(cfg: &Config, act: &Actuator, model: &ModelParams) -> Option<Self> {
-        if !cfg.is_valid() {
-            return None;
-        }
+    pub fn new(cfg: &Config, act: &Actuator, model: &ModelParams) -> Result<Self, InvalidField> {
+        cfg.validate()?;
         let r = act.screw_m_per_rad;
         let torque_per_a = act.efficiency * act.torque_constant_nm_per_a;
         let alpha = model.reflected_inertia_kg();
@@ -217,7 +318,10 @@ impl Prepared {
         ]
         .iter()
         .all(|v| v.is_finite() && *v >= 0.0);
-        all_finite.then_some(p)
+        // The model was validated; what is left to refuse is a combination
+        // of valid values whose constants overflow.
+        require(all_finite, "model")?;
+        Ok(p)
     }
 
     /// The configuration.
@@ -384,10 +488,10 @@ mod tests {
         assert_eq!(sqrt_approx(f32::INFINITY), f32::INFINITY);
     }
 
-    fn prepared() -> Prepared {
+    fn prepared() -> Constants {
         let model = ModelParams::default();
-        Prepared::new(&Config::default(), &Actuator::from_model(&model), &model)
-            .unwrap_or_else(|| panic!("default shaped law"))
+        Constants::new(&Config::default(), &Actuator::from_model(&model), &model)
+            .unwrap_or_else(|e| panic!("default shaped law: {e:?}"))
     }
 
     #[test]
@@ -503,7 +607,7 @@ mod tests {
                 ..Config::default()
             },
         ] {
-            assert!(Prepared::new(&c, &act, &model).is_none(), "{c:?}");
+            assert!(Constants::new(&c, &act, &model).is_err(), "{c:?}");
         }
     }
 }

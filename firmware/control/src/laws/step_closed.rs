@@ -16,7 +16,11 @@
 //! 50 mm compression it gives 1.8e-3 m/J, close to the 2e-3 m/J reading of
 //! the thesis's 0.2.
 
-use super::{check_finite, Actuator, LawError, NutPositionPd, StanceInput};
+use super::{
+    check_finite, flight_pd::FlightPd, in_range, or_zero, require, track_bottom, Actuator,
+    ControlInput, ControlLaw, EventInput, InvalidField, LawError, NutPositionPd, StanceInput,
+};
+use crate::estimator::{Phase, PhaseEvent};
 
 /// How `k_p` of eq 2.50 is chosen.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -126,6 +130,72 @@ impl Latch {
             x.nut_velocity_mps,
             x.spring_force_n,
         )
+    }
+}
+
+impl Config {
+    /// Checks every field, naming the first one out of range.
+    pub fn validate(&self) -> Result<(), InvalidField> {
+        match self.gain {
+            Gain::Fixed { kp_m_per_j } => require(
+                in_range(kp_m_per_j, 0.0, f32::MAX),
+                "step_closed.kp_m_per_j",
+            )?,
+            Gain::Normalised { min_compression_m } => require(
+                in_range(min_compression_m, 1e-4, 1.0),
+                "step_closed.min_compression_m",
+            )?,
+        }
+        self.pd
+            .validate("step_closed.kp_n_per_m", "step_closed.kd_n_s_per_m")
+    }
+}
+
+/// The thesis's closed-loop step controller: eqs 2.50-2.51 in stance, the
+/// flight PD in flight. State: whether this stance's bottom has passed, and
+/// the step latched there.
+#[derive(Debug, Clone, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct StepClosed {
+    cfg: Config,
+    act: Actuator,
+    flight: FlightPd,
+    after_bottom: bool,
+    latch: Latch,
+}
+
+impl StepClosed {
+    /// Checks `cfg`.
+    pub fn new(cfg: &Config, act: &Actuator, flight: FlightPd) -> Result<Self, InvalidField> {
+        cfg.validate()?;
+        Ok(Self {
+            cfg: *cfg,
+            act: *act,
+            flight,
+            after_bottom: false,
+            latch: Latch::default(),
+        })
+    }
+}
+
+impl ControlLaw for StepClosed {
+    fn on_event(&mut self, event: &EventInput) {
+        if event.event == PhaseEvent::Touchdown {
+            // Forget the step latched in the previous stance.
+            self.latch = Latch::default();
+        }
+        track_bottom(&mut self.after_bottom, event);
+    }
+
+    fn current_a(&mut self, x: &ControlInput) -> f32 {
+        match x.phase {
+            Phase::Flight => self.flight.current_a(x.motor_angle_rad, x.motor_rate_rad_s),
+            Phase::Stance => or_zero(self.latch.command(
+                &self.cfg,
+                &self.act,
+                &x.stance(self.after_bottom),
+            )),
+        }
     }
 }
 

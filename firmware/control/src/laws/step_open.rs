@@ -3,7 +3,11 @@
 //! reference is the start position `p = 0`. The reference is tracked by the
 //! nut position PD [`NutPositionPd`] (Table 2.1's `k_p,f`, `k_v,f`).
 
-use super::{check_finite, Actuator, LawError, NutPositionPd, StanceInput};
+use super::{
+    check_finite, flight_pd::FlightPd, in_range, or_zero, require, track_bottom, Actuator,
+    ControlInput, ControlLaw, EventInput, InvalidField, LawError, NutPositionPd, StanceInput,
+};
+use crate::estimator::Phase;
 
 /// Configuration of the open-loop step.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -44,6 +48,52 @@ pub fn command(c: &Config, act: &Actuator, x: &StanceInput) -> Result<f32, LawEr
         x.nut_velocity_mps,
         x.spring_force_n,
     )
+}
+
+impl Config {
+    /// Checks every field, naming the first one out of range.
+    pub fn validate(&self) -> Result<(), InvalidField> {
+        require(in_range(self.step_m, 0.0, 1.0), "step_open.step_m")?;
+        self.pd
+            .validate("step_open.kp_n_per_m", "step_open.kd_n_s_per_m")
+    }
+}
+
+/// The thesis's open-loop step controller: eq 2.49 in stance, the flight PD
+/// in flight. State: whether this stance's bottom has passed.
+#[derive(Debug, Clone, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct StepOpen {
+    cfg: Config,
+    act: Actuator,
+    flight: FlightPd,
+    after_bottom: bool,
+}
+
+impl StepOpen {
+    /// Checks `cfg`.
+    pub fn new(cfg: &Config, act: &Actuator, flight: FlightPd) -> Result<Self, InvalidField> {
+        cfg.validate()?;
+        Ok(Self {
+            cfg: *cfg,
+            act: *act,
+            flight,
+            after_bottom: false,
+        })
+    }
+}
+
+impl ControlLaw for StepOpen {
+    fn on_event(&mut self, event: &EventInput) {
+        track_bottom(&mut self.after_bottom, event);
+    }
+
+    fn current_a(&mut self, x: &ControlInput) -> f32 {
+        match x.phase {
+            Phase::Flight => self.flight.current_a(x.motor_angle_rad, x.motor_rate_rad_s),
+            Phase::Stance => or_zero(command(&self.cfg, &self.act, &x.stance(self.after_bottom))),
+        }
+    }
 }
 
 #[cfg(test)]

@@ -15,7 +15,11 @@
 //! `F_s` as feed-forward (the force the nut must hold to move at all), then
 //! `tau = F r / eta`.
 
-use super::{check_finite, Actuator, LawError, StanceInput};
+use super::{
+    check_finite, flight_pd::FlightPd, in_range, or_zero, require, Actuator, ControlInput,
+    ControlLaw, EventInput, InvalidField, LawError, StanceInput,
+};
+use crate::estimator::Phase;
 
 /// Configuration of the velocity law.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -63,6 +67,53 @@ pub fn command(c: &Config, act: &Actuator, x: &StanceInput) -> Result<f32, LawEr
     };
     let force_n = ff + c.loop_gain_n_s_per_m * (v_ref - x.nut_velocity_mps);
     act.nut_force_to_current(force_n)
+}
+
+impl Config {
+    /// Checks every field, naming the first one out of range.
+    pub fn validate(&self) -> Result<(), InvalidField> {
+        require(
+            in_range(self.gain_mps_per_j, 0.0, f32::MAX),
+            "velocity.gain_mps_per_j",
+        )?;
+        require(
+            in_range(self.loop_gain_n_s_per_m, 0.0, f32::MAX),
+            "velocity.loop_gain_n_s_per_m",
+        )
+    }
+}
+
+/// The thesis's actuator-velocity controller: eq 2.53 in stance, the flight
+/// PD in flight. No state of its own.
+#[derive(Debug, Clone, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Velocity {
+    cfg: Config,
+    act: Actuator,
+    flight: FlightPd,
+}
+
+impl Velocity {
+    /// Checks `cfg`.
+    pub fn new(cfg: &Config, act: &Actuator, flight: FlightPd) -> Result<Self, InvalidField> {
+        cfg.validate()?;
+        Ok(Self {
+            cfg: *cfg,
+            act: *act,
+            flight,
+        })
+    }
+}
+
+impl ControlLaw for Velocity {
+    fn on_event(&mut self, _event: &EventInput) {}
+
+    fn current_a(&mut self, x: &ControlInput) -> f32 {
+        match x.phase {
+            Phase::Flight => self.flight.current_a(x.motor_angle_rad, x.motor_rate_rad_s),
+            Phase::Stance => or_zero(command(&self.cfg, &self.act, &x.stance(false))),
+        }
+    }
 }
 
 #[cfg(test)]

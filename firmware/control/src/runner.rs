@@ -1,0 +1,542 @@
+//! The one control-period runner shared by the board, the QEMU image and
+//! the host simulator: they differ only in their I/O ([`HopperIo`]), their
+//! cycle counter ([`CycleCounter`]) and what paces them.
+//!
+//! One [`PeriodRunner::run_period`] call is one whole period:
+//!
+//! 1. read the sensors through the I/O;
+//! 2. [`Hopper::step`]: conversion, estimator and eq 4.1 filters, energy
+//!    (eqs 2.44-2.45), the selected controller, the supervisor, the DAC code,
+//!    the hop ledger and the telemetry record (timed with the counter);
+//! 3. write the DAC code and the amplifier enable; an I/O error latches a
+//!    fault and the amplifier is disabled in the same period;
+//! 4. the watchdog feed decision ([`FeedPolicy`]); a starve decision latches
+//!    [`Fault::SelfCheck`] and forces 0 A and the amplifier off in this and
+//!    every later period;
+//! 5. what to log: newly latched faults first, else a completed hop.
+//!
+//! After it the application tells [`PeriodRunner::end_period`] whether the
+//! period met its deadline (the board: the next trigger is not pending yet;
+//! QEMU: SysTick not pending; the host: always); `overrun_limit` late
+//! periods in a row latch [`Fault::Overrun`].
+
+use crate::hal::HopperIo;
+use crate::hopper::{ConfigError, Hopper, HopperConfig, StepOutput};
+use crate::supervisor::{Command, Fault, Faults, SupervisorInput};
+use crate::telemetry::HopLedger;
+use crate::watchdog::{Decision, FeedPolicy};
+
+/// A free-running counter the runner times the control step with (cycles,
+/// or guest instructions under QEMU's `-icount`). Wraps at `u32::MAX`.
+pub trait CycleCounter {
+    /// The counter now.
+    fn now(&mut self) -> u32;
+
+    /// What reading the counter twice back to back costs, in its units
+    /// (subtracted from every measurement).
+    fn overhead(&self) -> u32 {
+        0
+    }
+}
+
+/// No counter (the host simulator): every step costs 0.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct NoCounter;
+
+impl CycleCounter for NoCounter {
+    #[inline]
+    fn now(&mut self) -> u32 {
+        0
+    }
+}
+
+/// Min / mean / max of the control step's cost, in the counter's units.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
+pub struct StepStats {
+    /// Smallest sample (`u32::MAX` before the first).
+    pub min: u32,
+    /// Largest sample.
+    pub max: u32,
+    /// Sum of the samples.
+    pub sum: u64,
+    /// Number of samples.
+    pub count: u32,
+}
+
+impl Default for StepStats {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl StepStats {
+    /// No samples yet.
+    pub const fn new() -> Self {
+        StepStats {
+            min: u32::MAX,
+            max: 0,
+            sum: 0,
+            count: 0,
+        }
+    }
+
+    /// Adds one sample.
+    pub fn add(&mut self, x: u32) {
+        self.min = self.min.min(x);
+        self.max = self.max.max(x);
+        self.sum = self.sum.saturating_add(u64::from(x));
+        self.count = self.count.saturating_add(1);
+    }
+
+    /// Mean, rounded down (0 without samples).
+    pub fn mean(&self) -> u32 {
+        if self.count == 0 {
+            0
+        } else {
+            u32::try_from(self.sum / u64::from(self.count)).unwrap_or(u32::MAX)
+        }
+    }
+}
+
+/// What the application's logger gets from a period.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum LogItem {
+    /// A hop ended (the firmware's own ledger).
+    Hop(HopLedger),
+    /// Faults latched, with the control period they latched in.
+    Faults {
+        /// Control period number ([`crate::telemetry::StepRecord::step`]).
+        step: u32,
+        /// All latched faults.
+        faults: Faults,
+    },
+}
+
+/// Pacing of the runner.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Timing {
+    /// The control period, s (finite, > 0).
+    pub period_s: f32,
+    /// Late periods in a row that latch [`Fault::Overrun`] (>= 1). One late
+    /// period is tolerated (the next one catches up); three in a row mean
+    /// the loop cannot keep its rate.
+    pub overrun_limit: u32,
+}
+
+impl Default for Timing {
+    fn default() -> Self {
+        Self {
+            period_s: 1e-4,
+            overrun_limit: 3,
+        }
+    }
+}
+
+/// Why a [`PeriodRunner`] could not be built.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum RunnerError {
+    /// The controller's configuration.
+    Config(ConfigError),
+    /// `timing.period_s` is not finite and positive.
+    Period,
+    /// `timing.overrun_limit` is 0.
+    OverrunLimit,
+}
+
+/// What one period did.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Period {
+    /// The step's output, as written (the safe output after an I/O error or
+    /// a starve decision).
+    pub out: StepOutput,
+    /// Whether the application may reload the hardware watchdog now.
+    pub feed_watchdog: bool,
+    /// Faults that latched in this period.
+    pub newly_latched: Faults,
+    /// What to log, if anything.
+    pub log: Option<LogItem>,
+    /// The control step's cost, in the counter's units.
+    pub step_cost: u32,
+}
+
+/// The period runner: the controller, the watchdog feed decision, overrun
+/// and step-cost accounting. Not `Copy`: it holds the fault latch.
+#[derive(Debug, Clone)]
+pub struct PeriodRunner {
+    hopper: Hopper,
+    feed: FeedPolicy,
+    timing: Timing,
+    late_in_a_row: u32,
+    missed: u32,
+    periods: u32,
+    cost: StepStats,
+}
+
+impl PeriodRunner {
+    /// Validates `cfg` and `timing`.
+    pub fn new(cfg: HopperConfig, timing: Timing) -> Result<Self, RunnerError> {
+        if !(timing.period_s > 0.0 && timing.period_s.is_finite()) {
+            return Err(RunnerError::Period);
+        }
+        if timing.overrun_limit == 0 {
+            return Err(RunnerError::OverrunLimit);
+        }
+        let hopper = Hopper::new(cfg).map_err(RunnerError::Config)?;
+        Ok(Self {
+            feed: FeedPolicy::for_hopper(hopper.config()),
+            hopper,
+            timing,
+            late_in_a_row: 0,
+            missed: 0,
+            periods: 0,
+            cost: StepStats::new(),
+        })
+    }
+
+    /// The controller.
+    pub fn hopper(&self) -> &Hopper {
+        &self.hopper
+    }
+
+    /// The controller, mutably (simulated faults, target changes).
+    pub fn hopper_mut(&mut self) -> &mut Hopper {
+        &mut self.hopper
+    }
+
+    /// The pacing in use.
+    pub fn timing(&self) -> &Timing {
+        &self.timing
+    }
+
+    /// Latches [`Fault::Overrun`]: the application knows a deadline was
+    /// missed (e.g. after a watchdog reset, or a simulated overrun).
+    pub fn report_overrun(&mut self) {
+        self.hopper.supervisor_mut().report_overrun();
+    }
+
+    /// Clears the latched faults whose causes are gone in `input` (see
+    /// [`crate::supervisor::Supervisor::reset`]) and tells the feed policy
+    /// the latch cleared on purpose. Refused once the policy has starved:
+    /// the hardware reset is on its way, and only it clears that.
+    pub fn reset_faults(&mut self, input: &SupervisorInput) -> Result<(), Faults> {
+        if self.starved() {
+            return Err(self
+                .hopper
+                .supervisor()
+                .faults()
+                .union(Faults(Fault::SelfCheck.bit())));
+        }
+        self.hopper.supervisor_mut().reset(input)?;
+        self.feed.fault_reset();
+        Ok(())
+    }
+
+    /// Whether the feed policy has stopped feeding for good.
+    pub fn starved(&self) -> bool {
+        self.feed.starved().is_some()
+    }
+
+    /// One whole control period (see the [module documentation](self)).
+    pub fn run_period<Io: HopperIo, C: CycleCounter>(
+        &mut self,
+        io: &mut Io,
+        counter: &mut C,
+    ) -> Period {
+        let before = self.hopper.supervisor().faults();
+        let raw = io.read().ok();
+        let t0 = counter.now();
+        let mut out = self.hopper.step(raw.as_ref(), self.timing.period_s);
+        let t1 = counter.now();
+        let step_cost = t1.wrapping_sub(t0).saturating_sub(counter.overhead());
+        self.cost.add(step_cost);
+        self.periods = self.periods.wrapping_add(1);
+        let zero = self.hopper.zero_code();
+        if io.write_dac(out.dac_code).is_err() {
+            self.hopper.supervisor_mut().report(Fault::DacError);
+            // The DAC may hold any code now: ask once more for zero (it may
+            // fail again; the disable below is what makes it safe), and say
+            // zero is what this period commands.
+            let _ = io.write_dac(zero);
+            self.make_safe(&mut out, zero);
+        }
+        if io.set_amp_enabled(out.command.amp_enable).is_err() {
+            // The enable pin failed: we cannot know the amplifier's state, so
+            // make sure the command is zero and ask for "off" once more.
+            self.hopper.supervisor_mut().report(Fault::AmpFault);
+            let _ = io.write_dac(zero);
+            let _ = io.set_amp_enabled(false);
+            self.make_safe(&mut out, zero);
+        }
+        // Fed only after a period whose output is consistent (see
+        // `FeedPolicy`): if the control task stops or misbehaves, the MCU
+        // resets with the amplifier disabled.
+        let feed_watchdog = match self.feed.after_step(&out) {
+            Decision::Feed => true,
+            Decision::Starve(_) => {
+                // Latched, so no later period can enable the amplifier even
+                // though the hardware reset is up to one watchdog timeout away.
+                self.hopper.supervisor_mut().report(Fault::SelfCheck);
+                let _ = io.write_dac(zero);
+                let _ = io.set_amp_enabled(false);
+                self.make_safe(&mut out, zero);
+                false
+            }
+        };
+        out.record.faults = out.faults.0;
+        let newly_latched = Faults(out.faults.0 & !before.0);
+        let log = if !newly_latched.is_empty() {
+            Some(LogItem::Faults {
+                step: out.record.step,
+                faults: out.faults,
+            })
+        } else {
+            out.hop.map(LogItem::Hop)
+        };
+        Period {
+            out,
+            feed_watchdog,
+            newly_latched,
+            log,
+            step_cost,
+        }
+    }
+
+    fn make_safe(&self, out: &mut StepOutput, zero: u16) {
+        out.command = Command::SAFE;
+        out.dac_code = zero;
+        out.faults = self.hopper.supervisor().faults();
+    }
+
+    /// The application's verdict on the period just run: `late` when the
+    /// next period's trigger came before it finished. `overrun_limit` late
+    /// periods in a row latch [`Fault::Overrun`] (the next period is safe).
+    pub fn end_period(&mut self, late: bool) {
+        if late {
+            self.missed = self.missed.saturating_add(1);
+            self.late_in_a_row = self.late_in_a_row.saturating_add(1);
+            if self.late_in_a_row >= self.timing.overrun_limit {
+                self.report_overrun();
+            }
+        } else {
+            self.late_in_a_row = 0;
+        }
+    }
+
+    /// Periods run so far.
+    pub fn periods(&self) -> u32 {
+        self.periods
+    }
+
+    /// Periods that missed their deadline so far.
+    pub fn missed(&self) -> u32 {
+        self.missed
+    }
+
+    /// The control step's cost over every period so far.
+    pub fn step_cost(&self) -> &StepStats {
+        &self.cost
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::calibration::Calibration;
+    use crate::hal::{IoError, RawSample};
+    use crate::hopper::Strategy;
+
+    /// A hopper at rest in flight at the origin: nut on its stop, spring at preload.
+    fn rest_sample(cal: &Calibration) -> RawSample {
+        let preload_n = 11_000.0 * 0.005;
+        RawSample {
+            loadcell_code: (cal.loadcell_offset_code + preload_n / cal.loadcell_gain_n_per_code)
+                as u16,
+            pot_code: cal.pot_offset_code as u16,
+            ..RawSample::default()
+        }
+    }
+
+    /// I/O that records what was written and can fail on command.
+    struct Io {
+        raw: RawSample,
+        dac: Option<u16>,
+        enabled: Option<bool>,
+        fail_dac: bool,
+        fail_enable: bool,
+    }
+
+    impl Io {
+        fn new(raw: RawSample) -> Self {
+            Io {
+                raw,
+                dac: None,
+                enabled: None,
+                fail_dac: false,
+                fail_enable: false,
+            }
+        }
+    }
+
+    impl HopperIo for Io {
+        type Error = ();
+        fn read(&mut self) -> Result<RawSample, IoError<()>> {
+            Ok(self.raw)
+        }
+        fn write_dac(&mut self, code: u16) -> Result<(), IoError<()>> {
+            if self.fail_dac {
+                return Err(IoError::Dac);
+            }
+            self.dac = Some(code);
+            Ok(())
+        }
+        fn set_amp_enabled(&mut self, on: bool) -> Result<(), IoError<()>> {
+            if self.fail_enable {
+                return Err(IoError::Pin(()));
+            }
+            self.enabled = Some(on);
+            Ok(())
+        }
+    }
+
+    fn runner(strategy: Strategy) -> PeriodRunner {
+        let cfg = HopperConfig {
+            strategy,
+            ..HopperConfig::default()
+        };
+        PeriodRunner::new(cfg, Timing::default()).unwrap_or_else(|e| panic!("{e:?}"))
+    }
+
+    #[test]
+    fn a_running_period_writes_the_command_and_feeds() {
+        let mut r = runner(Strategy::Passive);
+        let mut io = Io::new(rest_sample(&HopperConfig::default().calibration));
+        let p = r.run_period(&mut io, &mut NoCounter);
+        assert_eq!(io.dac, Some(2048));
+        assert_eq!(io.enabled, Some(true));
+        assert!(p.feed_watchdog);
+        assert!(p.newly_latched.is_empty());
+        assert_eq!(p.log, None);
+    }
+
+    #[test]
+    fn a_dac_write_error_disables_the_amplifier_in_the_same_period() {
+        let mut r = runner(Strategy::default());
+        let mut io = Io::new(rest_sample(&HopperConfig::default().calibration));
+        io.fail_dac = true;
+        let p = r.run_period(&mut io, &mut NoCounter);
+        assert_eq!(io.enabled, Some(false), "amplifier left enabled");
+        assert_eq!(p.out.command, Command::SAFE);
+        assert!(p.newly_latched.contains(Fault::DacError));
+        assert!(matches!(p.log, Some(LogItem::Faults { .. })));
+        // A safely faulted period still feeds (the latch holds it safe).
+        assert!(p.feed_watchdog);
+    }
+
+    #[test]
+    fn an_enable_pin_error_latches_and_asks_for_zero() {
+        let mut r = runner(Strategy::default());
+        let mut io = Io::new(rest_sample(&HopperConfig::default().calibration));
+        io.fail_enable = true;
+        let p = r.run_period(&mut io, &mut NoCounter);
+        assert_eq!(io.dac, Some(2048));
+        assert!(p.out.faults.contains(Fault::AmpFault));
+        assert_eq!(p.out.command, Command::SAFE);
+    }
+
+    #[test]
+    fn late_periods_in_a_row_latch_an_overrun() {
+        let mut r = runner(Strategy::Passive);
+        let mut io = Io::new(rest_sample(&HopperConfig::default().calibration));
+        for late in [true, true, false, true, true] {
+            assert!(r.run_period(&mut io, &mut NoCounter).out.faults.is_empty());
+            r.end_period(late);
+        }
+        assert_eq!(r.missed(), 4);
+        r.end_period(true);
+        let p = r.run_period(&mut io, &mut NoCounter);
+        assert!(p.out.faults.contains(Fault::Overrun));
+        assert_eq!(io.enabled, Some(false));
+    }
+
+    #[test]
+    fn a_starve_decision_latches_so_no_later_period_enables() {
+        let mut r = runner(Strategy::Passive);
+        let mut io = Io::new(rest_sample(&HopperConfig::default().calibration));
+        assert!(r.run_period(&mut io, &mut NoCounter).feed_watchdog);
+        // Fault, then a latch that clears without a fault reset: the policy
+        // starves (`LatchCleared`).
+        r.report_overrun();
+        assert!(r.run_period(&mut io, &mut NoCounter).feed_watchdog);
+        let raw = io.raw;
+        let sup_in = {
+            let m = crate::calibration::Converter::new(HopperConfig::default().calibration)
+                .and_then(|mut c| c.convert(&raw))
+                .unwrap_or_else(|e| panic!("{e:?}"));
+            crate::supervisor::SupervisorInput::from_measurements(&m, 0.0, 0.0, 0.0)
+        };
+        assert!(r.hopper_mut().supervisor_mut().reset(&sup_in).is_ok());
+        let p = r.run_period(&mut io, &mut NoCounter);
+        assert!(!p.feed_watchdog);
+        assert!(r.starved());
+        assert!(p.out.faults.contains(Fault::SelfCheck));
+        assert_eq!(io.enabled, Some(false));
+        assert_eq!(io.dac, Some(2048));
+        // Every later period stays off and unfed, whatever the supervisor says.
+        for _ in 0..10 {
+            let p = r.run_period(&mut io, &mut NoCounter);
+            assert!(!p.feed_watchdog);
+            assert_eq!(p.out.command, Command::SAFE);
+            assert_eq!(io.enabled, Some(false));
+        }
+    }
+
+    #[test]
+    fn bad_timing_is_refused() {
+        let cfg = HopperConfig::default();
+        let t = |period_s, overrun_limit| Timing {
+            period_s,
+            overrun_limit,
+        };
+        assert_eq!(
+            PeriodRunner::new(cfg, t(0.0, 3)).err(),
+            Some(RunnerError::Period)
+        );
+        assert_eq!(
+            PeriodRunner::new(cfg, t(f32::NAN, 3)).err(),
+            Some(RunnerError::Period)
+        );
+        assert_eq!(
+            PeriodRunner::new(cfg, t(1e-4, 0)).err(),
+            Some(RunnerError::OverrunLimit)
+        );
+    }
+
+    struct Ticks(u32);
+    impl CycleCounter for Ticks {
+        fn now(&mut self) -> u32 {
+            self.0 = self.0.wrapping_add(100);
+            self.0
+        }
+        fn overhead(&self) -> u32 {
+            10
+        }
+    }
+
+    #[test]
+    fn the_step_cost_is_counted_without_the_counter_overhead() {
+        let mut r = runner(Strategy::Passive);
+        let mut io = Io::new(rest_sample(&HopperConfig::default().calibration));
+        let mut c = Ticks(u32::MAX - 50);
+        for _ in 0..4 {
+            assert_eq!(r.run_period(&mut io, &mut c).step_cost, 90);
+        }
+        assert_eq!(r.step_cost().mean(), 90);
+        assert_eq!(r.step_cost().count, 4);
+        assert_eq!(r.periods(), 4);
+    }
+}
