@@ -5,7 +5,7 @@
 //!
 //! The snapshots (`tests/snapshots/*.snap`, insta) pin every figure of the
 //! three canonical runs. A change meant to move them: rerun with
-//! `INSTA_UPDATE=always cargo test -p hil-tests`, then read the diff of the
+//! `INSTA_UPDATE=always cargo test -p sil-tests`, then read the diff of the
 //! `.snap` files and list each change with its reason in the commit.
 
 use hal_sim::run::{run, Summary};

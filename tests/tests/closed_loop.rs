@@ -13,7 +13,7 @@
 use hal_sim::controller::{Controller, ControllerSpec, FirmwareController};
 use hal_sim::run::{run, RunConfig, Summary};
 use hal_sim::{Params, Plant};
-use hil_tests::{snapshot_json, CliRun};
+use sil_tests::{snapshot_json, CliRun};
 
 fn sim(spec: &ControllerSpec, params: Params, start: f64, duration: f64) -> Summary {
     let mut cfg = RunConfig::new(params);

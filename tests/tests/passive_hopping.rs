@@ -7,7 +7,7 @@
 
 use hal_sim::run::Summary;
 use hal_sim::{Event, Params};
-use hil_tests::{snapshot_json, CliRun};
+use sil_tests::{snapshot_json, CliRun};
 use std::sync::OnceLock;
 
 fn energy_at_events(params: Params, start: f64, duration: f64) -> Vec<(&'static str, f64, f64)> {

@@ -10,7 +10,7 @@
 use hal_sim::controller::ControllerSpec;
 use hal_sim::run::{run, RunConfig, Summary};
 use hal_sim::Params;
-use hil_tests::{snapshot_json, CliRun};
+use sil_tests::{snapshot_json, CliRun};
 
 const TARGET_M: f64 = 0.15;
 
