@@ -4,8 +4,9 @@
 //!   (rustup target and components from `rust-toolchain.toml`), formatting,
 //!   clippy on the host and on the MCU target, the `no_std` builds of the
 //!   control crate and the plant, the firmware release build with its size
-//!   budget, and the whole host test suite. It ends with a
-//!   `xtask: N passed, M failed` line counting the tests run.
+//!   budget, the control crate's tests on their own (without the
+//!   simulator's features), and the whole host test suite. It ends with a
+//!   `xtask: N passed, M failed` line counting the tests of both runs.
 //! * `cargo xtask size`: build the board firmware with defmt and check its size
 //!   budget; the last line is `size: flash=N ram=M capture=C` (bytes).
 //! * `cargo xtask qemu`: build the QEMU variant (`--features qemu-sim`), run
@@ -242,15 +243,49 @@ fn llvm_size() -> Result<PathBuf, String> {
     found.ok_or_else(|| "llvm-size not found: run `rustup component add llvm-tools`".into())
 }
 
-/// Run the host test suite, echoing its output and counting the results.
+/// Run the host test suites, echoing their output and counting the results
+/// into one `xtask: N passed, M failed` line.
+///
+/// The control crate runs first on its own: in the workspace run it is
+/// built with the features hal-sim turns on (`fault-injection`, `serde`),
+/// so only this run tests it as the firmware builds it.
 fn cargo_test(root: &Path) -> Result<(), String> {
-    eprintln!("xtask: cargo test --workspace");
+    let control = counted_cargo_test(root, &["test", "-p", "hopper-control"])?;
+    let workspace = counted_cargo_test(root, &["test", "--workspace"])?;
+    let passed = control.passed + workspace.passed;
+    let failed = control.failed + workspace.failed;
+    println!("xtask: {passed} passed, {failed} failed");
+    for run in [&control, &workspace] {
+        if !run.status.success() || run.failed > 0 {
+            return Err(format!("{} ({})", run.what, run.status));
+        }
+    }
+    Ok(())
+}
+
+/// What one `cargo test` run reported.
+struct TestRun {
+    /// The command, for messages.
+    what: String,
+    /// Tests passed, summed over its `test result:` lines.
+    passed: u64,
+    /// Tests failed, summed likewise.
+    failed: u64,
+    /// Cargo's exit status: a failure with no failed test is a test binary
+    /// that did not build, which no `test result:` line shows.
+    status: std::process::ExitStatus,
+}
+
+/// Runs `cargo ARGS`, echoing its output and counting its results.
+fn counted_cargo_test(root: &Path, args: &[&str]) -> Result<TestRun, String> {
+    let what = format!("cargo {}", args.join(" "));
+    eprintln!("xtask: {what}");
     let mut child = cargo()
-        .args(["test", "--workspace"])
+        .args(args)
         .current_dir(root)
         .stdout(Stdio::piped())
         .spawn()
-        .map_err(|e| format!("cannot start cargo test: {e}"))?;
+        .map_err(|e| format!("cannot start {what}: {e}"))?;
     let (mut passed, mut failed) = (0u64, 0u64);
     if let Some(out) = child.stdout.take() {
         for line in BufReader::new(out).lines().map_while(Result::ok) {
@@ -269,11 +304,11 @@ fn cargo_test(root: &Path) -> Result<(), String> {
             }
         }
     }
-    let status = child.wait().map_err(|e| format!("cargo test: {e}"))?;
-    println!("xtask: {passed} passed, {failed} failed");
-    if status.success() && failed == 0 {
-        Ok(())
-    } else {
-        Err(format!("cargo test ({status})"))
-    }
+    let status = child.wait().map_err(|e| format!("{what}: {e}"))?;
+    Ok(TestRun {
+        what,
+        passed,
+        failed,
+        status,
+    })
 }
