@@ -74,6 +74,60 @@ fn run(root: &Path, what: &str, cmd: &mut Command) -> Result<(), String> {
     }
 }
 
+/// Runs the `cargo build` in `cmd` and returns the path of the executable
+/// `bin` it built, as cargo's own JSON messages name it (diagnostics still
+/// go to the terminal, rendered as usual).
+fn build_executable(
+    root: &Path,
+    what: &str,
+    bin: &str,
+    cmd: &mut Command,
+) -> Result<PathBuf, String> {
+    eprintln!("xtask: {what}");
+    let out = cmd
+        .arg("--message-format=json-render-diagnostics")
+        .current_dir(root)
+        .stderr(Stdio::inherit())
+        .output()
+        .map_err(|e| format!("{what}: cannot start: {e}"))?;
+    if !out.status.success() {
+        return Err(format!("{what} ({})", out.status));
+    }
+    String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .filter_map(|l| serde_json::from_str::<serde_json::Value>(l).ok())
+        .filter(|m| m["reason"] == "compiler-artifact" && m["target"]["name"] == bin)
+        .find_map(|m| m["executable"].as_str().map(PathBuf::from))
+        .ok_or_else(|| format!("{what}: cargo reported no executable `{bin}`"))
+}
+
+/// The workspace's target directory as cargo resolves it (CARGO_TARGET_DIR,
+/// `build.target-dir`, else `ROOT/target`), for builds that pass their own
+/// `--target-dir` under it. A relative CARGO_TARGET_DIR is taken from `root`,
+/// where every cargo command of xtask runs.
+#[cfg_attr(
+    not(test),
+    expect(
+        dead_code,
+        reason = "for qemu.rs's `run_scenario` (`target_dir(root)?.join(\"qemu\")`), which the lead wires in"
+    )
+)]
+fn target_dir(root: &Path) -> Result<PathBuf, String> {
+    let out = cargo()
+        .args(["metadata", "--format-version", "1", "--no-deps"])
+        .current_dir(root)
+        .stderr(Stdio::inherit())
+        .output()
+        .map_err(|e| format!("cargo metadata: cannot start: {e}"))?;
+    if !out.status.success() {
+        return Err(format!("cargo metadata ({})", out.status));
+    }
+    serde_json::from_slice::<serde_json::Value>(&out.stdout)
+        .ok()
+        .and_then(|m| m["target_directory"].as_str().map(PathBuf::from))
+        .ok_or_else(|| "cargo metadata printed no target_directory".to_string())
+}
+
 /// Install what a fresh machine lacks: the MCU target and the components
 /// `rust-toolchain.toml` names (rustup does not add them to an installed
 /// toolchain by itself). Idempotent.
@@ -165,16 +219,15 @@ fn test(root: &Path) -> Result<(), String> {
 }
 
 fn size(root: &Path) -> Result<(), String> {
-    run(
+    // The image cargo reports having just built, not a path guessed from
+    // `target/`: with CARGO_TARGET_DIR set (or `build.target-dir`), the
+    // guess fails on a fresh clone and reads a stale image on an old one.
+    let elf = build_executable(
         root,
         "firmware release build",
+        "hopper-fw",
         cargo().args(["build", "-p", "hopper-app", "--release", "--target", TARGET]),
     )?;
-    let elf = root
-        .join("target")
-        .join(TARGET)
-        .join("release")
-        .join("hopper-fw");
     let tool = llvm_size()?;
     let out = Command::new(&tool)
         .arg(&elf)
@@ -311,4 +364,22 @@ fn counted_cargo_test(root: &Path, args: &[&str]) -> Result<TestRun, String> {
         failed,
         status,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn target_dir_follows_cargo_target_dir() {
+        // This test's own build directory is the one cargo resolved.
+        let root = workspace_root();
+        let dir = target_dir(&root).unwrap_or_default();
+        assert!(dir.is_absolute(), "{}", dir.display());
+        let expected = match std::env::var_os("CARGO_TARGET_DIR") {
+            Some(d) => root.join(d),
+            None => root.join("target"),
+        };
+        assert_eq!(dir, expected);
+    }
 }
