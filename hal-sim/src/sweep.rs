@@ -546,9 +546,7 @@ impl Sweep {
     }
 
     /// Write `sweep.csv`, `sweep.png` and `sweep.svg` into `dir` (created if
-    /// missing). The CSV and SVG are made in memory and the PNG is drawn to a
-    /// temporary name first, so a failure removes what it wrote and leaves no
-    /// partial output.
+    /// missing), whole or not at all ([`crate::out_dir::write_whole`]).
     pub fn write(&self, rows: &[Row], dir: &Path, title: &str) -> Result<Vec<PathBuf>, String> {
         crate::plot::ensure_font()?;
         let csv = self.csv(rows);
@@ -558,38 +556,19 @@ impl Sweep {
             rows,
             title,
         )?;
-        let existed = dir.exists();
-        std::fs::create_dir_all(dir)
-            .map_err(|e| format!("cannot create output directory {}: {e}", dir.display()))?;
-        let paths = [
-            dir.join("sweep.csv"),
-            dir.join("sweep.png"),
-            dir.join("sweep.svg"),
-        ];
-        // The bitmap backend picks the format from the extension: keep `.png`.
-        let png_tmp = dir.join(".sweep.partial.png");
-        let written = (|| -> Result<(), String> {
-            let io = |p: &Path, e: std::io::Error| format!("cannot write {}: {e}", p.display());
+        crate::out_dir::write_whole(dir, |staging| {
+            let names = ["sweep.csv", "sweep.png", "sweep.svg"];
+            let io =
+                |n: &str, e: std::io::Error| format!("cannot write {}: {e}", dir.join(n).display());
+            std::fs::write(staging.join(names[0]), &csv).map_err(|e| io(names[0], e))?;
             self.draw(
-                BitMapBackend::new(&png_tmp, PLOT_SIZE).into_drawing_area(),
+                BitMapBackend::new(&staging.join(names[1]), PLOT_SIZE).into_drawing_area(),
                 rows,
                 title,
             )?;
-            std::fs::write(&paths[0], &csv).map_err(|e| io(&paths[0], e))?;
-            std::fs::write(&paths[2], &svg).map_err(|e| io(&paths[2], e))?;
-            std::fs::rename(&png_tmp, &paths[1]).map_err(|e| io(&paths[1], e))?;
-            Ok(())
-        })();
-        if let Err(e) = written {
-            for p in paths.iter().chain([&png_tmp]) {
-                let _ = std::fs::remove_file(p);
-            }
-            if !existed {
-                let _ = std::fs::remove_dir(dir);
-            }
-            return Err(e);
-        }
-        Ok(paths.to_vec())
+            std::fs::write(staging.join(names[2]), &svg).map_err(|e| io(names[2], e))?;
+            Ok(names.map(String::from).to_vec())
+        })
     }
 
     fn draw<DB: DrawingBackend>(

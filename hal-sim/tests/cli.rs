@@ -312,3 +312,58 @@ fn shaped_with_model_params_and_ledger() {
     let o = sim(&[&common[..], &["--json"]].concat());
     assert!(String::from_utf8_lossy(&o.stderr).contains("--model-params"));
 }
+
+#[test]
+fn a_closed_stdout_ends_quietly() {
+    // A pipe whose read end is already closed: every write to it fails, as
+    // for `hopper-sim run ... | head` once head has exited.
+    for args in [
+        &["run", "--duration", "0.5", "--ledger"][..],
+        &["run", "--duration", "0.5", "--json"],
+        &["params", "show", "design"],
+    ] {
+        let (reader, writer) = std::io::pipe().unwrap();
+        drop(reader);
+        let o = Command::new(env!("CARGO_BIN_EXE_hopper-sim"))
+            .args(args)
+            .stdout(writer)
+            .stderr(std::process::Stdio::piped())
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(err.is_empty(), "{args:?}: {err}");
+        assert_eq!(o.status.code(), Some(0), "{args:?}");
+    }
+}
+
+#[test]
+fn a_failed_plot_leaves_no_partial_output() {
+    let dir = tempfile::tempdir().unwrap();
+    // One trajectory sample in 0.5 s at 1 Hz: the CSV is written, then the
+    // plot fails (it needs two samples).
+    let plot_fails = ["run", "--duration", "0.5", "--sample-hz", "1"];
+    let out = dir.path().join("new").join("run");
+    let o = sim(&[&plot_fails[..], &["--out", out.to_str().unwrap()]].concat());
+    assert_eq!(o.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("not enough samples to plot"), "{err}");
+    let left: Vec<_> = std::fs::read_dir(dir.path()).unwrap().collect();
+    assert!(left.is_empty(), "left behind: {left:?}");
+
+    // Into an existing result: the old files stay as they were, no staging
+    // directory is left, and the new run's CSV does not replace the old one.
+    let out = dir.path().join("run");
+    let ok = sim(&["run", "--duration", "0.2", "--out", out.to_str().unwrap()]);
+    assert!(ok.status.success());
+    let before = std::fs::read(out.join("trajectory.csv")).unwrap();
+    let o = sim(&[&plot_fails[..], &["--out", out.to_str().unwrap()]].concat());
+    assert_eq!(o.status.code(), Some(2));
+    assert_eq!(std::fs::read(out.join("trajectory.csv")).unwrap(), before);
+    let mut names: Vec<String> = std::fs::read_dir(&out)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    assert_eq!(names, ["hop.png", "trajectory.csv"]);
+    assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
+}
