@@ -795,31 +795,27 @@ fn cell_edges(values: &[f64]) -> Vec<f64> {
     e
 }
 
-/// The viridis colour map at `t` in 0..=1 (five anchors, linear between).
+/// The viridis colour map at `t` in 0..=1 (plotters' `ViridisRGB`).
 fn viridis(t: f64) -> RGBColor {
-    const ANCHORS: [(f64, f64, f64); 5] = [
-        (68.0, 1.0, 84.0),
-        (59.0, 82.0, 139.0),
-        (33.0, 145.0, 140.0),
-        (94.0, 201.0, 98.0),
-        (253.0, 231.0, 37.0),
-    ];
-    let t = if t.is_finite() {
-        t.clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
-    let x = t * (ANCHORS.len() - 1) as f64;
-    let i = (x.floor() as usize).min(ANCHORS.len() - 2);
-    let f = x - i as f64;
-    let (a, b) = (ANCHORS[i], ANCHORS[i + 1]);
-    let mix = |p: f64, q: f64| (p + (q - p) * f).round() as u8;
-    RGBColor(mix(a.0, b.0), mix(a.1, b.1), mix(a.2, b.2))
+    // plotters clamps into 0..=1 but turns a NaN into an index and panics:
+    // a point whose metric cannot be normalised gets the low end instead.
+    let t = if t.is_finite() { t } else { 0.0 };
+    ViridisRGB::get_color(t)
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn viridis_ends_are_purple_and_yellow_and_bad_values_do_not_panic() {
+        assert_eq!(viridis(0.0), RGBColor(68, 1, 84));
+        assert_eq!(viridis(1.0), RGBColor(254, 232, 37));
+        assert_eq!(viridis(f64::NAN), viridis(0.0));
+        assert_eq!(viridis(f64::INFINITY), viridis(0.0));
+        assert_eq!(viridis(7.0), viridis(1.0));
+        assert_eq!(viridis(-7.0), viridis(0.0));
+    }
 
     #[test]
     fn short_plant_names_sweep_the_full_field() {
