@@ -63,18 +63,26 @@ impl CliRun<'_> {
 /// float's shortest printing depends on do not.
 pub const SNAPSHOT_SIGNIFICANT_DIGITS: usize = 10;
 
-/// `summary`'s `--json` form with every float rounded to
+/// `summary`'s `--json` form, pretty-printed, with every float rounded to
 /// [`SNAPSHOT_SIGNIFICANT_DIGITS`]; integers (hop counts, indices) stay exact.
 ///
 /// It goes through the printed text, as the command prints it: the f32
 /// figures of the firmware's ledger are printed as f32 (`0.09230099`), which
 /// `serde_json::to_value` would widen to f64 digits the command never shows.
-pub fn snapshot_json(summary: &Summary) -> Result<serde_json::Value, serde_json::Error> {
+/// The snapshot is this text, not a `serde_json::Value` handed to insta:
+/// a workspace build turns on serde_json's `arbitrary_precision` (through
+/// xtask's defmt-decoder), under which insta would record every number as a
+/// one-key map, so the same run would snapshot differently under
+/// `cargo test -p sil-tests` and `cargo test --workspace`.
+pub fn snapshot_text(summary: &Summary) -> Result<String, serde_json::Error> {
     let text = serde_json::to_string(summary)?;
-    serde_json::from_str(&text).map(round_floats)
+    let value = round_floats(serde_json::from_str(&text)?);
+    serde_json::to_string_pretty(&value)
 }
 
-/// Rounds every float in `v` to [`SNAPSHOT_SIGNIFICANT_DIGITS`].
+/// Rounds every float in `v` to [`SNAPSHOT_SIGNIFICANT_DIGITS`] and puts
+/// object keys in sorted order (whether or not serde_json's `preserve_order`
+/// is on in a build).
 pub fn round_floats(v: serde_json::Value) -> serde_json::Value {
     use serde_json::Value;
     match v {
@@ -87,7 +95,14 @@ pub fn round_floats(v: serde_json::Value) -> serde_json::Value {
         }
         Value::Array(a) => Value::Array(a.into_iter().map(round_floats).collect()),
         Value::Object(o) => {
-            Value::Object(o.into_iter().map(|(k, x)| (k, round_floats(x))).collect())
+            let mut entries: Vec<(String, Value)> = o.into_iter().collect();
+            entries.sort_by(|a, b| a.0.cmp(&b.0));
+            Value::Object(
+                entries
+                    .into_iter()
+                    .map(|(k, x)| (k, round_floats(x)))
+                    .collect(),
+            )
         }
         other => other,
     }

@@ -13,7 +13,7 @@
 use hal_sim::controller::{Controller, ControllerSpec, FirmwareController};
 use hal_sim::run::{run, RunConfig, Summary};
 use hal_sim::{Params, Plant};
-use sil_tests::{snapshot_json, CliRun};
+use sil_tests::{snapshot_text, CliRun};
 
 fn sim(spec: &ControllerSpec, params: Params, start: f64, duration: f64) -> Summary {
     let mut cfg = RunConfig::new(params);
@@ -85,7 +85,7 @@ fn energy_apex_canonical_run_converges_and_matches_its_snapshot() {
     assert!(s.faults.is_empty(), "{:?}", s.faults);
     assert!(s.max_current_a <= Params::design().current_limit_a + 1e-9);
     assert!(s.energy_residual_j.abs() < 1e-3, "{}", s.energy_residual_j);
-    insta::assert_json_snapshot!("energy_apex_design", snapshot_json(&s).unwrap());
+    insta::assert_snapshot!("energy_apex_design", snapshot_text(&s).unwrap());
 }
 
 #[test]

@@ -7,7 +7,7 @@
 
 use hal_sim::run::Summary;
 use hal_sim::{Event, Params};
-use sil_tests::{snapshot_json, CliRun};
+use sil_tests::{snapshot_text, CliRun};
 use std::sync::OnceLock;
 
 fn energy_at_events(params: Params, start: f64, duration: f64) -> Vec<(&'static str, f64, f64)> {
@@ -69,9 +69,9 @@ fn identified_passive_hopper_stops_within_a_few_seconds() {
 /// The snapshot of canonical run (c) pins every figure of its JSON.
 #[test]
 fn identified_passive_run_matches_its_snapshot() {
-    insta::assert_json_snapshot!(
+    insta::assert_snapshot!(
         "passive_identified",
-        snapshot_json(identified_passive()).unwrap()
+        snapshot_text(identified_passive()).unwrap()
     );
 }
 

@@ -10,7 +10,7 @@
 use hal_sim::controller::ControllerSpec;
 use hal_sim::run::{run, RunConfig, Summary};
 use hal_sim::Params;
-use sil_tests::{snapshot_json, CliRun};
+use sil_tests::{snapshot_text, CliRun};
 
 const TARGET_M: f64 = 0.15;
 
@@ -80,7 +80,7 @@ fn shaped_reaches_and_holds_the_thesis_target_without_stop_impacts() {
         .map(|w| w[1] - w[0])
         .fold(f64::NEG_INFINITY, f64::max);
     assert!(rise <= 0.0127 + 2e-4, "a hop rose {rise} m: {apexes:?}");
-    insta::assert_json_snapshot!("shaped_design", snapshot_json(&s).unwrap());
+    insta::assert_snapshot!("shaped_design", snapshot_text(&s).unwrap());
 }
 
 #[test]
