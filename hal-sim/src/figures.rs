@@ -70,13 +70,20 @@ pub fn expected_files() -> Vec<String> {
         .collect()
 }
 
-/// Simulate and draw every figure into `out` (created if missing).
+/// Simulate and draw every figure into `out` (created if missing), whole or
+/// not at all ([`crate::out_dir::write_whole`]).
 pub fn write_all(out: &Path, opts: &FigureOptions) -> Result<FiguresReport, String> {
-    // Fail on an unusable directory before spending time simulating.
-    std::fs::create_dir_all(out)
-        .map_err(|e| format!("cannot create output directory {}: {e}", out.display()))?;
-    if !out.is_dir() {
-        return Err(format!("output path {} is not a directory", out.display()));
+    // Fail on an unusable directory before spending time simulating, and
+    // without creating anything yet: the nearest existing ancestor must be a
+    // directory.
+    if let Some(a) = out.ancestors().find(|a| a.exists()) {
+        if !a.is_dir() {
+            return Err(format!(
+                "cannot create output directory {}: {} is not a directory",
+                out.display(),
+                a.display()
+            ));
+        }
     }
     ensure_font()?;
     let mut report = FiguresReport::default();
@@ -84,16 +91,23 @@ pub fn write_all(out: &Path, opts: &FigureOptions) -> Result<FiguresReport, Stri
     chapter2_figures(opts, &mut figs, &mut report.notes)?;
     step_response_figures(&mut figs, &mut report.notes)?;
     chapter4_figures(opts, &mut figs, &mut report.notes)?;
-    for f in &figs {
-        let png = out.join(format!("{}.png", f.file));
-        let svg = out.join(format!("{}.svg", f.file));
-        render_png(f, &png)?;
-        render_svg(f, &svg)?;
-        report.files.push(png);
-        report.files.push(svg);
-    }
+    report.files = crate::out_dir::write_whole(out, |staging| {
+        let mut names = Vec::new();
+        for f in &figs {
+            for (ext, render) in [("png", render_png as Render), ("svg", render_svg)] {
+                let name = format!("{}.{ext}", f.file);
+                render(f, &staging.join(&name))
+                    .map_err(|e| format!("cannot draw {}: {e}", out.join(&name).display()))?;
+                names.push(name);
+            }
+        }
+        Ok(names)
+    })?;
     Ok(report)
 }
+
+/// Draws one figure into one file.
+type Render = fn(&Figure, &Path) -> Result<(), String>;
 
 // ---------------------------------------------------------------- figure model
 
@@ -712,18 +726,15 @@ fn step_response_figures(figs: &mut Vec<Figure>, notes: &mut Vec<String>) -> Res
 
 // ---------------------------------------------------------------- rendering
 
+// The callers name the file in the error: they know its final path.
 fn render_png(f: &Figure, path: &Path) -> Result<(), String> {
     let root = BitMapBackend::new(path, f.size).into_drawing_area();
-    draw(f, &root)
-        .and_then(|_| root.present().map_err(|e| e.to_string()))
-        .map_err(|e| format!("cannot draw {}: {e}", path.display()))
+    draw(f, &root).and_then(|_| root.present().map_err(|e| e.to_string()))
 }
 
 fn render_svg(f: &Figure, path: &Path) -> Result<(), String> {
     let root = SVGBackend::new(path, f.size).into_drawing_area();
-    draw(f, &root)
-        .and_then(|_| root.present().map_err(|e| e.to_string()))
-        .map_err(|e| format!("cannot draw {}: {e}", path.display()))
+    draw(f, &root).and_then(|_| root.present().map_err(|e| e.to_string()))
 }
 
 /// Bounds of the finite values, padded by 5% (and never empty).

@@ -24,6 +24,8 @@ pub mod flight_stability;
 #[cfg(feature = "std")]
 pub mod inject;
 #[cfg(feature = "std")]
+pub mod out_dir;
+#[cfg(feature = "std")]
 pub mod params_toml;
 #[cfg(feature = "std")]
 pub mod plot;

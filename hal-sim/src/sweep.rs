@@ -546,9 +546,7 @@ impl Sweep {
     }
 
     /// Write `sweep.csv`, `sweep.png` and `sweep.svg` into `dir` (created if
-    /// missing). The CSV and SVG are made in memory and the PNG is drawn to a
-    /// temporary name first, so a failure removes what it wrote and leaves no
-    /// partial output.
+    /// missing), whole or not at all ([`crate::out_dir::write_whole`]).
     pub fn write(&self, rows: &[Row], dir: &Path, title: &str) -> Result<Vec<PathBuf>, String> {
         crate::plot::ensure_font()?;
         let csv = self.csv(rows);
@@ -558,38 +556,19 @@ impl Sweep {
             rows,
             title,
         )?;
-        let existed = dir.exists();
-        std::fs::create_dir_all(dir)
-            .map_err(|e| format!("cannot create output directory {}: {e}", dir.display()))?;
-        let paths = [
-            dir.join("sweep.csv"),
-            dir.join("sweep.png"),
-            dir.join("sweep.svg"),
-        ];
-        // The bitmap backend picks the format from the extension: keep `.png`.
-        let png_tmp = dir.join(".sweep.partial.png");
-        let written = (|| -> Result<(), String> {
-            let io = |p: &Path, e: std::io::Error| format!("cannot write {}: {e}", p.display());
+        crate::out_dir::write_whole(dir, |staging| {
+            let names = ["sweep.csv", "sweep.png", "sweep.svg"];
+            let io =
+                |n: &str, e: std::io::Error| format!("cannot write {}: {e}", dir.join(n).display());
+            std::fs::write(staging.join(names[0]), &csv).map_err(|e| io(names[0], e))?;
             self.draw(
-                BitMapBackend::new(&png_tmp, PLOT_SIZE).into_drawing_area(),
+                BitMapBackend::new(&staging.join(names[1]), PLOT_SIZE).into_drawing_area(),
                 rows,
                 title,
             )?;
-            std::fs::write(&paths[0], &csv).map_err(|e| io(&paths[0], e))?;
-            std::fs::write(&paths[2], &svg).map_err(|e| io(&paths[2], e))?;
-            std::fs::rename(&png_tmp, &paths[1]).map_err(|e| io(&paths[1], e))?;
-            Ok(())
-        })();
-        if let Err(e) = written {
-            for p in paths.iter().chain([&png_tmp]) {
-                let _ = std::fs::remove_file(p);
-            }
-            if !existed {
-                let _ = std::fs::remove_dir(dir);
-            }
-            return Err(e);
-        }
-        Ok(paths.to_vec())
+            std::fs::write(staging.join(names[2]), &svg).map_err(|e| io(names[2], e))?;
+            Ok(names.map(String::from).to_vec())
+        })
     }
 
     fn draw<DB: DrawingBackend>(
@@ -816,31 +795,27 @@ fn cell_edges(values: &[f64]) -> Vec<f64> {
     e
 }
 
-/// The viridis colour map at `t` in 0..=1 (five anchors, linear between).
+/// The viridis colour map at `t` in 0..=1 (plotters' `ViridisRGB`).
 fn viridis(t: f64) -> RGBColor {
-    const ANCHORS: [(f64, f64, f64); 5] = [
-        (68.0, 1.0, 84.0),
-        (59.0, 82.0, 139.0),
-        (33.0, 145.0, 140.0),
-        (94.0, 201.0, 98.0),
-        (253.0, 231.0, 37.0),
-    ];
-    let t = if t.is_finite() {
-        t.clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
-    let x = t * (ANCHORS.len() - 1) as f64;
-    let i = (x.floor() as usize).min(ANCHORS.len() - 2);
-    let f = x - i as f64;
-    let (a, b) = (ANCHORS[i], ANCHORS[i + 1]);
-    let mix = |p: f64, q: f64| (p + (q - p) * f).round() as u8;
-    RGBColor(mix(a.0, b.0), mix(a.1, b.1), mix(a.2, b.2))
+    // plotters clamps into 0..=1 but turns a NaN into an index and panics:
+    // a point whose metric cannot be normalised gets the low end instead.
+    let t = if t.is_finite() { t } else { 0.0 };
+    ViridisRGB::get_color(t)
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn viridis_ends_are_purple_and_yellow_and_bad_values_do_not_panic() {
+        assert_eq!(viridis(0.0), RGBColor(68, 1, 84));
+        assert_eq!(viridis(1.0), RGBColor(254, 232, 37));
+        assert_eq!(viridis(f64::NAN), viridis(0.0));
+        assert_eq!(viridis(f64::INFINITY), viridis(0.0));
+        assert_eq!(viridis(7.0), viridis(1.0));
+        assert_eq!(viridis(-7.0), viridis(0.0));
+    }
 
     #[test]
     fn short_plant_names_sweep_the_full_field() {

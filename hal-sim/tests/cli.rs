@@ -6,6 +6,7 @@
 
 use std::path::Path;
 use std::process::{Command, Output};
+use std::sync::OnceLock;
 
 fn sim(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_hopper-sim"))
@@ -29,18 +30,33 @@ fn json(out: &Output) -> serde_json::Value {
     serde_json::from_str(&text).unwrap()
 }
 
+/// `run --params identified --controller passive --start-apex 0.15
+/// --duration 2 --json`, simulated once for the tests that share it. 2 s,
+/// not the default 5: the 5 s run is canonical run (c) of the
+/// software-in-the-loop tests (`tests/tests/passive_hopping.rs`), which
+/// snapshot its whole JSON; simulating it here too would be the same run
+/// twice.
+fn identified_passive_json() -> &'static serde_json::Value {
+    static RUN: OnceLock<serde_json::Value> = OnceLock::new();
+    RUN.get_or_init(|| {
+        json(&sim(&[
+            "run",
+            "--params",
+            "identified",
+            "--controller",
+            "passive",
+            "--start-apex",
+            "0.15",
+            "--duration",
+            "2",
+            "--json",
+        ]))
+    })
+}
+
 #[test]
 fn run_json_has_the_contract_keys() {
-    let v = json(&sim(&[
-        "run",
-        "--params",
-        "identified",
-        "--controller",
-        "passive",
-        "--start-apex",
-        "0.15",
-        "--json",
-    ]));
+    let v = identified_passive_json();
     for key in [
         "apex_heights_m",
         "hops",
@@ -98,8 +114,15 @@ fn params_show_prints_toml_that_run_accepts() {
     let dir = tempfile::tempdir().unwrap();
     let f = dir.path().join("mine.toml");
     std::fs::write(&f, &text).unwrap();
-    let a = json(&sim(&["run", "--params", f.to_str().unwrap(), "--json"]));
-    let b = json(&sim(&["run", "--params", "identified", "--json"]));
+    let a = json(&sim(&[
+        "run",
+        "--params",
+        f.to_str().unwrap(),
+        "--duration",
+        "2",
+        "--json",
+    ]));
+    let b = identified_passive_json();
     assert_eq!(a["apex_heights_m"], b["apex_heights_m"]);
 }
 
@@ -288,4 +311,59 @@ fn shaped_with_model_params_and_ledger() {
     assert_clean_failure(&common, &out, "spring_stiffness_n_per_m");
     let o = sim(&[&common[..], &["--json"]].concat());
     assert!(String::from_utf8_lossy(&o.stderr).contains("--model-params"));
+}
+
+#[test]
+fn a_closed_stdout_ends_quietly() {
+    // A pipe whose read end is already closed: every write to it fails, as
+    // for `hopper-sim run ... | head` once head has exited.
+    for args in [
+        &["run", "--duration", "0.5", "--ledger"][..],
+        &["run", "--duration", "0.5", "--json"],
+        &["params", "show", "design"],
+    ] {
+        let (reader, writer) = std::io::pipe().unwrap();
+        drop(reader);
+        let o = Command::new(env!("CARGO_BIN_EXE_hopper-sim"))
+            .args(args)
+            .stdout(writer)
+            .stderr(std::process::Stdio::piped())
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(err.is_empty(), "{args:?}: {err}");
+        assert_eq!(o.status.code(), Some(0), "{args:?}");
+    }
+}
+
+#[test]
+fn a_failed_plot_leaves_no_partial_output() {
+    let dir = tempfile::tempdir().unwrap();
+    // One trajectory sample in 0.5 s at 1 Hz: the CSV is written, then the
+    // plot fails (it needs two samples).
+    let plot_fails = ["run", "--duration", "0.5", "--sample-hz", "1"];
+    let out = dir.path().join("new").join("run");
+    let o = sim(&[&plot_fails[..], &["--out", out.to_str().unwrap()]].concat());
+    assert_eq!(o.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("not enough samples to plot"), "{err}");
+    let left: Vec<_> = std::fs::read_dir(dir.path()).unwrap().collect();
+    assert!(left.is_empty(), "left behind: {left:?}");
+
+    // Into an existing result: the old files stay as they were, no staging
+    // directory is left, and the new run's CSV does not replace the old one.
+    let out = dir.path().join("run");
+    let ok = sim(&["run", "--duration", "0.2", "--out", out.to_str().unwrap()]);
+    assert!(ok.status.success());
+    let before = std::fs::read(out.join("trajectory.csv")).unwrap();
+    let o = sim(&[&plot_fails[..], &["--out", out.to_str().unwrap()]].concat());
+    assert_eq!(o.status.code(), Some(2));
+    assert_eq!(std::fs::read(out.join("trajectory.csv")).unwrap(), before);
+    let mut names: Vec<String> = std::fs::read_dir(&out)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    assert_eq!(names, ["hop.png", "trajectory.csv"]);
+    assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
 }

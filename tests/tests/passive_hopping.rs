@@ -5,9 +5,10 @@
 // Test helpers may panic on impossible setup errors: that is a failed test.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
-use hal_sim::controller::Passive;
-use hal_sim::run::{run, RunConfig};
+use hal_sim::run::Summary;
 use hal_sim::{Event, Params};
+use sil_tests::{snapshot_text, CliRun};
+use std::sync::OnceLock;
 
 fn energy_at_events(params: Params, start: f64, duration: f64) -> Vec<(&'static str, f64, f64)> {
     // (event, time, total energy right after the control step holding it)
@@ -32,13 +33,27 @@ fn energy_at_events(params: Params, start: f64, duration: f64) -> Vec<(&'static 
     out
 }
 
+/// Canonical run (c): `hopper-sim run --params identified --start-apex 0.15
+/// --json` (passive, 5 s), the README's first run: the firmware's passive
+/// strategy on the simulated sensors, as the command runs it. Simulated once
+/// per test binary; the tests below share it.
+fn identified_passive() -> &'static Summary {
+    static RUN: OnceLock<Summary> = OnceLock::new();
+    RUN.get_or_init(|| {
+        CliRun {
+            params: Some("identified"),
+            start_apex_m: Some(0.15),
+            ..CliRun::default()
+        }
+        .run()
+        .unwrap()
+    })
+}
+
 #[test]
 fn identified_passive_hopper_stops_within_a_few_seconds() {
-    let mut cfg = RunConfig::new(Params::identified());
-    cfg.start_apex_m = 0.15;
-    cfg.duration_s = 5.0;
-    let r = run(&cfg, "identified", &mut Passive).unwrap();
-    let s = &r.summary;
+    let s = identified_passive();
+    assert_eq!(s.controller, "passive");
     // Thesis Fig 4.7: stationary after about 1.5 s.
     let stopped = s.stopped_at_s.unwrap();
     assert!((0.8..2.0).contains(&stopped), "stopped at {stopped} s");
@@ -48,6 +63,16 @@ fn identified_passive_hopper_stops_within_a_few_seconds() {
     assert!((0.09..0.115).contains(&stance), "{stance}");
     assert!(s.energy_residual_j.abs() < 1e-6);
     assert_eq!(s.ledger.motor_work_j, 0.0);
+    assert!(s.faults.is_empty(), "{:?}", s.faults);
+}
+
+/// The snapshot of canonical run (c) pins every figure of its JSON.
+#[test]
+fn identified_passive_run_matches_its_snapshot() {
+    insta::assert_snapshot!(
+        "passive_identified",
+        snapshot_text(identified_passive()).unwrap()
+    );
 }
 
 #[test]
@@ -72,13 +97,15 @@ fn identified_friction_costs_joules_per_phase_like_the_thesis() {
 
 #[test]
 fn design_friction_decays_slower_than_identified() {
-    let run_one = |p: Params| {
-        let mut cfg = RunConfig::new(p);
-        cfg.duration_s = 5.0;
-        run(&cfg, "x", &mut Passive).unwrap().summary
-    };
-    let d = run_one(Params::design());
-    let i = run_one(Params::identified());
+    // The design plant, otherwise as canonical run (c).
+    let d = CliRun {
+        params: Some("design"),
+        start_apex_m: Some(0.15),
+        ..CliRun::default()
+    }
+    .run()
+    .unwrap();
+    let i = identified_passive();
     assert!(d.hops > i.hops, "{} vs {}", d.hops, i.hops);
     assert!(d.apex_heights_m[0] > i.apex_heights_m[0]);
 }

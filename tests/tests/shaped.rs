@@ -10,6 +10,7 @@
 use hal_sim::controller::ControllerSpec;
 use hal_sim::run::{run, RunConfig, Summary};
 use hal_sim::Params;
+use sil_tests::{snapshot_text, CliRun};
 
 const TARGET_M: f64 = 0.15;
 
@@ -36,9 +37,21 @@ fn holds_target(s: &Summary, n: usize) -> bool {
             .all(|h| (h - TARGET_M).abs() <= 0.02 * TARGET_M)
 }
 
+/// Canonical run (b): `hopper-sim run --params design --controller shaped
+/// --start-apex 0.05 --target-apex 0.15 --duration 15 --json`, the README's
+/// run to the thesis's target. One simulation feeds the bands and the
+/// snapshot, which pins every figure of the JSON.
 #[test]
 fn shaped_reaches_and_holds_the_thesis_target_without_stop_impacts() {
-    let s = sim("shaped", Params::design(), None, 0.05, 15.0);
+    let s = CliRun {
+        params: Some("design"),
+        controller: Some("shaped"),
+        start_apex_m: Some(0.05),
+        target_apex_m: Some(TARGET_M),
+        duration_s: Some(15.0),
+    }
+    .run()
+    .unwrap();
     assert!(holds_target(&s, 10), "{:?}", s.apex_heights_m);
     let htc = s.hops_to_converge.unwrap();
     // 14 with the defaults (seeds 1-5); 19 before the outer loop's
@@ -67,6 +80,7 @@ fn shaped_reaches_and_holds_the_thesis_target_without_stop_impacts() {
         .map(|w| w[1] - w[0])
         .fold(f64::NEG_INFINITY, f64::max);
     assert!(rise <= 0.0127 + 2e-4, "a hop rose {rise} m: {apexes:?}");
+    insta::assert_snapshot!("shaped_design", snapshot_text(&s).unwrap());
 }
 
 #[test]

@@ -4,8 +4,9 @@
 //!   (rustup target and components from `rust-toolchain.toml`), formatting,
 //!   clippy on the host and on the MCU target, the `no_std` builds of the
 //!   control crate and the plant, the firmware release build with its size
-//!   budget, and the whole host test suite. It ends with a
-//!   `xtask: N passed, M failed` line counting the tests run.
+//!   budget, the control crate's tests on their own (without the
+//!   simulator's features), and the whole host test suite. It ends with a
+//!   `xtask: N passed, M failed` line counting the tests of both runs.
 //! * `cargo xtask size`: build the board firmware with defmt and check its size
 //!   budget; the last line is `size: flash=N ram=M capture=C` (bytes).
 //! * `cargo xtask qemu`: build the QEMU variant (`--features qemu-sim`), run
@@ -71,6 +72,60 @@ fn run(root: &Path, what: &str, cmd: &mut Command) -> Result<(), String> {
     } else {
         Err(format!("{what} ({status})"))
     }
+}
+
+/// Runs the `cargo build` in `cmd` and returns the path of the executable
+/// `bin` it built, as cargo's own JSON messages name it (diagnostics still
+/// go to the terminal, rendered as usual).
+fn build_executable(
+    root: &Path,
+    what: &str,
+    bin: &str,
+    cmd: &mut Command,
+) -> Result<PathBuf, String> {
+    eprintln!("xtask: {what}");
+    let out = cmd
+        .arg("--message-format=json-render-diagnostics")
+        .current_dir(root)
+        .stderr(Stdio::inherit())
+        .output()
+        .map_err(|e| format!("{what}: cannot start: {e}"))?;
+    if !out.status.success() {
+        return Err(format!("{what} ({})", out.status));
+    }
+    String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .filter_map(|l| serde_json::from_str::<serde_json::Value>(l).ok())
+        .filter(|m| m["reason"] == "compiler-artifact" && m["target"]["name"] == bin)
+        .find_map(|m| m["executable"].as_str().map(PathBuf::from))
+        .ok_or_else(|| format!("{what}: cargo reported no executable `{bin}`"))
+}
+
+/// The workspace's target directory as cargo resolves it (CARGO_TARGET_DIR,
+/// `build.target-dir`, else `ROOT/target`), for builds that pass their own
+/// `--target-dir` under it. A relative CARGO_TARGET_DIR is taken from `root`,
+/// where every cargo command of xtask runs.
+#[cfg_attr(
+    not(test),
+    expect(
+        dead_code,
+        reason = "for qemu.rs's `run_scenario` (`target_dir(root)?.join(\"qemu\")`), which the lead wires in"
+    )
+)]
+fn target_dir(root: &Path) -> Result<PathBuf, String> {
+    let out = cargo()
+        .args(["metadata", "--format-version", "1", "--no-deps"])
+        .current_dir(root)
+        .stderr(Stdio::inherit())
+        .output()
+        .map_err(|e| format!("cargo metadata: cannot start: {e}"))?;
+    if !out.status.success() {
+        return Err(format!("cargo metadata ({})", out.status));
+    }
+    serde_json::from_slice::<serde_json::Value>(&out.stdout)
+        .ok()
+        .and_then(|m| m["target_directory"].as_str().map(PathBuf::from))
+        .ok_or_else(|| "cargo metadata printed no target_directory".to_string())
 }
 
 /// Install what a fresh machine lacks: the MCU target and the components
@@ -164,16 +219,15 @@ fn test(root: &Path) -> Result<(), String> {
 }
 
 fn size(root: &Path) -> Result<(), String> {
-    run(
+    // The image cargo reports having just built, not a path guessed from
+    // `target/`: with CARGO_TARGET_DIR set (or `build.target-dir`), the
+    // guess fails on a fresh clone and reads a stale image on an old one.
+    let elf = build_executable(
         root,
         "firmware release build",
+        "hopper-fw",
         cargo().args(["build", "-p", "hopper-app", "--release", "--target", TARGET]),
     )?;
-    let elf = root
-        .join("target")
-        .join(TARGET)
-        .join("release")
-        .join("hopper-fw");
     let tool = llvm_size()?;
     let out = Command::new(&tool)
         .arg(&elf)
@@ -242,15 +296,49 @@ fn llvm_size() -> Result<PathBuf, String> {
     found.ok_or_else(|| "llvm-size not found: run `rustup component add llvm-tools`".into())
 }
 
-/// Run the host test suite, echoing its output and counting the results.
+/// Run the host test suites, echoing their output and counting the results
+/// into one `xtask: N passed, M failed` line.
+///
+/// The control crate runs first on its own: in the workspace run it is
+/// built with the features hal-sim turns on (`fault-injection`, `serde`),
+/// so only this run tests it as the firmware builds it.
 fn cargo_test(root: &Path) -> Result<(), String> {
-    eprintln!("xtask: cargo test --workspace");
+    let control = counted_cargo_test(root, &["test", "-p", "hopper-control"])?;
+    let workspace = counted_cargo_test(root, &["test", "--workspace"])?;
+    let passed = control.passed + workspace.passed;
+    let failed = control.failed + workspace.failed;
+    println!("xtask: {passed} passed, {failed} failed");
+    for run in [&control, &workspace] {
+        if !run.status.success() || run.failed > 0 {
+            return Err(format!("{} ({})", run.what, run.status));
+        }
+    }
+    Ok(())
+}
+
+/// What one `cargo test` run reported.
+struct TestRun {
+    /// The command, for messages.
+    what: String,
+    /// Tests passed, summed over its `test result:` lines.
+    passed: u64,
+    /// Tests failed, summed likewise.
+    failed: u64,
+    /// Cargo's exit status: a failure with no failed test is a test binary
+    /// that did not build, which no `test result:` line shows.
+    status: std::process::ExitStatus,
+}
+
+/// Runs `cargo ARGS`, echoing its output and counting its results.
+fn counted_cargo_test(root: &Path, args: &[&str]) -> Result<TestRun, String> {
+    let what = format!("cargo {}", args.join(" "));
+    eprintln!("xtask: {what}");
     let mut child = cargo()
-        .args(["test", "--workspace"])
+        .args(args)
         .current_dir(root)
         .stdout(Stdio::piped())
         .spawn()
-        .map_err(|e| format!("cannot start cargo test: {e}"))?;
+        .map_err(|e| format!("cannot start {what}: {e}"))?;
     let (mut passed, mut failed) = (0u64, 0u64);
     if let Some(out) = child.stdout.take() {
         for line in BufReader::new(out).lines().map_while(Result::ok) {
@@ -269,11 +357,29 @@ fn cargo_test(root: &Path) -> Result<(), String> {
             }
         }
     }
-    let status = child.wait().map_err(|e| format!("cargo test: {e}"))?;
-    println!("xtask: {passed} passed, {failed} failed");
-    if status.success() && failed == 0 {
-        Ok(())
-    } else {
-        Err(format!("cargo test ({status})"))
+    let status = child.wait().map_err(|e| format!("{what}: {e}"))?;
+    Ok(TestRun {
+        what,
+        passed,
+        failed,
+        status,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn target_dir_follows_cargo_target_dir() {
+        // This test's own build directory is the one cargo resolved.
+        let root = workspace_root();
+        let dir = target_dir(&root).unwrap_or_default();
+        assert!(dir.is_absolute(), "{}", dir.display());
+        let expected = match std::env::var_os("CARGO_TARGET_DIR") {
+            Some(d) => root.join(d),
+            None => root.join("target"),
+        };
+        assert_eq!(dir, expected);
     }
 }

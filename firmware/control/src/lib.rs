@@ -52,20 +52,24 @@ pub(crate) mod proptest_support {
     /// Cases per property in the default run (issue 6 asks for at least 10 000).
     pub const MIN_CASES: u32 = 10_000;
 
-    /// Cases per property: [`MIN_CASES`], or more when `HOPPER_PROPTEST_CASES`
-    /// or proptest's own `PROPTEST_CASES` asks for more. Taking the maximum
-    /// keeps an environment that sets `PROPTEST_CASES` low for other crates
-    /// from silently thinning these properties.
+    /// Cases per property: `HOPPER_PROPTEST_CASES` when set, else
+    /// proptest's own `PROPTEST_CASES` when set, else [`MIN_CASES`]. A set
+    /// value wins either way, so a quick local run can lower the count
+    /// (`PROPTEST_CASES=200 cargo test`) as well as a long one raise it.
+    /// `HOPPER_PROPTEST_CASES` comes first because it names these properties
+    /// only: an environment that sets `PROPTEST_CASES` low for other crates
+    /// can still pin these at 10 000 or more with it. A value that is not a
+    /// positive integer counts as not set (0 cases would pass vacuously).
     pub fn cases() -> u32 {
         let from_env = |key: &str| {
             std::env::var(key)
                 .ok()
                 .and_then(|v| v.trim().parse::<u32>().ok())
-                .unwrap_or(0)
+                .filter(|n| *n > 0)
         };
-        MIN_CASES
-            .max(from_env("HOPPER_PROPTEST_CASES"))
-            .max(from_env("PROPTEST_CASES"))
+        from_env("HOPPER_PROPTEST_CASES")
+            .or_else(|| from_env("PROPTEST_CASES"))
+            .unwrap_or(MIN_CASES)
     }
 
     /// Runs `test` on [`cases`] values of `strategy`, reports the number of

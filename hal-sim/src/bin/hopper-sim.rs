@@ -11,7 +11,7 @@
 //! hopper-sim figures --out DIR
 //! ```
 
-use anyhow::{bail, Context, Result};
+use anyhow::{bail, Result};
 use clap::{Args, Parser, Subcommand};
 use hal_sim::inject::Injection;
 use hal_sim::params::Params;
@@ -20,6 +20,24 @@ use hal_sim::run;
 use hal_sim::scenario::{self, Overrides, Scenario, Settings};
 use hal_sim::sweep::{self, Sweep};
 use std::path::PathBuf;
+
+/// `println!` that hands a write error to the caller (`?`) instead of
+/// panicking, so that a closed stdout (`hopper-sim run | head`) ends the
+/// command quietly (see [`is_closed_pipe`]).
+macro_rules! say {
+    ($($arg:tt)*) => {{
+        use std::io::Write as _;
+        writeln!(std::io::stdout().lock(), $($arg)*)?
+    }};
+}
+
+/// [`say!`] without the newline.
+macro_rules! say_raw {
+    ($($arg:tt)*) => {{
+        use std::io::Write as _;
+        write!(std::io::stdout().lock(), $($arg)*)?
+    }};
+}
 
 #[derive(Parser)]
 #[command(
@@ -254,9 +272,24 @@ fn main() {
         Cmd::Figures { out, quick } => cmd_figures(&out, quick),
     };
     if let Err(e) = result {
+        if is_closed_pipe(&e) {
+            // The reader has all it wanted (`| head`): not an error, as for
+            // any Unix filter whose reader went away.
+            return;
+        }
         eprintln!("hopper-sim: error: {e:#}");
         std::process::exit(2);
     }
+}
+
+/// Whether `e` is a write to a stdout whose reader has closed it. Rust
+/// ignores SIGPIPE, so such a write fails with `BrokenPipe` instead of
+/// ending the process the way the shell expects.
+fn is_closed_pipe(e: &anyhow::Error) -> bool {
+    e.chain().any(|c| {
+        c.downcast_ref::<std::io::Error>()
+            .is_some_and(|io| io.kind() == std::io::ErrorKind::BrokenPipe)
+    })
 }
 
 /// Help and version go out as clap prints them; any other command-line error
@@ -292,7 +325,7 @@ fn cmd_params_show(preset: &str) -> Result<()> {
             Params::PRESET_NAMES
         );
     };
-    print!("{}", params_toml::to_toml(&p, preset));
+    say_raw!("{}", params_toml::to_toml(&p, preset));
     Ok(())
 }
 
@@ -300,9 +333,9 @@ fn cmd_figures(out: &std::path::Path, quick: bool) -> Result<()> {
     let opts = hal_sim::figures::FigureOptions { quick };
     let report = hal_sim::figures::write_all(out, &opts).map_err(anyhow::Error::msg)?;
     for n in &report.notes {
-        println!("{n}");
+        say!("{n}");
     }
-    println!(
+    say!(
         "hopper-sim: wrote {} files to {}",
         report.files.len(),
         out.display()
@@ -358,30 +391,31 @@ fn cmd_run(a: RunArgs) -> Result<()> {
 
     let mut written = Vec::new();
     if let Some(dir) = &a.out {
-        std::fs::create_dir_all(dir)
-            .with_context(|| format!("cannot create output directory {}", dir.display()))?;
-        let csv_path = dir.join("trajectory.csv");
-        let mut f = std::io::BufWriter::new(
-            std::fs::File::create(&csv_path)
-                .with_context(|| format!("cannot create {}", csv_path.display()))?,
-        );
-        run::write_csv(&result.samples, &mut f)
-            .with_context(|| format!("cannot write {}", csv_path.display()))?;
-        std::io::Write::flush(&mut f)
-            .with_context(|| format!("cannot write {}", csv_path.display()))?;
-        written.push(csv_path);
-        let png = dir.join("hop.png");
         let title = format!(
             "{} hopping, {} parameters, start apex {:.3} m",
             s.controller, s.params, s.start_apex_m
         );
-        hal_sim::plot::hop_plot(&result.samples, &title, s.target_apex_m, &png)
-            .map_err(anyhow::Error::msg)?;
-        written.push(png);
+        written = hal_sim::out_dir::write_whole(dir, |staging| {
+            let csv_path = staging.join("trajectory.csv");
+            let io = |e: std::io::Error| {
+                format!("cannot write {}: {e}", dir.join("trajectory.csv").display())
+            };
+            let mut f = std::io::BufWriter::new(std::fs::File::create(&csv_path).map_err(io)?);
+            run::write_csv(&result.samples, &mut f).map_err(io)?;
+            std::io::Write::flush(&mut f).map_err(io)?;
+            hal_sim::plot::hop_plot(
+                &result.samples,
+                &title,
+                s.target_apex_m,
+                &staging.join("hop.png"),
+            )?;
+            Ok(vec!["trajectory.csv".into(), "hop.png".into()])
+        })
+        .map_err(anyhow::Error::msg)?;
     }
 
     if a.json {
-        println!("{}", serde_json::to_string(s)?);
+        say!("{}", serde_json::to_string(s)?);
         return Ok(());
     }
     let l = &s.ledger;
@@ -389,9 +423,12 @@ fn cmd_run(a: RunArgs) -> Result<()> {
         Some(x) => format!("{:.4} {unit}", x * scale),
         None => "-".to_string(),
     };
-    println!(
+    say!(
         "hopper-sim: {} controller, {} parameters, released from {:.3} m, {:.2} s simulated",
-        s.controller, s.params, s.start_apex_m, s.duration_s
+        s.controller,
+        s.params,
+        s.start_apex_m,
+        s.duration_s
     );
     let n = s.apex_heights_m.len();
     let shown: Vec<String> = if n <= 14 {
@@ -403,8 +440,8 @@ fn cmd_run(a: RunArgs) -> Result<()> {
             .chain(tail)
             .collect()
     };
-    println!("  hops (stances)     {}", s.hops);
-    println!(
+    say!("  hops (stances)     {}", s.hops);
+    say!(
         "  apex heights [m]   {}",
         if shown.is_empty() {
             "-".into()
@@ -413,7 +450,7 @@ fn cmd_run(a: RunArgs) -> Result<()> {
         }
     );
     if let Some(t) = s.target_apex_m {
-        println!(
+        say!(
             "  target apex        {t:.4} m, {}",
             match s.hops_to_converge {
                 Some(k) => format!("within 2% from hop {k} on"),
@@ -421,7 +458,7 @@ fn cmd_run(a: RunArgs) -> Result<()> {
             }
         );
     }
-    println!(
+    say!(
         "  faults             {}",
         if s.faults.is_empty() {
             "none".to_string()
@@ -437,24 +474,24 @@ fn cmd_run(a: RunArgs) -> Result<()> {
             )
         }
     );
-    println!(
+    say!(
         "  steady apex        {}",
         fmt_opt(s.steady_apex_m, "m", 1.0)
     );
-    println!(
+    say!(
         "  mean stance time   {}",
         fmt_opt(s.stance_time_s, "ms", 1000.0)
     );
-    println!("  hopping stopped at {}", fmt_opt(s.stopped_at_s, "s", 1.0));
-    println!(
+    say!("  hopping stopped at {}", fmt_opt(s.stopped_at_s, "s", 1.0));
+    say!(
         "  energy [J]         start {:.3}, end {:.3}; motor work {:+.3}, friction {:.3}, damping {:.3},",
         s.initial_energy_j, s.final_energy_j, l.motor_work_j, l.friction_j, l.damping_j
     );
-    println!(
+    say!(
         "                     touchdown {:.3}, liftoff {:.3}, stop impacts {:.3}, settling {:.3}; residual {:.2e}",
         l.touchdown_loss_j, l.liftoff_loss_j, l.stop_impact_loss_j, l.settle_loss_j, s.energy_residual_j
     );
-    println!(
+    say!(
         "  motor              peak speed {:.0} rad/s ({:.0}% of no-load {:.0} rad/s), peak current {:.1} A, peak stroke {:.1} mm",
         s.peak_motor_speed_rad_s,
         100.0 * s.peak_motor_speed_rad_s / s.no_load_speed_rad_s,
@@ -463,7 +500,7 @@ fn cmd_run(a: RunArgs) -> Result<()> {
         s.peak_stroke_m * 1000.0
     );
     if let Some(h) = &s.steady_hop {
-        println!(
+        say!(
             "  steady hop [J]     motor work {:.2}, friction {:.2}, touchdown {:.2}, liftoff {:.2}, stop impacts {:.2}; at apex rotor {:.2}, spring {:.2} (mean of the last 5 hops)",
             h.motor_work_j,
             h.friction_j,
@@ -475,8 +512,8 @@ fn cmd_run(a: RunArgs) -> Result<()> {
         );
     }
     if a.ledger {
-        println!("  per-hop energy ledger, J (previous apex to this apex; rotor and spring: actuator energy left at this apex)");
-        println!(
+        say!("  per-hop energy ledger, J (previous apex to this apex; rotor and spring: actuator energy left at this apex)");
+        say!(
             "  {:>4} {:>8} {:>8} {:>8} {:>8} {:>9} {:>8} {:>8} {:>8} {:>8}",
             "hop",
             "time s",
@@ -490,7 +527,7 @@ fn cmd_run(a: RunArgs) -> Result<()> {
             "spring"
         );
         for (i, h) in s.hop_ledger.iter().enumerate() {
-            println!(
+            say!(
                 "  {:>4} {:>8.3} {:>8.4} {:>8.3} {:>8.3} {:>9.3} {:>8.3} {:>8.3} {:>8.3} {:>8.3}",
                 i + 1,
                 h.apex_time_s,
@@ -506,7 +543,7 @@ fn cmd_run(a: RunArgs) -> Result<()> {
         }
     }
     for p in &written {
-        println!("  wrote {}", p.display());
+        say!("  wrote {}", p.display());
     }
     Ok(())
 }
@@ -582,7 +619,7 @@ fn cmd_sweep(a: SweepArgs) -> Result<()> {
         .write(&rows, &a.out, &title)
         .map_err(anyhow::Error::msg)?;
 
-    println!(
+    say!(
         "hopper-sim sweep: {runs} runs of {} s ({} controller, {} parameters) in {elapsed_s:.1} s on {} threads",
         sw.base.duration_s,
         sw.base.controller,
@@ -590,7 +627,7 @@ fn cmd_sweep(a: SweepArgs) -> Result<()> {
         rayon::current_num_threads()
     );
     if rows.len() <= 40 {
-        println!("  {:>24} {}", swept.join(", "), sw.metric);
+        say!("  {:>24} {}", swept.join(", "), sw.metric);
         for r in &rows {
             let vals: Vec<String> = r.values.iter().map(|v| format!("{v:.6}")).collect();
             let m = match sw.plotted(&r.metrics) {
@@ -598,11 +635,11 @@ fn cmd_sweep(a: SweepArgs) -> Result<()> {
                 Some((v, true)) => format!("{v:.4} (last apex, never steady)"),
                 None => "-".to_string(),
             };
-            println!("  {:>24} {m}", vals.join(", "));
+            say!("  {:>24} {m}", vals.join(", "));
         }
     }
     for p in &written {
-        println!("  wrote {}", p.display());
+        say!("  wrote {}", p.display());
     }
     Ok(())
 }
