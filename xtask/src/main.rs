@@ -105,13 +105,6 @@ fn build_executable(
 /// `build.target-dir`, else `ROOT/target`), for builds that pass their own
 /// `--target-dir` under it. A relative CARGO_TARGET_DIR is taken from `root`,
 /// where every cargo command of xtask runs.
-#[cfg_attr(
-    not(test),
-    expect(
-        dead_code,
-        reason = "for qemu.rs's `run_scenario` (`target_dir(root)?.join(\"qemu\")`), which the lead wires in"
-    )
-)]
 fn target_dir(root: &Path) -> Result<PathBuf, String> {
     let out = cargo()
         .args(["metadata", "--format-version", "1", "--no-deps"])

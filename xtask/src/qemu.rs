@@ -116,7 +116,7 @@ fn run_scenario(root: &Path, scenario: &Scenario) -> Result<(), String> {
     // One target directory for both images: the second build recompiles
     // only the application crate (the scenario is an `option_env!`), and the
     // scenarios run one after the other.
-    let target_dir = root.join("target").join("qemu");
+    let target_dir = crate::target_dir(root)?.join("qemu");
     run_cmd(
         root,
         &format!("firmware build (QEMU variant, {} scenario)", scenario.name),

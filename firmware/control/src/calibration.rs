@@ -279,10 +279,8 @@ impl DacMap {
         if current_a.is_nan() {
             return self.zero_code;
         }
-        let i = current_a.max(-self.limit_a).min(self.limit_a);
-        let x = (self.zero_f + i * self.codes_per_amp)
-            .max(0.0)
-            .min(self.max_f);
+        let i = crate::num::clamp(current_a, -self.limit_a, self.limit_a);
+        let x = crate::num::clamp(self.zero_f + i * self.codes_per_amp, 0.0, self.max_f);
         // 0 <= x <= 65535: truncating x + 0.5 rounds to nearest, exactly, and
         // the result fits u16 (going through u32 saves the u16 saturation).
         (x + 0.5) as u32 as u16

@@ -70,7 +70,7 @@ pub fn spring_energy_j(spring_force_n: f32, stiffness_n_per_m: f32) -> Result<f3
     if !(stiffness_n_per_m > 0.0 && stiffness_n_per_m.is_finite()) {
         return Err(EnergyError::NonPositiveStiffness);
     }
-    let f = spring_force_n.max(0.0);
+    let f = crate::num::max(spring_force_n, 0.0);
     finite(0.5 * f * f / stiffness_n_per_m)
 }
 
@@ -143,7 +143,7 @@ impl EnergyModel {
         let zd = x.body_velocity_mps;
         let z = x.body_height_m;
         let nut_abs_velocity = zd - self.r * thd; // nut velocity over ground, m/s
-        let f = x.spring_force_n.max(0.0);
+        let f = crate::num::max(x.spring_force_n, 0.0);
         let e = self.half_j * thd * thd
             + self.half_m_body * zd * zd
             + self.half_m_nut * nut_abs_velocity * nut_abs_velocity
@@ -161,7 +161,7 @@ impl EnergyModel {
             return Err(EnergyError::NonFiniteInput);
         }
         let zd = x.body_velocity_mps;
-        let f = x.spring_force_n.max(0.0);
+        let f = crate::num::max(x.spring_force_n, 0.0);
         let e = (self.half_m_body + self.half_m_nut) * zd * zd
             + (self.m_body_g + self.m_nut_g) * x.body_height_m
             + self.half_inv_k * f * f

@@ -313,7 +313,7 @@ impl PhaseEstimator {
                 }
                 if self.extremum_armed && body_v <= 0.0 {
                     self.extremum_done = true;
-                    let toe_height_m = (self.peak_height_m - self.leg_length_m).max(0.0);
+                    let toe_height_m = crate::num::max(self.peak_height_m - self.leg_length_m, 0.0);
                     self.last_apex_m = Some(toe_height_m);
                     return Some(PhaseEvent::Apex { toe_height_m });
                 }

@@ -246,7 +246,7 @@ impl Hopper {
                 ))
             })?,
             estimator,
-            supervisor: Supervisor::new(cfg.supervisor),
+            supervisor: Supervisor::new(cfg.supervisor)?,
             ledger: HopLedgerBuilder::new(),
             desired_energy_j,
             screw_m_per_rad: cfg.model.screw_m_per_rad(),

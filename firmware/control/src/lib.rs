@@ -40,6 +40,36 @@ pub mod supervisor;
 pub mod telemetry;
 pub mod watchdog;
 
+/// `f32` limits by plain comparison, for the control step. The Cortex-M4F
+/// has no `VMAXNM`/`VMINNM` (those are ARMv8), so `f32::max` and `f32::min`
+/// become library calls there (a call, NaN tests and a return each, about
+/// nine of them per period before), and `f32::clamp` asserts its bounds (a
+/// panic path). These compile to a compare and a conditional move.
+pub(crate) mod num {
+    /// `x` limited to `lo..=hi` (for `lo <= hi`); a NaN `x` stays NaN.
+    #[inline(always)]
+    pub fn clamp(x: f32, lo: f32, hi: f32) -> f32 {
+        if x < lo {
+            lo
+        } else if x > hi {
+            hi
+        } else {
+            x
+        }
+    }
+
+    /// The larger of `x` and `y` (`y` not NaN); a NaN `x` gives `y`, as
+    /// `f32::max` does.
+    #[inline(always)]
+    pub fn max(x: f32, y: f32) -> f32 {
+        if x > y {
+            x
+        } else {
+            y
+        }
+    }
+}
+
 /// Property-test plumbing shared by the modules' tests (host only).
 #[cfg(test)]
 pub(crate) mod proptest_support {

@@ -20,10 +20,12 @@
 //! nut has moved far enough for the residual; its common case (a count
 //! came in) is one integer compare.
 //!
-//! The latching property runs 10 000 cases by default; set
-//! `HOPPER_PROPTEST_CASES` (or `PROPTEST_CASES`) higher for a longer run.
-//! The output-bound property runs proptest's default count (or
-//! `PROPTEST_CASES`).
+//! The latching property runs 10 000 cases by default;
+//! `HOPPER_PROPTEST_CASES` (or, when it is not set, `PROPTEST_CASES`) raises
+//! or lowers the count. The output-bound property runs proptest's default
+//! count (or `PROPTEST_CASES`).
+
+use crate::laws::{in_range, require, InvalidField};
 
 /// One kind of fault the supervisor detects.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -346,6 +348,89 @@ impl Default for SupervisorConfig {
     }
 }
 
+impl SupervisorConfig {
+    /// Checks every field, naming the first one out of range: finite,
+    /// ordered ranges and stroke limits, a positive current limit with the
+    /// trip level at or above it, a positive braking deceleration and spring
+    /// rate, finite contact thresholds, and positive cross-check bounds
+    /// (`f32::INFINITY` turns a cross-check off).
+    pub fn validate(&self) -> Result<(), InvalidField> {
+        let finite_range = |r: &Range| r.min.is_finite() && r.max.is_finite() && r.min <= r.max;
+        let ranges = [
+            (
+                &self.nut_position_range_m,
+                "supervisor.nut_position_range_m",
+            ),
+            (
+                &self.nut_velocity_range_mps,
+                "supervisor.nut_velocity_range_mps",
+            ),
+            (
+                &self.motor_speed_range_rad_s,
+                "supervisor.motor_speed_range_rad_s",
+            ),
+            (&self.body_height_range_m, "supervisor.body_height_range_m"),
+            (
+                &self.body_velocity_range_mps,
+                "supervisor.body_velocity_range_mps",
+            ),
+            (
+                &self.spring_force_range_n,
+                "supervisor.spring_force_range_n",
+            ),
+            (
+                &self.leg_compression_range_m,
+                "supervisor.leg_compression_range_m",
+            ),
+            (&self.nut_stops_m, "supervisor.nut_stops_m"),
+        ];
+        for (r, name) in ranges {
+            require(finite_range(r), name)?;
+        }
+        let positive = |v: f32| v.is_finite() && v > 0.0;
+        require(positive(self.current_limit_a), "supervisor.current_limit_a")?;
+        require(
+            in_range(self.overcurrent_trip_a, self.current_limit_a, f32::MAX),
+            "supervisor.overcurrent_trip_a",
+        )?;
+        require(
+            positive(self.spring_rate_n_per_m),
+            "supervisor.spring_rate_n_per_m",
+        )?;
+        require(
+            self.spring_preload_m.is_finite(),
+            "supervisor.spring_preload_m",
+        )?;
+        for (v, name) in [
+            (self.contact_force_n, "supervisor.contact_force_n"),
+            (self.free_force_n, "supervisor.free_force_n"),
+            (
+                self.contact_compression_m,
+                "supervisor.contact_compression_m",
+            ),
+            (self.free_compression_m, "supervisor.free_compression_m"),
+        ] {
+            require(v.is_finite(), name)?;
+        }
+        // NaN fails `> 0`; +inf passes and disables the check.
+        require(self.spring_mismatch_n > 0.0, "supervisor.spring_mismatch_n")?;
+        require(
+            self.frozen_speed_rad_s > 0.0,
+            "supervisor.frozen_speed_rad_s",
+        )?;
+        require(
+            self.stroke_min_m.is_finite()
+                && self.stroke_max_m.is_finite()
+                && self.stroke_min_m <= self.stroke_max_m,
+            "supervisor.stroke_min_m",
+        )?;
+        require(
+            positive(self.brake_decel_mps2),
+            "supervisor.brake_decel_mps2",
+        )
+    }
+}
+
 /// Distance from a mechanical stop within which the nut may halt in one
 /// period (a stop impact), m: the frozen-encoder check is off there. 0.5 mm
 /// is six periods of travel at the 0.8 m/s the no-load speed allows.
@@ -377,9 +462,9 @@ pub struct Supervisor {
     config: SupervisorConfig,
     latched: Faults,
     disagree_periods: u16,
-    /// `sane_limit(config.current_limit_a)`, worked out once.
+    /// The current limit, A (validated: finite, > 0).
     limit_a: f32,
-    /// `1 / (2 a)` of the braking deceleration, or NaN when no braking is assumed.
+    /// `1 / (2 a)` of the braking deceleration (validated: finite, > 0).
     half_inv_decel: f32,
     /// Centre of the stops and the half-width that is more than
     /// [`STOP_BAND_M`] away from both, m (NaN for bad stops: check off).
@@ -397,26 +482,20 @@ pub(crate) const fn sane_limit(limit_a: f32) -> f32 {
 }
 
 impl Supervisor {
-    /// Creates a supervisor with no fault latched.
-    ///
-    /// A non-finite or non-positive `current_limit_a` is treated as 0 A (the
-    /// output is then always 0), so a bad configuration cannot produce current.
-    pub const fn new(config: SupervisorConfig) -> Self {
-        let a = config.brake_decel_mps2;
-        Self {
+    /// Creates a supervisor with no fault latched, once `config` passes
+    /// [`SupervisorConfig::validate`].
+    pub fn new(config: SupervisorConfig) -> Result<Self, InvalidField> {
+        config.validate()?;
+        Ok(Self {
             config,
             latched: Faults::NONE,
             disagree_periods: 0,
-            limit_a: sane_limit(config.current_limit_a),
-            half_inv_decel: if a > 0.0 && a.is_finite() {
-                0.5 / a
-            } else {
-                f32::NAN
-            },
+            limit_a: config.current_limit_a,
+            half_inv_decel: 0.5 / config.brake_decel_mps2,
             stops_centre_m: 0.5 * (config.nut_stops_m.min + config.nut_stops_m.max),
             stops_inner_half_m: 0.5 * (config.nut_stops_m.max - config.nut_stops_m.min)
                 - STOP_BAND_M,
-        }
+        })
     }
 
     /// Whether the motor encoder gave no count although the motor turns
@@ -474,13 +553,13 @@ impl Supervisor {
             (input.spring_force_n, c.spring_force_range_n),
             (input.leg_compression_m, c.leg_compression_range_m),
         ];
-        // Fast path, every period: all values finite and in range (a NaN
-        // compares false; `is_finite` also catches an infinity inside an
-        // unbounded range). `&` rather than `&&`: no
-        // branch per value.
-        let all_in_range = values.iter().fold(true, |ok, (x, r)| {
-            ok & x.is_finite() & (*x >= r.min) & (*x <= r.max)
-        });
+        // Every period: all values in range. A NaN compares false and an
+        // infinity is outside the (validated, finite) bounds, so this also
+        // rules out non-finite values. `&` rather than `&&`: no branch per
+        // value.
+        let all_in_range = values
+            .iter()
+            .fold(true, |ok, (x, r)| ok & (*x >= r.min) & (*x <= r.max));
         if !all_in_range {
             // Slow path, only on a fault: say which kind.
             for (x, range) in values {
@@ -496,17 +575,13 @@ impl Supervisor {
         {
             f.insert(Fault::EncoderJump);
         }
-        if input.nut_position_m.is_finite() && input.nut_velocity_mps.is_finite() {
+        // Values in range are finite; otherwise the position and velocity
+        // are checked (a non-finite one is named above, not as a stroke).
+        if all_in_range || (input.nut_position_m.is_finite() && input.nut_velocity_mps.is_finite())
+        {
             let p = input.nut_position_m;
             let pd = input.nut_velocity_mps;
-            // A non-positive or NaN deceleration means no braking is assumed
-            // possible (`half_inv_decel` is NaN): only the position itself
-            // is checked.
-            let stop_m = if self.half_inv_decel.is_nan() {
-                p
-            } else {
-                p + pd * pd.abs() * self.half_inv_decel
-            };
+            let stop_m = p + pd * pd.abs() * self.half_inv_decel;
             // `!(a <= x && x <= b)` also catches NaN from an overflow.
             if !(stop_m >= c.stroke_min_m && stop_m <= c.stroke_max_m) {
                 f.insert(Fault::StrokeLimit);
@@ -590,7 +665,7 @@ impl Supervisor {
         let limit = self.limit_a;
         // Finite request, finite non-negative limit: the clamp is finite and in range.
         Command {
-            current_a: requested_current_a.clamp(-limit, limit),
+            current_a: crate::num::clamp(requested_current_a, -limit, limit),
             amp_enable: limit > 0.0,
         }
     }
@@ -640,7 +715,11 @@ mod tests {
     }
 
     fn sup() -> Supervisor {
-        Supervisor::new(SupervisorConfig::default())
+        built(SupervisorConfig::default())
+    }
+
+    fn built(c: SupervisorConfig) -> Supervisor {
+        Supervisor::new(c).unwrap_or_else(|e| panic!("{e:?}"))
     }
 
     /// Applies `bad` once, expects `fault` latched and SAFE at once, stays latched,
@@ -771,7 +850,7 @@ mod tests {
             spring_mismatch_n: f32::INFINITY,
             ..SupervisorConfig::default()
         };
-        let mut s = Supervisor::new(no_cross_check);
+        let mut s = built(no_cross_check);
         for _ in 0..19 {
             assert!(s.check(&bad, 1.0).amp_enable);
         }
@@ -823,13 +902,15 @@ mod tests {
             ..nominal()
         };
         assert!(s.check(&near, 1.0).amp_enable);
-        // A NaN bound fails safe.
-        let mut s = Supervisor::new(SupervisorConfig {
+        // A NaN bound is refused.
+        let nan = SupervisorConfig {
             spring_mismatch_n: f32::NAN,
             ..SupervisorConfig::default()
-        });
-        assert_eq!(s.check(&nominal(), 1.0), Command::SAFE);
-        assert!(s.faults().contains(Fault::SensorDisagree));
+        };
+        assert_eq!(
+            Supervisor::new(nan).err(),
+            Some(InvalidField("supervisor.spring_mismatch_n"))
+        );
     }
 
     #[test]
@@ -881,14 +962,51 @@ mod tests {
     }
 
     #[test]
-    fn bad_limit_config_gives_no_current() {
-        let mut s = Supervisor::new(SupervisorConfig {
-            current_limit_a: f32::NAN,
-            ..SupervisorConfig::default()
-        });
-        let c = s.check(&nominal(), 10.0);
-        assert_eq!(c.current_a, 0.0);
-        assert!(!c.amp_enable);
+    fn bad_configurations_are_refused_by_name() {
+        let d = SupervisorConfig::default();
+        let refused = |c: SupervisorConfig| Supervisor::new(c).err().map(|f| f.0);
+        for limit in [f32::NAN, 0.0, -1.0, f32::INFINITY] {
+            assert_eq!(
+                refused(SupervisorConfig {
+                    current_limit_a: limit,
+                    ..d
+                }),
+                Some("supervisor.current_limit_a")
+            );
+        }
+        assert_eq!(
+            refused(SupervisorConfig {
+                overcurrent_trip_a: 10.0,
+                ..d
+            }),
+            Some("supervisor.overcurrent_trip_a")
+        );
+        assert_eq!(
+            refused(SupervisorConfig {
+                body_height_range_m: Range {
+                    min: 0.4,
+                    max: f32::INFINITY
+                },
+                ..d
+            }),
+            Some("supervisor.body_height_range_m")
+        );
+        assert_eq!(
+            refused(SupervisorConfig {
+                brake_decel_mps2: 0.0,
+                ..d
+            }),
+            Some("supervisor.brake_decel_mps2")
+        );
+        // Infinite cross-check bounds turn the checks off and are allowed.
+        assert_eq!(
+            refused(SupervisorConfig {
+                spring_mismatch_n: f32::INFINITY,
+                frozen_speed_rad_s: f32::INFINITY,
+                ..d
+            }),
+            None
+        );
     }
 
     #[test]
@@ -1056,7 +1174,7 @@ mod tests {
         fn no_contact_disagreement_passes_the_spring_check(
             f in -100.0f32..2000.0, p in -0.01f32..0.06, x in -0.005f32..0.12,
         ) {
-            let s = Supervisor::new(SupervisorConfig::default());
+            let s = sup();
             let input = SupervisorInput {
                 nut_position_m: p,
                 spring_force_n: f,

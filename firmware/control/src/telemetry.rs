@@ -173,11 +173,13 @@ impl HopLedgerBuilder {
         if !self.started {
             return;
         }
-        if command_a.is_finite() {
-            self.cur.peak_current_a = self.cur.peak_current_a.max(libm::fabsf(command_a));
+        // A NaN never replaces the peak (`x > peak` is false for it).
+        let current_a = libm::fabsf(command_a);
+        if current_a > self.cur.peak_current_a && current_a.is_finite() {
+            self.cur.peak_current_a = current_a;
         }
-        if nut_m.is_finite() {
-            self.cur.peak_stroke_m = self.cur.peak_stroke_m.max(nut_m);
+        if nut_m > self.cur.peak_stroke_m && nut_m.is_finite() {
+            self.cur.peak_stroke_m = nut_m;
         }
         if self.in_stance {
             let power_w = torque_nm * motor_speed_rad_s;

@@ -160,10 +160,11 @@ impl EnergyApex {
         let error_j = desired_j - measured_j;
         let next = self.offset_j + a.gain * error_j;
         if error_j.is_finite() {
-            self.last_error_j = error_j.clamp(-a.max_offset_j, a.max_offset_j);
+            self.last_error_j = crate::num::clamp(error_j, -a.max_offset_j, a.max_offset_j);
         }
         if next.is_finite() {
-            self.offset_j = next.clamp(a.min_offset_j.min(0.0), a.max_offset_j);
+            // The bounds are validated: `min_offset_j <= 0 <= max_offset_j`.
+            self.offset_j = crate::num::clamp(next, a.min_offset_j, a.max_offset_j);
         }
     }
 

@@ -64,7 +64,7 @@ impl Law {
         if self.allow_negative {
             tau
         } else {
-            tau.max(0.0)
+            crate::num::max(tau, 0.0)
         }
     }
 
@@ -72,15 +72,18 @@ impl Law {
     /// current limit; 0 A for a non-finite energy.
     #[inline]
     pub fn current_a(&self, energy_j: f32, desired_energy_j: f32) -> f32 {
-        // `f32::max` drops a NaN, so a NaN or infinite energy gives a torque
-        // of 0 or +-inf here, and the test below turns either into 0 A.
+        // The add-only limit drops a NaN, so a NaN or infinite energy gives
+        // a torque of 0, NaN or +-inf here, and the test below turns any of
+        // them into 0 A.
         let tau = self.torque_nm(energy_j, desired_energy_j);
         if !tau.is_finite() {
             return 0.0;
         }
-        (tau / self.torque_constant_nm_per_a)
-            .max(-self.limit_a)
-            .min(self.limit_a)
+        crate::num::clamp(
+            tau / self.torque_constant_nm_per_a,
+            -self.limit_a,
+            self.limit_a,
+        )
     }
 }
 

@@ -82,7 +82,7 @@ impl FlightPd {
         if i.is_nan() {
             return 0.0;
         }
-        i.max(-self.limit_a).min(self.limit_a)
+        crate::num::clamp(i, -self.limit_a, self.limit_a)
     }
 }
 

@@ -219,7 +219,7 @@ impl NutPositionPd {
         check_finite(&[p_ref_m, p_m, pd_mps, self.kp_n_per_m, self.kd_n_s_per_m])?;
         check_finite(&[spring_force_n])?;
         let ff = if self.spring_feedforward {
-            spring_force_n.max(0.0)
+            crate::num::max(spring_force_n, 0.0)
         } else {
             0.0
         };

@@ -415,7 +415,7 @@ impl Constants {
         };
         let i = self.a_per_n * (self.tracking_n_s_per_m * (v_ref - nut_velocity_mps) + spring_n);
         if i.is_finite() {
-            i.clamp(-self.limit_a, self.limit_a)
+            crate::num::clamp(i, -self.limit_a, self.limit_a)
         } else {
             0.0
         }
@@ -441,11 +441,11 @@ impl Constants {
         // while the level is not saturated, so a long climb at full level
         // does not wind it up and overshoot the target.
         let b = if (0.0..=1.0).contains(&trial) {
-            (integral + self.cfg.level_gain_per_j * e).clamp(0.0, 1.0)
+            crate::num::clamp(integral + self.cfg.level_gain_per_j * e, 0.0, 1.0)
         } else {
             integral
         };
-        (b, (b + kp * e).clamp(0.0, 1.0))
+        (b, crate::num::clamp(b + kp * e, 0.0, 1.0))
     }
 }
 

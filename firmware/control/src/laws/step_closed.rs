@@ -64,11 +64,11 @@ pub fn gain_m_per_j(c: &Config, act: &Actuator, compression_m: f32) -> Result<f3
     match c.gain {
         Gain::Fixed { kp_m_per_j } => {
             check_finite(&[kp_m_per_j])?;
-            Ok(kp_m_per_j.max(0.0))
+            Ok(crate::num::max(kp_m_per_j, 0.0))
         }
         Gain::Normalised { min_compression_m } => {
             check_finite(&[min_compression_m, compression_m])?;
-            let dz = compression_m.max(min_compression_m).max(1e-4);
+            let dz = crate::num::max(crate::num::max(compression_m, min_compression_m), 1e-4);
             let k = act.spring_stiffness_n_per_m;
             if !(k > 0.0 && k.is_finite()) {
                 return Err(LawError::NonFiniteInput);
@@ -85,7 +85,11 @@ pub fn step_m(c: &Config, act: &Actuator, x: &StanceInput) -> Result<f32, LawErr
     let kp = gain_m_per_j(c, act, x.leg_compression_m)?;
     let step = kp * (x.desired_energy_j - x.energy_j);
     check_finite(&[step])?;
-    Ok(step.clamp(0.0, act.stroke_m.max(0.0)))
+    Ok(crate::num::clamp(
+        step,
+        0.0,
+        crate::num::max(act.stroke_m, 0.0),
+    ))
 }
 
 /// Per-stance state: the step latched at `t1`.

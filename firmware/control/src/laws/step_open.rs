@@ -31,7 +31,7 @@ impl Default for Config {
 /// Position reference of eq 2.49, m: `l1` after the bottom, 0 before; clamped to `0..=stroke`.
 pub fn reference_m(c: &Config, act: &Actuator, after_bottom: bool) -> f32 {
     if after_bottom {
-        c.step_m.clamp(0.0, act.stroke_m.max(0.0))
+        crate::num::clamp(c.step_m, 0.0, crate::num::max(act.stroke_m, 0.0))
     } else {
         0.0
     }

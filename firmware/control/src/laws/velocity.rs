@@ -61,7 +61,7 @@ pub fn command(c: &Config, act: &Actuator, x: &StanceInput) -> Result<f32, LawEr
     check_finite(&[c.loop_gain_n_s_per_m, x.nut_velocity_mps, x.spring_force_n])?;
     let v_ref = velocity_reference_mps(c, x.energy_j, x.desired_energy_j)?;
     let ff = if c.spring_feedforward {
-        x.spring_force_n.max(0.0)
+        crate::num::max(x.spring_force_n, 0.0)
     } else {
         0.0
     };
