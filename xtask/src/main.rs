@@ -3,7 +3,8 @@
 //! * `cargo xtask test`: everything CI checks, in order: toolchain set-up
 //!   (rustup target and components from `rust-toolchain.toml`), formatting,
 //!   clippy on the host and on the MCU target, the `no_std` builds of the
-//!   control crate and the plant, the firmware release build with its size
+//!   control crate and the plant, the panic-never link check of the control
+//!   period, the firmware release build with its size
 //!   budget, the control crate's tests on their own (without the
 //!   simulator's features), and the whole host test suite. It ends with a
 //!   `xtask: N passed, M failed` line counting the tests of both runs.
@@ -185,6 +186,23 @@ fn test(root: &Path) -> Result<(), String> {
             "hal-sim",
             "--lib",
             "--no-default-features",
+            "--target",
+            TARGET,
+        ]),
+    )?;
+    // The control period linked with a panic handler that calls an undefined
+    // function (`firmware/app/src/bin/panic-check.rs`): a panic path the
+    // optimiser cannot remove fails the link.
+    run(
+        root,
+        "panic-never link check (MCU target)",
+        cargo().args([
+            "build",
+            "-p",
+            "hopper-app",
+            "--bin",
+            "panic-check",
+            "--release",
             "--target",
             TARGET,
         ]),

@@ -25,6 +25,22 @@
 //! - [`runner`]: the one period runner the board, QEMU and the host share;
 //! - [`watchdog`]: when the period may feed the hardware watchdog.
 #![no_std]
+// Panic-free, enforced: no indexing that can go out of bounds, no explicit
+// panics, no unwrap/expect outside the tests. The `panic-never` check in
+// `cargo xtask test` links the control step with a panic handler that does
+// not exist, so a panic path anywhere in it fails the build.
+#![cfg_attr(
+    not(test),
+    deny(
+        clippy::indexing_slicing,
+        clippy::panic,
+        clippy::unwrap_used,
+        clippy::expect_used,
+        clippy::unreachable,
+        clippy::todo,
+        clippy::unimplemented
+    )
+)]
 
 pub mod calibration;
 pub mod energy;
