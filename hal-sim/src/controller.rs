@@ -18,6 +18,7 @@ use hopper_control::laws::{
     constant_torque, energy_torque, flight_pd, modified_torque, shaped, step_closed, step_open,
     velocity, StanceLaw,
 };
+use hopper_control::params::{self, Param, ParamError};
 use hopper_control::runner::{NoCounter, PeriodRunner, Timing};
 use hopper_control::supervisor::Fault;
 use hopper_control::telemetry::HopLedger;
@@ -105,6 +106,10 @@ pub struct ControllerSpec {
     pub flight_override: Option<flight_pd::Config>,
     /// Faults to inject (`hopper-sim run --inject`).
     pub injections: Vec<Injection>,
+    /// Firmware parameters set by name ([`hopper_control::params`]),
+    /// applied last, in order; the configuration is validated again when
+    /// the controller is built.
+    pub params: Vec<(&'static Param, f32)>,
 }
 
 impl ControllerSpec {
@@ -119,6 +124,7 @@ impl ControllerSpec {
             strategy_override: None,
             flight_override: None,
             injections: Vec::new(),
+            params: Vec::new(),
         }
     }
 
@@ -187,6 +193,10 @@ impl ControllerSpec {
         if let Some(f) = self.flight_override {
             cfg.flight = f;
         }
+        for (p, v) in &self.params {
+            params::set(&mut cfg, p.name, *v)
+                .map_err(|e| describe_param_error(p, *v, e, &self.name))?;
+        }
         let timing = Timing {
             period_s: dt_s as f32,
             ..Timing::default()
@@ -216,6 +226,47 @@ impl ControllerSpec {
                 .collect(),
             max_abs_current_after_fault_a: None,
         })
+    }
+}
+
+/// The controllers firmware parameter `p` applies to, for an error message.
+pub fn owner_of(p: &Param) -> &'static str {
+    match p.name.split_once('.').map(|(head, _)| head) {
+        Some("shaped") => "the shaped controller",
+        Some("energy_apex") => "the energy-apex controller",
+        Some("energy") => "the energy controller",
+        Some("constant_torque") => "the open-torque controller",
+        Some("modified_torque") => "the modified-torque controller",
+        Some("step_open") => "the step-open controller",
+        Some("step_closed") => "the step-closed controller",
+        Some("velocity") => "the velocity controller",
+        _ => "another controller",
+    }
+}
+
+/// ` UNIT` for a message, or nothing for dimensionless numbers, flags and
+/// choices.
+pub fn unit_suffix(p: &Param) -> String {
+    match p.unit {
+        "1" | "-" => String::new(),
+        u => format!(" {u}"),
+    }
+}
+
+/// One clear sentence for a parameter `controller` refused.
+pub fn describe_param_error(p: &Param, value: f32, e: ParamError, controller: &str) -> String {
+    let unit = unit_suffix(p);
+    match e {
+        ParamError::Unknown => format!("unknown firmware parameter `{}`", p.name),
+        ParamError::OutOfRange(_) => format!(
+            "parameter `{}` = {value}{unit} is out of range: allowed {}{unit} ..= {}{unit}",
+            p.name, p.min, p.max
+        ),
+        ParamError::NotSelected(_) => format!(
+            "parameter `{}` applies to {}, not to the `{controller}` controller",
+            p.name,
+            owner_of(p)
+        ),
     }
 }
 

@@ -43,7 +43,8 @@ use crate::params_toml::{self, ParamsFileError};
 use crate::run::RunConfig;
 use hopper_control::estimator::EstimatorConfig;
 use hopper_control::hopper::{ApexLoop, Strategy};
-use hopper_control::laws::{energy_torque, flight_pd, shaped, StanceLaw};
+use hopper_control::laws::{energy_torque, flight_pd, StanceLaw};
+use hopper_control::params::Param;
 use hopper_control::pd_design::PdGains;
 use std::collections::HashMap;
 use std::path::Path;
@@ -65,22 +66,65 @@ pub const DEFAULT_CONTROL_HZ: f64 = 10_000.0;
 /// units of their names. Shared by the file reader and [`Settings::check`],
 /// so a flag and a file key are held to the same limits.
 pub mod limits {
+    use hopper_control::params::{self as fw, Param};
+
+    /// A firmware parameter's range ([`hopper_control::params`], the one
+    /// definition), in f64.
+    const fn of(p: &Param) -> (f64, f64) {
+        (p.min as f64, p.max as f64)
+    }
+
     /// Apex target, m.
-    pub const TARGET_APEX_M: (f64, f64) = (0.0, 1.0);
-    /// Open-loop torque, N m.
-    pub const TORQUE_NM: (f64, f64) = (-10.0, 10.0);
-    /// Energy-law gain `K_e`, N m/J.
-    pub const ENERGY_GAIN_NM_PER_J: (f64, f64) = (0.0, 100.0);
+    pub const TARGET_APEX_M: (f64, f64) = of(&fw::TARGET_APEX_M);
+    /// Open-loop torque, N m (`constant_torque.torque_nm`, the same range as
+    /// `modified_torque.torque_nm`).
+    pub const TORQUE_NM: (f64, f64) = of(&fw::CONSTANT_TORQUE_NM);
+    /// Energy-law gain `K_e`, N m/J (`energy.gain_nm_per_j`, the same range
+    /// as `energy_apex.gain_nm_per_j`).
+    pub const ENERGY_GAIN_NM_PER_J: (f64, f64) = of(&fw::ENERGY_GAIN);
     /// Flight PD proportional gain, A/rad.
-    pub const FLIGHT_KP_A_PER_RAD: (f64, f64) = (0.0, 1000.0);
+    pub const FLIGHT_KP_A_PER_RAD: (f64, f64) = of(&fw::FLIGHT_KP);
     /// Flight PD derivative gain, A s/rad.
-    pub const FLIGHT_KD_A_S_PER_RAD: (f64, f64) = (0.0, 100.0);
+    pub const FLIGHT_KD_A_S_PER_RAD: (f64, f64) = of(&fw::FLIGHT_KD);
     /// Load-cell noise, N (1 sigma).
     pub const LOADCELL_SIGMA_N: (f64, f64) = (0.0, 1000.0);
     /// Potentiometer noise, m (1 sigma).
     pub const POT_SIGMA_M: (f64, f64) = (0.0, 0.1);
     /// Control rate, Hz (the runner's 1e-6 ..= 0.01 s period).
     pub const CONTROL_HZ: (f64, f64) = (100.0, 1e6);
+}
+
+/// Parses `NAME=VALUE` for a firmware parameter of the table
+/// ([`hopper_control::params`]): the name must exist and the value be in its
+/// range (flags 0/1, choices by index or name).
+pub fn parse_param_setting(spec: &str) -> Result<(&'static Param, f32), String> {
+    let (name, value) = spec.split_once('=').ok_or_else(|| {
+        format!("bad --set `{spec}`: expected NAME=VALUE, e.g. shaped.switch_fraction=0.5")
+    })?;
+    let (name, value) = (name.trim(), value.trim());
+    let p = hopper_control::params::find(name).ok_or_else(|| {
+        format!("bad --set `{spec}`: no firmware parameter `{name}` (see docs/parameters.md)")
+    })?;
+    let v = match p.kind {
+        hopper_control::params::Kind::Choice(names) => match names.iter().position(|n| *n == value)
+        {
+            Some(i) => i as f32,
+            None => value
+                .parse::<f32>()
+                .map_err(|_| format!("bad --set `{spec}`: `{name}` is one of {names:?}"))?,
+        },
+        _ => value
+            .parse::<f32>()
+            .map_err(|_| format!("bad --set `{spec}`: `{value}` is not a number"))?,
+    };
+    p.check(v).map_err(|_| {
+        let unit = crate::controller::unit_suffix(p);
+        format!(
+            "bad --set `{spec}`: `{name}` must be in {}{unit} ..= {}{unit}",
+            p.min, p.max
+        )
+    })?;
+    Ok((p, v))
 }
 
 /// Settings that may or may not be given: by a scenario file or by flags.
@@ -119,6 +163,9 @@ pub struct Overrides {
     pub control_hz: Option<f64>,
     /// Faults to inject (a given list replaces the other layer's whole list).
     pub inject: Option<Vec<Injection>>,
+    /// Firmware parameters set by name (a given list replaces the other
+    /// layer's whole list).
+    pub firmware_params: Option<Vec<(&'static Param, f32)>>,
 }
 
 impl Overrides {
@@ -141,6 +188,10 @@ impl Overrides {
             duration_s: over.duration_s.or(self.duration_s),
             control_hz: over.control_hz.or(self.control_hz),
             inject: over.inject.clone().or_else(|| self.inject.clone()),
+            firmware_params: over
+                .firmware_params
+                .clone()
+                .or_else(|| self.firmware_params.clone()),
         }
     }
 }
@@ -168,9 +219,9 @@ pub struct Settings {
     pub flight_kd_a_s_per_rad: Option<f64>,
     /// Sensor noise and amplifier lag.
     pub sensors: SensorConfig,
-    /// The `shaped` law's constants when a sweep changes them (None: the
-    /// law's defaults).
-    pub shaped: Option<shaped::Config>,
+    /// Firmware parameters set by name ([`hopper_control::params`]; a
+    /// sweep sets them), applied last.
+    pub firmware_params: Vec<(&'static Param, f32)>,
     /// Start toe height, m.
     pub start_apex_m: f64,
     /// Simulated time, s.
@@ -207,7 +258,7 @@ impl Settings {
                 pot_sigma_m: o.pot_sigma_m.unwrap_or(d.pot_sigma_m),
                 ..d
             },
-            shaped: None,
+            firmware_params: o.firmware_params.unwrap_or_default(),
             start_apex_m: o.start_apex_m.unwrap_or(DEFAULT_START_APEX_M),
             duration_s: o.duration_s.unwrap_or(DEFAULT_DURATION_S),
             control_hz: o.control_hz.unwrap_or(DEFAULT_CONTROL_HZ),
@@ -236,21 +287,7 @@ impl Settings {
             injections: self.inject.clone(),
             ..ControllerSpec::new(&self.controller)
         };
-        if let Some(c) = self.shaped {
-            if self.controller != "shaped" {
-                return Err(format!(
-                    "the shaped law's constants apply to the shaped controller only, not `{}`",
-                    self.controller
-                ));
-            }
-            if let Err(f) = c.validate() {
-                return Err(format!(
-                    "shaped law constant `{}` out of range: {c:?} (see hopper_control::laws::shaped::Config)",
-                    f.0
-                ));
-            }
-            spec.strategy_override = Some(Strategy::Shaped(c));
-        }
+        spec.params = self.firmware_params.clone();
         if let Some(ke) = self.energy_gain_nm_per_j {
             check_range(
                 "energy_gain_nm_per_j",

@@ -11,7 +11,8 @@
 use crate::params::{field, FieldSpec, FIELDS};
 use crate::run::{self, Summary};
 use crate::scenario::Settings;
-use hopper_control::laws::shaped;
+use hopper_control::hopper::HopperConfig;
+use hopper_control::params::{self as fw, Param};
 use plotters::coord::Shift;
 use plotters::prelude::*;
 use rayon::prelude::*;
@@ -50,28 +51,9 @@ pub enum Knob {
     /// Sensor-noise seed (rounded to a whole number): a sweep over seeds
     /// repeats one scenario under different noise.
     Seed,
-    /// A constant of the `shaped` law.
-    Shaped(ShapedField),
-}
-
-/// The `shaped` law's tunable constants (see
-/// `hopper_control::laws::shaped::Config`).
-#[derive(Clone, Copy)]
-pub enum ShapedField {
-    /// Spin-up start, fraction of the present flight's apex.
-    SpinUp,
-    /// Push-to-brake switch, fraction of the model's stance time.
-    Switch,
-    /// Braking current, fraction of the limit.
-    Brake,
-    /// Outer-loop integral gain, 1/J.
-    LevelKi,
-    /// Outer-loop proportional gain, 1/J.
-    LevelKp,
-    /// Braking-curve margin.
-    BrakingMargin,
-    /// Outer-loop integral at start, fraction of the limit.
-    IntegralStart,
+    /// A firmware parameter by its table name ([`hopper_control::params`]),
+    /// e.g. `shaped.switch_fraction` (the shaped law's constants are these).
+    Param(&'static Param),
 }
 
 /// Controller settings a sweep accepts: (short name, column name, knob).
@@ -86,37 +68,37 @@ const SETTING_KNOBS: [(&str, &str, Knob); 14] = [
     (
         "spin_up",
         "shaped_spin_up_fraction",
-        Knob::Shaped(ShapedField::SpinUp),
+        Knob::Param(&fw::SHAPED_SPIN_UP_FRACTION),
     ),
     (
         "switch",
         "shaped_switch_fraction",
-        Knob::Shaped(ShapedField::Switch),
+        Knob::Param(&fw::SHAPED_SWITCH_FRACTION),
     ),
     (
         "brake",
         "shaped_brake_fraction",
-        Knob::Shaped(ShapedField::Brake),
+        Knob::Param(&fw::SHAPED_BRAKE_FRACTION),
     ),
     (
         "level_ki",
         "shaped_level_gain_per_j",
-        Knob::Shaped(ShapedField::LevelKi),
+        Knob::Param(&fw::SHAPED_LEVEL_GAIN),
     ),
     (
         "level_kp",
         "shaped_level_proportional_per_j",
-        Knob::Shaped(ShapedField::LevelKp),
+        Knob::Param(&fw::SHAPED_LEVEL_PROPORTIONAL),
     ),
     (
         "braking_margin",
         "shaped_braking_margin",
-        Knob::Shaped(ShapedField::BrakingMargin),
+        Knob::Param(&fw::SHAPED_BRAKING_MARGIN),
     ),
     (
         "integral_start",
         "shaped_integral_start",
-        Knob::Shaped(ShapedField::IntegralStart),
+        Knob::Param(&fw::SHAPED_INTEGRAL_START),
     ),
 ];
 
@@ -144,12 +126,19 @@ impl Knob {
             .iter()
             .find(|(short, column, _)| *short == name || *column == name)
             .map(|(_, _, k)| *k)
+            .or_else(|| fw::find(name).map(Knob::Param))
     }
 
     /// CSV column name (with its unit).
     pub fn column(&self) -> &'static str {
         match self {
             Knob::Plant(f) => f.name,
+            // A table parameter without a column of its own is named as in
+            // the table.
+            Knob::Param(p) => SETTING_KNOBS
+                .iter()
+                .find(|(_, _, k)| k.same(self))
+                .map_or(p.name, |(_, column, _)| column),
             other => SETTING_KNOBS
                 .iter()
                 .find(|(_, _, k)| k.same(other))
@@ -170,18 +159,10 @@ impl Knob {
             // Axis values are finite (checked when parsed); negative seeds
             // saturate to 0.
             Knob::Seed => s.sensors.seed = v.round().max(0.0) as u64,
-            Knob::Shaped(f) => {
-                let c = s.shaped.get_or_insert_with(shaped::Config::default);
-                let v = v as f32;
-                match f {
-                    ShapedField::SpinUp => c.spin_up_fraction = v,
-                    ShapedField::Switch => c.switch_fraction = v,
-                    ShapedField::Brake => c.brake_fraction = v,
-                    ShapedField::LevelKi => c.level_gain_per_j = v,
-                    ShapedField::LevelKp => c.level_proportional_per_j = v,
-                    ShapedField::BrakingMargin => c.braking_margin = v,
-                    ShapedField::IntegralStart => c.integral_start = v,
-                }
+            Knob::Param(p) => {
+                // The last value given for a parameter wins.
+                s.firmware_params.retain(|(q, _)| q.name != p.name);
+                s.firmware_params.push((p, v as f32));
             }
         }
     }
@@ -189,9 +170,7 @@ impl Knob {
     /// Whether two knobs change the same setting.
     fn same(&self, other: &Knob) -> bool {
         match (self, other) {
-            (Knob::Shaped(a), Knob::Shaped(b)) => {
-                std::mem::discriminant(a) == std::mem::discriminant(b)
-            }
+            (Knob::Param(a), Knob::Param(b)) => a.name == b.name,
             (Knob::Plant(a), Knob::Plant(b)) => a.name == b.name,
             (a, b) => std::mem::discriminant(a) == std::mem::discriminant(b),
         }
@@ -200,7 +179,7 @@ impl Knob {
     /// Why sweeping this knob would change nothing for `controller`, if so.
     fn unused_by(&self, controller: &str) -> Option<&'static str> {
         match self {
-            Knob::Shaped(_) if controller != "shaped" => Some("the shaped controller"),
+            Knob::Param(p) if !param_applies(p, controller) => Some(crate::controller::owner_of(p)),
             Knob::Torque if !matches!(controller, "open-torque" | "modified-torque") => {
                 Some("open-torque and modified-torque")
             }
@@ -216,6 +195,21 @@ impl Knob {
             _ => None,
         }
     }
+}
+
+/// Whether firmware parameter `p` belongs to `controller` (or to every one).
+fn param_applies(p: &Param, controller: &str) -> bool {
+    let Some(index) = fw::CONTROLLER_NAMES.iter().position(|n| *n == controller) else {
+        return false;
+    };
+    let Some(strategy) = fw::controller_default(index) else {
+        return false;
+    };
+    let cfg = HopperConfig {
+        strategy,
+        ..HopperConfig::default()
+    };
+    fw::get(&cfg, p.name).is_ok()
 }
 
 /// One swept parameter and its values.

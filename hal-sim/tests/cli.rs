@@ -367,3 +367,80 @@ fn a_failed_plot_leaves_no_partial_output() {
     assert_eq!(names, ["hop.png", "trajectory.csv"]);
     assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
 }
+
+/// `--set NAME=VALUE` reaches the firmware's parameter table: a changed
+/// value changes the run, a bad name, value or controller is one clear
+/// error that writes nothing.
+#[test]
+fn set_changes_a_firmware_parameter_by_name() {
+    let base = [
+        "run",
+        "--params",
+        "design",
+        "--controller",
+        "energy-apex",
+        "--start-apex",
+        "0.10",
+        "--duration",
+        "2",
+        "--json",
+    ];
+    let apexes = |extra: &[&str]| {
+        let args: Vec<&str> = base.iter().chain(extra).copied().collect();
+        let out = sim(&args);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        json(&out)["apex_heights_m"].clone()
+    };
+    let default = apexes(&[]);
+    // The default value, set explicitly: the same run.
+    assert_eq!(apexes(&["--set", "energy_apex.gain_nm_per_j=3"]), default);
+    // No stance torque (K_e = 0): the hop decays passively instead of
+    // climbing back towards the target after the high start.
+    let passive = apexes(&["--set", "energy_apex.gain_nm_per_j=0"]);
+    let last = |v: &serde_json::Value| {
+        v.as_array()
+            .and_then(|a| a.last())
+            .and_then(serde_json::Value::as_f64)
+            .unwrap_or(f64::NAN)
+    };
+    assert!(
+        last(&passive) < last(&default) - 0.01,
+        "{passive} vs {default}"
+    );
+
+    let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
+    let out_dir = dir.path().join("set");
+    for (set, needle) in [
+        ("no.such=1", "no firmware parameter `no.such`"),
+        (
+            "flight.kp_a_per_rad=-1",
+            "must be in 0 A/rad ..= 10000 A/rad",
+        ),
+        (
+            "shaped.switch_fraction=0.5",
+            "applies to the shaped controller, not to the `energy-apex` controller",
+        ),
+        (
+            "energy_apex.measure=kinetic",
+            "is one of [\"total\", \"body\"]",
+        ),
+    ] {
+        assert_clean_failure(
+            &[
+                "run",
+                "--controller",
+                "energy-apex",
+                "--duration",
+                "1",
+                "--set",
+                set,
+            ],
+            &out_dir,
+            needle,
+        );
+    }
+}

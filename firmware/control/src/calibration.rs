@@ -85,8 +85,6 @@ pub struct Calibration {
     /// Amplifier current per DAC code, A (current command positive = torque pushing the nut down).
     /// Default 40 / 2048 (±10 V to ±40 A, *placeholder*). Finite, `> 0`.
     pub dac_amps_per_code: f32,
-    /// Amplifier current limit, A. Default 33.7 (1.0 N m at 0.0297 N m/A). Finite, `> 0`.
-    pub current_limit_a: f32,
     /// Motor torque constant, N m/A. Default 0.0297 (README). Finite, `> 0`.
     pub torque_constant_nm_per_a: f32,
 }
@@ -111,7 +109,6 @@ impl Default for Calibration {
             dac_bits: 12,
             dac_zero_code: 2048,
             dac_amps_per_code: 40.0 / 2048.0,
-            current_limit_a: 33.7,
             torque_constant_nm_per_a: 0.0297,
         }
     }
@@ -138,7 +135,7 @@ const MAX_ACCUMULATED_COUNTS: i32 = 1 << 24;
 impl Calibration {
     /// Checks every field against its documented range; the error names the first bad field.
     pub fn validate(&self) -> Result<(), CalError> {
-        let checks: [(bool, &'static str); 16] = [
+        let checks: [(bool, &'static str); 15] = [
             (self.motor_counts_per_rev > 0, "motor_counts_per_rev"),
             (
                 (8..=32).contains(&self.motor_counter_bits),
@@ -175,7 +172,6 @@ impl Calibration {
                 "dac_zero_code",
             ),
             (finite_positive(self.dac_amps_per_code), "dac_amps_per_code"),
-            (finite_positive(self.current_limit_a), "current_limit_a"),
         ];
         for (ok, name) in checks {
             if !ok {
@@ -245,9 +241,11 @@ pub struct DacMap {
 }
 
 impl DacMap {
-    /// The map for `cal` (any calibration: an invalid gain maps everything to
-    /// the zero-current code).
-    pub fn new(cal: &Calibration) -> Self {
+    /// The map for `cal`, clamping to `±current_limit_a` (the model's
+    /// usable limit, [`crate::model::ModelParams::usable_current_limit_a`]).
+    /// Any calibration and limit work: an invalid gain or limit maps
+    /// everything to the zero-current code.
+    pub fn new(cal: &Calibration, current_limit_a: f32) -> Self {
         let max = max_code(cal.dac_bits);
         let zero_code = cal.dac_zero_code.min(max);
         // A gain so small that its inverse overflows is as unusable as zero.
@@ -262,8 +260,8 @@ impl DacMap {
             } else {
                 0.0
             },
-            limit_a: if valid && finite_positive(cal.current_limit_a) {
-                cal.current_limit_a
+            limit_a: if valid && finite_positive(current_limit_a) {
+                current_limit_a
             } else {
                 0.0
             },
@@ -479,6 +477,9 @@ mod tests {
     use super::*;
     use crate::hal::RawSample;
 
+    /// The default model's usable current limit, A (1 N m at 0.0297 N m/A).
+    const LIMIT_A: f32 = 33.7;
+
     fn close(a: f32, b: f32, tol: f32) -> bool {
         (a - b).abs() <= tol
     }
@@ -635,27 +636,27 @@ mod tests {
     #[test]
     fn dac_round_trip_and_clamps() {
         let cal = Calibration::default();
-        assert_eq!(DacMap::new(&cal).code(0.0), 2048);
-        assert_eq!(DacMap::new(&cal).code(f32::NAN), 2048);
+        assert_eq!(DacMap::new(&cal, LIMIT_A).code(0.0), 2048);
+        assert_eq!(DacMap::new(&cal, LIMIT_A).code(f32::NAN), 2048);
         // 10 A / (40/2048 A) = 512 codes.
-        assert_eq!(DacMap::new(&cal).code(10.0), 2560);
-        assert_eq!(DacMap::new(&cal).code(-10.0), 1536);
+        assert_eq!(DacMap::new(&cal, LIMIT_A).code(10.0), 2560);
+        assert_eq!(DacMap::new(&cal, LIMIT_A).code(-10.0), 1536);
         // Clamped to the 33.7 A limit: 33.7 * 51.2 = 1725.44 -> 1725.
-        assert_eq!(DacMap::new(&cal).code(1e9), 2048 + 1725);
-        assert_eq!(DacMap::new(&cal).code(f32::NEG_INFINITY), 2048 - 1725);
+        assert_eq!(DacMap::new(&cal, LIMIT_A).code(1e9), 2048 + 1725);
+        assert_eq!(
+            DacMap::new(&cal, LIMIT_A).code(f32::NEG_INFINITY),
+            2048 - 1725
+        );
         assert!(close(cal.dac_code_to_current_a(2560), 10.0, 1e-5));
         assert!(close(
-            cal.dac_code_to_current_a(DacMap::new(&cal).code(5.0)),
+            cal.dac_code_to_current_a(DacMap::new(&cal, LIMIT_A).code(5.0)),
             5.0,
             0.5 * cal.dac_amps_per_code
         ));
         // DAC range clamp when the limit exceeds the DAC's reach.
-        let wide = Calibration {
-            current_limit_a: 1000.0,
-            ..cal
-        };
-        assert_eq!(DacMap::new(&wide).code(1000.0), 4095);
-        assert_eq!(DacMap::new(&wide).code(-1000.0), 0);
+        let wide = cal;
+        assert_eq!(DacMap::new(&wide, 1000.0).code(1000.0), 4095);
+        assert_eq!(DacMap::new(&wide, 1000.0).code(-1000.0), 0);
         assert!(close(cal.torque_nm(33.7), 1.0, 1e-3));
     }
 
@@ -672,12 +673,11 @@ mod tests {
         ) {
             let cal = Calibration {
                 dac_amps_per_code: amps_per_code,
-                current_limit_a: limit,
                 dac_zero_code: zero,
                 dac_bits: bits,
                 ..Calibration::default()
             };
-            let code = DacMap::new(&cal).code(current);
+            let code = DacMap::new(&cal, limit).code(current);
             proptest::prop_assert!(code <= max_code(bits));
             let sane = amps_per_code.is_finite() && amps_per_code > 0.0 && (1.0 / amps_per_code).is_finite()
                 && limit.is_finite() && limit > 0.0;

@@ -65,12 +65,13 @@ impl HopperConfig {
     /// Defaults for `model`: the supervisor's current limit, spring and
     /// stroke limits follow the model; everything else is the default.
     pub fn for_model(model: ModelParams) -> Self {
-        let mut supervisor = SupervisorConfig::default();
-        let limit_a = model.usable_current_limit_a();
-        supervisor.current_limit_a = limit_a;
-        supervisor.overcurrent_trip_a = 10.0 * limit_a;
-        supervisor.spring_rate_n_per_m = model.spring_stiffness_n_per_m;
-        supervisor.spring_preload_m = model.preload_m;
+        let mut supervisor = SupervisorConfig {
+            // A request ten times the limit is a runaway law or a unit error.
+            overcurrent_trip_a: 10.0 * model.usable_current_limit_a(),
+            spring_rate_n_per_m: model.spring_stiffness_n_per_m,
+            spring_preload_m: model.preload_m,
+            ..SupervisorConfig::default()
+        };
         // Soft limits outside the mechanical stops by the braking distance
         // from the largest stop-impact speed tolerated (see
         // `STOP_IMPACT_SPEED_MPS`): a nut that cannot be slowed below it
@@ -84,7 +85,6 @@ impl HopperConfig {
         };
         supervisor.stroke_max_m = model.stroke_m + margin_m;
         let calibration = Calibration {
-            current_limit_a: limit_a,
             torque_constant_nm_per_a: model.torque_constant_nm_per_a,
             lead_m_per_rev: model.screw_lead_m,
             height_at_origin_m: model.leg_length_m,
@@ -97,7 +97,7 @@ impl HopperConfig {
             supervisor,
             flight: flight_pd::Config::default(),
             strategy: Strategy::default(),
-            target_apex_m: 0.05,
+            target_apex_m: crate::params::TARGET_APEX_M.default,
         }
     }
 }
@@ -239,14 +239,14 @@ impl Hopper {
             controller,
             cfg,
             converter,
-            dac: DacMap::new(&cfg.calibration),
+            dac: DacMap::new(&cfg.calibration, cfg.model.usable_current_limit_a()),
             energy: EnergyModel::new(&cfg.model).map_err(|_| {
                 ConfigError::Model(ModelError::OutOfRange(
                     crate::model::ModelField::SpringStiffness,
                 ))
             })?,
             estimator,
-            supervisor: Supervisor::new(cfg.supervisor)?,
+            supervisor: Supervisor::new(cfg.supervisor, cfg.model.usable_current_limit_a())?,
             ledger: HopLedgerBuilder::new(),
             desired_energy_j,
             screw_m_per_rad: cfg.model.screw_m_per_rad(),
@@ -265,7 +265,7 @@ impl Hopper {
     }
 
     fn desired_for(model: &ModelParams, apex_m: f32) -> Result<f32, ConfigError> {
-        if !(0.0..=1.0).contains(&apex_m) {
+        if crate::params::TARGET_APEX_M.check(apex_m).is_err() {
             return Err(ConfigError::TargetApex);
         }
         model
@@ -670,7 +670,7 @@ mod tests {
                 _ => Strategy::default(),
             };
             let mut h = hopper(strategy);
-            let limit = h.config().supervisor.current_limit_a;
+            let limit = h.supervisor().current_limit_a();
             let mut latched = false;
             for raw in &stream {
                 let out = h.step(raw.as_ref(), dt);
@@ -859,7 +859,7 @@ mod tests {
                     cfg.target_apex_m = target;
                     // A supervisor limit below the model's: the command must
                     // respect the configured limit, not the hardware's.
-                    cfg.supervisor.current_limit_a *= scale;
+                    cfg.model.current_limit_a *= scale;
                     Setup { cfg }
                 })
         }
@@ -968,11 +968,11 @@ mod tests {
                     let Some(mut h) = built(cfg)? else {
                         return Ok(());
                     };
-                    let limit = cfg.supervisor.current_limit_a;
-                    prop_assert!(limit > 0.0 && limit <= cfg.model.usable_current_limit_a());
+                    let limit = cfg.model.usable_current_limit_a();
+                    prop_assert!(limit > 0.0);
                     let (lo, hi) = {
-                        let a = DacMap::new(&cfg.calibration).code(-limit);
-                        let b = DacMap::new(&cfg.calibration).code(limit);
+                        let a = DacMap::new(&cfg.calibration, limit).code(-limit);
+                        let b = DacMap::new(&cfg.calibration, limit).code(limit);
                         (a.min(b), a.max(b))
                     };
                     let mut walk = Walker::new();
@@ -1047,7 +1047,8 @@ mod tests {
                         return Ok(());
                     }
                     let mut r = PeriodRunner::new(cfg, Timing::default()).map_err(fail)?;
-                    let zero = DacMap::new(&cfg.calibration).code(0.0);
+                    let zero =
+                        DacMap::new(&cfg.calibration, cfg.model.usable_current_limit_a()).code(0.0);
                     let m = &cfg.model;
                     // A clean sample at rest for the reset: nut on its stop,
                     // leg extended, spring at preload.

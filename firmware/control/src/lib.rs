@@ -16,6 +16,8 @@
 //! - [`estimator`]: flight/stance phase, touchdown, liftoff, apex, bottom;
 //! - [`energy`]: the energy estimate of eqs 2.44-2.45;
 //! - [`model`]: the parameters the controller believes and `E_D` (eq 2.43);
+//! - [`params`]: every runtime parameter defined once (name, unit, range,
+//!   default, live or not, doc), read and written by name;
 //! - [`laws`]: every controller as a type (passive, each thesis stance law
 //!   with the flight PD of eq 4.4, energy-apex, shaped) behind one enum;
 //! - [`pd_design`]: flight PD gain design (eqs 4.3-4.18);
@@ -50,6 +52,7 @@ pub mod hal;
 pub mod hopper;
 pub mod laws;
 pub mod model;
+pub mod params;
 pub mod pd_design;
 pub mod runner;
 pub mod supervisor;

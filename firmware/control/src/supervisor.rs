@@ -25,7 +25,7 @@
 //! or lowers the count. The output-bound property runs proptest's default
 //! count (or `PROPTEST_CASES`).
 
-use crate::laws::{in_range, require, InvalidField};
+use crate::laws::{require, InvalidField};
 
 /// One kind of fault the supervisor detects.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -222,8 +222,6 @@ impl Range {
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct SupervisorConfig {
-    /// Output current limit, A: the command is clamped to `±current_limit_a`. Default 33.7 (1.0 N m).
-    pub current_limit_a: f32,
     /// A request with magnitude above this, A, is an overcurrent fault (requests between
     /// the limit and this are clamped silently). Default 337 (10x the limit: a runaway law).
     pub overcurrent_trip_a: f32,
@@ -299,7 +297,6 @@ pub struct SupervisorConfig {
 impl Default for SupervisorConfig {
     fn default() -> Self {
         Self {
-            current_limit_a: 33.7,
             overcurrent_trip_a: 337.0,
             max_motor_delta_counts: 64,
             max_height_delta_counts: 32,
@@ -388,9 +385,8 @@ impl SupervisorConfig {
             require(finite_range(r), name)?;
         }
         let positive = |v: f32| v.is_finite() && v > 0.0;
-        require(positive(self.current_limit_a), "supervisor.current_limit_a")?;
         require(
-            in_range(self.overcurrent_trip_a, self.current_limit_a, f32::MAX),
+            positive(self.overcurrent_trip_a),
             "supervisor.overcurrent_trip_a",
         )?;
         require(
@@ -483,14 +479,26 @@ pub(crate) const fn sane_limit(limit_a: f32) -> f32 {
 
 impl Supervisor {
     /// Creates a supervisor with no fault latched, once `config` passes
-    /// [`SupervisorConfig::validate`].
-    pub fn new(config: SupervisorConfig) -> Result<Self, InvalidField> {
+    /// [`SupervisorConfig::validate`]. Commands are clamped to
+    /// `±current_limit_a`, the model's usable limit
+    /// ([`crate::model::ModelParams::usable_current_limit_a`]: the one
+    /// definition of the current limit), which must be finite and positive,
+    /// and no higher than the overcurrent trip level.
+    pub fn new(config: SupervisorConfig, current_limit_a: f32) -> Result<Self, InvalidField> {
         config.validate()?;
+        require(
+            current_limit_a.is_finite() && current_limit_a > 0.0,
+            "model.current_limit_a",
+        )?;
+        require(
+            config.overcurrent_trip_a >= current_limit_a,
+            "supervisor.overcurrent_trip_a",
+        )?;
         Ok(Self {
             config,
             latched: Faults::NONE,
             disagree_periods: 0,
-            limit_a: config.current_limit_a,
+            limit_a: current_limit_a,
             half_inv_decel: 0.5 / config.brake_decel_mps2,
             stops_centre_m: 0.5 * (config.nut_stops_m.min + config.nut_stops_m.max),
             stops_inner_half_m: 0.5 * (config.nut_stops_m.max - config.nut_stops_m.min)
@@ -512,6 +520,11 @@ impl Supervisor {
     /// The configuration in use.
     pub const fn config(&self) -> &SupervisorConfig {
         &self.config
+    }
+
+    /// The current limit commands are clamped to, A.
+    pub const fn current_limit_a(&self) -> f32 {
+        self.limit_a
     }
 
     /// The latched faults (empty when running).
@@ -718,8 +731,11 @@ mod tests {
         built(SupervisorConfig::default())
     }
 
+    /// The default model's usable current limit, A.
+    const LIMIT_A: f32 = 33.7;
+
     fn built(c: SupervisorConfig) -> Supervisor {
-        Supervisor::new(c).unwrap_or_else(|e| panic!("{e:?}"))
+        Supervisor::new(c, LIMIT_A).unwrap_or_else(|e| panic!("{e:?}"))
     }
 
     /// Applies `bad` once, expects `fault` latched and SAFE at once, stays latched,
@@ -908,7 +924,7 @@ mod tests {
             ..SupervisorConfig::default()
         };
         assert_eq!(
-            Supervisor::new(nan).err(),
+            Supervisor::new(nan, LIMIT_A).err(),
             Some(InvalidField("supervisor.spring_mismatch_n"))
         );
     }
@@ -964,14 +980,11 @@ mod tests {
     #[test]
     fn bad_configurations_are_refused_by_name() {
         let d = SupervisorConfig::default();
-        let refused = |c: SupervisorConfig| Supervisor::new(c).err().map(|f| f.0);
+        let refused = |c: SupervisorConfig| Supervisor::new(c, LIMIT_A).err().map(|f| f.0);
         for limit in [f32::NAN, 0.0, -1.0, f32::INFINITY] {
             assert_eq!(
-                refused(SupervisorConfig {
-                    current_limit_a: limit,
-                    ..d
-                }),
-                Some("supervisor.current_limit_a")
+                Supervisor::new(d, limit).err().map(|f| f.0),
+                Some("model.current_limit_a")
             );
         }
         assert_eq!(
@@ -1088,7 +1101,7 @@ mod tests {
             steps in prop::collection::vec((any_input(), any_f32(), 0_u8..20), 1..200)
         ) {
             let mut s = sup();
-            let limit = s.config().current_limit_a;
+            let limit = s.current_limit_a();
             for (input, request, action) in steps {
                 match action {
                     0 => s.report_overrun(),

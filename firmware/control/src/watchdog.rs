@@ -60,7 +60,7 @@ impl FeedConfig {
         Self {
             dac_zero_code: cfg.calibration.dac_zero_code,
             dac_max_code: u16::try_from(max).unwrap_or(u16::MAX),
-            current_limit_a: cfg.supervisor.current_limit_a,
+            current_limit_a: cfg.model.usable_current_limit_a(),
         }
     }
 }
@@ -221,7 +221,7 @@ mod tests {
         let c = FeedConfig::for_hopper(&HopperConfig::default());
         assert_eq!(c.dac_zero_code, 2048);
         assert_eq!(c.dac_max_code, 4095);
-        let limit = HopperConfig::default().supervisor.current_limit_a;
+        let limit = HopperConfig::default().model.usable_current_limit_a();
         assert_eq!(c.current_limit_a, limit);
     }
 

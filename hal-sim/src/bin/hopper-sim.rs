@@ -149,6 +149,11 @@ struct BaseArgs {
     /// Replaces the scenario file's `inject` list.
     #[arg(long = "inject", value_name = "KIND@TIME")]
     inject: Vec<String>,
+    /// Set a firmware parameter by its name in the parameter table
+    /// (docs/parameters.md), e.g. `--set shaped.switch_fraction=0.5`;
+    /// repeatable, applied after every other setting.
+    #[arg(long = "set", value_name = "NAME=VALUE")]
+    set: Vec<String>,
 }
 
 impl BaseArgs {
@@ -188,6 +193,17 @@ impl BaseArgs {
                     self.inject
                         .iter()
                         .map(|spec| Injection::parse(spec))
+                        .collect::<Result<Vec<_>, _>>()
+                        .map_err(anyhow::Error::msg)?,
+                )
+            },
+            firmware_params: if self.set.is_empty() {
+                None
+            } else {
+                Some(
+                    self.set
+                        .iter()
+                        .map(|spec| hal_sim::scenario::parse_param_setting(spec))
                         .collect::<Result<Vec<_>, _>>()
                         .map_err(anyhow::Error::msg)?,
                 )

@@ -2,10 +2,11 @@
 //! section 4.4.2): a fixed motor torque for the whole stance.
 
 use super::{
-    flight_pd::FlightPd, or_zero, require, Actuator, ControlInput, ControlLaw, EventInput,
-    InvalidField, LawError,
+    flight_pd::FlightPd, or_zero, Actuator, ControlInput, ControlLaw, EventInput, InvalidField,
+    LawError,
 };
 use crate::estimator::Phase;
+use crate::params;
 
 /// Configuration of the constant-torque law.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -17,7 +18,9 @@ pub struct Config {
 
 impl Default for Config {
     fn default() -> Self {
-        Self { torque_nm: 1.0 }
+        Self {
+            torque_nm: params::CONSTANT_TORQUE_NM.default,
+        }
     }
 }
 
@@ -30,7 +33,7 @@ pub fn command(c: &Config, act: &Actuator) -> Result<f32, LawError> {
 impl Config {
     /// Checks every field, naming the first one out of range.
     pub fn validate(&self) -> Result<(), InvalidField> {
-        require(self.torque_nm.is_finite(), "constant_torque.torque_nm")
+        params::CONSTANT_TORQUE_NM.check(self.torque_nm).map(|_| ())
     }
 }
 

@@ -3,12 +3,13 @@
 //! apex height; the flight PD in flight.
 
 use super::{
-    energy_torque, flight_pd::FlightPd, in_range, require, Actuator, ControlInput, ControlLaw,
-    EventInput, InvalidField,
+    energy_torque, flight_pd::FlightPd, Actuator, ControlInput, ControlLaw, EventInput,
+    InvalidField,
 };
 use crate::energy::{EnergyInput, EnergyModel};
 use crate::estimator::{Phase, PhaseEvent};
 use crate::model::ModelParams;
+use crate::params;
 
 /// Which energy an apex-regulating law feeds back.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -73,42 +74,33 @@ impl Default for ApexLoop {
     fn default() -> Self {
         Self {
             law: energy_torque::Config {
-                gain_nm_per_j: 3.0,
-                allow_negative: false,
+                gain_nm_per_j: params::ENERGY_APEX_GAIN.default,
+                allow_negative: params::ENERGY_APEX_ALLOW_NEGATIVE.default_flag(),
             },
-            measure: EnergyMeasure::Total,
-            proportional: 0.0,
-            gain: 0.6,
-            max_offset_j: 30.0,
-            min_offset_j: -5.0,
-            spin_up_fraction: 0.0,
+            measure: if params::ENERGY_APEX_MEASURE.default == 0.0 {
+                EnergyMeasure::Total
+            } else {
+                EnergyMeasure::Body
+            },
+            proportional: params::ENERGY_APEX_PROPORTIONAL.default,
+            gain: params::ENERGY_APEX_INTEGRAL.default,
+            max_offset_j: params::ENERGY_APEX_MAX_OFFSET_J.default,
+            min_offset_j: params::ENERGY_APEX_MIN_OFFSET_J.default,
+            spin_up_fraction: params::ENERGY_APEX_SPIN_UP.default,
         }
     }
 }
 
 impl ApexLoop {
-    /// Checks every field, naming the first one out of range.
+    /// Checks every field against [`params`], naming the first one out of
+    /// range.
     pub fn validate(&self) -> Result<(), InvalidField> {
-        require(
-            self.gain > 0.0 && self.gain < 10.0,
-            "energy_apex.integral_gain",
-        )?;
-        require(
-            in_range(self.proportional, 0.0, f32::MAX),
-            "energy_apex.proportional_gain",
-        )?;
-        require(
-            in_range(self.max_offset_j, 0.0, f32::MAX),
-            "energy_apex.max_offset_j",
-        )?;
-        require(
-            in_range(self.min_offset_j, f32::MIN, 0.0),
-            "energy_apex.min_offset_j",
-        )?;
-        require(
-            in_range(self.spin_up_fraction, 0.0, 1.0),
-            "energy_apex.spin_up_fraction",
-        )
+        params::ENERGY_APEX_INTEGRAL.check(self.gain)?;
+        params::ENERGY_APEX_PROPORTIONAL.check(self.proportional)?;
+        params::ENERGY_APEX_MAX_OFFSET_J.check(self.max_offset_j)?;
+        params::ENERGY_APEX_MIN_OFFSET_J.check(self.min_offset_j)?;
+        params::ENERGY_APEX_SPIN_UP.check(self.spin_up_fraction)?;
+        Ok(())
     }
 }
 
@@ -139,7 +131,7 @@ impl EnergyApex {
         cfg.validate()?;
         Ok(Self {
             cfg: *cfg,
-            law: energy_torque::Law::new(&cfg.law, act, "energy_apex.gain_nm_per_j")?,
+            law: energy_torque::Law::new(&cfg.law, act, &params::ENERGY_APEX_GAIN)?,
             flight,
             energy: EnergyModel::new(model)
                 .map_err(|_| InvalidField("model.spring_stiffness_n_per_m"))?,

@@ -12,6 +12,7 @@ use super::{
     flight_pd::FlightPd, require, Actuator, ControlInput, ControlLaw, EventInput, InvalidField,
 };
 use crate::estimator::Phase;
+use crate::params::{self, Param};
 
 /// Configuration of the energy-feedback torque law.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -26,8 +27,8 @@ pub struct Config {
 impl Default for Config {
     fn default() -> Self {
         Self {
-            gain_nm_per_j: 0.2,
-            allow_negative: true,
+            gain_nm_per_j: params::ENERGY_GAIN.default,
+            allow_negative: params::ENERGY_ALLOW_NEGATIVE.default_flag(),
         }
     }
 }
@@ -43,9 +44,11 @@ pub struct Law {
 }
 
 impl Law {
-    /// Checks `c` (`field` names the gain in errors, e.g. `energy.gain_nm_per_j`).
-    pub fn new(c: &Config, act: &Actuator, field: &'static str) -> Result<Self, InvalidField> {
-        require(c.gain_nm_per_j.is_finite() && c.gain_nm_per_j >= 0.0, field)?;
+    /// Checks `c`, its gain against `gain` (the table entry of the
+    /// controller that runs it: [`params::ENERGY_GAIN`] or
+    /// [`params::ENERGY_APEX_GAIN`]).
+    pub fn new(c: &Config, act: &Actuator, gain: &Param) -> Result<Self, InvalidField> {
+        gain.check(c.gain_nm_per_j)?;
         let kt = act.torque_constant_nm_per_a;
         require(kt > 0.0 && kt.is_finite(), "model.torque_constant_nm_per_a")?;
         Ok(Law {
@@ -100,7 +103,7 @@ impl EnergyTorque {
     /// Checks `c`.
     pub fn new(c: &Config, act: &Actuator, flight: FlightPd) -> Result<Self, InvalidField> {
         Ok(Self {
-            law: Law::new(c, act, "energy.gain_nm_per_j")?,
+            law: Law::new(c, act, &params::ENERGY_GAIN)?,
             flight,
         })
     }
@@ -126,7 +129,7 @@ mod tests {
     #[test]
     fn eq_2_52_values_sign_and_saturation() -> Result<(), InvalidField> {
         let act = Actuator::default();
-        let law = Law::new(&Config::default(), &act, "k")?;
+        let law = Law::new(&Config::default(), &act, &params::ENERGY_GAIN)?;
         // 2 J short -> 0.4 N m -> 13.47 A.
         assert!(close(law.torque_nm(68.0, 70.0), 0.4, 1e-5));
         assert!(close(law.current_a(68.0, 70.0), 13.468, 1e-2));
@@ -138,7 +141,7 @@ mod tests {
                 ..Config::default()
             },
             &act,
-            "k",
+            &params::ENERGY_GAIN,
         )?;
         assert_eq!(add_only.current_a(71.0, 70.0), 0.0);
         // 20 J short -> 4 N m -> saturates.
@@ -151,13 +154,13 @@ mod tests {
     #[test]
     fn a_bad_gain_is_refused_by_name() {
         let act = Actuator::default();
-        for k in [f32::NAN, -0.1, f32::INFINITY] {
+        for k in [f32::NAN, -0.1, f32::INFINITY, 101.0] {
             let c = Config {
                 gain_nm_per_j: k,
                 ..Config::default()
             };
             assert_eq!(
-                Law::new(&c, &act, "energy.gain_nm_per_j").err(),
+                Law::new(&c, &act, &params::ENERGY_GAIN).err(),
                 Some(InvalidField("energy.gain_nm_per_j"))
             );
         }
@@ -170,7 +173,7 @@ mod tests {
             neg in proptest::bool::ANY,
         ) {
             let act = Actuator::default();
-            let law = Law::new(&Config { gain_nm_per_j: k, allow_negative: neg }, &act, "k")
+            let law = Law::new(&Config { gain_nm_per_j: k, allow_negative: neg }, &act, &params::ENERGY_GAIN)
                 .map_err(|f| proptest::test_runner::TestCaseError::fail(f.0))?;
             let i = law.current_a(e, ed);
             proptest::prop_assert!(i.is_finite() && i.abs() <= act.current_limit_a);

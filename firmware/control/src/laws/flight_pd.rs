@@ -13,6 +13,7 @@
 //! gains along eq 4.18 (see [`crate::pd_design::kp_over_kd_at_eta_opt`]).
 
 use super::{require, Actuator, InvalidField};
+use crate::params;
 use crate::pd_design::PdGains;
 
 /// Configuration of the flight PD.
@@ -30,10 +31,10 @@ impl Default for Config {
     fn default() -> Self {
         Self {
             gains: PdGains {
-                kp: 20.3152,
-                kd: 0.6077,
+                kp: params::FLIGHT_KP.default,
+                kd: params::FLIGHT_KD.default,
             },
-            start_position_m: 0.0,
+            start_position_m: params::FLIGHT_START_M.default,
         }
     }
 }
@@ -53,12 +54,12 @@ impl FlightPd {
     /// stroke (a bad one is refused by name: with it the nut would not be
     /// driven home in flight).
     pub fn new(c: &Config, act: &Actuator) -> Result<Self, InvalidField> {
-        let ok = |v: f32| v.is_finite() && v >= 0.0;
-        require(ok(c.gains.kp), "flight.kp_a_per_rad")?;
-        require(ok(c.gains.kd), "flight.kd_a_s_per_rad")?;
+        params::FLIGHT_KP.check(c.gains.kp)?;
+        params::FLIGHT_KD.check(c.gains.kd)?;
+        params::FLIGHT_START_M.check(c.start_position_m)?;
         require(
-            ok(c.start_position_m) && c.start_position_m <= act.stroke_m,
-            "flight.start_position_m",
+            c.start_position_m <= act.stroke_m,
+            params::FLIGHT_START_M.name,
         )?;
         let r = act.screw_m_per_rad;
         require(r > 0.0 && r.is_finite(), "model.screw_lead_m")?;

@@ -55,12 +55,6 @@ pub(crate) fn require(ok: bool, field: &'static str) -> Result<(), InvalidField>
     }
 }
 
-/// Whether `v` is finite and within `lo..=hi`.
-#[inline]
-pub(crate) fn in_range(v: f32, lo: f32, hi: f32) -> bool {
-    v.is_finite() && v >= lo && v <= hi
-}
-
 /// Why a law refused to produce a command.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -186,24 +180,27 @@ pub struct NutPositionPd {
 }
 
 impl Default for NutPositionPd {
+    /// Table 2.1's loop: the open-loop step's defaults
+    /// ([`crate::params::STEP_OPEN_KP`] and the entries after it).
     fn default() -> Self {
         Self {
-            kp_n_per_m: 8e4,
-            kd_n_s_per_m: 300.0,
-            spring_feedforward: true,
+            kp_n_per_m: crate::params::STEP_OPEN_KP.default,
+            kd_n_s_per_m: crate::params::STEP_OPEN_KD.default,
+            spring_feedforward: crate::params::STEP_OPEN_FEEDFORWARD.default_flag(),
         }
     }
 }
 
 impl NutPositionPd {
-    /// Checks the gains (finite, >= 0), naming `kp_field` or `kd_field`.
+    /// Checks the gains against the table entries `kp` and `kd` of the law
+    /// that runs this loop.
     pub fn validate(
         &self,
-        kp_field: &'static str,
-        kd_field: &'static str,
+        kp: &crate::params::Param,
+        kd: &crate::params::Param,
     ) -> Result<(), InvalidField> {
-        require(in_range(self.kp_n_per_m, 0.0, f32::MAX), kp_field)?;
-        require(in_range(self.kd_n_s_per_m, 0.0, f32::MAX), kd_field)
+        kp.check(self.kp_n_per_m)?;
+        kd.check(self.kd_n_s_per_m).map(|_| ())
     }
 
     /// Current that drives the nut from `p` (m) at `pd` (m/s) to `p_ref` (m)
@@ -289,8 +286,10 @@ pub enum Strategy {
 }
 
 impl Default for Strategy {
+    /// [`crate::params::CONTROLLER`]'s default.
     fn default() -> Self {
-        Strategy::EnergyApex(energy_apex::ApexLoop::default())
+        crate::params::controller_default(crate::params::CONTROLLER.default as usize)
+            .unwrap_or(Strategy::Passive)
     }
 }
 

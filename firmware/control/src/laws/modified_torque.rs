@@ -5,10 +5,11 @@
 //! ([`super::flight_pd`]) drives the nut back.
 
 use super::{
-    check_finite, flight_pd::FlightPd, in_range, or_zero, require, Actuator, ControlInput,
-    ControlLaw, EventInput, InvalidField, LawError,
+    check_finite, flight_pd::FlightPd, or_zero, Actuator, ControlInput, ControlLaw, EventInput,
+    InvalidField, LawError,
 };
 use crate::estimator::Phase;
+use crate::params;
 
 /// Configuration of the modified torque law.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -24,8 +25,8 @@ pub struct Config {
 impl Default for Config {
     fn default() -> Self {
         Self {
-            torque_nm: 1.0,
-            apex_fraction: 0.4,
+            torque_nm: params::MODIFIED_TORQUE_NM.default,
+            apex_fraction: params::MODIFIED_TORQUE_APEX_FRACTION.default,
         }
     }
 }
@@ -75,11 +76,10 @@ pub fn command(c: &Config, act: &Actuator) -> Result<f32, LawError> {
 impl Config {
     /// Checks every field, naming the first one out of range.
     pub fn validate(&self) -> Result<(), InvalidField> {
-        require(self.torque_nm.is_finite(), "modified_torque.torque_nm")?;
-        require(
-            in_range(self.apex_fraction, 0.0, 1.0),
-            "modified_torque.apex_fraction",
-        )
+        params::MODIFIED_TORQUE_NM.check(self.torque_nm)?;
+        params::MODIFIED_TORQUE_APEX_FRACTION
+            .check(self.apex_fraction)
+            .map(|_| ())
     }
 }
 

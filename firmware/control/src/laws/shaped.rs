@@ -59,9 +59,10 @@
 //! instructions; `libm::sqrtf` costs several times that on the M4F without
 //! `vsqrt.f32`).
 
-use super::{in_range, require, Actuator, ControlInput, ControlLaw, EventInput, InvalidField};
+use super::{require, Actuator, ControlInput, ControlLaw, EventInput, InvalidField};
 use crate::estimator::{Phase, PhaseEvent};
 use crate::model::ModelParams;
+use crate::params;
 
 /// Configuration of the shaped-torque law. Times are fractions of the
 /// model's stance time, levels fractions of the current limit.
@@ -121,17 +122,17 @@ pub struct Config {
 impl Default for Config {
     fn default() -> Self {
         Self {
-            spin_up_fraction: 0.6,
-            spin_up_min_apex_m: 0.005,
-            switch_fraction: 0.6,
-            brake_fraction: 1.0,
-            initial_level: 1.0,
-            integral_start: 0.8,
-            level_gain_per_j: 0.1,
-            level_proportional_per_j: 0.2,
-            braking_margin: 0.7,
-            tracking_time_s: 0.005,
-            creep_speed_mps: 0.01,
+            spin_up_fraction: params::SHAPED_SPIN_UP_FRACTION.default,
+            spin_up_min_apex_m: params::SHAPED_SPIN_UP_MIN_APEX_M.default,
+            switch_fraction: params::SHAPED_SWITCH_FRACTION.default,
+            brake_fraction: params::SHAPED_BRAKE_FRACTION.default,
+            initial_level: params::SHAPED_INITIAL_LEVEL.default,
+            integral_start: params::SHAPED_INTEGRAL_START.default,
+            level_gain_per_j: params::SHAPED_LEVEL_GAIN.default,
+            level_proportional_per_j: params::SHAPED_LEVEL_PROPORTIONAL.default,
+            braking_margin: params::SHAPED_BRAKING_MARGIN.default,
+            tracking_time_s: params::SHAPED_TRACKING_TIME_S.default,
+            creep_speed_mps: params::SHAPED_CREEP_SPEED_MPS.default,
         }
     }
 }
@@ -141,30 +142,23 @@ impl Config {
     /// first one out of range.
     pub fn validate(&self) -> Result<(), InvalidField> {
         let fields = [
-            (self.spin_up_fraction, 0.0, 1.0, "shaped.spin_up_fraction"),
-            (
-                self.spin_up_min_apex_m,
-                0.0,
-                1.0,
-                "shaped.spin_up_min_apex_m",
-            ),
-            (self.switch_fraction, 0.0, 2.0, "shaped.switch_fraction"),
-            (self.brake_fraction, 0.0, 1.0, "shaped.brake_fraction"),
-            (self.initial_level, 0.0, 1.0, "shaped.initial_level"),
-            (self.integral_start, 0.0, 1.0, "shaped.integral_start"),
-            (self.level_gain_per_j, 0.0, 10.0, "shaped.level_gain_per_j"),
+            (self.spin_up_fraction, &params::SHAPED_SPIN_UP_FRACTION),
+            (self.spin_up_min_apex_m, &params::SHAPED_SPIN_UP_MIN_APEX_M),
+            (self.switch_fraction, &params::SHAPED_SWITCH_FRACTION),
+            (self.brake_fraction, &params::SHAPED_BRAKE_FRACTION),
+            (self.initial_level, &params::SHAPED_INITIAL_LEVEL),
+            (self.integral_start, &params::SHAPED_INTEGRAL_START),
+            (self.level_gain_per_j, &params::SHAPED_LEVEL_GAIN),
             (
                 self.level_proportional_per_j,
-                0.0,
-                10.0,
-                "shaped.level_proportional_per_j",
+                &params::SHAPED_LEVEL_PROPORTIONAL,
             ),
-            (self.braking_margin, 1e-3, 1.0, "shaped.braking_margin"),
-            (self.tracking_time_s, 1e-3, 0.1, "shaped.tracking_time_s"),
-            (self.creep_speed_mps, 0.0, 0.1, "shaped.creep_speed_mps"),
+            (self.braking_margin, &params::SHAPED_BRAKING_MARGIN),
+            (self.tracking_time_s, &params::SHAPED_TRACKING_TIME_S),
+            (self.creep_speed_mps, &params::SHAPED_CREEP_SPEED_MPS),
         ];
-        for (v, lo, hi, name) in fields {
-            require(in_range(v, lo, hi), name)?;
+        for (v, p) in fields {
+            p.check(v)?;
         }
         Ok(())
     }

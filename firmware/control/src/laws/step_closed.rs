@@ -17,10 +17,11 @@
 //! the thesis's 0.2.
 
 use super::{
-    check_finite, flight_pd::FlightPd, in_range, or_zero, require, track_bottom, Actuator,
-    ControlInput, ControlLaw, EventInput, InvalidField, LawError, NutPositionPd, StanceInput,
+    check_finite, flight_pd::FlightPd, or_zero, track_bottom, Actuator, ControlInput, ControlLaw,
+    EventInput, InvalidField, LawError, NutPositionPd, StanceInput,
 };
 use crate::estimator::{Phase, PhaseEvent};
+use crate::params;
 
 /// How `k_p` of eq 2.50 is chosen.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -53,8 +54,20 @@ pub struct Config {
 impl Default for Config {
     fn default() -> Self {
         Self {
-            gain: Gain::Fixed { kp_m_per_j: 2e-3 },
-            pd: NutPositionPd::default(),
+            gain: if params::STEP_CLOSED_GAIN.default == 0.0 {
+                Gain::Fixed {
+                    kp_m_per_j: params::STEP_CLOSED_KP_M_PER_J.default,
+                }
+            } else {
+                Gain::Normalised {
+                    min_compression_m: params::STEP_CLOSED_MIN_COMPRESSION_M.default,
+                }
+            },
+            pd: NutPositionPd {
+                kp_n_per_m: params::STEP_CLOSED_KP.default,
+                kd_n_s_per_m: params::STEP_CLOSED_KD.default,
+                spring_feedforward: params::STEP_CLOSED_FEEDFORWARD.default_flag(),
+            },
         }
     }
 }
@@ -141,17 +154,13 @@ impl Config {
     /// Checks every field, naming the first one out of range.
     pub fn validate(&self) -> Result<(), InvalidField> {
         match self.gain {
-            Gain::Fixed { kp_m_per_j } => require(
-                in_range(kp_m_per_j, 0.0, f32::MAX),
-                "step_closed.kp_m_per_j",
-            )?,
-            Gain::Normalised { min_compression_m } => require(
-                in_range(min_compression_m, 1e-4, 1.0),
-                "step_closed.min_compression_m",
-            )?,
-        }
+            Gain::Fixed { kp_m_per_j } => params::STEP_CLOSED_KP_M_PER_J.check(kp_m_per_j)?,
+            Gain::Normalised { min_compression_m } => {
+                params::STEP_CLOSED_MIN_COMPRESSION_M.check(min_compression_m)?
+            }
+        };
         self.pd
-            .validate("step_closed.kp_n_per_m", "step_closed.kd_n_s_per_m")
+            .validate(&params::STEP_CLOSED_KP, &params::STEP_CLOSED_KD)
     }
 }
 

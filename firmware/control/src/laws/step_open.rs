@@ -4,10 +4,11 @@
 //! nut position PD [`NutPositionPd`] (Table 2.1's `k_p,f`, `k_v,f`).
 
 use super::{
-    check_finite, flight_pd::FlightPd, in_range, or_zero, require, track_bottom, Actuator,
-    ControlInput, ControlLaw, EventInput, InvalidField, LawError, NutPositionPd, StanceInput,
+    check_finite, flight_pd::FlightPd, or_zero, track_bottom, Actuator, ControlInput, ControlLaw,
+    EventInput, InvalidField, LawError, NutPositionPd, StanceInput,
 };
 use crate::estimator::Phase;
+use crate::params;
 
 /// Configuration of the open-loop step.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -22,8 +23,12 @@ pub struct Config {
 impl Default for Config {
     fn default() -> Self {
         Self {
-            step_m: 0.01,
-            pd: NutPositionPd::default(),
+            step_m: params::STEP_OPEN_M.default,
+            pd: NutPositionPd {
+                kp_n_per_m: params::STEP_OPEN_KP.default,
+                kd_n_s_per_m: params::STEP_OPEN_KD.default,
+                spring_feedforward: params::STEP_OPEN_FEEDFORWARD.default_flag(),
+            },
         }
     }
 }
@@ -53,9 +58,9 @@ pub fn command(c: &Config, act: &Actuator, x: &StanceInput) -> Result<f32, LawEr
 impl Config {
     /// Checks every field, naming the first one out of range.
     pub fn validate(&self) -> Result<(), InvalidField> {
-        require(in_range(self.step_m, 0.0, 1.0), "step_open.step_m")?;
+        params::STEP_OPEN_M.check(self.step_m)?;
         self.pd
-            .validate("step_open.kp_n_per_m", "step_open.kd_n_s_per_m")
+            .validate(&params::STEP_OPEN_KP, &params::STEP_OPEN_KD)
     }
 }
 

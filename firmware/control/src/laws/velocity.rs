@@ -16,10 +16,11 @@
 //! `tau = F r / eta`.
 
 use super::{
-    check_finite, flight_pd::FlightPd, in_range, or_zero, require, Actuator, ControlInput,
-    ControlLaw, EventInput, InvalidField, LawError, StanceInput,
+    check_finite, flight_pd::FlightPd, or_zero, Actuator, ControlInput, ControlLaw, EventInput,
+    InvalidField, LawError, StanceInput,
 };
 use crate::estimator::Phase;
+use crate::params;
 
 /// Configuration of the velocity law.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -37,9 +38,9 @@ pub struct Config {
 impl Default for Config {
     fn default() -> Self {
         Self {
-            gain_mps_per_j: 0.03,
-            loop_gain_n_s_per_m: 5000.0,
-            spring_feedforward: true,
+            gain_mps_per_j: params::VELOCITY_GAIN.default,
+            loop_gain_n_s_per_m: params::VELOCITY_LOOP_GAIN.default,
+            spring_feedforward: params::VELOCITY_FEEDFORWARD.default_flag(),
         }
     }
 }
@@ -72,14 +73,10 @@ pub fn command(c: &Config, act: &Actuator, x: &StanceInput) -> Result<f32, LawEr
 impl Config {
     /// Checks every field, naming the first one out of range.
     pub fn validate(&self) -> Result<(), InvalidField> {
-        require(
-            in_range(self.gain_mps_per_j, 0.0, f32::MAX),
-            "velocity.gain_mps_per_j",
-        )?;
-        require(
-            in_range(self.loop_gain_n_s_per_m, 0.0, f32::MAX),
-            "velocity.loop_gain_n_s_per_m",
-        )
+        params::VELOCITY_GAIN.check(self.gain_mps_per_j)?;
+        params::VELOCITY_LOOP_GAIN
+            .check(self.loop_gain_n_s_per_m)
+            .map(|_| ())
     }
 }
 

@@ -1,0 +1,1012 @@
+//! The firmware's runtime parameters, each defined once: name, unit, range,
+//! default, whether it may change while the motor is driven, and a one-line
+//! doc.
+//!
+//! The configuration types' `Default` impls and their `validate` checks read
+//! these entries, the host tools (`hopper-sim`'s scenario files and sweeps)
+//! look parameters up here by name, the link of issue #10 exposes exactly
+//! [`TABLE`], and `docs/parameters.md` is generated from it (a test fails
+//! when the page is stale).
+//!
+//! Every value is an `f32`: a flag is 0 or 1, a choice is the index of one
+//! of its names, a count is a whole number. [`get`] and [`set`] read and
+//! write a [`HopperConfig`] by name; a parameter of a controller other than
+//! the selected one is refused by [`set`] (select the controller first:
+//! that starts it from its defaults).
+
+use crate::hopper::HopperConfig;
+use crate::laws::{
+    constant_torque, energy_apex, energy_torque, modified_torque, shaped, step_closed, step_open,
+    velocity, InvalidField, StanceLaw, Strategy,
+};
+
+/// What kind of value a parameter holds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Kind {
+    /// A real number in its unit.
+    Real,
+    /// A whole number (counts, samples, codes).
+    Count,
+    /// 0 (off) or 1 (on).
+    Flag,
+    /// The index of one of these names.
+    Choice(&'static [&'static str]),
+}
+
+/// One runtime parameter.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Param {
+    /// Name, as a path in the configuration (`flight.kp_a_per_rad`).
+    pub name: &'static str,
+    /// Unit (SI; `1` for a dimensionless number, `-` for flags and choices).
+    pub unit: &'static str,
+    /// The value's kind.
+    pub kind: Kind,
+    /// Smallest allowed value (inclusive).
+    pub min: f32,
+    /// Largest allowed value (inclusive).
+    pub max: f32,
+    /// The default.
+    pub default: f32,
+    /// Whether it may change while the motor is driven (armed); otherwise
+    /// only while the amplifier is disabled.
+    pub live: bool,
+    /// One line: what it is, and where it comes from (thesis equation).
+    pub doc: &'static str,
+}
+
+impl Param {
+    /// `v` if it is finite and within `min..=max` (and whole for counts,
+    /// flags and choices), else this parameter's name.
+    pub fn check(&self, v: f32) -> Result<f32, InvalidField> {
+        let whole = !matches!(self.kind, Kind::Real);
+        let ok =
+            v.is_finite() && v >= self.min && v <= self.max && (!whole || v == libm::truncf(v));
+        if ok {
+            Ok(v)
+        } else {
+            Err(InvalidField(self.name))
+        }
+    }
+
+    /// Checks a flag's or choice's stored value (`true` is 1).
+    pub fn check_flag(&self, on: bool) -> Result<bool, InvalidField> {
+        self.check(if on { 1.0 } else { 0.0 }).map(|_| on)
+    }
+
+    /// The default of a flag.
+    pub const fn default_flag(&self) -> bool {
+        self.default != 0.0
+    }
+}
+
+const LIVE: bool = true;
+const DISARMED: bool = false;
+
+macro_rules! param {
+    ($id:ident, $name:literal, $unit:literal, $kind:expr, $min:expr, $max:expr, $default:expr, $live:expr, $doc:literal) => {
+        #[doc = $doc]
+        pub const $id: Param = Param {
+            name: $name,
+            unit: $unit,
+            kind: $kind,
+            min: $min,
+            max: $max,
+            default: $default,
+            live: $live,
+            doc: $doc,
+        };
+    };
+}
+
+/// The controllers [`CONTROLLER`] chooses from, by name (the index is the value).
+pub const CONTROLLER_NAMES: [&str; 9] = [
+    "passive",
+    "step-open",
+    "step-closed",
+    "open-torque",
+    "energy",
+    "energy-apex",
+    "velocity",
+    "modified-torque",
+    "shaped",
+];
+
+/// Names of [`STEP_CLOSED_GAIN`]'s choices.
+const STEP_CLOSED_GAINS: [&str; 2] = ["fixed", "normalised"];
+/// Names of [`ENERGY_APEX_MEASURE`]'s choices.
+const ENERGY_MEASURES: [&str; 2] = ["total", "body"];
+
+use Kind::{Flag, Real};
+
+// --- The controller and its target -------------------------------------
+param!(
+    CONTROLLER,
+    "controller",
+    "-",
+    Kind::Choice(&CONTROLLER_NAMES),
+    0.0,
+    8.0,
+    5.0,
+    DISARMED,
+    "The controller that runs in stance and flight (selecting one starts it from its defaults)."
+);
+param!(
+    TARGET_APEX_M,
+    "target_apex_m",
+    "m",
+    Real,
+    0.0,
+    1.0,
+    0.05,
+    LIVE,
+    "Desired apex toe height H_D (E_D of eq 2.43)."
+);
+
+// --- Flight PD, eq 4.4 ----------------------------------------------------
+param!(
+    FLIGHT_KP,
+    "flight.kp_a_per_rad",
+    "A/rad",
+    Real,
+    0.0,
+    1.0e4,
+    20.3152,
+    LIVE,
+    "Flight PD position gain on the motor angle (eq 4.4; default eq 4.13)."
+);
+param!(
+    FLIGHT_KD,
+    "flight.kd_a_s_per_rad",
+    "A s/rad",
+    Real,
+    0.0,
+    1.0e3,
+    0.6077,
+    LIVE,
+    "Flight PD rate gain (eq 4.4; default eq 4.13)."
+);
+param!(
+    FLIGHT_START_M,
+    "flight.start_position_m",
+    "m",
+    Real,
+    0.0,
+    1.0,
+    0.0,
+    LIVE,
+    "Nut position the flight PD returns to (0: the upper stop; at most the stroke)."
+);
+
+// --- Thesis stance laws ---------------------------------------------------
+param!(
+    ENERGY_GAIN,
+    "energy.gain_nm_per_j",
+    "N m/J",
+    Real,
+    0.0,
+    100.0,
+    0.2,
+    LIVE,
+    "K_e of eq 2.52 (Table 2.1: 0.2)."
+);
+param!(
+    ENERGY_ALLOW_NEGATIVE,
+    "energy.allow_negative",
+    "-",
+    Flag,
+    0.0,
+    1.0,
+    1.0,
+    LIVE,
+    "Eq 2.52 may command negative torque on an energy surplus."
+);
+param!(
+    CONSTANT_TORQUE_NM,
+    "constant_torque.torque_nm",
+    "N m",
+    Real,
+    -10.0,
+    10.0,
+    1.0,
+    LIVE,
+    "Open-loop stance torque (section 2.1.3.4; Table 2.1: 1 N m)."
+);
+param!(
+    MODIFIED_TORQUE_NM,
+    "modified_torque.torque_nm",
+    "N m",
+    Real,
+    -10.0,
+    10.0,
+    1.0,
+    LIVE,
+    "Modified-torque law's torque in stance and late descent (section 4.4.3)."
+);
+param!(
+    MODIFIED_TORQUE_APEX_FRACTION,
+    "modified_torque.apex_fraction",
+    "1",
+    Real,
+    0.0,
+    1.0,
+    0.4,
+    LIVE,
+    "Fraction of the last apex below which the descent starts the torque (section 4.4.3: 40 %)."
+);
+param!(
+    STEP_OPEN_M,
+    "step_open.step_m",
+    "m",
+    Real,
+    0.0,
+    1.0,
+    0.01,
+    LIVE,
+    "Step height l1 of eq 2.49 (Table 2.1: 10 mm; clamped to the stroke)."
+);
+param!(
+    STEP_OPEN_KP,
+    "step_open.kp_n_per_m",
+    "N/m",
+    Real,
+    0.0,
+    1.0e7,
+    8.0e4,
+    LIVE,
+    "Nut position loop gain k_p,f of eq 2.49 (Table 2.1)."
+);
+param!(
+    STEP_OPEN_KD,
+    "step_open.kd_n_s_per_m",
+    "N s/m",
+    Real,
+    0.0,
+    1.0e5,
+    300.0,
+    LIVE,
+    "Nut velocity loop gain k_v,f of eq 2.49 (Table 2.1)."
+);
+param!(
+    STEP_OPEN_FEEDFORWARD,
+    "step_open.spring_feedforward",
+    "-",
+    Flag,
+    0.0,
+    1.0,
+    1.0,
+    LIVE,
+    "Add the measured spring force to the position loop."
+);
+param!(
+    STEP_CLOSED_GAIN,
+    "step_closed.gain",
+    "-",
+    Kind::Choice(&STEP_CLOSED_GAINS),
+    0.0,
+    1.0,
+    0.0,
+    LIVE,
+    "k_p of eq 2.50: fixed (step_closed.kp_m_per_j) or eq 2.51 normalised by the compression."
+);
+param!(
+    STEP_CLOSED_KP_M_PER_J,
+    "step_closed.kp_m_per_j",
+    "m/J",
+    Real,
+    0.0,
+    1.0,
+    2.0e-3,
+    LIVE,
+    "Fixed k_p of eq 2.50 (Table 2.1's 0.2 read as cm/J)."
+);
+param!(
+    STEP_CLOSED_MIN_COMPRESSION_M,
+    "step_closed.min_compression_m",
+    "m",
+    Real,
+    1.0e-4,
+    1.0,
+    0.005,
+    LIVE,
+    "Floor on the compression in eq 2.51's normalised gain."
+);
+param!(
+    STEP_CLOSED_KP,
+    "step_closed.kp_n_per_m",
+    "N/m",
+    Real,
+    0.0,
+    1.0e7,
+    8.0e4,
+    LIVE,
+    "Nut position loop gain of eq 2.50 (Table 2.1)."
+);
+param!(
+    STEP_CLOSED_KD,
+    "step_closed.kd_n_s_per_m",
+    "N s/m",
+    Real,
+    0.0,
+    1.0e5,
+    300.0,
+    LIVE,
+    "Nut velocity loop gain of eq 2.50 (Table 2.1)."
+);
+param!(
+    STEP_CLOSED_FEEDFORWARD,
+    "step_closed.spring_feedforward",
+    "-",
+    Flag,
+    0.0,
+    1.0,
+    1.0,
+    LIVE,
+    "Add the measured spring force to the position loop."
+);
+param!(
+    VELOCITY_GAIN,
+    "velocity.gain_mps_per_j",
+    "m/(s J)",
+    Real,
+    0.0,
+    10.0,
+    0.03,
+    LIVE,
+    "K_v of eq 2.53 (Table 2.1's 30 read as mm/(s J))."
+);
+param!(
+    VELOCITY_LOOP_GAIN,
+    "velocity.loop_gain_n_s_per_m",
+    "N s/m",
+    Real,
+    0.0,
+    1.0e6,
+    5000.0,
+    LIVE,
+    "Velocity loop gain from nut speed error to force."
+);
+param!(
+    VELOCITY_FEEDFORWARD,
+    "velocity.spring_feedforward",
+    "-",
+    Flag,
+    0.0,
+    1.0,
+    1.0,
+    LIVE,
+    "Add the measured spring force to the velocity loop."
+);
+
+// --- energy-apex ------------------------------------------------------------
+param!(
+    ENERGY_APEX_GAIN,
+    "energy_apex.gain_nm_per_j",
+    "N m/J",
+    Real,
+    0.0,
+    100.0,
+    3.0,
+    LIVE,
+    "K_e of the inner eq 2.52 (full torque for a 0.33 J deficit)."
+);
+param!(
+    ENERGY_APEX_ALLOW_NEGATIVE,
+    "energy_apex.allow_negative",
+    "-",
+    Flag,
+    0.0,
+    1.0,
+    0.0,
+    LIVE,
+    "The inner law may command negative torque."
+);
+param!(
+    ENERGY_APEX_MEASURE,
+    "energy_apex.measure",
+    "-",
+    Kind::Choice(&ENERGY_MEASURES),
+    0.0,
+    1.0,
+    0.0,
+    LIVE,
+    "Energy fed back: total (eq 2.44) or body only."
+);
+param!(
+    ENERGY_APEX_PROPORTIONAL,
+    "energy_apex.proportional_gain",
+    "1",
+    Real,
+    0.0,
+    10.0,
+    0.0,
+    LIVE,
+    "Outer loop's proportional gain on the last apex error (J per J)."
+);
+param!(
+    ENERGY_APEX_INTEGRAL,
+    "energy_apex.integral_gain",
+    "1",
+    Real,
+    1.0e-3,
+    9.99,
+    0.6,
+    LIVE,
+    "Outer loop's integral gain on the apex error (J of offset per J)."
+);
+param!(
+    ENERGY_APEX_MAX_OFFSET_J,
+    "energy_apex.max_offset_j",
+    "J",
+    Real,
+    0.0,
+    1000.0,
+    30.0,
+    LIVE,
+    "Upper bound on the outer loop's correction of E_D."
+);
+param!(
+    ENERGY_APEX_MIN_OFFSET_J,
+    "energy_apex.min_offset_j",
+    "J",
+    Real,
+    -1000.0,
+    0.0,
+    -5.0,
+    LIVE,
+    "Lower bound on the outer loop's correction of E_D."
+);
+param!(
+    ENERGY_APEX_SPIN_UP,
+    "energy_apex.spin_up_fraction",
+    "1",
+    Real,
+    0.0,
+    1.0,
+    0.0,
+    LIVE,
+    "Fraction of the target apex below which the descent runs the stance law (0: off)."
+);
+
+// --- shaped -------------------------------------------------------------------
+param!(
+    SHAPED_SPIN_UP_FRACTION,
+    "shaped.spin_up_fraction",
+    "1",
+    Real,
+    0.0,
+    1.0,
+    0.6,
+    LIVE,
+    "Fraction of the flight's apex below which the descent spins the rotor up."
+);
+param!(
+    SHAPED_SPIN_UP_MIN_APEX_M,
+    "shaped.spin_up_min_apex_m",
+    "m",
+    Real,
+    0.0,
+    1.0,
+    0.005,
+    LIVE,
+    "Smallest flight apex that spins up."
+);
+param!(SHAPED_SWITCH_FRACTION, "shaped.switch_fraction", "1", Real, 0.0, 2.0, 0.6, LIVE,
+    "Fraction of the model's stance time T = pi sqrt((M + m_s)/k) after which the push turns to braking.");
+param!(
+    SHAPED_BRAKE_FRACTION,
+    "shaped.brake_fraction",
+    "1",
+    Real,
+    0.0,
+    1.0,
+    1.0,
+    LIVE,
+    "Braking current, fraction of the current limit."
+);
+param!(
+    SHAPED_INITIAL_LEVEL,
+    "shaped.initial_level",
+    "1",
+    Real,
+    0.0,
+    1.0,
+    1.0,
+    LIVE,
+    "Torque level of the first hop, fraction of the current limit."
+);
+param!(
+    SHAPED_INTEGRAL_START,
+    "shaped.integral_start",
+    "1",
+    Real,
+    0.0,
+    1.0,
+    0.8,
+    LIVE,
+    "Starting integral of the per-hop level loop."
+);
+param!(
+    SHAPED_LEVEL_GAIN,
+    "shaped.level_gain_per_j",
+    "1/J",
+    Real,
+    0.0,
+    10.0,
+    0.1,
+    LIVE,
+    "Integral gain of the level loop on the apex energy error."
+);
+param!(
+    SHAPED_LEVEL_PROPORTIONAL,
+    "shaped.level_proportional_per_j",
+    "1/J",
+    Real,
+    0.0,
+    10.0,
+    0.2,
+    LIVE,
+    "Proportional gain of the level loop."
+);
+param!(
+    SHAPED_BRAKING_MARGIN,
+    "shaped.braking_margin",
+    "1",
+    Real,
+    1.0e-3,
+    1.0,
+    0.7,
+    LIVE,
+    "Fraction of the available braking deceleration the flight return plans with."
+);
+param!(
+    SHAPED_TRACKING_TIME_S,
+    "shaped.tracking_time_s",
+    "s",
+    Real,
+    1.0e-3,
+    0.1,
+    0.005,
+    LIVE,
+    "Time constant of the flight return's speed tracking."
+);
+param!(
+    SHAPED_CREEP_SPEED_MPS,
+    "shaped.creep_speed_mps",
+    "m/s",
+    Real,
+    0.0,
+    0.1,
+    0.01,
+    LIVE,
+    "Speed at which the nut arrives at its stop."
+);
+
+/// Every parameter, in the order the docs list them.
+pub const TABLE: &[&Param] = &[
+    &CONTROLLER,
+    &TARGET_APEX_M,
+    &FLIGHT_KP,
+    &FLIGHT_KD,
+    &FLIGHT_START_M,
+    &ENERGY_GAIN,
+    &ENERGY_ALLOW_NEGATIVE,
+    &CONSTANT_TORQUE_NM,
+    &MODIFIED_TORQUE_NM,
+    &MODIFIED_TORQUE_APEX_FRACTION,
+    &STEP_OPEN_M,
+    &STEP_OPEN_KP,
+    &STEP_OPEN_KD,
+    &STEP_OPEN_FEEDFORWARD,
+    &STEP_CLOSED_GAIN,
+    &STEP_CLOSED_KP_M_PER_J,
+    &STEP_CLOSED_MIN_COMPRESSION_M,
+    &STEP_CLOSED_KP,
+    &STEP_CLOSED_KD,
+    &STEP_CLOSED_FEEDFORWARD,
+    &VELOCITY_GAIN,
+    &VELOCITY_LOOP_GAIN,
+    &VELOCITY_FEEDFORWARD,
+    &ENERGY_APEX_GAIN,
+    &ENERGY_APEX_ALLOW_NEGATIVE,
+    &ENERGY_APEX_MEASURE,
+    &ENERGY_APEX_PROPORTIONAL,
+    &ENERGY_APEX_INTEGRAL,
+    &ENERGY_APEX_MAX_OFFSET_J,
+    &ENERGY_APEX_MIN_OFFSET_J,
+    &ENERGY_APEX_SPIN_UP,
+    &SHAPED_SPIN_UP_FRACTION,
+    &SHAPED_SPIN_UP_MIN_APEX_M,
+    &SHAPED_SWITCH_FRACTION,
+    &SHAPED_BRAKE_FRACTION,
+    &SHAPED_INITIAL_LEVEL,
+    &SHAPED_INTEGRAL_START,
+    &SHAPED_LEVEL_GAIN,
+    &SHAPED_LEVEL_PROPORTIONAL,
+    &SHAPED_BRAKING_MARGIN,
+    &SHAPED_TRACKING_TIME_S,
+    &SHAPED_CREEP_SPEED_MPS,
+];
+
+/// The parameter called `name`.
+pub fn find(name: &str) -> Option<&'static Param> {
+    TABLE.iter().copied().find(|p| p.name == name)
+}
+
+/// Why [`get`] or [`set`] refused.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum ParamError {
+    /// No parameter has this name.
+    Unknown,
+    /// The value is outside the parameter's range (or not whole).
+    OutOfRange(&'static str),
+    /// The parameter belongs to a controller other than the selected one.
+    NotSelected(&'static str),
+}
+
+/// The index of the controller `strategy` is.
+pub fn controller_index(strategy: &Strategy) -> usize {
+    match strategy {
+        Strategy::Passive => 0,
+        Strategy::Thesis(StanceLaw::StepOpen(_)) => 1,
+        Strategy::Thesis(StanceLaw::StepClosed(_)) => 2,
+        Strategy::Thesis(StanceLaw::ConstantTorque(_)) => 3,
+        Strategy::Thesis(StanceLaw::EnergyTorque(_)) => 4,
+        Strategy::EnergyApex(_) => 5,
+        Strategy::Thesis(StanceLaw::Velocity(_)) => 6,
+        Strategy::Thesis(StanceLaw::ModifiedTorque(_)) => 7,
+        Strategy::Shaped(_) => 8,
+    }
+}
+
+/// The controller at `index` of [`CONTROLLER_NAMES`], with its defaults.
+pub fn controller_default(index: usize) -> Option<Strategy> {
+    Some(match index {
+        0 => Strategy::Passive,
+        1 => Strategy::Thesis(StanceLaw::StepOpen(step_open::Config::default())),
+        2 => Strategy::Thesis(StanceLaw::StepClosed(step_closed::Config::default())),
+        3 => Strategy::Thesis(StanceLaw::ConstantTorque(constant_torque::Config::default())),
+        4 => Strategy::Thesis(StanceLaw::EnergyTorque(energy_torque::Config::default())),
+        5 => Strategy::EnergyApex(energy_apex::ApexLoop::default()),
+        6 => Strategy::Thesis(StanceLaw::Velocity(velocity::Config::default())),
+        7 => Strategy::Thesis(StanceLaw::ModifiedTorque(modified_torque::Config::default())),
+        8 => Strategy::Shaped(shaped::Config::default()),
+        _ => return None,
+    })
+}
+
+/// Where a parameter lives in a configuration.
+enum Slot<'a> {
+    Real(&'a mut f32),
+    Flag(&'a mut bool),
+    Controller,
+    StepClosedGain(&'a mut step_closed::Gain),
+    Measure(&'a mut energy_apex::EnergyMeasure),
+}
+
+/// The slot of `p` in `cfg`, or the reason there is none.
+fn slot<'a>(cfg: &'a mut HopperConfig, p: &Param) -> Result<Slot<'a>, ParamError> {
+    use Slot::{Flag as B, Real as R};
+    let not = Err(ParamError::NotSelected(p.name));
+    let name = p.name;
+    if name == CONTROLLER.name {
+        return Ok(Slot::Controller);
+    }
+    if name == TARGET_APEX_M.name {
+        return Ok(R(&mut cfg.target_apex_m));
+    }
+    if let Some(rest) = name.strip_prefix("flight.") {
+        let f = &mut cfg.flight;
+        return match rest {
+            "kp_a_per_rad" => Ok(R(&mut f.gains.kp)),
+            "kd_a_s_per_rad" => Ok(R(&mut f.gains.kd)),
+            "start_position_m" => Ok(R(&mut f.start_position_m)),
+            _ => Err(ParamError::Unknown),
+        };
+    }
+    match &mut cfg.strategy {
+        Strategy::Thesis(StanceLaw::EnergyTorque(c)) if name.starts_with("energy.") => match name {
+            "energy.gain_nm_per_j" => Ok(R(&mut c.gain_nm_per_j)),
+            "energy.allow_negative" => Ok(B(&mut c.allow_negative)),
+            _ => Err(ParamError::Unknown),
+        },
+        Strategy::Thesis(StanceLaw::ConstantTorque(c)) if name == CONSTANT_TORQUE_NM.name => {
+            Ok(R(&mut c.torque_nm))
+        }
+        Strategy::Thesis(StanceLaw::ModifiedTorque(c)) if name.starts_with("modified_torque.") => {
+            match name {
+                "modified_torque.torque_nm" => Ok(R(&mut c.torque_nm)),
+                "modified_torque.apex_fraction" => Ok(R(&mut c.apex_fraction)),
+                _ => Err(ParamError::Unknown),
+            }
+        }
+        Strategy::Thesis(StanceLaw::StepOpen(c)) if name.starts_with("step_open.") => match name {
+            "step_open.step_m" => Ok(R(&mut c.step_m)),
+            "step_open.kp_n_per_m" => Ok(R(&mut c.pd.kp_n_per_m)),
+            "step_open.kd_n_s_per_m" => Ok(R(&mut c.pd.kd_n_s_per_m)),
+            "step_open.spring_feedforward" => Ok(B(&mut c.pd.spring_feedforward)),
+            _ => Err(ParamError::Unknown),
+        },
+        Strategy::Thesis(StanceLaw::StepClosed(c)) if name.starts_with("step_closed.") => {
+            match name {
+                "step_closed.gain" => Ok(Slot::StepClosedGain(&mut c.gain)),
+                "step_closed.kp_m_per_j" => match &mut c.gain {
+                    step_closed::Gain::Fixed { kp_m_per_j } => Ok(R(kp_m_per_j)),
+                    _ => not,
+                },
+                "step_closed.min_compression_m" => match &mut c.gain {
+                    step_closed::Gain::Normalised { min_compression_m } => Ok(R(min_compression_m)),
+                    _ => not,
+                },
+                "step_closed.kp_n_per_m" => Ok(R(&mut c.pd.kp_n_per_m)),
+                "step_closed.kd_n_s_per_m" => Ok(R(&mut c.pd.kd_n_s_per_m)),
+                "step_closed.spring_feedforward" => Ok(B(&mut c.pd.spring_feedforward)),
+                _ => Err(ParamError::Unknown),
+            }
+        }
+        Strategy::Thesis(StanceLaw::Velocity(c)) if name.starts_with("velocity.") => match name {
+            "velocity.gain_mps_per_j" => Ok(R(&mut c.gain_mps_per_j)),
+            "velocity.loop_gain_n_s_per_m" => Ok(R(&mut c.loop_gain_n_s_per_m)),
+            "velocity.spring_feedforward" => Ok(B(&mut c.spring_feedforward)),
+            _ => Err(ParamError::Unknown),
+        },
+        Strategy::EnergyApex(a) if name.starts_with("energy_apex.") => match name {
+            "energy_apex.gain_nm_per_j" => Ok(R(&mut a.law.gain_nm_per_j)),
+            "energy_apex.allow_negative" => Ok(B(&mut a.law.allow_negative)),
+            "energy_apex.measure" => Ok(Slot::Measure(&mut a.measure)),
+            "energy_apex.proportional_gain" => Ok(R(&mut a.proportional)),
+            "energy_apex.integral_gain" => Ok(R(&mut a.gain)),
+            "energy_apex.max_offset_j" => Ok(R(&mut a.max_offset_j)),
+            "energy_apex.min_offset_j" => Ok(R(&mut a.min_offset_j)),
+            "energy_apex.spin_up_fraction" => Ok(R(&mut a.spin_up_fraction)),
+            _ => Err(ParamError::Unknown),
+        },
+        Strategy::Shaped(c) if name.starts_with("shaped.") => match name {
+            "shaped.spin_up_fraction" => Ok(R(&mut c.spin_up_fraction)),
+            "shaped.spin_up_min_apex_m" => Ok(R(&mut c.spin_up_min_apex_m)),
+            "shaped.switch_fraction" => Ok(R(&mut c.switch_fraction)),
+            "shaped.brake_fraction" => Ok(R(&mut c.brake_fraction)),
+            "shaped.initial_level" => Ok(R(&mut c.initial_level)),
+            "shaped.integral_start" => Ok(R(&mut c.integral_start)),
+            "shaped.level_gain_per_j" => Ok(R(&mut c.level_gain_per_j)),
+            "shaped.level_proportional_per_j" => Ok(R(&mut c.level_proportional_per_j)),
+            "shaped.braking_margin" => Ok(R(&mut c.braking_margin)),
+            "shaped.tracking_time_s" => Ok(R(&mut c.tracking_time_s)),
+            "shaped.creep_speed_mps" => Ok(R(&mut c.creep_speed_mps)),
+            _ => Err(ParamError::Unknown),
+        },
+        _ => not,
+    }
+}
+
+/// The value of parameter `name` in `cfg`.
+pub fn get(cfg: &HopperConfig, name: &str) -> Result<f32, ParamError> {
+    let p = find(name).ok_or(ParamError::Unknown)?;
+    let mut c = *cfg;
+    let index = controller_index(&c.strategy);
+    Ok(match slot(&mut c, p)? {
+        Slot::Real(v) => *v,
+        Slot::Flag(b) => f32::from(u8::from(*b)),
+        Slot::Controller => index as f32,
+        Slot::StepClosedGain(g) => match g {
+            step_closed::Gain::Fixed { .. } => 0.0,
+            step_closed::Gain::Normalised { .. } => 1.0,
+        },
+        Slot::Measure(m) => match m {
+            energy_apex::EnergyMeasure::Total => 0.0,
+            energy_apex::EnergyMeasure::Body => 1.0,
+        },
+    })
+}
+
+/// Sets parameter `name` of `cfg` to `value`, after checking it against the
+/// parameter's range. The whole configuration is validated again when a
+/// controller is built from it (`Hopper::new`).
+pub fn set(cfg: &mut HopperConfig, name: &str, value: f32) -> Result<(), ParamError> {
+    let p = find(name).ok_or(ParamError::Unknown)?;
+    let v = p.check(value).map_err(|f| ParamError::OutOfRange(f.0))?;
+    match slot(cfg, p)? {
+        Slot::Real(x) => *x = v,
+        Slot::Flag(b) => *b = v != 0.0,
+        Slot::Controller => {
+            cfg.strategy = controller_default(v as usize).ok_or(ParamError::OutOfRange(p.name))?;
+        }
+        Slot::StepClosedGain(g) => {
+            *g = if v == 0.0 {
+                step_closed::Gain::Fixed {
+                    kp_m_per_j: STEP_CLOSED_KP_M_PER_J.default,
+                }
+            } else {
+                step_closed::Gain::Normalised {
+                    min_compression_m: STEP_CLOSED_MIN_COMPRESSION_M.default,
+                }
+            };
+        }
+        Slot::Measure(m) => {
+            *m = if v == 0.0 {
+                energy_apex::EnergyMeasure::Total
+            } else {
+                energy_apex::EnergyMeasure::Body
+            };
+        }
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    extern crate std;
+    use super::*;
+    use crate::hopper::Hopper;
+    use std::string::String;
+    use std::vec::Vec;
+
+    #[test]
+    fn names_are_unique_and_defaults_in_range() {
+        for (i, p) in TABLE.iter().enumerate() {
+            assert!(
+                p.check(p.default).is_ok(),
+                "{}: default out of range",
+                p.name
+            );
+            assert!(p.min <= p.max, "{}", p.name);
+            assert!(!p.doc.is_empty() && !p.unit.is_empty(), "{}", p.name);
+            for q in &TABLE[i + 1..] {
+                assert_ne!(p.name, q.name);
+            }
+        }
+    }
+
+    /// Every parameter can be read and written once its controller is
+    /// selected, and reads back its default from a fresh selection: the
+    /// configuration types' defaults are the table's.
+    #[test]
+    fn every_parameter_reads_its_default_and_writes() {
+        for p in TABLE {
+            let mut cfg = HopperConfig::default();
+            // Select the controller the parameter belongs to.
+            let owner = CONTROLLER_NAMES.iter().position(|n| {
+                let prefix = match *n {
+                    "open-torque" => "constant_torque",
+                    "modified-torque" => "modified_torque",
+                    "step-open" => "step_open",
+                    "step-closed" => "step_closed",
+                    "energy-apex" => "energy_apex",
+                    other => other,
+                };
+                p.name.starts_with(&[prefix, "."].concat())
+            });
+            if let Some(i) = owner {
+                set(&mut cfg, CONTROLLER.name, i as f32).unwrap_or_else(|e| panic!("{e:?}"));
+            }
+            if p.name == STEP_CLOSED_MIN_COMPRESSION_M.name {
+                set(&mut cfg, STEP_CLOSED_GAIN.name, 1.0).unwrap_or_else(|e| panic!("{e:?}"));
+            }
+            let got = get(&cfg, p.name).unwrap_or_else(|e| panic!("{}: {e:?}", p.name));
+            if p.name != CONTROLLER.name {
+                assert_eq!(
+                    got, p.default,
+                    "{}: the type's default is not the table's",
+                    p.name
+                );
+            }
+            let v = if p.kind == Kind::Real { p.max } else { p.min };
+            set(&mut cfg, p.name, v).unwrap_or_else(|e| panic!("{}: {e:?}", p.name));
+            assert_eq!(get(&cfg, p.name), Ok(v), "{}", p.name);
+        }
+        assert_eq!(
+            get(&HopperConfig::default(), CONTROLLER.name),
+            Ok(CONTROLLER.default)
+        );
+    }
+
+    #[test]
+    fn bad_values_and_names_are_refused() {
+        let mut cfg = HopperConfig::default();
+        assert_eq!(set(&mut cfg, "no.such", 1.0), Err(ParamError::Unknown));
+        assert_eq!(
+            set(&mut cfg, FLIGHT_KP.name, -1.0),
+            Err(ParamError::OutOfRange(FLIGHT_KP.name))
+        );
+        assert_eq!(
+            set(&mut cfg, FLIGHT_KP.name, f32::NAN),
+            Err(ParamError::OutOfRange(FLIGHT_KP.name))
+        );
+        assert_eq!(
+            set(&mut cfg, CONTROLLER.name, 2.5),
+            Err(ParamError::OutOfRange(CONTROLLER.name))
+        );
+        // The default controller is energy-apex: a shaped constant is refused.
+        assert_eq!(
+            set(&mut cfg, SHAPED_BRAKE_FRACTION.name, 0.5),
+            Err(ParamError::NotSelected(SHAPED_BRAKE_FRACTION.name))
+        );
+        assert_eq!(
+            cfg,
+            HopperConfig::default(),
+            "a refused set changed nothing"
+        );
+    }
+
+    #[test]
+    fn a_configuration_set_within_the_table_builds() {
+        for i in 0..CONTROLLER_NAMES.len() {
+            let mut cfg = HopperConfig::default();
+            set(&mut cfg, CONTROLLER.name, i as f32).unwrap_or_else(|e| panic!("{e:?}"));
+            for p in TABLE {
+                if p.name == CONTROLLER.name || get(&cfg, p.name).is_err() {
+                    continue;
+                }
+                let mut c = cfg;
+                for v in [p.min, p.max, p.default] {
+                    set(&mut c, p.name, v).unwrap_or_else(|e| panic!("{e:?}"));
+                    // The flight start must lie on the stroke: the one
+                    // cross-field rule beyond the table's ranges (checked
+                    // by the flight PD's own test).
+                    if p.name == FLIGHT_START_M.name && v > c.model.stroke_m {
+                        continue;
+                    }
+                    assert!(
+                        Hopper::new(c).is_ok(),
+                        "{} = {v}: {:?}",
+                        p.name,
+                        Hopper::new(c).err()
+                    );
+                }
+            }
+        }
+    }
+
+    /// The parameter table as Markdown (`docs/parameters.md`).
+    pub fn markdown() -> String {
+        let mut s = String::from(
+            "# Runtime parameters\n\n\
+             Generated from `firmware/control/src/params.rs` (`hopper_control::params::TABLE`) by\n\
+             `HOPPER_WRITE_DOCS=1 cargo test -p hopper-control params_doc`; a test fails when this\n\
+             page is stale. Live: may change while the motor is driven; otherwise only with\n\
+             the amplifier disabled. Flags are 0/1, choices the index of a name.\n\n\
+             | Name | Unit | Range | Default | Live | What |\n\
+             |------|------|-------|---------|------|------|\n",
+        );
+        for p in TABLE {
+            let range = match p.kind {
+                Kind::Choice(names) => names.join(", "),
+                Kind::Flag => String::from("0, 1"),
+                _ => std::format!("{} ..= {}", p.min, p.max),
+            };
+            let default = match p.kind {
+                Kind::Choice(names) => String::from(names[p.default as usize]),
+                _ => std::format!("{}", p.default),
+            };
+            s += &std::format!(
+                "| `{}` | {} | {} | {} | {} | {} |\n",
+                p.name,
+                p.unit,
+                range,
+                default,
+                if p.live { "yes" } else { "no" },
+                p.doc
+            );
+        }
+        s
+    }
+
+    #[test]
+    fn params_doc_is_current() {
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../../docs/parameters.md");
+        let want = markdown();
+        if std::env::var_os("HOPPER_WRITE_DOCS").is_some() {
+            std::fs::write(path, &want).unwrap_or_else(|e| panic!("{path}: {e}"));
+        }
+        let have = std::fs::read_to_string(path).unwrap_or_default();
+        let stale: Vec<_> = want.lines().filter(|l| !have.contains(l)).collect();
+        assert!(
+            have == want,
+            "docs/parameters.md is stale (first differing lines: {stale:?}); regenerate with \
+             `HOPPER_WRITE_DOCS=1 cargo test -p hopper-control params_doc`"
+        );
+    }
+}
