@@ -344,7 +344,7 @@ pub fn run(input: &Input) -> Outcome {
             ..Outcome::default()
         };
     };
-    let limit = cfg.supervisor.current_limit_a;
+    let limit = cfg.model.usable_current_limit_a();
     let zero = cfg.calibration.dac_zero_code;
 
     // Start from rest: nut on its stop, spring at its preload.

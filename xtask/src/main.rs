@@ -7,7 +7,8 @@
 //!   period, the firmware release build with its size
 //!   budget, the control crate's tests on their own (without the
 //!   simulator's features), and the whole host test suite. It ends with a
-//!   `xtask: N passed, M failed` line counting the tests of both runs.
+//!   `xtask: N passed, M failed` line counting the tests of every run
+//!   (the control crate alone, the workspace, the fuzz target's stable tests).
 //! * `cargo xtask size`: build the board firmware with defmt and check its size
 //!   budget; the last line is `size: flash=N ram=M capture=C` (bytes).
 //! * `cargo xtask qemu`: build the QEMU variant (`--features qemu-sim`), run
@@ -316,10 +317,15 @@ fn llvm_size() -> Result<PathBuf, String> {
 fn cargo_test(root: &Path) -> Result<(), String> {
     let control = counted_cargo_test(root, &["test", "-p", "hopper-control"])?;
     let workspace = counted_cargo_test(root, &["test", "--workspace"])?;
-    let passed = control.passed + workspace.passed;
-    let failed = control.failed + workspace.failed;
+    // The fuzz target's logic on stable, over seeded inputs and the kept
+    // regressions (the fuzz crate is outside the workspace: it needs
+    // libFuzzer to fuzz, not to test).
+    let fuzz = counted_cargo_test(root, &["test", "--manifest-path", "fuzz/Cargo.toml"])?;
+    let runs = [&control, &workspace, &fuzz];
+    let passed: u64 = runs.iter().map(|r| r.passed).sum();
+    let failed: u64 = runs.iter().map(|r| r.failed).sum();
     println!("xtask: {passed} passed, {failed} failed");
-    for run in [&control, &workspace] {
+    for run in runs {
         if !run.status.success() || run.failed > 0 {
             return Err(format!("{} ({})", run.what, run.status));
         }
