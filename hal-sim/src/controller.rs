@@ -13,10 +13,9 @@ use crate::mock::{firmware_config, SensorConfig, SimHal};
 use crate::params::Params;
 use crate::plant::Plant;
 use hopper_control::estimator::PhaseEvent;
-use hopper_control::hopper::{ApexLoop, Hopper, MeasurementOverride, StepOutput, Strategy};
+use hopper_control::hopper::{Hopper, MeasurementOverride, StepOutput, Strategy};
 use hopper_control::laws::{
-    constant_torque, energy_torque, flight_pd, modified_torque, shaped, step_closed, step_open,
-    velocity, StanceLaw,
+    constant_torque, flight_pd, modified_torque, ControllerKind, StanceLaw,
 };
 use hopper_control::params::{self, Param, ParamError};
 use hopper_control::runner::{NoCounter, PeriodRunner, Timing};
@@ -73,18 +72,9 @@ pub struct FaultRecord {
     pub time_s: f64,
 }
 
-/// Controller names `hopper-sim run --controller` accepts.
-pub const CONTROLLER_NAMES: [&str; 9] = [
-    "passive",
-    "step-open",
-    "step-closed",
-    "open-torque",
-    "energy",
-    "energy-apex",
-    "velocity",
-    "modified-torque",
-    "shaped",
-];
+/// Controller names `hopper-sim run --controller` accepts: the firmware's
+/// own list ([`hopper_control::laws::ControllerKind`]).
+pub use hopper_control::params::CONTROLLER_NAMES;
 
 /// What to build: a controller name and its settings.
 #[derive(Clone, Debug, PartialEq)]
@@ -133,31 +123,31 @@ impl ControllerSpec {
         if let Some(s) = self.strategy_override {
             return Ok(s);
         }
+        let kind = self.kind()?;
         let torque = |default: f32| self.torque_nm.map_or(default, |t| t as f32);
-        Ok(match self.name.as_str() {
-            "passive" => Strategy::Passive,
-            "step-open" => Strategy::Thesis(StanceLaw::StepOpen(step_open::Config::default())),
-            "step-closed" => {
-                Strategy::Thesis(StanceLaw::StepClosed(step_closed::Config::default()))
-            }
-            "open-torque" => Strategy::Thesis(StanceLaw::ConstantTorque(constant_torque::Config {
-                torque_nm: torque(constant_torque::Config::default().torque_nm),
-            })),
-            "energy" => Strategy::Thesis(StanceLaw::EnergyTorque(energy_torque::Config::default())),
-            "energy-apex" => Strategy::EnergyApex(ApexLoop::default()),
-            "velocity" => Strategy::Thesis(StanceLaw::Velocity(velocity::Config::default())),
-            "modified-torque" => {
-                Strategy::Thesis(StanceLaw::ModifiedTorque(modified_torque::Config {
-                    torque_nm: torque(modified_torque::Config::default().torque_nm),
-                    ..modified_torque::Config::default()
+        Ok(match kind.default_strategy() {
+            Strategy::Thesis(StanceLaw::ConstantTorque(c)) => {
+                Strategy::Thesis(StanceLaw::ConstantTorque(constant_torque::Config {
+                    torque_nm: torque(c.torque_nm),
                 }))
             }
-            "shaped" => Strategy::Shaped(shaped::Config::default()),
-            other => {
-                return Err(format!(
-                    "unknown controller `{other}`: expected one of {CONTROLLER_NAMES:?}"
-                ))
+            Strategy::Thesis(StanceLaw::ModifiedTorque(c)) => {
+                Strategy::Thesis(StanceLaw::ModifiedTorque(modified_torque::Config {
+                    torque_nm: torque(c.torque_nm),
+                    ..c
+                }))
             }
+            other => other,
+        })
+    }
+
+    /// The controller this spec names.
+    pub fn kind(&self) -> Result<ControllerKind, String> {
+        ControllerKind::from_name(&self.name).ok_or_else(|| {
+            format!(
+                "unknown controller `{}`: expected one of {CONTROLLER_NAMES:?}",
+                self.name
+            )
         })
     }
 
@@ -204,11 +194,8 @@ impl ControllerSpec {
         let runner = PeriodRunner::new(cfg, timing)
             .map_err(|e| format!("controller configuration: {e:?}"))?;
         let hal = SimHal::new(&cfg.calibration, &self.sensors);
-        let name = CONTROLLER_NAMES
-            .iter()
-            .copied()
-            .find(|n| *n == self.name)
-            .unwrap_or("passive");
+        // The name of what actually runs (a strategy override names its own).
+        let name = cfg.strategy.kind().name();
         Ok(FirmwareController {
             name,
             runner,

@@ -15,10 +15,7 @@
 //! that starts it from its defaults).
 
 use crate::hopper::HopperConfig;
-use crate::laws::{
-    constant_torque, energy_apex, energy_torque, modified_torque, shaped, step_closed, step_open,
-    velocity, InvalidField, StanceLaw, Strategy,
-};
+use crate::laws::{energy_apex, step_closed, ControllerKind, InvalidField, StanceLaw, Strategy};
 
 /// What kind of value a parameter holds.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -101,18 +98,20 @@ macro_rules! param {
     };
 }
 
-/// The controllers [`CONTROLLER`] chooses from, by name (the index is the value).
-pub const CONTROLLER_NAMES: [&str; 9] = [
-    "passive",
-    "step-open",
-    "step-closed",
-    "open-torque",
-    "energy",
-    "energy-apex",
-    "velocity",
-    "modified-torque",
-    "shaped",
-];
+/// The controllers [`CONTROLLER`] chooses from, by name (the index is the
+/// value): [`ControllerKind::ALL`]'s names.
+pub const CONTROLLER_NAMES: [&str; 9] = controller_names();
+
+#[allow(clippy::indexing_slicing)] // const evaluation: a bad index fails the build.
+const fn controller_names() -> [&'static str; 9] {
+    let mut names = [""; 9];
+    let mut i = 0;
+    while i < names.len() {
+        names[i] = ControllerKind::ALL[i].name();
+        i += 1;
+    }
+    names
+}
 
 /// Names of [`STEP_CLOSED_GAIN`]'s choices.
 const STEP_CLOSED_GAINS: [&str; 2] = ["fixed", "normalised"];
@@ -647,35 +646,18 @@ pub enum ParamError {
     NotSelected(&'static str),
 }
 
-/// The index of the controller `strategy` is.
+/// The index of the controller `strategy` is (the [`CONTROLLER`] value).
 pub fn controller_index(strategy: &Strategy) -> usize {
-    match strategy {
-        Strategy::Passive => 0,
-        Strategy::Thesis(StanceLaw::StepOpen(_)) => 1,
-        Strategy::Thesis(StanceLaw::StepClosed(_)) => 2,
-        Strategy::Thesis(StanceLaw::ConstantTorque(_)) => 3,
-        Strategy::Thesis(StanceLaw::EnergyTorque(_)) => 4,
-        Strategy::EnergyApex(_) => 5,
-        Strategy::Thesis(StanceLaw::Velocity(_)) => 6,
-        Strategy::Thesis(StanceLaw::ModifiedTorque(_)) => 7,
-        Strategy::Shaped(_) => 8,
-    }
+    let kind = strategy.kind();
+    ControllerKind::ALL
+        .iter()
+        .position(|k| *k == kind)
+        .unwrap_or(0)
 }
 
 /// The controller at `index` of [`CONTROLLER_NAMES`], with its defaults.
 pub fn controller_default(index: usize) -> Option<Strategy> {
-    Some(match index {
-        0 => Strategy::Passive,
-        1 => Strategy::Thesis(StanceLaw::StepOpen(step_open::Config::default())),
-        2 => Strategy::Thesis(StanceLaw::StepClosed(step_closed::Config::default())),
-        3 => Strategy::Thesis(StanceLaw::ConstantTorque(constant_torque::Config::default())),
-        4 => Strategy::Thesis(StanceLaw::EnergyTorque(energy_torque::Config::default())),
-        5 => Strategy::EnergyApex(energy_apex::ApexLoop::default()),
-        6 => Strategy::Thesis(StanceLaw::Velocity(velocity::Config::default())),
-        7 => Strategy::Thesis(StanceLaw::ModifiedTorque(modified_torque::Config::default())),
-        8 => Strategy::Shaped(shaped::Config::default()),
-        _ => return None,
-    })
+    ControllerKind::ALL.get(index).map(|k| k.default_strategy())
 }
 
 /// Where a parameter lives in a configuration.

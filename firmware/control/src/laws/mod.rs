@@ -285,6 +285,110 @@ pub enum Strategy {
     Shaped(shaped::Config),
 }
 
+/// Which controller, without its settings. The index in [`ControllerKind::ALL`]
+/// is the value of the `controller` parameter ([`crate::params::CONTROLLER`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum ControllerKind {
+    /// `passive`: the motor off.
+    Passive,
+    /// `step-open`: eq 2.49.
+    StepOpen,
+    /// `step-closed`: eqs 2.50-2.51.
+    StepClosed,
+    /// `open-torque`: constant stance torque.
+    OpenTorque,
+    /// `energy`: eq 2.52.
+    Energy,
+    /// `energy-apex`: eq 2.52 with a per-hop loop on the apex.
+    EnergyApex,
+    /// `velocity`: eq 2.53.
+    Velocity,
+    /// `modified-torque`: section 4.4.3.
+    ModifiedTorque,
+    /// `shaped`: this project's shaped torque.
+    Shaped,
+}
+
+impl ControllerKind {
+    /// Every controller, in the parameter table's order.
+    pub const ALL: [ControllerKind; 9] = [
+        ControllerKind::Passive,
+        ControllerKind::StepOpen,
+        ControllerKind::StepClosed,
+        ControllerKind::OpenTorque,
+        ControllerKind::Energy,
+        ControllerKind::EnergyApex,
+        ControllerKind::Velocity,
+        ControllerKind::ModifiedTorque,
+        ControllerKind::Shaped,
+    ];
+
+    /// The name the host tools and the link use (`energy-apex`).
+    pub const fn name(self) -> &'static str {
+        match self {
+            ControllerKind::Passive => "passive",
+            ControllerKind::StepOpen => "step-open",
+            ControllerKind::StepClosed => "step-closed",
+            ControllerKind::OpenTorque => "open-torque",
+            ControllerKind::Energy => "energy",
+            ControllerKind::EnergyApex => "energy-apex",
+            ControllerKind::Velocity => "velocity",
+            ControllerKind::ModifiedTorque => "modified-torque",
+            ControllerKind::Shaped => "shaped",
+        }
+    }
+
+    /// The controller called `name`, if any.
+    pub fn from_name(name: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|k| k.name() == name)
+    }
+
+    /// This controller with its default settings.
+    pub fn default_strategy(self) -> Strategy {
+        match self {
+            ControllerKind::Passive => Strategy::Passive,
+            ControllerKind::StepOpen => {
+                Strategy::Thesis(StanceLaw::StepOpen(step_open::Config::default()))
+            }
+            ControllerKind::StepClosed => {
+                Strategy::Thesis(StanceLaw::StepClosed(step_closed::Config::default()))
+            }
+            ControllerKind::OpenTorque => {
+                Strategy::Thesis(StanceLaw::ConstantTorque(constant_torque::Config::default()))
+            }
+            ControllerKind::Energy => {
+                Strategy::Thesis(StanceLaw::EnergyTorque(energy_torque::Config::default()))
+            }
+            ControllerKind::EnergyApex => Strategy::EnergyApex(energy_apex::ApexLoop::default()),
+            ControllerKind::Velocity => {
+                Strategy::Thesis(StanceLaw::Velocity(velocity::Config::default()))
+            }
+            ControllerKind::ModifiedTorque => {
+                Strategy::Thesis(StanceLaw::ModifiedTorque(modified_torque::Config::default()))
+            }
+            ControllerKind::Shaped => Strategy::Shaped(shaped::Config::default()),
+        }
+    }
+}
+
+impl Strategy {
+    /// Which controller this is.
+    pub fn kind(&self) -> ControllerKind {
+        match self {
+            Strategy::Passive => ControllerKind::Passive,
+            Strategy::Thesis(StanceLaw::StepOpen(_)) => ControllerKind::StepOpen,
+            Strategy::Thesis(StanceLaw::StepClosed(_)) => ControllerKind::StepClosed,
+            Strategy::Thesis(StanceLaw::ConstantTorque(_)) => ControllerKind::OpenTorque,
+            Strategy::Thesis(StanceLaw::EnergyTorque(_)) => ControllerKind::Energy,
+            Strategy::EnergyApex(_) => ControllerKind::EnergyApex,
+            Strategy::Thesis(StanceLaw::Velocity(_)) => ControllerKind::Velocity,
+            Strategy::Thesis(StanceLaw::ModifiedTorque(_)) => ControllerKind::ModifiedTorque,
+            Strategy::Shaped(_) => ControllerKind::Shaped,
+        }
+    }
+}
+
 impl Default for Strategy {
     /// [`crate::params::CONTROLLER`]'s default.
     fn default() -> Self {
