@@ -324,15 +324,31 @@ mod app {
     const SYSTICK_HZ: u32 = 168_000_000;
     const _: () = assert!(SYSTICK_HZ.is_multiple_of(CONTROL_HZ));
 
-    /// Whether the build asked for the `shaped` scenario
-    /// (`HOPPER_QEMU_SCENARIO=shaped`; anything else: `energy-apex`).
-    const SHAPED: bool = is_shaped(option_env!("HOPPER_QEMU_SCENARIO"));
+    /// The scenario the build asked for (`HOPPER_QEMU_SCENARIO`: `energy-apex`,
+    /// the default, or `shaped`); any other name fails the build.
+    const SHAPED: bool = match scenario(option_env!("HOPPER_QEMU_SCENARIO")) {
+        Some(shaped) => shaped,
+        None => panic!("HOPPER_QEMU_SCENARIO must be `energy-apex` or `shaped`"),
+    };
 
-    const fn is_shaped(s: Option<&str>) -> bool {
+    /// `Some(true)` for `shaped`, `Some(false)` for `energy-apex` or no
+    /// value, `None` for anything else.
+    const fn scenario(s: Option<&str>) -> Option<bool> {
         let Some(s) = s else {
-            return false;
+            return Some(false);
         };
-        let (a, b) = (s.as_bytes(), b"shaped");
+        if same(s.as_bytes(), b"shaped") {
+            Some(true)
+        } else if same(s.as_bytes(), b"energy-apex") {
+            Some(false)
+        } else {
+            None
+        }
+    }
+
+    /// Byte-wise equality in a `const fn`.
+    #[allow(clippy::indexing_slicing)] // const evaluation, bounds checked by the loop.
+    const fn same(a: &[u8], b: &[u8]) -> bool {
         if a.len() != b.len() {
             return false;
         }
