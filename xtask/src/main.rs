@@ -186,15 +186,7 @@ fn test(root: &Path) -> Result<(), String> {
     run(
         root,
         "no_std plant build (MCU target)",
-        cargo().args([
-            "build",
-            "-p",
-            "hal-sim",
-            "--lib",
-            "--no-default-features",
-            "--target",
-            TARGET,
-        ]),
+        cargo().args(["build", "-p", "hopper-plant", "--target", TARGET]),
     )?;
     run(
         root,

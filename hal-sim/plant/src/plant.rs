@@ -113,7 +113,7 @@ pub struct State {
 /// Where the energy went since the start, J. All entries are >= 0 except
 /// `motor_work_j`, which is the net work the motor did on the mechanism.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
-#[cfg_attr(feature = "std", derive(serde::Serialize))]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
 pub struct Ledger {
     /// Net mechanical work of the actuator on the nut, `int eta tau pd / r`.
     pub motor_work_j: f64,
@@ -985,10 +985,10 @@ impl Plant {
     /// picked per configuration at compile time (constant addresses, the
     /// rows that are zero there skipped), eight inlined copies; else one
     /// copy with the map indexed at run time. [`Self::advance`]'s fast path
-    /// takes the specialised form on the host (10 ns of the 40 a period
-    /// took); the loop, and the `no_std` build (the QEMU image, where
-    /// `f64` is software and the eight copies would take 10 KB of flash),
-    /// the generic one.
+    /// takes the specialised form with the `specialised-step` feature (the
+    /// simulator's: 10 ns of the 40 a period took); the loop, and builds
+    /// without it (the QEMU image, where `f64` is software and the eight
+    /// copies would take 10 KB of flash), the generic one.
     #[inline(always)]
     fn rk4_step<const SPECIALISED: bool>(&self, y0: &Y, h: f64, t_end: f64) -> Y {
         match self.rk4_linear::<SPECIALISED>(y0, h, t_end) {
@@ -1359,7 +1359,7 @@ impl Plant {
             // period longer than max_step_s needs the loop: decided before
             // integrating, not after).
             if remaining > TIME_TOL_S && t_end - (self.t_s + h) <= TIME_TOL_S {
-                let y1 = self.rk4_step::<{ cfg!(feature = "std") }>(&self.y, h, t_end);
+                let y1 = self.rk4_step::<{ cfg!(feature = "specialised-step") }>(&self.y, h, t_end);
                 if self.first_firing(&y1).is_none() && y1.iter().all(|v| v.is_finite()) {
                     self.y = y1;
                     self.t_s = t_end;
