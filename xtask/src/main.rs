@@ -181,15 +181,7 @@ fn test(root: &Path) -> Result<(), String> {
     run(
         root,
         "no_std plant build (MCU target)",
-        cargo().args([
-            "build",
-            "-p",
-            "hal-sim",
-            "--lib",
-            "--no-default-features",
-            "--target",
-            TARGET,
-        ]),
+        cargo().args(["build", "-p", "hopper-plant", "--target", TARGET]),
     )?;
     // The control period linked with a panic handler that calls an undefined
     // function (`firmware/app/src/bin/panic-check.rs`): a panic path the

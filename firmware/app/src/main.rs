@@ -9,9 +9,10 @@
 //!   end-of-conversion interrupt runs the control task with fresh samples.
 //!   See [`board`] for clocks, pins and the watchdog.
 //! * `--features qemu-sim` (takes precedence): QEMU's `netduinoplus2`. The
-//!   `no_std` plant and sensor models of `hal-sim` stand in for the hardware
-//!   behind the same [`hopper_control::hal::HopperIo`] trait; SysTick paces
-//!   the control task; the scripted scenario ends with a semihosting exit.
+//!   `no_std` plant and sensor models of `hopper-plant` stand in for the
+//!   hardware behind the same [`hopper_control::hal::HopperIo`] trait;
+//!   SysTick paces the control task; the scripted scenario ends with a
+//!   semihosting exit.
 //!
 //! On the host this crate compiles to a stub `main` that says so, which keeps
 //! `cargo clippy --workspace --all-targets` working.
@@ -309,12 +310,12 @@ mod app {
     use cortex_m::peripheral::syst::SystClkSource;
     use cortex_m::peripheral::{SCB, SYST};
     use cortex_m_semihosting::debug;
-    use hal_sim::metrics::{hops_to_converge, steady_apex};
-    use hal_sim::mock::{firmware_config, SensorConfig, SimHal};
-    use hal_sim::{Event, Params, Plant};
     use hopper_control::hopper::{ApexLoop, Strategy};
     use hopper_control::laws::shaped;
     use hopper_control::runner::{CycleCounter, LogItem, PeriodRunner};
+    use hopper_plant::metrics::{hops_to_converge, steady_apex};
+    use hopper_plant::mock::{firmware_config, SensorConfig, SimHal};
+    use hopper_plant::{Event, Params, Plant};
     use rtic_sync::make_channel;
     use stm32f4::stm32f405::TIM5;
 

@@ -1,0 +1,21 @@
+//! # hopper-plant: the vertical hopper's plant, sensors and mock HAL
+//!
+//! The plant the firmware controls, modelled after thesis chapter 2.1 with the
+//! errata of `shared/MODEL.md` applied ([`plant`]), its parameter sets
+//! ([`params`]), the sensor, DAC and amplifier models ([`sensors`]), the mock
+//! HAL that runs the firmware's control crate on them ([`mock`]) and the hop
+//! metrics ([`metrics`]).
+//!
+//! `no_std` (math through `libm`) and allocation-free, so the same plant
+//! links into the QEMU firmware image; the host simulator (`hal-sim`, the
+//! `hopper-sim` CLI) builds on it.
+#![cfg_attr(not(test), no_std)]
+
+pub mod metrics;
+pub mod mock;
+pub mod params;
+pub mod plant;
+pub mod sensors;
+
+pub use params::{ParamError, Params};
+pub use plant::{Event, Ledger, Mode, NutStop, Plant, PlantError, State};
