@@ -43,6 +43,51 @@ pub enum ModelField {
     CurrentLimit,
 }
 
+/// The allowed range of a physical parameter: `min ..= max`, `min` itself
+/// refused when `min_exclusive`. Written in `f64` so the simulator's `f64`
+/// plant parameters (`hopper-plant`'s `FIELDS`) share the one definition;
+/// [`ModelParams::validate`] compares in `f32`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FieldRange {
+    /// Lower bound.
+    pub min: f64,
+    /// Whether the lower bound itself is refused.
+    pub min_exclusive: bool,
+    /// Upper bound (inclusive).
+    pub max: f64,
+}
+
+const fn range(min: f64, min_exclusive: bool, max: f64) -> FieldRange {
+    FieldRange {
+        min,
+        min_exclusive,
+        max,
+    }
+}
+
+impl ModelField {
+    /// The field's allowed range, the one definition the controller's model
+    /// and the simulator's plant both check.
+    pub const fn range(self) -> FieldRange {
+        match self {
+            ModelField::BodyMass => range(0.1, false, 1000.0),
+            ModelField::UnsprungMass => range(0.0, true, 100.0),
+            ModelField::NutMass => range(0.0, true, 100.0),
+            ModelField::RotorInertia => range(1e-7, false, 1.0),
+            ModelField::ScrewLead => range(1e-4, false, 0.1),
+            ModelField::SpringStiffness => range(10.0, false, 1e7),
+            ModelField::LegLength => range(0.05, false, 5.0),
+            ModelField::Preload => range(0.0, false, 0.5),
+            ModelField::Stroke => range(1e-3, false, 0.5),
+            ModelField::Efficiency => range(0.05, false, 1.0),
+            ModelField::Gravity => range(0.1, false, 100.0),
+            ModelField::TorqueLimit => range(0.0, true, 100.0),
+            ModelField::TorqueConstant => range(1e-4, false, 10.0),
+            ModelField::CurrentLimit => range(0.0, true, 1000.0),
+        }
+    }
+}
+
 /// Why a [`ModelParams`] or a model computation was refused.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -53,38 +98,40 @@ pub enum ModelError {
     BadArgument,
 }
 
-/// Physical parameters of the hopper, f32 SI. `Default` is the thesis's
+/// Physical parameters of the hopper, f32 SI, each in the range
+/// [`ModelField::range`] gives (the simulator's plant checks the same ranges).
+/// `Default` is the thesis's
 /// "design" set (Table 2.1) plus the motor of section 3.1 and a 5 mm preload.
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct ModelParams {
-    /// Sprung (body) mass `M`, kg, in (0, 1000]. Default 9.0.
+    /// Sprung (body) mass `M`, kg. Default 9.0.
     pub body_mass_kg: f32,
-    /// Unsprung (lower leg + toe) mass `m_u`, kg, in [0, 1000]. Default 0.6.
+    /// Unsprung (lower leg + toe) mass `m_u`, kg. Default 0.6.
     pub unsprung_mass_kg: f32,
-    /// Sliding (ball nut) mass `m_s`, kg, in [0, 1000]. Default 0.25.
+    /// Sliding (ball nut) mass `m_s`, kg. Default 0.25.
     pub nut_mass_kg: f32,
-    /// Rotor + screw moment of inertia `J`, kg m^2, in (0, 1]. Default 2.7e-4.
+    /// Rotor + screw moment of inertia `J`, kg m^2. Default 2.7e-4.
     pub rotor_inertia_kg_m2: f32,
-    /// Ball-screw lead, m per revolution, in (0, 0.1]. Default 0.005.
+    /// Ball-screw lead, m per revolution. Default 0.005.
     pub screw_lead_m: f32,
-    /// Leg spring stiffness `k`, N/m, in (0, 1e7]. Default 11 000.
+    /// Leg spring stiffness `k`, N/m. Default 11 000.
     pub spring_stiffness_n_per_m: f32,
-    /// Leg free length `l0`, m (body coordinate at touchdown), in (0, 10]. Default 0.61.
+    /// Leg free length `l0`, m (body coordinate at touchdown). Default 0.61.
     pub leg_length_m: f32,
-    /// Spring preload `delta0`, m, in [0, 1]. Default 0.005.
+    /// Spring preload `delta0`, m. Default 0.005.
     pub preload_m: f32,
-    /// Nut stroke, m (`p` in `0..stroke`), in (0, 1]. Default 0.05.
+    /// Nut stroke, m (`p` in `0..stroke`). Default 0.05.
     pub stroke_m: f32,
-    /// Motor + ball-screw efficiency `eta`, dimensionless, in (0, 1]. Default 0.9.
+    /// Motor + ball-screw efficiency `eta`, dimensionless. Default 0.9.
     pub efficiency: f32,
-    /// Gravitational acceleration `g`, m/s^2, in (0, 100]. Default 9.81.
+    /// Gravitational acceleration `g`, m/s^2. Default 9.81.
     pub gravity_mps2: f32,
-    /// Motor torque limit, N m, in (0, 100]. Default 1.0 (Table 2.1).
+    /// Motor torque limit, N m. Default 1.0 (Table 2.1).
     pub torque_limit_nm: f32,
-    /// Motor torque constant `k_m`, N m/A, in (0, 10]. Default 0.0297.
+    /// Motor torque constant `k_m`, N m/A. Default 0.0297.
     pub torque_constant_nm_per_a: f32,
-    /// Amplifier current limit, A, in (0, 1000]. Default 33.67 (= 1.0 N m / 0.0297 N m/A).
+    /// Amplifier current limit, A. Default 33.67 (= 1.0 N m / 0.0297 N m/A).
     pub current_limit_a: f32,
 }
 
@@ -109,9 +156,11 @@ impl Default for ModelParams {
     }
 }
 
-/// `Ok` if `lo <(=) v <= hi` (lower bound exclusive when `open_low`), else the field error.
-fn check(v: f32, lo: f32, open_low: bool, hi: f32, field: ModelField) -> Result<(), ModelError> {
-    let low_ok = if open_low { v > lo } else { v >= lo };
+/// `Ok` if `v` is within `field`'s range, else the field error.
+fn check(v: f32, field: ModelField) -> Result<(), ModelError> {
+    let r = field.range();
+    let (lo, hi) = (r.min as f32, r.max as f32);
+    let low_ok = if r.min_exclusive { v > lo } else { v >= lo };
     // NaN fails every comparison, so it is rejected here too.
     if low_ok && v <= hi && v.is_finite() {
         Ok(())
@@ -121,35 +170,28 @@ fn check(v: f32, lo: f32, open_low: bool, hi: f32, field: ModelField) -> Result<
 }
 
 impl ModelParams {
-    /// Checks every field against its documented range; the error names the first bad field.
+    /// Checks every field against its range ([`ModelField::range`]); the
+    /// error names the first bad field.
     pub fn validate(&self) -> Result<(), ModelError> {
         use ModelField as F;
-        check(self.body_mass_kg, 0.0, true, 1000.0, F::BodyMass)?;
-        check(self.unsprung_mass_kg, 0.0, false, 1000.0, F::UnsprungMass)?;
-        check(self.nut_mass_kg, 0.0, false, 1000.0, F::NutMass)?;
-        check(self.rotor_inertia_kg_m2, 0.0, true, 1.0, F::RotorInertia)?;
-        check(self.screw_lead_m, 0.0, true, 0.1, F::ScrewLead)?;
-        check(
-            self.spring_stiffness_n_per_m,
-            0.0,
-            true,
-            1e7,
-            F::SpringStiffness,
-        )?;
-        check(self.leg_length_m, 0.0, true, 10.0, F::LegLength)?;
-        check(self.preload_m, 0.0, false, 1.0, F::Preload)?;
-        check(self.stroke_m, 0.0, true, 1.0, F::Stroke)?;
-        check(self.efficiency, 0.0, true, 1.0, F::Efficiency)?;
-        check(self.gravity_mps2, 0.0, true, 100.0, F::Gravity)?;
-        check(self.torque_limit_nm, 0.0, true, 100.0, F::TorqueLimit)?;
-        check(
-            self.torque_constant_nm_per_a,
-            0.0,
-            true,
-            10.0,
-            F::TorqueConstant,
-        )?;
-        check(self.current_limit_a, 0.0, true, 1000.0, F::CurrentLimit)?;
+        for (v, field) in [
+            (self.body_mass_kg, F::BodyMass),
+            (self.unsprung_mass_kg, F::UnsprungMass),
+            (self.nut_mass_kg, F::NutMass),
+            (self.rotor_inertia_kg_m2, F::RotorInertia),
+            (self.screw_lead_m, F::ScrewLead),
+            (self.spring_stiffness_n_per_m, F::SpringStiffness),
+            (self.leg_length_m, F::LegLength),
+            (self.preload_m, F::Preload),
+            (self.stroke_m, F::Stroke),
+            (self.efficiency, F::Efficiency),
+            (self.gravity_mps2, F::Gravity),
+            (self.torque_limit_nm, F::TorqueLimit),
+            (self.torque_constant_nm_per_a, F::TorqueConstant),
+            (self.current_limit_a, F::CurrentLimit),
+        ] {
+            check(v, field)?;
+        }
         Ok(())
     }
 

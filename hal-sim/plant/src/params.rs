@@ -6,6 +6,7 @@
 //! the TOML printer and the TOML reader all use it, so they cannot drift apart.
 
 use core::fmt;
+use hopper_control::model::ModelField;
 
 /// Parameters of the plant (thesis Table 2.1 and section 4.5, MODEL.md).
 ///
@@ -194,6 +195,12 @@ pub struct Range {
 }
 
 impl Range {
+    /// The range of a field the controller's model shares, in `unit`.
+    pub const fn of_model(field: ModelField, unit: &'static str) -> Self {
+        let r = field.range();
+        Self::new(r.min, r.min_exclusive, r.max, unit)
+    }
+
     /// `min ..= max` (`min` itself refused if `min_exclusive`), in `unit`.
     pub const fn new(min: f64, min_exclusive: bool, max: f64, unit: &'static str) -> Self {
         Self {
@@ -265,6 +272,17 @@ impl FieldSpec {
 }
 
 macro_rules! field {
+    // A field the controller's model has too: its range is the model's
+    // (`hopper_control::model::ModelField::range`, the one definition).
+    ($name:ident, $unit:expr, $doc:expr, model $field:ident) => {
+        FieldSpec {
+            name: stringify!($name),
+            doc: $doc,
+            range: Range::of_model(ModelField::$field, $unit),
+            get: |p| p.$name,
+            set: |p, v| p.$name = v,
+        }
+    };
     ($name:ident, $unit:expr, $doc:expr, > $min:expr, $max:expr) => {
         field!($name, $unit, $doc, $min, true, $max)
     };
@@ -284,36 +302,12 @@ macro_rules! field {
 
 /// Every parameter field, in TOML order.
 pub const FIELDS: [FieldSpec; 18] = [
-    field!(body_mass_kg, "kg", "sprung (body) mass M", 0.1, 1000.0),
-    field!(
-        unsprung_mass_kg,
-        "kg",
-        "unsprung mass m_u (lower leg, toe)",
-        > 0.0,
-        100.0
-    ),
-    field!(
-        nut_mass_kg,
-        "kg",
-        "sliding mass m_s (ball nut + share of spring)",
-        > 0.0,
-        100.0
-    ),
-    field!(
-        rotor_inertia_kg_m2,
-        "kg m^2",
-        "rotor + screw inertia J",
-        1e-7,
-        1.0
-    ),
-    field!(screw_lead_m, "m/rev", "ball-screw lead", 1e-4, 0.1),
-    field!(
-        spring_stiffness_n_per_m,
-        "N/m",
-        "leg spring stiffness k",
-        10.0,
-        1e7
-    ),
+    field!(body_mass_kg, "kg", "sprung (body) mass M", model BodyMass),
+    field!(unsprung_mass_kg, "kg", "unsprung mass m_u (lower leg, toe)", model UnsprungMass),
+    field!(nut_mass_kg, "kg", "sliding mass m_s (ball nut + share of spring)", model NutMass),
+    field!(rotor_inertia_kg_m2, "kg m^2", "rotor + screw inertia J", model RotorInertia),
+    field!(screw_lead_m, "m/rev", "ball-screw lead", model ScrewLead),
+    field!(spring_stiffness_n_per_m, "N/m", "leg spring stiffness k", model SpringStiffness),
     field!(
         spring_damping_ns_per_m,
         "N s/m",
@@ -321,27 +315,9 @@ pub const FIELDS: [FieldSpec; 18] = [
         0.0,
         1e4
     ),
-    field!(
-        spring_preload_m,
-        "m",
-        "spring preload delta0 (nut at p = 0, leg extended)",
-        0.0,
-        0.5
-    ),
-    field!(
-        leg_length_m,
-        "m",
-        "leg free length l0 (body height at touchdown)",
-        0.05,
-        5.0
-    ),
-    field!(
-        efficiency,
-        "1",
-        "motor + ball-screw efficiency eta",
-        0.05,
-        1.0
-    ),
+    field!(spring_preload_m, "m", "spring preload delta0 (nut at p = 0, leg extended)", model Preload),
+    field!(leg_length_m, "m", "leg free length l0 (body height at touchdown)", model LegLength),
+    field!(efficiency, "1", "motor + ball-screw efficiency eta", model Efficiency),
     field!(
         planarizer_friction_n,
         "N",
@@ -356,27 +332,9 @@ pub const FIELDS: [FieldSpec; 18] = [
         0.0,
         1e4
     ),
-    field!(
-        stroke_m,
-        "m",
-        "ball-screw stroke between the mechanical stops",
-        1e-3,
-        0.5
-    ),
-    field!(
-        gravity_mps2,
-        "m/s^2",
-        "gravitational acceleration",
-        0.1,
-        100.0
-    ),
-    field!(
-        torque_constant_nm_per_a,
-        "N m/A",
-        "motor torque constant (= back-EMF constant)",
-        1e-4,
-        10.0
-    ),
+    field!(stroke_m, "m", "ball-screw stroke between the mechanical stops", model Stroke),
+    field!(gravity_mps2, "m/s^2", "gravitational acceleration", model Gravity),
+    field!(torque_constant_nm_per_a, "N m/A", "motor torque constant (= back-EMF constant)", model TorqueConstant),
     field!(
         winding_resistance_ohm,
         "ohm",
@@ -391,7 +349,7 @@ pub const FIELDS: [FieldSpec; 18] = [
         1.0,
         1000.0
     ),
-    field!(current_limit_a, "A", "amplifier current limit", 0.0, 1000.0),
+    field!(current_limit_a, "A", "amplifier current limit", model CurrentLimit),
 ];
 
 /// Look a field up by its TOML name.
