@@ -43,6 +43,7 @@ use crate::params_toml::{self, ParamsFileError};
 use crate::run::RunConfig;
 use hopper_control::estimator::EstimatorConfig;
 use hopper_control::hopper::{ApexLoop, Strategy};
+use hopper_control::laws::ControllerKind;
 use hopper_control::laws::{energy_torque, flight_pd, StanceLaw};
 use hopper_control::params::Param;
 use hopper_control::pd_design::PdGains;
@@ -50,7 +51,7 @@ use std::collections::HashMap;
 use std::path::Path;
 
 /// Controller run when neither file nor flag names one.
-pub const DEFAULT_CONTROLLER: &str = "passive";
+pub const DEFAULT_CONTROLLER: ControllerKind = ControllerKind::Passive;
 /// Plant preset used when neither file nor flag gives one.
 pub const DEFAULT_PARAMS: &str = "design";
 /// Default apex target, m.
@@ -136,7 +137,7 @@ pub struct Overrides {
     /// What the controller believes (default: the plant).
     pub model: Option<Params>,
     /// Controller name, one of [`CONTROLLER_NAMES`].
-    pub controller: Option<String>,
+    pub controller: Option<ControllerKind>,
     /// Apex target, m.
     pub target_apex_m: Option<f64>,
     /// Torque of open-torque / modified-torque, N m.
@@ -174,7 +175,7 @@ impl Overrides {
         Overrides {
             plant: over.plant.clone().or_else(|| self.plant.clone()),
             model: over.model.or(self.model),
-            controller: over.controller.clone().or_else(|| self.controller.clone()),
+            controller: over.controller.or(self.controller),
             target_apex_m: over.target_apex_m.or(self.target_apex_m),
             torque_nm: over.torque_nm.or(self.torque_nm),
             energy_gain_nm_per_j: over.energy_gain_nm_per_j.or(self.energy_gain_nm_per_j),
@@ -206,7 +207,7 @@ pub struct Settings {
     /// What the controller believes (None: the plant).
     pub model: Option<Params>,
     /// Controller name.
-    pub controller: String,
+    pub controller: ControllerKind,
     /// Apex target, m.
     pub target_apex_m: f64,
     /// Torque of open-torque / modified-torque (None: the law's 1 N m), N m.
@@ -245,7 +246,7 @@ impl Settings {
             params,
             params_name,
             model: o.model,
-            controller: o.controller.unwrap_or_else(|| DEFAULT_CONTROLLER.into()),
+            controller: o.controller.unwrap_or(DEFAULT_CONTROLLER),
             target_apex_m: o.target_apex_m.unwrap_or(DEFAULT_TARGET_APEX_M),
             torque_nm: o.torque_nm,
             energy_gain_nm_per_j: o.energy_gain_nm_per_j,
@@ -285,7 +286,7 @@ impl Settings {
             sensors: self.sensors,
             model: self.model,
             injections: self.inject.clone(),
-            ..ControllerSpec::new(&self.controller)
+            ..ControllerSpec::new(self.controller.name())
         };
         spec.params = self.firmware_params.clone();
         if let Some(ke) = self.energy_gain_nm_per_j {
@@ -295,12 +296,12 @@ impl Settings {
                 limits::ENERGY_GAIN_NM_PER_J,
                 "N m/J",
             )?;
-            spec.strategy_override = Some(match self.controller.as_str() {
-                "energy" => Strategy::Thesis(StanceLaw::EnergyTorque(energy_torque::Config {
+            spec.strategy_override = Some(match self.controller {
+                ControllerKind::Energy => Strategy::Thesis(StanceLaw::EnergyTorque(energy_torque::Config {
                     gain_nm_per_j: ke as f32,
                     ..energy_torque::Config::default()
                 })),
-                "energy-apex" => {
+                ControllerKind::EnergyApex => {
                     let d = ApexLoop::default();
                     Strategy::EnergyApex(ApexLoop {
                         law: energy_torque::Config {
@@ -318,7 +319,7 @@ impl Settings {
             });
         }
         if self.flight_kp_a_per_rad.is_some() || self.flight_kd_a_s_per_rad.is_some() {
-            if self.controller == "shaped" {
+            if self.controller == ControllerKind::Shaped {
                 return Err(
                     "the flight PD gains (--flight-kp, --flight-kd) do not apply to the shaped controller: it has its own braking-curve back-drive"
                         .into(),
@@ -354,12 +355,6 @@ impl Settings {
     /// controller name and settings, and that the firmware accepts its
     /// configuration.
     pub fn check(&self) -> Result<(), String> {
-        if !CONTROLLER_NAMES.contains(&self.controller.as_str()) {
-            return Err(format!(
-                "unknown controller `{}`: expected one of {CONTROLLER_NAMES:?}",
-                self.controller
-            ));
-        }
         if !(self.control_hz.is_finite() && self.control_hz > 0.0) {
             // The runner checks the period's range; this catches 0 and NaN first.
             return Err(format!(
@@ -412,7 +407,7 @@ impl Settings {
     /// plant are known, so `run`, every sweep point and scenario files all
     /// get it; the passive strategy never runs the flight PD.
     fn check_flight_pd(&self, spec: &ControllerSpec) -> Result<(), String> {
-        if self.controller == "passive" {
+        if self.controller == ControllerKind::Passive {
             return Ok(());
         }
         let gains = spec.flight_override.unwrap_or_default().gains;
@@ -560,6 +555,22 @@ const CONTROLLER_KEYS: [&str; 6] = [
 ];
 const SENSOR_KEYS: [&str; 4] = ["noise", "seed", "loadcell_sigma_n", "pot_sigma_m"];
 const SWEEP_KEYS: [&str; 2] = ["param", "metric"];
+
+/// The controller called `name`, or the file's error for `path`.
+fn controller_named(
+    r: &Reader<'_>,
+    name: &str,
+    path: &str,
+) -> Result<ControllerKind, ScenarioError> {
+    ControllerKind::from_name(name).ok_or_else(|| {
+        r.err(
+            path,
+            format!(
+                "unknown controller `{name}` in `{path}`: expected one of {CONTROLLER_NAMES:?}"
+            ),
+        )
+    })
+}
 
 struct Reader<'a> {
     origin: &'a str,
@@ -738,11 +749,16 @@ pub fn from_toml_str(text: &str, origin: &str) -> Result<Scenario, ScenarioError
 
     match top.get("controller") {
         None => {}
-        Some(toml::Value::String(name)) => s.controller = Some(name.clone()),
+        Some(toml::Value::String(name)) => {
+            s.controller = Some(controller_named(&r, name, "controller")?)
+        }
         Some(toml::Value::Table(t)) => {
             let p = "controller.";
             r.check_keys(t, p, &CONTROLLER_KEYS)?;
-            s.controller = r.string(t, p, "name")?.map(str::to_string);
+            s.controller = match r.string(t, p, "name")? {
+                Some(name) => Some(controller_named(&r, name, "controller.name")?),
+                None => None,
+            };
             s.target_apex_m = r.number(t, p, "target_apex_m", limits::TARGET_APEX_M, false, "m")?;
             s.torque_nm = r.number(t, p, "torque_nm", limits::TORQUE_NM, false, "N m")?;
             s.energy_gain_nm_per_j = r.number(
@@ -777,22 +793,6 @@ pub fn from_toml_str(text: &str, origin: &str) -> Result<Scenario, ScenarioError
             ))
         }
     }
-    if let Some(name) = &s.controller {
-        if !CONTROLLER_NAMES.contains(&name.as_str()) {
-            let path = if top.get("controller").is_some_and(toml::Value::is_table) {
-                "controller.name"
-            } else {
-                "controller"
-            };
-            return Err(r.err(
-                path,
-                format!(
-                    "unknown controller `{name}` in `{path}`: expected one of {CONTROLLER_NAMES:?}"
-                ),
-            ));
-        }
-    }
-
     match top.get("sensors") {
         None => {}
         Some(toml::Value::Table(t)) => {
@@ -894,7 +894,7 @@ mod tests {
         assert_eq!(p.spring_stiffness_n_per_m, 10_000.0);
         assert_eq!(name, "s.toml");
         assert_eq!(o.model, Some(Params::identified()));
-        assert_eq!(o.controller.as_deref(), Some("energy-apex"));
+        assert_eq!(o.controller, Some(ControllerKind::EnergyApex));
         assert_eq!(o.target_apex_m, Some(0.04));
         assert_eq!(o.energy_gain_nm_per_j, Some(2.0));
         assert_eq!((o.noise, o.seed), (Some(false), Some(7)));
@@ -977,7 +977,7 @@ mod tests {
     #[test]
     fn flags_override_file_override_defaults() {
         let file = Overrides {
-            controller: Some("energy-apex".into()),
+            controller: Some(ControllerKind::EnergyApex),
             target_apex_m: Some(0.04),
             duration_s: Some(15.0),
             seed: Some(3),
@@ -989,7 +989,7 @@ mod tests {
             ..Overrides::default()
         };
         let s = Settings::resolve(Some(&file), &cli);
-        assert_eq!(s.controller, "energy-apex");
+        assert_eq!(s.controller, ControllerKind::EnergyApex);
         assert_eq!(s.target_apex_m, 0.06);
         assert_eq!(s.duration_s, 15.0);
         assert_eq!(s.sensors.seed, 9);

@@ -12,6 +12,7 @@ use crate::params::{field, FieldSpec, FIELDS};
 use crate::run::{self, Summary};
 use crate::scenario::Settings;
 use hopper_control::hopper::HopperConfig;
+use hopper_control::laws::ControllerKind;
 use hopper_control::params::{self as fw, Param};
 use plotters::coord::Shift;
 use plotters::prelude::*;
@@ -177,19 +178,20 @@ impl Knob {
     }
 
     /// Why sweeping this knob would change nothing for `controller`, if so.
-    fn unused_by(&self, controller: &str) -> Option<&'static str> {
+    fn unused_by(&self, controller: ControllerKind) -> Option<&'static str> {
+        use ControllerKind as C;
         match self {
             Knob::Param(p) if !param_applies(p, controller) => Some(crate::controller::owner_of(p)),
-            Knob::Torque if !matches!(controller, "open-torque" | "modified-torque") => {
+            Knob::Torque if !matches!(controller, C::OpenTorque | C::ModifiedTorque) => {
                 Some("open-torque and modified-torque")
             }
-            Knob::EnergyGain if !matches!(controller, "energy" | "energy-apex") => {
+            Knob::EnergyGain if !matches!(controller, C::Energy | C::EnergyApex) => {
                 Some("energy and energy-apex")
             }
-            Knob::FlightKp | Knob::FlightKd if controller == "shaped" => {
+            Knob::FlightKp | Knob::FlightKd if controller == C::Shaped => {
                 Some("the controllers with the flight PD (every one but passive and shaped)")
             }
-            Knob::FlightKp | Knob::FlightKd | Knob::TargetApex if controller == "passive" => {
+            Knob::FlightKp | Knob::FlightKd | Knob::TargetApex if controller == C::Passive => {
                 Some("every controller but passive")
             }
             _ => None,
@@ -198,15 +200,9 @@ impl Knob {
 }
 
 /// Whether firmware parameter `p` belongs to `controller` (or to every one).
-fn param_applies(p: &Param, controller: &str) -> bool {
-    let Some(index) = fw::CONTROLLER_NAMES.iter().position(|n| *n == controller) else {
-        return false;
-    };
-    let Some(strategy) = fw::controller_default(index) else {
-        return false;
-    };
+fn param_applies(p: &Param, controller: ControllerKind) -> bool {
     let cfg = HopperConfig {
-        strategy,
+        strategy: controller.default_strategy(),
         ..HopperConfig::default()
     };
     fw::get(&cfg, p.name).is_ok()
@@ -432,7 +428,7 @@ impl Sweep {
                     a.spec
                 ));
             }
-            if let Some(users) = a.knob.unused_by(&self.base.controller) {
+            if let Some(users) = a.knob.unused_by(self.base.controller) {
                 return Err(format!(
                     "--param `{}`: `{}` is used by {users} only, not by the `{}` controller",
                     a.spec,

@@ -10,6 +10,7 @@
 
 use hal_sim::run::{run, Summary};
 use hal_sim::scenario::{Overrides, Settings};
+use hopper_control::laws::ControllerKind;
 
 /// The flags of one `hopper-sim run ... --json` that a test pins down. A
 /// field left `None` is a flag not given, so the command line's default
@@ -19,7 +20,7 @@ pub struct CliRun<'a> {
     /// `--params`: a preset or a TOML file.
     pub params: Option<&'a str>,
     /// `--controller`.
-    pub controller: Option<&'a str>,
+    pub controller: Option<ControllerKind>,
     /// `--start-apex`, m.
     pub start_apex_m: Option<f64>,
     /// `--target-apex`, m.
@@ -40,7 +41,7 @@ impl CliRun<'_> {
         };
         let flags = Overrides {
             plant,
-            controller: self.controller.map(str::to_string),
+            controller: self.controller,
             start_apex_m: self.start_apex_m,
             target_apex_m: self.target_apex_m,
             duration_s: self.duration_s,

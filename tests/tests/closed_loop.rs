@@ -13,6 +13,7 @@
 use hal_sim::controller::{Controller, ControllerSpec, FirmwareController};
 use hal_sim::run::{run, RunConfig, Summary};
 use hal_sim::{Params, Plant};
+use hopper_control::laws::ControllerKind;
 use sil_tests::{snapshot_text, CliRun};
 
 fn sim(spec: &ControllerSpec, params: Params, start: f64, duration: f64) -> Summary {
@@ -61,7 +62,7 @@ fn energy_apex_converges_to_the_target_from_low_and_high_starts() {
 fn energy_apex_canonical_run_converges_and_matches_its_snapshot() {
     let s = CliRun {
         params: Some("design"),
-        controller: Some("energy-apex"),
+        controller: Some(ControllerKind::EnergyApex),
         start_apex_m: Some(0.10),
         target_apex_m: Some(0.05),
         duration_s: Some(10.0),

@@ -10,6 +10,7 @@
 use hal_sim::controller::ControllerSpec;
 use hal_sim::run::{run, RunConfig, Summary};
 use hal_sim::Params;
+use hopper_control::laws::ControllerKind;
 use sil_tests::{snapshot_text, CliRun};
 
 const TARGET_M: f64 = 0.15;
@@ -45,7 +46,7 @@ fn holds_target(s: &Summary, n: usize) -> bool {
 fn shaped_reaches_and_holds_the_thesis_target_without_stop_impacts() {
     let s = CliRun {
         params: Some("design"),
-        controller: Some("shaped"),
+        controller: Some(ControllerKind::Shaped),
         start_apex_m: Some(0.05),
         target_apex_m: Some(TARGET_M),
         duration_s: Some(15.0),

@@ -19,6 +19,7 @@ use hal_sim::params_toml;
 use hal_sim::run;
 use hal_sim::scenario::{self, Overrides, Scenario, Settings};
 use hal_sim::sweep::{self, Sweep};
+use hopper_control::laws::ControllerKind;
 use std::path::PathBuf;
 
 /// `println!` that hands a write error to the caller (`?`) instead of
@@ -108,8 +109,8 @@ struct BaseArgs {
     /// shaped (docs/beat-the-thesis.md).
     /// Each is the firmware's control crate on the simulated sensors
     /// [default: passive].
-    #[arg(long)]
-    controller: Option<String>,
+    #[arg(long, value_parser = parse_controller)]
+    controller: Option<ControllerKind>,
     /// Desired apex (toe height) H_D, m; sets the energy target E_D
     /// [default: 0.05].
     #[arg(long, allow_negative_numbers = true)]
@@ -156,6 +157,16 @@ struct BaseArgs {
     set: Vec<String>,
 }
 
+/// `--controller NAME`: one of the firmware's controllers, by name.
+fn parse_controller(name: &str) -> std::result::Result<ControllerKind, String> {
+    ControllerKind::from_name(name).ok_or_else(|| {
+        format!(
+            "unknown controller `{name}`: expected one of {:?}",
+            hal_sim::controller::CONTROLLER_NAMES
+        )
+    })
+}
+
 impl BaseArgs {
     /// The flags that were given, as overrides.
     fn overrides(&self) -> Result<Overrides> {
@@ -175,7 +186,7 @@ impl BaseArgs {
                 ),
                 None => None,
             },
-            controller: self.controller.clone(),
+            controller: self.controller,
             target_apex_m: self.target_apex,
             torque_nm: self.torque,
             energy_gain_nm_per_j: self.ke,

@@ -372,6 +372,12 @@ impl ControllerKind {
     }
 }
 
+impl core::fmt::Display for ControllerKind {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
 impl Strategy {
     /// Which controller this is.
     pub fn kind(&self) -> ControllerKind {
