@@ -11,6 +11,7 @@
 pub use hopper_plant::{metrics, mock, params, plant, sensors};
 
 pub mod controller;
+pub mod csv_out;
 pub mod figures;
 pub mod flight_stability;
 pub mod inject;

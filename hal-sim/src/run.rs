@@ -2,6 +2,7 @@
 //! with trajectory sampling and the per-run summary `hopper-sim` prints.
 
 use crate::controller::{Controller, EstimatorEvents, FaultRecord};
+use crate::csv_out::Fixed;
 use crate::params::Params;
 use crate::plant::{Event, Ledger, Mode, Plant, PlantError};
 use hopper_control::telemetry::HopLedger;
@@ -524,29 +525,62 @@ fn summarize(
     }
 }
 
-/// Write the trajectory as CSV.
-pub fn write_csv(samples: &[Sample], w: &mut impl std::io::Write) -> std::io::Result<()> {
-    writeln!(
-        w,
-        "time_s,phase,z_m,zd_mps,p_m,pd_mps,toe_height_m,spring_force_n,torque_nm,energy_j"
-    )?;
-    for s in samples {
-        writeln!(
-            w,
-            "{:.6},{},{:.9},{:.9},{:.9},{:.9},{:.9},{:.6},{:.6},{:.9}",
-            s.t_s,
-            s.phase.name(),
-            s.z_m,
-            s.zd_mps,
-            s.p_m,
-            s.pd_mps,
-            s.toe_height_m,
-            s.spring_force_n,
-            s.torque_nm,
-            s.energy_j
-        )?;
+/// The columns of `trajectory.csv`, in order: [`TrajectoryRow`]'s fields.
+/// Written by hand so that a run without samples still has its header.
+pub const TRAJECTORY_COLUMNS: [&str; 10] = [
+    "time_s",
+    "phase",
+    "z_m",
+    "zd_mps",
+    "p_m",
+    "pd_mps",
+    "toe_height_m",
+    "spring_force_n",
+    "torque_nm",
+    "energy_j",
+];
+
+/// One row of `trajectory.csv`: a [`Sample`] with its columns' decimals
+/// (forces and torque 1 uN m, time 1 us, lengths 1 nm).
+#[derive(Serialize)]
+struct TrajectoryRow {
+    time_s: Fixed<6>,
+    phase: &'static str,
+    z_m: Fixed<9>,
+    zd_mps: Fixed<9>,
+    p_m: Fixed<9>,
+    pd_mps: Fixed<9>,
+    toe_height_m: Fixed<9>,
+    spring_force_n: Fixed<6>,
+    torque_nm: Fixed<6>,
+    energy_j: Fixed<9>,
+}
+
+impl From<&Sample> for TrajectoryRow {
+    fn from(s: &Sample) -> Self {
+        TrajectoryRow {
+            time_s: Fixed(s.t_s),
+            phase: s.phase.name(),
+            z_m: Fixed(s.z_m),
+            zd_mps: Fixed(s.zd_mps),
+            p_m: Fixed(s.p_m),
+            pd_mps: Fixed(s.pd_mps),
+            toe_height_m: Fixed(s.toe_height_m),
+            spring_force_n: Fixed(s.spring_force_n),
+            torque_nm: Fixed(s.torque_nm),
+            energy_j: Fixed(s.energy_j),
+        }
     }
-    Ok(())
+}
+
+/// Write the trajectory as CSV ([`TRAJECTORY_COLUMNS`]).
+pub fn write_csv(samples: &[Sample], w: &mut impl std::io::Write) -> std::io::Result<()> {
+    let mut out = csv::WriterBuilder::new().has_headers(false).from_writer(w);
+    out.write_record(TRAJECTORY_COLUMNS)?;
+    for s in samples {
+        out.serialize(TrajectoryRow::from(s))?;
+    }
+    out.flush()
 }
 
 #[cfg(test)]
@@ -559,6 +593,36 @@ mod tests {
         let s = steady_apex(&[0.3, 0.1, 0.1, 0.1, 0.101, 0.1]).unwrap();
         assert!((s - 0.1002).abs() < 1e-12);
         assert_eq!(steady_apex(&[0.1, 0.1, 0.1, 0.1, 0.11]), None);
+    }
+
+    /// The hand-written header names the struct's fields, in order.
+    #[test]
+    fn trajectory_header_is_the_row_struct() {
+        let s = Sample {
+            t_s: 0.0,
+            phase: Mode::Flight,
+            z_m: 0.0,
+            zd_mps: 0.0,
+            p_m: 0.0,
+            pd_mps: 0.0,
+            toe_height_m: 0.0,
+            spring_force_n: 0.0,
+            torque_nm: 0.0,
+            energy_j: 0.0,
+        };
+        let mut w = csv::Writer::from_writer(Vec::new());
+        w.serialize(TrajectoryRow::from(&s)).unwrap();
+        let text = String::from_utf8(w.into_inner().unwrap()).unwrap();
+        assert_eq!(
+            text.lines().next(),
+            Some(TRAJECTORY_COLUMNS.join(",").as_str())
+        );
+        let mut empty = Vec::new();
+        write_csv(&[], &mut empty).unwrap();
+        assert_eq!(
+            empty,
+            format!("{}\n", TRAJECTORY_COLUMNS.join(",")).into_bytes()
+        );
     }
 
     #[test]

@@ -8,6 +8,7 @@
 //! `torque`, `target_apex`, `start_apex`, `ke` (energy-law gain),
 //! `flight_kp`, `flight_kd` (or their column names, e.g. `torque_nm`).
 
+use crate::csv_out::Shown;
 use crate::params::{field, FieldSpec, FIELDS};
 use crate::run::{self, Summary};
 use crate::scenario::Settings;
@@ -17,7 +18,6 @@ use hopper_control::params::{self as fw, Param};
 use plotters::coord::Shift;
 use plotters::prelude::*;
 use rayon::prelude::*;
-use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 /// Most values one swept parameter may take.
@@ -499,29 +499,33 @@ impl Sweep {
     }
 
     /// The CSV text: the swept columns, then [`METRICS`]; empty cells for
-    /// undefined metrics.
-    pub fn csv(&self, rows: &[Row]) -> String {
-        let mut out = String::new();
+    /// undefined metrics. The columns depend on the sweep, so a row is a
+    /// sequence, not a struct.
+    pub fn csv(&self, rows: &[Row]) -> Result<String, String> {
         let header: Vec<&str> = self
             .axes
             .iter()
             .map(|a| a.knob.column())
             .chain(METRICS.iter().map(|(n, _)| *n))
             .collect();
-        let _ = writeln!(out, "{}", header.join(","));
+        let mut out = csv::WriterBuilder::new()
+            .has_headers(false)
+            .from_writer(Vec::new());
+        let failed = |e: csv::Error| format!("cannot format sweep.csv: {e}");
+        out.write_record(&header).map_err(failed)?;
         for r in rows {
-            let cells: Vec<String> = r
+            let cells: Vec<Option<Shown>> = r
                 .values
                 .iter()
-                .map(|v| format!("{v}"))
-                .chain(r.metrics.values().iter().map(|m| match m {
-                    Some(v) => format!("{v}"),
-                    None => String::new(),
-                }))
+                .map(|&v| Some(Shown(v)))
+                .chain(r.metrics.values().iter().map(|m| m.map(Shown)))
                 .collect();
-            let _ = writeln!(out, "{}", cells.join(","));
+            out.serialize(cells).map_err(failed)?;
         }
-        out
+        let bytes = out
+            .into_inner()
+            .map_err(|e| format!("cannot format sweep.csv: {}", e.error()))?;
+        String::from_utf8(bytes).map_err(|e| format!("cannot format sweep.csv: {e}"))
     }
 
     /// The plotted value of a row: the metric, except that the default
@@ -539,7 +543,7 @@ impl Sweep {
     /// missing), whole or not at all ([`crate::out_dir::write_whole`]).
     pub fn write(&self, rows: &[Row], dir: &Path, title: &str) -> Result<Vec<PathBuf>, String> {
         crate::plot::ensure_font()?;
-        let csv = self.csv(rows);
+        let csv = self.csv(rows)?;
         let mut svg = String::new();
         self.draw(
             SVGBackend::with_string(&mut svg, PLOT_SIZE).into_drawing_area(),

@@ -2,7 +2,7 @@
 //! the configuration (which equations and constraints hold), the forces,
 //! the accelerations and the RK4 step through them.
 
-use super::{Mode, NutStop, Plant};
+use super::{Mode, NutStop, Plant, State};
 use crate::params::Params;
 
 /// Constants derived once from [`Params`].
@@ -221,9 +221,132 @@ impl Config {
     }
 }
 
-/// Augmented state for integration: z, zd, p, pd, motor work, friction work,
-/// damping work.
-pub(super) type Y = [f64; 7];
+/// The state RK4 integrates: the mechanical state and the ledger's work
+/// integrals, which take the same stages so that the books close to the
+/// integration error.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(super) struct AugState {
+    /// Body height `z`, m.
+    pub(super) z_m: f64,
+    /// Body velocity, m/s.
+    pub(super) zd_mps: f64,
+    /// Nut displacement `p`, m.
+    pub(super) p_m: f64,
+    /// Nut velocity relative to the body, m/s.
+    pub(super) pd_mps: f64,
+    /// Net motor work on the nut since the start, J.
+    pub(super) motor_work_j: f64,
+    /// Dry friction dissipation since the start, J.
+    pub(super) friction_work_j: f64,
+    /// Spring damping dissipation since the start, J.
+    pub(super) damping_work_j: f64,
+}
+
+impl AugState {
+    /// `s` with the work integrals at zero.
+    pub(super) fn at_rest_books(s: &State) -> Self {
+        AugState {
+            z_m: s.z_m,
+            zd_mps: s.zd_mps,
+            p_m: s.p_m,
+            pd_mps: s.pd_mps,
+            motor_work_j: 0.0,
+            friction_work_j: 0.0,
+            damping_work_j: 0.0,
+        }
+    }
+
+    /// Every component finite.
+    pub(super) fn is_finite(&self) -> bool {
+        self.z_m.is_finite()
+            && self.zd_mps.is_finite()
+            && self.p_m.is_finite()
+            && self.pd_mps.is_finite()
+            && self.motor_work_j.is_finite()
+            && self.friction_work_j.is_finite()
+            && self.damping_work_j.is_finite()
+    }
+
+    /// `self + dt_s k`: an RK4 stage's argument.
+    #[inline(always)]
+    fn stage(&self, k: &Rates, dt_s: f64) -> Self {
+        AugState {
+            z_m: self.z_m + dt_s * k.zd_mps,
+            zd_mps: self.zd_mps + dt_s * k.zdd_mps2,
+            p_m: self.p_m + dt_s * k.pd_mps,
+            pd_mps: self.pd_mps + dt_s * k.pdd_mps2,
+            motor_work_j: self.motor_work_j + dt_s * k.motor_power_w,
+            friction_work_j: self.friction_work_j + dt_s * k.friction_power_w,
+            damping_work_j: self.damping_work_j + dt_s * k.damping_power_w,
+        }
+    }
+
+    /// The RK4 step of length `h_s` from `self` with stage derivatives
+    /// `k`: `y0 + h/6 (k1 + 2 k2 + 2 k3 + k4)` per component.
+    #[inline(always)]
+    fn rk4_combine(&self, k: [&Rates; 4], h_s: f64) -> Self {
+        let w = h_s / 6.0;
+        let [k1, k2, k3, k4] = k;
+        // Written out per component, in the order the array form summed.
+        let sum = |a: f64, b: f64, c: f64, d: f64| w * (a + 2.0 * b + 2.0 * c + d);
+        AugState {
+            z_m: self.z_m + sum(k1.zd_mps, k2.zd_mps, k3.zd_mps, k4.zd_mps),
+            zd_mps: self.zd_mps + sum(k1.zdd_mps2, k2.zdd_mps2, k3.zdd_mps2, k4.zdd_mps2),
+            p_m: self.p_m + sum(k1.pd_mps, k2.pd_mps, k3.pd_mps, k4.pd_mps),
+            pd_mps: self.pd_mps + sum(k1.pdd_mps2, k2.pdd_mps2, k3.pdd_mps2, k4.pdd_mps2),
+            motor_work_j: self.motor_work_j
+                + sum(
+                    k1.motor_power_w,
+                    k2.motor_power_w,
+                    k3.motor_power_w,
+                    k4.motor_power_w,
+                ),
+            friction_work_j: self.friction_work_j
+                + sum(
+                    k1.friction_power_w,
+                    k2.friction_power_w,
+                    k3.friction_power_w,
+                    k4.friction_power_w,
+                ),
+            damping_work_j: self.damping_work_j
+                + sum(
+                    k1.damping_power_w,
+                    k2.damping_power_w,
+                    k3.damping_power_w,
+                    k4.damping_power_w,
+                ),
+        }
+    }
+
+    /// The components in a fixed order, for the tests' comparisons.
+    #[cfg(test)]
+    pub(super) fn to_array(self) -> [f64; 7] {
+        [
+            self.z_m,
+            self.zd_mps,
+            self.p_m,
+            self.pd_mps,
+            self.motor_work_j,
+            self.friction_work_j,
+            self.damping_work_j,
+        ]
+    }
+}
+
+/// Time derivative of an [`AugState`].
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Rates {
+    zd_mps: f64,
+    zdd_mps2: f64,
+    pd_mps: f64,
+    pdd_mps2: f64,
+    /// `drive pd`, W.
+    motor_power_w: f64,
+    /// `friction zd`, W.
+    friction_power_w: f64,
+    /// `c rate^2`, W.
+    damping_power_w: f64,
+}
 
 /// Generalised forces (friction excluded).
 #[derive(Clone, Copy)]
@@ -233,11 +356,11 @@ pub(super) struct Forces {
 }
 
 impl Plant {
-    pub(super) fn compression(c: &Coef, stance: bool, y: &Y) -> f64 {
+    pub(super) fn compression(c: &Coef, stance: bool, y: &AugState) -> f64 {
         if stance {
-            c.preload + c.l0 - y[0] + y[2]
+            c.preload + c.l0 - y.z_m + y.p_m
         } else {
-            c.preload + y[2]
+            c.preload + y.p_m
         }
     }
 
@@ -245,8 +368,8 @@ impl Plant {
         0.5 * c.alpha * pd * pd + 0.5 * m_zz * zd * zd - c.m_nut * zd * pd
     }
 
-    pub(super) fn energy(c: &Coef, mode: Mode, y: &Y) -> f64 {
-        let (z, zd, p, pd) = (y[0], y[1], y[2], y[3]);
+    pub(super) fn energy(c: &Coef, mode: Mode, y: &AugState) -> f64 {
+        let (z, zd, p, pd) = (y.z_m, y.zd_mps, y.p_m, y.pd_mps);
         let stance = mode != Mode::Flight;
         let m_zz = if stance { c.m_body_nut } else { c.m_total };
         let x = Self::compression(c, stance, y);
@@ -261,9 +384,9 @@ impl Plant {
     }
 
     #[inline(always)]
-    pub(super) fn forces(&self, cfg: &Config, y: &Y) -> Forces {
+    pub(super) fn forces(&self, cfg: &Config, y: &AugState) -> Forces {
         let c = &self.c;
-        let (zd, pd) = (y[1], y[3]);
+        let (zd, pd) = (y.zd_mps, y.pd_mps);
         let torque_nm = c.kt * c.motor_current_from_pd(self.cmd_limited_a, pd);
         let drive = c.eta_over_r * torque_nm;
         let stance = cfg.stance_equations();
@@ -324,7 +447,7 @@ impl Plant {
     }
 
     /// Force on `z` needed to hold the body still (up positive), N.
-    pub(super) fn z_hold_force(&self, cfg: &Config, y: &Y) -> f64 {
+    pub(super) fn z_hold_force(&self, cfg: &Config, y: &AugState) -> f64 {
         let f = self.forces(cfg, y);
         let pdd = if cfg.nut == NutStop::Free {
             f.f_p * self.c.inv_alpha
@@ -335,7 +458,7 @@ impl Plant {
     }
 
     /// Force on `p` needed to hold the nut still (down positive), N.
-    pub(super) fn p_hold_force(&self, cfg: &Config, y: &Y) -> f64 {
+    pub(super) fn p_hold_force(&self, cfg: &Config, y: &AugState) -> f64 {
         let f = self.forces(cfg, y);
         let mut held = *cfg;
         held.nut = NutStop::Top; // any non-free value: solve with pdd = 0
@@ -344,7 +467,7 @@ impl Plant {
     }
 
     /// One RK4 step of length `h` from `y0` in the present configuration.
-    pub(super) fn rk4(&self, y0: &Y, h: f64) -> Y {
+    pub(super) fn rk4(&self, y0: &AugState, h: f64) -> AugState {
         let cfg = &self.cfg;
         // The configuration is fixed over a step: pick the derivative
         // specialised for it once, not in every evaluation.
@@ -367,31 +490,20 @@ impl Plant {
     #[inline(always)]
     pub(super) fn rk4_in<const STANCE: bool, const Z_FREE: bool, const P_FREE: bool>(
         &self,
-        y0: &Y,
+        y0: &AugState,
         h: f64,
-    ) -> Y {
+    ) -> AugState {
         let c = &self.c;
         let level = if STANCE { c.f_stance } else { c.f_flight };
         // Friction on z while sliding is `-level * z_dir`.
         let friction = level * self.cfg.z_dir;
         let lin = Linear::new::<STANCE, Z_FREE, P_FREE>(c, friction);
-        let d = |y: &Y| self.deriv_in::<STANCE, Z_FREE, P_FREE>(y, friction, &lin);
-        let add = |a: &Y, k: &Y, s: f64| -> Y {
-            let mut o = *a;
-            for (oi, ki) in o.iter_mut().zip(k.iter()) {
-                *oi += s * ki;
-            }
-            o
-        };
+        let d = |y: &AugState| self.deriv_in::<STANCE, Z_FREE, P_FREE>(y, friction, &lin);
         let k1 = d(y0);
-        let k2 = d(&add(y0, &k1, 0.5 * h));
-        let k3 = d(&add(y0, &k2, 0.5 * h));
-        let k4 = d(&add(y0, &k3, h));
-        let mut out = *y0;
-        for (i, o) in out.iter_mut().enumerate() {
-            *o += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
-        }
-        out
+        let k2 = d(&y0.stage(&k1, 0.5 * h));
+        let k3 = d(&y0.stage(&k2, 0.5 * h));
+        let k4 = d(&y0.stage(&k3, h));
+        y0.rk4_combine([&k1, &k2, &k3, &k4], h)
     }
 
     /// Time derivative of the augmented state: [`Self::forces`] and
@@ -401,12 +513,12 @@ impl Plant {
     #[inline(always)]
     pub(super) fn deriv_in<const STANCE: bool, const Z_FREE: bool, const P_FREE: bool>(
         &self,
-        y: &Y,
+        y: &AugState,
         friction: f64,
         lin: &Linear,
-    ) -> Y {
+    ) -> Rates {
         let c = &self.c;
-        let (zd, pd) = (y[1], y[3]);
+        let (zd, pd) = (y.zd_mps, y.pd_mps);
         let torque_nm = c.kt * c.motor_current_from_pd(self.cmd_limited_a, pd);
         let drive = c.eta_over_r * torque_nm;
         let rate = if STANCE { pd - zd } else { pd };
@@ -419,6 +531,14 @@ impl Plant {
         let zd = if Z_FREE { zd } else { 0.0 };
         let pd = if P_FREE { pd } else { 0.0 };
         let friction_w = if Z_FREE { friction * zd } else { 0.0 };
-        [zd, zdd, pd, pdd, drive * pd, friction_w, c.c * rate * rate]
+        Rates {
+            zd_mps: zd,
+            zdd_mps2: zdd,
+            pd_mps: pd,
+            pdd_mps2: pdd,
+            motor_power_w: drive * pd,
+            friction_power_w: friction_w,
+            damping_power_w: c.c * rate * rate,
+        }
     }
 }

@@ -3,7 +3,7 @@
 //! integrates up to the end of the period and locates every crossing in
 //! time by bisection.
 
-use super::dynamics::{Config, Y};
+use super::dynamics::{AugState, Config};
 use super::{Event, Mode, NutStop, Plant, PlantError};
 
 /// Events are located in time to this tolerance, s.
@@ -77,15 +77,15 @@ impl Plant {
     }
 
     #[inline(always)]
-    pub(super) fn guard(&self, y: &Y, g: Guard) -> f64 {
+    pub(super) fn guard(&self, y: &AugState, g: Guard) -> f64 {
         let c = &self.c;
         let cfg = &self.cfg;
         match g {
-            Guard::StopTop => -y[2],
-            Guard::StopBottom => y[2] - c.stroke,
-            Guard::Touchdown => c.l0 - y[0],
-            Guard::Liftoff => y[0] - c.l0,
-            Guard::ZeroVelocity => -cfg.z_dir * y[1],
+            Guard::StopTop => -y.p_m,
+            Guard::StopBottom => y.p_m - c.stroke,
+            Guard::Touchdown => c.l0 - y.z_m,
+            Guard::Liftoff => y.z_m - c.l0,
+            Guard::ZeroVelocity => -cfg.z_dir * y.zd_mps,
             Guard::Unstick => libm::fabs(self.z_hold_force(cfg, y)) - self.friction_level(cfg),
             Guard::Release => {
                 let r = self.p_hold_force(cfg, y);
@@ -111,7 +111,7 @@ impl Plant {
 
     /// The first guard, in priority order, that fires at `y`.
     #[cfg(test)]
-    pub(super) fn first_firing_reference(&self, y: &Y) -> Option<Guard> {
+    pub(super) fn first_firing_reference(&self, y: &AugState) -> Option<Guard> {
         let (gs, n) = self.active_guards();
         gs.iter().take(n).copied().find(|&g| self.guard(y, g) > 0.0)
     }
@@ -120,19 +120,19 @@ impl Plant {
     /// present configuration, in priority order (nut, contact, body
     /// velocity), evaluated one by one until one fires.
     #[inline]
-    pub(super) fn first_firing(&self, y: &Y) -> Option<Guard> {
+    pub(super) fn first_firing(&self, y: &AugState) -> Option<Guard> {
         self.first_firing_in::<false>(y)
     }
 
     /// [`Self::first_firing`] when the guards that do not depend on the
     /// motor command are known not to fire at `y`: only the force guards
     /// (stiction, nut release, standing) are evaluated, in the same order.
-    pub(super) fn first_firing_force_guards(&self, y: &Y) -> Option<Guard> {
+    pub(super) fn first_firing_force_guards(&self, y: &AugState) -> Option<Guard> {
         self.first_firing_in::<true>(y)
     }
 
     #[inline(always)]
-    pub(super) fn first_firing_in<const FORCE_ONLY: bool>(&self, y: &Y) -> Option<Guard> {
+    pub(super) fn first_firing_in<const FORCE_ONLY: bool>(&self, y: &AugState) -> Option<Guard> {
         let cfg = &self.cfg;
         let fires = |g: Guard| (!FORCE_ONLY || g.depends_on_command()) && self.guard(y, g) > 0.0;
         if cfg.nut == NutStop::Free {
@@ -212,7 +212,7 @@ impl Plant {
             // integrating, not after).
             if remaining > TIME_TOL_S && t_end - (self.t_s + h) <= TIME_TOL_S {
                 let y1 = self.rk4_step::<{ cfg!(feature = "specialised-step") }>(&self.y, h, t_end);
-                if self.first_firing(&y1).is_none() && y1.iter().all(|v| v.is_finite()) {
+                if self.first_firing(&y1).is_none() && y1.is_finite() {
                     self.y = y1;
                     self.t_s = t_end;
                     self.sync_ledger();
@@ -284,7 +284,7 @@ impl Plant {
                 all_clear = false;
             }
             self.sync_ledger();
-            if !self.y.iter().all(|v| v.is_finite()) {
+            if !self.y.is_finite() {
                 return Err(PlantError::NonFiniteState { t_s: self.t_s });
             }
         }
@@ -299,6 +299,7 @@ impl Plant {
 mod tests {
     use super::*;
     use crate::params::Params;
+    use crate::plant::State;
 
     /// The unrolled guard search agrees with the table-driven one in every
     /// configuration, for states on both sides of every guard.
@@ -330,7 +331,12 @@ mod tests {
                                             plant.cmd_a = cmd;
                                             plant.cmd_limited_a =
                                                 cmd.clamp(-plant.c.i_limit, plant.c.i_limit);
-                                            let y = [z, zd, p, pd, 0.0, 0.0, 0.0];
+                                            let y = AugState::at_rest_books(&State {
+                                                z_m: z,
+                                                zd_mps: zd,
+                                                p_m: p,
+                                                pd_mps: pd,
+                                            });
                                             let want = plant.first_firing_reference(&y);
                                             assert_eq!(plant.first_firing(&y), want);
                                             // With the state guards clear, the

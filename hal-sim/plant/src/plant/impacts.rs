@@ -7,15 +7,15 @@ use super::{Event, Mode, NutStop, Plant, SETTLE_SPEED_MPS};
 
 impl Plant {
     pub(super) fn sync_ledger(&mut self) {
-        self.ledger.motor_work_j = self.y[4];
-        self.ledger.friction_j = self.y[5];
-        self.ledger.damping_j = self.y[6];
+        self.ledger.motor_work_j = self.y.motor_work_j;
+        self.ledger.friction_j = self.y.friction_work_j;
+        self.ledger.damping_j = self.y.damping_work_j;
     }
 
     /// After `zd` reached 0 (or at the start): stick if stiction can hold the
     /// body, else slide in the direction of the net force.
     pub(super) fn decide_stick_or_slide(&mut self) {
-        self.y[1] = 0.0;
+        self.y.zd_mps = 0.0;
         let hold = self.z_hold_force(&self.cfg, &self.y);
         if libm::fabs(hold) <= self.friction_level(&self.cfg) {
             self.cfg.z_stuck = true;
@@ -36,17 +36,17 @@ impl Plant {
                 } else {
                     (NutStop::Bottom, c.stroke)
                 };
-                let pd = self.y[3];
+                let pd = self.y.pd_mps;
                 let e_before = self.energy_j();
-                self.y[2] = p;
-                self.y[3] = 0.0;
+                self.y.p_m = p;
+                self.y.pd_mps = 0.0;
                 // The stop's impulse acts on p only: m_zz zd - m_s pd is
                 // conserved. A body held by stiction or standing is knocked
                 // loose by it (stiction cannot absorb an impulse).
                 let m_zz = self.m_zz(&self.cfg);
-                self.y[1] -= c.m_nut * pd / m_zz;
+                self.y.zd_mps -= c.m_nut * pd / m_zz;
                 self.cfg.nut = stop;
-                let zd = self.y[1];
+                let zd = self.y.zd_mps;
                 let loss = e_before - self.energy_j();
                 self.ledger.stop_impact_loss_j += loss;
                 on_event(Event::StopImpact {
@@ -67,9 +67,9 @@ impl Plant {
                 }
             }
             Guard::Touchdown => {
-                let zd = self.y[1];
+                let zd = self.y.zd_mps;
                 let loss = 0.5 * c.m_u * zd * zd;
-                self.y[0] = c.l0;
+                self.y.z_m = c.l0;
                 self.cfg.mode = Mode::Stance;
                 self.ledger.touchdown_loss_j += loss;
                 on_event(Event::Touchdown {
@@ -79,7 +79,7 @@ impl Plant {
                 });
             }
             Guard::Liftoff => {
-                self.y[0] = c.l0;
+                self.y.z_m = c.l0;
                 self.lift_off(on_event);
             }
             Guard::ZeroVelocity => {
@@ -91,11 +91,11 @@ impl Plant {
                 match (self.cfg.mode, rising) {
                     (Mode::Flight, true) => on_event(Event::Apex {
                         t_s,
-                        toe_height_m: self.y[0] - c.l0,
+                        toe_height_m: self.y.z_m - c.l0,
                     }),
                     (Mode::Stance, false) => on_event(Event::Bottom {
                         t_s,
-                        z_m: self.y[0],
+                        z_m: self.y.z_m,
                     }),
                     _ => {}
                 }
@@ -130,10 +130,10 @@ impl Plant {
     pub(super) fn lift_off(&mut self, on_event: &mut impl FnMut(Event)) {
         let c = self.c;
         let t_s = self.t_s;
-        let (zd, pd) = (self.y[1], self.y[3]);
+        let (zd, pd) = (self.y.zd_mps, self.y.pd_mps);
         let e_before = self.energy_j();
         if zd < SETTLE_SPEED_MPS {
-            self.y[1] = 0.0;
+            self.y.zd_mps = 0.0;
             self.cfg.mode = Mode::Standing;
             self.cfg.z_stuck = false;
             let loss = e_before - self.energy_j();
@@ -153,8 +153,8 @@ impl Plant {
             // Nut held by a stop (pd = 0): eq 2.40 exactly.
             (b / c.m_total, 0.0)
         };
-        self.y[1] = zd_after;
-        self.y[3] = pd_after;
+        self.y.zd_mps = zd_after;
+        self.y.pd_mps = pd_after;
         self.cfg.mode = Mode::Flight;
         self.cfg.z_dir = 1.0;
         self.cfg.z_stuck = false;

@@ -66,7 +66,7 @@ mod impacts;
 mod step_map;
 
 use crate::params::{ParamError, Params};
-use dynamics::{Coef, Config, Y};
+use dynamics::{AugState, Coef, Config};
 use events::{Guard, MAX_EVENTS_PER_ADVANCE};
 use step_map::StepMaps;
 
@@ -255,7 +255,7 @@ impl core::fmt::Display for PlantError {
 pub struct Plant {
     params: Params,
     c: Coef,
-    y: Y,
+    y: AugState,
     t_s: f64,
     cfg: Config,
     ledger: Ledger,
@@ -307,7 +307,7 @@ impl Plant {
         let mut plant = Plant {
             params,
             c,
-            y: [s.z_m, s.zd_mps, s.p_m, s.pd_mps, 0.0, 0.0, 0.0],
+            y: AugState::at_rest_books(&s),
             t_s: 0.0,
             cfg: Config {
                 mode,
@@ -365,10 +365,10 @@ impl Plant {
     /// Current mechanical state.
     pub fn state(&self) -> State {
         State {
-            z_m: self.y[0],
-            zd_mps: self.y[1],
-            p_m: self.y[2],
-            pd_mps: self.y[3],
+            z_m: self.y.z_m,
+            zd_mps: self.y.zd_mps,
+            p_m: self.y.p_m,
+            pd_mps: self.y.pd_mps,
         }
     }
 
@@ -395,7 +395,7 @@ impl Plant {
     /// Toe height above the ground, m (0 on the ground).
     pub fn toe_height_m(&self) -> f64 {
         match self.cfg.mode {
-            Mode::Flight => self.y[0] - self.c.l0,
+            Mode::Flight => self.y.z_m - self.c.l0,
             _ => 0.0,
         }
     }
@@ -409,21 +409,21 @@ impl Plant {
     pub fn spring_force_n(&self) -> f64 {
         let y = &self.y;
         let rate = if self.cfg.stance_equations() {
-            y[3] - y[1]
+            y.pd_mps - y.zd_mps
         } else {
-            y[3]
+            y.pd_mps
         };
         self.c.k * self.spring_compression_m() + self.c.c * rate
     }
 
     /// Motor angle `theta = p / r`, rad (eq 2.4).
     pub fn motor_angle_rad(&self) -> f64 {
-        self.y[2] / self.c.r
+        self.y.p_m / self.c.r
     }
 
     /// Motor speed, rad/s.
     pub fn motor_speed_rad_s(&self) -> f64 {
-        self.motor_speed_at_rad_s(self.y[3])
+        self.motor_speed_at_rad_s(self.y.pd_mps)
     }
 
     /// Motor speed at nut speed `pd_mps`, rad/s (`theta_dot = pd / r`,
@@ -436,7 +436,8 @@ impl Plant {
     /// Current the amplifier drives for the last command at the present
     /// speed, A.
     pub fn motor_current_a(&self) -> f64 {
-        self.c.motor_current_from_pd(self.cmd_limited_a, self.y[3])
+        self.c
+            .motor_current_from_pd(self.cmd_limited_a, self.y.pd_mps)
     }
 
     /// Motor torque for the last command at the present speed, N m.

@@ -1,7 +1,7 @@
 //! The common RK4 step, precomputed once per configuration as the linear
 //! map it is there (no spring damping, the supply not limiting the current).
 
-use super::dynamics::{Coef, Linear, Y};
+use super::dynamics::{AugState, Coef, Linear};
 use super::{NutStop, Plant};
 
 /// A 4x4 matrix over the mechanical state `x = (z, zd, p, pd)`.
@@ -187,7 +187,12 @@ impl Plant {
     /// without it (the QEMU image, where `f64` is software and the eight
     /// copies would take 10 KB of flash), the generic one.
     #[inline(always)]
-    pub(super) fn rk4_step<const SPECIALISED: bool>(&self, y0: &Y, h: f64, t_end: f64) -> Y {
+    pub(super) fn rk4_step<const SPECIALISED: bool>(
+        &self,
+        y0: &AugState,
+        h: f64,
+        t_end: f64,
+    ) -> AugState {
         match self.rk4_linear::<SPECIALISED>(y0, h, t_end) {
             Some(y1) => y1,
             None => self.rk4(y0, h),
@@ -201,10 +206,10 @@ impl Plant {
     #[inline(always)]
     pub(super) fn rk4_linear<const SPECIALISED: bool>(
         &self,
-        y0: &Y,
+        y0: &AugState,
         h: f64,
         t_end: f64,
-    ) -> Option<Y> {
+    ) -> Option<AugState> {
         // `h` is `t_end - t_s`, or `max_step_s`: a period of the maps' step
         // may differ from it by the clock's rounding, up to an ulp of
         // `t_end`. Integrating the maps' step instead is an error of that
@@ -243,9 +248,9 @@ impl Plant {
     #[inline(always)]
     pub(super) fn rk4_linear_in<const Z_FREE: bool, const P_FREE: bool>(
         &self,
-        y0: &Y,
+        y0: &AugState,
         map: &StepMap,
-    ) -> Option<Y> {
+    ) -> Option<AugState> {
         let c = &self.c;
         let cfg = &self.cfg;
         let cmd = self.cmd_limited_a;
@@ -264,7 +269,7 @@ impl Plant {
             c.f_flight
         };
         let friction = level * cfg.z_dir;
-        let (z, zd, p, pd) = (y0[0], y0[1], y0[2], y0[3]);
+        let (z, zd, p, pd) = (y0.z_m, y0.zd_mps, y0.p_m, y0.pd_mps);
         let x = [z, zd, p, pd];
         let u = [drive, friction];
         let (pd2, pd3, pd4) = if P_FREE {
@@ -299,15 +304,15 @@ impl Plant {
         };
         // Ledger: motor work `drive dp`, friction work `friction dz` (zero
         // for a held body: dz = 0); no damping work (c = 0).
-        Some([
-            z + dz,
-            zd + dzd,
-            p + dp,
-            pd + dpd,
-            y0[4] + drive * dp,
-            y0[5] + friction * dz,
-            y0[6],
-        ])
+        Some(AugState {
+            z_m: z + dz,
+            zd_mps: zd + dzd,
+            p_m: p + dp,
+            pd_mps: pd + dpd,
+            motor_work_j: y0.motor_work_j + drive * dp,
+            friction_work_j: y0.friction_work_j + friction * dz,
+            damping_work_j: y0.damping_work_j,
+        })
     }
 }
 
@@ -357,15 +362,15 @@ mod tests {
                             let cmd = uniform(-1.2, 1.2) * c.i_limit;
                             plant.cmd_a = cmd;
                             plant.cmd_limited_a = cmd.clamp(-c.i_limit, c.i_limit);
-                            let y0 = [
-                                c.l0 + uniform(-0.05, 0.05),
-                                uniform(-2.0, 2.0),
-                                uniform(0.0, c.stroke),
-                                uniform(-pd_max, pd_max),
-                                uniform(-5.0, 5.0),
-                                uniform(0.0, 5.0),
-                                uniform(0.0, 5.0),
-                            ];
+                            let y0 = AugState {
+                                z_m: c.l0 + uniform(-0.05, 0.05),
+                                zd_mps: uniform(-2.0, 2.0),
+                                p_m: uniform(0.0, c.stroke),
+                                pd_mps: uniform(-pd_max, pd_max),
+                                motor_work_j: uniform(-5.0, 5.0),
+                                friction_work_j: uniform(0.0, 5.0),
+                                damping_work_j: uniform(0.0, 5.0),
+                            };
                             let want = plant.rk4(&y0, h);
                             let Some(got) = plant.rk4_linear::<true>(&y0, h, 1.0) else {
                                 assert!(plant.rk4_linear::<false>(&y0, h, 1.0).is_none());
@@ -376,14 +381,18 @@ mod tests {
                             // The generic form: the same up to the sign of
                             // a zero increment.
                             assert_eq!(plant.rk4_linear::<false>(&y0, h, 1.0), Some(got));
-                            for i in 0..7 {
-                                let scale = libm::fabs(want[i]).max(libm::fabs(y0[i]));
+                            let components = got
+                                .to_array()
+                                .into_iter()
+                                .zip(want.to_array())
+                                .zip(y0.to_array())
+                                .enumerate();
+                            for (i, ((got_i, want_i), y0_i)) in components {
+                                let scale = libm::fabs(want_i).max(libm::fabs(y0_i));
                                 assert!(
-                                    libm::fabs(got[i] - want[i]) <= 1e-12 * scale,
-                                    "{:?} y0 {y0:?} cmd {cmd}: [{i}] {} vs {}",
+                                    libm::fabs(got_i - want_i) <= 1e-12 * scale,
+                                    "{:?} y0 {y0:?} cmd {cmd}: [{i}] {got_i} vs {want_i}",
                                     plant.cfg,
-                                    got[i],
-                                    want[i]
                                 );
                             }
                             // Outside the maps' step (beyond the clock's
