@@ -9,7 +9,7 @@
 //!
 //! Flight adds the unsprung mass riding with the body:
 //! `0.5 m_u zd^2 + m_u g (z - l0)`. This is the simulator's energy
-//! (`hal-sim/src/plant.rs`) with the spring term taken from the load cell.
+//! (`hal-sim/plant/src/plant/dynamics.rs`) with the spring term taken from the load cell.
 //! The load-cell force is clamped at `>= 0` (a spring cannot pull), so a
 //! noisy negative reading never adds energy.
 
@@ -206,7 +206,7 @@ pub fn body_energy_j(m: &ModelParams, x: &EnergyInput) -> Result<f32, EnergyErro
 mod tests {
     use super::*;
 
-    /// The simulator's energy (hal-sim `Plant::energy`), written out in f64:
+    /// The simulator's energy (hopper-plant `Plant::energy`), written out in f64:
     /// `0.5 alpha pd^2 + 0.5 m_zz zd^2 - m_s zd pd + M g z + m_s g (z - p)
     ///  + 0.5 k x^2 (+ m_u g (z - l0) in flight)`.
     fn plant_energy(m: &ModelParams, z: f64, zd: f64, p: f64, pd: f64, stance: bool) -> f64 {

@@ -4,7 +4,7 @@
 //! [`HopperIo`] is this project's own trait. It works in raw units (counts and
 //! converter codes); [`crate::calibration`] turns them into SI.
 //! The board (`hopper-app`'s `BoardIo`, register-level: injected ADC,
-//! timer encoders, DAC, GPIO) and the simulator (`hal-sim`'s mock I/O)
+//! timer encoders, DAC, GPIO) and the simulator (`hopper-plant`'s mock I/O)
 //! implement it.
 
 /// One raw reading of every sensor, taken at the start of a control period.
