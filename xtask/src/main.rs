@@ -28,8 +28,13 @@ mod qemu;
 
 const TARGET: &str = "thumbv7em-none-eabihf";
 
-/// Flash budget for the board image with defmt (text + data), bytes.
-const FLASH_BUDGET_BYTES: u64 = 32 * 1024;
+/// Flash budget for the board image with defmt (text + data), bytes: 40 KiB
+/// of the STM32F405's 1 MiB. It was 32 KiB while the board could only run
+/// its compile-time default controller; with the controller chosen at run
+/// time (the parameter table, issue 15, and the link of issue #10) every
+/// controller's constructor and validation is in the image
+/// (`Controller::new` alone is 7.5 KB): 34.6 KB after issue 15.
+const FLASH_BUDGET_BYTES: u64 = 40 * 1024;
 /// Static RAM budget (data + bss) without the telemetry capture buffer, bytes.
 const RAM_BUDGET_BYTES: u64 = 16 * 1024;
 
