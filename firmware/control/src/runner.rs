@@ -19,6 +19,12 @@
 //! period met its deadline (the board: the next trigger is not pending yet;
 //! QEMU: SysTick not pending; the host: always); `overrun_limit` late
 //! periods in a row latch [`Fault::Overrun`].
+//!
+//! The arming state of issue #10 (disarmed at boot, armed only on a checked
+//! command, disarmed on a fault, the e-stop or link loss) belongs here, in
+//! front of step 3: the runner already decides what the amplifier enable
+//! gets in every period, and the board, QEMU and the host would all inherit
+//! it without a change of their own.
 
 use crate::hal::HopperIo;
 use crate::hopper::{ConfigError, Hopper, HopperConfig, StepOutput};
