@@ -90,25 +90,30 @@ pub struct Calibration {
 }
 
 impl Default for Calibration {
+    /// The parameter table's defaults ([`crate::params`]; *placeholders*
+    /// until the robot is calibrated). The lead, torque constant and start
+    /// height are the default model's (`HopperConfig::for_model` sets them),
+    /// the widths the board's converters.
     fn default() -> Self {
+        use crate::params as p;
         Self {
-            motor_counts_per_rev: 2000,
+            motor_counts_per_rev: p::CAL_MOTOR_COUNTS_PER_REV.default as u32,
             motor_counter_bits: 16,
-            motor_counts_positive_down: true,
+            motor_counts_positive_down: p::CAL_MOTOR_POSITIVE_DOWN.default_flag(),
             lead_m_per_rev: 0.005,
-            height_counts_per_rev: 2000,
+            height_counts_per_rev: p::CAL_HEIGHT_COUNTS_PER_REV.default as u32,
             height_counter_bits: 16,
-            height_counts_positive_up: true,
-            height_pulley_radius_m: 0.02,
+            height_counts_positive_up: p::CAL_HEIGHT_POSITIVE_UP.default_flag(),
+            height_pulley_radius_m: p::CAL_PULLEY_RADIUS.default,
             height_at_origin_m: 0.61,
-            loadcell_gain_n_per_code: 0.5,
-            loadcell_offset_code: 200.0,
-            pot_gain_m_per_code: 0.12 / 4096.0,
-            pot_offset_code: 205.0,
+            loadcell_gain_n_per_code: p::CAL_LOADCELL_GAIN.default,
+            loadcell_offset_code: p::CAL_LOADCELL_OFFSET.default,
+            pot_gain_m_per_code: p::CAL_POT_GAIN.default,
+            pot_offset_code: p::CAL_POT_OFFSET.default,
             adc_bits: 12,
             dac_bits: 12,
-            dac_zero_code: 2048,
-            dac_amps_per_code: 40.0 / 2048.0,
+            dac_zero_code: p::CAL_DAC_ZERO.default as u16,
+            dac_amps_per_code: p::CAL_DAC_AMPS.default,
             torque_constant_nm_per_a: 0.0297,
         }
     }

@@ -102,15 +102,16 @@ pub struct EstimatorConfig {
 
 impl Default for EstimatorConfig {
     fn default() -> Self {
+        use crate::params as p;
         Self {
-            touchdown_force_n: 40.0,
-            liftoff_force_n: 20.0,
-            touchdown_compression_m: 0.002,
-            liftoff_compression_m: 0.001,
-            debounce_samples: 3,
-            velocity_filter_gain: 0.9,
-            apex_arm_velocity_mps: 0.1,
-            bottom_arm_velocity_mps: 0.1,
+            touchdown_force_n: p::EST_TOUCHDOWN_FORCE_N.default,
+            liftoff_force_n: p::EST_LIFTOFF_FORCE_N.default,
+            touchdown_compression_m: p::EST_TOUCHDOWN_COMPRESSION_M.default,
+            liftoff_compression_m: p::EST_LIFTOFF_COMPRESSION_M.default,
+            debounce_samples: p::EST_DEBOUNCE_SAMPLES.default as u8,
+            velocity_filter_gain: p::EST_FILTER_GAIN.default,
+            apex_arm_velocity_mps: p::EST_APEX_ARM_MPS.default,
+            bottom_arm_velocity_mps: p::EST_BOTTOM_ARM_MPS.default,
         }
     }
 }

@@ -118,7 +118,7 @@ const STEP_CLOSED_GAINS: [&str; 2] = ["fixed", "normalised"];
 /// Names of [`ENERGY_APEX_MEASURE`]'s choices.
 const ENERGY_MEASURES: [&str; 2] = ["total", "body"];
 
-use Kind::{Flag, Real};
+use Kind::{Count, Flag, Real};
 
 // --- The controller and its target -------------------------------------
 param!(
@@ -583,6 +583,507 @@ param!(
     "Speed at which the nut arrives at its stop."
 );
 
+// --- Phase estimator, supervisor limits, calibration ------------------------
+// Set with the amplifier disabled only. Derived from the model and not
+// listed: the overcurrent trip (10x the current limit), the stroke soft
+// limits and the stops, the lead, torque constant and start height of the
+// calibration, and the counter and converter widths (board facts).
+param!(
+    EST_TOUCHDOWN_FORCE_N,
+    "estimator.touchdown_force_n",
+    "N",
+    Real,
+    0.0,
+    1.0e4,
+    40.0,
+    DISARMED,
+    "Load-cell force beyond k (delta0 + p) that counts as touchdown evidence (8 sigma of 5 N)."
+);
+param!(
+    EST_LIFTOFF_FORCE_N,
+    "estimator.liftoff_force_n",
+    "N",
+    Real,
+    -1.0e4,
+    1.0e4,
+    20.0,
+    DISARMED,
+    "Excess force below which liftoff is considered (below the touchdown force)."
+);
+param!(
+    EST_TOUCHDOWN_COMPRESSION_M,
+    "estimator.touchdown_compression_m",
+    "m",
+    Real,
+    0.0,
+    0.5,
+    0.002,
+    DISARMED,
+    "Potentiometer compression above which touchdown is considered."
+);
+param!(
+    EST_LIFTOFF_COMPRESSION_M,
+    "estimator.liftoff_compression_m",
+    "m",
+    Real,
+    -0.5,
+    0.5,
+    0.001,
+    DISARMED,
+    "Potentiometer compression below which liftoff is considered (below the touchdown compression)."
+);
+param!(
+    EST_DEBOUNCE_SAMPLES,
+    "estimator.debounce_samples",
+    "samples",
+    Count,
+    1.0,
+    255.0,
+    3.0,
+    DISARMED,
+    "Consecutive agreeing samples needed to change phase."
+);
+param!(
+    EST_FILTER_GAIN,
+    "estimator.velocity_filter_gain",
+    "1",
+    Real,
+    0.0,
+    0.999,
+    0.9,
+    DISARMED,
+    "Filter gain G of eq 4.1 for both velocities."
+);
+param!(
+    EST_APEX_ARM_MPS,
+    "estimator.apex_arm_velocity_mps",
+    "m/s",
+    Real,
+    1.0e-4,
+    10.0,
+    0.1,
+    DISARMED,
+    "Upward body velocity that arms apex detection in flight."
+);
+param!(
+    EST_BOTTOM_ARM_MPS,
+    "estimator.bottom_arm_velocity_mps",
+    "m/s",
+    Real,
+    1.0e-4,
+    10.0,
+    0.1,
+    DISARMED,
+    "Downward body speed that arms bottom detection in stance."
+);
+param!(
+    SUP_MAX_MOTOR_DELTA,
+    "supervisor.max_motor_delta_counts",
+    "counts",
+    Count,
+    1.0,
+    1.0e6,
+    64.0,
+    DISARMED,
+    "Largest plausible motor counter change per period (1000 rad/s at 2000 counts/rev and 10 kHz is 32, x2)."
+);
+param!(
+    SUP_MAX_HEIGHT_DELTA,
+    "supervisor.max_height_delta_counts",
+    "counts",
+    Count,
+    1.0,
+    1.0e6,
+    32.0,
+    DISARMED,
+    "Largest plausible height counter change per period (10 m/s on a 20 mm pulley at 10 kHz is 16, x2)."
+);
+param!(
+    SUP_NUT_POSITION_MIN_M,
+    "supervisor.nut_position_min_m",
+    "m",
+    Real,
+    -1.0,
+    1.0,
+    -0.01,
+    DISARMED,
+    "Lowest plausible nut position (stops at 0 and 0.05 m)."
+);
+param!(
+    SUP_NUT_POSITION_MAX_M,
+    "supervisor.nut_position_max_m",
+    "m",
+    Real,
+    -1.0,
+    1.0,
+    0.06,
+    DISARMED,
+    "Highest plausible nut position (stops at 0 and 0.05 m)."
+);
+param!(
+    SUP_NUT_VELOCITY_MIN_MPS,
+    "supervisor.nut_velocity_min_mps",
+    "m/s",
+    Real,
+    -100.0,
+    100.0,
+    -1.0,
+    DISARMED,
+    "Lowest plausible nut velocity (the no-load speed is 0.64 m/s)."
+);
+param!(
+    SUP_NUT_VELOCITY_MAX_MPS,
+    "supervisor.nut_velocity_max_mps",
+    "m/s",
+    Real,
+    -100.0,
+    100.0,
+    1.0,
+    DISARMED,
+    "Highest plausible nut velocity (the no-load speed is 0.64 m/s)."
+);
+param!(
+    SUP_MOTOR_SPEED_MIN_RAD_S,
+    "supervisor.motor_speed_min_rad_s",
+    "rad/s",
+    Real,
+    -1.0e5,
+    1.0e5,
+    -1200.0,
+    DISARMED,
+    "Lowest plausible motor speed (no-load 808 rad/s)."
+);
+param!(
+    SUP_MOTOR_SPEED_MAX_RAD_S,
+    "supervisor.motor_speed_max_rad_s",
+    "rad/s",
+    Real,
+    -1.0e5,
+    1.0e5,
+    1200.0,
+    DISARMED,
+    "Highest plausible motor speed (no-load 808 rad/s)."
+);
+param!(
+    SUP_BODY_HEIGHT_MIN_M,
+    "supervisor.body_height_min_m",
+    "m",
+    Real,
+    -10.0,
+    100.0,
+    0.4,
+    DISARMED,
+    "Lowest plausible body height z (l0 = 0.61 m)."
+);
+param!(
+    SUP_BODY_HEIGHT_MAX_M,
+    "supervisor.body_height_max_m",
+    "m",
+    Real,
+    -10.0,
+    100.0,
+    3.0,
+    DISARMED,
+    "Highest plausible body height z (l0 = 0.61 m)."
+);
+param!(
+    SUP_BODY_VELOCITY_MIN_MPS,
+    "supervisor.body_velocity_min_mps",
+    "m/s",
+    Real,
+    -1000.0,
+    1000.0,
+    -10.0,
+    DISARMED,
+    "Lowest plausible body velocity."
+);
+param!(
+    SUP_BODY_VELOCITY_MAX_MPS,
+    "supervisor.body_velocity_max_mps",
+    "m/s",
+    Real,
+    -1000.0,
+    1000.0,
+    10.0,
+    DISARMED,
+    "Highest plausible body velocity."
+);
+param!(
+    SUP_SPRING_FORCE_MIN_N,
+    "supervisor.spring_force_min_n",
+    "N",
+    Real,
+    -1.0e5,
+    1.0e5,
+    -50.0,
+    DISARMED,
+    "Lowest plausible spring force (both load-cell rails outside)."
+);
+param!(
+    SUP_SPRING_FORCE_MAX_N,
+    "supervisor.spring_force_max_n",
+    "N",
+    Real,
+    -1.0e5,
+    1.0e5,
+    1800.0,
+    DISARMED,
+    "Highest plausible spring force (both load-cell rails outside)."
+);
+param!(
+    SUP_LEG_COMPRESSION_MIN_M,
+    "supervisor.leg_compression_min_m",
+    "m",
+    Real,
+    -1.0,
+    1.0,
+    -0.004,
+    DISARMED,
+    "Lowest plausible leg compression (both potentiometer rails outside)."
+);
+param!(
+    SUP_LEG_COMPRESSION_MAX_M,
+    "supervisor.leg_compression_max_m",
+    "m",
+    Real,
+    -1.0,
+    1.0,
+    0.1,
+    DISARMED,
+    "Highest plausible leg compression (both potentiometer rails outside)."
+);
+param!(
+    SUP_SPRING_RATE,
+    "supervisor.spring_rate_n_per_m",
+    "N/m",
+    Real,
+    10.0,
+    1.0e7,
+    11000.0,
+    DISARMED,
+    "Spring rate k of the sensor cross-checks (calibrated; Table 2.1: 11 kN/m)."
+);
+param!(
+    SUP_SPRING_PRELOAD,
+    "supervisor.spring_preload_m",
+    "m",
+    Real,
+    0.0,
+    0.5,
+    0.005,
+    DISARMED,
+    "Spring preload delta0 of the sensor cross-checks (calibrated)."
+);
+param!(
+    SUP_CONTACT_FORCE,
+    "supervisor.contact_force_n",
+    "N",
+    Real,
+    -1.0e4,
+    1.0e4,
+    150.0,
+    DISARMED,
+    "Excess force above which the load cell says contact."
+);
+param!(
+    SUP_FREE_FORCE,
+    "supervisor.free_force_n",
+    "N",
+    Real,
+    -1.0e4,
+    1.0e4,
+    40.0,
+    DISARMED,
+    "Excess force below which the load cell says no contact."
+);
+param!(
+    SUP_CONTACT_COMPRESSION,
+    "supervisor.contact_compression_m",
+    "m",
+    Real,
+    -1.0,
+    1.0,
+    0.015,
+    DISARMED,
+    "Leg compression above which the potentiometer says contact."
+);
+param!(
+    SUP_FREE_COMPRESSION,
+    "supervisor.free_compression_m",
+    "m",
+    Real,
+    -1.0,
+    1.0,
+    0.003,
+    DISARMED,
+    "Leg compression below which the potentiometer says no contact."
+);
+param!(
+    SUP_CONTACT_DISAGREE_PERIODS,
+    "supervisor.contact_disagree_periods",
+    "periods",
+    Count,
+    1.0,
+    65535.0,
+    20.0,
+    DISARMED,
+    "Consecutive disagreeing periods before contact-disagree latches (2 ms at 10 kHz)."
+);
+param!(
+    SUP_SPRING_MISMATCH,
+    "supervisor.spring_mismatch_n",
+    "N",
+    Real,
+    1.0e-3,
+    1.0e30,
+    30.0,
+    DISARMED,
+    "Largest plausible |F - k (delta0 + p + x)| before sensor-disagree (13 sigma; 1e30 turns it off)."
+);
+param!(
+    SUP_FROZEN_SPEED,
+    "supervisor.frozen_speed_rad_s",
+    "rad/s",
+    Real,
+    1.0e-3,
+    1.0e30,
+    100.0,
+    DISARMED,
+    "Motor speed above which a period without a count is encoder-frozen (1e30 turns it off)."
+);
+param!(
+    SUP_BRAKE_DECEL,
+    "supervisor.brake_decel_mps2",
+    "m/s^2",
+    Real,
+    1.0e-3,
+    1.0e4,
+    3.0,
+    DISARMED,
+    "Nut braking deceleration assumed in the stroke prediction (1 N m through 426 kg)."
+);
+param!(
+    CAL_MOTOR_COUNTS_PER_REV,
+    "calibration.motor_counts_per_rev",
+    "counts",
+    Count,
+    1.0,
+    1.0e6,
+    2000.0,
+    DISARMED,
+    "Motor encoder counts per revolution (500 lines x 4)."
+);
+param!(
+    CAL_MOTOR_POSITIVE_DOWN,
+    "calibration.motor_counts_positive_down",
+    "-",
+    Flag,
+    0.0,
+    1.0,
+    1.0,
+    DISARMED,
+    "Motor counts increase when the nut moves down."
+);
+param!(
+    CAL_HEIGHT_COUNTS_PER_REV,
+    "calibration.height_counts_per_rev",
+    "counts",
+    Count,
+    1.0,
+    1.0e6,
+    2000.0,
+    DISARMED,
+    "Height encoder counts per pulley revolution (placeholder)."
+);
+param!(
+    CAL_HEIGHT_POSITIVE_UP,
+    "calibration.height_counts_positive_up",
+    "-",
+    Flag,
+    0.0,
+    1.0,
+    1.0,
+    DISARMED,
+    "Height counts increase when the body moves up."
+);
+param!(
+    CAL_PULLEY_RADIUS,
+    "calibration.height_pulley_radius_m",
+    "m",
+    Real,
+    1.0e-4,
+    1.0,
+    0.02,
+    DISARMED,
+    "Radius of the height-sensor pulley (placeholder)."
+);
+param!(
+    CAL_LOADCELL_GAIN,
+    "calibration.loadcell_gain_n_per_code",
+    "N/code",
+    Real,
+    -1.0e3,
+    1.0e3,
+    0.5,
+    DISARMED,
+    "Load-cell gain, compression positive (placeholder; not 0)."
+);
+param!(
+    CAL_LOADCELL_OFFSET,
+    "calibration.loadcell_offset_code",
+    "code",
+    Real,
+    -1.0e5,
+    1.0e5,
+    200.0,
+    DISARMED,
+    "Load-cell code at zero force (placeholder)."
+);
+param!(
+    CAL_POT_GAIN,
+    "calibration.pot_gain_m_per_code",
+    "m/code",
+    Real,
+    -1.0,
+    1.0,
+    0.12 / 4096.0,
+    DISARMED,
+    "Potentiometer gain, m of leg compression per code (placeholder 0.12/4096; not 0)."
+);
+param!(
+    CAL_POT_OFFSET,
+    "calibration.pot_offset_code",
+    "code",
+    Real,
+    -1.0e5,
+    1.0e5,
+    205.0,
+    DISARMED,
+    "Potentiometer code at zero compression (placeholder)."
+);
+param!(
+    CAL_DAC_ZERO,
+    "calibration.dac_zero_code",
+    "code",
+    Count,
+    0.0,
+    65535.0,
+    2048.0,
+    DISARMED,
+    "DAC code for zero current (mid-scale; within the DAC range)."
+);
+param!(
+    CAL_DAC_AMPS,
+    "calibration.dac_amps_per_code",
+    "A/code",
+    Real,
+    1.0e-6,
+    100.0,
+    0.01953125,
+    DISARMED,
+    "Amplifier current per DAC code (placeholder 40 A / 2048)."
+);
+
 /// Every parameter, in the order the docs list them.
 pub const TABLE: &[&Param] = &[
     &CONTROLLER,
@@ -627,6 +1128,51 @@ pub const TABLE: &[&Param] = &[
     &SHAPED_BRAKING_MARGIN,
     &SHAPED_TRACKING_TIME_S,
     &SHAPED_CREEP_SPEED_MPS,
+    &EST_TOUCHDOWN_FORCE_N,
+    &EST_LIFTOFF_FORCE_N,
+    &EST_TOUCHDOWN_COMPRESSION_M,
+    &EST_LIFTOFF_COMPRESSION_M,
+    &EST_DEBOUNCE_SAMPLES,
+    &EST_FILTER_GAIN,
+    &EST_APEX_ARM_MPS,
+    &EST_BOTTOM_ARM_MPS,
+    &SUP_MAX_MOTOR_DELTA,
+    &SUP_MAX_HEIGHT_DELTA,
+    &SUP_NUT_POSITION_MIN_M,
+    &SUP_NUT_POSITION_MAX_M,
+    &SUP_NUT_VELOCITY_MIN_MPS,
+    &SUP_NUT_VELOCITY_MAX_MPS,
+    &SUP_MOTOR_SPEED_MIN_RAD_S,
+    &SUP_MOTOR_SPEED_MAX_RAD_S,
+    &SUP_BODY_HEIGHT_MIN_M,
+    &SUP_BODY_HEIGHT_MAX_M,
+    &SUP_BODY_VELOCITY_MIN_MPS,
+    &SUP_BODY_VELOCITY_MAX_MPS,
+    &SUP_SPRING_FORCE_MIN_N,
+    &SUP_SPRING_FORCE_MAX_N,
+    &SUP_LEG_COMPRESSION_MIN_M,
+    &SUP_LEG_COMPRESSION_MAX_M,
+    &SUP_SPRING_RATE,
+    &SUP_SPRING_PRELOAD,
+    &SUP_CONTACT_FORCE,
+    &SUP_FREE_FORCE,
+    &SUP_CONTACT_COMPRESSION,
+    &SUP_FREE_COMPRESSION,
+    &SUP_CONTACT_DISAGREE_PERIODS,
+    &SUP_SPRING_MISMATCH,
+    &SUP_FROZEN_SPEED,
+    &SUP_BRAKE_DECEL,
+    &CAL_MOTOR_COUNTS_PER_REV,
+    &CAL_MOTOR_POSITIVE_DOWN,
+    &CAL_HEIGHT_COUNTS_PER_REV,
+    &CAL_HEIGHT_POSITIVE_UP,
+    &CAL_PULLEY_RADIUS,
+    &CAL_LOADCELL_GAIN,
+    &CAL_LOADCELL_OFFSET,
+    &CAL_POT_GAIN,
+    &CAL_POT_OFFSET,
+    &CAL_DAC_ZERO,
+    &CAL_DAC_AMPS,
 ];
 
 /// The parameter called `name`.
@@ -664,6 +1210,9 @@ pub fn controller_default(index: usize) -> Option<Strategy> {
 enum Slot<'a> {
     Real(&'a mut f32),
     Flag(&'a mut bool),
+    U32(&'a mut u32),
+    U16(&'a mut u16),
+    U8(&'a mut u8),
     Controller,
     StepClosedGain(&'a mut step_closed::Gain),
     Measure(&'a mut energy_apex::EnergyMeasure),
@@ -686,6 +1235,69 @@ fn slot<'a>(cfg: &'a mut HopperConfig, p: &Param) -> Result<Slot<'a>, ParamError
             "kp_a_per_rad" => Ok(R(&mut f.gains.kp)),
             "kd_a_s_per_rad" => Ok(R(&mut f.gains.kd)),
             "start_position_m" => Ok(R(&mut f.start_position_m)),
+            _ => Err(ParamError::Unknown),
+        };
+    }
+    if let Some(rest) = name.strip_prefix("estimator.") {
+        let e = &mut cfg.estimator;
+        return match rest {
+            "touchdown_force_n" => Ok(R(&mut e.touchdown_force_n)),
+            "liftoff_force_n" => Ok(R(&mut e.liftoff_force_n)),
+            "touchdown_compression_m" => Ok(R(&mut e.touchdown_compression_m)),
+            "liftoff_compression_m" => Ok(R(&mut e.liftoff_compression_m)),
+            "debounce_samples" => Ok(Slot::U8(&mut e.debounce_samples)),
+            "velocity_filter_gain" => Ok(R(&mut e.velocity_filter_gain)),
+            "apex_arm_velocity_mps" => Ok(R(&mut e.apex_arm_velocity_mps)),
+            "bottom_arm_velocity_mps" => Ok(R(&mut e.bottom_arm_velocity_mps)),
+            _ => Err(ParamError::Unknown),
+        };
+    }
+    if let Some(rest) = name.strip_prefix("supervisor.") {
+        let c = &mut cfg.supervisor;
+        return match rest {
+            "max_motor_delta_counts" => Ok(Slot::U32(&mut c.max_motor_delta_counts)),
+            "max_height_delta_counts" => Ok(Slot::U32(&mut c.max_height_delta_counts)),
+            "nut_position_min_m" => Ok(R(&mut c.nut_position_range_m.min)),
+            "nut_position_max_m" => Ok(R(&mut c.nut_position_range_m.max)),
+            "nut_velocity_min_mps" => Ok(R(&mut c.nut_velocity_range_mps.min)),
+            "nut_velocity_max_mps" => Ok(R(&mut c.nut_velocity_range_mps.max)),
+            "motor_speed_min_rad_s" => Ok(R(&mut c.motor_speed_range_rad_s.min)),
+            "motor_speed_max_rad_s" => Ok(R(&mut c.motor_speed_range_rad_s.max)),
+            "body_height_min_m" => Ok(R(&mut c.body_height_range_m.min)),
+            "body_height_max_m" => Ok(R(&mut c.body_height_range_m.max)),
+            "body_velocity_min_mps" => Ok(R(&mut c.body_velocity_range_mps.min)),
+            "body_velocity_max_mps" => Ok(R(&mut c.body_velocity_range_mps.max)),
+            "spring_force_min_n" => Ok(R(&mut c.spring_force_range_n.min)),
+            "spring_force_max_n" => Ok(R(&mut c.spring_force_range_n.max)),
+            "leg_compression_min_m" => Ok(R(&mut c.leg_compression_range_m.min)),
+            "leg_compression_max_m" => Ok(R(&mut c.leg_compression_range_m.max)),
+            "spring_rate_n_per_m" => Ok(R(&mut c.spring_rate_n_per_m)),
+            "spring_preload_m" => Ok(R(&mut c.spring_preload_m)),
+            "contact_force_n" => Ok(R(&mut c.contact_force_n)),
+            "free_force_n" => Ok(R(&mut c.free_force_n)),
+            "contact_compression_m" => Ok(R(&mut c.contact_compression_m)),
+            "free_compression_m" => Ok(R(&mut c.free_compression_m)),
+            "contact_disagree_periods" => Ok(Slot::U16(&mut c.contact_disagree_periods)),
+            "spring_mismatch_n" => Ok(R(&mut c.spring_mismatch_n)),
+            "frozen_speed_rad_s" => Ok(R(&mut c.frozen_speed_rad_s)),
+            "brake_decel_mps2" => Ok(R(&mut c.brake_decel_mps2)),
+            _ => Err(ParamError::Unknown),
+        };
+    }
+    if let Some(rest) = name.strip_prefix("calibration.") {
+        let c = &mut cfg.calibration;
+        return match rest {
+            "motor_counts_per_rev" => Ok(Slot::U32(&mut c.motor_counts_per_rev)),
+            "motor_counts_positive_down" => Ok(B(&mut c.motor_counts_positive_down)),
+            "height_counts_per_rev" => Ok(Slot::U32(&mut c.height_counts_per_rev)),
+            "height_counts_positive_up" => Ok(B(&mut c.height_counts_positive_up)),
+            "height_pulley_radius_m" => Ok(R(&mut c.height_pulley_radius_m)),
+            "loadcell_gain_n_per_code" => Ok(R(&mut c.loadcell_gain_n_per_code)),
+            "loadcell_offset_code" => Ok(R(&mut c.loadcell_offset_code)),
+            "pot_gain_m_per_code" => Ok(R(&mut c.pot_gain_m_per_code)),
+            "pot_offset_code" => Ok(R(&mut c.pot_offset_code)),
+            "dac_zero_code" => Ok(Slot::U16(&mut c.dac_zero_code)),
+            "dac_amps_per_code" => Ok(R(&mut c.dac_amps_per_code)),
             _ => Err(ParamError::Unknown),
         };
     }
@@ -772,6 +1384,11 @@ pub fn get(cfg: &HopperConfig, name: &str) -> Result<f32, ParamError> {
     Ok(match slot(&mut c, p)? {
         Slot::Real(v) => *v,
         Slot::Flag(b) => f32::from(u8::from(*b)),
+        // Counts are checked against their (below 2^24) ranges on set, so
+        // they are exact in f32.
+        Slot::U32(n) => *n as f32,
+        Slot::U16(n) => f32::from(*n),
+        Slot::U8(n) => f32::from(*n),
         Slot::Controller => index as f32,
         Slot::StepClosedGain(g) => match g {
             step_closed::Gain::Fixed { .. } => 0.0,
@@ -793,6 +1410,10 @@ pub fn set(cfg: &mut HopperConfig, name: &str, value: f32) -> Result<(), ParamEr
     match slot(cfg, p)? {
         Slot::Real(x) => *x = v,
         Slot::Flag(b) => *b = v != 0.0,
+        // Whole and within the count's range (checked above).
+        Slot::U32(n) => *n = v as u32,
+        Slot::U16(n) => *n = v as u16,
+        Slot::U8(n) => *n = v as u8,
         Slot::Controller => {
             cfg.strategy = controller_default(v as usize).ok_or(ParamError::OutOfRange(p.name))?;
         }
@@ -923,7 +1544,19 @@ mod tests {
                     continue;
                 }
                 let mut c = cfg;
+                // Sensor, estimator and supervisor limits have cross-field
+                // rules (a range's min below its max, the liftoff threshold
+                // below the touchdown one, ...) that one value at its bound
+                // may break: the construction must then refuse, not panic.
+                let coupled = ["estimator.", "supervisor.", "calibration."]
+                    .iter()
+                    .any(|prefix| p.name.starts_with(prefix));
                 for v in [p.min, p.max, p.default] {
+                    if coupled {
+                        set(&mut c, p.name, v).unwrap_or_else(|e| panic!("{e:?}"));
+                        let _ = Hopper::new(c);
+                        continue;
+                    }
                     set(&mut c, p.name, v).unwrap_or_else(|e| panic!("{e:?}"));
                     // The flight start must lie on the stroke: the one
                     // cross-field rule beyond the table's ranges (checked
@@ -954,14 +1587,22 @@ mod tests {
              |------|------|-------|---------|------|------|\n",
         );
         for p in TABLE {
+            // Large bounds (1e30: a check turned off) in exponent form.
+            let num = |v: f32| {
+                if v.abs() >= 1e7 {
+                    std::format!("{v:e}")
+                } else {
+                    std::format!("{v}")
+                }
+            };
             let range = match p.kind {
                 Kind::Choice(names) => names.join(", "),
                 Kind::Flag => String::from("0, 1"),
-                _ => std::format!("{} ..= {}", p.min, p.max),
+                _ => std::format!("{} ..= {}", num(p.min), num(p.max)),
             };
             let default = match p.kind {
                 Kind::Choice(names) => String::from(names[p.default as usize]),
-                _ => std::format!("{}", p.default),
+                _ => num(p.default),
             };
             s += &std::format!(
                 "| `{}` | {} | {} | {} | {} | {} |\n",
@@ -970,7 +1611,8 @@ mod tests {
                 range,
                 default,
                 if p.live { "yes" } else { "no" },
-                p.doc
+                // A `|` would end the table cell.
+                p.doc.replace('|', "\\|")
             );
         }
         s
@@ -984,7 +1626,7 @@ mod tests {
             std::fs::write(path, &want).unwrap_or_else(|e| panic!("{path}: {e}"));
         }
         let have = std::fs::read_to_string(path).unwrap_or_default();
-        let stale: Vec<_> = want.lines().filter(|l| !have.contains(l)).collect();
+        let stale: Vec<_> = want.lines().filter(|l| !have.contains(l)).take(3).collect();
         assert!(
             have == want,
             "docs/parameters.md is stale (first differing lines: {stale:?}); regenerate with \

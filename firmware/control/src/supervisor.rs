@@ -295,52 +295,54 @@ pub struct SupervisorConfig {
 }
 
 impl Default for SupervisorConfig {
+    /// The parameter table's defaults ([`crate::params`]); the fields
+    /// derived from the model (trip level, stops, stroke limits) take the
+    /// default model's values here and `HopperConfig::for_model` sets them.
     fn default() -> Self {
+        use crate::params as p;
+        let range = |min: &p::Param, max: &p::Param| Range {
+            min: min.default,
+            max: max.default,
+        };
         Self {
             overcurrent_trip_a: 337.0,
-            max_motor_delta_counts: 64,
-            max_height_delta_counts: 32,
-            nut_position_range_m: Range {
-                min: -0.01,
-                max: 0.06,
-            },
-            nut_velocity_range_mps: Range {
-                min: -1.0,
-                max: 1.0,
-            },
-            motor_speed_range_rad_s: Range {
-                min: -1200.0,
-                max: 1200.0,
-            },
-            body_height_range_m: Range { min: 0.4, max: 3.0 },
-            body_velocity_range_mps: Range {
-                min: -10.0,
-                max: 10.0,
-            },
-            spring_force_range_n: Range {
-                min: -50.0,
-                max: 1800.0,
-            },
-            leg_compression_range_m: Range {
-                min: -0.004,
-                max: 0.1,
-            },
-            spring_rate_n_per_m: 11_000.0,
-            spring_preload_m: 0.005,
-            contact_force_n: 150.0,
-            free_force_n: 40.0,
-            contact_compression_m: 0.015,
-            free_compression_m: 0.003,
-            contact_disagree_periods: 20,
-            spring_mismatch_n: 30.0,
-            frozen_speed_rad_s: 100.0,
+            max_motor_delta_counts: p::SUP_MAX_MOTOR_DELTA.default as u32,
+            max_height_delta_counts: p::SUP_MAX_HEIGHT_DELTA.default as u32,
+            nut_position_range_m: range(&p::SUP_NUT_POSITION_MIN_M, &p::SUP_NUT_POSITION_MAX_M),
+            nut_velocity_range_mps: range(
+                &p::SUP_NUT_VELOCITY_MIN_MPS,
+                &p::SUP_NUT_VELOCITY_MAX_MPS,
+            ),
+            motor_speed_range_rad_s: range(
+                &p::SUP_MOTOR_SPEED_MIN_RAD_S,
+                &p::SUP_MOTOR_SPEED_MAX_RAD_S,
+            ),
+            body_height_range_m: range(&p::SUP_BODY_HEIGHT_MIN_M, &p::SUP_BODY_HEIGHT_MAX_M),
+            body_velocity_range_mps: range(
+                &p::SUP_BODY_VELOCITY_MIN_MPS,
+                &p::SUP_BODY_VELOCITY_MAX_MPS,
+            ),
+            spring_force_range_n: range(&p::SUP_SPRING_FORCE_MIN_N, &p::SUP_SPRING_FORCE_MAX_N),
+            leg_compression_range_m: range(
+                &p::SUP_LEG_COMPRESSION_MIN_M,
+                &p::SUP_LEG_COMPRESSION_MAX_M,
+            ),
+            spring_rate_n_per_m: p::SUP_SPRING_RATE.default,
+            spring_preload_m: p::SUP_SPRING_PRELOAD.default,
+            contact_force_n: p::SUP_CONTACT_FORCE.default,
+            free_force_n: p::SUP_FREE_FORCE.default,
+            contact_compression_m: p::SUP_CONTACT_COMPRESSION.default,
+            free_compression_m: p::SUP_FREE_COMPRESSION.default,
+            contact_disagree_periods: p::SUP_CONTACT_DISAGREE_PERIODS.default as u16,
+            spring_mismatch_n: p::SUP_SPRING_MISMATCH.default,
+            frozen_speed_rad_s: p::SUP_FROZEN_SPEED.default,
             nut_stops_m: Range {
                 min: 0.0,
                 max: 0.05,
             },
             stroke_min_m: -0.005,
             stroke_max_m: 0.055,
-            brake_decel_mps2: 3.0,
+            brake_decel_mps2: p::SUP_BRAKE_DECEL.default,
         }
     }
 }
