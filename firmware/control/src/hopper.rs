@@ -503,17 +503,6 @@ mod tests {
     };
     use proptest::strategy::Strategy as _;
 
-    /// A hopper at rest in flight at the origin: nut on its stop, spring at preload.
-    fn rest_sample(cal: &Calibration) -> RawSample {
-        let preload_n = 11_000.0 * 0.005;
-        RawSample {
-            loadcell_code: (cal.loadcell_offset_code + preload_n / cal.loadcell_gain_n_per_code)
-                as u16,
-            pot_code: cal.pot_offset_code as u16,
-            ..RawSample::default()
-        }
-    }
-
     fn hopper(strategy: Strategy) -> Hopper {
         let cfg = HopperConfig {
             strategy,
@@ -525,7 +514,7 @@ mod tests {
     #[test]
     fn passive_commands_zero_with_the_amplifier_enabled() {
         let mut h = hopper(Strategy::Passive);
-        let raw = rest_sample(&h.config().calibration);
+        let raw = crate::proptest_support::rest_sample(&h.config().calibration);
         for _ in 0..10 {
             let out = h.step(Some(&raw), 1e-4);
             assert_eq!(out.command.current_a, 0.0);
@@ -538,7 +527,7 @@ mod tests {
     #[test]
     fn flight_pd_pulls_a_displaced_nut_home() {
         let mut h = hopper(Strategy::default());
-        let mut raw = rest_sample(&h.config().calibration);
+        let mut raw = crate::proptest_support::rest_sample(&h.config().calibration);
         h.step(Some(&raw), 1e-4);
         // Ease the nut 400 counts down (1 mm) at 0.05 m/s (63 rad/s: slow
         // enough to halt within a period without looking like a frozen
@@ -555,7 +544,7 @@ mod tests {
     #[test]
     fn a_fault_is_safe_in_the_same_period_and_stays_latched() {
         let mut h = hopper(Strategy::default());
-        let mut raw = rest_sample(&h.config().calibration);
+        let mut raw = crate::proptest_support::rest_sample(&h.config().calibration);
         h.step(Some(&raw), 1e-4);
         raw.estop_pressed = true;
         let out = h.step(Some(&raw), 1e-4);
@@ -590,7 +579,7 @@ mod tests {
     #[test]
     fn overrun_reported_by_the_application_makes_the_next_period_safe() {
         let mut h = hopper(Strategy::default());
-        let raw = rest_sample(&h.config().calibration);
+        let raw = crate::proptest_support::rest_sample(&h.config().calibration);
         assert!(h.step(Some(&raw), 1e-4).command.amp_enable);
         h.supervisor_mut().report_overrun();
         let out = h.step(Some(&raw), 1e-4);

@@ -98,6 +98,18 @@ pub(crate) mod proptest_support {
     use proptest::strategy::Strategy;
     use proptest::test_runner::{Config, TestCaseError, TestError, TestRunner};
 
+    /// A hopper at rest in flight at the origin, as `cal` reads it: nut on
+    /// its stop, the spring at the default model's preload.
+    pub fn rest_sample(cal: &crate::calibration::Calibration) -> crate::hal::RawSample {
+        let preload_n = 11_000.0 * 0.005;
+        crate::hal::RawSample {
+            loadcell_code: (cal.loadcell_offset_code + preload_n / cal.loadcell_gain_n_per_code)
+                as u16,
+            pot_code: cal.pot_offset_code as u16,
+            ..crate::hal::RawSample::default()
+        }
+    }
+
     /// Cases per property in the default run (issue 6 asks for at least 10 000).
     pub const MIN_CASES: u32 = 10_000;
 

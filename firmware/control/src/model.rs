@@ -131,27 +131,63 @@ pub struct ModelParams {
     pub torque_limit_nm: f32,
     /// Motor torque constant `k_m`, N m/A. Default 0.0297.
     pub torque_constant_nm_per_a: f32,
-    /// Amplifier current limit, A. Default 33.67 (= 1.0 N m / 0.0297 N m/A).
+    /// Amplifier current limit, A. Default 33.670 (= 1.0 N m / 0.0297 N m/A).
     pub current_limit_a: f32,
 }
 
+/// The thesis's design machine (Table 2.1, with the 80 W motor of section
+/// 3.1 and a 5 mm preload), in `f64`: the one definition of its values. The
+/// simulator's `design` plant preset takes them as they are;
+/// [`ModelParams::default`] converts them to `f32` once.
+pub mod design {
+    /// Sprung (body) mass `M`, kg.
+    pub const BODY_MASS_KG: f64 = 9.0;
+    /// Unsprung mass `m_u`, kg.
+    pub const UNSPRUNG_MASS_KG: f64 = 0.6;
+    /// Sliding (ball nut) mass `m_s`, kg.
+    pub const NUT_MASS_KG: f64 = 0.25;
+    /// Rotor + screw inertia `J`, kg m^2.
+    pub const ROTOR_INERTIA_KG_M2: f64 = 2.7e-4;
+    /// Ball-screw lead, m per revolution.
+    pub const SCREW_LEAD_M: f64 = 0.005;
+    /// Leg spring stiffness `k`, N/m.
+    pub const SPRING_STIFFNESS_N_PER_M: f64 = 11_000.0;
+    /// Spring preload `delta0`, m.
+    pub const SPRING_PRELOAD_M: f64 = 0.005;
+    /// Leg free length `l0`, m.
+    pub const LEG_LENGTH_M: f64 = 0.61;
+    /// Motor + ball-screw efficiency `eta`.
+    pub const EFFICIENCY: f64 = 0.9;
+    /// Nut stroke between the mechanical stops, m.
+    pub const STROKE_M: f64 = 0.05;
+    /// Gravitational acceleration, m/s^2.
+    pub const GRAVITY_MPS2: f64 = 9.81;
+    /// Motor torque constant, N m/A (110 rad/s^2/A times the 2.7e-4 kg m^2 rotor).
+    pub const TORQUE_CONSTANT_NM_PER_A: f64 = 110.0 * 2.7e-4;
+    /// Motor torque limit of Table 2.1, N m.
+    pub const TORQUE_LIMIT_NM: f64 = 1.0;
+    /// Amplifier current limit, A: the torque limit at the torque constant.
+    pub const CURRENT_LIMIT_A: f64 = TORQUE_LIMIT_NM / TORQUE_CONSTANT_NM_PER_A;
+}
+
 impl Default for ModelParams {
+    /// [`design`], in `f32`.
     fn default() -> Self {
         Self {
-            body_mass_kg: 9.0,
-            unsprung_mass_kg: 0.6,
-            nut_mass_kg: 0.25,
-            rotor_inertia_kg_m2: 2.7e-4,
-            screw_lead_m: 0.005,
-            spring_stiffness_n_per_m: 11_000.0,
-            leg_length_m: 0.61,
-            preload_m: 0.005,
-            stroke_m: 0.05,
-            efficiency: 0.9,
-            gravity_mps2: 9.81,
-            torque_limit_nm: 1.0,
-            torque_constant_nm_per_a: 0.0297,
-            current_limit_a: 33.67,
+            body_mass_kg: design::BODY_MASS_KG as f32,
+            unsprung_mass_kg: design::UNSPRUNG_MASS_KG as f32,
+            nut_mass_kg: design::NUT_MASS_KG as f32,
+            rotor_inertia_kg_m2: design::ROTOR_INERTIA_KG_M2 as f32,
+            screw_lead_m: design::SCREW_LEAD_M as f32,
+            spring_stiffness_n_per_m: design::SPRING_STIFFNESS_N_PER_M as f32,
+            leg_length_m: design::LEG_LENGTH_M as f32,
+            preload_m: design::SPRING_PRELOAD_M as f32,
+            stroke_m: design::STROKE_M as f32,
+            efficiency: design::EFFICIENCY as f32,
+            gravity_mps2: design::GRAVITY_MPS2 as f32,
+            torque_limit_nm: design::TORQUE_LIMIT_NM as f32,
+            torque_constant_nm_per_a: design::TORQUE_CONSTANT_NM_PER_A as f32,
+            current_limit_a: design::CURRENT_LIMIT_A as f32,
         }
     }
 }

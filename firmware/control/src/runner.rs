@@ -352,20 +352,8 @@ impl PeriodRunner {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::calibration::Calibration;
     use crate::hal::{IoError, RawSample};
     use crate::hopper::Strategy;
-
-    /// A hopper at rest in flight at the origin: nut on its stop, spring at preload.
-    fn rest_sample(cal: &Calibration) -> RawSample {
-        let preload_n = 11_000.0 * 0.005;
-        RawSample {
-            loadcell_code: (cal.loadcell_offset_code + preload_n / cal.loadcell_gain_n_per_code)
-                as u16,
-            pot_code: cal.pot_offset_code as u16,
-            ..RawSample::default()
-        }
-    }
 
     /// I/O that records what was written and can fail on command.
     struct Io {
@@ -420,7 +408,9 @@ mod tests {
     #[test]
     fn a_running_period_writes_the_command_and_feeds() {
         let mut r = runner(Strategy::Passive);
-        let mut io = Io::new(rest_sample(&HopperConfig::default().calibration));
+        let mut io = Io::new(crate::proptest_support::rest_sample(
+            &HopperConfig::default().calibration,
+        ));
         let p = r.run_period(&mut io, &mut NoCounter);
         assert_eq!(io.dac, Some(2048));
         assert_eq!(io.enabled, Some(true));
@@ -432,7 +422,9 @@ mod tests {
     #[test]
     fn a_dac_write_error_disables_the_amplifier_in_the_same_period() {
         let mut r = runner(Strategy::default());
-        let mut io = Io::new(rest_sample(&HopperConfig::default().calibration));
+        let mut io = Io::new(crate::proptest_support::rest_sample(
+            &HopperConfig::default().calibration,
+        ));
         io.fail_dac = true;
         let p = r.run_period(&mut io, &mut NoCounter);
         assert_eq!(io.enabled, Some(false), "amplifier left enabled");
@@ -446,7 +438,9 @@ mod tests {
     #[test]
     fn an_enable_pin_error_latches_and_asks_for_zero() {
         let mut r = runner(Strategy::default());
-        let mut io = Io::new(rest_sample(&HopperConfig::default().calibration));
+        let mut io = Io::new(crate::proptest_support::rest_sample(
+            &HopperConfig::default().calibration,
+        ));
         io.fail_enable = true;
         let p = r.run_period(&mut io, &mut NoCounter);
         assert_eq!(io.dac, Some(2048));
@@ -457,7 +451,9 @@ mod tests {
     #[test]
     fn late_periods_in_a_row_latch_an_overrun() {
         let mut r = runner(Strategy::Passive);
-        let mut io = Io::new(rest_sample(&HopperConfig::default().calibration));
+        let mut io = Io::new(crate::proptest_support::rest_sample(
+            &HopperConfig::default().calibration,
+        ));
         for late in [true, true, false, true, true] {
             assert!(r.run_period(&mut io, &mut NoCounter).out.faults.is_empty());
             r.end_period(late);
@@ -472,7 +468,9 @@ mod tests {
     #[test]
     fn a_starve_decision_latches_so_no_later_period_enables() {
         let mut r = runner(Strategy::Passive);
-        let mut io = Io::new(rest_sample(&HopperConfig::default().calibration));
+        let mut io = Io::new(crate::proptest_support::rest_sample(
+            &HopperConfig::default().calibration,
+        ));
         assert!(r.run_period(&mut io, &mut NoCounter).feed_watchdog);
         // Fault, then a latch that clears without a fault reset: the policy
         // starves (`LatchCleared`).
@@ -536,7 +534,9 @@ mod tests {
     #[test]
     fn the_step_cost_is_counted_without_the_counter_overhead() {
         let mut r = runner(Strategy::Passive);
-        let mut io = Io::new(rest_sample(&HopperConfig::default().calibration));
+        let mut io = Io::new(crate::proptest_support::rest_sample(
+            &HopperConfig::default().calibration,
+        ));
         let mut c = Ticks(u32::MAX - 50);
         for _ in 0..4 {
             assert_eq!(r.run_period(&mut io, &mut c).step_cost, 90);

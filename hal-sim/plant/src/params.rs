@@ -55,8 +55,9 @@ pub struct Params {
 
 /// Torque constant chosen so that the thesis's DC-motor plant gain
 /// `A = k_m / J_e = 110` (eq 4.3, eq 4.13's worked numbers) holds with
-/// Table 2.1's `J = 2.7e-4 kg m^2`: `k_m = 110 * 2.7e-4`.
-const KT_NM_PER_A: f64 = 110.0 * 2.7e-4;
+/// Table 2.1's `J = 2.7e-4 kg m^2`: `k_m = 110 * 2.7e-4` (defined with the
+/// rest of the design machine in `hopper_control::model::design`).
+const KT_NM_PER_A: f64 = hopper_control::model::design::TORQUE_CONSTANT_NM_PER_A;
 
 impl Params {
     /// The "design" set: thesis Table 2.1 (vertical hopper simulation).
@@ -67,25 +68,26 @@ impl Params {
     /// Table 2.1. The thesis gives no preload; 5 mm keeps the nut seated on
     /// its upper stop when the motor is off.
     pub const fn design() -> Self {
+        use hopper_control::model::design as d;
         Params {
-            body_mass_kg: 9.0,
-            unsprung_mass_kg: 0.6,
-            nut_mass_kg: 0.25,
-            rotor_inertia_kg_m2: 2.7e-4,
-            screw_lead_m: 0.005,
-            spring_stiffness_n_per_m: 11_000.0,
+            body_mass_kg: d::BODY_MASS_KG,
+            unsprung_mass_kg: d::UNSPRUNG_MASS_KG,
+            nut_mass_kg: d::NUT_MASS_KG,
+            rotor_inertia_kg_m2: d::ROTOR_INERTIA_KG_M2,
+            screw_lead_m: d::SCREW_LEAD_M,
+            spring_stiffness_n_per_m: d::SPRING_STIFFNESS_N_PER_M,
             spring_damping_ns_per_m: 0.0,
-            spring_preload_m: 0.005,
-            leg_length_m: 0.61,
-            efficiency: 0.9,
+            spring_preload_m: d::SPRING_PRELOAD_M,
+            leg_length_m: d::LEG_LENGTH_M,
+            efficiency: d::EFFICIENCY,
             planarizer_friction_n: 5.0,
             leg_friction_n: 5.0,
-            stroke_m: 0.05,
-            gravity_mps2: 9.81,
+            stroke_m: d::STROKE_M,
+            gravity_mps2: d::GRAVITY_MPS2,
             torque_constant_nm_per_a: KT_NM_PER_A,
             winding_resistance_ohm: KT_NM_PER_A * 24.0 / 2.0,
             supply_voltage_v: 24.0,
-            current_limit_a: 1.0 / KT_NM_PER_A,
+            current_limit_a: d::CURRENT_LIMIT_A,
         }
     }
 
