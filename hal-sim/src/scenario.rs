@@ -25,6 +25,9 @@
 //! loadcell_sigma_n = 2.0
 //! pot_sigma_m = 1e-4
 //!
+//! [params]                  # firmware parameters by name (docs/parameters.md)
+//! "energy_apex.integral_gain" = 0.4
+//!
 //! [sweep]                   # only `hopper-sim sweep` reads this
 //! param = ["screw_lead_m=0.002:0.010:9"]
 //! metric = "first_stance_motor_work_j"
@@ -533,8 +536,9 @@ fn key_lines(
 }
 
 /// The keys each table accepts.
-const TOP_KEYS: [&str; 10] = [
+const TOP_KEYS: [&str; 11] = [
     "description",
+    "params",
     "inject",
     "plant",
     "model",
@@ -833,6 +837,50 @@ pub fn from_toml_str(text: &str, origin: &str) -> Result<Scenario, ScenarioError
         }
     }
 
+    match top.get("params") {
+        None => {}
+        Some(toml::Value::Table(t)) => {
+            let mut list = Vec::new();
+            for (name, value) in t {
+                let path = format!("params.\"{name}\"");
+                let p = hopper_control::params::find(name).ok_or_else(|| {
+                    r.err(
+                        &format!("params.{name}"),
+                        format!("unknown firmware parameter `{path}` (see docs/parameters.md)"),
+                    )
+                })?;
+                let v = match value {
+                    toml::Value::Float(f) => *f,
+                    toml::Value::Integer(i) => *i as f64,
+                    toml::Value::Boolean(b) => f64::from(u8::from(*b)),
+                    other => {
+                        return Err(r.err(
+                            &format!("params.{name}"),
+                            format!("`{path}` must be a number, got {other}"),
+                        ))
+                    }
+                };
+                let unit = crate::controller::unit_suffix(p);
+                let v = p.check(v as f32).map_err(|_| {
+                    r.err(
+                        &format!("params.{name}"),
+                        format!(
+                            "`{path}` = {v} is out of range: allowed {}{unit} ..= {}{unit}",
+                            p.min, p.max
+                        ),
+                    )
+                })?;
+                list.push((p, v));
+            }
+            s.firmware_params = Some(list);
+        }
+        Some(other) => {
+            return Err(r.err(
+                "params",
+                format!("`params` must be a table of firmware parameters by name, got {other}"),
+            ))
+        }
+    }
     let mut sweep = SweepSection::default();
     match top.get("sweep") {
         None => {}
@@ -903,6 +951,35 @@ mod tests {
         let set = Settings::resolve(Some(o), &Overrides::default());
         set.check().unwrap();
         assert!(set.controller_spec().unwrap().strategy_override.is_some());
+    }
+
+    #[test]
+    fn firmware_parameters_by_name_parse_and_are_checked() {
+        let s = from_toml_str(
+            "[controller]\nname = \"energy-apex\"\n[params]\n\"energy_apex.integral_gain\" = 0.4\n\"energy_apex.allow_negative\" = true\n",
+            "s.toml",
+        )
+        .unwrap();
+        let list = s.settings.firmware_params.clone().unwrap();
+        let got: Vec<(&str, f32)> = list.iter().map(|(p, v)| (p.name, *v)).collect();
+        assert_eq!(
+            got,
+            vec![
+                ("energy_apex.allow_negative", 1.0),
+                ("energy_apex.integral_gain", 0.4)
+            ]
+        );
+        let settings = Settings::resolve(Some(&s.settings), &Overrides::default());
+        settings.check().unwrap();
+        let e = parse_err("\n[params]\n\"flight.kp_a_per_rad\" = -1\n");
+        assert_eq!(e.location, "s.toml:3", "{e}");
+        assert!(
+            e.message
+                .contains("out of range: allowed 0 A/rad ..= 10000 A/rad"),
+            "{e}"
+        );
+        let e = parse_err("[params]\n\"no.such\" = 1\n");
+        assert!(e.message.contains("unknown firmware parameter"), "{e}");
     }
 
     #[test]
