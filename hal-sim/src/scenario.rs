@@ -50,6 +50,7 @@ use hopper_control::laws::ControllerKind;
 use hopper_control::laws::{energy_torque, flight_pd, StanceLaw};
 use hopper_control::params::Param;
 use hopper_control::pd_design::PdGains;
+use serde::Deserialize;
 use std::collections::HashMap;
 use std::path::Path;
 
@@ -535,30 +536,67 @@ fn key_lines(
     }
 }
 
-/// The keys each table accepts.
-const TOP_KEYS: [&str; 11] = [
-    "description",
-    "params",
-    "inject",
-    "plant",
-    "model",
-    "start_apex_m",
-    "duration_s",
-    "control_hz",
-    "controller",
-    "sensors",
-    "sweep",
-];
-const CONTROLLER_KEYS: [&str; 6] = [
-    "name",
-    "target_apex_m",
-    "torque_nm",
-    "energy_gain_nm_per_j",
-    "flight_kp_a_per_rad",
-    "flight_kd_a_s_per_rad",
-];
-const SENSOR_KEYS: [&str; 4] = ["noise", "seed", "loadcell_sigma_n", "pot_sigma_m"];
-const SWEEP_KEYS: [&str; 2] = ["param", "metric"];
+/// A scenario file as serde reads it: every table refuses unknown keys, and
+/// the types are checked here; presets, names and ranges after, by
+/// [`from_toml_str`], with the line of the key.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct FileToml {
+    description: Option<String>,
+    /// A preset name or a table read like a parameter file.
+    plant: Option<toml::Value>,
+    /// The same, for what the controller believes.
+    model: Option<toml::Value>,
+    start_apex_m: Option<f64>,
+    duration_s: Option<f64>,
+    control_hz: Option<f64>,
+    inject: Option<Vec<String>>,
+    /// A controller name or a [`ControllerToml`] table.
+    controller: Option<toml::Value>,
+    sensors: Option<SensorsToml>,
+    sweep: Option<SweepToml>,
+    /// Firmware parameters by their table names (docs/parameters.md).
+    params: Option<toml::Table>,
+}
+
+/// `[controller]`.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ControllerToml {
+    name: Option<String>,
+    target_apex_m: Option<f64>,
+    torque_nm: Option<f64>,
+    energy_gain_nm_per_j: Option<f64>,
+    flight_kp_a_per_rad: Option<f64>,
+    flight_kd_a_s_per_rad: Option<f64>,
+}
+
+/// `[sensors]`.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SensorsToml {
+    noise: Option<bool>,
+    seed: Option<u64>,
+    loadcell_sigma_n: Option<f64>,
+    pot_sigma_m: Option<f64>,
+}
+
+/// `[sweep]`.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SweepToml {
+    /// One `NAME=START:END:N` or a list of them.
+    param: Option<OneOrMany>,
+    metric: Option<String>,
+}
+
+/// A string or a list of strings.
+#[derive(Deserialize)]
+#[serde(untagged)]
+enum OneOrMany {
+    One(String),
+    Many(Vec<String>),
+}
 
 /// The controller called `name`, or the file's error for `path`.
 fn controller_named(
@@ -576,8 +614,38 @@ fn controller_named(
     })
 }
 
+/// A serde message about the key at `path`, in this file's words: an
+/// unknown key, or a value of the wrong type.
+fn describe_serde(message: &str, path: &str) -> String {
+    if let Some(rest) = message.strip_prefix("unknown field `") {
+        let expected = rest.split_once("`, expected ").map_or("", |(_, e)| e);
+        return format!("unknown key `{path}`: expected {expected}");
+    }
+    let (got, wanted) = match message.split_once(", expected ") {
+        Some((got, wanted)) => (
+            got.trim_start_matches("invalid type: ")
+                .trim_start_matches("invalid value: "),
+            wanted,
+        ),
+        // The one untagged type: `sweep.param`.
+        None if message.contains("untagged enum OneOrMany") => {
+            return format!("`{path}` must be a NAME=START:END:N string or a list of them")
+        }
+        None => return format!("`{path}`: {message}"),
+    };
+    let wanted = match wanted {
+        "f64" => "a number",
+        "u64" => "a non-negative integer",
+        "a boolean" => "true or false",
+        "a sequence" => "a list",
+        other => other,
+    };
+    format!("`{path}` must be {wanted}, got {got}")
+}
+
 struct Reader<'a> {
     origin: &'a str,
+    /// The line of every key, by its dotted path.
     lines: HashMap<String, usize>,
 }
 
@@ -592,76 +660,45 @@ impl Reader<'_> {
         }
     }
 
-    fn check_keys(
-        &self,
-        table: &toml::Table,
-        prefix: &str,
-        allowed: &[&str],
-    ) -> Result<(), ScenarioError> {
-        for key in table.keys() {
-            if !allowed.contains(&key.as_str()) {
-                let path = format!("{prefix}{key}");
-                return Err(self.err(
-                    &path,
-                    format!("unknown key `{path}`: expected one of {allowed:?}"),
-                ));
-            }
-        }
-        Ok(())
+    /// The deepest key path on `line`, if a key is there.
+    fn path_on_line(&self, line: usize) -> Option<&str> {
+        self.lines
+            .iter()
+            .filter(|(_, l)| **l == line)
+            .map(|(p, _)| p.as_str())
+            .max_by_key(|p| p.len())
     }
 
-    fn number(
+    /// `value` at `path` if it lies in `(lo, hi)` (`lo` itself refused when
+    /// `lo_exclusive`), in `unit`.
+    fn ranged(
         &self,
-        table: &toml::Table,
-        prefix: &str,
-        key: &str,
+        path: &str,
+        value: Option<f64>,
         (lo, hi): (f64, f64),
         lo_exclusive: bool,
         unit: &'static str,
     ) -> Result<Option<f64>, ScenarioError> {
-        let path = format!("{prefix}{key}");
-        let v = match table.get(key) {
-            None => return Ok(None),
-            Some(toml::Value::Float(f)) => *f,
-            Some(toml::Value::Integer(i)) => *i as f64,
-            Some(other) => {
-                return Err(self.err(
-                    &path,
-                    format!("`{path}` must be a number in {unit}, got {other}"),
-                ))
-            }
+        let Some(v) = value else {
+            return Ok(None);
         };
         let range = Range::new(lo, lo_exclusive, hi, unit);
         if !range.allows(v) {
             return Err(self.err(
-                &path,
+                path,
                 format!("`{path}` = {v} is out of range: allowed {range}"),
             ));
         }
         Ok(Some(v))
     }
 
-    fn string<'t>(
-        &self,
-        table: &'t toml::Table,
-        prefix: &str,
-        key: &str,
-    ) -> Result<Option<&'t str>, ScenarioError> {
-        let path = format!("{prefix}{key}");
-        match table.get(key) {
-            None => Ok(None),
-            Some(toml::Value::String(s)) => Ok(Some(s)),
-            Some(other) => Err(self.err(&path, format!("`{path}` must be a string, got {other}"))),
-        }
-    }
-
     /// A parameter set: a preset name or a table read like a parameter file.
     fn params(
         &self,
-        table: &toml::Table,
+        value: Option<&toml::Value>,
         key: &str,
     ) -> Result<Option<(Params, String)>, ScenarioError> {
-        match table.get(key) {
+        match value {
             None => Ok(None),
             Some(toml::Value::String(name)) => match Params::preset(name) {
                 Some(p) => Ok(Some((p, name.clone()))),
@@ -685,6 +722,44 @@ impl Reader<'_> {
             )),
         }
     }
+
+    /// `[params]`: firmware parameters by name, each checked against the table.
+    fn firmware_params(
+        &self,
+        table: &toml::Table,
+    ) -> Result<Vec<(&'static Param, f32)>, ScenarioError> {
+        let mut list = Vec::new();
+        for (name, value) in table {
+            let key = format!("params.{name}");
+            let path = format!("params.\"{name}\"");
+            let p = hopper_control::params::find(name).ok_or_else(|| {
+                self.err(
+                    &key,
+                    format!("unknown firmware parameter `{path}` (see docs/parameters.md)"),
+                )
+            })?;
+            let v = match value {
+                toml::Value::Float(f) => *f,
+                toml::Value::Integer(i) => *i as f64,
+                toml::Value::Boolean(b) => f64::from(u8::from(*b)),
+                other => {
+                    return Err(self.err(&key, format!("`{path}` must be a number, got {other}")))
+                }
+            };
+            let unit = crate::controller::unit_suffix(p);
+            let v = p.check(v as f32).map_err(|_| {
+                self.err(
+                    &key,
+                    format!(
+                        "`{path}` = {v} is out of range: allowed {}{unit} ..= {}{unit}",
+                        p.min, p.max
+                    ),
+                )
+            })?;
+            list.push((p, v));
+        }
+        Ok(list)
+    }
 }
 
 /// Parse a scenario file's text. `origin` names it in errors and is the
@@ -701,90 +776,111 @@ pub fn from_toml_str(text: &str, origin: &str) -> Result<Scenario, ScenarioError
     let mut lines = HashMap::new();
     key_lines(text, spanned.get_ref(), "", &mut lines);
     let r = Reader { origin, lines };
-    let top: toml::Table =
-        toml::from_str(text).map_err(|e| r.err("", format!("malformed TOML: {}", e.message())))?;
-    r.check_keys(&top, "", &TOP_KEYS)?;
-
+    let file: FileToml = toml::from_str(text).map_err(|e| {
+        let line = e.span().map(|s| line_of(text, s.start));
+        let path = line
+            .and_then(|l| r.path_on_line(l))
+            .unwrap_or("")
+            .to_string();
+        ScenarioError {
+            location: match line {
+                Some(l) => format!("{origin}:{l}"),
+                None => origin.to_string(),
+            },
+            message: describe_serde(e.message(), &path),
+        }
+    })?;
     let mut s = Overrides {
-        plant: r.params(&top, "plant")?,
-        model: r.params(&top, "model")?.map(|(p, _)| p),
-        start_apex_m: r.number(
-            &top,
-            "",
+        plant: r.params(file.plant.as_ref(), "plant")?,
+        model: r.params(file.model.as_ref(), "model")?.map(|(p, _)| p),
+        start_apex_m: r.ranged(
             "start_apex_m",
+            file.start_apex_m,
             crate::run::START_APEX_RANGE_M,
             true,
             "m",
         )?,
-        duration_s: r.number(
-            &top,
-            "",
+        duration_s: r.ranged(
             "duration_s",
+            file.duration_s,
             (0.0, crate::run::MAX_DURATION_S),
             true,
             "s",
         )?,
-        control_hz: r.number(&top, "", "control_hz", limits::CONTROL_HZ, false, "Hz")?,
+        control_hz: r.ranged(
+            "control_hz",
+            file.control_hz,
+            limits::CONTROL_HZ,
+            false,
+            "Hz",
+        )?,
         ..Overrides::default()
     };
-    let description = r.string(&top, "", "description")?.map(str::to_string);
-    match top.get("inject") {
-        None => {}
-        Some(toml::Value::Array(items)) => {
-            let mut list = Vec::new();
-            for item in items {
-                let toml::Value::String(spec) = item else {
-                    return Err(r.err(
-                        "inject",
-                        format!("`inject` must be a list of \"KIND@TIME\" strings, got {item}"),
-                    ));
-                };
-                list.push(Injection::parse(spec).map_err(|e| r.err("inject", e))?);
-            }
-            s.inject = Some(list);
-        }
-        Some(other) => {
-            return Err(r.err(
-                "inject",
-                format!("`inject` must be a list of \"KIND@TIME\" strings, got {other}"),
-            ))
-        }
+    if let Some(list) = &file.inject {
+        s.inject = Some(
+            list.iter()
+                .map(|spec| Injection::parse(spec).map_err(|e| r.err("inject", e)))
+                .collect::<Result<_, _>>()?,
+        );
     }
-
-    match top.get("controller") {
+    match file.controller {
         None => {}
         Some(toml::Value::String(name)) => {
-            s.controller = Some(controller_named(&r, name, "controller")?)
+            s.controller = Some(controller_named(&r, &name, "controller")?)
         }
-        Some(toml::Value::Table(t)) => {
+        Some(table @ toml::Value::Table(_)) => {
+            let c = ControllerToml::deserialize(table).map_err(|e| {
+                // A value deserialiser has no spans: the key is in the message.
+                let message = e.message().to_string();
+                let key = message
+                    .strip_prefix("unknown field `")
+                    .and_then(|rest| rest.split_once('`'))
+                    .map_or("", |(k, _)| k);
+                let path = format!("controller.{key}");
+                let at = if r.lines.contains_key(&path) {
+                    path.as_str()
+                } else {
+                    "controller"
+                };
+                r.err(at, describe_serde(&message, &path))
+            })?;
             let p = "controller.";
-            r.check_keys(t, p, &CONTROLLER_KEYS)?;
-            s.controller = match r.string(t, p, "name")? {
+            s.controller = match &c.name {
                 Some(name) => Some(controller_named(&r, name, "controller.name")?),
                 None => None,
             };
-            s.target_apex_m = r.number(t, p, "target_apex_m", limits::TARGET_APEX_M, false, "m")?;
-            s.torque_nm = r.number(t, p, "torque_nm", limits::TORQUE_NM, false, "N m")?;
-            s.energy_gain_nm_per_j = r.number(
-                t,
-                p,
-                "energy_gain_nm_per_j",
+            let at = |k: &str| format!("{p}{k}");
+            s.target_apex_m = r.ranged(
+                &at("target_apex_m"),
+                c.target_apex_m,
+                limits::TARGET_APEX_M,
+                false,
+                "m",
+            )?;
+            s.torque_nm = r.ranged(
+                &at("torque_nm"),
+                c.torque_nm,
+                limits::TORQUE_NM,
+                false,
+                "N m",
+            )?;
+            s.energy_gain_nm_per_j = r.ranged(
+                &at("energy_gain_nm_per_j"),
+                c.energy_gain_nm_per_j,
                 limits::ENERGY_GAIN_NM_PER_J,
                 false,
                 "N m/J",
             )?;
-            s.flight_kp_a_per_rad = r.number(
-                t,
-                p,
-                "flight_kp_a_per_rad",
+            s.flight_kp_a_per_rad = r.ranged(
+                &at("flight_kp_a_per_rad"),
+                c.flight_kp_a_per_rad,
                 limits::FLIGHT_KP_A_PER_RAD,
                 false,
                 "A/rad",
             )?;
-            s.flight_kd_a_s_per_rad = r.number(
-                t,
-                p,
-                "flight_kd_a_s_per_rad",
+            s.flight_kd_a_s_per_rad = r.ranged(
+                &at("flight_kd_a_s_per_rad"),
+                c.flight_kd_a_s_per_rad,
                 limits::FLIGHT_KD_A_S_PER_RAD,
                 false,
                 "A s/rad",
@@ -797,123 +893,41 @@ pub fn from_toml_str(text: &str, origin: &str) -> Result<Scenario, ScenarioError
             ))
         }
     }
-    match top.get("sensors") {
-        None => {}
-        Some(toml::Value::Table(t)) => {
-            let p = "sensors.";
-            r.check_keys(t, p, &SENSOR_KEYS)?;
-            s.noise = match t.get("noise") {
-                None => None,
-                Some(toml::Value::Boolean(b)) => Some(*b),
-                Some(other) => {
-                    return Err(r.err(
-                        "sensors.noise",
-                        format!("`sensors.noise` must be true or false, got {other}"),
-                    ))
-                }
-            };
-            s.seed = match t.get("seed") {
-                None => None,
-                Some(toml::Value::Integer(i)) if *i >= 0 => Some(*i as u64),
-                Some(other) => {
-                    return Err(r.err(
-                        "sensors.seed",
-                        format!("`sensors.seed` must be a non-negative integer, got {other}"),
-                    ))
-                }
-            };
-            s.loadcell_sigma_n = r.number(
-                t,
-                p,
-                "loadcell_sigma_n",
-                limits::LOADCELL_SIGMA_N,
-                false,
-                "N",
-            )?;
-            s.pot_sigma_m = r.number(t, p, "pot_sigma_m", limits::POT_SIGMA_M, false, "m")?;
-        }
-        Some(other) => {
-            return Err(r.err("sensors", format!("`sensors` must be a table, got {other}")))
-        }
+    if let Some(t) = &file.sensors {
+        s.noise = t.noise;
+        s.seed = t.seed;
+        s.loadcell_sigma_n = r.ranged(
+            "sensors.loadcell_sigma_n",
+            t.loadcell_sigma_n,
+            limits::LOADCELL_SIGMA_N,
+            false,
+            "N",
+        )?;
+        s.pot_sigma_m = r.ranged(
+            "sensors.pot_sigma_m",
+            t.pot_sigma_m,
+            limits::POT_SIGMA_M,
+            false,
+            "m",
+        )?;
     }
-
-    match top.get("params") {
-        None => {}
-        Some(toml::Value::Table(t)) => {
-            let mut list = Vec::new();
-            for (name, value) in t {
-                let path = format!("params.\"{name}\"");
-                let p = hopper_control::params::find(name).ok_or_else(|| {
-                    r.err(
-                        &format!("params.{name}"),
-                        format!("unknown firmware parameter `{path}` (see docs/parameters.md)"),
-                    )
-                })?;
-                let v = match value {
-                    toml::Value::Float(f) => *f,
-                    toml::Value::Integer(i) => *i as f64,
-                    toml::Value::Boolean(b) => f64::from(u8::from(*b)),
-                    other => {
-                        return Err(r.err(
-                            &format!("params.{name}"),
-                            format!("`{path}` must be a number, got {other}"),
-                        ))
-                    }
-                };
-                let unit = crate::controller::unit_suffix(p);
-                let v = p.check(v as f32).map_err(|_| {
-                    r.err(
-                        &format!("params.{name}"),
-                        format!(
-                            "`{path}` = {v} is out of range: allowed {}{unit} ..= {}{unit}",
-                            p.min, p.max
-                        ),
-                    )
-                })?;
-                list.push((p, v));
-            }
-            s.firmware_params = Some(list);
-        }
-        Some(other) => {
-            return Err(r.err(
-                "params",
-                format!("`params` must be a table of firmware parameters by name, got {other}"),
-            ))
-        }
+    if let Some(t) = &file.params {
+        s.firmware_params = Some(r.firmware_params(t)?);
     }
-    let mut sweep = SweepSection::default();
-    match top.get("sweep") {
-        None => {}
-        Some(toml::Value::Table(t)) => {
-            r.check_keys(t, "sweep.", &SWEEP_KEYS)?;
-            sweep.metric = r.string(t, "sweep.", "metric")?.map(str::to_string);
-            sweep.params = match t.get("param") {
+    let sweep = match file.sweep {
+        None => SweepSection::default(),
+        Some(t) => SweepSection {
+            params: match t.param {
                 None => Vec::new(),
-                Some(toml::Value::Array(items)) => items
-                    .iter()
-                    .map(|v| match v {
-                        toml::Value::String(s) => Ok(s.clone()),
-                        other => Err(r.err(
-                            "sweep.param",
-                            format!("`sweep.param` entries must be strings NAME=START:END:N, got {other}"),
-                        )),
-                    })
-                    .collect::<Result<_, _>>()?,
-                Some(toml::Value::String(one)) => vec![one.clone()],
-                Some(other) => {
-                    return Err(r.err(
-                        "sweep.param",
-                        format!("`sweep.param` must be a list of NAME=START:END:N strings, got {other}"),
-                    ))
-                }
-            };
-        }
-        Some(other) => return Err(r.err("sweep", format!("`sweep` must be a table, got {other}"))),
-    }
-
+                Some(OneOrMany::One(one)) => vec![one],
+                Some(OneOrMany::Many(list)) => list,
+            },
+            metric: t.metric,
+        },
+    };
     Ok(Scenario {
         origin: origin.to_string(),
-        description,
+        description: file.description,
         settings: s,
         sweep,
     })
