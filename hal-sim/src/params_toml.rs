@@ -7,6 +7,7 @@
 //! field.
 
 use crate::params::{field, Params, FIELDS};
+use serde::Deserialize as _;
 use std::fmt::Write as _;
 use std::path::Path;
 
@@ -112,53 +113,70 @@ pub fn params_from_table(
             ))
         }
     };
-    let mut seen = Vec::new();
-    let mut p = params.unwrap_or_default();
-    let has_base = table.contains_key("base");
-    for (key, value) in table.iter() {
-        if key == "base" {
-            continue;
+    // The file's fields over the preset's (or over nothing: then serde's
+    // missing-field check asks for every one), read by serde into `Params`,
+    // which refuses unknown fields and non-numbers.
+    let mut merged = match &params {
+        Some(base) => {
+            toml::Table::try_from(base).map_err(|e| err(None, format!("preset as TOML: {e}")))?
         }
-        let spec = field(key).ok_or_else(|| {
-            err(
-                line_for(key),
+        None => toml::Table::new(),
+    };
+    for (key, value) in table.iter().filter(|(k, _)| k.as_str() != "base") {
+        merged.insert(key.clone(), value.clone());
+    }
+    let p = Params::deserialize(toml::Value::Table(merged)).map_err(|e| {
+        let message = e.message();
+        // The key serde names: `unknown field `K``, `missing field `K``, or
+        // the value's key after "in" in the full text.
+        let quoted = |m: &str| m.split('`').nth(1).map(str::to_string);
+        let full = e.to_string();
+        if message.starts_with("unknown field") {
+            let key = quoted(message).unwrap_or_default();
+            return err(
+                line_for(&key),
                 format!("unknown parameter `{section}{key}` (see `hopper-sim params show design` for the fields)"),
-            )
-        })?;
-        let v = match value {
-            toml::Value::Float(f) => *f,
-            toml::Value::Integer(i) => *i as f64,
-            other => {
+            );
+        }
+        if message.starts_with("missing field") {
+            let key = quoted(message).unwrap_or_default();
+            let unit = field(&key).map_or("", |f| f.unit());
+            return err(
+                None,
+                format!(
+                    "missing parameter `{section}{key}` [{unit}] (give every field, or start from a preset with `base = \"design\"`)"
+                ),
+            );
+        }
+        let key = full
+            .rsplit_once("in `")
+            .and_then(|(_, k)| k.split('`').next())
+            .unwrap_or_default()
+            .to_string();
+        let unit = field(&key).map_or("its unit", |f| f.unit());
+        let got = message
+            .trim_start_matches("invalid type: ")
+            .split(", expected")
+            .next()
+            .unwrap_or(message);
+        err(
+            line_for(&key),
+            format!("parameter `{section}{key}` must be a number in {unit}, got {got}"),
+        )
+    })?;
+    // Each field the file gives, against its range, at its line.
+    for (key, _) in table.iter().filter(|(k, _)| k.as_str() != "base") {
+        if let Some(spec) = field(key) {
+            let v = (spec.get)(&p);
+            if !spec.allows(v) {
                 return Err(err(
                     line_for(key),
                     format!(
-                        "parameter `{section}{key}` must be a number in {}, got {other}",
-                        spec.unit()
+                        "parameter `{section}{key}` = {v} is out of range: allowed {}",
+                        spec.range
                     ),
-                ))
+                ));
             }
-        };
-        if !spec.allows(v) {
-            return Err(err(
-                line_for(key),
-                format!(
-                    "parameter `{section}{key}` = {v} is out of range: allowed {}",
-                    spec.range
-                ),
-            ));
-        }
-        (spec.set)(&mut p, v);
-        seen.push(spec.name);
-    }
-    if !has_base {
-        if let Some(missing) = FIELDS.iter().find(|f| !seen.contains(&f.name)) {
-            return Err(err(
-                None,
-                format!(
-                    "missing parameter `{section}{}` [{}] (give every field, or start from a preset with `base = \"design\"`)",
-                    missing.name, missing.unit()
-                ),
-            ));
         }
     }
     p.validate().map_err(|e| {

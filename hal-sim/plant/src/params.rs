@@ -13,6 +13,11 @@ use hopper_control::model::ModelField;
 /// Coordinates: `z` body height (`z = leg_length_m` at touchdown), `p` nut
 /// displacement, positive down (compressing the spring), `0 ..= stroke_m`.
 #[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(
+    feature = "serde",
+    derive(serde::Serialize, serde::Deserialize),
+    serde(deny_unknown_fields)
+)]
 pub struct Params {
     /// Sprung (body) mass `M`, kg.
     pub body_mass_kg: f64,
