@@ -99,6 +99,26 @@ pub mod limits {
     pub const CONTROL_HZ: (f64, f64) = (100.0, 1e6);
 }
 
+/// The flag (and scenario key) that sets firmware parameter `name`, when it
+/// has one of its own: such parameters are set there only, so that one
+/// precedence (flag over file) and the run's checks (the flight PD's
+/// stability, the reported target) apply to them.
+pub fn dedicated_setting(name: &str) -> Option<&'static str> {
+    Some(match name {
+        "controller" => "--controller / controller.name",
+        "target_apex_m" => "--target-apex / controller.target_apex_m",
+        "flight.kp_a_per_rad" => "--flight-kp / controller.flight_kp_a_per_rad",
+        "flight.kd_a_s_per_rad" => "--flight-kd / controller.flight_kd_a_s_per_rad",
+        "constant_torque.torque_nm" | "modified_torque.torque_nm" => {
+            "--torque / controller.torque_nm"
+        }
+        "energy.gain_nm_per_j" | "energy_apex.gain_nm_per_j" => {
+            "--ke / controller.energy_gain_nm_per_j"
+        }
+        _ => return None,
+    })
+}
+
 /// Parses `NAME=VALUE` for a firmware parameter of the table
 /// ([`hopper_control::params`]): the name must exist and the value be in its
 /// range (flags 0/1, choices by index or name).
@@ -110,6 +130,9 @@ pub fn parse_param_setting(spec: &str) -> Result<(&'static Param, f32), String> 
     let p = hopper_control::params::find(name).ok_or_else(|| {
         format!("bad --set `{spec}`: no firmware parameter `{name}` (see docs/parameters.md)")
     })?;
+    if let Some(flag) = dedicated_setting(name) {
+        return Err(format!("bad --set `{spec}`: set `{name}` with {flag}"));
+    }
     let v = match p.kind {
         hopper_control::params::Kind::Choice(names) => match names.iter().position(|n| *n == value)
         {
@@ -410,6 +433,19 @@ impl Settings {
     /// ([`crate::flight_stability`]). Checked here, where the rate and the
     /// plant are known, so `run`, every sweep point and scenario files all
     /// get it; the passive strategy never runs the flight PD.
+    /// The eq 4.1 filter gain the firmware will run with (the table's
+    /// `estimator.velocity_filter_gain` when set, else its default).
+    fn filter_gain(&self) -> f64 {
+        self.firmware_params
+            .iter()
+            .rev()
+            .find(|(p, _)| p.name == hopper_control::params::EST_FILTER_GAIN.name)
+            .map_or(
+                f64::from(EstimatorConfig::default().velocity_filter_gain),
+                |(_, v)| f64::from(*v),
+            )
+    }
+
     fn check_flight_pd(&self, spec: &ControllerSpec) -> Result<(), String> {
         if self.controller == ControllerKind::Passive {
             return Ok(());
@@ -421,7 +457,7 @@ impl Settings {
             kp,
             kd,
             dt_s: 1.0 / self.control_hz,
-            filter_gain: f64::from(EstimatorConfig::default().velocity_filter_gain),
+            filter_gain: self.filter_gain(),
             amp_tau_s: self.sensors.amp_tau_s,
         };
         if (kp == 0.0 && kd == 0.0) || lp.is_stable() {
@@ -438,7 +474,7 @@ impl Settings {
                 // The gains as f32 (what the firmware runs) print as given.
                 Err(format!(
                     "--flight-kd / controller.flight_kd_a_s_per_rad = {} A s/rad makes the flight PD unstable ({why}) with kp = {} A/rad at {hz} Hz: stable for kd in {lo:.4} ..= {hi:.4} A s/rad (A = {:.1} rad/s^2/A, eq 4.1 filter G = {})",
-                    gains.kd, gains.kp, lp.plant_gain, EstimatorConfig::default().velocity_filter_gain
+                    gains.kd, gains.kp, lp.plant_gain, self.filter_gain()
                 ))
             }
             None => Err(format!(
@@ -738,6 +774,9 @@ impl Reader<'_> {
                     format!("unknown firmware parameter `{path}` (see docs/parameters.md)"),
                 )
             })?;
+            if let Some(flag) = dedicated_setting(name) {
+                return Err(self.err(&key, format!("set `{path}` with {flag}")));
+            }
             let v = match value {
                 toml::Value::Float(f) => *f,
                 toml::Value::Integer(i) => *i as f64,
@@ -830,12 +869,19 @@ pub fn from_toml_str(text: &str, origin: &str) -> Result<Scenario, ScenarioError
         }
         Some(table @ toml::Value::Table(_)) => {
             let c = ControllerToml::deserialize(table).map_err(|e| {
-                // A value deserialiser has no spans: the key is in the message.
+                // A value deserialiser has no spans: the key is in the text,
+                // in the message of an unknown field, after "in" otherwise.
                 let message = e.message().to_string();
+                let full = e.to_string();
                 let key = message
                     .strip_prefix("unknown field `")
                     .and_then(|rest| rest.split_once('`'))
-                    .map_or("", |(k, _)| k);
+                    .map(|(k, _)| k)
+                    .or_else(|| {
+                        full.rsplit_once("in `")
+                            .and_then(|(_, k)| k.split('`').next())
+                    })
+                    .unwrap_or("");
                 let path = format!("controller.{key}");
                 let at = if r.lines.contains_key(&path) {
                     path.as_str()
@@ -985,11 +1031,20 @@ mod tests {
         );
         let settings = Settings::resolve(Some(&s.settings), &Overrides::default());
         settings.check().unwrap();
-        let e = parse_err("\n[params]\n\"flight.kp_a_per_rad\" = -1\n");
+        let e = parse_err("\n[params]\n\"energy_apex.integral_gain\" = 20\n");
+        assert_eq!(e.location, "s.toml:3", "{e}");
+        assert!(
+            e.message.contains("out of range: allowed 0.001 ..= 9.99"),
+            "{e}"
+        );
+        let e = parse_err("[params]\n\"flight.kp_a_per_rad\" = 5\n");
+        assert!(e.message.contains("with --flight-kp"), "{e}");
+        // A wrong type in [controller] names its key and line.
+        let e = parse_err("[controller]\nname = \"energy\"\ntarget_apex_m = \"high\"\n");
         assert_eq!(e.location, "s.toml:3", "{e}");
         assert!(
             e.message
-                .contains("out of range: allowed 0 A/rad ..= 10000 A/rad"),
+                .contains("`controller.target_apex_m` must be a number"),
             "{e}"
         );
         let e = parse_err("[params]\n\"no.such\" = 1\n");

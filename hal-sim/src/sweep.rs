@@ -127,7 +127,16 @@ impl Knob {
             .iter()
             .find(|(short, column, _)| *short == name || *column == name)
             .map(|(_, _, k)| *k)
-            .or_else(|| fw::find(name).map(Knob::Param))
+            .or_else(|| match name {
+                // The table's names for settings with a knob of their own.
+                "target_apex_m" => Some(Knob::TargetApex),
+                "flight.kp_a_per_rad" => Some(Knob::FlightKp),
+                "flight.kd_a_s_per_rad" => Some(Knob::FlightKd),
+                "constant_torque.torque_nm" | "modified_torque.torque_nm" => Some(Knob::Torque),
+                "energy.gain_nm_per_j" | "energy_apex.gain_nm_per_j" => Some(Knob::EnergyGain),
+                _ if crate::scenario::dedicated_setting(name).is_some() => None,
+                _ => fw::find(name).map(Knob::Param),
+            })
     }
 
     /// CSV column name (with its unit).

@@ -397,28 +397,28 @@ fn set_changes_a_firmware_parameter_by_name() {
     };
     let default = apexes(&[]);
     // The default value, set explicitly: the same run.
-    assert_eq!(apexes(&["--set", "energy_apex.gain_nm_per_j=3"]), default);
-    // No stance torque (K_e = 0): the hop decays passively instead of
-    // climbing back towards the target after the high start.
-    let passive = apexes(&["--set", "energy_apex.gain_nm_per_j=0"]);
+    assert_eq!(apexes(&["--set", "energy_apex.integral_gain=0.6"]), default);
+    // A twelfth of the outer loop's integral gain: after the high start the
+    // apex climbs back towards the 0.05 m target more slowly (0.0324 m
+    // against 0.0351 m after 2 s).
+    let slow = apexes(&["--set", "energy_apex.integral_gain=0.05"]);
     let last = |v: &serde_json::Value| {
         v.as_array()
             .and_then(|a| a.last())
             .and_then(serde_json::Value::as_f64)
             .unwrap_or(f64::NAN)
     };
-    assert!(
-        last(&passive) < last(&default) - 0.01,
-        "{passive} vs {default}"
-    );
+    assert!(last(&slow) < last(&default) - 0.002, "{slow} vs {default}");
 
     let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
     let out_dir = dir.path().join("set");
     for (set, needle) in [
         ("no.such=1", "no firmware parameter `no.such`"),
+        ("energy_apex.integral_gain=20", "must be in 0.001 ..= 9.99"),
+        // A parameter with a flag of its own is set there only.
         (
-            "flight.kp_a_per_rad=-1",
-            "must be in 0 A/rad ..= 10000 A/rad",
+            "flight.kp_a_per_rad=5",
+            "set `flight.kp_a_per_rad` with --flight-kp",
         ),
         (
             "shaped.switch_fraction=0.5",

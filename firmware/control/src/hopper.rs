@@ -305,8 +305,10 @@ impl Hopper {
         &self.supervisor
     }
 
-    /// The supervisor, mutably (report overruns, reset).
-    pub fn supervisor_mut(&mut self) -> &mut Supervisor {
+    /// The supervisor, mutably: for the period runner (overruns, resets
+    /// through `PeriodRunner::reset_faults`, which the feed policy must hear
+    /// of) and this crate's tests, not for applications.
+    pub(crate) fn supervisor_mut(&mut self) -> &mut Supervisor {
         &mut self.supervisor
     }
 

@@ -586,7 +586,7 @@ param!(
 // --- Phase estimator, supervisor limits, calibration ------------------------
 // Set with the amplifier disabled only. Derived from the model and not
 // listed: the overcurrent trip (10x the current limit), the stroke soft
-// limits and the stops, the lead, torque constant and start height of the
+// limits with the braking deceleration they assume, and the stops, the lead, torque constant and start height of the
 // calibration, and the counter and converter widths (board facts).
 param!(
     EST_TOUCHDOWN_FORCE_N,
@@ -952,17 +952,6 @@ param!(
     "Motor speed above which a period without a count is encoder-frozen (1e30 turns it off)."
 );
 param!(
-    SUP_BRAKE_DECEL,
-    "supervisor.brake_decel_mps2",
-    "m/s^2",
-    Real,
-    1.0e-3,
-    1.0e4,
-    3.0,
-    DISARMED,
-    "Nut braking deceleration assumed in the stroke prediction (1 N m through 426 kg)."
-);
-param!(
     CAL_MOTOR_COUNTS_PER_REV,
     "calibration.motor_counts_per_rev",
     "counts",
@@ -1161,7 +1150,6 @@ pub const TABLE: &[&Param] = &[
     &SUP_CONTACT_DISAGREE_PERIODS,
     &SUP_SPRING_MISMATCH,
     &SUP_FROZEN_SPEED,
-    &SUP_BRAKE_DECEL,
     &CAL_MOTOR_COUNTS_PER_REV,
     &CAL_MOTOR_POSITIVE_DOWN,
     &CAL_HEIGHT_COUNTS_PER_REV,
@@ -1280,7 +1268,6 @@ fn slot<'a>(cfg: &'a mut HopperConfig, p: &Param) -> Result<Slot<'a>, ParamError
             "contact_disagree_periods" => Ok(Slot::U16(&mut c.contact_disagree_periods)),
             "spring_mismatch_n" => Ok(R(&mut c.spring_mismatch_n)),
             "frozen_speed_rad_s" => Ok(R(&mut c.frozen_speed_rad_s)),
-            "brake_decel_mps2" => Ok(R(&mut c.brake_decel_mps2)),
             _ => Err(ParamError::Unknown),
         };
     }
@@ -1418,6 +1405,11 @@ pub fn set(cfg: &mut HopperConfig, name: &str, value: f32) -> Result<(), ParamEr
             cfg.strategy = controller_default(v as usize).ok_or(ParamError::OutOfRange(p.name))?;
         }
         Slot::StepClosedGain(g) => {
+            let fixed = matches!(g, step_closed::Gain::Fixed { .. });
+            if fixed == (v == 0.0) {
+                // The same choice: keep its value.
+                return Ok(());
+            }
             *g = if v == 0.0 {
                 step_closed::Gain::Fixed {
                     kp_m_per_j: STEP_CLOSED_KP_M_PER_J.default,

@@ -8,11 +8,11 @@
 //! 2. [`Hopper::step`]: conversion, estimator and eq 4.1 filters, energy
 //!    (eqs 2.44-2.45), the selected controller, the supervisor, the DAC code,
 //!    the hop ledger and the telemetry record (timed with the counter);
-//! 3. write the DAC code and the amplifier enable; an I/O error latches a
+//! 3. the watchdog feed decision ([`FeedPolicy`]) on the step's output; a
+//!    starve decision latches [`Fault::SelfCheck`] and makes this and every
+//!    later period's output 0 A with the amplifier off before it is written;
+//! 4. write the DAC code and the amplifier enable; an I/O error latches a
 //!    fault and the amplifier is disabled in the same period;
-//! 4. the watchdog feed decision ([`FeedPolicy`]); a starve decision latches
-//!    [`Fault::SelfCheck`] and forces 0 A and the amplifier off in this and
-//!    every later period;
 //! 5. what to log: newly latched faults first, else a completed hop.
 //!
 //! After it the application tells [`PeriodRunner::end_period`] whether the
@@ -162,7 +162,8 @@ pub struct Period {
     pub out: StepOutput,
     /// Whether the application may reload the hardware watchdog now.
     pub feed_watchdog: bool,
-    /// Faults that latched in this period.
+    /// Faults latched since the last period reported (in this period, or
+    /// between periods: an overrun from `end_period`, a reported one).
     pub newly_latched: Faults,
     /// What to log, if anything.
     pub log: Option<LogItem>,
@@ -181,6 +182,8 @@ pub struct PeriodRunner {
     missed: u32,
     periods: u32,
     cost: StepStats,
+    /// The faults the last period reported (for `newly_latched`).
+    reported: Faults,
 }
 
 impl PeriodRunner {
@@ -201,6 +204,7 @@ impl PeriodRunner {
             missed: 0,
             periods: 0,
             cost: StepStats::new(),
+            reported: Faults::NONE,
         })
     }
 
@@ -239,6 +243,10 @@ impl PeriodRunner {
         }
         self.hopper.supervisor_mut().reset(input)?;
         self.feed.fault_reset();
+        self.reported = Faults::NONE;
+        // A late period before the reset does not count towards an overrun
+        // after it.
+        self.late_in_a_row = 0;
         Ok(())
     }
 
@@ -253,7 +261,6 @@ impl PeriodRunner {
         io: &mut Io,
         counter: &mut C,
     ) -> Period {
-        let before = self.hopper.supervisor().faults();
         let raw = io.read().ok();
         let t0 = counter.now();
         let mut out = self.hopper.step(raw.as_ref(), self.timing.period_s);
@@ -262,6 +269,19 @@ impl PeriodRunner {
         self.cost.add(step_cost);
         self.periods = self.periods.wrapping_add(1);
         let zero = self.hopper.zero_code();
+        // The feed decision first, on the step's own output (`FeedPolicy` is
+        // pure): an output that contradicts itself never reaches the pins.
+        // A starve latches `SelfCheck`, so no later period can enable the
+        // amplifier though the hardware reset is up to one watchdog timeout
+        // away (and `Supervisor::reset` never clears it).
+        let feed_watchdog = match self.feed.after_step(&out) {
+            Decision::Feed => true,
+            Decision::Starve(_) => {
+                self.hopper.supervisor_mut().report(Fault::SelfCheck);
+                self.make_safe(&mut out, zero);
+                false
+            }
+        };
         if io.write_dac(out.dac_code).is_err() {
             self.hopper.supervisor_mut().report(Fault::DacError);
             // The DAC may hold any code now: ask once more for zero (it may
@@ -278,23 +298,12 @@ impl PeriodRunner {
             let _ = io.set_amp_enabled(false);
             self.make_safe(&mut out, zero);
         }
-        // Fed only after a period whose output is consistent (see
-        // `FeedPolicy`): if the control task stops or misbehaves, the MCU
-        // resets with the amplifier disabled.
-        let feed_watchdog = match self.feed.after_step(&out) {
-            Decision::Feed => true,
-            Decision::Starve(_) => {
-                // Latched, so no later period can enable the amplifier even
-                // though the hardware reset is up to one watchdog timeout away.
-                self.hopper.supervisor_mut().report(Fault::SelfCheck);
-                let _ = io.write_dac(zero);
-                let _ = io.set_amp_enabled(false);
-                self.make_safe(&mut out, zero);
-                false
-            }
-        };
         out.record.faults = out.faults.0;
-        let newly_latched = Faults(out.faults.0 & !before.0);
+        // Since the last report, not since this period began: a fault that
+        // latched between periods (`end_period`'s overrun, `report_overrun`)
+        // is reported with the period that first shows it.
+        let newly_latched = Faults(out.faults.0 & !self.reported.0);
+        self.reported = out.faults;
         let log = if !newly_latched.is_empty() {
             Some(LogItem::Faults {
                 step: out.record.step,
@@ -316,6 +325,9 @@ impl PeriodRunner {
         out.command = Command::SAFE;
         out.dac_code = zero;
         out.faults = self.hopper.supervisor().faults();
+        // The capture shows what was written, not what was withdrawn.
+        out.record.command_a = 0.0;
+        out.record.dac_code = zero;
     }
 
     /// The application's verdict on the period just run: `late` when the
@@ -360,6 +372,8 @@ mod tests {
         raw: RawSample,
         dac: Option<u16>,
         enabled: Option<bool>,
+        /// How many times the enable was written high.
+        enable_writes: u32,
         fail_dac: bool,
         fail_enable: bool,
     }
@@ -370,6 +384,7 @@ mod tests {
                 raw,
                 dac: None,
                 enabled: None,
+                enable_writes: 0,
                 fail_dac: false,
                 fail_enable: false,
             }
@@ -393,6 +408,7 @@ mod tests {
                 return Err(IoError::Pin(()));
             }
             self.enabled = Some(on);
+            self.enable_writes += u32::from(on);
             Ok(())
         }
     }
@@ -463,6 +479,13 @@ mod tests {
         let p = r.run_period(&mut io, &mut NoCounter);
         assert!(p.out.faults.contains(Fault::Overrun));
         assert_eq!(io.enabled, Some(false));
+        // Latched between periods, reported with the first period that shows it.
+        assert!(p.newly_latched.contains(Fault::Overrun));
+        assert!(matches!(p.log, Some(LogItem::Faults { .. })));
+        assert!(r
+            .run_period(&mut io, &mut NoCounter)
+            .newly_latched
+            .is_empty());
     }
 
     #[test]
@@ -484,12 +507,20 @@ mod tests {
             crate::supervisor::SupervisorInput::from_measurements(&m, 0.0, 0.0, 0.0)
         };
         assert!(r.hopper_mut().supervisor_mut().reset(&sup_in).is_ok());
+        io.enable_writes = 0;
         let p = r.run_period(&mut io, &mut NoCounter);
+        // Decided before the writes: the starving period never enables.
+        assert_eq!(io.enable_writes, 0);
+        assert_eq!(p.out.record.command_a, 0.0);
         assert!(!p.feed_watchdog);
         assert!(r.starved());
         assert!(p.out.faults.contains(Fault::SelfCheck));
         assert_eq!(io.enabled, Some(false));
         assert_eq!(io.dac, Some(2048));
+        // Neither reset clears it: only the watchdog's hardware reset does.
+        assert!(r.reset_faults(&sup_in).is_err());
+        assert!(r.hopper_mut().supervisor_mut().reset(&sup_in).is_err());
+        assert!(r.hopper().supervisor().faults().contains(Fault::SelfCheck));
         // Every later period stays off and unfed, whatever the supervisor says.
         for _ in 0..10 {
             let p = r.run_period(&mut io, &mut NoCounter);
@@ -497,6 +528,7 @@ mod tests {
             assert_eq!(p.out.command, Command::SAFE);
             assert_eq!(io.enabled, Some(false));
         }
+        assert_eq!(io.enable_writes, 0);
     }
 
     #[test]

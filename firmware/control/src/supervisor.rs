@@ -342,7 +342,10 @@ impl Default for SupervisorConfig {
             },
             stroke_min_m: -0.005,
             stroke_max_m: 0.055,
-            brake_decel_mps2: p::SUP_BRAKE_DECEL.default,
+            // Tied to the stroke soft limits `HopperConfig::for_model` puts
+            // at the braking distance from the largest tolerated stop-impact
+            // speed: not a parameter of its own.
+            brake_decel_mps2: 3.0,
         }
     }
 }
@@ -693,11 +696,15 @@ impl Supervisor {
     /// fault) are re-evaluated on `input`; if any is still
     /// present, nothing is cleared and the faults still present are returned.
     /// Event faults (contact disagreement, overcurrent, non-finite command,
-    /// overrun, DAC error) are in the past, so they clear. The
+    /// overrun, DAC error) are in the past, so they clear. `SelfCheck` never
+    /// clears (only the watchdog's hardware reset does). The
     /// contact-disagreement counter restarts. Call it with a fresh sample,
     /// with the amplifier disabled.
     pub fn reset(&mut self, input: &SupervisorInput) -> Result<(), Faults> {
-        let still = self.input_faults(input);
+        // `SelfCheck` means the software's own output contradicted itself:
+        // only the hardware reset it leads to clears it.
+        let self_check = Faults(self.latched.0 & Fault::SelfCheck.bit());
+        let still = self.input_faults(input).union(self_check);
         if !still.is_empty() {
             return Err(still);
         }
