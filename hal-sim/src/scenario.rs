@@ -99,24 +99,75 @@ pub mod limits {
     pub const CONTROL_HZ: (f64, f64) = (100.0, 1e6);
 }
 
-/// The flag (and scenario key) that sets firmware parameter `name`, when it
-/// has one of its own: such parameters are set there only, so that one
-/// precedence (flag over file) and the run's checks (the flight PD's
-/// stability, the reported target) apply to them.
-pub fn dedicated_setting(name: &str) -> Option<&'static str> {
-    Some(match name {
-        "controller" => "--controller / controller.name",
-        "target_apex_m" => "--target-apex / controller.target_apex_m",
-        "flight.kp_a_per_rad" => "--flight-kp / controller.flight_kp_a_per_rad",
-        "flight.kd_a_s_per_rad" => "--flight-kd / controller.flight_kd_a_s_per_rad",
-        "constant_torque.torque_nm" | "modified_torque.torque_nm" => {
-            "--torque / controller.torque_nm"
+/// A firmware parameter with a flag (and scenario key) of its own: such
+/// parameters are set there only, so that one precedence (flag over file)
+/// and the run's checks (the flight PD's stability, the reported target)
+/// apply to them.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Dedicated {
+    /// `controller`.
+    Controller,
+    /// `target_apex_m`.
+    TargetApex,
+    /// `flight.kp_a_per_rad`.
+    FlightKp,
+    /// `flight.kd_a_s_per_rad`.
+    FlightKd,
+    /// `constant_torque.torque_nm`, `modified_torque.torque_nm`.
+    Torque,
+    /// `energy.gain_nm_per_j`, `energy_apex.gain_nm_per_j`.
+    EnergyGain,
+}
+
+impl Dedicated {
+    /// The dedicated setting of firmware parameter `name`, if it has one.
+    pub fn of(name: &str) -> Option<Self> {
+        Some(match name {
+            "controller" => Dedicated::Controller,
+            "target_apex_m" => Dedicated::TargetApex,
+            "flight.kp_a_per_rad" => Dedicated::FlightKp,
+            "flight.kd_a_s_per_rad" => Dedicated::FlightKd,
+            "constant_torque.torque_nm" | "modified_torque.torque_nm" => Dedicated::Torque,
+            "energy.gain_nm_per_j" | "energy_apex.gain_nm_per_j" => Dedicated::EnergyGain,
+            _ => return None,
+        })
+    }
+
+    /// Where to set it: the flag and the scenario key.
+    pub fn flag(self) -> &'static str {
+        match self {
+            Dedicated::Controller => "--controller / controller.name",
+            Dedicated::TargetApex => "--target-apex / controller.target_apex_m",
+            Dedicated::FlightKp => "--flight-kp / controller.flight_kp_a_per_rad",
+            Dedicated::FlightKd => "--flight-kd / controller.flight_kd_a_s_per_rad",
+            Dedicated::Torque => "--torque / controller.torque_nm",
+            Dedicated::EnergyGain => "--ke / controller.energy_gain_nm_per_j",
         }
-        "energy.gain_nm_per_j" | "energy_apex.gain_nm_per_j" => {
-            "--ke / controller.energy_gain_nm_per_j"
-        }
-        _ => return None,
-    })
+    }
+}
+
+/// Why a firmware parameter setting was refused ([`table_setting`]).
+enum SettingError<E> {
+    /// It is set by its own flag.
+    Dedicated(Dedicated),
+    /// The value could not be read.
+    Value(E),
+    /// The value (given here) is outside the parameter's range.
+    OutOfRange(f64),
+}
+
+/// The one check of a firmware parameter setting, for `--set` and a
+/// scenario's `[params]`, in this order: `p` has no setting of its own, its
+/// value can be read, and the value is in its range.
+fn table_setting<E>(
+    p: &'static Param,
+    value: impl FnOnce() -> Result<f64, E>,
+) -> Result<f32, SettingError<E>> {
+    if let Some(d) = Dedicated::of(p.name) {
+        return Err(SettingError::Dedicated(d));
+    }
+    let v = value().map_err(SettingError::Value)?;
+    p.check(v as f32).map_err(|_| SettingError::OutOfRange(v))
 }
 
 /// Parses `NAME=VALUE` for a firmware parameter of the table
@@ -130,27 +181,31 @@ pub fn parse_param_setting(spec: &str) -> Result<(&'static Param, f32), String> 
     let p = hopper_control::params::find(name).ok_or_else(|| {
         format!("bad --set `{spec}`: no firmware parameter `{name}` (see docs/parameters.md)")
     })?;
-    if let Some(flag) = dedicated_setting(name) {
-        return Err(format!("bad --set `{spec}`: set `{name}` with {flag}"));
-    }
-    let v = match p.kind {
+    let read = || match p.kind {
+        // A choice may be given by its name.
         hopper_control::params::Kind::Choice(names) => match names.iter().position(|n| *n == value)
         {
-            Some(i) => i as f32,
+            Some(i) => Ok(i as f64),
             None => value
-                .parse::<f32>()
-                .map_err(|_| format!("bad --set `{spec}`: `{name}` is one of {names:?}"))?,
+                .parse::<f64>()
+                .map_err(|_| format!("bad --set `{spec}`: `{name}` is one of {names:?}")),
         },
         _ => value
-            .parse::<f32>()
-            .map_err(|_| format!("bad --set `{spec}`: `{value}` is not a number"))?,
+            .parse::<f64>()
+            .map_err(|_| format!("bad --set `{spec}`: `{value}` is not a number")),
     };
-    p.check(v).map_err(|_| {
-        let unit = crate::controller::unit_suffix(p);
-        format!(
-            "bad --set `{spec}`: `{name}` must be in {}{unit} ..= {}{unit}",
-            p.min, p.max
-        )
+    let v = table_setting(p, read).map_err(|e| match e {
+        SettingError::Dedicated(d) => {
+            format!("bad --set `{spec}`: set `{name}` with {}", d.flag())
+        }
+        SettingError::Value(message) => message,
+        SettingError::OutOfRange(_) => {
+            let unit = crate::controller::unit_suffix(p);
+            format!(
+                "bad --set `{spec}`: `{name}` must be in {}{unit} ..= {}{unit}",
+                p.min, p.max
+            )
+        }
     })?;
     Ok((p, v))
 }
@@ -774,26 +829,25 @@ impl Reader<'_> {
                     format!("unknown firmware parameter `{path}` (see docs/parameters.md)"),
                 )
             })?;
-            if let Some(flag) = dedicated_setting(name) {
-                return Err(self.err(&key, format!("set `{path}` with {flag}")));
-            }
-            let v = match value {
-                toml::Value::Float(f) => *f,
-                toml::Value::Integer(i) => *i as f64,
-                toml::Value::Boolean(b) => f64::from(u8::from(*b)),
-                other => {
-                    return Err(self.err(&key, format!("`{path}` must be a number, got {other}")))
-                }
+            let read = || match value {
+                toml::Value::Float(f) => Ok(*f),
+                toml::Value::Integer(i) => Ok(*i as f64),
+                toml::Value::Boolean(b) => Ok(f64::from(u8::from(*b))),
+                other => Err(format!("`{path}` must be a number, got {other}")),
             };
-            let unit = crate::controller::unit_suffix(p);
-            let v = p.check(v as f32).map_err(|_| {
-                self.err(
-                    &key,
-                    format!(
-                        "`{path}` = {v} is out of range: allowed {}{unit} ..= {}{unit}",
-                        p.min, p.max
-                    ),
-                )
+            let v = table_setting(p, read).map_err(|e| {
+                let message = match e {
+                    SettingError::Dedicated(d) => format!("set `{path}` with {}", d.flag()),
+                    SettingError::Value(message) => message,
+                    SettingError::OutOfRange(v) => {
+                        let unit = crate::controller::unit_suffix(p);
+                        format!(
+                            "`{path}` = {v} is out of range: allowed {}{unit} ..= {}{unit}",
+                            p.min, p.max
+                        )
+                    }
+                };
+                self.err(&key, message)
             })?;
             list.push((p, v));
         }

@@ -11,7 +11,7 @@
 use crate::csv_out::Shown;
 use crate::params::{field, FieldSpec, FIELDS};
 use crate::run::{self, Summary};
-use crate::scenario::Settings;
+use crate::scenario::{Dedicated, Settings};
 use hopper_control::hopper::HopperConfig;
 use hopper_control::laws::ControllerKind;
 use hopper_control::params::{self as fw, Param};
@@ -127,15 +127,15 @@ impl Knob {
             .iter()
             .find(|(short, column, _)| *short == name || *column == name)
             .map(|(_, _, k)| *k)
-            .or_else(|| match name {
+            .or_else(|| match Dedicated::of(name) {
                 // The table's names for settings with a knob of their own.
-                "target_apex_m" => Some(Knob::TargetApex),
-                "flight.kp_a_per_rad" => Some(Knob::FlightKp),
-                "flight.kd_a_s_per_rad" => Some(Knob::FlightKd),
-                "constant_torque.torque_nm" | "modified_torque.torque_nm" => Some(Knob::Torque),
-                "energy.gain_nm_per_j" | "energy_apex.gain_nm_per_j" => Some(Knob::EnergyGain),
-                _ if crate::scenario::dedicated_setting(name).is_some() => None,
-                _ => fw::find(name).map(Knob::Param),
+                Some(Dedicated::TargetApex) => Some(Knob::TargetApex),
+                Some(Dedicated::FlightKp) => Some(Knob::FlightKp),
+                Some(Dedicated::FlightKd) => Some(Knob::FlightKd),
+                Some(Dedicated::Torque) => Some(Knob::Torque),
+                Some(Dedicated::EnergyGain) => Some(Knob::EnergyGain),
+                Some(Dedicated::Controller) => None,
+                None => fw::find(name).map(Knob::Param),
             })
     }
 
