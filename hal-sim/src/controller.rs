@@ -9,7 +9,7 @@
 use crate::inject::{
     InjectKind, Injection, ENCODER_JUMP_COUNTS, NOISE_BURST_DURATION_S, NOISE_BURST_SIGMA_CODES,
 };
-use crate::mock::{firmware_config, SensorConfig, SimHal};
+use crate::mock::{firmware_config, model_params, SensorConfig, SimHal};
 use crate::params::Params;
 use crate::plant::Plant;
 use hopper_control::estimator::PhaseEvent;
@@ -18,6 +18,7 @@ use hopper_control::laws::{
     constant_torque, flight_pd, modified_torque, ControllerKind, StanceLaw,
 };
 use hopper_control::params::{self, Param, ParamError};
+use hopper_control::pd_design::{self, PdGains};
 use hopper_control::runner::{NoCounter, PeriodRunner, Timing};
 use hopper_control::supervisor::Fault;
 use hopper_control::telemetry::HopLedger;
@@ -50,6 +51,20 @@ pub trait Controller {
     fn estimator_events(&self) -> Option<EstimatorEvents> {
         None
     }
+    /// When the phase estimator reported each touchdown and liftoff: the
+    /// start of the period whose command first followed it, s.
+    fn contact_times(&self) -> Option<ContactTimes> {
+        None
+    }
+}
+
+/// Times of the phase estimator's touchdown and liftoff events, s.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ContactTimes {
+    /// Touchdowns.
+    pub touchdowns_s: Vec<f64>,
+    /// Liftoffs (a withdrawn touchdown's liftoff included).
+    pub liftoffs_s: Vec<f64>,
 }
 
 /// How many of each event the firmware's phase estimator reported.
@@ -61,6 +76,9 @@ pub struct EstimatorEvents {
     pub liftoffs: usize,
     /// Flight apexes.
     pub apexes: usize,
+    /// Touchdowns predicted from the height encoder that load cell and
+    /// potentiometer did not confirm (each withdrawn with a liftoff).
+    pub withdrawn_touchdowns: u32,
 }
 
 /// A latched fault.
@@ -92,8 +110,14 @@ pub struct ControllerSpec {
     /// A strategy with non-default gains, used instead of the name's default
     /// (the name still names the run).
     pub strategy_override: Option<Strategy>,
-    /// Flight PD gains instead of the eq 4.13 default.
+    /// Flight PD gains instead of the preset's (below) or the firmware's
+    /// default (eq 4.13).
     pub flight_override: Option<flight_pd::Config>,
+    /// The preset the plant came from (a parameter file's `base`), whose
+    /// machine brings its own controller defaults: the `design` preset's
+    /// flight law is Table 2.1's ([`Params::preset_flight_gains`]). `None`:
+    /// the firmware's defaults.
+    pub preset: Option<&'static str>,
     /// Faults to inject (`hopper-sim run --inject`).
     pub injections: Vec<Injection>,
     /// Firmware parameters set by name ([`hopper_control::params`]),
@@ -113,6 +137,7 @@ impl ControllerSpec {
             model: None,
             strategy_override: None,
             flight_override: None,
+            preset: None,
             injections: Vec::new(),
             params: Vec::new(),
         }
@@ -139,6 +164,22 @@ impl ControllerSpec {
             }
             other => other,
         })
+    }
+
+    /// The flight PD gains this spec's preset brings on a machine the
+    /// controller believes has `believed` parameters: the preset's gains on
+    /// the nut converted to the motor ([`pd_design::gains_from_nut`]), or
+    /// the firmware's default (eq 4.13) when the preset brings none.
+    pub fn default_flight_gains(&self, believed: &Params) -> Result<PdGains, String> {
+        match self.preset.and_then(Params::preset_flight_gains) {
+            Some(g) => pd_design::gains_from_nut(
+                g.kp_n_per_m as f32,
+                g.kd_ns_per_m as f32,
+                &model_params(believed),
+            )
+            .map_err(|e| format!("the preset's flight gains on this machine: {e:?}")),
+            None => Ok(flight_pd::Config::default().gains),
+        }
     }
 
     /// The controller this spec names.
@@ -180,6 +221,7 @@ impl ControllerSpec {
             self.target_apex_m,
             start_apex_m,
         );
+        cfg.flight.gains = self.default_flight_gains(believed)?;
         if let Some(f) = self.flight_override {
             cfg.flight = f;
         }
@@ -206,6 +248,7 @@ impl ControllerSpec {
             hops: Vec::new(),
             last: None,
             events: EstimatorEvents::default(),
+            contact_times: ContactTimes::default(),
             injections: self
                 .injections
                 .iter()
@@ -270,6 +313,7 @@ pub struct FirmwareController {
     hops: Vec<HopLedger>,
     last: Option<StepOutput>,
     events: EstimatorEvents,
+    contact_times: ContactTimes,
     injections: Vec<(Injection, InjectState)>,
     max_abs_current_after_fault_a: Option<f64>,
 }
@@ -384,8 +428,14 @@ impl Controller for FirmwareController {
             self.hops.push(h);
         }
         match out.event {
-            Some(PhaseEvent::Touchdown) => self.events.touchdowns += 1,
-            Some(PhaseEvent::Liftoff) => self.events.liftoffs += 1,
+            Some(PhaseEvent::Touchdown) => {
+                self.events.touchdowns += 1;
+                self.contact_times.touchdowns_s.push(plant.time_s());
+            }
+            Some(PhaseEvent::Liftoff) => {
+                self.events.liftoffs += 1;
+                self.contact_times.liftoffs_s.push(plant.time_s());
+            }
             Some(PhaseEvent::Apex { .. }) => self.events.apexes += 1,
             _ => {}
         }
@@ -415,7 +465,14 @@ impl Controller for FirmwareController {
     }
 
     fn estimator_events(&self) -> Option<EstimatorEvents> {
-        Some(self.events)
+        Some(EstimatorEvents {
+            withdrawn_touchdowns: self.runner.hopper().estimator().withdrawn_touchdowns(),
+            ..self.events
+        })
+    }
+
+    fn contact_times(&self) -> Option<ContactTimes> {
+        Some(self.contact_times.clone())
     }
 }
 

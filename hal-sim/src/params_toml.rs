@@ -191,16 +191,50 @@ pub fn params_from_table(
     Ok(p)
 }
 
+/// A plant parameter set as given: the values, the name runs report them
+/// under (the preset or the file), and the preset they start from (the
+/// preset itself, or a file's `base`), whose machine brings its own
+/// controller defaults ([`Params::preset_flight_gains`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct PlantSet {
+    /// The parameter values.
+    pub params: Params,
+    /// Name reported in summaries.
+    pub name: String,
+    /// The preset the set starts from, if any.
+    pub preset: Option<&'static str>,
+}
+
+impl PlantSet {
+    /// A preset by name.
+    pub fn preset(name: &str) -> Option<PlantSet> {
+        let preset = Params::preset_name(name)?;
+        Some(PlantSet {
+            params: Params::preset(preset)?,
+            name: preset.to_string(),
+            preset: Some(preset),
+        })
+    }
+}
+
+/// The preset a parameter table starts from (`base = "NAME"`), if a known one.
+pub fn base_of(table: &toml::Table) -> Option<&'static str> {
+    table
+        .get("base")
+        .and_then(toml::Value::as_str)
+        .and_then(Params::preset_name)
+}
+
 /// Resolve `--params`: a preset name or a path to a TOML file.
-pub fn load(spec: &str) -> Result<(Params, String), ParamsFileError> {
+pub fn load(spec: &str) -> Result<PlantSet, ParamsFileError> {
     load_as(spec, "--params")
 }
 
 /// [`load`] for the command-line flag `flag` (named in the error for an
 /// unknown preset; file errors name the file).
-pub fn load_as(spec: &str, flag: &str) -> Result<(Params, String), ParamsFileError> {
-    if let Some(p) = Params::preset(spec) {
-        return Ok((p, spec.to_string()));
+pub fn load_as(spec: &str, flag: &str) -> Result<PlantSet, ParamsFileError> {
+    if let Some(set) = PlantSet::preset(spec) {
+        return Ok(set);
     }
     let path = Path::new(spec);
     let looks_like_file = spec.ends_with(".toml") || spec.contains('/') || path.exists();
@@ -217,7 +251,16 @@ pub fn load_as(spec: &str, flag: &str) -> Result<(Params, String), ParamsFileErr
         location: spec.to_string(),
         message: format!("cannot read parameter file: {e}"),
     })?;
-    Ok((from_toml_str(&text, spec)?, spec.to_string()))
+    let params = from_toml_str(&text, spec)?;
+    // Parsed already, so this cannot fail; only the `base` is wanted.
+    let preset = toml::from_str::<toml::Table>(&text)
+        .ok()
+        .and_then(|t| base_of(&t));
+    Ok(PlantSet {
+        params,
+        name: spec.to_string(),
+        preset,
+    })
 }
 
 #[cfg(test)]

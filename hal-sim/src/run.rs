@@ -190,6 +190,9 @@ pub struct Summary {
     pub max_abs_current_after_fault_a: Option<f64>,
     /// Events the firmware's phase estimator reported (null without firmware).
     pub estimated_events: Option<EstimatorEvents>,
+    /// The estimator's touchdown and liftoff timing against the plant's
+    /// (null without firmware).
+    pub contact_latency: Option<ContactLatency>,
     /// The firmware's per-hop ledger, one entry per completed hop.
     pub firmware_hops: Vec<HopLedger>,
     /// Motor work (plant ledger) from the first touchdown to the first
@@ -205,6 +208,90 @@ pub struct Summary {
     /// apex is steady; null with fewer than 5 full hops (the entry from the
     /// release does not count).
     pub steady_hop: Option<HopEnergy>,
+}
+
+/// How far apart an estimator event and a plant event may be and still be
+/// the same event, s: far more than any detection delay (4.5 ms before
+/// issue 16's prediction), far less than a stance or flight (90 ms, 40 ms).
+pub const CONTACT_MATCH_WINDOW_S: f64 = 0.02;
+
+/// The phase estimator's touchdowns and liftoffs against the plant's.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct ContactLatency {
+    /// Touchdowns.
+    pub touchdown: LatencyStats,
+    /// Liftoffs.
+    pub liftoff: LatencyStats,
+}
+
+/// One kind of contact event: estimator against plant (ground truth).
+/// Latency is the estimator's event time (the start of the first period
+/// whose command follows it) minus the plant's; negative is early.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct LatencyStats {
+    /// Plant events, except those in the run's last
+    /// [`CONTACT_MATCH_WINDOW_S`] (the estimator has had no time to see them).
+    pub true_events: usize,
+    /// Estimator events paired one to one with a plant event within
+    /// [`CONTACT_MATCH_WINDOW_S`].
+    pub matched: usize,
+    /// Estimator events with no plant event to pair: false events.
+    pub false_events: usize,
+    /// Plant events with no estimator event: missed events.
+    pub missed: usize,
+    /// Smallest latency of the pairs, ms.
+    pub min_ms: Option<f64>,
+    /// Mean latency, ms.
+    pub mean_ms: Option<f64>,
+    /// Largest latency, ms.
+    pub max_ms: Option<f64>,
+    /// Largest |latency|, ms.
+    pub max_abs_ms: Option<f64>,
+}
+
+impl LatencyStats {
+    /// Pairs sorted estimator times with sorted plant times, each estimator
+    /// event with the nearest unpaired plant event within the window;
+    /// plant events after `end_s - window` do not count as missed.
+    pub fn pair(estimated_s: &[f64], truth_s: &[f64], end_s: f64) -> LatencyStats {
+        let w = CONTACT_MATCH_WINDOW_S;
+        let mut used = vec![false; truth_s.len()];
+        let mut lat = Vec::new();
+        let mut false_events = 0;
+        for &e in estimated_s {
+            let best = truth_s
+                .iter()
+                .enumerate()
+                .filter(|(i, t)| !used[*i] && (e - **t).abs() <= w)
+                .min_by(|a, b| (e - a.1).abs().total_cmp(&(e - b.1).abs()));
+            match best {
+                Some((i, t)) => {
+                    used[i] = true;
+                    lat.push((e - t) * 1e3);
+                }
+                None => false_events += 1,
+            }
+        }
+        let counted = |t: f64| t <= end_s - w;
+        let true_events = truth_s.iter().filter(|t| counted(**t)).count();
+        let missed = truth_s
+            .iter()
+            .zip(&used)
+            .filter(|(t, u)| counted(**t) && !**u)
+            .count();
+        let n = lat.len();
+        let fold = |f: fn(f64, f64) -> f64| lat.iter().copied().reduce(f);
+        LatencyStats {
+            true_events,
+            matched: n,
+            false_events,
+            missed,
+            min_ms: fold(f64::min),
+            mean_ms: (n > 0).then(|| lat.iter().sum::<f64>() / n as f64),
+            max_ms: fold(f64::max),
+            max_abs_ms: lat.iter().map(|x| x.abs()).reduce(f64::max),
+        }
+    }
 }
 
 /// One hop's energy flows, from the previous apex (or the release) to this
@@ -420,6 +507,23 @@ pub fn run_with_progress(
         &events,
         max_residual,
     );
+    let contact_latency = controller.contact_times().map(|c| {
+        let of = |want_touchdown: bool| -> Vec<f64> {
+            events
+                .iter()
+                .filter_map(|e| match *e {
+                    Event::Touchdown { t_s, .. } if want_touchdown => Some(t_s),
+                    Event::Liftoff { t_s, .. } if !want_touchdown => Some(t_s),
+                    _ => None,
+                })
+                .collect()
+        };
+        let end_s = plant.time_s();
+        ContactLatency {
+            touchdown: LatencyStats::pair(&c.touchdowns_s, &of(true), end_s),
+            liftoff: LatencyStats::pair(&c.liftoffs_s, &of(false), end_s),
+        }
+    });
     Ok(RunResult {
         samples,
         events,
@@ -439,6 +543,7 @@ pub fn run_with_progress(
                 max_abs_current_after_fault_a: controller.max_abs_current_after_fault_a(),
                 faults,
                 estimated_events: controller.estimator_events(),
+                contact_latency,
                 firmware_hops: controller.hop_ledgers(),
                 first_stance_motor_work_j: first_stance_work_j,
                 steady_hop: match tracker.hops.len() {
@@ -518,6 +623,7 @@ fn summarize(
         first_fault_s: None,
         max_abs_current_after_fault_a: None,
         estimated_events: None,
+        contact_latency: None,
         firmware_hops: Vec::new(),
         first_stance_motor_work_j: None,
         hop_ledger: Vec::new(),

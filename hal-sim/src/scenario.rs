@@ -16,7 +16,7 @@
 //! target_apex_m = 0.05
 //! torque_nm = 1.0           # open-torque, modified-torque
 //! energy_gain_nm_per_j = 3.0     # K_e of eq 2.52 (energy, energy-apex)
-//! flight_kp_a_per_rad = 20.3152  # flight PD (eq 4.13 default)
+//! flight_kp_a_per_rad = 20.3152  # flight PD (eq 4.13; default: the preset's)
 //! flight_kd_a_s_per_rad = 0.6077
 //!
 //! [sensors]
@@ -42,7 +42,7 @@ use crate::flight_stability::{self, FlightLoop};
 use crate::inject::Injection;
 use crate::mock::SensorConfig;
 use crate::params::{Params, Range};
-use crate::params_toml::{self, ParamsFileError};
+use crate::params_toml::{self, ParamsFileError, PlantSet};
 use crate::run::RunConfig;
 use hopper_control::estimator::EstimatorConfig;
 use hopper_control::hopper::{ApexLoop, Strategy};
@@ -214,8 +214,8 @@ pub fn parse_param_setting(spec: &str) -> Result<(&'static Param, f32), String> 
 /// `None` means "not given here".
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Overrides {
-    /// Plant parameters and the name they are reported under.
-    pub plant: Option<(Params, String)>,
+    /// Plant parameters, the name they are reported under, their preset.
+    pub plant: Option<PlantSet>,
     /// What the controller believes (default: the plant).
     pub model: Option<Params>,
     /// Controller name, one of [`CONTROLLER_NAMES`].
@@ -286,6 +286,9 @@ pub struct Settings {
     pub params: Params,
     /// Name the parameters are reported under (preset, file or scenario).
     pub params_name: String,
+    /// The preset the plant starts from (its controller defaults apply:
+    /// the design preset's Table 2.1 flight law).
+    pub preset: Option<&'static str>,
     /// What the controller believes (None: the plant).
     pub model: Option<Params>,
     /// Controller name.
@@ -296,9 +299,9 @@ pub struct Settings {
     pub torque_nm: Option<f64>,
     /// Energy-law gain (None: the law's default), N m/J.
     pub energy_gain_nm_per_j: Option<f64>,
-    /// Flight PD proportional gain (None: eq 4.13), A/rad.
+    /// Flight PD proportional gain (None: the preset's, else eq 4.13), A/rad.
     pub flight_kp_a_per_rad: Option<f64>,
-    /// Flight PD derivative gain (None: eq 4.13), A s/rad.
+    /// Flight PD derivative gain (None: the preset's, else eq 4.13), A s/rad.
     pub flight_kd_a_s_per_rad: Option<f64>,
     /// Sensor noise and amplifier lag.
     pub sensors: SensorConfig,
@@ -320,13 +323,15 @@ impl Settings {
     pub fn resolve(file: Option<&Overrides>, cli: &Overrides) -> Settings {
         let o = file.cloned().unwrap_or_default().overridden_by(cli);
         let d = SensorConfig::DEFAULT;
-        let (params, params_name) = o.plant.unwrap_or_else(|| {
-            // The default preset always exists; `design()` is the same set.
-            (Params::design(), DEFAULT_PARAMS.to_string())
+        let plant = o.plant.unwrap_or_else(|| PlantSet {
+            params: Params::design(),
+            name: DEFAULT_PARAMS.to_string(),
+            preset: Params::preset_name(DEFAULT_PARAMS),
         });
         Settings {
-            params,
-            params_name,
+            params: plant.params,
+            params_name: plant.name,
+            preset: plant.preset,
             model: o.model,
             controller: o.controller.unwrap_or(DEFAULT_CONTROLLER),
             target_apex_m: o.target_apex_m.unwrap_or(DEFAULT_TARGET_APEX_M),
@@ -367,6 +372,7 @@ impl Settings {
             torque_nm: self.torque_nm,
             sensors: self.sensors,
             model: self.model,
+            preset: self.preset,
             injections: self.inject.clone(),
             ..ControllerSpec::new(self.controller.name())
         };
@@ -407,7 +413,10 @@ impl Settings {
                         .into(),
                 );
             }
-            let d = flight_pd::Config::default();
+            let d = flight_pd::Config {
+                gains: spec.default_flight_gains(self.model.as_ref().unwrap_or(&self.params))?,
+                ..flight_pd::Config::default()
+            };
             let kp = self.flight_kp_a_per_rad.unwrap_or(f64::from(d.gains.kp));
             let kd = self.flight_kd_a_s_per_rad.unwrap_or(f64::from(d.gains.kd));
             check_range(
@@ -505,7 +514,10 @@ impl Settings {
         if self.controller == ControllerKind::Passive {
             return Ok(());
         }
-        let gains = spec.flight_override.unwrap_or_default().gains;
+        let gains = match spec.flight_override {
+            Some(f) => f.gains,
+            None => spec.default_flight_gains(self.model.as_ref().unwrap_or(&self.params))?,
+        };
         let (kp, kd) = (f64::from(gains.kp), f64::from(gains.kd));
         let lp = FlightLoop {
             plant_gain: flight_stability::plant_gain(&self.params),
@@ -788,11 +800,11 @@ impl Reader<'_> {
         &self,
         value: Option<&toml::Value>,
         key: &str,
-    ) -> Result<Option<(Params, String)>, ScenarioError> {
+    ) -> Result<Option<PlantSet>, ScenarioError> {
         match value {
             None => Ok(None),
-            Some(toml::Value::String(name)) => match Params::preset(name) {
-                Some(p) => Ok(Some((p, name.clone()))),
+            Some(toml::Value::String(name)) => match PlantSet::preset(name) {
+                Some(set) => Ok(Some(set)),
                 None => Err(self.err(
                     key,
                     format!(
@@ -805,7 +817,11 @@ impl Reader<'_> {
                 let prefix = format!("{key}.");
                 let line_for = |k: &str| self.lines.get(&format!("{prefix}{k}")).copied();
                 let p = params_toml::params_from_table(t, self.origin, &prefix, &line_for)?;
-                Ok(Some((p, self.origin.to_string())))
+                Ok(Some(PlantSet {
+                    params: p,
+                    name: self.origin.to_string(),
+                    preset: params_toml::base_of(t),
+                }))
             }
             Some(other) => Err(self.err(
                 key,
@@ -885,7 +901,9 @@ pub fn from_toml_str(text: &str, origin: &str) -> Result<Scenario, ScenarioError
     })?;
     let mut s = Overrides {
         plant: r.params(file.plant.as_ref(), "plant")?,
-        model: r.params(file.model.as_ref(), "model")?.map(|(p, _)| p),
+        model: r
+            .params(file.model.as_ref(), "model")?
+            .map(|set| set.params),
         start_apex_m: r.ranged(
             "start_apex_m",
             file.start_apex_m,
@@ -1052,7 +1070,9 @@ mod tests {
         )
         .unwrap();
         let o = &s.settings;
-        let (p, name) = o.plant.clone().unwrap();
+        let PlantSet {
+            params: p, name, ..
+        } = o.plant.clone().unwrap();
         assert_eq!(p.spring_stiffness_n_per_m, 10_000.0);
         assert_eq!(name, "s.toml");
         assert_eq!(o.model, Some(Params::identified()));

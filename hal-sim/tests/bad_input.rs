@@ -171,7 +171,15 @@ fn stroke_above_the_hardware() {
 fn unstable_flight_pd() {
     let c = Case::new();
     c.fails(
-        &["run", "--controller", "energy-apex", "--flight-kd", "80"],
+        &[
+            "run",
+            "--controller",
+            "energy-apex",
+            "--flight-kp",
+            "20.3152",
+            "--flight-kd",
+            "80",
+        ],
         &["--flight-kd", "= 80", "unstable", "..= 50.9"],
     );
     c.fails(
@@ -187,7 +195,15 @@ fn unstable_flight_pd() {
         &["controller.flight_kd_a_s_per_rad", "= 0", "unstable"],
     );
     c.fails(
-        &["run", "--controller", "energy", "--control-hz", "100"],
+        &[
+            "run",
+            "--params",
+            "identified",
+            "--controller",
+            "energy",
+            "--control-hz",
+            "100",
+        ],
         &["--control-hz", "100 Hz", "unstable"],
     );
     c.fails(

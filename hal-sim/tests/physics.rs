@@ -70,7 +70,7 @@ fn ledger_closes_with_the_nut_moving_under_torque() {
     let mut p = frictionless(Params::design());
     p.unsprung_mass_kg = 1e-9;
     let r = p.screw_m_per_rad();
-    let torque = 0.5;
+    let torque = 0.25;
     let cmd = torque / p.torque_constant_nm_per_a;
     let p_eq = p.efficiency * torque / r / p.spring_stiffness_n_per_m - p.spring_preload_m;
     let z0 = p.leg_length_m + 0.1;
@@ -134,7 +134,14 @@ fn touchdown_loses_half_mu_v_squared_at_the_exact_time() {
 
 #[test]
 fn liftoff_conserves_momentum_and_loses_the_pickup_energy() {
-    let p = frictionless(Params::design());
+    // A preload keeps the nut pressed on its stop through liftoff, so it is
+    // at rest there as eq 2.40 assumes; with none the spring force, and so
+    // the stop's, is zero at liftoff and the nut may creep off the stop at
+    // 1e-4 m/s, which changes the momentum balance by 2e-5 kg m/s.
+    let p = Params {
+        spring_preload_m: 0.005,
+        ..frictionless(Params::design())
+    };
     let mut plant = Plant::new(p, 0.2).unwrap();
     let events = simulate(&mut plant, 0.6, |_| 0.0, |_| {});
     let (before, after, loss) = events
@@ -152,7 +159,10 @@ fn liftoff_conserves_momentum_and_loses_the_pickup_energy() {
     let m_bs = p.body_mass_kg + p.nut_mass_kg;
     let m_t = m_bs + p.unsprung_mass_kg;
     // eq 2.39-2.41: (M + m_s) zd- = m_t zd+ with the nut at rest.
-    assert!((m_bs * before - m_t * after).abs() < 1e-12);
+    assert!(
+        (m_bs * before - m_t * after).abs() < 1e-12,
+        "{before} {after}"
+    );
     // MODEL.md erratum: the loss is 0.5 (M+m_s) m_u / m_t zd^2, not 75 mJ.
     let expected = 0.5 * m_bs * p.unsprung_mass_kg / m_t * before * before;
     assert!((loss - expected).abs() < 1e-9, "{loss} vs {expected}");

@@ -70,19 +70,16 @@ fn energy_apex_canonical_run_converges_and_matches_its_snapshot() {
     .run()
     .unwrap();
     // The first hops overshoot the dip (the law sheds the drop's surplus
-    // energy), then the apex climbs back without overshoot and stays within
-    // 2 % of the target: from hop 26 of 34 today.
+    // energy), then the apex climbs back, overshoots by 6 % and stays
+    // within 2 % of the target: from hop 15 of 33 today (26 before issue
+    // 16's zero preload and predicted contact; the issue asks for <= 15).
     let htc = s.hops_to_converge.unwrap();
-    assert!(htc <= 30, "converged at hop {htc}");
+    assert!(htc <= 15, "converged at hop {htc}");
     for h in last(&s, 5) {
         assert!((h - 0.05).abs() <= 0.02 * 0.05, "{:?}", s.apex_heights_m);
     }
     let climb = &s.apex_heights_m[3..];
-    assert!(
-        climb.windows(2).all(|w| w[1] > w[0]) && climb.iter().all(|h| *h < 0.05),
-        "{:?}",
-        s.apex_heights_m
-    );
+    assert!(climb.iter().all(|h| *h < 0.054), "{:?}", s.apex_heights_m);
     assert!(s.faults.is_empty(), "{:?}", s.faults);
     assert!(s.max_current_a <= Params::design().current_limit_a + 1e-9);
     assert!(s.energy_residual_j.abs() < 1e-3, "{}", s.energy_residual_j);
@@ -100,7 +97,7 @@ fn energy_apex_regulates_a_lower_target_too() {
 #[test]
 fn constant_torque_limit_cycle_grows_with_torque() {
     let mut steady = Vec::new();
-    for torque in [0.8, 0.9, 1.0] {
+    for torque in [0.5, 0.8, 0.9, 1.0] {
         let s = sim(
             &ControllerSpec {
                 torque_nm: Some(torque),
@@ -115,56 +112,73 @@ fn constant_torque_limit_cycle_grows_with_torque() {
             .unwrap_or_else(|| panic!("{torque} N m: no limit cycle: {:?}", last(&s, 6)));
         steady.push(h);
     }
-    assert!(steady[0] < steady[1] && steady[1] < steady[2], "{steady:?}");
-    // The 1 N m cycle is about 0.040 m: far below the thesis's 0.15 m (70 J).
-    assert!((0.035..0.046).contains(&steady[2]), "{steady:?}");
-    // Below about 0.7 N m the stance work cannot pay for the losses.
-    let weak = sim(
-        &ControllerSpec {
-            torque_nm: Some(0.5),
-            ..ControllerSpec::new("open-torque")
-        },
-        Params::design(),
-        0.10,
-        10.0,
-    );
-    assert!(
-        last(&weak, 3).iter().all(|h| *h < 0.005),
-        "{:?}",
-        weak.apex_heights_m
-    );
+    assert!(steady.windows(2).all(|w| w[0] < w[1]), "{steady:?}");
+    // The 1 N m cycle is about 0.087 m (0.040 m with the old 5 mm preload):
+    // below the thesis's 0.15 m (70 J), which constant torque need not reach.
+    assert!((0.083..0.091).contains(&steady[3]), "{steady:?}");
+    // Even 0.5 N m holds about 0.021 m (with the old 5 mm preload and late
+    // contact detection it decayed below 5 mm).
+    assert!((0.0204..0.0218).contains(&steady[0]), "{steady:?}");
 }
 
 #[test]
-fn thesis_laws_against_the_torque_limited_actuator() {
-    // Design parameters, 0.10 m drop, 0.05 m target (E_D = 60.3 J).
-    let run = |name: &str| sim(&spec(name, 0.05), Params::design(), 0.10, 8.0);
-    // Position steps (eqs 2.49-2.50): the 1 N m motor moves the nut only a
-    // few mm against the spring before liftoff, so hopping decays.
-    for name in ["step-open", "step-closed"] {
-        let s = run(name);
-        assert!(s.max_stroke_m < 0.01, "{name}: {}", s.max_stroke_m);
-        assert!(s.stopped_at_s.is_some(), "{name}: {:?}", s.apex_heights_m);
+fn thesis_laws_steady_apexes_on_the_design_preset() {
+    let run = |kind: ControllerKind, start: f64| {
+        CliRun {
+            params: Some("design"),
+            controller: Some(kind),
+            start_apex_m: Some(start),
+            target_apex_m: Some(0.15),
+            duration_s: Some(15.0),
+        }
+        .run()
+        .unwrap()
+    };
+    // Hops (1-based) from which every apex is within 2 % of the steady one.
+    let settled = |s: &Summary| {
+        let h = s.steady_apex_m.unwrap();
+        let a = &s.apex_heights_m;
+        (0..a.len())
+            .find(|&i| a[i..].iter().all(|x| (x - h).abs() <= 0.02 * h))
+            .map(|i| i + 1)
+            .unwrap()
+    };
+    let mut hops = Vec::new();
+    for (kind, steady_m) in [
+        (ControllerKind::OpenTorque, 0.0871),
+        (ControllerKind::Energy, 0.0800),
+        (ControllerKind::Velocity, 0.0708),
+    ] {
+        for start in [0.05, 0.25] {
+            let s = run(kind, start);
+            let h = s
+                .steady_apex_m
+                .unwrap_or_else(|| panic!("{kind}: {:?}", s.apex_heights_m));
+            assert!(
+                (h - steady_m).abs() <= 0.03 * steady_m,
+                "{kind} from {start}: {h}"
+            );
+            // The thesis's "about 100 ms" stance (93 ms with a 5 mm preload).
+            let t = s.stance_time_s.unwrap();
+            assert!((0.097..0.102).contains(&t), "{kind}: stance {t}");
+            assert!(s.faults.is_empty(), "{kind}: {:?}", s.faults);
+            hops.push(settled(&s));
+        }
     }
-    // Energy feedback (eq 2.52) and velocity (eq 2.53) count the rotor's
-    // kinetic energy as hop energy: they cut the torque while the motor
-    // spins, and hopping decays too.
-    for name in ["energy", "velocity"] {
-        let s = run(name);
+    // "Energy feedback converges much faster than constant torque": from
+    // 0.25 m, 12 hops against 22 (and from 0.05 m, 12 against 16).
+    assert!(hops[3] < hops[1] && hops[2] < hops[0], "{hops:?}");
+    // Position steps (eqs 2.49-2.50): the 1 N m motor moves the nut only
+    // about a centimetre against the spring before liftoff, and hopping
+    // decays to sub-millimetre bounces.
+    for kind in [ControllerKind::StepOpen, ControllerKind::StepClosed] {
+        let s = run(kind, 0.10);
+        assert!(s.max_stroke_m < 0.045, "{kind}: {}", s.max_stroke_m);
         assert!(
-            last(&s, 3).iter().all(|h| *h < 0.01),
-            "{name}: {:?}",
+            last(&s, 1).iter().all(|h| *h < 0.002),
+            "{kind}: {:?}",
             s.apex_heights_m
         );
-    }
-    // Modified torque (section 4.4.3): spinning up before touchdown gets the
-    // apex far above the stance-only laws.
-    let s = run("modified-torque");
-    let best = s.apex_heights_m.iter().copied().fold(0.0, f64::max);
-    assert!(best > 0.09, "{:?}", s.apex_heights_m);
-    for s in [run("energy"), run("velocity"), run("modified-torque")] {
-        assert!(s.faults.is_empty(), "{}: {:?}", s.controller, s.faults);
-        assert!(s.max_current_a <= Params::design().current_limit_a + 1e-9);
     }
 }
 

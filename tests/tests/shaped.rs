@@ -55,9 +55,10 @@ fn shaped_reaches_and_holds_the_thesis_target_without_stop_impacts() {
     .unwrap();
     assert!(holds_target(&s, 10), "{:?}", s.apex_heights_m);
     let htc = s.hops_to_converge.unwrap();
-    // 14 with the defaults (seeds 1-5); 19 before the outer loop's
-    // anti-windup and the first-descent spin-up, 16 with the first alone.
-    assert!(htc <= 15, "converged at hop {htc}");
+    // 9 with the design preset of issue 16 (no preload, predicted contact;
+    // the issue asks for <= 10); 14 before it, 19 before the outer loop's
+    // anti-windup and the first-descent spin-up.
+    assert!(htc <= 10, "converged at hop {htc}");
     assert!(s.faults.is_empty(), "{:?}", s.faults);
     // Within the actuator's limits: current limit, stroke.
     let p = Params::design();
@@ -70,9 +71,10 @@ fn shaped_reaches_and_holds_the_thesis_target_without_stop_impacts() {
     assert!(steady.stop_impact_loss_j < 0.1, "{steady:?}");
     // A tripwire for docs/beat-the-thesis.md: the best one-hop schedule the
     // example `one_hop_bound` finds, with the plant's exact state, rises
-    // 0.0127 m at most. A closed-loop hop rising more (the release's 0.05 m
-    // counted, so hop 1 too) would mean that the plant changed or that the
-    // search missed better schedules. The climb rises at most 0.009 m.
+    // 0.0220 m at most (0.0127 m with the old 5 mm preload). A closed-loop
+    // hop rising more (the release's 0.05 m counted, so hop 1 too) would
+    // mean that the plant changed or that the search missed better
+    // schedules. The climb rises at most 0.0162 m.
     let apexes: Vec<f64> = std::iter::once(0.05)
         .chain(s.apex_heights_m.iter().copied())
         .collect();
@@ -80,7 +82,7 @@ fn shaped_reaches_and_holds_the_thesis_target_without_stop_impacts() {
         .windows(2)
         .map(|w| w[1] - w[0])
         .fold(f64::NEG_INFINITY, f64::max);
-    assert!(rise <= 0.0127 + 2e-4, "a hop rose {rise} m: {apexes:?}");
+    assert!(rise <= 0.0220 + 2e-4, "a hop rose {rise} m: {apexes:?}");
     insta::assert_snapshot!("shaped_design", snapshot_text(&s).unwrap());
 }
 

@@ -286,7 +286,7 @@ mod tests {
             body_velocity_mps: 0.0,
             motor_rate_rad_s: 0.0,
             nut_position_m: 0.0,
-            spring_force_n: 11_000.0 * 0.005,
+            spring_force_n: m.spring_stiffness_n_per_m * m.preload_m,
             phase: Phase::Flight,
         };
         let ed = m

@@ -14,6 +14,38 @@
 //! consecutive samples (debounce). Touchdown and liftoff therefore strictly
 //! alternate, whatever the input.
 //!
+//! Those thresholds make the sensor evidence late: at 1 m/s the 40 N and
+//! 2 mm take 3.5-4.5 ms of compression to build, and against the 426 kg of
+//! reflected rotor inertia the nut's travel grows with the square of the
+//! time it is driven, so a stance law switched on that late loses about
+//! 1 J per hop. So the events are *predicted* from the height encoder
+//! (`predict_contact`): touchdown and liftoff are both the body coordinate
+//! crossing `l0` (MODEL.md's transitions), so with the filtered body
+//! velocity `v` the crossing falls within half a period of this sample when
+//! `z - l0 + v dt / 2` has crossed 0 (descending in flight, rising in
+//! stance). The event is then reported at the sample nearest the crossing:
+//! within `dt / 2` plus one height count over `|v|` (63 us at 1 m/s) of it.
+//! The other sensors check the prediction:
+//! - a predicted liftoff waits while load cell or potentiometer still show
+//!   contact above their touchdown thresholds (a ground higher than the
+//!   height origin says);
+//! - a predicted touchdown must be confirmed, both above their touchdown
+//!   thresholds, within `contact_confirm_s`; if it is not (a ground lower
+//!   than the origin says, the robot held up, or the toe resting on the
+//!   ground with the leg on its extension stop), it is withdrawn with a
+//!   liftoff event and counted ([`PhaseEstimator::withdrawn_touchdowns`]);
+//! - in stance the potentiometer measures what the height encoder does,
+//!   `l0 - z`. When they disagree by more than the pot's contact threshold
+//!   at a withdrawal or at a touchdown the sensors found, the height origin
+//!   is off and prediction stops until they agree again at such a touchdown.
+//!
+//! The sensor evidence with its debounce still changes the phase when it
+//! comes first (or when the height encoder says the leg is compressed by
+//! more than the pot's contact threshold while the sensors say "free"), so
+//! a wrong height origin costs timing, not the hop. With the leg on its
+//! extension stop and the toe on the ground (the nut holding the body up)
+//! no sensor can see the contact: such sub-millimetre hops are not events.
+//!
 //! Velocities come from the filtered derivative of eq 4.1
 //! ([`FilteredDerivative`]) of the body height and motor angle. Apex: in
 //! flight, once the filtered body velocity has exceeded `+apex_arm_velocity`,
@@ -98,6 +130,12 @@ pub struct EstimatorConfig {
     pub apex_arm_velocity_mps: f32,
     /// Downward body speed that arms bottom detection in stance, m/s, > 0. Default 0.1.
     pub bottom_arm_velocity_mps: f32,
+    /// Predict touchdown and liftoff from the height encoder (module doc). Default true.
+    pub predict_contact: bool,
+    /// Time within which the sensors must confirm a predicted touchdown, s,
+    /// finite and > 0. Default 0.03 (the 40 N and 2 mm take 9 ms at a 1 cm
+    /// hop's 0.44 m/s).
+    pub contact_confirm_s: f32,
 }
 
 impl Default for EstimatorConfig {
@@ -112,6 +150,8 @@ impl Default for EstimatorConfig {
             velocity_filter_gain: p::EST_FILTER_GAIN.default,
             apex_arm_velocity_mps: p::EST_APEX_ARM_MPS.default,
             bottom_arm_velocity_mps: p::EST_BOTTOM_ARM_MPS.default,
+            predict_contact: p::EST_PREDICT_CONTACT.default_flag(),
+            contact_confirm_s: p::EST_CONTACT_CONFIRM_S.default,
         }
     }
 }
@@ -130,6 +170,8 @@ pub enum EstimatorError {
     FilterGain(FilterError),
     /// An arming velocity is not a finite positive number.
     ArmVelocity,
+    /// `contact_confirm_s` is not a finite positive number.
+    ConfirmTime,
     /// The model parameters are invalid.
     Model(ModelError),
 }
@@ -151,6 +193,18 @@ pub struct PhaseEstimator {
     peak_height_m: f32,
     last_apex_m: Option<f32>,
     rejected_samples: u32,
+    /// Prediction is on (configured, and no touchdown withdrawn since).
+    predicting: bool,
+    /// A predicted touchdown awaits the sensors' confirmation.
+    unconfirmed: bool,
+    /// Time since that touchdown, s.
+    unconfirmed_s: f32,
+    /// The height encoder has put the toe above the ground in this flight:
+    /// only then may a touchdown be predicted (after a liftoff the sensors
+    /// decided with the body still below `l0`, the height would predict
+    /// the same stance's touchdown again).
+    toe_cleared: bool,
+    withdrawn_touchdowns: u32,
 }
 
 impl PhaseEstimator {
@@ -176,6 +230,9 @@ impl PhaseEstimator {
         if !(arm_ok(cfg.apex_arm_velocity_mps) && arm_ok(cfg.bottom_arm_velocity_mps)) {
             return Err(EstimatorError::ArmVelocity);
         }
+        if !(cfg.contact_confirm_s > 0.0 && cfg.contact_confirm_s < f32::INFINITY) {
+            return Err(EstimatorError::ConfirmTime);
+        }
         let filter = FilteredDerivative::new(cfg.velocity_filter_gain)
             .map_err(EstimatorError::FilterGain)?;
         Ok(Self {
@@ -193,6 +250,11 @@ impl PhaseEstimator {
             peak_height_m: f32::NEG_INFINITY,
             last_apex_m: None,
             rejected_samples: 0,
+            predicting: cfg.predict_contact,
+            unconfirmed: false,
+            unconfirmed_s: 0.0,
+            toe_cleared: false,
+            withdrawn_touchdowns: 0,
         })
     }
 
@@ -202,9 +264,30 @@ impl PhaseEstimator {
     }
 
     /// Forces the phase (e.g. at start-up standing on the ground) and clears the
-    /// debounce and event state; the velocity filters are kept.
+    /// debounce and event state; the velocity filters are kept. Prediction
+    /// is on again if configured (a new start, e.g. after recalibration).
     pub fn set_phase(&mut self, phase: Phase) {
+        self.change_phase(phase);
+        self.predicting = self.cfg.predict_contact;
+    }
+
+    /// Touchdowns predicted from the height encoder that load cell and
+    /// potentiometer did not confirm in time (each withdrawn with a liftoff).
+    pub fn withdrawn_touchdowns(&self) -> u32 {
+        self.withdrawn_touchdowns
+    }
+
+    /// Whether touchdown and liftoff are predicted from the height encoder
+    /// (configured, and no touchdown withdrawn since the last [`set_phase`](Self::set_phase)).
+    pub fn predicting(&self) -> bool {
+        self.predicting
+    }
+
+    fn change_phase(&mut self, phase: Phase) {
         self.phase = phase;
+        self.unconfirmed = false;
+        self.unconfirmed_s = 0.0;
+        self.toe_cleared = false;
         self.reset_phase_state();
     }
 
@@ -277,26 +360,80 @@ impl PhaseEstimator {
         let nut_m = self.screw_m_per_rad * m.motor_angle_rad;
         let excess_n = m.spring_force_n - self.stiffness_n_per_m * (self.preload_m + nut_m);
         let c = &self.cfg;
-        let evidence = match self.phase {
-            Phase::Flight => {
-                excess_n >= c.touchdown_force_n && m.leg_compression_m >= c.touchdown_compression_m
-            }
-            Phase::Stance => {
-                excess_n <= c.liftoff_force_n && m.leg_compression_m <= c.liftoff_compression_m
-            }
+        let force_contact = excess_n >= c.touchdown_force_n;
+        let pot_contact = m.leg_compression_m >= c.touchdown_compression_m;
+        // The toe's height above the ground half a period from now (eq 4.1
+        // velocity; in stance the negative leg compression).
+        let toe_m = m.body_height_m - self.leg_length_m;
+        let toe_ahead_m = toe_m + 0.5 * dt_s * body_v;
+        self.toe_cleared |= self.phase == Phase::Flight && toe_m > 0.0;
+        let slightly_compressed = toe_ahead_m < 0.0 && toe_ahead_m >= -c.touchdown_compression_m;
+        let height_holds_stance = self.predicting && slightly_compressed;
+        let (evidence, predicted) = match self.phase {
+            Phase::Flight => (
+                force_contact && pot_contact,
+                self.predicting && self.toe_cleared && body_v < 0.0 && toe_ahead_m <= 0.0,
+            ),
+            // Not before a predicted touchdown is confirmed: at the ground
+            // the sensors still read "free".
+            // And, when predicting, not while the height encoder says the
+            // leg is still compressed, unless by more than the pot's own
+            // contact threshold (then the height origin is off): the
+            // sensors read "free" about a millimetre early.
+            Phase::Stance => (
+                !self.unconfirmed
+                    && !height_holds_stance
+                    && excess_n <= c.liftoff_force_n
+                    && m.leg_compression_m <= c.liftoff_compression_m,
+                self.predicting
+                    && body_v > 0.0
+                    && toe_ahead_m >= 0.0
+                    && !(force_contact || pot_contact),
+            ),
         };
         self.pending = if evidence {
             self.pending.saturating_add(1)
         } else {
             0
         };
-        if self.pending >= c.debounce_samples {
+        // In stance the potentiometer measures what the height encoder
+        // does, `l0 - z`: agreement within the pot's contact threshold
+        // says the height origin is right.
+        let height_compression_m = crate::num::max(-toe_m, 0.0);
+        let origin_agrees =
+            (height_compression_m - m.leg_compression_m).abs() <= c.touchdown_compression_m;
+        if predicted || self.pending >= c.debounce_samples {
+            let confirmed = force_contact && pot_contact;
+            if !predicted && self.phase == Phase::Flight && self.cfg.predict_contact {
+                // A touchdown the sensors found: prediction resumes if the
+                // height encoder agrees with the potentiometer.
+                self.predicting = origin_agrees;
+            }
             let (next, event) = match self.phase {
                 Phase::Flight => (Phase::Stance, PhaseEvent::Touchdown),
                 Phase::Stance => (Phase::Flight, PhaseEvent::Liftoff),
             };
-            self.set_phase(next);
+            self.change_phase(next);
+            self.unconfirmed = next == Phase::Stance && !confirmed;
             return Some(event);
+        }
+        if self.unconfirmed {
+            if force_contact && pot_contact {
+                self.unconfirmed = false;
+            } else {
+                self.unconfirmed_s += dt_s;
+                if self.unconfirmed_s > self.cfg.contact_confirm_s {
+                    // No load: withdraw the touchdown. If the height encoder
+                    // says the leg is compressed and the potentiometer does
+                    // not, its origin is off: the sensors alone decide
+                    // until they agree again (otherwise the toe only rests
+                    // on the ground with the leg at its stop).
+                    self.withdrawn_touchdowns = self.withdrawn_touchdowns.saturating_add(1);
+                    self.predicting = origin_agrees;
+                    self.change_phase(Phase::Flight);
+                    return Some(PhaseEvent::Liftoff);
+                }
+            }
         }
 
         match self.phase {
@@ -344,7 +481,7 @@ mod tests {
 
     const L0: f32 = 0.61;
     const K: f32 = 11_000.0;
-    const D0: f32 = 0.005;
+    const D0: f32 = crate::model::design::SPRING_PRELOAD_M as f32;
     const G: f32 = 9.81;
 
     /// Tiny deterministic LCG (Knuth MMIX constants).
@@ -371,9 +508,10 @@ mod tests {
         let mut push = |z: f32, p: f32| out.push((z, p, (L0 - z).max(0.0)));
         for (i, &h) in apexes.iter().enumerate() {
             let v = libm::sqrtf(2.0 * G * h);
-            // Descent from h.
+            // Descent from h (the last one stops short of the ground).
+            let fall_s = if i + 1 == apexes.len() { 0.9 } else { 1.0 } * v / G;
             let mut t = 0.0;
-            while t < v / G {
+            while t < fall_s {
                 push(L0 + h - 0.5 * G * t * t, 0.0);
                 t += dt;
             }

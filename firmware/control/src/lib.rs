@@ -101,7 +101,8 @@ pub(crate) mod proptest_support {
     /// A hopper at rest in flight at the origin, as `cal` reads it: nut on
     /// its stop, the spring at the default model's preload.
     pub fn rest_sample(cal: &crate::calibration::Calibration) -> crate::hal::RawSample {
-        let preload_n = 11_000.0 * 0.005;
+        let m = crate::model::ModelParams::default();
+        let preload_n = m.spring_stiffness_n_per_m * m.preload_m;
         crate::hal::RawSample {
             loadcell_code: (cal.loadcell_offset_code + preload_n / cal.loadcell_gain_n_per_code)
                 as u16,

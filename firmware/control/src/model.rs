@@ -101,7 +101,8 @@ pub enum ModelError {
 /// Physical parameters of the hopper, f32 SI, each in the range
 /// [`ModelField::range`] gives (the simulator's plant checks the same ranges).
 /// `Default` is the thesis's
-/// "design" set (Table 2.1) plus the motor of section 3.1 and a 5 mm preload.
+/// "design" set (Table 2.1) plus the motor of section 3.1, with no preload
+/// (the thesis gives none; see [`design::SPRING_PRELOAD_M`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct ModelParams {
@@ -119,7 +120,7 @@ pub struct ModelParams {
     pub spring_stiffness_n_per_m: f32,
     /// Leg free length `l0`, m (body coordinate at touchdown). Default 0.61.
     pub leg_length_m: f32,
-    /// Spring preload `delta0`, m. Default 0.005.
+    /// Spring preload `delta0`, m. Default 0 (the thesis's design).
     pub preload_m: f32,
     /// Nut stroke, m (`p` in `0..stroke`). Default 0.05.
     pub stroke_m: f32,
@@ -136,7 +137,7 @@ pub struct ModelParams {
 }
 
 /// The thesis's design machine (Table 2.1, with the 80 W motor of section
-/// 3.1 and a 5 mm preload), in `f64`: the one definition of its values. The
+/// 3.1), in `f64`: the one definition of its values. The
 /// simulator's `design` plant preset takes them as they are;
 /// [`ModelParams::default`] converts them to `f32` once.
 pub mod design {
@@ -152,8 +153,14 @@ pub mod design {
     pub const SCREW_LEAD_M: f64 = 0.005;
     /// Leg spring stiffness `k`, N/m.
     pub const SPRING_STIFFNESS_N_PER_M: f64 = 11_000.0;
-    /// Spring preload `delta0`, m.
-    pub const SPRING_PRELOAD_M: f64 = 0.005;
+    /// Spring preload `delta0`, m: none. The thesis gives no preload, and
+    /// its eq 2.43 puts the nut on its stop with no spring energy at the
+    /// apex, which is zero preload. Keeping the nut seated needs only its
+    /// sag under its own weight (`m_s g / k` = 0.22 mm), and the stops hold
+    /// it while hopping anyway. A preload is a design knob (sweep
+    /// `spring_preload_m`): 5 mm shortens the stance from 100 to 93 ms and
+    /// strands spring energy in the actuator at liftoff (docs/thesis-comparison.md).
+    pub const SPRING_PRELOAD_M: f64 = 0.0;
     /// Leg free length `l0`, m.
     pub const LEG_LENGTH_M: f64 = 0.61;
     /// Motor + ball-screw efficiency `eta`.
@@ -168,6 +175,13 @@ pub mod design {
     pub const TORQUE_LIMIT_NM: f64 = 1.0;
     /// Amplifier current limit, A: the torque limit at the torque constant.
     pub const CURRENT_LIMIT_A: f64 = TORQUE_LIMIT_NM / TORQUE_CONSTANT_NM_PER_A;
+    /// Flight-law position gain `k_pf` of Table 2.1, N/m: the force the nut
+    /// sees (`eta tau / r`) per metre of nut error. The thesis states no
+    /// unit; with N/m the Chapter 2 flight returns the nut within the
+    /// flights it simulates. The Chapter 4 machine uses eq 4.13 instead.
+    pub const FLIGHT_KPF_N_PER_M: f64 = 8.0e4;
+    /// Flight-law velocity gain `k_vf` of Table 2.1, N s/m (as `k_pf`).
+    pub const FLIGHT_KVF_NS_PER_M: f64 = 300.0;
 }
 
 impl Default for ModelParams {
@@ -361,10 +375,11 @@ mod tests {
         // Plant energy at rest in flight, p = 0: M g z + m_s g z + 0.5 k d0^2 + m_u g (z - l0).
         let plant = m.body_mass_kg * 9.81 * z
             + m.nut_mass_kg * 9.81 * z
-            + 0.5 * 11_000.0 * 0.005 * 0.005
+            + 0.5 * m.spring_stiffness_n_per_m * m.preload_m * m.preload_m
             + m.unsprung_mass_kg * 9.81 * (z - m.leg_length_m);
         assert!((m.desired_energy_j(h)? - plant).abs() < 1e-3);
-        assert!((m.desired_energy_j(h)? - 69.985).abs() < 1e-2);
+        // (M + m_s) g (l0 + H) + m_u g H with no preload (69.985 J with 5 mm).
+        assert!((m.desired_energy_j(h)? - 69.848).abs() < 1e-2);
         let stance = m.stance_energy_at_touchdown_j(h)?;
         assert!((m.desired_energy_j(h)? - stance - 0.6 * 9.81 * h).abs() < 1e-3);
         assert!(m.stance_energy_for_liftoff_j(h)? > stance);

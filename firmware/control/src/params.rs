@@ -677,6 +677,28 @@ param!(
     "Downward body speed that arms bottom detection in stance."
 );
 param!(
+    EST_PREDICT_CONTACT,
+    "estimator.predict_contact",
+    "-",
+    Flag,
+    0.0,
+    1.0,
+    1.0,
+    DISARMED,
+    "Predict touchdown and liftoff from the height encoder (the toe reaching the ground within half a period); load cell and potentiometer confirm (0: those two alone, late by their thresholds)."
+);
+param!(
+    EST_CONTACT_CONFIRM_S,
+    "estimator.contact_confirm_s",
+    "s",
+    Real,
+    1.0e-3,
+    1.0,
+    0.03,
+    DISARMED,
+    "Time within which load cell and potentiometer must confirm a predicted touchdown; else it is withdrawn (a liftoff) and prediction stays off."
+);
+param!(
     SUP_MAX_MOTOR_DELTA,
     "supervisor.max_motor_delta_counts",
     "counts",
@@ -870,9 +892,9 @@ param!(
     Real,
     0.0,
     0.5,
-    0.005,
+    crate::model::design::SPRING_PRELOAD_M as f32,
     DISARMED,
-    "Spring preload delta0 of the sensor cross-checks (calibrated)."
+    "Spring preload delta0 of the sensor cross-checks (calibrated; design: none)."
 );
 param!(
     SUP_CONTACT_FORCE,
@@ -1125,6 +1147,8 @@ pub const TABLE: &[&Param] = &[
     &EST_FILTER_GAIN,
     &EST_APEX_ARM_MPS,
     &EST_BOTTOM_ARM_MPS,
+    &EST_PREDICT_CONTACT,
+    &EST_CONTACT_CONFIRM_S,
     &SUP_MAX_MOTOR_DELTA,
     &SUP_MAX_HEIGHT_DELTA,
     &SUP_NUT_POSITION_MIN_M,
@@ -1237,6 +1261,8 @@ fn slot<'a>(cfg: &'a mut HopperConfig, p: &Param) -> Result<Slot<'a>, ParamError
             "velocity_filter_gain" => Ok(R(&mut e.velocity_filter_gain)),
             "apex_arm_velocity_mps" => Ok(R(&mut e.apex_arm_velocity_mps)),
             "bottom_arm_velocity_mps" => Ok(R(&mut e.bottom_arm_velocity_mps)),
+            "predict_contact" => Ok(Slot::Flag(&mut e.predict_contact)),
+            "contact_confirm_s" => Ok(R(&mut e.contact_confirm_s)),
             _ => Err(ParamError::Unknown),
         };
     }

@@ -195,12 +195,50 @@ pub fn kp_over_kd_at_eta_opt(settling_time_s: f32) -> Result<f32, DesignError> {
     kp_over_kd(eta_opt(), settling_time_s)
 }
 
+/// Motor-side PD gains for gains stated on the nut, as Table 2.1 states the
+/// Chapter 2 flight law (`k_pf` in N/m, `k_vf` in N s/m): the nut sees the
+/// force `eta k_m i / r` (eq 2.13's generalised force), and a nut error is
+/// `r` times a motor-angle error, so `k_p = k_pf r^2 / (eta k_m)` and
+/// `k_d = k_vf r^2 / (eta k_m)`. With the design machine (`r` = 7.958e-4
+/// m/rad, `eta` 0.9, `k_m` 0.0297 N m/A) Table 2.1's 8e4 N/m and 300 N s/m
+/// are 1.895 A/rad and 7.11e-3 A s/rad.
+pub fn gains_from_nut(
+    kp_n_per_m: f32,
+    kd_ns_per_m: f32,
+    model: &crate::model::ModelParams,
+) -> Result<PdGains, DesignError> {
+    let r = model.screw_m_per_rad();
+    let per = r * r / (model.efficiency * model.torque_constant_nm_per_a);
+    let g = PdGains {
+        kp: kp_n_per_m * per,
+        kd: kd_ns_per_m * per,
+    };
+    if g.kp.is_finite() && g.kd.is_finite() && g.kp >= 0.0 && g.kd >= 0.0 {
+        Ok(g)
+    } else {
+        Err(DesignError::NonFiniteResult)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
 
     fn rel_close(actual: f32, expected: f32, rel_tol: f32) -> bool {
         (actual - expected).abs() <= rel_tol * expected.abs()
+    }
+
+    #[test]
+    fn table_2_1_nut_gains_on_the_motor() -> Result<(), DesignError> {
+        use crate::model::{design, ModelParams};
+        let g = gains_from_nut(
+            design::FLIGHT_KPF_N_PER_M as f32,
+            design::FLIGHT_KVF_NS_PER_M as f32,
+            &ModelParams::default(),
+        )?;
+        assert!(rel_close(g.kp, 1.8953, 1e-4), "kp = {}", g.kp);
+        assert!(rel_close(g.kd, 7.1073e-3, 1e-4), "kd = {}", g.kd);
+        Ok(())
     }
 
     #[test]

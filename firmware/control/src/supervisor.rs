@@ -225,11 +225,14 @@ pub struct SupervisorConfig {
     /// A request with magnitude above this, A, is an overcurrent fault (requests between
     /// the limit and this are clamped silently). Default 337 (10x the limit: a runaway law).
     pub overcurrent_trip_a: f32,
-    /// Largest plausible motor counter change per period, counts. Default 64: 1000 rad/s
-    /// (above the 808 rad/s no-load speed) at 2000 counts/rev and 10 kHz is 32 counts, x2 margin.
+    /// Largest plausible motor counter change per [`REFERENCE_PERIOD_S`]
+    /// (100 us), counts; the limit scales with the control period (at least
+    /// 2 counts). Default 64: 1000 rad/s (above the 808 rad/s no-load speed)
+    /// at 2000 counts/rev is 32 counts per 100 us, x2 margin.
     pub max_motor_delta_counts: u32,
-    /// Largest plausible height counter change per period, counts. Default 32: 10 m/s
-    /// with a 20 mm pulley at 2000 counts/rev and 10 kHz is 16 counts, x2 margin.
+    /// Largest plausible height counter change per [`REFERENCE_PERIOD_S`],
+    /// counts, scaled as the motor's. Default 32: 10 m/s with a 20 mm pulley
+    /// at 2000 counts/rev is 16 counts per 100 us, x2 margin.
     pub max_height_delta_counts: u32,
     /// Plausible nut position, m. Default -0.01..=0.06 (stops at 0 and 0.05).
     pub nut_position_range_m: Range,
@@ -251,7 +254,7 @@ pub struct SupervisorConfig {
     pub leg_compression_range_m: Range,
     /// Spring rate `k`, N/m, for the contact check. Default 11 000 (Table 2.1).
     pub spring_rate_n_per_m: f32,
-    /// Spring preload `delta0`, m, for the contact check. Default 0.005.
+    /// Spring preload `delta0`, m, for the contact check. Default 0 (the design machine has none).
     pub spring_preload_m: f32,
     /// Contact force above the flight force `k (delta0 + p)` that means "load cell says contact", N. Default 150.
     pub contact_force_n: f32,
@@ -261,7 +264,9 @@ pub struct SupervisorConfig {
     pub contact_compression_m: f32,
     /// Leg compression below which the pot says "no contact", m. Default 0.003.
     pub free_compression_m: f32,
-    /// Consecutive disagreeing periods before the contact-disagree fault. Default 20 (2 ms).
+    /// How long load cell and potentiometer must disagree before the
+    /// contact-disagree fault, in [`REFERENCE_PERIOD_S`] units (consecutive
+    /// periods at 10 kHz; the time is what counts at any rate). Default 20 (2 ms).
     pub contact_disagree_periods: u16,
     /// Largest plausible `|F - k (delta0 + p + x)|`, N: the load cell's force
     /// against the spring compression the motor encoder (`p`) and the
@@ -273,9 +278,10 @@ pub struct SupervisorConfig {
     /// see. `f32::INFINITY` disables the check (e.g. a spring with damping,
     /// or a `k` known only roughly).
     pub spring_mismatch_n: f32,
-    /// Filtered motor speed, rad/s, above which a period without a single
-    /// motor count is impossible away from the stops: [`Fault::EncoderFrozen`].
-    /// Default 100: 3.2 counts per period at 2000 counts/rev and 10 kHz, and
+    /// Filtered motor speed, rad/s, above which [`REFERENCE_PERIOD_S`]
+    /// (100 us, one period at 10 kHz, ten at 100 kHz) without a single motor
+    /// count is impossible away from the stops: [`Fault::EncoderFrozen`].
+    /// Default 100: 3.2 counts per 100 us at 2000 counts/rev, and
     /// the motor (2 N m stall, 1 N m of spring through the screw, 2.7e-4
     /// kg m^2) loses at most about 1.1 rad/s in a period; the eq 4.1 filter's
     /// lag adds about 10 rad/s. `f32::INFINITY` disables the check.
@@ -432,6 +438,14 @@ impl SupervisorConfig {
     }
 }
 
+/// The control period the per-period limits are stated for, s (10 kHz).
+/// [`Supervisor::check`] scales them to the period it is given, so 1 kHz
+/// and 100 kHz runs see the same physical limits (issue 16: at 40 kHz and
+/// above a fixed "no count in one period" tripped `encoder-frozen` on a
+/// healthy encoder, and at 1 kHz 64 counts per period tripped `encoder-jump`
+/// at 200 rad/s).
+pub const REFERENCE_PERIOD_S: f32 = 1.0e-4;
+
 /// Distance from a mechanical stop within which the nut may halt in one
 /// period (a stop impact), m: the frozen-encoder check is off there. 0.5 mm
 /// is six periods of travel at the 0.8 m/s the no-load speed allows.
@@ -462,7 +476,13 @@ impl Command {
 pub struct Supervisor {
     config: SupervisorConfig,
     latched: Faults,
-    disagree_periods: u16,
+    /// Time load cell and pot have disagreed, in [`REFERENCE_PERIOD_S`] units.
+    disagree_ref: f32,
+    /// Time without a motor count while fast, in [`REFERENCE_PERIOD_S`] units.
+    frozen_ref: f32,
+    /// The last period given to [`Self::check`] over [`REFERENCE_PERIOD_S`]
+    /// (1 until then): the scale of the per-period limits.
+    period_scale: f32,
     /// The current limit, A (validated: finite, > 0).
     limit_a: f32,
     /// `1 / (2 a)` of the braking deceleration (validated: finite, > 0).
@@ -502,7 +522,9 @@ impl Supervisor {
         Ok(Self {
             config,
             latched: Faults::NONE,
-            disagree_periods: 0,
+            disagree_ref: 0.0,
+            frozen_ref: 0.0,
+            period_scale: 1.0,
             limit_a: current_limit_a,
             half_inv_decel: 0.5 / config.brake_decel_mps2,
             stops_centre_m: 0.5 * (config.nut_stops_m.min + config.nut_stops_m.max),
@@ -588,8 +610,12 @@ impl Supervisor {
                 }
             }
         }
-        if input.motor_delta_counts.unsigned_abs() > c.max_motor_delta_counts
-            || input.height_delta_counts.unsigned_abs() > c.max_height_delta_counts
+        // Limits per reference period, scaled to this one; at least two
+        // counts, so quantisation alone never trips at high rates.
+        let scale = self.period_scale;
+        let limit = |per_ref: u32| crate::num::max(per_ref as f32 * scale, 2.0);
+        if input.motor_delta_counts.unsigned_abs() as f32 > limit(c.max_motor_delta_counts)
+            || input.height_delta_counts.unsigned_abs() as f32 > limit(c.max_height_delta_counts)
         {
             f.insert(Fault::EncoderJump);
         }
@@ -613,9 +639,6 @@ impl Supervisor {
         }
         // A NaN residual (a non-finite input, already named above) is not a
         // disagreement; only finite residuals beyond the bound are.
-        if self.encoder_frozen(input) {
-            f.insert(Fault::EncoderFrozen);
-        }
         let residual_n = self.spring_residual_n(input);
         // False for a NaN bound too: a bad bound fails safe.
         let within = residual_n.abs() <= c.spring_mismatch_n;
@@ -657,18 +680,42 @@ impl Supervisor {
     /// infinite request latches [`Fault::CommandNonFinite`]; a request beyond
     /// `overcurrent_trip_a` latches [`Fault::Overcurrent`].
     ///
-    /// Contact disagreement must persist `contact_disagree_periods`
-    /// consecutive calls before it latches.
+    /// `dt_s` is the control period: the limits stated per
+    /// [`REFERENCE_PERIOD_S`] scale to it (a non-finite or non-positive one
+    /// keeps the last good scale). Contact disagreement must persist
+    /// `contact_disagree_periods` x 100 us, and a silent encoder 100 us,
+    /// before they latch.
     #[inline]
-    pub fn check(&mut self, input: &SupervisorInput, requested_current_a: f32) -> Command {
+    pub fn check(
+        &mut self,
+        input: &SupervisorInput,
+        requested_current_a: f32,
+        dt_s: f32,
+    ) -> Command {
+        let scale = dt_s * (1.0 / REFERENCE_PERIOD_S);
+        if scale > 0.0 && scale < f32::INFINITY {
+            self.period_scale = scale;
+        }
+        let scale = self.period_scale;
         let mut new = self.input_faults(input);
+        // Persistence in time: the sums of scales compare against whole
+        // reference periods, less a little for the rounding of the sums.
+        const ROUNDING: f32 = 1.0e-3;
         if self.contact_disagrees(input) {
-            self.disagree_periods = self.disagree_periods.saturating_add(1);
-            if self.disagree_periods >= self.config.contact_disagree_periods {
+            self.disagree_ref += scale;
+            if self.disagree_ref >= f32::from(self.config.contact_disagree_periods) - ROUNDING {
                 new.insert(Fault::ContactDisagree);
             }
         } else {
-            self.disagree_periods = 0;
+            self.disagree_ref = 0.0;
+        }
+        if self.encoder_frozen(input) {
+            self.frozen_ref += scale;
+            if self.frozen_ref >= 1.0 - ROUNDING {
+                new.insert(Fault::EncoderFrozen);
+            }
+        } else {
+            self.frozen_ref = 0.0;
         }
         if !requested_current_a.is_finite() {
             new.insert(Fault::CommandNonFinite);
@@ -704,12 +751,16 @@ impl Supervisor {
         // `SelfCheck` means the software's own output contradicted itself:
         // only the hardware reset it leads to clears it.
         let self_check = Faults(self.latched.0 & Fault::SelfCheck.bit());
-        let still = self.input_faults(input).union(self_check);
+        let mut still = self.input_faults(input).union(self_check);
+        if self.encoder_frozen(input) {
+            still.insert(Fault::EncoderFrozen);
+        }
         if !still.is_empty() {
             return Err(still);
         }
         self.latched = Faults::NONE;
-        self.disagree_periods = 0;
+        self.disagree_ref = 0.0;
+        self.frozen_ref = 0.0;
         Ok(())
     }
 }
@@ -727,13 +778,20 @@ mod tests {
             motor_speed_rad_s: 0.0,
             body_height_m: 0.61,
             body_velocity_mps: 0.0,
-            spring_force_n: 55.0, // k * delta0
+            spring_force_n: flight_force_n(), // k * delta0
             leg_compression_m: 0.0,
             motor_delta_counts: 0,
             height_delta_counts: 0,
             estop_pressed: false,
             amp_fault: false,
         }
+    }
+
+    /// `k delta0` of the default configuration, N: the load cell in flight
+    /// with the nut on its upper stop.
+    fn flight_force_n() -> f32 {
+        let d = SupervisorConfig::default();
+        d.spring_rate_n_per_m * d.spring_preload_m
     }
 
     fn sup() -> Supervisor {
@@ -751,7 +809,7 @@ mod tests {
     /// reset fails while `bad` persists (if `state`), succeeds on nominal input.
     fn fault_case(bad: SupervisorInput, request_a: f32, fault: Fault, state: bool) {
         let mut s = sup();
-        let ok = s.check(&nominal(), 5.0);
+        let ok = s.check(&nominal(), 5.0, REFERENCE_PERIOD_S);
         assert_eq!(
             ok,
             Command {
@@ -759,17 +817,22 @@ mod tests {
                 amp_enable: true
             }
         );
-        assert_eq!(s.check(&bad, request_a), Command::SAFE, "{}", fault.name());
+        assert_eq!(
+            s.check(&bad, request_a, REFERENCE_PERIOD_S),
+            Command::SAFE,
+            "{}",
+            fault.name()
+        );
         assert!(s.faults().contains(fault), "{:?}", s.faults());
         for _ in 0..3 {
-            assert_eq!(s.check(&nominal(), 5.0), Command::SAFE);
+            assert_eq!(s.check(&nominal(), 5.0, REFERENCE_PERIOD_S), Command::SAFE);
         }
         if state {
             assert!(s.reset(&bad).is_err(), "{}", fault.name());
             assert!(s.is_faulted());
         }
         assert_eq!(s.reset(&nominal()), Ok(()));
-        assert_eq!(s.check(&nominal(), 5.0).current_a, 5.0);
+        assert_eq!(s.check(&nominal(), 5.0, REFERENCE_PERIOD_S).current_a, 5.0);
     }
 
     #[test]
@@ -818,15 +881,15 @@ mod tests {
         let fine = SupervisorInput {
             nut_position_m: 0.03,
             nut_velocity_mps: 0.3,
-            spring_force_n: 385.0,
+            spring_force_n: flight_force_n() + 330.0,
             ..nominal()
         };
-        assert!(s.check(&fine, 1.0).amp_enable);
+        assert!(s.check(&fine, 1.0, REFERENCE_PERIOD_S).amp_enable);
         // Upward: 0.01 - 0.4^2/6 = -0.0167 < -0.005.
         let up = SupervisorInput {
             nut_position_m: 0.01,
             nut_velocity_mps: -0.4,
-            spring_force_n: 165.0,
+            spring_force_n: flight_force_n() + 110.0,
             ..nominal()
         };
         fault_case(up, 0.0, Fault::StrokeLimit, true);
@@ -856,17 +919,20 @@ mod tests {
     #[test]
     fn request_is_clamped_not_faulted_below_trip() {
         let mut s = sup();
-        let c = s.check(&nominal(), 100.0);
+        let c = s.check(&nominal(), 100.0, REFERENCE_PERIOD_S);
         assert_eq!(c.current_a, 33.7);
         assert!(c.amp_enable);
-        assert_eq!(s.check(&nominal(), -100.0).current_a, -33.7);
+        assert_eq!(
+            s.check(&nominal(), -100.0, REFERENCE_PERIOD_S).current_a,
+            -33.7
+        );
     }
 
     #[test]
     fn contact_disagree_needs_persistence() {
-        // Load cell: 55 + 200 N contact force; pot: no compression.
+        // Load cell: k delta0 + 200 N contact force; pot: no compression.
         let bad = SupervisorInput {
-            spring_force_n: 255.0,
+            spring_force_n: flight_force_n() + 200.0,
             ..nominal()
         };
         // The cross-check would trip on this at once; this test is about the
@@ -877,16 +943,16 @@ mod tests {
         };
         let mut s = built(no_cross_check);
         for _ in 0..19 {
-            assert!(s.check(&bad, 1.0).amp_enable);
+            assert!(s.check(&bad, 1.0, REFERENCE_PERIOD_S).amp_enable);
         }
         // An agreeing sample restarts the count.
-        assert!(s.check(&nominal(), 1.0).amp_enable);
+        assert!(s.check(&nominal(), 1.0, REFERENCE_PERIOD_S).amp_enable);
         for _ in 0..19 {
-            assert!(s.check(&bad, 1.0).amp_enable);
+            assert!(s.check(&bad, 1.0, REFERENCE_PERIOD_S).amp_enable);
         }
-        assert_eq!(s.check(&bad, 1.0), Command::SAFE);
+        assert_eq!(s.check(&bad, 1.0, REFERENCE_PERIOD_S), Command::SAFE);
         assert!(s.faults().contains(Fault::ContactDisagree));
-        assert_eq!(s.check(&nominal(), 1.0), Command::SAFE);
+        assert_eq!(s.check(&nominal(), 1.0, REFERENCE_PERIOD_S), Command::SAFE);
         assert_eq!(s.reset(&nominal()), Ok(()));
         // Pot says compressed, load cell says free.
         let other = SupervisorInput {
@@ -895,7 +961,7 @@ mod tests {
         };
         let mut last = Command::SAFE;
         for _ in 0..20 {
-            last = s.check(&other, 1.0);
+            last = s.check(&other, 1.0, REFERENCE_PERIOD_S);
         }
         assert_eq!(last, Command::SAFE);
         // Stance where they agree: compression 20 mm, force k (delta0 + 0.02).
@@ -903,11 +969,11 @@ mod tests {
         let stance = SupervisorInput {
             leg_compression_m: 0.02,
             body_height_m: 0.59,
-            spring_force_n: 275.0,
+            spring_force_n: flight_force_n() + 220.0,
             ..nominal()
         };
         for _ in 0..100 {
-            assert!(s.check(&stance, 1.0).amp_enable);
+            assert!(s.check(&stance, 1.0, REFERENCE_PERIOD_S).amp_enable);
         }
     }
 
@@ -923,10 +989,10 @@ mod tests {
         // 25 N off (below the 30 N bound): fine.
         let mut s = sup();
         let near = SupervisorInput {
-            spring_force_n: 80.0,
+            spring_force_n: flight_force_n() + 25.0,
             ..nominal()
         };
-        assert!(s.check(&near, 1.0).amp_enable);
+        assert!(s.check(&near, 1.0, REFERENCE_PERIOD_S).amp_enable);
         // A NaN bound is refused.
         let nan = SupervisorConfig {
             spring_mismatch_n: f32::NAN,
@@ -945,7 +1011,7 @@ mod tests {
             nut_position_m: 0.02,
             motor_speed_rad_s: 150.0,
             nut_velocity_mps: 0.12,
-            spring_force_n: 275.0,
+            spring_force_n: flight_force_n() + 220.0,
             motor_delta_counts: 0,
             ..nominal()
         };
@@ -956,29 +1022,29 @@ mod tests {
             motor_delta_counts: 4,
             ..moving
         };
-        assert!(s.check(&counting, 1.0).amp_enable);
+        assert!(s.check(&counting, 1.0, REFERENCE_PERIOD_S).amp_enable);
         // Slow: fine.
         let slow = SupervisorInput {
             motor_speed_rad_s: 60.0,
             nut_velocity_mps: 0.05,
             ..moving
         };
-        assert!(s.check(&slow, 1.0).amp_enable);
+        assert!(s.check(&slow, 1.0, REFERENCE_PERIOD_S).amp_enable);
         // On the upper stop (an impact halts the nut at once): fine.
         let on_stop = SupervisorInput {
             nut_position_m: 0.0002,
             nut_velocity_mps: 0.0,
-            spring_force_n: 57.2,
+            spring_force_n: flight_force_n() + 2.2,
             ..moving
         };
-        assert!(s.check(&on_stop, 1.0).amp_enable);
+        assert!(s.check(&on_stop, 1.0, REFERENCE_PERIOD_S).amp_enable);
     }
 
     #[test]
     fn reported_events() {
         let mut s = sup();
         s.report_overrun();
-        assert_eq!(s.check(&nominal(), 1.0), Command::SAFE);
+        assert_eq!(s.check(&nominal(), 1.0, REFERENCE_PERIOD_S), Command::SAFE);
         s.report_dac_error();
         let names: heapless::Vec<&str, 13> = s.faults().iter().map(Fault::name).collect();
         assert_eq!(names.as_slice(), &["overrun", "dac-error"]);
@@ -1118,7 +1184,7 @@ mod tests {
                     2 => { let _ = s.reset(&input); }
                     _ => {}
                 }
-                let c = s.check(&input, request);
+                let c = s.check(&input, request, REFERENCE_PERIOD_S);
                 prop_assert!(c.current_a.is_finite());
                 prop_assert!(c.current_a.abs() <= limit);
                 if !c.amp_enable {
@@ -1162,7 +1228,7 @@ mod tests {
                     let before = s.faults();
                     match action {
                         Action::Check(input, request) => {
-                            let c = s.check(&input, request);
+                            let c = s.check(&input, request, REFERENCE_PERIOD_S);
                             prop_assert_eq!(s.faults().0 & before.0, before.0);
                             if s.is_faulted() {
                                 prop_assert_eq!(c, Command::SAFE);

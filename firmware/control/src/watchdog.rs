@@ -196,7 +196,7 @@ impl FeedPolicy {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::hal::RawSample;
+
     use crate::hopper::Hopper;
 
     fn policy() -> FeedPolicy {
@@ -314,11 +314,7 @@ mod tests {
         let mut h = Hopper::new(cfg).unwrap_or_else(|e| panic!("{e:?}"));
         let mut p = FeedPolicy::for_hopper(&cfg);
         let cal = cfg.calibration;
-        let mut raw = RawSample {
-            loadcell_code: (cal.loadcell_offset_code + 55.0 / cal.loadcell_gain_n_per_code) as u16,
-            pot_code: cal.pot_offset_code as u16,
-            ..RawSample::default()
-        };
+        let mut raw = crate::proptest_support::rest_sample(&cal);
         for k in 0..200 {
             if k == 100 {
                 raw.estop_pressed = true;

@@ -58,6 +58,18 @@ pub struct Params {
     pub current_limit_a: f64,
 }
 
+/// Flight PD gains stated on the nut (Table 2.1's form): the force the nut
+/// sees per metre of nut error, N/m, and per m/s of nut speed, N s/m
+/// (`hopper_control::pd_design::gains_from_nut` converts them to the
+/// firmware's motor-side A/rad and A s/rad).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct NutPdGains {
+    /// Position gain `k_pf`, N/m.
+    pub kp_n_per_m: f64,
+    /// Velocity gain `k_vf`, N s/m.
+    pub kd_ns_per_m: f64,
+}
+
 /// Torque constant chosen so that the thesis's DC-motor plant gain
 /// `A = k_m / J_e = 110` (eq 4.3, eq 4.13's worked numbers) holds with
 /// Table 2.1's `J = 2.7e-4 kg m^2`: `k_m = 110 * 2.7e-4` (defined with the
@@ -70,8 +82,8 @@ impl Params {
     /// The motor is the 80 W Maxon class of section 3.1: stall torque 2.0 N m
     /// (Table 3.1) at 24 V sets the winding resistance
     /// (`R = k_t V / tau_stall`); the amplifier limit gives the 1.0 N m of
-    /// Table 2.1. The thesis gives no preload; 5 mm keeps the nut seated on
-    /// its upper stop when the motor is off.
+    /// Table 2.1. No preload: the thesis gives none
+    /// ([`hopper_control::model::design::SPRING_PRELOAD_M`] says why).
     pub const fn design() -> Self {
         use hopper_control::model::design as d;
         Params {
@@ -122,6 +134,26 @@ impl Params {
 
     /// Names of the presets [`Params::preset`] accepts.
     pub const PRESET_NAMES: [&'static str; 2] = ["design", "identified"];
+
+    /// The preset name as a `'static` string, if `name` is one.
+    pub fn preset_name(name: &str) -> Option<&'static str> {
+        Self::PRESET_NAMES.iter().copied().find(|n| *n == name)
+    }
+
+    /// The flight PD a preset's machine was simulated with, stated on the
+    /// nut: `design` runs Table 2.1's Chapter 2 flight law (`k_pf` 8e4 N/m,
+    /// `k_vf` 300 N s/m); `identified`, the Chapter 4 machine, has `None`:
+    /// the firmware's own default, eq 4.13's gains on the motor.
+    pub fn preset_flight_gains(name: &str) -> Option<NutPdGains> {
+        use hopper_control::model::design as d;
+        match name {
+            "design" => Some(NutPdGains {
+                kp_n_per_m: d::FLIGHT_KPF_N_PER_M,
+                kd_ns_per_m: d::FLIGHT_KVF_NS_PER_M,
+            }),
+            _ => None,
+        }
+    }
 
     /// Screw transmission `r = lead / (2 pi)`, m/rad (`theta = p / r`, eq 2.4).
     pub fn screw_m_per_rad(&self) -> f64 {

@@ -94,7 +94,9 @@ struct BaseArgs {
     /// duration; see scenarios/). Flags given as well override it.
     #[arg(long)]
     scenario: Option<PathBuf>,
-    /// Plant parameters: a preset (design, identified) or a TOML file
+    /// Plant parameters: a preset (design: Table 2.1, no preload, Table 2.1's
+    /// flight PD; identified: section 4.5 with eq 4.13's flight PD) or a TOML
+    /// file (`base = "design"` brings the design preset's flight PD too)
     /// [default: design].
     #[arg(long)]
     params: Option<String>,
@@ -122,10 +124,14 @@ struct BaseArgs {
     /// law's, 0.2 for energy, 3 for energy-apex).
     #[arg(long, allow_negative_numbers = true)]
     ke: Option<f64>,
-    /// Flight PD proportional gain, A/rad (default eq 4.13: 20.3152).
+    /// Flight PD proportional gain, A/rad (default: the preset's; design:
+    /// Table 2.1's 8e4 N/m on the nut, 1.8953 A/rad; identified and files
+    /// without a base: eq 4.13, 20.3152).
     #[arg(long, allow_negative_numbers = true)]
     flight_kp: Option<f64>,
-    /// Flight PD derivative gain, A s/rad (default eq 4.13: 0.6077).
+    /// Flight PD derivative gain, A s/rad (default: the preset's; design:
+    /// Table 2.1's 300 N s/m on the nut, 0.0071073 A s/rad; identified: eq
+    /// 4.13, 0.6077).
     #[arg(long, allow_negative_numbers = true)]
     flight_kd: Option<f64>,
     /// Sensor noise: default (load cell 2 N, potentiometer 0.1 mm, 1 sigma)
@@ -182,7 +188,7 @@ impl BaseArgs {
                             "--model-params" => anyhow::anyhow!("{e}"),
                             _ => anyhow::anyhow!("--model-params {e}"),
                         })?
-                        .0,
+                        .params,
                 ),
                 None => None,
             },
