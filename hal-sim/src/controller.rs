@@ -167,11 +167,19 @@ impl ControllerSpec {
     }
 
     /// The flight PD gains this spec's preset brings on a machine the
-    /// controller believes has `believed` parameters: the preset's gains on
-    /// the nut converted to the motor ([`pd_design::gains_from_nut`]), or
-    /// the firmware's default (eq 4.13) when the preset brings none.
+    /// controller believes has `believed` parameters: for the Chapter 2
+    /// laws ([`ControllerKind::is_chapter_2_law`]) the preset's gains on the
+    /// nut converted to the motor ([`pd_design::gains_from_nut`]); the
+    /// firmware's default (eq 4.13) for the other laws or when the preset
+    /// brings none. (With Table 2.1's lightly damped flight law, damping
+    /// ratio 0.026, energy-apex no longer regulates from 0.25 m or to 0.04 m.)
     pub fn default_flight_gains(&self, believed: &Params) -> Result<PdGains, String> {
-        match self.preset.and_then(Params::preset_flight_gains) {
+        // The preset's flight law goes with the laws it was simulated with.
+        let gains = match self.kind()?.is_chapter_2_law() {
+            true => self.preset.and_then(Params::preset_flight_gains),
+            false => None,
+        };
+        match gains {
             Some(g) => pd_design::gains_from_nut(
                 g.kp_n_per_m as f32,
                 g.kd_ns_per_m as f32,

@@ -399,15 +399,17 @@ impl PhaseEstimator {
         // In stance the potentiometer measures what the height encoder
         // does, `l0 - z`: agreement within the pot's contact threshold
         // says the height origin is right.
-        let height_compression_m = crate::num::max(-toe_m, 0.0);
-        let origin_agrees =
-            (height_compression_m - m.leg_compression_m).abs() <= c.touchdown_compression_m;
+        // Only needed at a phase change or a withdrawal: not every period.
+        let origin_agrees = || {
+            let height_compression_m = crate::num::max(-toe_m, 0.0);
+            (height_compression_m - m.leg_compression_m).abs() <= c.touchdown_compression_m
+        };
         if predicted || self.pending >= c.debounce_samples {
             let confirmed = force_contact && pot_contact;
             if !predicted && self.phase == Phase::Flight && self.cfg.predict_contact {
                 // A touchdown the sensors found: prediction resumes if the
                 // height encoder agrees with the potentiometer.
-                self.predicting = origin_agrees;
+                self.predicting = origin_agrees();
             }
             let (next, event) = match self.phase {
                 Phase::Flight => (Phase::Stance, PhaseEvent::Touchdown),
@@ -429,7 +431,7 @@ impl PhaseEstimator {
                     // until they agree again (otherwise the toe only rests
                     // on the ground with the leg at its stop).
                     self.withdrawn_touchdowns = self.withdrawn_touchdowns.saturating_add(1);
-                    self.predicting = origin_agrees;
+                    self.predicting = origin_agrees();
                     self.change_phase(Phase::Flight);
                     return Some(PhaseEvent::Liftoff);
                 }

@@ -451,6 +451,17 @@ pub const REFERENCE_PERIOD_S: f32 = 1.0e-4;
 /// is six periods of travel at the 0.8 m/s the no-load speed allows.
 pub const STOP_BAND_M: f32 = 0.0005;
 
+/// The encoder-jump limits (motor, height) at `scale` reference periods,
+/// counts: the per-100-us limits scaled, at least two counts so that
+/// quantisation alone never trips at high rates.
+fn jump_limits(c: &SupervisorConfig, scale: f32) -> (f32, f32) {
+    let limit = |per_ref: u32| crate::num::max(per_ref as f32 * scale, 2.0);
+    (
+        limit(c.max_motor_delta_counts),
+        limit(c.max_height_delta_counts),
+    )
+}
+
 /// What goes to the amplifier this period.
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -483,6 +494,9 @@ pub struct Supervisor {
     /// The last period given to [`Self::check`] over [`REFERENCE_PERIOD_S`]
     /// (1 until then): the scale of the per-period limits.
     period_scale: f32,
+    /// The encoder-jump limits at that scale, counts (motor, height):
+    /// recomputed only when the period changes.
+    jump_limits: (f32, f32),
     /// The current limit, A (validated: finite, > 0).
     limit_a: f32,
     /// `1 / (2 a)` of the braking deceleration (validated: finite, > 0).
@@ -525,6 +539,7 @@ impl Supervisor {
             disagree_ref: 0.0,
             frozen_ref: 0.0,
             period_scale: 1.0,
+            jump_limits: jump_limits(&config, 1.0),
             limit_a: current_limit_a,
             half_inv_decel: 0.5 / config.brake_decel_mps2,
             stops_centre_m: 0.5 * (config.nut_stops_m.min + config.nut_stops_m.max),
@@ -610,12 +625,9 @@ impl Supervisor {
                 }
             }
         }
-        // Limits per reference period, scaled to this one; at least two
-        // counts, so quantisation alone never trips at high rates.
-        let scale = self.period_scale;
-        let limit = |per_ref: u32| crate::num::max(per_ref as f32 * scale, 2.0);
-        if input.motor_delta_counts.unsigned_abs() as f32 > limit(c.max_motor_delta_counts)
-            || input.height_delta_counts.unsigned_abs() as f32 > limit(c.max_height_delta_counts)
+        let (motor_limit, height_limit) = self.jump_limits;
+        if input.motor_delta_counts.unsigned_abs() as f32 > motor_limit
+            || input.height_delta_counts.unsigned_abs() as f32 > height_limit
         {
             f.insert(Fault::EncoderJump);
         }
@@ -693,8 +705,9 @@ impl Supervisor {
         dt_s: f32,
     ) -> Command {
         let scale = dt_s * (1.0 / REFERENCE_PERIOD_S);
-        if scale > 0.0 && scale < f32::INFINITY {
+        if scale != self.period_scale && scale > 0.0 && scale < f32::INFINITY {
             self.period_scale = scale;
+            self.jump_limits = jump_limits(&self.config, scale);
         }
         let scale = self.period_scale;
         let mut new = self.input_faults(input);

@@ -142,8 +142,9 @@ impl Params {
 
     /// The flight PD a preset's machine was simulated with, stated on the
     /// nut: `design` runs Table 2.1's Chapter 2 flight law (`k_pf` 8e4 N/m,
-    /// `k_vf` 300 N s/m); `identified`, the Chapter 4 machine, has `None`:
-    /// the firmware's own default, eq 4.13's gains on the motor.
+    /// `k_vf` 300 N s/m) with the Chapter 2 stance laws; `identified`, the
+    /// Chapter 4 machine, has `None`: the firmware's own default, eq 4.13's
+    /// gains on the motor.
     pub fn preset_flight_gains(name: &str) -> Option<NutPdGains> {
         use hopper_control::model::design as d;
         match name {

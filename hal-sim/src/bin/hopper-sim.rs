@@ -94,10 +94,10 @@ struct BaseArgs {
     /// duration; see scenarios/). Flags given as well override it.
     #[arg(long)]
     scenario: Option<PathBuf>,
-    /// Plant parameters: a preset (design: Table 2.1, no preload, Table 2.1's
-    /// flight PD; identified: section 4.5 with eq 4.13's flight PD) or a TOML
-    /// file (`base = "design"` brings the design preset's flight PD too)
-    /// [default: design].
+    /// Plant parameters: a preset (design: Table 2.1, no preload, and Table
+    /// 2.1's flight PD for the Chapter 2 laws; identified: section 4.5) or a
+    /// TOML file (`base = "design"` brings the design preset's flight PD
+    /// too) [default: design].
     #[arg(long)]
     params: Option<String>,
     /// What the controller believes, separately from the plant (`--params`):
@@ -124,14 +124,15 @@ struct BaseArgs {
     /// law's, 0.2 for energy, 3 for energy-apex).
     #[arg(long, allow_negative_numbers = true)]
     ke: Option<f64>,
-    /// Flight PD proportional gain, A/rad (default: the preset's; design:
-    /// Table 2.1's 8e4 N/m on the nut, 1.8953 A/rad; identified and files
-    /// without a base: eq 4.13, 20.3152).
+    /// Flight PD proportional gain, A/rad (default: eq 4.13, 20.3152; with
+    /// the design preset the Chapter 2 laws (step-open, step-closed,
+    /// open-torque, energy, velocity) run Table 2.1's 8e4 N/m on the nut,
+    /// 1.8953 A/rad).
     #[arg(long, allow_negative_numbers = true)]
     flight_kp: Option<f64>,
-    /// Flight PD derivative gain, A s/rad (default: the preset's; design:
-    /// Table 2.1's 300 N s/m on the nut, 0.0071073 A s/rad; identified: eq
-    /// 4.13, 0.6077).
+    /// Flight PD derivative gain, A s/rad (default: eq 4.13, 0.6077; the
+    /// Chapter 2 laws on the design preset: Table 2.1's 300 N s/m on the
+    /// nut, 0.0071073 A s/rad).
     #[arg(long, allow_negative_numbers = true)]
     flight_kd: Option<f64>,
     /// Sensor noise: default (load cell 2 N, potentiometer 0.1 mm, 1 sigma)

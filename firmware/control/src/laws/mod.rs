@@ -311,6 +311,23 @@ pub enum ControllerKind {
 }
 
 impl ControllerKind {
+    /// Whether this is one of the stance laws of section 2.1.3 that the
+    /// thesis simulated on its design machine with Table 2.1's flight law
+    /// (position steps, constant torque, energy feedback, velocity). The
+    /// modified torque law (section 4.4.3) ran on the Chapter 4 machine
+    /// with eq 4.13's flight PD, and this project's energy-apex law was
+    /// tuned with it; shaped has a back-drive of its own.
+    pub const fn is_chapter_2_law(self) -> bool {
+        matches!(
+            self,
+            ControllerKind::StepOpen
+                | ControllerKind::StepClosed
+                | ControllerKind::OpenTorque
+                | ControllerKind::Energy
+                | ControllerKind::Velocity
+        )
+    }
+
     /// Every controller, in the parameter table's order.
     pub const ALL: [ControllerKind; 9] = [
         ControllerKind::Passive,
