@@ -282,9 +282,12 @@ fn chapter2_figures(
         ),
     ];
     for (state_file, phase_file, name, caption) in laws {
+        // The design preset as the thesis simulated it: its Table 2.1
+        // flight law with these Chapter 2 laws.
         let spec = ControllerSpec {
             target_apex_m: CH2_TARGET_APEX_M,
             sensors: SensorConfig::DEFAULT,
+            preset: Some("design"),
             ..ControllerSpec::new(name)
         };
         let (samples, summary) = simulate(params, "design", spec, CH2_START_APEX_M, duration_s)?;

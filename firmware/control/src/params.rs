@@ -154,7 +154,7 @@ param!(
     1.0e4,
     20.3152,
     LIVE,
-    "Flight PD position gain on the motor angle (eq 4.4; default eq 4.13)."
+    "Flight PD position gain on the motor angle (eq 4.4; default eq 4.13; hopper-sim's design preset runs Table 2.1's 8e4 N/m on the nut, 1.8953 A/rad, with the Chapter 2 laws)."
 );
 param!(
     FLIGHT_KD,
@@ -165,7 +165,7 @@ param!(
     1.0e3,
     0.6077,
     LIVE,
-    "Flight PD rate gain (eq 4.4; default eq 4.13)."
+    "Flight PD rate gain (eq 4.4; default eq 4.13; the design preset's Chapter 2 laws: Table 2.1's 300 N s/m, 0.0071073 A s/rad)."
 );
 param!(
     FLIGHT_START_M,

@@ -1017,6 +1017,70 @@ mod tests {
         );
     }
 
+    /// Issue 16: the per-100-us limits scale with the period. At 100 kHz a
+    /// silent encoder at speed needs ten periods (100 us) to trip and one
+    /// count per period is normal; at 1 kHz 300 counts in a period (940
+    /// rad/s) are plausible and 700 are not.
+    #[test]
+    fn limits_scale_with_the_period() {
+        let moving = SupervisorInput {
+            nut_position_m: 0.02,
+            motor_speed_rad_s: 150.0,
+            nut_velocity_mps: 0.12,
+            spring_force_n: flight_force_n() + 220.0,
+            motor_delta_counts: 0,
+            ..nominal()
+        };
+        let dt = 1e-5;
+        let mut s = sup();
+        for k in 0..9 {
+            assert!(s.check(&moving, 1.0, dt).amp_enable, "period {k}");
+        }
+        assert_eq!(s.check(&moving, 1.0, dt), Command::SAFE);
+        assert!(s.faults().contains(Fault::EncoderFrozen));
+        // A count every other period at 100 kHz: fine.
+        let mut s = sup();
+        for k in 0..100 {
+            let input = SupervisorInput {
+                motor_delta_counts: k % 2,
+                ..moving
+            };
+            assert!(s.check(&input, 1.0, dt).amp_enable, "period {k}");
+        }
+        // At 100 kHz the 64 counts per 100 us are 6.4 per period: six pass
+        // (1,900 rad/s), seven do not.
+        let jump = |n| SupervisorInput {
+            motor_delta_counts: n,
+            ..moving
+        };
+        assert!(sup().check(&jump(6), 1.0, dt).amp_enable);
+        assert_eq!(sup().check(&jump(7), 1.0, dt), Command::SAFE);
+        // 1 kHz: 640 counts per period allowed.
+        let dt = 1e-3;
+        assert!(sup().check(&jump(300), 1.0, dt).amp_enable);
+        assert!(sup().check(&jump(640), 1.0, dt).amp_enable);
+        let mut s = sup();
+        assert_eq!(s.check(&jump(700), 1.0, dt), Command::SAFE);
+        assert!(s.faults().contains(Fault::EncoderJump));
+        // Contact disagreement for 2 ms: 2 periods at 1 kHz, 200 at 100 kHz.
+        let bad = SupervisorInput {
+            spring_force_n: flight_force_n() + 200.0,
+            ..nominal()
+        };
+        let no_cross_check = SupervisorConfig {
+            spring_mismatch_n: f32::INFINITY,
+            ..SupervisorConfig::default()
+        };
+        for (dt, periods) in [(1e-3_f32, 2), (1e-5, 200)] {
+            let mut s = built(no_cross_check);
+            for k in 1..periods {
+                assert!(s.check(&bad, 1.0, dt).amp_enable, "dt {dt}: period {k}");
+            }
+            assert_eq!(s.check(&bad, 1.0, dt), Command::SAFE, "dt {dt}");
+            assert!(s.faults().contains(Fault::ContactDisagree));
+        }
+    }
+
     #[test]
     fn encoder_frozen_at_speed_away_from_the_stops() {
         // 20 mm down, motor at 150 rad/s per the filter, no count this period.
