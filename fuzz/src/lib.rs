@@ -166,6 +166,8 @@ pub struct PeriodRecord {
     pub new_target_apex: Option<u8>,
     /// The application calls the period late (`end_period(true)`) after it.
     pub late: bool,
+    /// An arm (`true`) or disarm (`false`) request before the period.
+    pub arm: Option<bool>,
 }
 
 /// The raw sensor words of a period.
@@ -302,6 +304,9 @@ pub fn config(input: &Input) -> (HopperConfig, Timing) {
         target_apex_m: f32::from(input.target_apex) / 255.0,
         ..HopperConfig::default()
     };
+    // No link in the harness: untethered, armed at the first period (the
+    // records then arm and disarm at will).
+    cfg.arming.untethered = true;
     let p = input.perturb;
     if p.disagree_off {
         cfg.supervisor.spring_mismatch_n = f32::INFINITY;
@@ -360,6 +365,7 @@ pub fn run(input: &Input) -> Outcome {
         },
         ..FakeIo::default()
     };
+    runner.arming_mut().request_arm();
     let mut latched = runner.hopper().supervisor().faults();
     let mut outcome = Outcome::default();
 
@@ -372,6 +378,11 @@ pub fn run(input: &Input) -> Outcome {
         io.fail_enable = rec.enable_fails;
         if rec.overrun {
             runner.report_overrun();
+        }
+        match rec.arm {
+            Some(true) => runner.arming_mut().request_arm(),
+            Some(false) => runner.arming_mut().request_disarm(),
+            None => {}
         }
         if let Some(b) = rec.new_target_apex {
             // Always in range (0..=1 m): a refusal would be a bug.
@@ -424,6 +435,18 @@ fn check(p: &Period, io: &FakeIo, before: Faults, latched: Faults, limit: f32, z
         assert_eq!(io.enable, Some(c.amp_enable), "{p:?}");
     }
     assert_eq!(out.record.faults, out.faults.0, "{p:?}");
+    // Disarmed (at boot, on request, after a fault or the e-stop): the safe
+    // output; armed only without a fault or the e-stop.
+    if !p.armed {
+        assert_eq!(c, Command::SAFE, "{p:?}");
+        assert_eq!(out.dac_code, zero, "{p:?}");
+        assert_ne!(io.enable, Some(true), "{p:?}");
+    } else {
+        assert!(out.faults.is_empty(), "{p:?}");
+    }
+    if p.arm_event == Some(hopper_control::arming::ArmEvent::Armed) {
+        assert!(out.faults.is_empty(), "{p:?}");
+    }
     // The feed policy never starves on a correct build.
     assert!(p.feed_watchdog, "{p:?}");
     assert!(!out.faults.contains(Fault::SelfCheck), "{p:?}");
@@ -575,6 +598,12 @@ mod tests {
                         overrun: rare(6),
                         new_target_apex: ((r >> 52) & 0x3F == 0).then_some((r >> 32) as u8 % 40),
                         late: (r >> 58) == 0,
+                        // Now and then a disarm, and an arm request after it.
+                        arm: match (r >> 44) & 0x1FF {
+                            0 => Some(false),
+                            1..=3 => Some(true),
+                            _ => None,
+                        },
                     }
                 })
                 .collect();
@@ -627,6 +656,7 @@ mod tests {
                             overrun: false,
                             new_target_apex: None,
                             late: false,
+                            arm: None,
                         };
                         200
                     ],

@@ -12,6 +12,7 @@ use crate::inject::{
 use crate::mock::{firmware_config, model_params, SensorConfig, SimHal};
 use crate::params::Params;
 use crate::plant::Plant;
+use hopper_control::arming::ArmEvent;
 use hopper_control::estimator::PhaseEvent;
 use hopper_control::hopper::{Hopper, MeasurementOverride, StepOutput, Strategy};
 use hopper_control::laws::{
@@ -54,6 +55,11 @@ pub trait Controller {
     /// When the phase estimator reported each touchdown and liftoff: the
     /// start of the period whose command first followed it, s.
     fn contact_times(&self) -> Option<ContactTimes> {
+        None
+    }
+    /// Why the firmware refused the run's arm request, if it did (then the
+    /// run is disarmed throughout: 0 A, amplifier off).
+    fn arm_refusal(&self) -> Option<&'static str> {
         None
     }
 }
@@ -230,6 +236,10 @@ impl ControllerSpec {
             start_apex_m,
         );
         cfg.flight.gains = self.default_flight_gains(believed)?;
+        // The simulator has no link: a run is the operator's explicit arm
+        // command (below), untethered (`--set arming.untethered=0` leaves
+        // it disarmed: "link-down").
+        cfg.arming.untethered = true;
         if let Some(f) = self.flight_override {
             cfg.flight = f;
         }
@@ -241,8 +251,11 @@ impl ControllerSpec {
             period_s: dt_s as f32,
             ..Timing::default()
         };
-        let runner = PeriodRunner::new(cfg, timing)
+        let mut runner = PeriodRunner::new(cfg, timing)
             .map_err(|e| format!("controller configuration: {e:?}"))?;
+        // Disarmed at boot like the board; armed at the first period if
+        // the robot is at rest with the nut home (a release from rest is).
+        runner.arming_mut().request_arm();
         let hal = SimHal::new(&cfg.calibration, &self.sensors);
         // The name of what actually runs (a strategy override names its own).
         let name = cfg.strategy.kind().name();
@@ -257,6 +270,7 @@ impl ControllerSpec {
             last: None,
             events: EstimatorEvents::default(),
             contact_times: ContactTimes::default(),
+            arm_refusal: None,
             injections: self
                 .injections
                 .iter()
@@ -322,6 +336,7 @@ pub struct FirmwareController {
     last: Option<StepOutput>,
     events: EstimatorEvents,
     contact_times: ContactTimes,
+    arm_refusal: Option<&'static str>,
     injections: Vec<(Injection, InjectState)>,
     max_abs_current_after_fault_a: Option<f64>,
 }
@@ -417,7 +432,11 @@ impl Controller for FirmwareController {
         }
         let out = {
             let mut io = self.hal.io(plant);
-            self.runner.run_period(&mut io, &mut NoCounter).out
+            let period = self.runner.run_period(&mut io, &mut NoCounter);
+            if let Some(ArmEvent::Refused(r)) = period.arm_event {
+                self.arm_refusal.get_or_insert(r.name());
+            }
+            period.out
         };
         // The host keeps every deadline: the plant takes no time.
         self.runner.end_period(false);
@@ -481,6 +500,10 @@ impl Controller for FirmwareController {
 
     fn contact_times(&self) -> Option<ContactTimes> {
         Some(self.contact_times.clone())
+    }
+
+    fn arm_refusal(&self) -> Option<&'static str> {
+        self.arm_refusal
     }
 }
 

@@ -193,6 +193,9 @@ pub struct Summary {
     /// The estimator's touchdown and liftoff timing against the plant's
     /// (null without firmware).
     pub contact_latency: Option<ContactLatency>,
+    /// Why the firmware refused to arm (`arming::ArmRefusal::name`; the run
+    /// then stays disarmed: 0 A, amplifier off); null when it armed.
+    pub arm_refused: Option<&'static str>,
     /// The firmware's per-hop ledger, one entry per completed hop.
     pub firmware_hops: Vec<HopLedger>,
     /// Motor work (plant ledger) from the first touchdown to the first
@@ -544,6 +547,7 @@ pub fn run_with_progress(
                 faults,
                 estimated_events: controller.estimator_events(),
                 contact_latency,
+                arm_refused: controller.arm_refusal(),
                 firmware_hops: controller.hop_ledgers(),
                 first_stance_motor_work_j: first_stance_work_j,
                 steady_hop: match tracker.hops.len() {
@@ -624,6 +628,7 @@ fn summarize(
         max_abs_current_after_fault_a: None,
         estimated_events: None,
         contact_latency: None,
+        arm_refused: None,
         firmware_hops: Vec::new(),
         first_stance_motor_work_j: None,
         hop_ledger: Vec::new(),

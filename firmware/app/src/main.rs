@@ -29,6 +29,12 @@
 //! At reset the amplifier-enable pin (PB0) floats and the external pull-down
 //! keeps the amplifier off; `init` drives it low before anything else. The
 //! panic handler and the HardFault handler drive it low first thing.
+//! The period runner starts disarmed (`hopper_control::arming`, issue 17):
+//! the board build writes 0 A with the amplifier off until an arm command
+//! is accepted, and nothing in this build sends one yet (the link of issue
+//! 17 will), so a flashed board watches its sensors and never moves the
+//! motor. The QEMU build's scenario arms once, untethered, at the first
+//! period.
 #![cfg_attr(target_os = "none", no_std, no_main)]
 #![deny(unsafe_code)]
 
@@ -211,6 +217,7 @@ mod app {
             // amplifier off, until someone looks (a reset of the latch).
             defmt::error!("watchdog reset: amplifier stays off (overrun latched)");
             runner.report_overrun();
+            runner.arming_mut().note_watchdog_reset();
         }
         let (tx, rx) = make_channel!(LogItem, LOG_CAPACITY);
         if logger::spawn(rx).is_err() {
@@ -457,7 +464,7 @@ mod app {
         };
 
         let params = Params::design();
-        let cfg = firmware_config(
+        let mut cfg = firmware_config(
             &params,
             &params,
             if SHAPED {
@@ -468,7 +475,11 @@ mod app {
             TARGET_APEX_M,
             START_APEX_M,
         );
-        let (Ok(plant), Ok(runner)) = (
+        // The scenario is the operator: no link (untethered), and one arm
+        // request, decided at the first period like any other (issue 17:
+        // disarmed at boot).
+        cfg.arming.untethered = true;
+        let (Ok(plant), Ok(mut runner)) = (
             Plant::new(params, START_APEX_M),
             PeriodRunner::new(cfg, TIMING),
         ) else {
@@ -477,6 +488,7 @@ mod app {
             #[allow(clippy::empty_loop)]
             loop {}
         };
+        runner.arming_mut().request_arm();
         let hal = SimHal::new(&cfg.calibration, &SensorConfig::DEFAULT);
         let (tx, rx) = make_channel!(LogItem, LOG_CAPACITY);
         if logger::spawn(rx).is_err() {

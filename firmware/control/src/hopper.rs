@@ -17,6 +17,7 @@
 //! [`crate::runner::PeriodRunner`] wraps it around the I/O: read, step,
 //! write the DAC, set the enable, the watchdog decision and overruns.
 
+use crate::arming::ArmingConfig;
 #[cfg(feature = "fault-injection")]
 use crate::calibration::Measurements;
 use crate::calibration::{CalError, Calibration, Converter, DacMap};
@@ -59,6 +60,8 @@ pub struct HopperConfig {
     pub strategy: Strategy,
     /// Desired apex toe height `H_D`, m, in `0..=1`. Default 0.05.
     pub target_apex_m: f32,
+    /// Arming (issue 17): the period runner's gate on the output.
+    pub arming: ArmingConfig,
 }
 
 impl HopperConfig {
@@ -98,6 +101,7 @@ impl HopperConfig {
             flight: flight_pd::Config::default(),
             strategy: Strategy::default(),
             target_apex_m: crate::params::TARGET_APEX_M.default,
+            arming: ArmingConfig::default(),
         }
     }
 }
@@ -315,6 +319,11 @@ impl Hopper {
     /// The phase estimate.
     pub fn phase(&self) -> Phase {
         self.estimator.phase()
+    }
+
+    /// Nut velocity from the filtered motor rate (eq 4.1), m/s.
+    pub fn nut_velocity_mps(&self) -> f32 {
+        self.estimator.velocities().motor_rad_s * self.cfg.model.screw_m_per_rad()
     }
 
     /// The phase estimator (its counters: withdrawn touchdowns, rejected samples).

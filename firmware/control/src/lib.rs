@@ -44,6 +44,7 @@
     )
 )]
 
+pub mod arming;
 pub mod calibration;
 pub mod energy;
 pub mod estimator;

@@ -676,6 +676,51 @@ param!(
     DISARMED,
     "Downward body speed that arms bottom detection in stance."
 );
+// --- Arming (issue 17) ------------------------------------------------------
+param!(
+    ARM_LINK_TIMEOUT_S,
+    "arming.link_timeout_s",
+    "s",
+    Real,
+    1.0e-3,
+    60.0,
+    0.2,
+    DISARMED,
+    "No valid link frame for this long disarms the amplifier (and a dead link refuses arming)."
+);
+param!(
+    ARM_UNTETHERED,
+    "arming.untethered",
+    "-",
+    Flag,
+    0.0,
+    1.0,
+    0.0,
+    DISARMED,
+    "Run without a link: no link needed to arm, and link loss does not disarm (an explicit choice; the simulator sets it)."
+);
+param!(
+    ARM_HOME_TOLERANCE_M,
+    "arming.home_tolerance_m",
+    "m",
+    Real,
+    0.0,
+    0.05,
+    0.001,
+    DISARMED,
+    "To arm, the nut must be at most this far from its upper stop."
+);
+param!(
+    ARM_STILL_MPS,
+    "arming.still_velocity_mps",
+    "m/s",
+    Real,
+    1.0e-4,
+    10.0,
+    0.05,
+    DISARMED,
+    "To arm, nut and body must be slower than this."
+);
 param!(
     EST_PREDICT_CONTACT,
     "estimator.predict_contact",
@@ -1149,6 +1194,10 @@ pub const TABLE: &[&Param] = &[
     &EST_BOTTOM_ARM_MPS,
     &EST_PREDICT_CONTACT,
     &EST_CONTACT_CONFIRM_S,
+    &ARM_LINK_TIMEOUT_S,
+    &ARM_UNTETHERED,
+    &ARM_HOME_TOLERANCE_M,
+    &ARM_STILL_MPS,
     &SUP_MAX_MOTOR_DELTA,
     &SUP_MAX_HEIGHT_DELTA,
     &SUP_NUT_POSITION_MIN_M,
@@ -1247,6 +1296,16 @@ fn slot<'a>(cfg: &'a mut HopperConfig, p: &Param) -> Result<Slot<'a>, ParamError
             "kp_a_per_rad" => Ok(R(&mut f.gains.kp)),
             "kd_a_s_per_rad" => Ok(R(&mut f.gains.kd)),
             "start_position_m" => Ok(R(&mut f.start_position_m)),
+            _ => Err(ParamError::Unknown),
+        };
+    }
+    if let Some(rest) = name.strip_prefix("arming.") {
+        let a = &mut cfg.arming;
+        return match rest {
+            "link_timeout_s" => Ok(R(&mut a.link_timeout_s)),
+            "untethered" => Ok(Slot::Flag(&mut a.untethered)),
+            "home_tolerance_m" => Ok(R(&mut a.home_tolerance_m)),
+            "still_velocity_mps" => Ok(R(&mut a.still_velocity_mps)),
             _ => Err(ParamError::Unknown),
         };
     }

@@ -8,24 +8,27 @@
 //! 2. [`Hopper::step`]: conversion, estimator and eq 4.1 filters, energy
 //!    (eqs 2.44-2.45), the selected controller, the supervisor, the DAC code,
 //!    the hop ledger and the telemetry record (timed with the counter);
-//! 3. the watchdog feed decision ([`FeedPolicy`]) on the step's output; a
+//! 3. arming ([`Arming`], issue 17): the link timer, the disarm causes (a
+//!    fault, the e-stop, link loss, a request) or a pending arm request, on
+//!    this period's measurements; while disarmed the output is 0 A, the
+//!    zero-current code and the amplifier off (disarmed at every boot);
+//! 4. the watchdog feed decision ([`FeedPolicy`]) on the output; a
 //!    starve decision latches [`Fault::SelfCheck`] and makes this and every
 //!    later period's output 0 A with the amplifier off before it is written;
-//! 4. write the DAC code and the amplifier enable; an I/O error latches a
-//!    fault and the amplifier is disabled in the same period;
-//! 5. what to log: newly latched faults first, else a completed hop.
+//! 5. write the DAC code and the amplifier enable; an I/O error latches a
+//!    fault and the amplifier is disabled in the same period (and disarms
+//!    from the next period on: the latched fault);
+//! 6. what to log: newly latched faults first, else a completed hop.
 //!
 //! After it the application tells [`PeriodRunner::end_period`] whether the
 //! period met its deadline (the board: the next trigger is not pending yet;
 //! QEMU: SysTick not pending; the host: always); `overrun_limit` late
 //! periods in a row latch [`Fault::Overrun`].
 //!
-//! The arming state of issue #10 (disarmed at boot, armed only on a checked
-//! command, disarmed on a fault, the e-stop or link loss) belongs here, in
-//! front of step 3: the runner already decides what the amplifier enable
-//! gets in every period, and the board, QEMU and the host would all inherit
-//! it without a change of their own.
+//! Fault resets ([`PeriodRunner::reset_faults`]) are allowed only while
+//! disarmed.
 
+use crate::arming::{ArmEvent, ArmInput, Arming};
 use crate::hal::HopperIo;
 use crate::hopper::{ConfigError, Hopper, HopperConfig, StepOutput};
 use crate::supervisor::{Command, Fault, Faults, SupervisorInput};
@@ -152,6 +155,8 @@ pub enum RunnerError {
     Period,
     /// `timing.overrun_limit` is 0.
     OverrunLimit,
+    /// The arming configuration (`arming.*`, by name).
+    Arming(crate::laws::InvalidField),
 }
 
 /// What one period did.
@@ -169,6 +174,10 @@ pub struct Period {
     pub log: Option<LogItem>,
     /// The control step's cost, in the counter's units.
     pub step_cost: u32,
+    /// Whether the output went out armed (otherwise it is the safe one).
+    pub armed: bool,
+    /// What arming did this period, if anything.
+    pub arm_event: Option<ArmEvent>,
 }
 
 /// The period runner: the controller, the watchdog feed decision, overrun
@@ -176,6 +185,7 @@ pub struct Period {
 #[derive(Debug, Clone)]
 pub struct PeriodRunner {
     hopper: Hopper,
+    arming: Arming,
     feed: FeedPolicy,
     timing: Timing,
     late_in_a_row: u32,
@@ -195,8 +205,10 @@ impl PeriodRunner {
         if timing.overrun_limit == 0 {
             return Err(RunnerError::OverrunLimit);
         }
+        let arming = Arming::new(cfg.arming).map_err(RunnerError::Arming)?;
         let hopper = Hopper::new(cfg).map_err(RunnerError::Config)?;
         Ok(Self {
+            arming,
             feed: FeedPolicy::for_hopper(hopper.config()),
             hopper,
             timing,
@@ -218,6 +230,18 @@ impl PeriodRunner {
         &mut self.hopper
     }
 
+    /// Arming: the state, the link timer, arm and disarm requests.
+    pub fn arming(&self) -> &Arming {
+        &self.arming
+    }
+
+    /// Arming, mutably: [`Arming::request_arm`], [`Arming::request_disarm`],
+    /// [`Arming::link_frame`], [`Arming::note_watchdog_reset`]. Requests
+    /// take effect at the next period.
+    pub fn arming_mut(&mut self) -> &mut Arming {
+        &mut self.arming
+    }
+
     /// The pacing in use.
     pub fn timing(&self) -> &Timing {
         &self.timing
@@ -234,6 +258,11 @@ impl PeriodRunner {
     /// the latch cleared on purpose. Refused once the policy has starved:
     /// the hardware reset is on its way, and only it clears that.
     pub fn reset_faults(&mut self, input: &SupervisorInput) -> Result<(), Faults> {
+        if self.arming.is_armed() {
+            // Only while disarmed (a latched fault disarms, so this is a
+            // reset without a fault: nothing to clear, and nothing changes).
+            return Err(self.hopper.supervisor().faults());
+        }
         if self.starved() {
             return Err(self
                 .hopper
@@ -269,6 +298,33 @@ impl PeriodRunner {
         self.cost.add(step_cost);
         self.periods = self.periods.wrapping_add(1);
         let zero = self.hopper.zero_code();
+        // Arming, on this period's measurements, before anything is written.
+        // The pose only matters to an arm request.
+        let (nut_velocity_mps, body_velocity_mps) = if self.arming.arm_pending() {
+            (
+                self.hopper.nut_velocity_mps(),
+                self.hopper.estimator().velocities().body_mps,
+            )
+        } else {
+            (0.0, 0.0)
+        };
+        let arm_input = ArmInput {
+            faults: out.faults,
+            estop_pressed: raw.is_some_and(|r| r.estop_pressed),
+            sensors_ok: raw.is_some() && out.energy_j.is_finite(),
+            nut_position_m: out.record.nut_position_m,
+            nut_velocity_mps,
+            body_velocity_mps,
+        };
+        let arm_event = self.arming.period(self.timing.period_s, &arm_input);
+        let armed = self.arming.is_armed();
+        if !armed {
+            // Disarmed: the safe output, without a fault.
+            out.command = Command::SAFE;
+            out.dac_code = zero;
+            out.record.command_a = 0.0;
+            out.record.dac_code = zero;
+        }
         // The feed decision first, on the step's own output (`FeedPolicy` is
         // pure): an output that contradicts itself never reaches the pins.
         // A starve latches `SelfCheck`, so no later period can enable the
@@ -299,6 +355,12 @@ impl PeriodRunner {
             self.make_safe(&mut out, zero);
         }
         out.record.faults = out.faults.0;
+        let mut arm_event = arm_event;
+        if !out.faults.is_empty() {
+            // A write failure after the decision: disarmed as of now.
+            arm_event = self.arming.fault_latched().or(arm_event);
+        }
+        let armed = self.arming.is_armed();
         // Since the last report, not since this period began: a fault that
         // latched between periods (`end_period`'s overrun, `report_overrun`)
         // is reported with the period that first shows it.
@@ -318,6 +380,8 @@ impl PeriodRunner {
             newly_latched,
             log,
             step_cost,
+            armed: armed && out.command.amp_enable,
+            arm_event,
         }
     }
 
@@ -413,12 +477,68 @@ mod tests {
         }
     }
 
+    /// A runner armed (untethered) at its first period, as the simulator
+    /// and the QEMU scenario run it.
     fn runner(strategy: Strategy) -> PeriodRunner {
-        let cfg = HopperConfig {
+        let mut cfg = HopperConfig {
             strategy,
             ..HopperConfig::default()
         };
-        PeriodRunner::new(cfg, Timing::default()).unwrap_or_else(|e| panic!("{e:?}"))
+        cfg.arming.untethered = true;
+        let mut r = PeriodRunner::new(cfg, Timing::default()).unwrap_or_else(|e| panic!("{e:?}"));
+        r.arming_mut().request_arm();
+        r
+    }
+
+    #[test]
+    fn disarmed_at_boot_until_an_arm_request_is_accepted() {
+        let mut r = PeriodRunner::new(HopperConfig::default(), Timing::default())
+            .unwrap_or_else(|e| panic!("{e:?}"));
+        let mut io = Io::new(crate::proptest_support::rest_sample(
+            &HopperConfig::default().calibration,
+        ));
+        for _ in 0..100 {
+            let p = r.run_period(&mut io, &mut NoCounter);
+            assert_eq!((io.dac, io.enabled), (Some(2048), Some(false)));
+            assert!(!p.armed && p.feed_watchdog && p.out.faults.is_empty());
+            r.end_period(false);
+        }
+        // No link yet: refused, and still safe.
+        r.arming_mut().request_arm();
+        let p = r.run_period(&mut io, &mut NoCounter);
+        assert_eq!(
+            p.arm_event,
+            Some(ArmEvent::Refused(crate::arming::ArmRefusal::LinkDown))
+        );
+        assert_eq!(io.enabled, Some(false));
+        // A frame, then the request: armed in that very period.
+        r.arming_mut().link_frame();
+        r.arming_mut().request_arm();
+        let p = r.run_period(&mut io, &mut NoCounter);
+        assert_eq!(p.arm_event, Some(ArmEvent::Armed));
+        assert_eq!(io.enabled, Some(true));
+        assert!(p.armed);
+        // The e-stop while armed: 0 A and off in the same period.
+        io.raw.estop_pressed = true;
+        r.arming_mut().link_frame();
+        let p = r.run_period(&mut io, &mut NoCounter);
+        assert_eq!((io.dac, io.enabled), (Some(2048), Some(false)));
+        assert!(!p.armed);
+        assert!(matches!(p.arm_event, Some(ArmEvent::Disarmed(_))));
+        // Released: the estop fault resets only while disarmed, and arming
+        // needs a new request.
+        io.raw.estop_pressed = false;
+        let raw = io.raw;
+        let rest = {
+            let m = crate::calibration::Converter::new(HopperConfig::default().calibration)
+                .and_then(|mut c| c.convert(&raw))
+                .unwrap_or_else(|e| panic!("{e:?}"));
+            crate::supervisor::SupervisorInput::from_measurements(&m, 0.0, 0.0, 0.0)
+        };
+        assert_eq!(r.reset_faults(&rest), Ok(()));
+        r.arming_mut().link_frame();
+        let p = r.run_period(&mut io, &mut NoCounter);
+        assert!(!p.armed && p.out.faults.is_empty());
     }
 
     #[test]
@@ -428,6 +548,7 @@ mod tests {
             &HopperConfig::default().calibration,
         ));
         let p = r.run_period(&mut io, &mut NoCounter);
+        assert_eq!(p.arm_event, Some(ArmEvent::Armed));
         assert_eq!(io.dac, Some(2048));
         assert_eq!(io.enabled, Some(true));
         assert!(p.feed_watchdog);
