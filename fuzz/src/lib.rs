@@ -28,6 +28,8 @@
 //!   feeds (`feed_watchdog`), `Fault::SelfCheck` never latches and the
 //!   runner never reports itself starved.
 
+pub mod link;
+
 use arbitrary::{Arbitrary, Unstructured};
 use hopper_control::hal::{HopperIo, IoError, RawSample};
 use hopper_control::hopper::{ApexLoop, HopperConfig, Strategy};

@@ -176,6 +176,8 @@ fn test(root: &Path) -> Result<(), String> {
             "hopper-app",
             "-p",
             "hopper-control",
+            "-p",
+            "hopper-protocol",
             "--target",
             TARGET,
             "--",

@@ -1,0 +1,562 @@
+//! The link protocol between a host (`hopper-link`, tests) and a robot (the
+//! board, the QEMU image, `hopper-sim serve`), issue 17.
+//!
+//! `no_std` and allocation-free, so the firmware and the host share one
+//! implementation:
+//!
+//! - messages are serde types ([`HostMsg`], [`RobotMsg`]) encoded with
+//!   postcard;
+//! - a frame is `COBS(postcard(message) ++ CRC-16/XMODEM(postcard bytes),
+//!   little-endian)` followed by a single `0x00` delimiter ([`encode`]): COBS
+//!   leaves no zero inside a frame, so a receiver finds frame boundaries
+//!   after any garbage;
+//! - [`Decoder`] takes bytes as they arrive (one at a time, from an
+//!   interrupt, or in chunks) and yields whole messages; every frame that
+//!   is too long, fails COBS, fails its CRC or does not decode is counted
+//!   ([`LinkStats`]) and dropped, and decoding never panics on any input
+//!   (a property test and the `link` fuzz target check it);
+//! - the first exchange is a version handshake ([`HostMsg::Hello`],
+//!   [`RobotMsg::Hello`], [`PROTOCOL_VERSION`]); requests carry an id that
+//!   their response repeats; telemetry, hop ledgers, faults, state changes
+//!   and log text come unsolicited, telemetry with a sequence number so
+//!   the host counts drops.
+#![no_std]
+#![warn(missing_docs)]
+#![deny(unsafe_code)]
+
+use serde::{Deserialize, Serialize};
+
+/// The protocol version: a host and a robot talk only when theirs agree.
+pub const PROTOCOL_VERSION: u16 = 1;
+
+/// Largest encoded message, bytes (postcard, before the CRC and COBS).
+pub const MAX_MESSAGE: usize = 120;
+
+/// Largest frame on the wire, bytes: the message, 2 CRC bytes, COBS's
+/// overhead (one byte per 254, plus one) and the delimiter.
+pub const MAX_FRAME: usize = MAX_MESSAGE + 2 + MAX_MESSAGE / 254 + 2;
+
+/// Longest parameter name carried, bytes (the table's longest is 40).
+pub const NAME_LEN: usize = 48;
+
+/// Longest log text carried, bytes.
+pub const TEXT_LEN: usize = 64;
+
+/// A parameter name on the wire.
+pub type Name = heapless::String<NAME_LEN>;
+
+/// CRC-16/XMODEM (polynomial 0x1021): two bytes per frame catch every
+/// burst error up to 16 bits on a UART line.
+const CRC: crc::Crc<u16> = crc::Crc::<u16>::new(&crc::CRC_16_XMODEM);
+
+/// Host to robot.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub enum HostMsg {
+    /// Opens a session: the host's protocol version.
+    Hello {
+        /// [`PROTOCOL_VERSION`] of the host.
+        version: u16,
+    },
+    /// Keeps the link alive (any valid frame does; this one carries nothing).
+    Heartbeat,
+    /// A request; the robot answers with a [`RobotMsg::Response`] with the same id.
+    Request {
+        /// Chosen by the host, repeated in the response.
+        id: u16,
+        /// What is asked.
+        req: Request,
+    },
+}
+
+/// What a host can ask.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub enum Request {
+    /// The robot's state ([`Response::Status`]).
+    Status,
+    /// Arm (refused with the reason unless every condition holds).
+    Arm,
+    /// Disarm.
+    Disarm,
+    /// Clear the latched faults whose cause is gone (only while disarmed).
+    ResetFaults,
+    /// The number of parameters in the table.
+    ParamCount,
+    /// One table entry by index ([`Response::ParamInfo`]).
+    ParamInfo {
+        /// Index into the table.
+        index: u16,
+    },
+    /// A parameter's value by name.
+    ParamGet {
+        /// The table name.
+        name: Name,
+    },
+    /// Set a parameter; checked on the robot and applied at a period boundary.
+    ParamSet {
+        /// The table name.
+        name: Name,
+        /// The value, in the parameter's unit (flags 0/1, choices by index).
+        value: f32,
+    },
+    /// Telemetry records every `every` periods (0: off).
+    Telemetry {
+        /// Decimation, periods per record.
+        every: u16,
+    },
+}
+
+/// Robot to host.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub enum RobotMsg {
+    /// Answers [`HostMsg::Hello`]: the robot's protocol version.
+    Hello {
+        /// [`PROTOCOL_VERSION`] of the robot.
+        version: u16,
+    },
+    /// The answer to a request.
+    Response {
+        /// The request's id.
+        id: u16,
+        /// The answer.
+        resp: Response,
+    },
+    /// One telemetry record (unsolicited, while streaming).
+    Telemetry(Telemetry),
+    /// A hop ended (the firmware's ledger).
+    Hop(Hop),
+    /// Faults latched: the fault bits (`hopper_control::supervisor::Fault`).
+    Faults {
+        /// Control period number.
+        step: u32,
+        /// All latched faults, one bit each.
+        bits: u16,
+    },
+    /// The arming state changed.
+    State(ArmState),
+    /// A line of log text.
+    Log(heapless::String<TEXT_LEN>),
+}
+
+/// The arming state on the wire (`hopper_control::arming`'s names as codes).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum ArmState {
+    /// Armed.
+    Armed,
+    /// Disarmed: `hopper_control::arming::DisarmReason` by index (boot 0,
+    /// watchdog-reset 1, command 2, estop 3, fault 4, link-lost 5).
+    Disarmed(u8),
+}
+
+/// An answer.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub enum Response {
+    /// Done.
+    Ok,
+    /// Refused, with the reason (`hopper_control` names: an arm refusal, a
+    /// parameter error).
+    Refused(heapless::String<TEXT_LEN>),
+    /// The state.
+    Status(Status),
+    /// The table's size.
+    ParamCount(u16),
+    /// One table entry.
+    ParamInfo(ParamInfo),
+    /// A parameter's value.
+    Value(f32),
+}
+
+/// The robot's state.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Status {
+    /// Arming.
+    pub arm: ArmState,
+    /// Latched fault bits.
+    pub faults: u16,
+    /// Control periods run.
+    pub periods: u32,
+    /// Frames received intact.
+    pub frames_ok: u32,
+    /// Frames dropped (any reason, [`LinkStats::bad`]).
+    pub frames_bad: u32,
+    /// Telemetry records not sent (the transmit queue was full).
+    pub telemetry_dropped: u32,
+    /// Last apex, m (NaN before the first).
+    pub last_apex_m: f32,
+}
+
+/// One table entry.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ParamInfo {
+    /// Table name.
+    pub name: Name,
+    /// Unit.
+    pub unit: heapless::String<8>,
+    /// Range.
+    pub min: f32,
+    /// Range.
+    pub max: f32,
+    /// Default.
+    pub default: f32,
+    /// Value now.
+    pub value: f32,
+    /// May be set while armed.
+    pub live: bool,
+}
+
+/// One telemetry record (the firmware's `StepRecord`, plus a sequence number).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Telemetry {
+    /// Sequence number of the record (consecutive; a gap is a drop).
+    pub seq: u32,
+    /// Control period number.
+    pub step: u32,
+    /// Phase (0 flight, 1 stance).
+    pub phase: u8,
+    /// Armed.
+    pub armed: bool,
+    /// Latched fault bits.
+    pub faults: u16,
+    /// Body height, m.
+    pub body_height_m: f32,
+    /// Nut position, m.
+    pub nut_position_m: f32,
+    /// Spring force, N.
+    pub spring_force_n: f32,
+    /// Energy estimate, J.
+    pub energy_j: f32,
+    /// Commanded current, A.
+    pub command_a: f32,
+}
+
+/// One hop's ledger (the firmware's `HopLedger`).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Hop {
+    /// Hop number.
+    pub hop: u32,
+    /// Apex toe height, m.
+    pub apex_height_m: f32,
+    /// Energy at touchdown, J.
+    pub energy_at_touchdown_j: f32,
+    /// Energy at liftoff, J.
+    pub energy_at_liftoff_j: f32,
+    /// Stance work, J.
+    pub stance_work_j: f32,
+    /// Stance duration, s.
+    pub stance_duration_s: f32,
+    /// Peak current, A.
+    pub peak_current_a: f32,
+    /// Peak nut stroke, m.
+    pub peak_stroke_m: f32,
+}
+
+/// Why a message could not be framed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum EncodeError {
+    /// The message does not fit [`MAX_MESSAGE`] (or the output buffer).
+    TooLong,
+}
+
+/// Frames `msg` into `out`: `COBS(postcard(msg) ++ crc) ++ [0]`. Returns the
+/// frame's length.
+pub fn encode<T: Serialize>(msg: &T, out: &mut [u8]) -> Result<usize, EncodeError> {
+    let mut raw = [0u8; MAX_MESSAGE + 2];
+    let body = postcard::to_slice(msg, &mut raw[..MAX_MESSAGE])
+        .map_err(|_| EncodeError::TooLong)?
+        .len();
+    let crc = CRC.checksum(raw.get(..body).ok_or(EncodeError::TooLong)?);
+    raw.get_mut(body..body + 2)
+        .ok_or(EncodeError::TooLong)?
+        .copy_from_slice(&crc.to_le_bytes());
+    let n = cobs::try_encode(raw.get(..body + 2).ok_or(EncodeError::TooLong)?, out)
+        .map_err(|_| EncodeError::TooLong)?;
+    *out.get_mut(n).ok_or(EncodeError::TooLong)? = 0;
+    Ok(n + 1)
+}
+
+/// Counts of what the [`Decoder`] received.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct LinkStats {
+    /// Frames that decoded to a message.
+    pub ok: u32,
+    /// Frames longer than [`MAX_FRAME`].
+    pub too_long: u32,
+    /// Frames that are not valid COBS (or too short for a CRC).
+    pub bad_cobs: u32,
+    /// Frames whose CRC does not match.
+    pub bad_crc: u32,
+    /// Frames with a good CRC that do not decode as a message.
+    pub bad_message: u32,
+}
+
+impl LinkStats {
+    /// Every dropped frame.
+    pub fn bad(&self) -> u32 {
+        self.too_long
+            .saturating_add(self.bad_cobs)
+            .saturating_add(self.bad_crc)
+            .saturating_add(self.bad_message)
+    }
+}
+
+/// A streaming frame decoder for messages of type `T`. Bytes between a
+/// frame's end and the next delimiter are one (bad) frame; empty frames
+/// (two delimiters in a row) are ignored, so a sender may start with a
+/// delimiter to flush the line.
+#[derive(Debug, Clone)]
+pub struct Decoder {
+    buf: [u8; MAX_FRAME],
+    len: usize,
+    /// The current frame overflowed: drop it at its delimiter.
+    overflow: bool,
+    stats: LinkStats,
+}
+
+impl Default for Decoder {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl Decoder {
+    /// An empty decoder.
+    pub const fn new() -> Self {
+        Self {
+            buf: [0; MAX_FRAME],
+            len: 0,
+            overflow: false,
+            stats: LinkStats {
+                ok: 0,
+                too_long: 0,
+                bad_cobs: 0,
+                bad_crc: 0,
+                bad_message: 0,
+            },
+        }
+    }
+
+    /// What was received so far.
+    pub fn stats(&self) -> LinkStats {
+        self.stats
+    }
+
+    /// Takes one byte; returns a message when `byte` ends a good frame.
+    pub fn push<T: for<'de> Deserialize<'de>>(&mut self, byte: u8) -> Option<T> {
+        if byte != 0 {
+            match self.buf.get_mut(self.len) {
+                Some(slot) if !self.overflow => {
+                    *slot = byte;
+                    self.len += 1;
+                }
+                _ => self.overflow = true,
+            }
+            return None;
+        }
+        let (len, overflow) = (self.len, self.overflow);
+        self.len = 0;
+        self.overflow = false;
+        if overflow {
+            self.stats.too_long = self.stats.too_long.saturating_add(1);
+            return None;
+        }
+        if len == 0 {
+            return None;
+        }
+        let mut raw = [0u8; MAX_FRAME];
+        let frame = self.buf.get(..len)?;
+        let Ok(n) = cobs::decode(frame, &mut raw).map(|r| r.frame_size()) else {
+            self.stats.bad_cobs = self.stats.bad_cobs.saturating_add(1);
+            return None;
+        };
+        let (Some(body), Some(tail)) = (
+            n.checked_sub(2).and_then(|b| raw.get(..b)),
+            n.checked_sub(2).and_then(|b| raw.get(b..n)),
+        ) else {
+            self.stats.bad_cobs = self.stats.bad_cobs.saturating_add(1);
+            return None;
+        };
+        let mut crc = [0u8; 2];
+        crc.copy_from_slice(tail);
+        if CRC.checksum(body) != u16::from_le_bytes(crc) {
+            self.stats.bad_crc = self.stats.bad_crc.saturating_add(1);
+            return None;
+        }
+        match postcard::from_bytes::<T>(body) {
+            Ok(msg) => {
+                self.stats.ok = self.stats.ok.saturating_add(1);
+                Some(msg)
+            }
+            Err(_) => {
+                self.stats.bad_message = self.stats.bad_message.saturating_add(1);
+                None
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    extern crate std;
+    use super::*;
+    use proptest::prelude::*;
+    use std::vec::Vec;
+
+    fn frame<T: Serialize>(msg: &T) -> Vec<u8> {
+        let mut out = [0u8; MAX_FRAME];
+        let n = encode(msg, &mut out).unwrap_or_else(|e| panic!("{e:?}"));
+        out[..n].to_vec()
+    }
+
+    fn decode_all<T: for<'de> Deserialize<'de>>(d: &mut Decoder, bytes: &[u8]) -> Vec<T> {
+        bytes.iter().filter_map(|&b| d.push::<T>(b)).collect()
+    }
+
+    fn name(s: &str) -> Name {
+        let mut n = Name::new();
+        n.push_str(s)
+            .unwrap_or_else(|e| panic!("name too long: {e:?}"));
+        n
+    }
+
+    #[test]
+    fn the_largest_messages_fit_a_frame() {
+        let info = RobotMsg::Response {
+            id: u16::MAX,
+            resp: Response::ParamInfo(ParamInfo {
+                name: name(&"x".repeat(NAME_LEN)),
+                unit: heapless::String::try_from("A s/rad").unwrap_or_default(),
+                min: -1.0,
+                max: 1.0,
+                default: 0.0,
+                value: 0.5,
+                live: true,
+            }),
+        };
+        let log = RobotMsg::Log(
+            heapless::String::try_from("y".repeat(TEXT_LEN).as_str()).unwrap_or_default(),
+        );
+        let set = HostMsg::Request {
+            id: 7,
+            req: Request::ParamSet {
+                name: name(&"z".repeat(NAME_LEN)),
+                value: f32::MAX,
+            },
+        };
+        for f in [frame(&info), frame(&log), frame(&set)] {
+            assert!(f.len() <= MAX_FRAME, "{}", f.len());
+            assert_eq!(f.iter().filter(|b| **b == 0).count(), 1);
+            assert_eq!(f.last(), Some(&0));
+        }
+        let t = RobotMsg::Telemetry(Telemetry {
+            seq: u32::MAX,
+            step: u32::MAX,
+            phase: 1,
+            armed: true,
+            faults: u16::MAX,
+            body_height_m: 0.6,
+            nut_position_m: 0.01,
+            spring_force_n: 300.0,
+            energy_j: 60.0,
+            command_a: 33.7,
+        });
+        // The budget of issue 17: 1 kHz of full records at 921,600 baud
+        // (92,160 bytes/s) needs frames of at most 92 bytes.
+        let n = frame(&t).len();
+        std::println!("telemetry frame: {n} bytes");
+        assert!(n <= 40, "telemetry frame {n} bytes");
+    }
+
+    #[test]
+    fn a_corrupted_byte_is_counted_and_the_next_frame_still_decodes() {
+        let a = frame(&HostMsg::Heartbeat);
+        let b = frame(&HostMsg::Request {
+            id: 3,
+            req: Request::Arm,
+        });
+        let mut bad = b.clone();
+        bad[1] ^= 0x40;
+        let mut d = Decoder::new();
+        let mut stream = Vec::new();
+        stream.extend_from_slice(&bad);
+        stream.extend_from_slice(&a);
+        stream.extend_from_slice(&b);
+        let got: Vec<HostMsg> = decode_all(&mut d, &stream);
+        assert_eq!(
+            got,
+            [
+                HostMsg::Heartbeat,
+                HostMsg::Request {
+                    id: 3,
+                    req: Request::Arm
+                }
+            ]
+        );
+        assert_eq!(d.stats().ok, 2);
+        assert_eq!(d.stats().bad(), 1);
+        // Too long: dropped at its delimiter, counted, and the line recovers.
+        let mut long = std::vec![1u8; 3 * MAX_FRAME];
+        long.push(0);
+        long.extend_from_slice(&a);
+        let got: Vec<HostMsg> = decode_all(&mut d, &long);
+        assert_eq!(got, [HostMsg::Heartbeat]);
+        assert_eq!(d.stats().too_long, 1);
+    }
+
+    fn host_msg() -> impl Strategy<Value = HostMsg> {
+        let name = "[a-z_.]{0,48}".prop_map(|s| {
+            let mut n = Name::new();
+            let _ = n.push_str(&s);
+            n
+        });
+        let req = prop_oneof![
+            Just(Request::Status),
+            Just(Request::Arm),
+            Just(Request::Disarm),
+            Just(Request::ResetFaults),
+            Just(Request::ParamCount),
+            any::<u16>().prop_map(|index| Request::ParamInfo { index }),
+            name.clone().prop_map(|name| Request::ParamGet { name }),
+            (name, any::<f32>()).prop_map(|(name, value)| Request::ParamSet { name, value }),
+            any::<u16>().prop_map(|every| Request::Telemetry { every }),
+        ];
+        prop_oneof![
+            any::<u16>().prop_map(|version| HostMsg::Hello { version }),
+            Just(HostMsg::Heartbeat),
+            (any::<u16>(), req).prop_map(|(id, req)| HostMsg::Request { id, req }),
+        ]
+    }
+
+    proptest! {
+        /// Any message survives framing and a byte-by-byte decoder, also
+        /// after garbage on the line (one bad frame at most, then intact).
+        #[test]
+        fn round_trip_after_garbage(
+            msgs in proptest::collection::vec(host_msg(), 1..8),
+            garbage in proptest::collection::vec(any::<u8>(), 0..300),
+        ) {
+            let mut d = Decoder::new();
+            let _: Vec<HostMsg> = decode_all(&mut d, &garbage);
+            let mut stream = std::vec![0u8];
+            for m in &msgs {
+                stream.extend_from_slice(&frame(m));
+            }
+            let got: Vec<HostMsg> = decode_all(&mut d, &stream);
+            // NaN != NaN: compare as bytes.
+            prop_assert_eq!(
+                got.iter().map(frame).collect::<Vec<_>>(),
+                msgs.iter().map(frame).collect::<Vec<_>>()
+            );
+        }
+
+        /// Arbitrary bytes never panic, and every delimiter ends exactly one
+        /// (possibly empty) frame: the counts add up.
+        #[test]
+        fn arbitrary_bytes_are_counted(bytes in proptest::collection::vec(any::<u8>(), 0..2000)) {
+            let mut d = Decoder::new();
+            let ok = bytes.iter().filter_map(|&b| d.push::<RobotMsg>(b)).count();
+            let s = d.stats();
+            prop_assert_eq!(s.ok as usize, ok);
+            let delimiters = bytes.iter().filter(|b| **b == 0).count();
+            prop_assert!((s.ok + s.bad()) as usize <= delimiters);
+        }
+    }
+}
