@@ -201,6 +201,11 @@ impl Arming {
         &self.cfg
     }
 
+    /// A new (validated) configuration, the state and the link timer kept.
+    pub fn reconfigure(&mut self, cfg: ArmingConfig) {
+        self.cfg = cfg;
+    }
+
     /// The state now.
     pub const fn state(&self) -> ArmState {
         self.state

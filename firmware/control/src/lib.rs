@@ -52,6 +52,7 @@ pub mod filter;
 pub mod hal;
 pub mod hopper;
 pub mod laws;
+pub mod link;
 pub mod model;
 pub mod params;
 pub mod pd_design;

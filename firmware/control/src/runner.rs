@@ -159,6 +159,33 @@ pub enum RunnerError {
     Arming(crate::laws::InvalidField),
 }
 
+/// Why [`PeriodRunner::set_param`] refused a set (nothing changed).
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum SetError {
+    /// Unknown name, out of range or the wrong type, or a constant of a
+    /// controller that is not selected.
+    Param(crate::params::ParamError),
+    /// The parameter may be set only while disarmed.
+    WhileArmed(&'static str),
+    /// The new configuration as a whole is refused (a cross-field rule).
+    Config(RunnerError),
+}
+
+impl SetError {
+    /// A short reason, for the link.
+    pub fn reason(&self) -> &'static str {
+        use crate::params::ParamError as P;
+        match self {
+            SetError::Param(P::Unknown) => "unknown-parameter",
+            SetError::Param(P::OutOfRange(_)) => "out-of-range",
+            SetError::Param(P::NotSelected(_)) => "controller-not-selected",
+            SetError::WhileArmed(_) => "disarm-first",
+            SetError::Config(_) => "invalid-configuration",
+        }
+    }
+}
+
 /// What one period did.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Period {
@@ -276,6 +303,45 @@ impl PeriodRunner {
         // A late period before the reset does not count towards an overrun
         // after it.
         self.late_in_a_row = 0;
+        Ok(())
+    }
+
+    /// Sets a runtime parameter by its table name ([`crate::params`]),
+    /// between periods (the application calls it from the control task
+    /// between two [`run_period`](Self::run_period)s, so it applies at a
+    /// period boundary). While armed only the target apex may change (in
+    /// place); everything else needs the runner disarmed, and then the
+    /// controller is rebuilt from the new configuration with the latched
+    /// faults carried over (a set never clears a latch) and the arming
+    /// state kept. The whole new configuration is checked before anything
+    /// changes: a refused set changes nothing.
+    pub fn set_param(&mut self, name: &str, value: f32) -> Result<(), SetError> {
+        let p =
+            crate::params::find(name).ok_or(SetError::Param(crate::params::ParamError::Unknown))?;
+        let mut cfg = *self.hopper.config();
+        crate::params::set(&mut cfg, p.name, value).map_err(SetError::Param)?;
+        if self.arming.is_armed() {
+            if p.name != crate::params::TARGET_APEX_M.name {
+                return Err(SetError::WhileArmed(p.name));
+            }
+            return self
+                .hopper
+                .set_target_apex(cfg.target_apex_m)
+                .map_err(|_| SetError::Param(crate::params::ParamError::OutOfRange(p.name)));
+        }
+        let arming =
+            Arming::new(cfg.arming).map_err(|e| SetError::Config(RunnerError::Arming(e)))?;
+        let mut hopper = Hopper::new(cfg).map_err(|e| SetError::Config(RunnerError::Config(e)))?;
+        let latched = self.hopper.supervisor().faults();
+        for f in Fault::ALL {
+            if latched.contains(f) {
+                hopper.supervisor_mut().report(f);
+            }
+        }
+        self.hopper = hopper;
+        self.arming.reconfigure(*arming.config());
+        self.feed
+            .reconfigure(crate::watchdog::FeedConfig::for_hopper(&cfg));
         Ok(())
     }
 
@@ -539,6 +605,50 @@ mod tests {
         r.arming_mut().link_frame();
         let p = r.run_period(&mut io, &mut NoCounter);
         assert!(!p.armed && p.out.faults.is_empty());
+    }
+
+    #[test]
+    fn parameter_sets_are_checked_and_applied_between_periods() {
+        use crate::params;
+        let mut r = runner(Strategy::default());
+        let mut io = Io::new(crate::proptest_support::rest_sample(
+            &HopperConfig::default().calibration,
+        ));
+        assert!(r.run_period(&mut io, &mut NoCounter).armed);
+        let before = *r.hopper().config();
+        // Armed: the target apex changes in place, nothing else may.
+        assert_eq!(r.set_param(params::TARGET_APEX_M.name, 0.12), Ok(()));
+        assert_eq!(r.hopper().config().target_apex_m, 0.12);
+        assert_eq!(
+            r.set_param(params::CONTROLLER.name, 8.0),
+            Err(SetError::WhileArmed(params::CONTROLLER.name))
+        );
+        // Refused sets change nothing, armed or not.
+        for (name, v) in [
+            (params::TARGET_APEX_M.name, 1.5),
+            (params::TARGET_APEX_M.name, f32::NAN),
+            ("no.such", 1.0),
+        ] {
+            let cfg = *r.hopper().config();
+            assert!(r.set_param(name, v).is_err(), "{name} = {v}");
+            assert_eq!(*r.hopper().config(), cfg);
+        }
+        assert_eq!(
+            r.set_param("no.such", 1.0).map_err(|e| e.reason()),
+            Err("unknown-parameter")
+        );
+        // Disarmed: a latched fault survives a controller change.
+        r.arming_mut().request_disarm();
+        r.report_overrun();
+        let p = r.run_period(&mut io, &mut NoCounter);
+        assert!(!p.armed && p.out.faults.contains(Fault::Overrun));
+        assert_eq!(r.set_param(params::CONTROLLER.name, 8.0), Ok(()));
+        assert_eq!(r.hopper().config().strategy.kind().name(), "shaped");
+        assert!(r.hopper().supervisor().faults().contains(Fault::Overrun));
+        let p = r.run_period(&mut io, &mut NoCounter);
+        assert!(p.feed_watchdog && p.newly_latched.is_empty());
+        assert_eq!(io.enabled, Some(false));
+        assert_ne!(*r.hopper().config(), before);
     }
 
     #[test]

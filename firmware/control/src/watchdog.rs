@@ -126,6 +126,12 @@ pub struct FeedPolicy {
 }
 
 impl FeedPolicy {
+    /// The same policy (its fault and starve state kept) for a new
+    /// configuration: a runtime parameter set that rebuilt the controller.
+    pub fn reconfigure(&mut self, cfg: FeedConfig) {
+        self.cfg = cfg;
+    }
+
     /// A policy that has seen no period yet.
     pub const fn new(cfg: FeedConfig) -> Self {
         Self {
