@@ -1023,14 +1023,7 @@ mod tests {
     /// rad/s) are plausible and 700 are not.
     #[test]
     fn limits_scale_with_the_period() {
-        let moving = SupervisorInput {
-            nut_position_m: 0.02,
-            motor_speed_rad_s: 150.0,
-            nut_velocity_mps: 0.12,
-            spring_force_n: flight_force_n() + 220.0,
-            motor_delta_counts: 0,
-            ..nominal()
-        };
+        let moving = moving_without_a_count();
         let dt = 1e-5;
         let mut s = sup();
         for k in 0..9 {
@@ -1081,17 +1074,21 @@ mod tests {
         }
     }
 
-    #[test]
-    fn encoder_frozen_at_speed_away_from_the_stops() {
-        // 20 mm down, motor at 150 rad/s per the filter, no count this period.
-        let moving = SupervisorInput {
+    /// 20 mm down, motor at 150 rad/s per the filter, no count this period.
+    fn moving_without_a_count() -> SupervisorInput {
+        SupervisorInput {
             nut_position_m: 0.02,
             motor_speed_rad_s: 150.0,
             nut_velocity_mps: 0.12,
             spring_force_n: flight_force_n() + 220.0,
             motor_delta_counts: 0,
             ..nominal()
-        };
+        }
+    }
+
+    #[test]
+    fn encoder_frozen_at_speed_away_from_the_stops() {
+        let moving = moving_without_a_count();
         fault_case(moving, 0.0, Fault::EncoderFrozen, true);
         let mut s = sup();
         // Counting: fine.
