@@ -1303,7 +1303,7 @@ fn slot<'a>(cfg: &'a mut HopperConfig, p: &Param) -> Result<Slot<'a>, ParamError
         let a = &mut cfg.arming;
         return match rest {
             "link_timeout_s" => Ok(R(&mut a.link_timeout_s)),
-            "untethered" => Ok(Slot::Flag(&mut a.untethered)),
+            "untethered" => Ok(B(&mut a.untethered)),
             "home_tolerance_m" => Ok(R(&mut a.home_tolerance_m)),
             "still_velocity_mps" => Ok(R(&mut a.still_velocity_mps)),
             _ => Err(ParamError::Unknown),
@@ -1320,7 +1320,7 @@ fn slot<'a>(cfg: &'a mut HopperConfig, p: &Param) -> Result<Slot<'a>, ParamError
             "velocity_filter_gain" => Ok(R(&mut e.velocity_filter_gain)),
             "apex_arm_velocity_mps" => Ok(R(&mut e.apex_arm_velocity_mps)),
             "bottom_arm_velocity_mps" => Ok(R(&mut e.bottom_arm_velocity_mps)),
-            "predict_contact" => Ok(Slot::Flag(&mut e.predict_contact)),
+            "predict_contact" => Ok(B(&mut e.predict_contact)),
             "contact_confirm_s" => Ok(R(&mut e.contact_confirm_s)),
             _ => Err(ParamError::Unknown),
         };

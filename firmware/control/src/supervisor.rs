@@ -941,20 +941,27 @@ mod tests {
         );
     }
 
-    #[test]
-    fn contact_disagree_needs_persistence() {
-        // Load cell: k delta0 + 200 N contact force; pot: no compression.
-        let bad = SupervisorInput {
+    /// Load cell: k delta0 + 200 N contact force; pot: no compression.
+    fn cell_says_contact_pot_says_free() -> SupervisorInput {
+        SupervisorInput {
             spring_force_n: flight_force_n() + 200.0,
             ..nominal()
-        };
-        // The cross-check would trip on this at once; this test is about the
-        // debounced contact check alone.
-        let no_cross_check = SupervisorConfig {
+        }
+    }
+
+    /// The cross-check would trip on a contact disagreement at once; the
+    /// tests of the debounced contact check alone turn it off.
+    fn no_cross_check() -> SupervisorConfig {
+        SupervisorConfig {
             spring_mismatch_n: f32::INFINITY,
             ..SupervisorConfig::default()
-        };
-        let mut s = built(no_cross_check);
+        }
+    }
+
+    #[test]
+    fn contact_disagree_needs_persistence() {
+        let bad = cell_says_contact_pot_says_free();
+        let mut s = built(no_cross_check());
         for _ in 0..19 {
             assert!(s.check(&bad, 1.0, REFERENCE_PERIOD_S).amp_enable);
         }
@@ -1056,16 +1063,9 @@ mod tests {
         assert_eq!(s.check(&jump(700), 1.0, dt), Command::SAFE);
         assert!(s.faults().contains(Fault::EncoderJump));
         // Contact disagreement for 2 ms: 2 periods at 1 kHz, 200 at 100 kHz.
-        let bad = SupervisorInput {
-            spring_force_n: flight_force_n() + 200.0,
-            ..nominal()
-        };
-        let no_cross_check = SupervisorConfig {
-            spring_mismatch_n: f32::INFINITY,
-            ..SupervisorConfig::default()
-        };
+        let bad = cell_says_contact_pot_says_free();
         for (dt, periods) in [(1e-3_f32, 2), (1e-5, 200)] {
-            let mut s = built(no_cross_check);
+            let mut s = built(no_cross_check());
             for k in 1..periods {
                 assert!(s.check(&bad, 1.0, dt).amp_enable, "dt {dt}: period {k}");
             }
