@@ -103,6 +103,11 @@ pub enum Request {
         /// Decimation, periods per record.
         every: u16,
     },
+    /// The control step's and the link's cost ([`Response::Timing`]).
+    Timing,
+    /// The capture around the last fault ([`Response::Dump`], then its
+    /// records as [`RobotMsg::Captured`]).
+    Dump,
 }
 
 /// Robot to host.
@@ -135,6 +140,9 @@ pub enum RobotMsg {
     State(ArmState),
     /// A line of log text.
     Log(heapless::String<TEXT_LEN>),
+    /// One record of a dump ([`Request::Dump`]): `seq` is its index in the
+    /// dump, oldest first.
+    Captured(Telemetry),
 }
 
 /// The arming state on the wire (`hopper_control::arming`'s names as codes).
@@ -163,6 +171,41 @@ pub enum Response {
     ParamInfo(ParamInfo),
     /// A parameter's value.
     Value(f32),
+    /// What the control step and the link cost.
+    Timing(TimingStats),
+    /// A dump follows: this many [`RobotMsg::Captured`] records.
+    Dump(DumpInfo),
+}
+
+/// The cost of the robot's periodic work, in its counter's ticks (the
+/// board: CPU cycles; QEMU: guest instructions; the simulator: 0, not
+/// measured).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct TimingStats {
+    /// Control periods run.
+    pub periods: u32,
+    /// Periods whose next trigger came before they finished.
+    pub missed: u32,
+    /// Control step (`Hopper::step`), mean.
+    pub step_mean: u32,
+    /// Control step, largest.
+    pub step_max: u32,
+    /// The link's work in a period (received bytes decoded and answered,
+    /// the period's messages framed and queued), mean.
+    pub link_mean: u32,
+    /// The link's work in a period, largest.
+    pub link_max: u32,
+}
+
+/// What a dump holds.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct DumpInfo {
+    /// Records that follow.
+    pub records: u16,
+    /// Whether a fault froze the capture (otherwise it is the latest periods).
+    pub frozen: bool,
+    /// The period the first fault latched in (0 if none).
+    pub fault_step: u32,
 }
 
 /// The robot's state.
@@ -398,6 +441,7 @@ mod tests {
     extern crate std;
     use super::*;
     use proptest::prelude::*;
+    use std::vec;
     use std::vec::Vec;
 
     fn frame<T: Serialize>(msg: &T) -> Vec<u8> {
@@ -513,6 +557,8 @@ mod tests {
             Just(Request::Disarm),
             Just(Request::ResetFaults),
             Just(Request::ParamCount),
+            Just(Request::Timing),
+            Just(Request::Dump),
             any::<u16>().prop_map(|index| Request::ParamInfo { index }),
             name.clone().prop_map(|name| Request::ParamGet { name }),
             (name, any::<f32>()).prop_map(|(name, value)| Request::ParamSet { name, value }),

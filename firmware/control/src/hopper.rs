@@ -176,6 +176,9 @@ pub struct Hopper {
     /// Screw ratio `r`, m/rad: the nut's speed from the motor's rate.
     screw_m_per_rad: f32,
     steps: u32,
+    /// The supervisor's input of the last step (a fault reset between
+    /// periods is checked against it); `None` before the first.
+    last_input: Option<SupervisorInput>,
     /// Corruption applied to each converted sample (simulated faults only).
     #[cfg(feature = "fault-injection")]
     injected: MeasurementOverride,
@@ -255,9 +258,30 @@ impl Hopper {
             desired_energy_j,
             screw_m_per_rad: cfg.model.screw_m_per_rad(),
             steps: 0,
+            last_input: None,
             #[cfg(feature = "fault-injection")]
             injected: MeasurementOverride::default(),
         })
+    }
+
+    /// The supervisor's input of the last step that converted a sample
+    /// (what a fault reset between periods is checked against).
+    pub fn last_input(&self) -> Option<&SupervisorInput> {
+        self.last_input.as_ref()
+    }
+
+    /// Takes over from `old` after a reconfiguration: its latched faults
+    /// (a new configuration never clears a latch), its step count (the
+    /// records' step numbers go on) and its last supervisor input.
+    pub fn continue_from(&mut self, old: &Hopper) {
+        let latched = old.supervisor.faults();
+        for f in Fault::ALL {
+            if latched.contains(f) {
+                self.supervisor.report(f);
+            }
+        }
+        self.steps = old.steps;
+        self.last_input = old.last_input;
     }
 
     /// Simulated faults: from the next period on, `o` replaces fields of
@@ -395,6 +419,7 @@ impl Hopper {
         let sup_in =
             SupervisorInput::from_measurements(&m, nut_velocity_mps, v.motor_rad_s, v.body_mps);
         let mut command = self.supervisor.check(&sup_in, requested_a, dt_s);
+        self.last_input = Some(sup_in);
         if !energy_j.is_finite() {
             // A non-finite input latched this period already; a finite one
             // that overflowed the energy is a bad sensor value too.
@@ -423,6 +448,7 @@ impl Hopper {
             record: StepRecord {
                 step: self.steps,
                 phase: phase as u8,
+                armed: false,
                 faults: faults.0,
                 dac_code,
                 body_height_m: m.body_height_m,
@@ -456,6 +482,7 @@ impl Hopper {
             record: StepRecord {
                 step: self.steps,
                 phase: phase as u8,
+                armed: false,
                 faults: faults.0,
                 dac_code,
                 body_height_m: f32::NAN,

@@ -1,29 +1,57 @@
 //! The robot's end of the host link (issue 17): what each
 //! [`hopper_protocol`] message does to the [`PeriodRunner`], and what the
-//! robot sends back. The transports (a UART interrupt, a TCP socket) only
-//! move bytes: they feed a [`hopper_protocol::Decoder`], hand each decoded
-//! [`HostMsg`] to [`Endpoint::on_message`] between two periods, and after
-//! each period send what [`Endpoint::after_period`] yields. One
-//! implementation, so the board, the QEMU image and the simulator's
-//! virtual robot answer alike.
+//! robot sends back. The transports (a UART interrupt, QEMU's USART on a
+//! TCP socket, the simulator's TCP socket) only move bytes: each period
+//! the application hands [`Endpoint::service`] the bytes received since
+//! the last one and a transmit queue ([`Tx`]); the endpoint decodes them,
+//! answers, and queues the period's messages. One implementation, so the
+//! board, the QEMU image and the simulator's virtual robot answer alike.
 //!
 //! - Every valid message keeps the link alive ([`crate::arming::Arming::link_frame`]).
 //! - An arm request is decided at the next period; its response waits for
 //!   that period (`Ok`, or `Refused` with the reason).
 //! - Parameter sets go through [`PeriodRunner::set_param`].
+//! - Nothing waits: a frame that finds the queue without room is not sent.
+//!   Telemetry and dump records leave room for one more frame, so answers
+//!   and state changes still fit when the stream fills the line; a dropped
+//!   telemetry record is counted (its sequence number is used anyway, so
+//!   the host sees the gap).
 
 use crate::arming::{ArmEvent, ArmState as RunnerArmState, DisarmReason};
 use crate::params;
-use crate::runner::{LogItem, Period, PeriodRunner};
-use crate::supervisor::SupervisorInput;
+use crate::runner::{CycleCounter, LogItem, Period, PeriodRunner, StepStats};
+use crate::telemetry::{FaultCapture, StepRecord};
 use hopper_protocol::{
-    ArmState, Hop, HostMsg, LinkStats, ParamInfo, Request, Response, RobotMsg, Status, Telemetry,
-    PROTOCOL_VERSION, TEXT_LEN,
+    encode, ArmState, Decoder, DumpInfo, Hop, HostMsg, ParamInfo, Request, Response, RobotMsg,
+    Status, Telemetry, TimingStats, MAX_FRAME, PROTOCOL_VERSION, TEXT_LEN,
 };
+
+/// A transmit queue of bytes (the board's UART ring, a socket buffer).
+pub trait Tx {
+    /// Bytes it can take now.
+    fn room(&self) -> usize;
+    /// Appends `frame`; only called with `frame.len() <= room()`.
+    fn put(&mut self, frame: &[u8]);
+}
+
+/// Dump records queued per period at most (bounds the link's work in one
+/// period; the line is the real limit).
+const DUMP_PER_PERIOD: u16 = 4;
+
+/// The disarm reasons by their wire code ([`ArmState::Disarmed`]).
+pub const DISARM_REASONS: [DisarmReason; 6] = [
+    DisarmReason::Boot,
+    DisarmReason::WatchdogReset,
+    DisarmReason::Command,
+    DisarmReason::Estop,
+    DisarmReason::Fault,
+    DisarmReason::LinkLost,
+];
 
 /// The robot's link state.
 #[derive(Debug, Clone, Default)]
 pub struct Endpoint {
+    rx: Decoder,
     /// The id of an arm request waiting for the next period.
     pending_arm: Option<u16>,
     /// Telemetry every this many periods (0: off).
@@ -32,6 +60,10 @@ pub struct Endpoint {
     seq: u32,
     telemetry_dropped: u32,
     last_apex_m: Option<f32>,
+    /// A dump in progress: the next record and the count.
+    dump: Option<(u16, u16)>,
+    /// The link's work per period, in the counter's ticks.
+    cost: StepStats,
 }
 
 fn text(s: &str) -> heapless::String<TEXT_LEN> {
@@ -45,14 +77,51 @@ fn text(s: &str) -> heapless::String<TEXT_LEN> {
 pub fn arm_state(s: RunnerArmState) -> ArmState {
     match s {
         RunnerArmState::Armed => ArmState::Armed,
-        RunnerArmState::Disarmed(r) => ArmState::Disarmed(match r {
-            DisarmReason::Boot => 0,
-            DisarmReason::WatchdogReset => 1,
-            DisarmReason::Command => 2,
-            DisarmReason::Estop => 3,
-            DisarmReason::Fault => 4,
-            DisarmReason::LinkLost => 5,
-        }),
+        RunnerArmState::Disarmed(r) => ArmState::Disarmed(
+            DISARM_REASONS
+                .iter()
+                .position(|x| *x == r)
+                .and_then(|i| u8::try_from(i).ok())
+                .unwrap_or(u8::MAX),
+        ),
+    }
+}
+
+/// A disarm reason from its wire code.
+pub fn disarm_reason(code: u8) -> Option<DisarmReason> {
+    DISARM_REASONS.get(usize::from(code)).copied()
+}
+
+/// The wire form of a step record.
+pub fn wire_record(seq: u32, r: &StepRecord) -> Telemetry {
+    Telemetry {
+        seq,
+        step: r.step,
+        phase: r.phase,
+        armed: r.armed,
+        faults: r.faults,
+        body_height_m: r.body_height_m,
+        nut_position_m: r.nut_position_m,
+        spring_force_n: r.spring_force_n,
+        energy_j: r.energy_j,
+        command_a: r.command_a,
+    }
+}
+
+/// Frames `msg` into `tx` if it has room for it (plus one more frame when
+/// `bulk`); whether it went.
+fn send<T: Tx>(tx: &mut T, msg: &RobotMsg, bulk: bool) -> bool {
+    let mut f = [0u8; MAX_FRAME];
+    let Ok(n) = encode(msg, &mut f) else {
+        return false;
+    };
+    let need = if bulk { n + MAX_FRAME } else { n };
+    match f.get(..n) {
+        Some(frame) if tx.room() >= need => {
+            tx.put(frame);
+            true
+        }
+        _ => false,
     }
 }
 
@@ -67,49 +136,86 @@ impl Endpoint {
         self.telemetry_dropped
     }
 
-    /// The transmit queue was full for a record: count it.
-    pub fn drop_telemetry(&mut self) {
-        self.telemetry_dropped = self.telemetry_dropped.saturating_add(1);
+    /// The link's work per period so far ([`service`](Self::service)).
+    pub fn cost(&self) -> &StepStats {
+        &self.cost
     }
 
-    /// A decoded message, between periods: the answer to send now, if any
-    /// (an arm request's comes with [`after_period`](Self::after_period)).
-    /// `link` is the decoder's counts (for the status) and `rest` the
-    /// supervisor input a fault reset is checked against (the latest
-    /// measurements).
-    pub fn on_message(
+    /// The period's link work, right after [`PeriodRunner::run_period`]:
+    /// the period's messages (the deferred arm answer, a state change,
+    /// faults or a hop, a telemetry record when due, dump records), then
+    /// every byte received since the last call (`rx`), decoded and
+    /// answered. `capture` is the one the application records into (a
+    /// dump reads it; a fault reset rearms it). Its cost, measured with
+    /// `counter`, goes into [`cost`](Self::cost).
+    pub fn service<const N: usize, T: Tx, C: CycleCounter>(
+        &mut self,
+        runner: &mut PeriodRunner,
+        p: &Period,
+        rx: impl Iterator<Item = u8>,
+        capture: &mut FaultCapture<N>,
+        tx: &mut T,
+        counter: &mut C,
+    ) {
+        let t0 = counter.now();
+        self.after_period(p, capture, tx);
+        for b in rx {
+            if let Some(msg) = self.rx.push::<HostMsg>(b) {
+                self.on_message(&msg, runner, capture, tx);
+            }
+        }
+        let t1 = counter.now();
+        self.cost
+            .add(t1.wrapping_sub(t0).saturating_sub(counter.overhead()));
+    }
+
+    /// A decoded message, between periods: queues its answer (an arm
+    /// request's comes after the next period).
+    pub fn on_message<const N: usize, T: Tx>(
         &mut self,
         msg: &HostMsg,
         runner: &mut PeriodRunner,
-        link: &LinkStats,
-        rest: &SupervisorInput,
-    ) -> Option<RobotMsg> {
+        capture: &mut FaultCapture<N>,
+        tx: &mut T,
+    ) {
         runner.arming_mut().link_frame();
         let (id, req) = match msg {
             HostMsg::Hello { .. } => {
-                return Some(RobotMsg::Hello {
-                    version: PROTOCOL_VERSION,
-                })
+                send(
+                    tx,
+                    &RobotMsg::Hello {
+                        version: PROTOCOL_VERSION,
+                    },
+                    false,
+                );
+                return;
             }
-            HostMsg::Heartbeat => return None,
+            HostMsg::Heartbeat => return,
             HostMsg::Request { id, req } => (*id, req),
         };
         let resp = match req {
-            Request::Status => Response::Status(self.status(runner, link)),
+            Request::Status => Response::Status(self.status(runner)),
             Request::Arm => {
                 runner.arming_mut().request_arm();
                 self.pending_arm = Some(id);
-                return None;
+                return;
             }
             Request::Disarm => {
                 runner.arming_mut().request_disarm();
                 Response::Ok
             }
-            Request::ResetFaults => match runner.reset_faults(rest) {
-                Ok(()) => Response::Ok,
-                Err(_) if runner.arming().is_armed() => Response::Refused(text("disarm-first")),
-                Err(_) => Response::Refused(text("faults-remain")),
-            },
+            Request::ResetFaults => {
+                let input = runner.hopper().last_input().copied();
+                match input.map(|i| runner.reset_faults(&i)) {
+                    Some(Ok(())) => {
+                        capture.rearm();
+                        Response::Ok
+                    }
+                    _ if runner.arming().is_armed() => Response::Refused(text("disarm-first")),
+                    None => Response::Refused(text("no-measurement-yet")),
+                    Some(Err(_)) => Response::Refused(text("faults-remain")),
+                }
+            }
             Request::ParamCount => Response::ParamCount(params::TABLE.len() as u16),
             Request::ParamInfo { index } => match params::TABLE.get(usize::from(*index)) {
                 Some(p) => {
@@ -142,15 +248,34 @@ impl Endpoint {
                 self.since = 0;
                 Response::Ok
             }
+            Request::Timing => Response::Timing(TimingStats {
+                periods: runner.periods(),
+                missed: runner.missed(),
+                step_mean: runner.step_cost().mean(),
+                step_max: runner.step_cost().max,
+                link_mean: self.cost.mean(),
+                link_max: self.cost.max,
+            }),
+            Request::Dump => {
+                let records = u16::try_from(capture.len()).unwrap_or(u16::MAX);
+                self.dump = Some((0, records));
+                Response::Dump(DumpInfo {
+                    records,
+                    frozen: capture.frozen(),
+                    fault_step: capture.fault_step().unwrap_or(0),
+                })
+            }
         };
-        Some(RobotMsg::Response { id, resp })
+        send(tx, &RobotMsg::Response { id, resp }, false);
     }
 
-    /// After a period: the messages it produced, each given to `send` (the
-    /// deferred arm answer, a state change, faults or a hop, a telemetry
-    /// record when due). `send` returns `false` when its queue is full; a
-    /// telemetry record it refuses is counted as dropped.
-    pub fn after_period(&mut self, p: &Period, mut send: impl FnMut(RobotMsg) -> bool) {
+    /// After a period: queues the messages it produced.
+    pub fn after_period<const N: usize, T: Tx>(
+        &mut self,
+        p: &Period,
+        capture: &FaultCapture<N>,
+        tx: &mut T,
+    ) {
         if let Some(ev) = p.arm_event {
             if let (Some(id), ArmEvent::Armed | ArmEvent::Refused(_)) = (self.pending_arm, ev) {
                 self.pending_arm = None;
@@ -158,7 +283,7 @@ impl Endpoint {
                     ArmEvent::Refused(r) => Response::Refused(text(r.name())),
                     _ => Response::Ok,
                 };
-                send(RobotMsg::Response { id, resp });
+                send(tx, &RobotMsg::Response { id, resp }, false);
             }
             let state = match ev {
                 ArmEvent::Armed => Some(ArmState::Armed),
@@ -166,19 +291,23 @@ impl Endpoint {
                 ArmEvent::Refused(_) => None,
             };
             if let Some(s) = state {
-                send(RobotMsg::State(s));
+                send(tx, &RobotMsg::State(s), false);
             }
         }
         match p.log {
             Some(LogItem::Faults { step, faults }) => {
-                send(RobotMsg::Faults {
-                    step,
-                    bits: faults.0,
-                });
+                send(
+                    tx,
+                    &RobotMsg::Faults {
+                        step,
+                        bits: faults.0,
+                    },
+                    false,
+                );
             }
             Some(LogItem::Hop(h)) => {
                 self.last_apex_m = Some(h.apex_height_m);
-                send(RobotMsg::Hop(Hop {
+                let hop = Hop {
                     hop: h.hop,
                     apex_height_m: h.apex_height_m,
                     energy_at_touchdown_j: h.energy_at_touchdown_j,
@@ -187,7 +316,8 @@ impl Endpoint {
                     stance_duration_s: h.stance_duration_s,
                     peak_current_a: h.peak_current_a,
                     peak_stroke_m: h.peak_stroke_m,
-                }));
+                };
+                send(tx, &RobotMsg::Hop(hop), false);
             }
             None => {}
         }
@@ -195,30 +325,37 @@ impl Endpoint {
             self.since = self.since.saturating_add(1);
             if self.since >= self.every {
                 self.since = 0;
-                let r = p.out.record;
-                let t = RobotMsg::Telemetry(Telemetry {
-                    seq: self.seq,
-                    step: r.step,
-                    phase: r.phase,
-                    armed: p.armed,
-                    faults: r.faults,
-                    body_height_m: r.body_height_m,
-                    nut_position_m: r.nut_position_m,
-                    spring_force_n: r.spring_force_n,
-                    energy_j: r.energy_j,
-                    command_a: r.command_a,
-                });
+                let t = RobotMsg::Telemetry(wire_record(self.seq, &p.out.record));
                 // The sequence number advances for a dropped record too:
                 // the host sees the gap.
                 self.seq = self.seq.wrapping_add(1);
-                if !send(t) {
-                    self.drop_telemetry();
+                if !send(tx, &t, true) {
+                    self.telemetry_dropped = self.telemetry_dropped.saturating_add(1);
                 }
             }
         }
+        if let Some((mut next, total)) = self.dump {
+            let end = total.min(next.saturating_add(DUMP_PER_PERIOD));
+            while next < end {
+                let Some(r) = capture.get(usize::from(next)) else {
+                    break;
+                };
+                if !send(
+                    tx,
+                    &RobotMsg::Captured(wire_record(u32::from(next), r)),
+                    true,
+                ) {
+                    break;
+                }
+                next += 1;
+            }
+            self.dump =
+                (next < total && capture.get(usize::from(next)).is_some()).then_some((next, total));
+        }
     }
 
-    fn status(&self, runner: &PeriodRunner, link: &LinkStats) -> Status {
+    fn status(&self, runner: &PeriodRunner) -> Status {
+        let link = self.rx.stats();
         Status {
             arm: arm_state(runner.arming().state()),
             faults: runner.hopper().supervisor().faults().0,
@@ -255,47 +392,54 @@ mod tests {
         }
     }
 
-    /// A robot at rest behind a byte link: host bytes in, robot messages out.
+    /// The transmit queue: a byte vector with a fixed room.
+    struct VecTx {
+        bytes: Vec<u8>,
+        cap: usize,
+    }
+    impl Tx for VecTx {
+        fn room(&self) -> usize {
+            self.cap.saturating_sub(self.bytes.len())
+        }
+        fn put(&mut self, frame: &[u8]) {
+            self.bytes.extend_from_slice(frame);
+        }
+    }
+
+    /// A robot at rest behind a byte link: host bytes in, robot messages
+    /// out, serviced after each period as the applications do.
     struct Robot {
         runner: PeriodRunner,
         io: Io,
         ep: Endpoint,
-        rx: Decoder,
-        rest: SupervisorInput,
-        out: Vec<RobotMsg>,
+        capture: FaultCapture<64>,
+        inbox: Vec<u8>,
+        tx: VecTx,
+        host: Decoder,
     }
 
     impl Robot {
         fn new() -> Self {
             let cfg = HopperConfig::default();
             let raw = crate::proptest_support::rest_sample(&cfg.calibration);
-            let rest = {
-                let m = crate::calibration::Converter::new(cfg.calibration)
-                    .and_then(|mut c| c.convert(&raw))
-                    .unwrap_or_else(|e| panic!("{e:?}"));
-                SupervisorInput::from_measurements(&m, 0.0, 0.0, 0.0)
-            };
             Robot {
                 runner: PeriodRunner::new(cfg, Timing::default())
                     .unwrap_or_else(|e| panic!("{e:?}")),
                 io: Io(raw),
                 ep: Endpoint::new(),
-                rx: Decoder::new(),
-                rest,
-                out: Vec::new(),
+                capture: FaultCapture::new(),
+                inbox: Vec::new(),
+                tx: VecTx {
+                    bytes: Vec::new(),
+                    cap: 4096,
+                },
+                host: Decoder::new(),
             }
         }
 
-        /// Host bytes arrive (between periods).
+        /// Host bytes arrive (serviced after the next period).
         fn receive(&mut self, bytes: &[u8]) {
-            for &b in bytes {
-                if let Some(m) = self.rx.push::<HostMsg>(b) {
-                    let stats = self.rx.stats();
-                    if let Some(r) = self.ep.on_message(&m, &mut self.runner, &stats, &self.rest) {
-                        self.out.push(r);
-                    }
-                }
-            }
+            self.inbox.extend_from_slice(bytes);
         }
 
         fn send(&mut self, msg: &HostMsg) {
@@ -313,18 +457,29 @@ mod tests {
             for _ in 0..n {
                 let p = self.runner.run_period(&mut self.io, &mut NoCounter);
                 self.runner.end_period(false);
-                let out = &mut self.out;
-                self.ep.after_period(&p, |m| {
-                    out.push(m);
-                    true
-                });
+                self.capture
+                    .record(&p.out.record, !p.newly_latched.is_empty());
+                let inbox = core::mem::take(&mut self.inbox);
+                self.ep.service(
+                    &mut self.runner,
+                    &p,
+                    inbox.into_iter(),
+                    &mut self.capture,
+                    &mut self.tx,
+                    &mut NoCounter,
+                );
                 last = Some(p);
             }
             last.unwrap_or_else(|| panic!("no period"))
         }
 
+        /// What the robot sent so far, decoded as the host does.
         fn take(&mut self) -> Vec<RobotMsg> {
-            core::mem::take(&mut self.out)
+            let bytes = core::mem::take(&mut self.tx.bytes);
+            let host = &mut self.host;
+            let msgs: Vec<RobotMsg> = bytes.iter().filter_map(|&b| host.push(b)).collect();
+            assert_eq!(host.stats().bad(), 0, "the robot sent a bad frame");
+            msgs
         }
     }
 
@@ -343,6 +498,7 @@ mod tests {
         r.send(&HostMsg::Hello {
             version: PROTOCOL_VERSION,
         });
+        r.periods(1);
         assert_eq!(
             r.take(),
             [RobotMsg::Hello {
@@ -351,6 +507,7 @@ mod tests {
         );
         r.periods(10);
         r.request(1, Request::ParamCount);
+        r.periods(1);
         assert_eq!(
             r.take(),
             [RobotMsg::Response {
@@ -373,6 +530,7 @@ mod tests {
                 value: 8.0,
             },
         );
+        r.periods(1);
         assert_eq!(
             r.take(),
             [
@@ -387,8 +545,9 @@ mod tests {
             ]
         );
         assert_eq!(r.runner.hopper().config().target_apex_m, 0.12);
-        // Arm: answered after the next period.
+        // Arm: serviced after a period, decided and answered after the next.
         r.request(4, Request::Arm);
+        r.periods(1);
         assert!(r.take().is_empty());
         let p = r.periods(1);
         assert!(p.armed);
@@ -411,6 +570,7 @@ mod tests {
                 value: 2.0,
             },
         );
+        r.periods(1);
         assert_eq!(
             r.take(),
             [RobotMsg::Response {
@@ -422,6 +582,7 @@ mod tests {
         // Telemetry every period; disarm gives 0 A in the next record.
         r.request(6, Request::Telemetry { every: 1 });
         r.request(7, Request::Disarm);
+        r.periods(1);
         r.take();
         r.periods(1);
         let msgs = r.take();
@@ -441,7 +602,7 @@ mod tests {
         r.io.0.estop_pressed = true;
         r.periods(1);
         r.request(8, Request::Arm);
-        r.periods(1);
+        r.periods(2);
         let msgs = r.take();
         assert!(
             msgs.contains(&RobotMsg::Response {
@@ -450,12 +611,53 @@ mod tests {
             }),
             "{msgs:?}"
         );
+        // The e-stop latched a fault: the capture freezes 64 / 4 = 16
+        // periods later (holding every period since boot, fewer than 64),
+        // and a dump streams it, oldest first, twice alike.
+        let fault_step = r
+            .capture
+            .fault_step()
+            .unwrap_or_else(|| panic!("no fault captured"));
+        r.periods(20);
+        assert!(r.capture.frozen());
+        let held = r.capture.len();
+        assert_eq!(held as u32, fault_step + 16);
+        let mut dumps = Vec::new();
+        for id in [20, 21] {
+            r.take();
+            r.request(id, Request::Dump);
+            r.periods(40);
+            let msgs = r.take();
+            assert!(
+                msgs.contains(&RobotMsg::Response {
+                    id,
+                    resp: Response::Dump(DumpInfo {
+                        records: held as u16,
+                        frozen: true,
+                        fault_step
+                    })
+                }),
+                "{msgs:?}"
+            );
+            let recs: Vec<Telemetry> = msgs
+                .iter()
+                .filter_map(|m| match m {
+                    RobotMsg::Captured(t) => Some(*t),
+                    _ => None,
+                })
+                .collect();
+            assert_eq!(recs.len(), held);
+            assert!(recs.iter().enumerate().all(|(i, t)| t.seq == i as u32));
+            assert_eq!(recs[held - 1].step, fault_step + 16);
+            dumps.push(recs);
+        }
+        assert_eq!(dumps[0], dumps[1]);
         // Released, faults reset, armed again; then no frame for 0.2 s:
         // disarmed by link loss within the timeout.
         r.io.0.estop_pressed = false;
         r.request(9, Request::ResetFaults);
         r.request(10, Request::Arm);
-        r.periods(1);
+        r.periods(2);
         let msgs = r.take();
         assert!(
             msgs.contains(&RobotMsg::Response {
@@ -485,6 +687,7 @@ mod tests {
         r.receive(&garbage);
         r.receive(&[0]);
         r.request(11, Request::Status);
+        r.periods(1);
         let msgs = r.take();
         let status = msgs.iter().find_map(|m| match m {
             RobotMsg::Response {

@@ -332,12 +332,7 @@ impl PeriodRunner {
         let arming =
             Arming::new(cfg.arming).map_err(|e| SetError::Config(RunnerError::Arming(e)))?;
         let mut hopper = Hopper::new(cfg).map_err(|e| SetError::Config(RunnerError::Config(e)))?;
-        let latched = self.hopper.supervisor().faults();
-        for f in Fault::ALL {
-            if latched.contains(f) {
-                hopper.supervisor_mut().report(f);
-            }
-        }
+        hopper.continue_from(&self.hopper);
         self.hopper = hopper;
         self.arming.reconfigure(*arming.config());
         self.feed
@@ -426,7 +421,7 @@ impl PeriodRunner {
             // A write failure after the decision: disarmed as of now.
             arm_event = self.arming.fault_latched().or(arm_event);
         }
-        let armed = self.arming.is_armed();
+        out.record.armed = self.arming.is_armed() && out.command.amp_enable;
         // Since the last report, not since this period began: a fault that
         // latched between periods (`end_period`'s overrun, `report_overrun`)
         // is reported with the period that first shows it.
@@ -446,7 +441,7 @@ impl PeriodRunner {
             newly_latched,
             log,
             step_cost,
-            armed: armed && out.command.amp_enable,
+            armed: out.record.armed,
             arm_event,
         }
     }

@@ -1,11 +1,8 @@
-//! Telemetry: a compact per-step record pushed into a fixed-size ring the
-//! application drains at low priority, and the per-hop energy ledger.
+//! Telemetry: a compact per-step record, the capture that keeps the last
+//! of them (frozen around a fault), and the per-hop energy ledger.
 //!
-//! Nothing here allocates; the ring overwrites its oldest record when the
-//! reader falls behind and counts what it dropped, so the control step never
-//! waits on telemetry.
-
-use heapless::Deque;
+//! Nothing here allocates, and the control task never waits on telemetry:
+//! the capture overwrites its oldest record, and readers only look.
 
 /// One control step, compact and fixed-size (32 bytes).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -15,6 +12,9 @@ pub struct StepRecord {
     pub step: u32,
     /// Estimated phase: 0 flight, 1 stance.
     pub phase: u8,
+    /// The output went out armed (amplifier enabled); set by the period
+    /// runner after arming decided.
+    pub armed: bool,
     /// Latched fault bits (0: none).
     pub faults: u16,
     /// DAC code written this step.
@@ -31,59 +31,118 @@ pub struct StepRecord {
     pub command_a: f32,
 }
 
-/// Fixed-capacity ring of [`StepRecord`]s; the oldest is dropped when full.
-#[derive(Debug)]
-pub struct TelemetryRing<const N: usize> {
-    buf: Deque<StepRecord, N>,
-    dropped: u32,
+/// The capture: the last `N` [`StepRecord`]s, frozen around the first
+/// fault (issue 17: a dump shows what led to the fault, not what the ring
+/// holds by the time someone asks).
+///
+/// While no fault is latched it overwrites its oldest record. The period
+/// a fault first latches in starts a countdown of `N / 4` more records;
+/// then the capture freezes, holding `3N/4` periods before the fault and
+/// `N/4` after it, until [`rearm`](Self::rearm) (a successful fault reset).
+/// Reading ([`get`](Self::get)) never removes anything, so a dump can be
+/// repeated.
+#[derive(Debug, Clone)]
+pub struct FaultCapture<const N: usize> {
+    buf: [StepRecord; N],
+    /// Index the next record goes to.
+    next: usize,
+    len: usize,
+    /// Records still to take after the fault (`Some(0)`: frozen).
+    remaining: Option<usize>,
+    fault_step: u32,
 }
 
-impl<const N: usize> Default for TelemetryRing<N> {
+impl<const N: usize> Default for FaultCapture<N> {
     fn default() -> Self {
         Self::new()
     }
 }
 
-impl<const N: usize> TelemetryRing<N> {
-    /// An empty ring.
+impl<const N: usize> FaultCapture<N> {
+    /// Records kept after the fault.
+    pub const AFTER_FAULT: usize = N / 4;
+
+    /// Empty, recording.
     pub const fn new() -> Self {
-        TelemetryRing {
-            buf: Deque::new(),
-            dropped: 0,
+        FaultCapture {
+            buf: [StepRecord {
+                step: 0,
+                phase: 0,
+                armed: false,
+                faults: 0,
+                dac_code: 0,
+                body_height_m: 0.0,
+                nut_position_m: 0.0,
+                spring_force_n: 0.0,
+                energy_j: 0.0,
+                command_a: 0.0,
+            }; N],
+            next: 0,
+            len: 0,
+            remaining: None,
+            fault_step: 0,
         }
     }
 
-    /// Append a record, dropping (and counting) the oldest if full.
-    pub fn push(&mut self, r: StepRecord) {
-        if self.buf.is_full() {
-            let _ = self.buf.pop_front();
-            self.dropped = self.dropped.saturating_add(1);
+    /// Takes one period's record; `fault_latched` when its period latched
+    /// the first fault (`Period::newly_latched` non-empty). Nothing changes
+    /// once frozen.
+    #[inline]
+    pub fn record(&mut self, r: &StepRecord, fault_latched: bool) {
+        if self.remaining == Some(0) {
+            return;
         }
-        // Cannot fail: there is room after the pop above (or N == 0, where
-        // the record is simply lost and counted).
-        if self.buf.push_back(r).is_err() {
-            self.dropped = self.dropped.saturating_add(1);
+        if let Some(slot) = self.buf.get_mut(self.next) {
+            *slot = *r;
+        }
+        self.next = if self.next + 1 >= N { 0 } else { self.next + 1 };
+        self.len = (self.len + 1).min(N);
+        match self.remaining {
+            Some(k) => self.remaining = Some(k.saturating_sub(1)),
+            None if fault_latched => {
+                self.fault_step = r.step;
+                self.remaining = Some(Self::AFTER_FAULT);
+            }
+            None => {}
         }
     }
 
-    /// Take the oldest record.
-    pub fn pop(&mut self) -> Option<StepRecord> {
-        self.buf.pop_front()
+    /// Whether a fault froze the capture.
+    pub fn frozen(&self) -> bool {
+        self.remaining == Some(0)
     }
 
-    /// Records waiting.
+    /// The period the fault that froze (or is freezing) the capture
+    /// latched in.
+    pub fn fault_step(&self) -> Option<u32> {
+        self.remaining.map(|_| self.fault_step)
+    }
+
+    /// Records held.
     pub fn len(&self) -> usize {
-        self.buf.len()
+        self.len
     }
 
-    /// Whether no record is waiting.
+    /// Whether nothing was recorded yet.
     pub fn is_empty(&self) -> bool {
-        self.buf.is_empty()
+        self.len == 0
     }
 
-    /// Records overwritten before they were read.
-    pub fn dropped(&self) -> u32 {
-        self.dropped
+    /// Record `i`, oldest first.
+    pub fn get(&self, i: usize) -> Option<&StepRecord> {
+        if i >= self.len {
+            return None;
+        }
+        // The oldest is at `next` once the buffer wrapped, else at 0.
+        let start = if self.len == N { self.next } else { 0 };
+        let j = start + i;
+        self.buf.get(if j >= N { j - N } else { j })
+    }
+
+    /// Records again (the faults were reset); what it holds stays until
+    /// overwritten.
+    pub fn rearm(&mut self) {
+        self.remaining = None;
     }
 }
 
@@ -206,19 +265,40 @@ impl HopLedgerBuilder {
 mod tests {
     use super::*;
 
-    #[test]
-    fn ring_drops_oldest_and_counts() {
-        let mut r: TelemetryRing<3> = TelemetryRing::new();
-        for i in 0..5 {
-            r.push(StepRecord {
-                step: i,
-                ..StepRecord::default()
-            });
+    fn rec(step: u32) -> StepRecord {
+        StepRecord {
+            step,
+            ..StepRecord::default()
         }
-        assert_eq!(r.len(), 3);
-        assert_eq!(r.dropped(), 2);
-        assert_eq!(r.pop().map(|x| x.step), Some(2));
+    }
+
+    #[test]
+    fn capture_keeps_the_latest_and_freezes_around_the_fault() {
         assert_eq!(core::mem::size_of::<StepRecord>(), 32);
+        let mut c: FaultCapture<8> = FaultCapture::new();
+        assert!(c.is_empty() && c.get(0).is_none());
+        for i in 0..5 {
+            c.record(&rec(i), false);
+        }
+        assert_eq!((c.len(), c.get(0).map(|r| r.step)), (5, Some(0)));
+        for i in 5..20 {
+            c.record(&rec(i), i == 12);
+        }
+        // Fault at step 12: two more records (8 / 4), then frozen.
+        assert!(c.frozen());
+        assert_eq!(c.fault_step(), Some(12));
+        let steps: heapless::Vec<u32, 8> = (0..c.len())
+            .filter_map(|i| c.get(i))
+            .map(|r| r.step)
+            .collect();
+        assert_eq!(steps.as_slice(), &[7, 8, 9, 10, 11, 12, 13, 14]);
+        assert!(c.get(8).is_none());
+        // A reset rearms: recording resumes, the oldest go first.
+        c.rearm();
+        assert!(!c.frozen() && c.fault_step().is_none());
+        c.record(&rec(100), false);
+        assert_eq!(c.get(7).map(|r| r.step), Some(100));
+        assert_eq!(c.get(0).map(|r| r.step), Some(8));
     }
 
     #[test]
