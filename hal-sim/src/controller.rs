@@ -206,14 +206,18 @@ impl ControllerSpec {
         })
     }
 
-    /// Builds the controller for a plant with `plant_params` whose body starts
-    /// at rest `start_apex_m` above the ground, at control period `dt_s`.
-    pub fn build(
+    /// The firmware's period runner and the sensor models for a plant with
+    /// `plant_params` whose body starts at rest `start_apex_m` above the
+    /// ground, at control period `dt_s`, disarmed as at boot.
+    /// `untethered`: whether arming needs no link (the default of the
+    /// `arming.untethered` parameter; `--set` overrides it).
+    pub fn runner(
         &self,
         plant_params: &Params,
         start_apex_m: f64,
         dt_s: f64,
-    ) -> Result<FirmwareController, String> {
+        untethered: bool,
+    ) -> Result<(PeriodRunner, SimHal), String> {
         if let Some(t) = self.torque_nm {
             if !(t.is_finite() && t.abs() <= 10.0) {
                 return Err(format!(
@@ -236,10 +240,7 @@ impl ControllerSpec {
             start_apex_m,
         );
         cfg.flight.gains = self.default_flight_gains(believed)?;
-        // The simulator has no link: a run is the operator's explicit arm
-        // command (below), untethered (`--set arming.untethered=0` leaves
-        // it disarmed: "link-down").
-        cfg.arming.untethered = true;
+        cfg.arming.untethered = untethered;
         if let Some(f) = self.flight_override {
             cfg.flight = f;
         }
@@ -251,12 +252,27 @@ impl ControllerSpec {
             period_s: dt_s as f32,
             ..Timing::default()
         };
-        let mut runner = PeriodRunner::new(cfg, timing)
+        let runner = PeriodRunner::new(cfg, timing)
             .map_err(|e| format!("controller configuration: {e:?}"))?;
+        Ok((runner, SimHal::new(&cfg.calibration, &self.sensors)))
+    }
+
+    /// Builds the controller for a plant with `plant_params` whose body starts
+    /// at rest `start_apex_m` above the ground, at control period `dt_s`.
+    pub fn build(
+        &self,
+        plant_params: &Params,
+        start_apex_m: f64,
+        dt_s: f64,
+    ) -> Result<FirmwareController, String> {
+        // The simulator has no link: a run is the operator's explicit arm
+        // command (below), untethered (`--set arming.untethered=0` leaves
+        // it disarmed: "link-down").
+        let (mut runner, hal) = self.runner(plant_params, start_apex_m, dt_s, true)?;
         // Disarmed at boot like the board; armed at the first period if
         // the robot is at rest with the nut home (a release from rest is).
         runner.arming_mut().request_arm();
-        let hal = SimHal::new(&cfg.calibration, &self.sensors);
+        let cfg = *runner.hopper().config();
         // The name of what actually runs (a strategy override names its own).
         let name = cfg.strategy.kind().name();
         Ok(FirmwareController {

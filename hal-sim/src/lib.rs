@@ -20,6 +20,7 @@ pub mod params_toml;
 pub mod plot;
 pub mod run;
 pub mod scenario;
+pub mod serve;
 pub mod sweep;
 
 pub use params::{ParamError, Params};

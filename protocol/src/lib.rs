@@ -108,6 +108,12 @@ pub enum Request {
     /// The capture around the last fault ([`Response::Dump`], then its
     /// records as [`RobotMsg::Captured`]).
     Dump,
+    /// Presses or releases the simulated e-stop (the QEMU image and
+    /// `hopper-sim serve`; a real robot refuses it: its e-stop is a button).
+    SimulateEstop {
+        /// Pressed.
+        pressed: bool,
+    },
 }
 
 /// Robot to host.
@@ -182,6 +188,8 @@ pub enum Response {
 /// measured).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct TimingStats {
+    /// The control period, s.
+    pub period_s: f32,
     /// Control periods run.
     pub periods: u32,
     /// Periods whose next trigger came before they finished.
@@ -559,6 +567,7 @@ mod tests {
             Just(Request::ParamCount),
             Just(Request::Timing),
             Just(Request::Dump),
+            any::<bool>().prop_map(|pressed| Request::SimulateEstop { pressed }),
             any::<u16>().prop_map(|index| Request::ParamInfo { index }),
             name.clone().prop_map(|name| Request::ParamGet { name }),
             (name, any::<f32>()).prop_map(|(name, value)| Request::ParamSet { name, value }),

@@ -366,6 +366,16 @@ pub struct Converter {
 }
 
 impl Converter {
+    /// Takes over `old`'s encoder state (the last raw counts and the
+    /// accumulated positions): the incremental encoders' origin survives a
+    /// reconfiguration, so the body height and nut position stay what
+    /// they are instead of being re-zeroed where the robot stands.
+    pub fn continue_from(&mut self, old: &Converter) {
+        self.last = old.last;
+        self.motor_counts = old.motor_counts;
+        self.height_counts = old.height_counts;
+    }
+
     /// Creates a converter; the calibration is validated first.
     pub fn new(cal: Calibration) -> Result<Self, CalError> {
         cal.validate()?;

@@ -271,9 +271,11 @@ impl Hopper {
     }
 
     /// Takes over from `old` after a reconfiguration: its latched faults
-    /// (a new configuration never clears a latch), its step count (the
-    /// records' step numbers go on) and its last supervisor input.
+    /// (a new configuration never clears a latch), the encoders' origin
+    /// ([`Converter::continue_from`]), its step count (the records' step
+    /// numbers go on) and its last supervisor input.
     pub fn continue_from(&mut self, old: &Hopper) {
+        self.converter.continue_from(&old.converter);
         let latched = old.supervisor.faults();
         for f in Fault::ALL {
             if latched.contains(f) {

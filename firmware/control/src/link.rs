@@ -64,6 +64,10 @@ pub struct Endpoint {
     dump: Option<(u16, u16)>,
     /// The link's work per period, in the counter's ticks.
     cost: StepStats,
+    /// A simulated robot ([`simulated`](Self::simulated)).
+    simulated: bool,
+    /// The simulated e-stop, as last asked.
+    sim_estop: bool,
 }
 
 fn text(s: &str) -> heapless::String<TEXT_LEN> {
@@ -129,6 +133,22 @@ impl Endpoint {
     /// No session yet, telemetry off.
     pub fn new() -> Self {
         Self::default()
+    }
+
+    /// The endpoint of a simulated robot (the QEMU image, the simulator's
+    /// virtual robot): it takes [`Request::SimulateEstop`], which a real
+    /// robot refuses.
+    pub fn simulated() -> Self {
+        Self {
+            simulated: true,
+            ..Self::default()
+        }
+    }
+
+    /// The simulated e-stop as the host last set it (always released on a
+    /// real robot); the application applies it to its sensor models.
+    pub fn sim_estop(&self) -> bool {
+        self.sim_estop
     }
 
     /// Telemetry records the transmit queue could not take so far.
@@ -249,6 +269,7 @@ impl Endpoint {
                 Response::Ok
             }
             Request::Timing => Response::Timing(TimingStats {
+                period_s: runner.timing().period_s,
                 periods: runner.periods(),
                 missed: runner.missed(),
                 step_mean: runner.step_cost().mean(),
@@ -256,6 +277,11 @@ impl Endpoint {
                 link_mean: self.cost.mean(),
                 link_max: self.cost.max,
             }),
+            Request::SimulateEstop { pressed } if self.simulated => {
+                self.sim_estop = *pressed;
+                Response::Ok
+            }
+            Request::SimulateEstop { .. } => Response::Refused(text("not-simulated")),
             Request::Dump => {
                 let records = u16::try_from(capture.len()).unwrap_or(u16::MAX);
                 self.dump = Some((0, records));

@@ -635,13 +635,24 @@ mod tests {
         // Disarmed: a latched fault survives a controller change.
         r.arming_mut().request_disarm();
         r.report_overrun();
-        let p = r.run_period(&mut io, &mut NoCounter);
+        // The body moves 2 counts a period (a slow settle) for 20 periods.
+        let mut p = r.run_period(&mut io, &mut NoCounter);
+        for _ in 0..20 {
+            io.raw.height_counts += 2;
+            p = r.run_period(&mut io, &mut NoCounter);
+        }
         assert!(!p.armed && p.out.faults.contains(Fault::Overrun));
+        let (height_m, step) = (p.out.record.body_height_m, p.out.record.step);
         assert_eq!(r.set_param(params::CONTROLLER.name, 8.0), Ok(()));
         assert_eq!(r.hopper().config().strategy.kind().name(), "shaped");
         assert!(r.hopper().supervisor().faults().contains(Fault::Overrun));
         let p = r.run_period(&mut io, &mut NoCounter);
         assert!(p.feed_watchdog && p.newly_latched.is_empty());
+        // The rebuilt controller goes on from the old one: the encoders'
+        // origin (the same body height, not re-zeroed where it stands) and
+        // the step count.
+        assert_eq!(p.out.record.body_height_m, height_m);
+        assert_eq!(p.out.record.step, step + 1);
         assert_eq!(io.enabled, Some(false));
         assert_ne!(*r.hopper().config(), before);
     }

@@ -15,6 +15,7 @@ pub mod metrics;
 pub mod mock;
 pub mod params;
 pub mod plant;
+pub mod robot;
 pub mod sensors;
 
 pub use params::{ParamError, Params};

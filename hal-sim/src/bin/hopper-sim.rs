@@ -11,7 +11,7 @@
 //! hopper-sim figures --out DIR
 //! ```
 
-use anyhow::{bail, Result};
+use anyhow::{bail, Context, Result};
 use clap::{Args, Parser, Subcommand};
 use hal_sim::inject::Injection;
 use hal_sim::params::Params;
@@ -58,6 +58,10 @@ enum Cmd {
     /// Run a grid of runs (one or two swept parameters) in parallel; writes
     /// sweep.csv and a plot (sweep.png, sweep.svg).
     Sweep(SweepArgs),
+    /// The virtual robot: the firmware on the simulated hopper behind the
+    /// link protocol on a TCP socket, in real time, for `hopper-link`
+    /// (docs/link.md). It boots disarmed and standing, like the board.
+    Serve(ServeArgs),
     /// Parameter sets.
     Params {
         #[command(subcommand)]
@@ -292,6 +296,24 @@ struct SweepArgs {
     out: PathBuf,
 }
 
+#[derive(Parser)]
+struct ServeArgs {
+    #[command(flatten)]
+    base: BaseArgs,
+    /// Address to listen on, HOST:PORT (port 0: any free port; the address
+    /// taken is printed).
+    #[arg(long, value_name = "HOST:PORT")]
+    tcp: String,
+    /// Robot seconds per wall second (the host's heartbeats must still come
+    /// within the 0.2 s link timeout of robot time: up to about 4 with
+    /// hopper-link's 20 ms heartbeat).
+    #[arg(long, default_value_t = 1.0)]
+    speed: f64,
+    /// Stop after this much robot time, s [default: run until killed].
+    #[arg(long = "for", value_name = "SECONDS")]
+    limit: Option<f64>,
+}
+
 fn main() {
     let cli = match Cli::try_parse() {
         Ok(cli) => cli,
@@ -300,6 +322,7 @@ fn main() {
     let result = match cli.cmd {
         Cmd::Run(args) => cmd_run(args),
         Cmd::Sweep(args) => cmd_sweep(args),
+        Cmd::Serve(args) => cmd_serve(args),
         Cmd::Params {
             cmd: ParamsCmd::Show { preset },
         } => cmd_params_show(&preset),
@@ -375,6 +398,61 @@ fn cmd_figures(out: &std::path::Path, quick: bool) -> Result<()> {
         out.display()
     );
     Ok(())
+}
+
+fn cmd_serve(a: ServeArgs) -> Result<()> {
+    let file = a.base.scenario()?;
+    let settings = resolve(file.as_ref(), &a.base)?;
+    settings.check().map_err(anyhow::Error::msg)?;
+    if !(a.speed.is_finite() && a.speed > 0.0 && a.speed <= 100.0) {
+        bail!("--speed {} must be in (0, 100]", a.speed);
+    }
+    if let Some(l) = a.limit {
+        if !(l.is_finite() && l > 0.0) {
+            bail!("--for {l} must be a positive number of seconds");
+        }
+    }
+    // Standing, as a robot is powered up (released 1 mm above the ground,
+    // it settles in about 0.3 s), unless --start-apex holds it up there
+    // until armed.
+    let held = a.base.start_apex.is_some();
+    let start_apex_m = a.base.start_apex.unwrap_or(0.001);
+    let cfg = settings.run_config(0.0);
+    let (runner, hal) = settings
+        .controller_spec()
+        .and_then(|spec| spec.runner(&cfg.params, start_apex_m, cfg.control_dt_s, false))
+        .map_err(anyhow::Error::msg)?;
+    let plant = hopper_plant::Plant::new(cfg.params, start_apex_m)
+        .map_err(|e| anyhow::anyhow!("plant: {e:?}"))?;
+    let robot = hopper_plant::robot::VirtualRobot::new(plant, hal, runner, cfg.control_dt_s);
+    let robot = if held { robot.hold() } else { robot };
+    let listener = std::net::TcpListener::bind(&a.tcp)
+        .with_context(|| format!("cannot listen on {}", a.tcp))?;
+    let addr = listener.local_addr().context("socket address")?;
+    println!(
+        "hopper-sim: virtual robot listening on {addr} ({} controller, {} parameters, {:.0} Hz, {}x real time, {}); connect with `hopper-link --tcp {addr} status`",
+        settings.controller.name(),
+        settings.params_name,
+        1.0 / cfg.control_dt_s,
+        a.speed,
+        if held {
+            format!("held {start_apex_m} m up until armed")
+        } else {
+            "standing".to_string()
+        }
+    );
+    use std::io::Write as _;
+    let _ = std::io::stdout().flush();
+    hal_sim::serve::serve(
+        robot,
+        &listener,
+        hal_sim::serve::ServeOptions {
+            speed: a.speed,
+            limit_s: a.limit,
+            dt_s: cfg.control_dt_s,
+        },
+    )
+    .map_err(anyhow::Error::msg)
 }
 
 fn cmd_run(a: RunArgs) -> Result<()> {

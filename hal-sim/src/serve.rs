@@ -1,0 +1,142 @@
+//! `hopper-sim serve --tcp ADDR`: the virtual robot on a TCP socket, in
+//! real time (or `--speed N` times it), so `hopper-link` can be learned and
+//! tested without hardware (issue 17).
+//!
+//! One client at a time. The loop runs the periods that are due by the
+//! wall clock, hands the bytes that arrived since the last batch to its
+//! first period, and writes what the robot queued. The transmit queue is
+//! bounded like a UART's ring ([`TX_QUEUE_BYTES`]): a client that does not
+//! read loses telemetry (counted by the robot), never blocks the robot.
+
+use hopper_control::link::Tx;
+use hopper_control::runner::NoCounter;
+use hopper_plant::robot::VirtualRobot;
+use std::io::{ErrorKind, Read, Write};
+use std::net::{TcpListener, TcpStream};
+use std::time::{Duration, Instant};
+
+/// The transmit queue's size, bytes: 16 KiB, about 170 ms of the board's
+/// 921,600 baud line.
+pub const TX_QUEUE_BYTES: usize = 16 * 1024;
+
+/// Periods run in one batch at most before the socket is serviced again
+/// (0.1 s of robot time at 10 kHz): a slow host falls behind the clock
+/// instead of starving the link.
+const MAX_BATCH: u64 = 1000;
+
+/// The robot's side of the socket: a bounded byte queue.
+#[derive(Debug, Default)]
+struct Queue {
+    bytes: Vec<u8>,
+}
+
+impl Tx for Queue {
+    fn room(&self) -> usize {
+        TX_QUEUE_BYTES.saturating_sub(self.bytes.len())
+    }
+    fn put(&mut self, frame: &[u8]) {
+        self.bytes.extend_from_slice(frame);
+    }
+}
+
+/// How the loop runs.
+#[derive(Debug, Clone, Copy)]
+pub struct ServeOptions {
+    /// Robot seconds per wall second.
+    pub speed: f64,
+    /// Stop after this much robot time, s (None: until killed).
+    pub limit_s: Option<f64>,
+    /// Control period, s.
+    pub dt_s: f64,
+}
+
+/// Serves `robot` on `listener` until the time limit (or forever).
+/// Messages about clients go to stderr.
+pub fn serve(
+    mut robot: VirtualRobot,
+    listener: &TcpListener,
+    opts: ServeOptions,
+) -> Result<(), String> {
+    listener
+        .set_nonblocking(true)
+        .map_err(|e| format!("socket: {e}"))?;
+    let mut client: Option<TcpStream> = None;
+    let mut tx = Queue::default();
+    let mut inbox: Vec<u8> = Vec::new();
+    let mut buf = [0u8; 4096];
+    let start = Instant::now();
+    let mut done: u64 = 0;
+    let limit = opts.limit_s.map(|s| (s / opts.dt_s).round() as u64);
+    loop {
+        if client.is_none() {
+            match listener.accept() {
+                Ok((s, peer)) => {
+                    let _ = s.set_nodelay(true);
+                    if s.set_nonblocking(true).is_ok() {
+                        eprintln!("hopper-sim: client {peer} connected");
+                        // What was queued for nobody is not the new client's.
+                        tx.bytes.clear();
+                        client = Some(s);
+                    }
+                }
+                Err(e) if e.kind() == ErrorKind::WouldBlock => {}
+                Err(e) => return Err(format!("accept: {e}")),
+            }
+        }
+        if let Some(s) = client.as_mut() {
+            let mut closed = false;
+            loop {
+                match s.read(&mut buf) {
+                    Ok(0) => {
+                        closed = true;
+                        break;
+                    }
+                    Ok(n) => inbox.extend_from_slice(buf.get(..n).unwrap_or_default()),
+                    Err(e) if e.kind() == ErrorKind::WouldBlock => break,
+                    Err(e) if e.kind() == ErrorKind::Interrupted => {}
+                    Err(_) => {
+                        closed = true;
+                        break;
+                    }
+                }
+            }
+            if closed {
+                eprintln!("hopper-sim: client disconnected");
+                client = None;
+            }
+        }
+        // The periods due by the clock, the first with the bytes that came.
+        let due = (start.elapsed().as_secs_f64() * opts.speed / opts.dt_s) as u64;
+        let due = limit.map_or(due, |l| due.min(l));
+        let batch = due.saturating_sub(done).min(MAX_BATCH);
+        for _ in 0..batch {
+            let rx = std::mem::take(&mut inbox);
+            robot.control(rx.into_iter(), &mut tx, &mut NoCounter);
+            robot.runner.end_period(false);
+            robot
+                .advance(&mut |_| {})
+                .map_err(|e| format!("plant integration failed: {e:?}"))?;
+            done += 1;
+        }
+        if let Some(s) = client.as_mut() {
+            match s.write(&tx.bytes) {
+                Ok(n) => {
+                    tx.bytes.drain(..n);
+                }
+                Err(e) if e.kind() == ErrorKind::WouldBlock => {}
+                Err(_) => {
+                    eprintln!("hopper-sim: client disconnected");
+                    client = None;
+                }
+            }
+        } else {
+            tx.bytes.clear();
+        }
+        if limit.is_some_and(|l| done >= l) {
+            return Ok(());
+        }
+        if batch < MAX_BATCH {
+            std::thread::sleep(Duration::from_micros(500));
+        }
+    }
+}

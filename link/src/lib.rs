@@ -1,0 +1,278 @@
+//! The host end of the hopper's link (issue 17): a [`Client`] over a serial
+//! port or a TCP socket that speaks [`hopper_protocol`] to the board, the
+//! QEMU image or `hopper-sim serve`.
+//!
+//! A reader thread decodes the robot's frames as they come; a heartbeat
+//! thread sends [`HostMsg::Heartbeat`] every [`HEARTBEAT`] while
+//! connected, so the robot's link timeout (0.2 s by default) only fires
+//! when the host is gone (or [`Client::set_heartbeats`] stops them on
+//! purpose). Requests carry ids; their responses are matched by id, and
+//! everything unsolicited (telemetry, hops, faults, state changes, dump
+//! records) waits in order for [`Client::next_event`].
+
+use anyhow::{anyhow, bail, Context, Result};
+use hopper_protocol::{
+    encode, Decoder, HostMsg, LinkStats, Request, Response, RobotMsg, MAX_FRAME, PROTOCOL_VERSION,
+};
+use std::collections::VecDeque;
+use std::io::{Read, Write};
+use std::net::TcpStream;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc::{self, Receiver, RecvTimeoutError};
+use std::sync::{Arc, Mutex};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+pub mod names;
+pub mod record;
+
+/// Heartbeat period: a tenth of the robot's default 0.2 s link timeout,
+/// so a virtual robot may run a few times faster than real time.
+pub const HEARTBEAT: Duration = Duration::from_millis(20);
+
+/// How long a request waits for its response.
+pub const RESPONSE_TIMEOUT: Duration = Duration::from_secs(3);
+
+/// Where the robot is.
+#[derive(Debug, Clone)]
+pub enum Target {
+    /// A TCP address (QEMU's `-serial tcp:`, `hopper-sim serve`).
+    Tcp(String),
+    /// A serial port and its baud rate (the board's USART1).
+    Serial(String, u32),
+}
+
+impl std::fmt::Display for Target {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Target::Tcp(a) => write!(f, "tcp {a}"),
+            Target::Serial(p, b) => write!(f, "serial {p} at {b} baud"),
+        }
+    }
+}
+
+type Writer = Arc<Mutex<Box<dyn Write + Send>>>;
+
+/// A connected robot.
+pub struct Client {
+    writer: Writer,
+    incoming: Receiver<RobotMsg>,
+    /// Unsolicited messages received while waiting for a response.
+    queued: VecDeque<RobotMsg>,
+    next_id: u16,
+    heartbeats: Arc<AtomicBool>,
+    stop: Arc<AtomicBool>,
+    stats: Arc<Mutex<LinkStats>>,
+    threads: Vec<JoinHandle<()>>,
+    target: Target,
+}
+
+fn frame(msg: &HostMsg) -> Result<Vec<u8>> {
+    let mut f = [0u8; MAX_FRAME];
+    let n = encode(msg, &mut f).map_err(|e| anyhow!("cannot frame {msg:?}: {e:?}"))?;
+    Ok(f.get(..n).unwrap_or_default().to_vec())
+}
+
+fn write_all(w: &Writer, bytes: &[u8]) -> Result<()> {
+    let mut w = w.lock().map_err(|_| anyhow!("link writer poisoned"))?;
+    w.write_all(bytes)?;
+    w.flush()?;
+    Ok(())
+}
+
+impl Client {
+    /// Opens `target`, starts the reader and heartbeat threads and does
+    /// the version handshake. One clear error for each way it can fail: no
+    /// such device, nobody listening, no answer, another protocol version.
+    pub fn connect(target: &Target) -> Result<Client> {
+        let (reader, writer): (Box<dyn Read + Send>, Box<dyn Write + Send>) = match target {
+            Target::Tcp(addr) => {
+                let s = TcpStream::connect(addr).with_context(|| {
+                    format!("cannot connect to {addr}: is `hopper-sim serve` or the QEMU image running?")
+                })?;
+                let _ = s.set_nodelay(true);
+                s.set_read_timeout(Some(Duration::from_millis(50)))?;
+                (Box::new(s.try_clone()?), Box::new(s))
+            }
+            Target::Serial(port, baud) => {
+                let p = serialport::new(port, *baud)
+                    .timeout(Duration::from_millis(50))
+                    .open()
+                    .with_context(|| format!("cannot open serial port {port}"))?;
+                (Box::new(p.try_clone()?), Box::new(p))
+            }
+        };
+        let writer: Writer = Arc::new(Mutex::new(writer));
+        let stop = Arc::new(AtomicBool::new(false));
+        let heartbeats = Arc::new(AtomicBool::new(true));
+        let stats = Arc::new(Mutex::new(LinkStats::default()));
+        let (tx, incoming) = mpsc::channel();
+        let mut threads = Vec::new();
+        {
+            let (stop, stats) = (stop.clone(), stats.clone());
+            let mut reader = reader;
+            threads.push(std::thread::spawn(move || {
+                let mut d = Decoder::new();
+                let mut buf = [0u8; 4096];
+                while !stop.load(Ordering::Relaxed) {
+                    match reader.read(&mut buf) {
+                        Ok(0) => break,
+                        Ok(n) => {
+                            for &b in buf.get(..n).unwrap_or_default() {
+                                if let Some(m) = d.push::<RobotMsg>(b) {
+                                    if tx.send(m).is_err() {
+                                        return;
+                                    }
+                                }
+                            }
+                            if let Ok(mut s) = stats.lock() {
+                                *s = d.stats();
+                            }
+                        }
+                        Err(e)
+                            if matches!(
+                                e.kind(),
+                                std::io::ErrorKind::TimedOut
+                                    | std::io::ErrorKind::WouldBlock
+                                    | std::io::ErrorKind::Interrupted
+                            ) => {}
+                        Err(_) => break,
+                    }
+                }
+            }));
+        }
+        {
+            let (stop, on, w) = (stop.clone(), heartbeats.clone(), writer.clone());
+            let beat = frame(&HostMsg::Heartbeat)?;
+            threads.push(std::thread::spawn(move || {
+                while !stop.load(Ordering::Relaxed) {
+                    if on.load(Ordering::Relaxed) && write_all(&w, &beat).is_err() {
+                        break;
+                    }
+                    std::thread::sleep(HEARTBEAT);
+                }
+            }));
+        }
+        let mut c = Client {
+            writer,
+            incoming,
+            queued: VecDeque::new(),
+            next_id: 1,
+            heartbeats,
+            stop,
+            stats,
+            threads,
+            target: target.clone(),
+        };
+        // A leading delimiter flushes whatever half frame the line holds.
+        c.send_raw(&[0])?;
+        c.send(&HostMsg::Hello {
+            version: PROTOCOL_VERSION,
+        })?;
+        let deadline = Instant::now() + RESPONSE_TIMEOUT;
+        loop {
+            match c.recv_until(deadline)? {
+                Some(RobotMsg::Hello { version }) if version == PROTOCOL_VERSION => return Ok(c),
+                Some(RobotMsg::Hello { version }) => bail!(
+                    "the robot at {target} speaks protocol version {version}, this hopper-link speaks {PROTOCOL_VERSION}: update one of them"
+                ),
+                Some(_) => {}
+                None => bail!(
+                    "no answer from {target} within {:.0} s: is it a hopper running firmware with the link (and the baud rate right)?",
+                    RESPONSE_TIMEOUT.as_secs_f64()
+                ),
+            }
+        }
+    }
+
+    /// Where this client is connected.
+    pub fn target(&self) -> &Target {
+        &self.target
+    }
+
+    /// Sends one message.
+    pub fn send(&self, msg: &HostMsg) -> Result<()> {
+        write_all(&self.writer, &frame(msg)?).context("the link closed")
+    }
+
+    /// Sends bytes as they are (tests: garbage on the line).
+    pub fn send_raw(&self, bytes: &[u8]) -> Result<()> {
+        write_all(&self.writer, bytes).context("the link closed")
+    }
+
+    /// Starts or stops the heartbeats (stopping them makes the robot
+    /// disarm after its link timeout, unless other frames keep coming).
+    pub fn set_heartbeats(&self, on: bool) {
+        self.heartbeats.store(on, Ordering::Relaxed);
+    }
+
+    /// What the host's decoder counted (frames from the robot).
+    pub fn stats(&self) -> LinkStats {
+        self.stats.lock().map(|s| *s).unwrap_or_default()
+    }
+
+    fn recv_until(&mut self, deadline: Instant) -> Result<Option<RobotMsg>> {
+        let left = deadline.saturating_duration_since(Instant::now());
+        match self.incoming.recv_timeout(left) {
+            Ok(m) => Ok(Some(m)),
+            Err(RecvTimeoutError::Timeout) => Ok(None),
+            Err(RecvTimeoutError::Disconnected) => {
+                bail!("the link to {} closed", self.target)
+            }
+        }
+    }
+
+    /// Sends `req` and waits for its response; unsolicited messages that
+    /// come meanwhile are kept for [`next_event`](Self::next_event).
+    pub fn request(&mut self, req: Request) -> Result<Response> {
+        let id = self.next_id;
+        self.next_id = self.next_id.wrapping_add(1).max(1);
+        let what = format!("{req:?}");
+        self.send(&HostMsg::Request { id, req })?;
+        let deadline = Instant::now() + RESPONSE_TIMEOUT;
+        loop {
+            match self.recv_until(deadline)? {
+                Some(RobotMsg::Response { id: got, resp }) if got == id => return Ok(resp),
+                Some(RobotMsg::Response { .. }) => {}
+                Some(m) => self.queued.push_back(m),
+                None => bail!(
+                    "no response to {what} from {} within {:.0} s",
+                    self.target,
+                    RESPONSE_TIMEOUT.as_secs_f64()
+                ),
+            }
+        }
+    }
+
+    /// Like [`request`](Self::request), but a refusal is an error with the
+    /// robot's reason.
+    pub fn expect_ok(&mut self, req: Request) -> Result<Response> {
+        match self.request(req)? {
+            Response::Refused(why) => bail!("refused: {why}"),
+            r => Ok(r),
+        }
+    }
+
+    /// The next unsolicited message, waiting up to `timeout`.
+    pub fn next_event(&mut self, timeout: Duration) -> Result<Option<RobotMsg>> {
+        if let Some(m) = self.queued.pop_front() {
+            return Ok(Some(m));
+        }
+        self.recv_until(Instant::now() + timeout)
+    }
+
+    /// Drops every unsolicited message received so far.
+    pub fn discard_events(&mut self) {
+        self.queued.clear();
+        while self.incoming.try_recv().is_ok() {}
+    }
+}
+
+impl Drop for Client {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Relaxed);
+        for t in self.threads.drain(..) {
+            let _ = t.join();
+        }
+    }
+}

@@ -1,0 +1,762 @@
+//! `hopper-link`: operate the hopper from a host (issue 17). One client for
+//! the board (`--serial PORT`), the QEMU image and the simulator's virtual
+//! robot (`--tcp ADDR`). See the README's "Operating the robot" and
+//! docs/link.md.
+
+use anyhow::{anyhow, bail, Context, Result};
+use clap::{Parser, Subcommand};
+use hopper_control::params::{self, Kind};
+use hopper_link::record::Recording;
+use hopper_link::{names, Client, Target};
+use hopper_protocol::{ArmState, Name, Request, Response, RobotMsg, Telemetry, TimingStats};
+use std::io::{BufRead, IsTerminal, Write};
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+#[derive(Parser)]
+#[command(
+    name = "hopper-link",
+    version,
+    about = "Operate the hopper over its link: status, parameters, arming, recording, watch, dump"
+)]
+struct Cli {
+    /// The robot on a TCP address (QEMU's -serial tcp:, `hopper-sim serve`).
+    #[arg(
+        long,
+        value_name = "HOST:PORT",
+        conflicts_with = "serial",
+        required_unless_present = "serial"
+    )]
+    tcp: Option<String>,
+    /// The robot on a serial port (the board's USART1 through a USB-UART
+    /// adapter, e.g. /dev/ttyUSB0).
+    #[arg(long, value_name = "PORT")]
+    serial: Option<String>,
+    /// Baud rate of --serial (the firmware's USART1 runs at 921,600).
+    #[arg(long, default_value_t = 921_600)]
+    baud: u32,
+    #[command(subcommand)]
+    cmd: Cmd,
+}
+
+#[derive(Subcommand, Debug)]
+enum Cmd {
+    /// State, faults, sensors, link counts and timing.
+    Status,
+    /// The parameter table on the robot.
+    Params {
+        #[command(subcommand)]
+        cmd: ParamsCmd,
+    },
+    /// Enable the amplifier and run the selected controller (refused with
+    /// the reason unless no fault is latched, the e-stop is released, the
+    /// nut is home and the robot is still). The link must stay up: use it
+    /// inside `shell`, or the robot disarms 0.2 s after this command exits.
+    Arm,
+    /// 0 A and the amplifier off; prints the next telemetry record.
+    Disarm,
+    /// Clear the latched faults whose cause is gone (only while disarmed).
+    ResetFaults,
+    /// Record telemetry and hop ledgers: telemetry.csv (units in the
+    /// headers), hops.csv and hop.png in DIR.
+    Record {
+        /// Robot time to record, s.
+        #[arg(long)]
+        duration: f64,
+        /// Records per second (at most the control rate).
+        #[arg(long, default_value_t = 1000.0)]
+        rate: f64,
+        /// Directory for the files (created if missing).
+        #[arg(long)]
+        out: PathBuf,
+    },
+    /// A live status line: state, faults, last apex, height, nut, force,
+    /// current, drops (Ctrl-C to stop).
+    Watch {
+        /// Stop after this many seconds (wall clock).
+        #[arg(long)]
+        duration: Option<f64>,
+    },
+    /// The capture around the last fault (frozen when it latched): capture.csv
+    /// and capture.png in DIR.
+    Dump {
+        /// Directory for the files (created if missing).
+        #[arg(long)]
+        out: PathBuf,
+    },
+    /// Press or release the simulated e-stop (QEMU and `hopper-sim serve`
+    /// only; a real robot refuses).
+    Estop {
+        /// press | release
+        #[arg(value_parser = ["press", "release"])]
+        action: String,
+    },
+    /// Stop the heartbeats and wait for the robot to disarm by link loss;
+    /// prints how long it took in robot time. Heartbeats resume after.
+    Silence {
+        /// Give up after this many wall seconds.
+        #[arg(long, default_value_t = 10.0)]
+        max: f64,
+    },
+    /// Send N random bytes (a noisy line), then a frame delimiter.
+    Garbage {
+        /// Bytes.
+        #[arg(default_value_t = 1024)]
+        bytes: usize,
+    },
+    /// Wait (the link stays up, heartbeats go on).
+    Wait {
+        /// Wall seconds.
+        seconds: f64,
+    },
+    /// Commands from standard input, one per line, on one connection (the
+    /// link and the arming survive between them). `#` starts a comment; a
+    /// line starting with `!` must fail (e.g. a refused set).
+    Shell,
+}
+
+#[derive(Subcommand, Debug)]
+enum ParamsCmd {
+    /// Every parameter: value, unit, range, default, whether it may change while armed.
+    List,
+    /// One parameter's value.
+    Get {
+        /// Table name, e.g. target_apex_m.
+        name: String,
+    },
+    /// Set a parameter (checked on the robot; a refused set changes nothing).
+    Set {
+        /// Table name.
+        name: String,
+        /// Value in the parameter's unit; a choice by name or index (controller shaped).
+        value: String,
+    },
+}
+
+/// One line of `shell`, parsed like a command line.
+#[derive(Parser, Debug)]
+#[command(name = ">", no_binary_name = true, disable_help_flag = true)]
+struct ShellLine {
+    #[command(subcommand)]
+    cmd: Cmd,
+}
+
+fn main() {
+    let cli = match Cli::try_parse() {
+        Ok(c) => c,
+        Err(e) => {
+            let _ = e.print();
+            std::process::exit(if e.use_stderr() { 2 } else { 0 });
+        }
+    };
+    let target = match (&cli.tcp, &cli.serial) {
+        (Some(a), _) => Target::Tcp(a.clone()),
+        (None, Some(p)) => Target::Serial(p.clone(), cli.baud),
+        (None, None) => {
+            eprintln!("hopper-link: error: give --tcp HOST:PORT or --serial PORT");
+            std::process::exit(2);
+        }
+    };
+    let result = Client::connect(&target).and_then(|mut c| match cli.cmd {
+        Cmd::Shell => shell(&mut c),
+        cmd => run(&mut c, &cmd),
+    });
+    if let Err(e) = result {
+        eprintln!("hopper-link: error: {e:#}");
+        std::process::exit(1);
+    }
+}
+
+fn shell(c: &mut Client) -> Result<()> {
+    let mut failures = 0;
+    for (n, line) in std::io::stdin().lock().lines().enumerate() {
+        let line = line.context("reading standard input")?;
+        let text = line.split('#').next().unwrap_or("").trim();
+        if text.is_empty() {
+            continue;
+        }
+        let (must_fail, text) = match text.strip_prefix('!') {
+            Some(t) => (true, t.trim()),
+            None => (false, text),
+        };
+        println!("> {}{text}", if must_fail { "! " } else { "" });
+        let outcome = ShellLine::try_parse_from(text.split_whitespace())
+            .map_err(|e| anyhow!("line {}: {}", n + 1, e.render().to_string().trim()))
+            .and_then(|l| match l.cmd {
+                Cmd::Shell => bail!("already in a shell"),
+                cmd => run(c, &cmd),
+            });
+        match (outcome, must_fail) {
+            (Ok(()), false) => {}
+            (Err(e), true) => println!("failed as expected: {e:#}"),
+            (Ok(()), true) => {
+                println!("error: line {}: expected to fail, but it succeeded", n + 1);
+                failures += 1;
+            }
+            (Err(e), false) => {
+                println!("error: {e:#}");
+                failures += 1;
+            }
+        }
+        let _ = std::io::stdout().flush();
+    }
+    if failures > 0 {
+        bail!("{failures} command(s) of the session did not go as written");
+    }
+    Ok(())
+}
+
+fn run(c: &mut Client, cmd: &Cmd) -> Result<()> {
+    match cmd {
+        Cmd::Status => status(c),
+        Cmd::Params { cmd } => match cmd {
+            ParamsCmd::List => params_list(c),
+            ParamsCmd::Get { name } => {
+                let v = get(c, name)?;
+                println!("{name} = {}", shown(name, v));
+                Ok(())
+            }
+            ParamsCmd::Set { name, value } => {
+                let v = parse_value(name, value)?;
+                match c.request(Request::ParamSet {
+                    name: wire_name(name)?,
+                    value: v,
+                })? {
+                    Response::Ok => {
+                        let now = get(c, name)?;
+                        println!("{name} = {} (set)", shown(name, now));
+                        Ok(())
+                    }
+                    Response::Refused(why) => {
+                        let now = get(c, name).map(|v| shown(name, v)).unwrap_or_default();
+                        bail!("set {name} = {value} refused: {why} (unchanged: {now})")
+                    }
+                    r => bail!("unexpected answer {r:?}"),
+                }
+            }
+        },
+        Cmd::Arm => match c.request(Request::Arm)? {
+            Response::Ok => {
+                println!("armed");
+                Ok(())
+            }
+            Response::Refused(why) => bail!("arm refused: {why}"),
+            r => bail!("unexpected answer {r:?}"),
+        },
+        Cmd::Disarm => disarm(c),
+        Cmd::ResetFaults => {
+            let r = c.request(Request::ResetFaults)?;
+            let st = status_of(c)?;
+            match r {
+                Response::Ok => {
+                    println!("faults reset; latched now: {}", names::faults(st.faults));
+                    Ok(())
+                }
+                Response::Refused(why) => bail!(
+                    "reset refused: {why}; still latched: {}",
+                    names::faults(st.faults)
+                ),
+                r => bail!("unexpected answer {r:?}"),
+            }
+        }
+        Cmd::Record {
+            duration,
+            rate,
+            out,
+        } => record(c, *duration, *rate, out),
+        Cmd::Watch { duration } => watch(c, *duration),
+        Cmd::Dump { out } => dump(c, out),
+        Cmd::Estop { action } => {
+            c.expect_ok(Request::SimulateEstop {
+                pressed: action == "press",
+            })?;
+            println!(
+                "simulated e-stop {}",
+                if action == "press" {
+                    "pressed"
+                } else {
+                    "released"
+                }
+            );
+            Ok(())
+        }
+        Cmd::Silence { max } => silence(c, *max),
+        Cmd::Garbage { bytes } => {
+            let mut x: u64 = 0x9E37_79B9_7F4A_7C15;
+            let junk: Vec<u8> = (0..*bytes)
+                .map(|_| {
+                    x ^= x << 13;
+                    x ^= x >> 7;
+                    x ^= x << 17;
+                    (x >> 24) as u8
+                })
+                .collect();
+            c.send_raw(&junk)?;
+            c.send_raw(&[0])?;
+            println!("sent {bytes} random bytes and a delimiter");
+            Ok(())
+        }
+        Cmd::Wait { seconds } => {
+            std::thread::sleep(Duration::from_secs_f64(seconds.clamp(0.0, 3600.0)));
+            Ok(())
+        }
+        Cmd::Shell => bail!("shell is a top-level command"),
+    }
+}
+
+fn wire_name(name: &str) -> Result<Name> {
+    let mut n = Name::new();
+    n.push_str(name)
+        .map_err(|_| anyhow!("parameter name `{name}` is too long"))?;
+    Ok(n)
+}
+
+/// A value as typed: a number, or a choice's name (`controller shaped`).
+fn parse_value(name: &str, value: &str) -> Result<f32> {
+    if let Ok(v) = value.parse::<f32>() {
+        return Ok(v);
+    }
+    match params::find(name).map(|p| p.kind) {
+        Some(Kind::Choice(names)) => names
+            .iter()
+            .position(|n| *n == value)
+            .map(|i| i as f32)
+            .ok_or_else(|| anyhow!("`{name}` is one of {names:?}, not `{value}`")),
+        _ => bail!("`{value}` is not a number"),
+    }
+}
+
+/// A value for display: a choice by name, else the number and unit.
+fn shown(name: &str, v: f32) -> String {
+    match params::find(name) {
+        Some(p) => match p.kind {
+            Kind::Choice(names) => names
+                .get(v as usize)
+                .map_or(format!("{v}"), |n| format!("{n} ({v})")),
+            _ if p.unit == "1" || p.unit == "-" => format!("{v}"),
+            _ => format!("{v} {}", p.unit),
+        },
+        None => format!("{v}"),
+    }
+}
+
+fn get(c: &mut Client, name: &str) -> Result<f32> {
+    match c.request(Request::ParamGet {
+        name: wire_name(name)?,
+    })? {
+        Response::Value(v) => Ok(v),
+        Response::Refused(why) => bail!("get {name}: {why}"),
+        r => bail!("unexpected answer {r:?}"),
+    }
+}
+
+fn status_of(c: &mut Client) -> Result<hopper_protocol::Status> {
+    match c.request(Request::Status)? {
+        Response::Status(s) => Ok(s),
+        r => bail!("unexpected answer {r:?}"),
+    }
+}
+
+fn timing_of(c: &mut Client) -> Result<TimingStats> {
+    match c.request(Request::Timing)? {
+        Response::Timing(t) => Ok(t),
+        r => bail!("unexpected answer {r:?}"),
+    }
+}
+
+/// One telemetry record now (telemetry is switched on for it, then off).
+fn one_record(c: &mut Client) -> Result<Telemetry> {
+    c.expect_ok(Request::Telemetry { every: 1 })?;
+    let deadline = Instant::now() + Duration::from_secs(3);
+    let found = loop {
+        match c.next_event(deadline.saturating_duration_since(Instant::now()))? {
+            Some(RobotMsg::Telemetry(t)) => break Some(t),
+            Some(_) => {}
+            None => break None,
+        }
+    };
+    c.expect_ok(Request::Telemetry { every: 0 })?;
+    found.ok_or_else(|| anyhow!("no telemetry record within 3 s"))
+}
+
+fn status(c: &mut Client) -> Result<()> {
+    let s = status_of(c)?;
+    let t = timing_of(c)?;
+    let r = one_record(c)?;
+    let period = f64::from(t.period_s);
+    println!(
+        "state: {}: {}",
+        names::arm_state(s.arm),
+        names::advice(s.arm)
+    );
+    println!("faults: {}", names::faults(s.faults));
+    println!(
+        "sensors: body height {:.4} m, nut {:.2} mm, spring force {:.1} N, energy {:.2} J, command {:.2} A, phase {}",
+        r.body_height_m,
+        r.nut_position_m * 1000.0,
+        r.spring_force_n,
+        r.energy_j,
+        r.command_a,
+        if r.phase == 1 { "stance" } else { "flight" }
+    );
+    println!(
+        "periods: {} ({:.3} s at {:.0} Hz), missed deadlines {}",
+        s.periods,
+        f64::from(s.periods) * period,
+        1.0 / period,
+        t.missed
+    );
+    println!(
+        "link: {} frames in, {} bad; {} telemetry records not sent; host got {} frames, {} bad",
+        s.frames_ok,
+        s.frames_bad,
+        s.telemetry_dropped,
+        c.stats().ok,
+        c.stats().bad()
+    );
+    if s.last_apex_m.is_finite() {
+        println!("last apex: {:.4} m", s.last_apex_m);
+    } else {
+        println!("last apex: none yet");
+    }
+    println!(
+        "cost per period (robot counter ticks: board cycles, QEMU instructions, simulator 0): control step mean {} max {}, link mean {} max {}",
+        t.step_mean, t.step_max, t.link_mean, t.link_max
+    );
+    Ok(())
+}
+
+fn params_list(c: &mut Client) -> Result<()> {
+    let n = match c.request(Request::ParamCount)? {
+        Response::ParamCount(n) => n,
+        r => bail!("unexpected answer {r:?}"),
+    };
+    println!(
+        "{:<42} {:>14} {:<8} {:>25} {:>12}  armed",
+        "name", "value", "unit", "range", "default"
+    );
+    for index in 0..n {
+        match c.request(Request::ParamInfo { index })? {
+            Response::ParamInfo(p) => {
+                let value = match params::find(&p.name).map(|x| x.kind) {
+                    Some(Kind::Choice(names)) => names
+                        .get(p.value as usize)
+                        .map_or(format!("{}", p.value), |s| (*s).to_string()),
+                    _ => format!("{}", p.value),
+                };
+                println!(
+                    "{:<42} {:>14} {:<8} {:>25} {:>12}  {}",
+                    p.name.as_str(),
+                    value,
+                    p.unit.as_str(),
+                    format!("{} ..= {}", p.min, p.max),
+                    p.default,
+                    if p.live { "settable" } else { "-" }
+                );
+            }
+            Response::Refused(why) => bail!("parameter {index}: {why}"),
+            r => bail!("unexpected answer {r:?}"),
+        }
+    }
+    println!("{n} parameters");
+    Ok(())
+}
+
+fn disarm(c: &mut Client) -> Result<()> {
+    c.expect_ok(Request::Telemetry { every: 1 })?;
+    c.discard_events();
+    c.expect_ok(Request::Disarm)?;
+    let deadline = Instant::now() + Duration::from_secs(3);
+    let next = loop {
+        match c.next_event(deadline.saturating_duration_since(Instant::now()))? {
+            Some(RobotMsg::Telemetry(t)) if !t.armed => break Some(t),
+            Some(_) => {}
+            None => break None,
+        }
+    };
+    c.expect_ok(Request::Telemetry { every: 0 })?;
+    let t = next.ok_or_else(|| anyhow!("no disarmed telemetry record within 3 s"))?;
+    println!(
+        "disarmed; next record: step {}, armed {}, command {:.3} A",
+        t.step, t.armed, t.command_a
+    );
+    if t.command_a != 0.0 {
+        bail!("the record after the disarm commands {} A", t.command_a);
+    }
+    Ok(())
+}
+
+fn record(c: &mut Client, duration_s: f64, rate_hz: f64, out: &std::path::Path) -> Result<()> {
+    if !(duration_s.is_finite() && duration_s > 0.0) {
+        bail!("--duration {duration_s} must be a positive number of seconds");
+    }
+    let t = timing_of(c)?;
+    let period = f64::from(t.period_s);
+    if !(rate_hz.is_finite() && rate_hz > 0.0 && rate_hz <= 1.0 / period + 1e-6) {
+        bail!(
+            "--rate {rate_hz} must be in (0, {:.0}] Hz (the control rate)",
+            1.0 / period
+        );
+    }
+    let every = (1.0 / (rate_hz * period)).round().clamp(1.0, 65535.0) as u16;
+    let target = get(c, "target_apex_m").ok().map(f64::from);
+    let controller = get(c, "controller")
+        .ok()
+        .and_then(|v| params::CONTROLLER_NAMES.get(v as usize).copied())
+        .unwrap_or("the controller");
+    let mut rec = Recording {
+        period_s: period,
+        ..Recording::default()
+    };
+    let span = (duration_s / period).round() as u64;
+    let bar = indicatif::ProgressBar::new(span);
+    if !std::io::stderr().is_terminal() {
+        bar.set_draw_target(indicatif::ProgressDrawTarget::hidden());
+    }
+    c.discard_events();
+    c.expect_ok(Request::Telemetry { every })?;
+    let mut quiet = Instant::now();
+    loop {
+        match c.next_event(Duration::from_millis(200))? {
+            Some(RobotMsg::Telemetry(t)) => {
+                quiet = Instant::now();
+                let first = rec.records.first().map_or(t.step, |f| f.step);
+                let spanned = u64::from(t.step.wrapping_sub(first));
+                rec.records.push(t);
+                bar.set_position(spanned.min(span));
+                if spanned + u64::from(every) > span {
+                    break;
+                }
+            }
+            Some(RobotMsg::Hop(h)) => rec.hops.push(h),
+            Some(RobotMsg::Faults { step, bits }) => {
+                bar.suspend(|| {
+                    println!("fault at step {step}: {}", names::faults(bits));
+                });
+                rec.faults.push((step, bits));
+            }
+            Some(RobotMsg::State(s)) => bar.suspend(|| println!("state: {}", names::arm_state(s))),
+            Some(_) => {}
+            None if quiet.elapsed() > Duration::from_secs(3) => {
+                bail!("no telemetry for 3 s: the robot stopped streaming")
+            }
+            None => {}
+        }
+    }
+    c.expect_ok(Request::Telemetry { every: 0 })?;
+    bar.finish_and_clear();
+    let title = format!("{controller} on the robot ({})", c.target());
+    let written = rec.write(out, &title, target)?;
+    let apexes = rec.apexes_m();
+    println!(
+        "recorded {:.3} s: {} records at {:.0} Hz, {} dropped; {} hops",
+        rec.records.len() as f64 * f64::from(every) * period,
+        rec.records.len(),
+        1.0 / (f64::from(every) * period),
+        rec.dropped(),
+        rec.hops.len()
+    );
+    println!(
+        "apexes (m): {}",
+        apexes
+            .iter()
+            .map(|a| format!("{a:.4}"))
+            .collect::<Vec<_>>()
+            .join(" ")
+    );
+    if let (Some(s), Some(t)) = (hopper_plant::metrics::steady_apex(&apexes), target) {
+        println!(
+            "steady apex: {s:.4} m (target {t:.4} m, {:+.1}%)",
+            (s - t) / t * 100.0
+        );
+    }
+    println!(
+        "wrote {}",
+        written
+            .iter()
+            .map(|p| p.display().to_string())
+            .collect::<Vec<_>>()
+            .join(", ")
+    );
+    Ok(())
+}
+
+fn watch(c: &mut Client, duration: Option<f64>) -> Result<()> {
+    let t = timing_of(c)?;
+    let every = ((0.1 / f64::from(t.period_s)).round() as u16).max(1);
+    c.discard_events();
+    c.expect_ok(Request::Telemetry { every })?;
+    let tty = std::io::stdout().is_terminal();
+    let start = Instant::now();
+    let mut last_apex = f32::NAN;
+    let mut last_seq: Option<u32> = None;
+    let mut drops: u64 = 0;
+    let mut state = String::from("?");
+    while duration.is_none_or(|d| start.elapsed().as_secs_f64() < d) {
+        match c.next_event(Duration::from_millis(500))? {
+            Some(RobotMsg::Telemetry(r)) => {
+                if let Some(p) = last_seq {
+                    drops += u64::from(r.seq.wrapping_sub(p).saturating_sub(1));
+                }
+                last_seq = Some(r.seq);
+                let line = format!(
+                    "{:<22} faults {:<16} apex {:>7.4} m  z {:.4} m  nut {:>6.2} mm  F {:>6.1} N  I {:>6.2} A  drops {}",
+                    if r.armed { "armed".to_string() } else { state.clone() },
+                    names::faults(r.faults),
+                    last_apex,
+                    r.body_height_m,
+                    r.nut_position_m * 1000.0,
+                    r.spring_force_n,
+                    r.command_a,
+                    drops
+                );
+                if tty {
+                    print!("\r{line}");
+                } else if r.seq.is_multiple_of(10) {
+                    println!("{line}");
+                }
+                let _ = std::io::stdout().flush();
+            }
+            Some(RobotMsg::Hop(h)) => last_apex = h.apex_height_m,
+            Some(RobotMsg::State(s)) => state = names::arm_state(s),
+            Some(RobotMsg::Faults { step, bits }) => {
+                println!("\nfault at step {step}: {}", names::faults(bits));
+            }
+            _ => {}
+        }
+    }
+    c.expect_ok(Request::Telemetry { every: 0 })?;
+    if tty {
+        println!();
+    }
+    Ok(())
+}
+
+fn dump(c: &mut Client, out: &std::path::Path) -> Result<()> {
+    let t = timing_of(c)?;
+    let st = status_of(c)?;
+    c.discard_events();
+    let info = match c.request(Request::Dump)? {
+        Response::Dump(i) => i,
+        r => bail!("unexpected answer {r:?}"),
+    };
+    let mut rec = Recording {
+        period_s: f64::from(t.period_s),
+        ..Recording::default()
+    };
+    let mut quiet = Instant::now();
+    while rec.records.len() < usize::from(info.records) {
+        match c.next_event(Duration::from_millis(200))? {
+            Some(RobotMsg::Captured(r)) => {
+                quiet = Instant::now();
+                rec.records.push(r);
+            }
+            Some(_) => {}
+            None if quiet.elapsed() > Duration::from_secs(5) => bail!(
+                "the dump stopped after {} of {} records",
+                rec.records.len(),
+                info.records
+            ),
+            None => {}
+        }
+    }
+    let title = if info.frozen {
+        format!("capture frozen by a fault at step {}", info.fault_step)
+    } else {
+        "capture of the latest periods (no fault)".to_string()
+    };
+    let mut written = rec.write(out, &title, None)?;
+    // The dump's files are named for what they are.
+    for (from, to) in [("telemetry.csv", "capture.csv"), ("hop.png", "capture.png")] {
+        let (a, b) = (out.join(from), out.join(to));
+        if a.exists() {
+            std::fs::rename(&a, &b)?;
+            if let Some(w) = written.iter_mut().find(|p| **p == a) {
+                *w = b;
+            }
+        }
+    }
+    let hops = out.join("hops.csv");
+    let _ = std::fs::remove_file(&hops);
+    written.retain(|p| *p != hops);
+    let span_ms = rec.records.len() as f64 * rec.period_s * 1000.0;
+    if info.frozen {
+        println!(
+            "capture: {} records ({span_ms:.1} ms), frozen by the fault at step {}; latched now: {}",
+            rec.records.len(),
+            info.fault_step,
+            names::faults(st.faults)
+        );
+    } else {
+        println!(
+            "capture: {} records ({span_ms:.1} ms) of the latest periods; no fault froze it",
+            rec.records.len()
+        );
+    }
+    println!(
+        "wrote {}",
+        written
+            .iter()
+            .map(|p| p.display().to_string())
+            .collect::<Vec<_>>()
+            .join(", ")
+    );
+    Ok(())
+}
+
+fn silence(c: &mut Client, max_s: f64) -> Result<()> {
+    let timeout_s = get(c, "arming.link_timeout_s")?;
+    let t = timing_of(c)?;
+    let period = f64::from(t.period_s);
+    let every = ((0.001 / period).round() as u16).max(1);
+    c.expect_ok(Request::Telemetry { every })?;
+    c.discard_events();
+    // The latest step the host has seen when it goes quiet: the robot gets
+    // the last frame no earlier, so the time from it to the disarm is at
+    // least the robot's true quiet time.
+    let mut last_seen: Option<u32> = None;
+    let start = Instant::now();
+    while start.elapsed() < Duration::from_millis(100) {
+        if let Some(RobotMsg::Telemetry(r)) = c.next_event(Duration::from_millis(20))? {
+            last_seen = Some(r.step);
+        }
+    }
+    // Heartbeats off, then one last frame of our own: the robot receives
+    // it no earlier than the latest step seen here when it goes out.
+    c.set_heartbeats(false);
+    std::thread::sleep(hopper_link::HEARTBEAT);
+    while let Ok(Some(m)) = c.next_event(Duration::ZERO) {
+        if let RobotMsg::Telemetry(r) = m {
+            last_seen = Some(r.step);
+        }
+    }
+    let from = last_seen.ok_or_else(|| anyhow!("no telemetry before the silence"))?;
+    c.send(&hopper_protocol::HostMsg::Heartbeat)?;
+    let mut disarmed_at = None;
+    let mut reason = None;
+    while start.elapsed().as_secs_f64() < max_s {
+        match c.next_event(Duration::from_millis(100))? {
+            Some(RobotMsg::Telemetry(r)) if !r.armed && disarmed_at.is_none() => {
+                disarmed_at = Some(r.step)
+            }
+            Some(RobotMsg::State(s @ ArmState::Disarmed(_))) => reason = Some(s),
+            _ => {}
+        }
+        if disarmed_at.is_some() && reason.is_some() {
+            break;
+        }
+    }
+    c.set_heartbeats(true);
+    c.expect_ok(Request::Telemetry { every: 0 })?;
+    let at =
+        disarmed_at.ok_or_else(|| anyhow!("still armed {max_s} s after the heartbeats stopped"))?;
+    let quiet_s = f64::from(at.wrapping_sub(from)) * period;
+    println!(
+        "{} {quiet_s:.4} s of robot time after the host went quiet (link timeout {timeout_s:.3} s)",
+        reason.map_or("disarmed".to_string(), names::arm_state)
+    );
+    if reason != Some(ArmState::Disarmed(5)) {
+        bail!("disarmed for another reason: {:?}", reason);
+    }
+    Ok(())
+}
