@@ -52,7 +52,12 @@ enum Cmd {
     /// the reason unless no fault is latched, the e-stop is released, the
     /// nut is home and the robot is still). The link must stay up: use it
     /// inside `shell`, or the robot disarms 0.2 s after this command exits.
-    Arm,
+    Arm {
+        /// Ask again until accepted or this many wall seconds passed (e.g.
+        /// while the robot settles after a disarm).
+        #[arg(long, value_name = "SECONDS")]
+        retry: Option<f64>,
+    },
     /// 0 A and the amplifier off; prints the next telemetry record.
     Disarm,
     /// Clear the latched faults whose cause is gone (only while disarmed).
@@ -235,14 +240,25 @@ fn run(c: &mut Client, cmd: &Cmd) -> Result<()> {
                 }
             }
         },
-        Cmd::Arm => match c.request(Request::Arm)? {
-            Response::Ok => {
-                println!("armed");
-                Ok(())
+        Cmd::Arm { retry } => {
+            let start = Instant::now();
+            loop {
+                match c.request(Request::Arm)? {
+                    Response::Ok => {
+                        println!("armed");
+                        return Ok(());
+                    }
+                    Response::Refused(why)
+                        if start.elapsed().as_secs_f64() < retry.unwrap_or(0.0) =>
+                    {
+                        let _ = why;
+                        std::thread::sleep(Duration::from_millis(50));
+                    }
+                    Response::Refused(why) => bail!("arm refused: {why}"),
+                    r => bail!("unexpected answer {r:?}"),
+                }
             }
-            Response::Refused(why) => bail!("arm refused: {why}"),
-            r => bail!("unexpected answer {r:?}"),
-        },
+        }
         Cmd::Disarm => disarm(c),
         Cmd::ResetFaults => {
             let r = c.request(Request::ResetFaults)?;
@@ -635,10 +651,19 @@ fn watch(c: &mut Client, duration: Option<f64>) -> Result<()> {
 fn dump(c: &mut Client, out: &std::path::Path) -> Result<()> {
     let t = timing_of(c)?;
     let st = status_of(c)?;
-    c.discard_events();
-    let info = match c.request(Request::Dump)? {
-        Response::Dump(i) => i,
-        r => bail!("unexpected answer {r:?}"),
+    // A fault latched less than a quarter capture ago is still being
+    // captured: ask again until the capture froze (a fresh dump restarts).
+    let asked = Instant::now();
+    let info = loop {
+        c.discard_events();
+        let info = match c.request(Request::Dump)? {
+            Response::Dump(i) => i,
+            r => bail!("unexpected answer {r:?}"),
+        };
+        if info.frozen || info.fault_step == 0 || asked.elapsed() > Duration::from_secs(5) {
+            break info;
+        }
+        std::thread::sleep(Duration::from_millis(100));
     };
     let mut rec = Recording {
         period_s: f64::from(t.period_s),
@@ -660,8 +685,14 @@ fn dump(c: &mut Client, out: &std::path::Path) -> Result<()> {
             None => {}
         }
     }
+    if info.frozen {
+        rec.t0_step = Some(info.fault_step);
+    }
     let title = if info.frozen {
-        format!("capture frozen by a fault at step {}", info.fault_step)
+        format!(
+            "capture frozen by a fault at step {} (t = 0 s there)",
+            info.fault_step
+        )
     } else {
         "capture of the latest periods (no fault)".to_string()
     };
@@ -705,6 +736,9 @@ fn dump(c: &mut Client, out: &std::path::Path) -> Result<()> {
 }
 
 fn silence(c: &mut Client, max_s: f64) -> Result<()> {
+    if status_of(c)?.arm != ArmState::Armed {
+        bail!("the robot is not armed: arm it first");
+    }
     let timeout_s = get(c, "arming.link_timeout_s")?;
     let t = timing_of(c)?;
     let period = f64::from(t.period_s);

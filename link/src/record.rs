@@ -18,6 +18,8 @@ pub struct Recording {
     pub hops: Vec<Hop>,
     /// Faults latched during the recording: (step, bits).
     pub faults: Vec<(u32, u16)>,
+    /// The step of t = 0 (None: the first record's; a dump: the fault's).
+    pub t0_step: Option<u32>,
 }
 
 impl Recording {
@@ -40,8 +42,11 @@ impl Recording {
 
     /// Time of a record since the first, s.
     fn t_s(&self, r: &Telemetry) -> f64 {
-        let first = self.records.first().map_or(r.step, |f| f.step);
-        f64::from(r.step.wrapping_sub(first)) * self.period_s
+        let first = self
+            .t0_step
+            .or(self.records.first().map(|f| f.step))
+            .unwrap_or(r.step);
+        f64::from(r.step.wrapping_sub(first) as i32) * self.period_s
     }
 
     /// Writes `telemetry.csv`, `hops.csv` and `hop.png` into `dir`

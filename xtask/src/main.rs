@@ -18,13 +18,21 @@
 //!   instruction budget. The `shaped` scenario prints `qemu-shaped: ...`;
 //!   the last line is `qemu: steady_apex_m=... hops_to_converge=...
 //!   step_instr_min=... step_instr_mean=... step_instr_max=... missed=...`
-//!   (the energy-apex scenario).
+//!   (the energy-apex scenario). Before the scenarios it runs the link
+//!   session (`tests/link-session.txt`) with `hopper-link` against the QEMU
+//!   link image: `qemu-link: steady_apex_m=... records=... dropped=...
+//!   link_lost_s=... frames_bad=... step_instr_mean=... step_instr_max=...
+//!   link_instr_mean=... link_instr_max=...`.
+//! * `cargo xtask link-session`: the same session against `hopper-sim
+//!   serve` (the virtual robot), `link-sim: ...` (`cargo xtask test` runs
+//!   it after the QEMU runs).
 
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
 use std::process::{Command, ExitCode, Stdio};
 
 mod qemu;
+mod session;
 
 const TARGET: &str = "thumbv7em-none-eabihf";
 
@@ -45,8 +53,9 @@ fn main() -> ExitCode {
         Some("test") => test(&root),
         Some("size") => setup(&root).and_then(|_| size(&root)),
         Some("qemu") => setup(&root).and_then(|_| qemu::run(&root)),
+        Some("link-session") => session::against_serve(&root),
         _ => {
-            eprintln!("usage: cargo xtask <test|size|qemu>");
+            eprintln!("usage: cargo xtask <test|size|qemu|link-session>");
             return ExitCode::from(2);
         }
     };
@@ -226,6 +235,7 @@ fn test(root: &Path) -> Result<(), String> {
     )?;
     size(root)?;
     qemu::run(root)?;
+    session::against_serve(root)?;
     cargo_test(root)
 }
 

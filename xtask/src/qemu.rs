@@ -94,6 +94,12 @@ const QEMU_TIMEOUT: Duration = Duration::from_secs(900);
 pub fn run(root: &Path) -> Result<(), String> {
     ensure_qemu()?;
     let mut failed = Vec::new();
+    if let Err(e) = link_session(root) {
+        if !e.starts_with("qemu-link session failed") {
+            println!("qemu-link: error (see above)");
+        }
+        failed.push(e);
+    }
     for s in &SCENARIOS {
         if let Err(e) = run_scenario(root, s) {
             // A failure before the summary (build, QEMU, decoding, the host
@@ -110,6 +116,32 @@ pub fn run(root: &Path) -> Result<(), String> {
     } else {
         Err(failed.join("; "))
     }
+}
+
+/// The link image (`--features qemu-link`) and the scripted session
+/// against it (the `qemu-link:` line).
+fn link_session(root: &Path) -> Result<(), String> {
+    let target_dir = crate::target_dir(root)?.join("qemu-link");
+    run_cmd(
+        root,
+        "firmware build (QEMU link image)",
+        cargo()
+            .args([
+                "build",
+                "-p",
+                "hopper-app",
+                "--release",
+                "--target",
+                TARGET,
+                "--no-default-features",
+                "--features",
+                "qemu-link",
+                "--target-dir",
+            ])
+            .arg(&target_dir),
+    )?;
+    let elf = target_dir.join(TARGET).join("release").join("hopper-fw");
+    crate::session::against_qemu(root, &elf)
 }
 
 fn run_scenario(root: &Path, scenario: &Scenario) -> Result<(), String> {
@@ -375,7 +407,7 @@ fn run_qemu(elf: &Path, shift: u32) -> Result<(Vec<u8>, bool), String> {
 }
 
 /// Decodes a defmt byte stream with the ELF's format table.
-fn decode(elf: &Path, bytes: &[u8]) -> Result<Vec<String>, String> {
+pub(crate) fn decode(elf: &Path, bytes: &[u8]) -> Result<Vec<String>, String> {
     let image = std::fs::read(elf).map_err(|e| format!("{}: {e}", elf.display()))?;
     let table = defmt_decoder::Table::parse(&image)
         .map_err(|e| format!("defmt table: {e}"))?

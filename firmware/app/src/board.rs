@@ -35,6 +35,8 @@
 //! | PB3  | TIM2_CH2, AF1, pull-up    | motor encoder B                     | input            | — |
 //! | PA0  | TIM5_CH1, AF2, pull-up    | height encoder A                    | input            | — |
 //! | PA1  | TIM5_CH2, AF2, pull-up    | height encoder B                    | input            | — |
+//! | PA9  | USART1_TX, AF7            | host link, to the USB-UART adapter's RX, 921,600 baud 8N1 | output | idle high |
+//! | PA10 | USART1_RX, AF7, pull-up   | host link, from the adapter's TX    | input            | idle high when unplugged |
 //!
 //! PA15, PB3 and PB4 are JTAG pins at reset (JTDI, JTDO/SWO, NJTRST): after
 //! [`init`] the board is debuggable over SWD only (PA13/PA14, untouched) and
@@ -78,6 +80,7 @@
 
 use core::convert::Infallible;
 
+use heapless::spsc::{Consumer, Producer};
 use hopper_control::hal::{HopperIo, IoError, RawSample};
 use stm32f4::stm32f405::{self as pac, Peripherals};
 
@@ -214,7 +217,6 @@ macro_rules! configure_encoder {
 }
 
 /// Everything the RTIC app needs from the board.
-#[derive(Debug)]
 pub struct Board {
     /// Sensors, DAC and amplifier enable: the control step's [`HopperIo`].
     pub io: BoardIo,
@@ -222,6 +224,8 @@ pub struct Board {
     pub watchdog: Watchdog,
     /// The dump button (PC13).
     pub dump_button: DumpButton,
+    /// The host link's USART1 (PA9/PA10), receiving.
+    pub serial: crate::serial::Serial,
 }
 
 /// The clocks `init` ended up with.
@@ -231,6 +235,8 @@ struct Clocks {
     sysclk_hz: u32,
     /// Clock of the APB1 timers (TIM2..TIM5), Hz.
     apb1_timer_hz: u32,
+    /// APB2 clock (USART1), Hz.
+    pclk2_hz: u32,
 }
 
 /// Configures the board; the amplifier is disabled (AMP_EN low) and the DAC at
@@ -243,7 +249,12 @@ struct Clocks {
 /// Starts TIM4 (the ADC interrupt then fires every period once the
 /// application unmasks it) and, last, the watchdog: the first
 /// [`Watchdog::feed`] must come within ~5 ms of this function returning.
-pub fn init(dp: Peripherals, control_hz: u32, dac_zero_code: u16) -> Board {
+pub fn init(
+    dp: Peripherals,
+    control_hz: u32,
+    dac_zero_code: u16,
+    link: (Producer<'static, u8>, Consumer<'static, u8>),
+) -> Board {
     let zero_code = if dac_zero_code <= DAC_MAX_CODE {
         dac_zero_code
     } else {
@@ -318,7 +329,17 @@ pub fn init(dp: Peripherals, control_hz: u32, dac_zero_code: u16) -> Board {
     //    ADC powered and settled.
     dp.TIM4.cr1().modify(|_, w| w.cen().enabled());
 
-    // 9. The watchdog, last: from here on the control task must run.
+    // 9. The host link (issue 17): USART1 on PA9/PA10.
+    let serial = crate::serial::Serial::new(
+        dp.USART1,
+        &dp.RCC,
+        &dp.GPIOA,
+        clocks.pclk2_hz,
+        link.0,
+        link.1,
+    );
+
+    // 10. The watchdog, last: from here on the control task must run.
     let watchdog = Watchdog::start(dp.IWDG, &dp.RCC);
 
     Board {
@@ -339,6 +360,7 @@ pub fn init(dp: Peripherals, control_hz: u32, dac_zero_code: u16) -> Board {
             pressed: true,
             last_sample: true,
         },
+        serial,
     }
 }
 
@@ -403,6 +425,7 @@ fn configure_clocks(rcc: &pac::RCC, flash: &pac::FLASH, pwr: &pac::PWR) -> Clock
     let hsi = Clocks {
         sysclk_hz: HSI_HZ,
         apb1_timer_hz: HSI_HZ,
+        pclk2_hz: HSI_HZ,
     };
 
     // Start from a known state: on the HSI, PLL off (a debugger or bootloader
@@ -483,6 +506,7 @@ fn configure_clocks(rcc: &pac::RCC, flash: &pac::FLASH, pwr: &pac::PWR) -> Clock
         sysclk_hz: SYSCLK_HZ,
         // APB1 prescaler ≠ 1: its timers run at twice PCLK1.
         apb1_timer_hz: 2 * PLL_PCLK1_HZ,
+        pclk2_hz: SYSCLK_HZ / 2,
     }
 }
 

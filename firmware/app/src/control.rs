@@ -2,7 +2,7 @@
 //! rate and overrun limit, the telemetry capture size and the log queue.
 
 use hopper_control::runner::Timing;
-use hopper_control::telemetry::TelemetryRing;
+use hopper_control::telemetry::{FaultCapture, CAPTURE_LEN};
 
 /// Parses a decimal `u32` at compile time; `default` when absent or malformed
 /// (a malformed value then fails the range assert below instead of panicking).
@@ -57,12 +57,9 @@ const _: () = assert!(
 #[allow(clippy::cast_precision_loss)] // CONTROL_HZ <= 20_000 is exact in f32.
 pub const CONTROL_PERIOD_S: f32 = 1.0 / CONTROL_HZ as f32;
 
-/// Records in the telemetry capture buffer (32 bytes each): the last
-/// 25.6 ms at 10 kHz, dumped on request.
-pub const CAPTURE_LEN: usize = 256;
-
-/// The capture buffer type.
-pub type Capture = TelemetryRing<CAPTURE_LEN>;
+/// The capture buffer type (`hopper_control::telemetry::CAPTURE_LEN`
+/// records), dumped on request (the link's `dump`, the dump button).
+pub type Capture = FaultCapture<CAPTURE_LEN>;
 
 /// The runner's pacing: [`CONTROL_PERIOD_S`] and [`OVERRUN_LIMIT`].
 pub const TIMING: Timing = Timing {

@@ -47,11 +47,19 @@ fn main() {
 #[cfg(target_os = "none")]
 pub mod control;
 
+#[cfg(target_os = "none")]
+pub mod serial;
+
 #[cfg(all(target_os = "none", not(feature = "qemu-sim")))]
 mod board;
 
 #[cfg(all(target_os = "none", not(feature = "qemu-sim")))]
 use defmt_rtt as _;
+
+// Board logs carry the time since boot (the QEMU log stays bare: the xtask
+// parses its lines).
+#[cfg(all(target_os = "none", not(feature = "qemu-sim")))]
+defmt::timestamp!("{=u32:us}", crate::log::now_us());
 
 #[cfg(all(target_os = "none", feature = "qemu-sim"))]
 use defmt_semihosting as _;
@@ -137,6 +145,18 @@ pub mod log {
         }
     }
 
+    /// Control periods run, for the log's timestamps (the control task
+    /// stores it once a period).
+    pub static PERIODS: core::sync::atomic::AtomicU32 = core::sync::atomic::AtomicU32::new(0);
+
+    /// Microseconds since boot in control periods (wraps after 71 min at
+    /// 10 kHz).
+    pub fn now_us() -> u32 {
+        PERIODS
+            .load(core::sync::atomic::Ordering::Relaxed)
+            .wrapping_mul(1_000_000 / crate::control::CONTROL_HZ)
+    }
+
     /// Prints one item (board: at info and warn level; QEMU: always, as
     /// its run's log is the test's evidence).
     pub fn print(item: &LogItem) {
@@ -164,15 +184,18 @@ mod app {
     use crate::board::{self, BoardIo, CycleCounter, DumpButton, Watchdog};
     use crate::control::{Capture, CONTROL_HZ, LOG_CAPACITY, TIMING};
     use crate::log::{self, Log};
+    use crate::serial::{LinkTx, RxQueue, Serial, TxQueue};
     use cortex_m::peripheral::NVIC;
+    use heapless::spsc::Consumer;
     use hopper_control::hopper::HopperConfig;
+    use hopper_control::link::Endpoint;
     use hopper_control::runner::{LogItem, PeriodRunner};
     use rtic_sync::make_channel;
     use stm32f4::stm32f405::Interrupt;
 
     #[shared]
     struct Shared {
-        /// Per-step records, drained on request.
+        /// The capture, frozen around the first fault.
         capture: Capture,
     }
 
@@ -184,9 +207,13 @@ mod app {
         runner: PeriodRunner,
         cycles: CycleCounter,
         log: Log,
+        link: Endpoint,
+        link_rx: Consumer<'static, u8>,
+        link_tx: LinkTx,
+        serial: Serial,
     }
 
-    #[init]
+    #[init(local = [rxq: RxQueue = RxQueue::new(), txq: TxQueue = TxQueue::new()])]
     fn init(cx: init::Context) -> (Shared, Local) {
         let mut cfg = HopperConfig::default();
         // TIM2 and TIM5 count the encoders over 32 bits.
@@ -210,7 +237,14 @@ mod app {
         };
         let mut core = cx.core;
         let cycles = CycleCounter::start(&mut core.DCB, &mut core.DWT);
-        let board = board::init(cx.device, CONTROL_HZ, cfg.calibration.dac_zero_code);
+        let (rx_in, rx_out) = cx.local.rxq.split();
+        let (tx_in, tx_out) = cx.local.txq.split();
+        let board = board::init(
+            cx.device,
+            CONTROL_HZ,
+            cfg.calibration.dac_zero_code,
+            (rx_in, tx_out),
+        );
         let watchdog = board.watchdog;
         if watchdog.caused_last_reset() {
             // The control loop stopped or misbehaved last time: start faulted,
@@ -234,9 +268,10 @@ mod app {
             runner.report_overrun();
         }
         defmt::info!(
-            "hopper-fw: board build, control at {=u32} Hz, core clock {=u32} Hz",
+            "hopper-fw: board build, control at {=u32} Hz, core clock {=u32} Hz, link on USART1 at {=u32} baud; disarmed until the host arms",
             board.io.control_hz(),
-            board.io.sysclk_hz()
+            board.io.sysclk_hz(),
+            crate::serial::LINK_BAUD
         );
         (
             Shared {
@@ -249,6 +284,10 @@ mod app {
                 runner,
                 cycles,
                 log: Log::new(tx),
+                link: Endpoint::new(),
+                link_rx: rx_out,
+                link_tx: LinkTx::new(tx_in),
+                serial: board.serial,
             },
         )
     }
@@ -261,20 +300,40 @@ mod app {
     }
 
     /// The control period: fresh ADC samples are in; the runner reads, steps
-    /// and writes; this task only paces it, feeds the watchdog and queues
-    /// the log (neither blocks).
-    #[task(binds = ADC, priority = 3, local = [io, watchdog, dump, runner, cycles, log, polls: u32 = 0], shared = [capture])]
+    /// and writes; this task paces it, feeds the watchdog, records the
+    /// capture, services the link (the received bytes since the last
+    /// period, the period's messages queued) and queues the log. Nothing
+    /// here waits.
+    #[task(binds = ADC, priority = 3, local = [io, watchdog, dump, runner, cycles, log, link, link_rx, link_tx, polls: u32 = 0], shared = [capture])]
     fn control(mut cx: control::Context) {
         if !cx.local.io.ack_control_irq() {
             return;
         }
-        let p = cx.local.runner.run_period(cx.local.io, cx.local.cycles);
+        let runner = &mut *cx.local.runner;
+        let p = runner.run_period(cx.local.io, cx.local.cycles);
         // The next conversion already finished: this period overran.
-        cx.local.runner.end_period(NVIC::is_pending(Interrupt::ADC));
+        runner.end_period(NVIC::is_pending(Interrupt::ADC));
+        log::PERIODS.store(runner.periods(), core::sync::atomic::Ordering::Relaxed);
         if p.feed_watchdog {
             cx.local.watchdog.feed();
         }
-        cx.shared.capture.lock(|c| c.push(p.out.record));
+        let (link, rx, tx, cycles) = (
+            &mut *cx.local.link,
+            &mut *cx.local.link_rx,
+            &mut *cx.local.link_tx,
+            &mut *cx.local.cycles,
+        );
+        cx.shared.capture.lock(|c| {
+            c.record(&p.out.record, !p.newly_latched.is_empty());
+            link.service(
+                runner,
+                &p,
+                core::iter::from_fn(|| rx.dequeue()),
+                c,
+                tx,
+                cycles,
+            );
+        });
         if let Some(item) = p.log {
             cx.local.log.push(item);
         }
@@ -282,6 +341,12 @@ mod app {
         if cx.local.polls.is_multiple_of(100) && cx.local.dump.pressed() {
             let _ = dump::spawn(cx.local.log.dropped());
         }
+    }
+
+    /// The link's bytes in and out (below the control task).
+    #[task(binds = USART1, priority = 2, local = [serial])]
+    fn usart1(cx: usart1::Context) {
+        cx.local.serial.on_interrupt();
     }
 
     /// Logs hop ledgers and faults as the control task queues them.
@@ -292,24 +357,31 @@ mod app {
         }
     }
 
-    /// Dumps the capture buffer (the dump button).
+    /// Prints the capture (the dump button), oldest first; it stays in
+    /// place (the link's `dump` reads the same records).
     #[task(priority = 1, shared = [capture])]
     async fn dump(mut cx: dump::Context, log_dropped: u32) {
-        defmt::info!("capture dump begins");
-        while let Some(r) = cx.shared.capture.lock(|c| c.pop()) {
-            defmt::info!("{}", r);
-        }
-        let dropped = cx.shared.capture.lock(|c| c.dropped());
+        let (n, frozen, fault_step) = cx
+            .shared
+            .capture
+            .lock(|c| (c.len(), c.frozen(), c.fault_step().unwrap_or(0)));
         defmt::info!(
-            "capture dump ends ({=u32} older records dropped; {=u32} log items dropped)",
-            dropped,
-            log_dropped
+            "capture dump begins: {=usize} records, frozen by a fault: {=bool} (step {=u32})",
+            n,
+            frozen,
+            fault_step
         );
+        for i in 0..n {
+            if let Some(r) = cx.shared.capture.lock(|c| c.get(i).copied()) {
+                defmt::info!("{}", r);
+            }
+        }
+        defmt::info!("capture dump ends ({=u32} log items dropped)", log_dropped);
     }
 }
 
 /// The QEMU application: the same period runner on the simulated hopper.
-#[cfg(all(target_os = "none", feature = "qemu-sim"))]
+#[cfg(all(target_os = "none", feature = "qemu-sim", not(feature = "qemu-link")))]
 #[rtic::app(device = stm32f4::stm32f405, peripherals = true, dispatchers = [FSMC])]
 mod app {
     use crate::control::{Capture, CONTROL_HZ, CONTROL_PERIOD_S, LOG_CAPACITY, TIMING};
@@ -550,7 +622,9 @@ mod app {
             let mut io = sim.hal.io(&sim.plant);
             runner.run_period(&mut io, cx.local.counter)
         };
-        cx.shared.capture.lock(|c| c.push(p.out.record));
+        cx.shared
+            .capture
+            .lock(|c| c.record(&p.out.record, !p.newly_latched.is_empty()));
         if let Some(item) = p.log {
             cx.local.log.push(item);
         }
@@ -629,5 +703,174 @@ mod app {
         while let Ok(item) = rx.recv().await {
             log::print(&item);
         }
+    }
+}
+
+/// The QEMU link image (`--features qemu-link`, issue 17): the virtual
+/// robot (`hopper_plant::robot::VirtualRobot`, which `hopper-sim serve`
+/// runs too) with the host link on USART1, which QEMU wires to its first
+/// `-serial` (the xtask gives it a TCP socket). Like the board it boots
+/// disarmed and tethered, so nothing moves until `hopper-link` arms it; the
+/// body is held 0.05 m up until then (`VirtualRobot::held`). It runs until
+/// QEMU is stopped, or `LINK_LIMIT_S` of robot time.
+#[cfg(all(target_os = "none", feature = "qemu-link"))]
+#[rtic::app(device = stm32f4::stm32f405, peripherals = true, dispatchers = [FSMC])]
+mod app {
+    use crate::control::{CONTROL_HZ, CONTROL_PERIOD_S, TIMING};
+    use crate::serial::{LinkTx, RxQueue, Serial, TxQueue};
+    use cortex_m::peripheral::syst::SystClkSource;
+    use cortex_m::peripheral::{SCB, SYST};
+    use cortex_m_semihosting::debug;
+    use heapless::spsc::Consumer;
+    use hopper_control::hopper::Strategy;
+    use hopper_control::runner::{CycleCounter, PeriodRunner};
+    use hopper_plant::mock::{firmware_config, SensorConfig, SimHal};
+    use hopper_plant::robot::VirtualRobot;
+    use hopper_plant::{Params, Plant};
+    use stm32f4::stm32f405::TIM5;
+
+    /// As in the scenario image: SysTick at 168 MHz of virtual time.
+    const SYSTICK_HZ: u32 = 168_000_000;
+    /// Where the body is held until armed, m (toe height).
+    const START_APEX_M: f64 = 0.05;
+    /// The longest a session may run, s of robot time (then QEMU exits).
+    const LINK_LIMIT_S: u32 = 600;
+    /// PCLK2 on the HSI, Hz (QEMU has no RCC model, and ignores the baud
+    /// rate anyway).
+    const PCLK2_HZ: u32 = 16_000_000;
+
+    /// TIM5 counts guest instructions under `-icount shift=0`.
+    pub struct Instructions {
+        tim5: TIM5,
+        overhead: u32,
+    }
+
+    impl CycleCounter for Instructions {
+        #[inline(always)]
+        fn now(&mut self) -> u32 {
+            self.tim5.cnt().read().bits()
+        }
+        fn overhead(&self) -> u32 {
+            self.overhead
+        }
+    }
+
+    #[shared]
+    struct Shared {}
+
+    #[local]
+    struct Local {
+        robot: VirtualRobot,
+        counter: Instructions,
+        syst: SYST,
+        link_rx: Consumer<'static, u8>,
+        link_tx: LinkTx,
+        serial: Serial,
+    }
+
+    #[init(local = [rxq: RxQueue = RxQueue::new(), txq: TxQueue = TxQueue::new()])]
+    fn init(cx: init::Context) -> (Shared, Local) {
+        let dp = cx.device;
+        let mut core = cx.core;
+        dp.RCC
+            .ahb1enr()
+            .modify(|_, w| w.gpioaen().enabled().gpioben().enabled());
+        let _ = dp.RCC.ahb1enr().read();
+        dp.GPIOB.bsrr().write(|w| w.br0().set_bit());
+        dp.GPIOB.moder().modify(|_, w| w.moder0().output());
+
+        dp.RCC.apb1enr().modify(|_, w| w.tim5en().enabled());
+        let _ = dp.RCC.apb1enr().read();
+        let tim5 = dp.TIM5;
+        tim5.psc().write(|w| w.psc().set(0));
+        tim5.arr().write(|w| w.arr().set(u32::MAX));
+        tim5.egr().write(|w| w.ug().set_bit());
+        tim5.cr1().modify(|_, w| w.cen().enabled());
+        let a = tim5.cnt().read().bits();
+        let b = tim5.cnt().read().bits();
+        let counter = Instructions {
+            tim5,
+            overhead: b.wrapping_sub(a),
+        };
+
+        let params = Params::design();
+        // The board's defaults (energy-apex, 0.05 m, tethered); the host
+        // chooses the controller and target over the link.
+        let cfg = firmware_config(&params, &params, Strategy::default(), 0.05, START_APEX_M);
+        let (Ok(plant), Ok(runner)) = (
+            Plant::new(params, START_APEX_M),
+            PeriodRunner::new(cfg, TIMING),
+        ) else {
+            defmt::error!("link image set-up failed");
+            debug::exit(debug::EXIT_FAILURE);
+            #[allow(clippy::empty_loop)]
+            loop {}
+        };
+        let hal = SimHal::new(&cfg.calibration, &SensorConfig::DEFAULT);
+        let robot = VirtualRobot::new(plant, hal, runner, f64::from(CONTROL_PERIOD_S)).hold();
+
+        let (rx_in, rx_out) = cx.local.rxq.split();
+        let (tx_in, tx_out) = cx.local.txq.split();
+        let serial = Serial::new(dp.USART1, &dp.RCC, &dp.GPIOA, PCLK2_HZ, rx_in, tx_out);
+
+        core.SYST.set_clock_source(SystClkSource::Core);
+        core.SYST.set_reload(SYSTICK_HZ / CONTROL_HZ - 1);
+        core.SYST.clear_current();
+        core.SYST.enable_interrupt();
+        core.SYST.enable_counter();
+        defmt::println!(
+            "hopper-fw: QEMU link image, {=u32} Hz, link on USART1; disarmed, held {=f64} m up until armed",
+            CONTROL_HZ,
+            START_APEX_M
+        );
+        (
+            Shared {},
+            Local {
+                robot,
+                counter,
+                syst: core.SYST,
+                link_rx: rx_out,
+                link_tx: LinkTx::new(tx_in),
+                serial,
+            },
+        )
+    }
+
+    /// Busy idle: QEMU 7.2 loses SysTick ticks while the core sleeps in `wfi`.
+    #[idle]
+    fn idle(_: idle::Context) -> ! {
+        loop {
+            cortex_m::asm::nop();
+        }
+    }
+
+    /// One control period and the link's work, then the plant to the next
+    /// tick with SysTick stopped (as in the scenario image).
+    #[task(binds = SysTick, priority = 3, local = [robot, counter, syst, link_rx, link_tx])]
+    fn control(cx: control::Context) {
+        let robot = &mut *cx.local.robot;
+        let rx = &mut *cx.local.link_rx;
+        let _ = robot.control(
+            core::iter::from_fn(|| rx.dequeue()),
+            cx.local.link_tx,
+            cx.local.counter,
+        );
+        cx.local.syst.disable_counter();
+        if robot.advance(&mut |_| {}).is_err() {
+            defmt::error!("plant integration failed");
+            debug::exit(debug::EXIT_FAILURE);
+        }
+        cx.local.syst.enable_counter();
+        robot.runner.end_period(SCB::is_pendst_pending());
+        if robot.runner.periods() >= LINK_LIMIT_S * CONTROL_HZ {
+            defmt::println!("link image: {=u32} s limit reached", LINK_LIMIT_S);
+            debug::exit(debug::EXIT_SUCCESS);
+        }
+    }
+
+    /// The link's bytes in and out (below the control task).
+    #[task(binds = USART1, priority = 2, local = [serial])]
+    fn usart1(cx: usart1::Context) {
+        cx.local.serial.on_interrupt();
     }
 }

@@ -114,8 +114,27 @@ impl Fault {
 
 /// A set of [`Fault`]s, one bit each (bit `n` is `Fault::ALL[n]`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Faults(pub u16);
+
+/// By name (`estop overrun`), as the logs print them; `none` when empty.
+#[cfg(feature = "defmt")]
+impl defmt::Format for Faults {
+    fn format(&self, f: defmt::Formatter) {
+        if self.is_empty() {
+            defmt::write!(f, "none");
+        }
+        let mut first = true;
+        for fault in Fault::ALL {
+            if self.contains(fault) {
+                if !first {
+                    defmt::write!(f, " ");
+                }
+                defmt::write!(f, "{=str}", fault.name());
+                first = false;
+            }
+        }
+    }
+}
 
 impl Faults {
     /// No fault.

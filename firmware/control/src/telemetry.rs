@@ -31,6 +31,12 @@ pub struct StepRecord {
     pub command_a: f32,
 }
 
+/// Records in the firmware's capture (32 bytes each, 32 KiB): 102.4 ms at
+/// 10 kHz, most of a hop; frozen around the first fault with 76.8 ms before
+/// it and 25.6 ms after. The board, the QEMU image and the virtual robot
+/// keep this many.
+pub const CAPTURE_LEN: usize = 1024;
+
 /// The capture: the last `N` [`StepRecord`]s, frozen around the first
 /// fault (issue 17: a dump shows what led to the fault, not what the ring
 /// holds by the time someone asks).

@@ -15,11 +15,7 @@ use crate::mock::SimHal;
 use crate::{Event, Plant, PlantError};
 use hopper_control::link::{Endpoint, Tx};
 use hopper_control::runner::{CycleCounter, Period, PeriodRunner};
-use hopper_control::telemetry::FaultCapture;
-
-/// The capture a virtual robot keeps, records (as the board: 102.4 ms at
-/// 10 kHz).
-pub const CAPTURE_LEN: usize = 1024;
+use hopper_control::telemetry::{FaultCapture, CAPTURE_LEN};
 
 /// The firmware on the simulated hopper, behind a link.
 pub struct VirtualRobot {

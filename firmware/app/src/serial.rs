@@ -1,0 +1,152 @@
+//! The host link's transport on USART1 (issue 17), for the board and the
+//! QEMU image alike: PA9 TX, PA10 RX (AF7), 8N1 at [`LINK_BAUD`].
+//!
+//! The bytes go through two lock-free single-producer queues, so neither
+//! side ever waits for the other:
+//!
+//! - receive: the `USART1` interrupt (priority 2, below the control task)
+//!   moves each received byte into [`RxQueue`]; the control task drains it
+//!   once per period into `hopper_control::link::Endpoint::service`. A full
+//!   queue drops the byte (the frame then fails its CRC and is counted).
+//! - transmit: the control task frames its messages into [`TxQueue`]
+//!   through [`LinkTx`] (a frame goes in whole or not at all) and pends the
+//!   interrupt, which feeds the data register while it is empty and turns
+//!   its TXE interrupt off when the queue runs dry.
+//!
+//! QEMU's netduinoplus2 models USART1 (wired to the first `-serial`), not
+//! its baud rate: there the bytes move as fast as the host socket takes
+//! them.
+
+use heapless::spsc::{Consumer, Producer, Queue};
+use hopper_control::link::Tx;
+use stm32f4::stm32f405 as pac;
+
+/// The link's baud rate: 921,600 carries 92,160 bytes/s, 1 kHz of full
+/// telemetry records (at most 40 bytes framed) with room to spare.
+pub const LINK_BAUD: u32 = 921_600;
+
+/// Received bytes waiting for the control task: 512 bytes, 5.6 ms of the
+/// line at full rate, more than 50 periods.
+pub type RxQueue = Queue<u8, 512>;
+
+/// Bytes waiting for the line: 4 KiB, 44 ms at 921,600 baud.
+pub type TxQueue = Queue<u8, 4096>;
+
+/// The control task's end of the transmit queue.
+pub struct LinkTx {
+    tx: Producer<'static, u8>,
+}
+
+impl LinkTx {
+    /// Wraps the producer.
+    pub fn new(tx: Producer<'static, u8>) -> Self {
+        Self { tx }
+    }
+}
+
+impl Tx for LinkTx {
+    fn room(&self) -> usize {
+        self.tx.capacity().saturating_sub(self.tx.len())
+    }
+
+    fn put(&mut self, frame: &[u8]) {
+        for &b in frame {
+            // Cannot fail: the endpoint checked the room first, and only
+            // this end adds to the queue.
+            let _ = self.tx.enqueue(b);
+        }
+        // Start the transmitter (the interrupt stops itself when done).
+        cortex_m::peripheral::NVIC::pend(pac::Interrupt::USART1);
+    }
+}
+
+/// The interrupt's side: the USART and the queues' other ends.
+pub struct Serial {
+    usart: pac::USART1,
+    rx: Producer<'static, u8>,
+    tx: Consumer<'static, u8>,
+    /// Received bytes dropped (receive queue full, or an overrun).
+    lost: u32,
+}
+
+/// The USART1 divider for `baud` from `pclk2_hz` (16x oversampling),
+/// rounded to the nearest sixteenth.
+pub const fn brr(pclk2_hz: u32, baud: u32) -> u32 {
+    (pclk2_hz + baud / 2) / baud
+}
+
+impl Serial {
+    /// Configures PA9/PA10 and USART1 at [`LINK_BAUD`] from `pclk2_hz`, the
+    /// receive interrupt on. `gpioa` must be clocked.
+    pub fn new(
+        usart: pac::USART1,
+        rcc: &pac::RCC,
+        gpioa: &pac::GPIOA,
+        pclk2_hz: u32,
+        rx: Producer<'static, u8>,
+        tx: Consumer<'static, u8>,
+    ) -> Self {
+        rcc.apb2enr().modify(|_, w| w.usart1en().enabled());
+        let _ = rcc.apb2enr().read();
+        gpioa.afrh().modify(|_, w| w.afrh9().af7().afrh10().af7());
+        gpioa.pupdr().modify(|_, w| w.pupdr10().pull_up());
+        gpioa
+            .moder()
+            .modify(|_, w| w.moder9().alternate().moder10().alternate());
+        usart.brr().write(|w| brr_bits(w, brr(pclk2_hz, LINK_BAUD)));
+        usart.cr1().write(|w| {
+            w.ue()
+                .enabled()
+                .te()
+                .enabled()
+                .re()
+                .enabled()
+                .rxneie()
+                .enabled()
+        });
+        Self {
+            usart,
+            rx,
+            tx,
+            lost: 0,
+        }
+    }
+
+    /// Received bytes dropped so far.
+    pub fn lost(&self) -> u32 {
+        self.lost
+    }
+
+    /// The interrupt: received bytes into the receive queue, queued bytes
+    /// to the line while it takes them.
+    pub fn on_interrupt(&mut self) {
+        let sr = self.usart.sr().read();
+        if sr.rxne().bit_is_set() || sr.ore().bit_is_set() {
+            // Reading DR clears RXNE (and, after the SR read, an overrun).
+            let b = (self.usart.dr().read().bits() & 0xFF) as u8;
+            if sr.ore().bit_is_set() || self.rx.enqueue(b).is_err() {
+                self.lost = self.lost.saturating_add(1);
+            }
+        }
+        while self.usart.sr().read().txe().bit_is_set() {
+            match self.tx.dequeue() {
+                Some(b) => {
+                    self.usart.dr().write(|w| w.dr().set(u16::from(b)));
+                }
+                None => {
+                    self.usart.cr1().modify(|_, w| w.txeie().disabled());
+                    return;
+                }
+            }
+        }
+        self.usart.cr1().modify(|_, w| w.txeie().enabled());
+    }
+}
+
+/// BRR's mantissa and fraction as one value (the register's 16 bits).
+fn brr_bits(w: &mut pac::usart1::brr::W, v: u32) -> &mut pac::usart1::brr::W {
+    w.div_mantissa()
+        .set(((v >> 4) & 0x0FFF) as u16)
+        .div_fraction()
+        .set((v & 0xF) as u8)
+}
