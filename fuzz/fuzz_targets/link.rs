@@ -4,5 +4,5 @@
 #![no_main]
 
 libfuzzer_sys::fuzz_target!(|data: &[u8]| {
-    hopper_fuzz::link::run(data);
+    let _ = hopper_fuzz::link::run(data);
 });

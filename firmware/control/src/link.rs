@@ -515,6 +515,31 @@ mod tests {
         n
     }
 
+    /// A real robot's endpoint refuses the simulated e-stop; a simulated
+    /// one takes it.
+    #[test]
+    fn only_a_simulated_robot_takes_the_simulated_estop() {
+        for (sim, expect) in [
+            (false, Response::Refused(text("not-simulated"))),
+            (true, Response::Ok),
+        ] {
+            let mut r = Robot::new();
+            if sim {
+                r.ep = Endpoint::simulated();
+            }
+            r.request(1, Request::SimulateEstop { pressed: true });
+            r.periods(1);
+            assert_eq!(
+                r.take(),
+                [RobotMsg::Response {
+                    id: 1,
+                    resp: expect
+                }]
+            );
+            assert_eq!(r.ep.sim_estop(), sim);
+        }
+    }
+
     /// The scripted session of issue 17 at the library level (no transport):
     /// handshake, parameters, arm, a refused set, disarm, the e-stop, link
     /// loss and garbage on the line.
