@@ -250,7 +250,7 @@ pub struct ParamInfo {
     pub default: f32,
     /// Value now.
     pub value: f32,
-    /// May be set while armed.
+    /// May be set while armed (the others only while disarmed).
     pub live: bool,
 }
 

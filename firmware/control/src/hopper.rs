@@ -154,7 +154,7 @@ pub struct StepOutput {
     pub energy_j: f32,
     /// Latched faults after this period.
     pub faults: Faults,
-    /// Compact record for the telemetry ring.
+    /// Compact record for the telemetry and the capture.
     pub record: StepRecord,
 }
 

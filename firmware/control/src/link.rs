@@ -250,7 +250,7 @@ impl Endpoint {
                         max: p.max,
                         default: p.default,
                         value: params::get(runner.hopper().config(), p.name).unwrap_or(f32::NAN),
-                        live: p.live,
+                        live: PeriodRunner::settable_while_armed(p),
                     })
                 }
                 None => Response::Refused(text("no-such-index")),

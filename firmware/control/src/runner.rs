@@ -306,6 +306,13 @@ impl PeriodRunner {
         Ok(())
     }
 
+    /// Whether [`set_param`](Self::set_param) takes `p` while armed: only
+    /// the target apex, which changes in place (anything else rebuilds the
+    /// controller).
+    pub fn settable_while_armed(p: &crate::params::Param) -> bool {
+        p.name == crate::params::TARGET_APEX_M.name
+    }
+
     /// Sets a runtime parameter by its table name ([`crate::params`]),
     /// between periods (the application calls it from the control task
     /// between two [`run_period`](Self::run_period)s, so it applies at a
@@ -321,7 +328,7 @@ impl PeriodRunner {
         let mut cfg = *self.hopper.config();
         crate::params::set(&mut cfg, p.name, value).map_err(SetError::Param)?;
         if self.arming.is_armed() {
-            if p.name != crate::params::TARGET_APEX_M.name {
+            if !Self::settable_while_armed(p) {
                 return Err(SetError::WhileArmed(p.name));
             }
             return self
