@@ -586,15 +586,19 @@ fn record(c: &mut Client, duration_s: f64, rate_hz: f64, out: &std::path::Path) 
             (s - t) / t * 100.0
         );
     }
+    print_written(&written);
+    Ok(())
+}
+
+fn print_written(paths: &[PathBuf]) {
     println!(
         "wrote {}",
-        written
+        paths
             .iter()
             .map(|p| p.display().to_string())
             .collect::<Vec<_>>()
             .join(", ")
     );
-    Ok(())
 }
 
 fn watch(c: &mut Client, duration: Option<f64>) -> Result<()> {
@@ -724,14 +728,7 @@ fn dump(c: &mut Client, out: &std::path::Path) -> Result<()> {
             rec.records.len()
         );
     }
-    println!(
-        "wrote {}",
-        written
-            .iter()
-            .map(|p| p.display().to_string())
-            .collect::<Vec<_>>()
-            .join(", ")
-    );
+    print_written(&written);
     Ok(())
 }
 

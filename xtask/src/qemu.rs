@@ -14,7 +14,7 @@
 
 use std::collections::BTreeMap;
 use std::io::Read;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
@@ -118,29 +118,46 @@ pub fn run(root: &Path) -> Result<(), String> {
     }
 }
 
+/// Builds the QEMU image with `features` (`cmd` is cargo, with any
+/// environment the build needs) into `target_dir`; returns the ELF.
+fn build_image(
+    root: &Path,
+    what: &str,
+    features: &str,
+    mut cmd: Command,
+    target_dir: &Path,
+) -> Result<PathBuf, String> {
+    run_cmd(
+        root,
+        what,
+        cmd.args([
+            "build",
+            "-p",
+            "hopper-app",
+            "--release",
+            "--target",
+            TARGET,
+            "--no-default-features",
+            "--features",
+            features,
+            "--target-dir",
+        ])
+        .arg(target_dir),
+    )?;
+    Ok(target_dir.join(TARGET).join("release").join("hopper-fw"))
+}
+
 /// The link image (`--features qemu-link`) and the scripted session
 /// against it (the `qemu-link:` line).
 fn link_session(root: &Path) -> Result<(), String> {
     let target_dir = crate::target_dir(root)?.join("qemu-link");
-    run_cmd(
+    let elf = build_image(
         root,
         "firmware build (QEMU link image)",
-        cargo()
-            .args([
-                "build",
-                "-p",
-                "hopper-app",
-                "--release",
-                "--target",
-                TARGET,
-                "--no-default-features",
-                "--features",
-                "qemu-link",
-                "--target-dir",
-            ])
-            .arg(&target_dir),
+        "qemu-link",
+        cargo(),
+        &target_dir,
     )?;
-    let elf = target_dir.join(TARGET).join("release").join("hopper-fw");
     crate::session::against_qemu(root, &elf)
 }
 
@@ -149,26 +166,15 @@ fn run_scenario(root: &Path, scenario: &Scenario) -> Result<(), String> {
     // only the application crate (the scenario is an `option_env!`), and the
     // scenarios run one after the other.
     let target_dir = crate::target_dir(root)?.join("qemu");
-    run_cmd(
+    let mut build = cargo();
+    build.env("HOPPER_QEMU_SCENARIO", scenario.name);
+    let elf = build_image(
         root,
         &format!("firmware build (QEMU variant, {} scenario)", scenario.name),
-        cargo()
-            .env("HOPPER_QEMU_SCENARIO", scenario.name)
-            .args([
-                "build",
-                "-p",
-                "hopper-app",
-                "--release",
-                "--target",
-                TARGET,
-                "--no-default-features",
-                "--features",
-                "qemu-sim",
-                "--target-dir",
-            ])
-            .arg(&target_dir),
+        "qemu-sim",
+        build,
+        &target_dir,
     )?;
-    let elf = target_dir.join(TARGET).join("release").join("hopper-fw");
     let (bytes, status) = run_qemu(&elf, 0)?;
     let lines = decode(&elf, &bytes)?;
     for l in &lines {
@@ -350,6 +356,31 @@ fn overrun_check(elf: &Path) -> Result<(), String> {
     Ok(())
 }
 
+/// `qemu-system-arm` on the netduinoplus2 with `elf`, semihosting, `-icount
+/// shift=SHIFT,sleep=off` and USART1 on the chardev `serial`.
+pub(crate) fn qemu_command(elf: &Path, shift: u32, serial: &str) -> Command {
+    let mut c = Command::new("qemu-system-arm");
+    c.args([
+        "-cpu",
+        "cortex-m4",
+        "-machine",
+        "netduinoplus2",
+        "-display",
+        "none",
+        "-monitor",
+        "none",
+        "-serial",
+        serial,
+        "-semihosting-config",
+        "enable=on,target=native",
+        "-icount",
+        &format!("shift={shift},sleep=off"),
+        "-kernel",
+    ])
+    .arg(elf);
+    c
+}
+
 /// Runs the image with `-icount shift=SHIFT`; returns its stdout (the defmt
 /// stream) and whether it exited with success.
 fn run_qemu(elf: &Path, shift: u32) -> Result<(Vec<u8>, bool), String> {
@@ -358,25 +389,7 @@ fn run_qemu(elf: &Path, shift: u32) -> Result<(Vec<u8>, bool), String> {
         elf.display()
     );
     let started = Instant::now();
-    let mut child = Command::new("qemu-system-arm")
-        .args([
-            "-cpu",
-            "cortex-m4",
-            "-machine",
-            "netduinoplus2",
-            "-display",
-            "none",
-            "-monitor",
-            "none",
-            "-serial",
-            "none",
-            "-semihosting-config",
-            "enable=on,target=native",
-            "-icount",
-            &format!("shift={shift},sleep=off"),
-            "-kernel",
-        ])
-        .arg(elf)
+    let mut child = qemu_command(elf, shift, "none")
         .stdout(Stdio::piped())
         .spawn()
         .map_err(|e| format!("cannot start qemu-system-arm: {e}"))?;

@@ -114,25 +114,7 @@ pub fn against_qemu(root: &Path, elf: &Path) -> Result<(), String> {
         .port();
     let addr = format!("127.0.0.1:{port}");
     eprintln!("xtask: running the link image on qemu-system-arm, USART1 on tcp {addr}");
-    let mut child = Command::new("qemu-system-arm")
-        .args([
-            "-cpu",
-            "cortex-m4",
-            "-machine",
-            "netduinoplus2",
-            "-display",
-            "none",
-            "-monitor",
-            "none",
-            "-serial",
-            &format!("tcp:{addr},server=on,wait=off"),
-            "-semihosting-config",
-            "enable=on,target=native",
-            "-icount",
-            "shift=0,sleep=off",
-            "-kernel",
-        ])
-        .arg(elf)
+    let mut child = crate::qemu::qemu_command(elf, 0, &format!("tcp:{addr},server=on,wait=off"))
         .stdout(Stdio::piped())
         .spawn()
         .map_err(|e| format!("cannot start qemu-system-arm: {e}"))?;

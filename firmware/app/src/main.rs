@@ -107,6 +107,72 @@ unsafe fn HardFault(_frame: &cortex_m_rt::ExceptionFrame) -> ! {
     }
 }
 
+/// What both QEMU images share: the amplifier pin and the instruction
+/// counter at start-up, SysTick's clock.
+#[cfg(all(target_os = "none", feature = "qemu-sim"))]
+pub mod qemu {
+    use hopper_control::runner::CycleCounter;
+    use stm32f4::stm32f405 as pac;
+
+    /// QEMU clocks SysTick (and counts guest time) at the netduinoplus2's
+    /// 168 MHz CPU clock, whatever the RCC says; with `-icount shift=0` one
+    /// tick is 1/168 us of virtual time.
+    pub const SYSTICK_HZ: u32 = 168_000_000;
+    const _: () = assert!(SYSTICK_HZ.is_multiple_of(crate::control::CONTROL_HZ));
+
+    /// TIM5 as the runner's counter: a free-running 32-bit counter that QEMU
+    /// runs at 1 GHz of virtual time, so under `-icount shift=0` it counts
+    /// guest instructions.
+    pub struct Instructions {
+        tim5: pac::TIM5,
+        overhead: u32,
+    }
+
+    impl CycleCounter for Instructions {
+        #[inline(always)]
+        fn now(&mut self) -> u32 {
+            self.tim5.cnt().read().bits()
+        }
+        fn overhead(&self) -> u32 {
+            self.overhead
+        }
+    }
+
+    /// SysTick at the control rate, its interrupt on (the control task).
+    pub fn start_systick(syst: &mut cortex_m::peripheral::SYST) {
+        syst.set_clock_source(cortex_m::peripheral::syst::SystClkSource::Core);
+        syst.set_reload(SYSTICK_HZ / crate::control::CONTROL_HZ - 1);
+        syst.clear_current();
+        syst.enable_interrupt();
+        syst.enable_counter();
+    }
+
+    /// AMP_EN (PB0) low before anything else, as on the board; then TIM5
+    /// free-running as the instruction counter.
+    pub fn start(rcc: &pac::RCC, gpiob: &pac::GPIOB, tim5: pac::TIM5) -> Instructions {
+        rcc.ahb1enr()
+            .modify(|_, w| w.gpioaen().enabled().gpioben().enabled());
+        let _ = rcc.ahb1enr().read();
+        gpiob.bsrr().write(|w| w.br0().set_bit());
+        gpiob.moder().modify(|_, w| w.moder0().output());
+
+        rcc.apb1enr().modify(|_, w| w.tim5en().enabled());
+        let _ = rcc.apb1enr().read();
+        tim5.psc().write(|w| w.psc().set(0));
+        tim5.arr().write(|w| w.arr().set(u32::MAX));
+        tim5.egr().write(|w| w.ug().set_bit());
+        tim5.cr1().modify(|_, w| w.cen().enabled());
+        // Cost of reading the counter twice back to back, subtracted from
+        // every measurement.
+        let a = tim5.cnt().read().bits();
+        let b = tim5.cnt().read().bits();
+        Instructions {
+            tim5,
+            overhead: b.wrapping_sub(a),
+        }
+    }
+}
+
 /// The log channel's ends and the count of items it had no room for.
 #[cfg(target_os = "none")]
 pub mod log {
@@ -386,23 +452,15 @@ mod app {
 mod app {
     use crate::control::{Capture, CONTROL_HZ, CONTROL_PERIOD_S, LOG_CAPACITY, TIMING};
     use crate::log::{self, Log};
-    use cortex_m::peripheral::syst::SystClkSource;
     use cortex_m::peripheral::{SCB, SYST};
     use cortex_m_semihosting::debug;
     use hopper_control::hopper::{ApexLoop, Strategy};
     use hopper_control::laws::shaped;
-    use hopper_control::runner::{CycleCounter, LogItem, PeriodRunner};
+    use hopper_control::runner::{LogItem, PeriodRunner};
     use hopper_plant::metrics::{hops_to_converge, steady_apex};
     use hopper_plant::mock::{firmware_config, SensorConfig, SimHal};
     use hopper_plant::{Event, Params, Plant};
     use rtic_sync::make_channel;
-    use stm32f4::stm32f405::TIM5;
-
-    /// QEMU clocks SysTick (and counts guest time) at the netduinoplus2's
-    /// 168 MHz CPU clock, whatever the RCC says; with `-icount shift=0` one
-    /// tick is 1/168 us of virtual time.
-    const SYSTICK_HZ: u32 = 168_000_000;
-    const _: () = assert!(SYSTICK_HZ.is_multiple_of(CONTROL_HZ));
 
     /// The scenario the build asked for (`HOPPER_QEMU_SCENARIO`: `energy-apex`,
     /// the default, or `shaped`); any other name fails the build.
@@ -466,24 +524,6 @@ mod app {
     /// stays at zero) before it stops.
     const SAFE_PERIODS_AFTER_FAULT: u32 = 100;
 
-    /// TIM5 as the runner's counter: a free-running 32-bit counter that QEMU
-    /// runs at 1 GHz of virtual time, so under `-icount shift=0` it counts
-    /// guest instructions.
-    pub struct Instructions {
-        tim5: TIM5,
-        overhead: u32,
-    }
-
-    impl CycleCounter for Instructions {
-        #[inline(always)]
-        fn now(&mut self) -> u32 {
-            self.tim5.cnt().read().bits()
-        }
-        fn overhead(&self) -> u32 {
-            self.overhead
-        }
-    }
-
     /// The simulated hopper and what the summary reports.
     pub struct Sim {
         plant: Plant,
@@ -504,7 +544,7 @@ mod app {
     struct Local {
         runner: PeriodRunner,
         sim: Sim,
-        counter: Instructions,
+        counter: crate::qemu::Instructions,
         syst: SYST,
         log: Log,
     }
@@ -513,27 +553,7 @@ mod app {
     fn init(cx: init::Context) -> (Shared, Local) {
         let dp = cx.device;
         let mut core = cx.core;
-        // AMP_EN (PB0) low before anything else, as on the board.
-        dp.RCC.ahb1enr().modify(|_, w| w.gpioben().enabled());
-        let _ = dp.RCC.ahb1enr().read();
-        dp.GPIOB.bsrr().write(|w| w.br0().set_bit());
-        dp.GPIOB.moder().modify(|_, w| w.moder0().output());
-
-        dp.RCC.apb1enr().modify(|_, w| w.tim5en().enabled());
-        let _ = dp.RCC.apb1enr().read();
-        let tim5 = dp.TIM5;
-        tim5.psc().write(|w| w.psc().set(0));
-        tim5.arr().write(|w| w.arr().set(u32::MAX));
-        tim5.egr().write(|w| w.ug().set_bit());
-        tim5.cr1().modify(|_, w| w.cen().enabled());
-        // Cost of reading the counter twice back to back, subtracted from
-        // every measurement.
-        let a = tim5.cnt().read().bits();
-        let b = tim5.cnt().read().bits();
-        let counter = Instructions {
-            tim5,
-            overhead: b.wrapping_sub(a),
-        };
+        let counter = crate::qemu::start(&dp.RCC, &dp.GPIOB, dp.TIM5);
 
         let params = Params::design();
         let mut cfg = firmware_config(
@@ -567,11 +587,7 @@ mod app {
             defmt::error!("logger did not start");
         }
 
-        core.SYST.set_clock_source(SystClkSource::Core);
-        core.SYST.set_reload(SYSTICK_HZ / CONTROL_HZ - 1);
-        core.SYST.clear_current();
-        core.SYST.enable_interrupt();
-        core.SYST.enable_counter();
+        crate::qemu::start_systick(&mut core.SYST);
         defmt::println!(
             "hopper-fw: QEMU build, {=str} scenario, {=u32} Hz, {=u32} s",
             SCENARIO,
@@ -718,19 +734,15 @@ mod app {
 mod app {
     use crate::control::{CONTROL_HZ, CONTROL_PERIOD_S, TIMING};
     use crate::serial::{LinkTx, RxQueue, Serial, TxQueue};
-    use cortex_m::peripheral::syst::SystClkSource;
     use cortex_m::peripheral::{SCB, SYST};
     use cortex_m_semihosting::debug;
     use heapless::spsc::Consumer;
     use hopper_control::hopper::Strategy;
-    use hopper_control::runner::{CycleCounter, PeriodRunner};
+    use hopper_control::runner::PeriodRunner;
     use hopper_plant::mock::{firmware_config, SensorConfig, SimHal};
     use hopper_plant::robot::VirtualRobot;
     use hopper_plant::{Params, Plant};
-    use stm32f4::stm32f405::TIM5;
 
-    /// As in the scenario image: SysTick at 168 MHz of virtual time.
-    const SYSTICK_HZ: u32 = 168_000_000;
     /// Where the body is held until armed, m (toe height).
     const START_APEX_M: f64 = 0.05;
     /// The longest a session may run, s of robot time (then QEMU exits).
@@ -739,29 +751,13 @@ mod app {
     /// rate anyway).
     const PCLK2_HZ: u32 = 16_000_000;
 
-    /// TIM5 counts guest instructions under `-icount shift=0`.
-    pub struct Instructions {
-        tim5: TIM5,
-        overhead: u32,
-    }
-
-    impl CycleCounter for Instructions {
-        #[inline(always)]
-        fn now(&mut self) -> u32 {
-            self.tim5.cnt().read().bits()
-        }
-        fn overhead(&self) -> u32 {
-            self.overhead
-        }
-    }
-
     #[shared]
     struct Shared {}
 
     #[local]
     struct Local {
         robot: VirtualRobot,
-        counter: Instructions,
+        counter: crate::qemu::Instructions,
         syst: SYST,
         link_rx: Consumer<'static, u8>,
         link_tx: LinkTx,
@@ -772,26 +768,7 @@ mod app {
     fn init(cx: init::Context) -> (Shared, Local) {
         let dp = cx.device;
         let mut core = cx.core;
-        dp.RCC
-            .ahb1enr()
-            .modify(|_, w| w.gpioaen().enabled().gpioben().enabled());
-        let _ = dp.RCC.ahb1enr().read();
-        dp.GPIOB.bsrr().write(|w| w.br0().set_bit());
-        dp.GPIOB.moder().modify(|_, w| w.moder0().output());
-
-        dp.RCC.apb1enr().modify(|_, w| w.tim5en().enabled());
-        let _ = dp.RCC.apb1enr().read();
-        let tim5 = dp.TIM5;
-        tim5.psc().write(|w| w.psc().set(0));
-        tim5.arr().write(|w| w.arr().set(u32::MAX));
-        tim5.egr().write(|w| w.ug().set_bit());
-        tim5.cr1().modify(|_, w| w.cen().enabled());
-        let a = tim5.cnt().read().bits();
-        let b = tim5.cnt().read().bits();
-        let counter = Instructions {
-            tim5,
-            overhead: b.wrapping_sub(a),
-        };
+        let counter = crate::qemu::start(&dp.RCC, &dp.GPIOB, dp.TIM5);
 
         let params = Params::design();
         // The board's defaults (energy-apex, 0.05 m, tethered); the host
@@ -813,11 +790,7 @@ mod app {
         let (tx_in, tx_out) = cx.local.txq.split();
         let serial = Serial::new(dp.USART1, &dp.RCC, &dp.GPIOA, PCLK2_HZ, rx_in, tx_out);
 
-        core.SYST.set_clock_source(SystClkSource::Core);
-        core.SYST.set_reload(SYSTICK_HZ / CONTROL_HZ - 1);
-        core.SYST.clear_current();
-        core.SYST.enable_interrupt();
-        core.SYST.enable_counter();
+        crate::qemu::start_systick(&mut core.SYST);
         defmt::println!(
             "hopper-fw: QEMU link image, {=u32} Hz, link on USART1; disarmed, held {=f64} m up until armed",
             CONTROL_HZ,
