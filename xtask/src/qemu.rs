@@ -150,7 +150,8 @@ fn build_image(
 /// The link image (`--features qemu-link`) and the scripted session
 /// against it (the `qemu-link:` line).
 fn link_session(root: &Path) -> Result<(), String> {
-    let target_dir = crate::target_dir(root)?.join("qemu-link");
+    // The scenario images' directory: the same dependencies, built once.
+    let target_dir = crate::target_dir(root)?.join("qemu");
     let elf = build_image(
         root,
         "firmware build (QEMU link image)",

@@ -46,21 +46,23 @@ impl Drop for Reaped {
     }
 }
 
-/// The dev builds of `hopper-link` and `hopper-sim`: what the test suite
-/// builds anyway (dependencies at opt-level 2), so the sessions add no
-/// release link of their own; the virtual robot keeps 3x real time.
+/// `hopper-link` and `hopper-sim` as the test suite builds them: `cargo
+/// test --workspace --no-run` builds every test and these binaries with
+/// the workspace's features (dependencies at opt-level 2), so the suite
+/// that runs next builds nothing again; the virtual robot keeps 3x real
+/// time in this profile.
 fn host_binaries(root: &Path) -> Result<(PathBuf, PathBuf), String> {
     let link = build_executable(
         root,
-        "hopper-link build",
+        "workspace test build (and the hopper-link, hopper-sim binaries)",
         "hopper-link",
-        cargo().args(["build", "-p", "hopper-link"]),
+        cargo().args(["test", "--workspace", "--no-run"]),
     )?;
     let sim = build_executable(
         root,
-        "hopper-sim build",
+        "hopper-sim (built)",
         "hopper-sim",
-        cargo().args(["build", "-p", "hal-sim", "--bin", "hopper-sim"]),
+        cargo().args(["test", "--workspace", "--no-run"]),
     )?;
     Ok((link, sim))
 }
