@@ -741,28 +741,14 @@ fn silence(c: &mut Client, max_s: f64) -> Result<()> {
     let period = f64::from(t.period_s);
     let every = ((0.001 / period).round() as u16).max(1);
     c.expect_ok(Request::Telemetry { every })?;
-    c.discard_events();
-    // The latest step the host has seen when it goes quiet: the robot gets
-    // the last frame no earlier, so the time from it to the disarm is at
-    // least the robot's true quiet time.
-    let mut last_seen: Option<u32> = None;
-    let start = Instant::now();
-    while start.elapsed() < Duration::from_millis(100) {
-        if let Some(RobotMsg::Telemetry(r)) = c.next_event(Duration::from_millis(20))? {
-            last_seen = Some(r.step);
-        }
-    }
-    // Heartbeats off, then one last frame of our own: the robot receives
-    // it no earlier than the latest step seen here when it goes out.
+    // Heartbeats off, then one last frame of our own: a status request,
+    // whose answer gives the period the robot received it in. From there
+    // to the first disarmed record is the robot's own quiet time, exactly
+    // (the host's lag does not enter).
     c.set_heartbeats(false);
-    std::thread::sleep(hopper_link::HEARTBEAT);
-    while let Ok(Some(m)) = c.next_event(Duration::ZERO) {
-        if let RobotMsg::Telemetry(r) = m {
-            last_seen = Some(r.step);
-        }
-    }
-    let from = last_seen.ok_or_else(|| anyhow!("no telemetry before the silence"))?;
-    c.send(&hopper_protocol::HostMsg::Heartbeat)?;
+    std::thread::sleep(2 * hopper_link::HEARTBEAT);
+    let from = status_of(c)?.periods;
+    let start = Instant::now();
     let mut disarmed_at = None;
     let mut reason = None;
     while start.elapsed().as_secs_f64() < max_s {
@@ -783,7 +769,7 @@ fn silence(c: &mut Client, max_s: f64) -> Result<()> {
         disarmed_at.ok_or_else(|| anyhow!("still armed {max_s} s after the heartbeats stopped"))?;
     let quiet_s = f64::from(at.wrapping_sub(from)) * period;
     println!(
-        "{} {quiet_s:.4} s of robot time after the host went quiet (link timeout {timeout_s:.3} s)",
+        "{} {quiet_s:.4} s of robot time after the robot received the host's last frame (link timeout {timeout_s:.3} s)",
         reason.map_or("disarmed".to_string(), names::arm_state)
     );
     if reason != Some(ArmState::Disarmed(5)) {

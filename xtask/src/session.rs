@@ -27,9 +27,10 @@ const APEX_TOLERANCE: f64 = 0.02;
 const LAST_APEXES: usize = 5;
 /// The link timeout the session runs with (the default), s.
 const LINK_TIMEOUT_S: f64 = 0.2;
-/// How much later than the timeout the host may see the disarm, s of robot
-/// time: the host's view of the robot's step lags by the link's latency.
-const LINK_LOST_SLACK_S: f64 = 0.05;
+/// How much later than the timeout the disarm may come, s of robot time
+/// (measured by the robot: from the period that received the host's last
+/// frame to the first disarmed record): one period of rounding.
+const LINK_LOST_SLACK_S: f64 = 0.0015;
 /// Wall-clock limit for a session.
 const SESSION_TIMEOUT: Duration = Duration::from_secs(600);
 /// The virtual robot's speed for the session (robot s per wall s): fast,
