@@ -30,6 +30,9 @@ pub mod record;
 /// so a virtual robot may run a few times faster than real time.
 pub const HEARTBEAT: Duration = Duration::from_millis(20);
 
+/// How long a TCP connection may take to open.
+pub const CONNECT_TIMEOUT: Duration = Duration::from_secs(3);
+
 /// How long a request waits for its response.
 pub const RESPONSE_TIMEOUT: Duration = Duration::from_secs(3);
 
@@ -87,7 +90,13 @@ impl Client {
     pub fn connect(target: &Target) -> Result<Client> {
         let (reader, writer): (Box<dyn Read + Send>, Box<dyn Write + Send>) = match target {
             Target::Tcp(addr) => {
-                let s = TcpStream::connect(addr).with_context(|| {
+                use std::net::ToSocketAddrs;
+                let sock = addr
+                    .to_socket_addrs()
+                    .with_context(|| format!("cannot resolve {addr}"))?
+                    .next()
+                    .ok_or_else(|| anyhow!("cannot resolve {addr}"))?;
+                let s = TcpStream::connect_timeout(&sock, CONNECT_TIMEOUT).with_context(|| {
                     format!("cannot connect to {addr}: is `hopper-sim serve` or the QEMU image running?")
                 })?;
                 let _ = s.set_nodelay(true);
@@ -178,7 +187,7 @@ impl Client {
                 ),
                 Some(_) => {}
                 None => bail!(
-                    "no answer from {target} within {:.0} s: is it a hopper running firmware with the link (and the baud rate right)?",
+                    "no answer from {target} within {:.0} s: is it a hopper running firmware with the link (and the baud rate right), and no other hopper-link connected (a robot takes one client at a time)?",
                     RESPONSE_TIMEOUT.as_secs_f64()
                 ),
             }
@@ -259,6 +268,12 @@ impl Client {
             return Ok(Some(m));
         }
         self.recv_until(Instant::now() + timeout)
+    }
+
+    /// Drops the unsolicited messages that came while waiting for the last
+    /// response (not those after it).
+    pub fn discard_queued(&mut self) {
+        self.queued.clear();
     }
 
     /// Drops every unsolicited message received so far.

@@ -382,7 +382,10 @@ fn timing_of(c: &mut Client) -> Result<TimingStats> {
 
 /// One telemetry record now (telemetry is switched on for it, then off).
 fn one_record(c: &mut Client) -> Result<Telemetry> {
-    c.expect_ok(Request::Telemetry { every: 1 })?;
+    // Every 100th period: any line carries that. Records queued before
+    // the answer may be stale (an earlier stream): only later ones count.
+    c.expect_ok(Request::Telemetry { every: 100 })?;
+    c.discard_queued();
     let deadline = Instant::now() + Duration::from_secs(3);
     let found = loop {
         match c.next_event(deadline.saturating_duration_since(Instant::now()))? {
@@ -531,6 +534,8 @@ fn record(c: &mut Client, duration_s: f64, rate_hz: f64, out: &std::path::Path) 
     }
     c.discard_events();
     c.expect_ok(Request::Telemetry { every })?;
+    // Records before the answer may be from an earlier stream.
+    c.discard_queued();
     let mut quiet = Instant::now();
     loop {
         match c.next_event(Duration::from_millis(200))? {
@@ -606,6 +611,7 @@ fn watch(c: &mut Client, duration: Option<f64>) -> Result<()> {
     let every = ((0.1 / f64::from(t.period_s)).round() as u16).max(1);
     c.discard_events();
     c.expect_ok(Request::Telemetry { every })?;
+    c.discard_queued();
     let tty = std::io::stdout().is_terminal();
     let start = Instant::now();
     let mut last_apex = f32::NAN;
@@ -665,6 +671,9 @@ fn dump(c: &mut Client, out: &std::path::Path) -> Result<()> {
             r => bail!("unexpected answer {r:?}"),
         };
         if info.frozen || info.fault_step == 0 || asked.elapsed() > Duration::from_secs(5) {
+            // Records that came before this answer belong to an earlier
+            // dump still draining from the robot's queue.
+            c.discard_queued();
             break info;
         }
         std::thread::sleep(Duration::from_millis(100));
@@ -676,7 +685,8 @@ fn dump(c: &mut Client, out: &std::path::Path) -> Result<()> {
     let mut quiet = Instant::now();
     while rec.records.len() < usize::from(info.records) {
         match c.next_event(Duration::from_millis(200))? {
-            Some(RobotMsg::Captured(r)) => {
+            // In order, or from an earlier dump: skip those.
+            Some(RobotMsg::Captured(r)) if r.seq as usize == rec.records.len() => {
                 quiet = Instant::now();
                 rec.records.push(r);
             }
@@ -748,12 +758,16 @@ fn silence(c: &mut Client, max_s: f64) -> Result<()> {
     c.set_heartbeats(false);
     std::thread::sleep(2 * hopper_link::HEARTBEAT);
     let from = status_of(c)?.periods;
+    c.discard_queued();
     let start = Instant::now();
     let mut disarmed_at = None;
     let mut reason = None;
     while start.elapsed().as_secs_f64() < max_s {
         match c.next_event(Duration::from_millis(100))? {
-            Some(RobotMsg::Telemetry(r)) if !r.armed && disarmed_at.is_none() => {
+            // Only records after the last frame (wrapping comparison).
+            Some(RobotMsg::Telemetry(r))
+                if !r.armed && disarmed_at.is_none() && (r.step.wrapping_sub(from) as i32) >= 0 =>
+            {
                 disarmed_at = Some(r.step)
             }
             Some(RobotMsg::State(s @ ArmState::Disarmed(_))) => reason = Some(s),

@@ -20,7 +20,8 @@
 //! # Tasks
 //! | Task      | Priority | Trigger |
 //! |-----------|----------|---------|
-//! | `control` | 3 (highest) | board: ADC injected end of conversion (TIM4 at `CONTROL_HZ`); QEMU: SysTick at `CONTROL_HZ` |
+//! | `usart1`  | 4        | USART1 (the host link's bytes; board and QEMU link image) |
+//! | `control` | 3        | board: ADC injected end of conversion (TIM4 at `CONTROL_HZ`); QEMU: SysTick at `CONTROL_HZ` |
 //! | `logger`  | 1        | started in `init`; waits on the log channel (hop ledgers, faults) |
 //! | `dump`    | 1        | board: spawned when the dump button is pressed; drains the capture |
 //! | `idle`    | 0        | busy loop (no `wfi`: QEMU 7.2 loses SysTick ticks while sleeping) |
@@ -378,9 +379,6 @@ mod app {
         }
         let runner = &mut *cx.local.runner;
         let p = runner.run_period(cx.local.io, cx.local.cycles);
-        // The next conversion already finished: this period overran.
-        runner.end_period(NVIC::is_pending(Interrupt::ADC));
-        log::PERIODS.store(runner.periods(), core::sync::atomic::Ordering::Relaxed);
         if p.feed_watchdog {
             cx.local.watchdog.feed();
         }
@@ -401,6 +399,10 @@ mod app {
                 cycles,
             );
         });
+        // The next conversion already finished: this period (with its link
+        // work) overran.
+        runner.end_period(NVIC::is_pending(Interrupt::ADC));
+        log::PERIODS.store(runner.periods(), core::sync::atomic::Ordering::Relaxed);
         if let Some(item) = p.log {
             cx.local.log.push(item);
         }
@@ -410,8 +412,9 @@ mod app {
         }
     }
 
-    /// The link's bytes in and out (below the control task).
-    #[task(binds = USART1, priority = 2, local = [serial])]
+    /// The link's bytes in and out, above the control task: the USART has
+    /// no receive FIFO (`serial`'s module docs).
+    #[task(binds = USART1, priority = 4, local = [serial])]
     fn usart1(cx: usart1::Context) {
         cx.local.serial.on_interrupt();
     }
@@ -848,8 +851,9 @@ mod app {
         }
     }
 
-    /// The link's bytes in and out (below the control task).
-    #[task(binds = USART1, priority = 2, local = [serial])]
+    /// The link's bytes in and out, above the control task: the USART has
+    /// no receive FIFO (`serial`'s module docs).
+    #[task(binds = USART1, priority = 4, local = [serial])]
     fn usart1(cx: usart1::Context) {
         cx.local.serial.on_interrupt();
     }

@@ -4,8 +4,13 @@
 //! The bytes go through two lock-free single-producer queues, so neither
 //! side ever waits for the other:
 //!
-//! - receive: the `USART1` interrupt (priority 2, below the control task)
-//!   moves each received byte into [`RxQueue`]; the control task drains it
+//! - receive: the `USART1` interrupt moves each received byte into
+//!   [`RxQueue`]. It runs at priority 4, *above* the control task: the USART
+//!   has no receive FIFO, and at 921,600 baud a byte must be read within
+//!   10.85 us, less than a control period's work (up to about 60 us when a
+//!   parameter set rebuilds the controller). Its handler is a few dozen
+//!   cycles and shares nothing but the lock-free queues. The control task
+//!   drains the queue
 //!   once per period into `hopper_control::link::Endpoint::service`. A full
 //!   queue drops the byte (the frame then fails its CRC and is counted).
 //! - transmit: the control task frames its messages into [`TxQueue`]
@@ -123,8 +128,13 @@ impl Serial {
         let sr = self.usart.sr().read();
         if sr.rxne().bit_is_set() || sr.ore().bit_is_set() {
             // Reading DR clears RXNE (and, after the SR read, an overrun).
+            // On an overrun DR still holds the last good byte (RM0090): keep
+            // it; the byte after it is the one lost.
             let b = (self.usart.dr().read().bits() & 0xFF) as u8;
-            if sr.ore().bit_is_set() || self.rx.enqueue(b).is_err() {
+            if sr.ore().bit_is_set() {
+                self.lost = self.lost.saturating_add(1);
+            }
+            if self.rx.enqueue(b).is_err() {
                 self.lost = self.lost.saturating_add(1);
             }
         }

@@ -468,6 +468,8 @@ impl Hopper {
     }
 
     fn safe_output(&mut self, fault: Fault) -> StepOutput {
+        // No usable measurement this period: a fault reset must wait for one.
+        self.last_input = None;
         self.supervisor.report(fault);
         let dac_code = self.dac.code(0.0);
         let faults = self.supervisor.faults();

@@ -285,6 +285,7 @@ impl Endpoint {
             Request::Dump => {
                 let records = u16::try_from(capture.len()).unwrap_or(u16::MAX);
                 self.dump = Some((0, records));
+                capture.hold(true);
                 Response::Dump(DumpInfo {
                     records,
                     frozen: capture.frozen(),
@@ -299,18 +300,21 @@ impl Endpoint {
     pub fn after_period<const N: usize, T: Tx>(
         &mut self,
         p: &Period,
-        capture: &FaultCapture<N>,
+        capture: &mut FaultCapture<N>,
         tx: &mut T,
     ) {
+        // A pending arm request was decided in this period: answer it. No
+        // Armed or Refused event means it changed nothing (already armed,
+        // or a disarm asked for in the same batch won).
+        if let Some(id) = self.pending_arm.take() {
+            let resp = match p.arm_event {
+                Some(ArmEvent::Refused(r)) => Response::Refused(text(r.name())),
+                _ if p.armed => Response::Ok,
+                _ => Response::Refused(text("disarm-requested")),
+            };
+            send(tx, &RobotMsg::Response { id, resp }, false);
+        }
         if let Some(ev) = p.arm_event {
-            if let (Some(id), ArmEvent::Armed | ArmEvent::Refused(_)) = (self.pending_arm, ev) {
-                self.pending_arm = None;
-                let resp = match ev {
-                    ArmEvent::Refused(r) => Response::Refused(text(r.name())),
-                    _ => Response::Ok,
-                };
-                send(tx, &RobotMsg::Response { id, resp }, false);
-            }
             let state = match ev {
                 ArmEvent::Armed => Some(ArmState::Armed),
                 ArmEvent::Disarmed(r) => Some(arm_state(RunnerArmState::Disarmed(r))),
@@ -377,6 +381,9 @@ impl Endpoint {
             }
             self.dump =
                 (next < total && capture.get(usize::from(next)).is_some()).then_some((next, total));
+            if self.dump.is_none() {
+                capture.hold(false);
+            }
         }
     }
 
@@ -515,6 +522,54 @@ mod tests {
         n
     }
 
+    /// Every arm request gets an answer: a second one while armed is `Ok`,
+    /// one that a disarm in the same batch overrides is refused.
+    #[test]
+    fn every_arm_request_is_answered() {
+        let mut r = Robot::new();
+        r.request(1, Request::Arm);
+        r.periods(2);
+        r.take();
+        assert!(r.runner.arming().is_armed());
+        r.request(2, Request::Arm);
+        r.periods(2);
+        assert!(r.take().contains(&RobotMsg::Response {
+            id: 2,
+            resp: Response::Ok
+        }));
+        r.request(3, Request::Disarm);
+        r.request(4, Request::Arm);
+        r.periods(2);
+        let msgs = r.take();
+        assert!(
+            msgs.contains(&RobotMsg::Response {
+                id: 4,
+                resp: Response::Refused(text("disarm-requested"))
+            }),
+            "{msgs:?}"
+        );
+        assert!(!r.runner.arming().is_armed());
+        // A controller rebuilt by a set and an arm in the same batch: the
+        // new velocity filters have measured nothing yet, so the arm waits.
+        r.request(
+            5,
+            Request::ParamSet {
+                name: name("controller"),
+                value: 8.0,
+            },
+        );
+        r.request(6, Request::Arm);
+        r.periods(2);
+        let msgs = r.take();
+        assert!(
+            msgs.contains(&RobotMsg::Response {
+                id: 6,
+                resp: Response::Refused(text("sensors-implausible"))
+            }),
+            "{msgs:?}"
+        );
+    }
+
     /// A real robot's endpoint refuses the simulated e-stop; a simulated
     /// one takes it.
     #[test]
@@ -596,6 +651,10 @@ mod tests {
             ]
         );
         assert_eq!(r.runner.hopper().config().target_apex_m, 0.12);
+        // The rebuilt controller's velocity filters measure after two
+        // periods (`every_arm_request_is_answered` shows an earlier arm
+        // refused).
+        r.periods(2);
         // Arm: serviced after a period, decided and answered after the next.
         r.request(4, Request::Arm);
         r.periods(1);

@@ -221,6 +221,8 @@ pub struct PeriodRunner {
     cost: StepStats,
     /// The faults the last period reported (for `newly_latched`).
     reported: Faults,
+    /// Periods until a rebuilt controller's velocity filters measure.
+    unsettled: u8,
 }
 
 impl PeriodRunner {
@@ -244,6 +246,7 @@ impl PeriodRunner {
             periods: 0,
             cost: StepStats::new(),
             reported: Faults::NONE,
+            unsettled: 0,
         })
     }
 
@@ -341,6 +344,7 @@ impl PeriodRunner {
         let mut hopper = Hopper::new(cfg).map_err(|e| SetError::Config(RunnerError::Config(e)))?;
         hopper.continue_from(&self.hopper);
         self.hopper = hopper;
+        self.unsettled = 2;
         self.arming.reconfigure(*arming.config());
         self.feed
             .reconfigure(crate::watchdog::FeedConfig::for_hopper(&cfg));
@@ -379,11 +383,15 @@ impl PeriodRunner {
         let arm_input = ArmInput {
             faults: out.faults,
             estop_pressed: raw.is_some_and(|r| r.estop_pressed),
-            sensors_ok: raw.is_some() && out.energy_j.is_finite(),
+            // A controller rebuilt less than two periods ago has velocity
+            // filters that read 0 m/s whatever the robot does (it may still
+            // be bouncing): not a measurement to arm on.
+            sensors_ok: raw.is_some() && out.energy_j.is_finite() && self.unsettled == 0,
             nut_position_m: out.record.nut_position_m,
             nut_velocity_mps,
             body_velocity_mps,
         };
+        self.unsettled = self.unsettled.saturating_sub(1);
         let arm_event = self.arming.period(self.timing.period_s, &arm_input);
         let armed = self.arming.is_armed();
         if !armed {

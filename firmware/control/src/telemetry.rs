@@ -56,6 +56,8 @@ pub struct FaultCapture<const N: usize> {
     /// Records still to take after the fault (`Some(0)`: frozen).
     remaining: Option<usize>,
     fault_step: u32,
+    /// Held by a reader (a dump in progress): nothing is recorded.
+    held: bool,
 }
 
 impl<const N: usize> Default for FaultCapture<N> {
@@ -87,6 +89,7 @@ impl<const N: usize> FaultCapture<N> {
             len: 0,
             remaining: None,
             fault_step: 0,
+            held: false,
         }
     }
 
@@ -95,7 +98,7 @@ impl<const N: usize> FaultCapture<N> {
     /// once frozen.
     #[inline]
     pub fn record(&mut self, r: &StepRecord, fault_latched: bool) {
-        if self.remaining == Some(0) {
+        if self.remaining == Some(0) || (self.held && self.remaining.is_none()) {
             return;
         }
         if let Some(slot) = self.buf.get_mut(self.next) {
@@ -149,6 +152,14 @@ impl<const N: usize> FaultCapture<N> {
     /// overwritten.
     pub fn rearm(&mut self) {
         self.remaining = None;
+    }
+
+    /// Holds (or releases) the records for a reader that takes several
+    /// periods (a dump): while held and no fault is being captured, nothing
+    /// is recorded, so the records read stay consecutive. A fault latched
+    /// while held is still captured (the fault matters more than the dump).
+    pub fn hold(&mut self, held: bool) {
+        self.held = held;
     }
 }
 
@@ -305,6 +316,13 @@ mod tests {
         c.record(&rec(100), false);
         assert_eq!(c.get(7).map(|r| r.step), Some(100));
         assert_eq!(c.get(0).map(|r| r.step), Some(8));
+        // Held for a reader: nothing moves until released.
+        c.hold(true);
+        c.record(&rec(101), false);
+        assert_eq!(c.get(7).map(|r| r.step), Some(100));
+        c.hold(false);
+        c.record(&rec(102), false);
+        assert_eq!(c.get(7).map(|r| r.step), Some(102));
     }
 
     #[test]
