@@ -567,7 +567,7 @@ fn record(c: &mut Client, duration_s: f64, rate_hz: f64, out: &std::path::Path) 
     c.expect_ok(Request::Telemetry { every: 0 })?;
     bar.finish_and_clear();
     let title = format!("{controller} on the robot ({})", c.target());
-    let written = rec.write(out, &title, target)?;
+    let written = rec.write(out, ("telemetry.csv", "hop.png"), true, &title, target)?;
     let apexes = rec.apexes_m();
     println!(
         "recorded {:.3} s: {} records at {:.0} Hz, {} dropped; {} hops",
@@ -710,20 +710,7 @@ fn dump(c: &mut Client, out: &std::path::Path) -> Result<()> {
     } else {
         "capture of the latest periods (no fault)".to_string()
     };
-    let mut written = rec.write(out, &title, None)?;
-    // The dump's files are named for what they are.
-    for (from, to) in [("telemetry.csv", "capture.csv"), ("hop.png", "capture.png")] {
-        let (a, b) = (out.join(from), out.join(to));
-        if a.exists() {
-            std::fs::rename(&a, &b)?;
-            if let Some(w) = written.iter_mut().find(|p| **p == a) {
-                *w = b;
-            }
-        }
-    }
-    let hops = out.join("hops.csv");
-    let _ = std::fs::remove_file(&hops);
-    written.retain(|p| *p != hops);
+    let written = rec.write(out, ("capture.csv", "capture.png"), false, &title, None)?;
     let span_ms = rec.records.len() as f64 * rec.period_s * 1000.0;
     if info.frozen {
         println!(

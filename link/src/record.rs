@@ -49,18 +49,21 @@ impl Recording {
         f64::from(r.step.wrapping_sub(first) as i32) * self.period_s
     }
 
-    /// Writes `telemetry.csv`, `hops.csv` and `hop.png` into `dir`
-    /// (created if missing); returns the paths written. `title` heads the
-    /// plot; `target_apex_m` draws the target.
+    /// Writes the records as `files.0` (CSV) and their plot as `files.1`
+    /// (PNG) into `dir` (created if missing), and the hop ledgers as
+    /// `hops.csv` when `hops` is set; returns the paths written. `title`
+    /// heads the plot; `target_apex_m` draws the target.
     pub fn write(
         &self,
         dir: &Path,
+        files: (&str, &str),
+        hops: bool,
         title: &str,
         target_apex_m: Option<f64>,
     ) -> Result<Vec<PathBuf>> {
         std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
         let mut written = Vec::new();
-        let path = dir.join("telemetry.csv");
+        let path = dir.join(files.0);
         let mut w = csv::Writer::from_path(&path)
             .with_context(|| format!("cannot write {}", path.display()))?;
         w.write_record([
@@ -95,6 +98,20 @@ impl Recording {
         }
         w.flush()?;
         written.push(path);
+        if hops {
+            written.push(self.write_hops(dir)?);
+        }
+        if self.records.len() >= 2 {
+            let path = dir.join(files.1);
+            hal_sim::plot::hop_plot(&self.samples(), title, target_apex_m, &path)
+                .map_err(anyhow::Error::msg)?;
+            written.push(path);
+        }
+        Ok(written)
+    }
+
+    /// `hops.csv`: one hop ledger a row.
+    fn write_hops(&self, dir: &Path) -> Result<PathBuf> {
         let path = dir.join("hops.csv");
         let mut w = csv::Writer::from_path(&path)
             .with_context(|| format!("cannot write {}", path.display()))?;
@@ -121,14 +138,7 @@ impl Recording {
             ])?;
         }
         w.flush()?;
-        written.push(path);
-        if self.records.len() >= 2 {
-            let path = dir.join("hop.png");
-            hal_sim::plot::hop_plot(&self.samples(), title, target_apex_m, &path)
-                .map_err(anyhow::Error::msg)?;
-            written.push(path);
-        }
-        Ok(written)
+        Ok(path)
     }
 
     /// The records as the simulator's trajectory samples (what the robot

@@ -102,6 +102,17 @@ fn build_executable(
     bin: &str,
     cmd: &mut Command,
 ) -> Result<PathBuf, String> {
+    let [exe] = build_executables(root, what, [bin], cmd)?;
+    Ok(exe)
+}
+
+/// Like [`build_executable`], for several executables of one cargo run.
+fn build_executables<const N: usize>(
+    root: &Path,
+    what: &str,
+    bins: [&str; N],
+    cmd: &mut Command,
+) -> Result<[PathBuf; N], String> {
     eprintln!("xtask: {what}");
     let out = cmd
         .arg("--message-format=json-render-diagnostics")
@@ -112,16 +123,26 @@ fn build_executable(
     if !out.status.success() {
         return Err(format!("{what} ({})", out.status));
     }
-    String::from_utf8_lossy(&out.stdout)
+    let messages: Vec<serde_json::Value> = String::from_utf8_lossy(&out.stdout)
         .lines()
-        .filter_map(|l| serde_json::from_str::<serde_json::Value>(l).ok())
-        .filter(|m| {
-            m["reason"] == "compiler-artifact"
-                && m["target"]["name"] == bin
-                && m["profile"]["test"] == false
-        })
-        .find_map(|m| m["executable"].as_str().map(PathBuf::from))
-        .ok_or_else(|| format!("{what}: cargo reported no executable `{bin}`"))
+        .filter_map(|l| serde_json::from_str(l).ok())
+        .collect();
+    let mut found = Vec::with_capacity(N);
+    for bin in bins {
+        let exe = messages
+            .iter()
+            .filter(|m| {
+                m["reason"] == "compiler-artifact"
+                    && m["target"]["name"] == bin
+                    && m["profile"]["test"] == false
+            })
+            .find_map(|m| m["executable"].as_str().map(PathBuf::from))
+            .ok_or_else(|| format!("{what}: cargo reported no executable `{bin}`"))?;
+        found.push(exe);
+    }
+    found
+        .try_into()
+        .map_err(|_| format!("{what}: executables missing"))
 }
 
 /// The workspace's target directory as cargo resolves it (CARGO_TARGET_DIR,

@@ -17,7 +17,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-use crate::{build_executable, cargo};
+use crate::{build_executables, cargo};
 
 /// The session's target apex, m (`params set target_apex_m 0.12`).
 const TARGET_APEX_M: f64 = 0.12;
@@ -53,16 +53,10 @@ impl Drop for Reaped {
 /// that runs next builds nothing again; the virtual robot keeps 3x real
 /// time in this profile.
 fn host_binaries(root: &Path) -> Result<(PathBuf, PathBuf), String> {
-    let link = build_executable(
+    let [link, sim] = build_executables(
         root,
         "workspace test build (and the hopper-link, hopper-sim binaries)",
-        "hopper-link",
-        cargo().args(["test", "--workspace", "--no-run"]),
-    )?;
-    let sim = build_executable(
-        root,
-        "hopper-sim (built)",
-        "hopper-sim",
+        ["hopper-link", "hopper-sim"],
         cargo().args(["test", "--workspace", "--no-run"]),
     )?;
     Ok((link, sim))
