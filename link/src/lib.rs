@@ -35,6 +35,8 @@ pub const CONNECT_TIMEOUT: Duration = Duration::from_secs(3);
 
 /// How long a request waits for its response.
 pub const RESPONSE_TIMEOUT: Duration = Duration::from_secs(3);
+/// How often the hello is repeated until the robot answers it.
+pub const HELLO_RETRY: Duration = Duration::from_millis(200);
 
 /// Where the robot is.
 #[derive(Debug, Clone)]
@@ -173,19 +175,28 @@ impl Client {
             threads,
             target: target.clone(),
         };
-        // A leading delimiter flushes whatever half frame the line holds.
-        c.send_raw(&[0])?;
-        c.send(&HostMsg::Hello {
-            version: PROTOCOL_VERSION,
-        })?;
+        // The hello is repeated until answered: a robot that is still
+        // booting (its USART not yet enabled), or a TCP server that has not
+        // yet taken this connection from its backlog, loses the bytes sent
+        // before it listens. Each hello starts with a delimiter, which
+        // flushes whatever half frame the line holds.
         let deadline = Instant::now() + RESPONSE_TIMEOUT;
+        let mut next_hello = Instant::now();
         loop {
-            match c.recv_until(deadline)? {
+            if Instant::now() >= next_hello {
+                c.send_raw(&[0])?;
+                c.send(&HostMsg::Hello {
+                    version: PROTOCOL_VERSION,
+                })?;
+                next_hello = Instant::now() + HELLO_RETRY;
+            }
+            match c.recv_until(next_hello.min(deadline))? {
                 Some(RobotMsg::Hello { version }) if version == PROTOCOL_VERSION => return Ok(c),
                 Some(RobotMsg::Hello { version }) => bail!(
                     "the robot at {target} speaks protocol version {version}, this hopper-link speaks {PROTOCOL_VERSION}: update one of them"
                 ),
                 Some(_) => {}
+                None if Instant::now() < deadline => {}
                 None => bail!(
                     "no answer from {target} within {:.0} s: is it a hopper running firmware with the link (and the baud rate right), and no other hopper-link connected (a robot takes one client at a time)?",
                     RESPONSE_TIMEOUT.as_secs_f64()

@@ -76,3 +76,46 @@ fn another_protocol_version() {
     );
     let _ = robot.join();
 }
+
+#[test]
+fn a_robot_still_booting_gets_the_hello_again() {
+    // Like the QEMU image just started (or a board coming out of reset):
+    // the bytes of the first 0.5 s are lost, then it answers every hello.
+    let l = TcpListener::bind("127.0.0.1:0").unwrap_or_else(|e| panic!("{e}"));
+    let addr = l.local_addr().unwrap_or_else(|e| panic!("{e}"));
+    let robot = std::thread::spawn(move || {
+        let Ok((mut s, _)) = l.accept() else { return 0 };
+        let booted = Instant::now() + Duration::from_millis(500);
+        let _ = s.set_read_timeout(Some(Duration::from_millis(20)));
+        let mut d = hopper_protocol::Decoder::new();
+        let mut buf = [0u8; 256];
+        let mut hellos = 0;
+        let end = Instant::now() + Duration::from_secs(2);
+        while Instant::now() < end {
+            let n = std::io::Read::read(&mut s, &mut buf).unwrap_or(0);
+            if Instant::now() < booted {
+                continue;
+            }
+            for &b in &buf[..n] {
+                if let Some(hopper_protocol::HostMsg::Hello { .. }) = d.push(b) {
+                    hellos += 1;
+                    let mut f = [0u8; MAX_FRAME];
+                    let k = encode(&RobotMsg::Hello { version: 1 }, &mut f).unwrap_or(0);
+                    let _ = s.write_all(&f[..k]);
+                }
+            }
+        }
+        hellos
+    });
+    let t0 = Instant::now();
+    let c = Client::connect(&Target::Tcp(addr.to_string()));
+    let took = t0.elapsed();
+    assert!(c.is_ok(), "{:?}", c.err());
+    // Connected on the first hello after the boot: hellos repeat every 0.2 s.
+    assert!(
+        took >= Duration::from_millis(500) && took < Duration::from_millis(800),
+        "{took:?}"
+    );
+    drop(c);
+    assert_eq!(robot.join().unwrap_or(0), 1);
+}

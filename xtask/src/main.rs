@@ -80,12 +80,20 @@ fn cargo() -> Command {
     Command::new(std::env::var("CARGO").unwrap_or_else(|_| "cargo".into()))
 }
 
+/// Prints how long a step took (`xtask: WHAT: N.N s`), so the suite's
+/// time can be kept within its budget step by step.
+fn took(what: &str, started: std::time::Instant) {
+    eprintln!("xtask: {what}: {:.1} s", started.elapsed().as_secs_f64());
+}
+
 fn run(root: &Path, what: &str, cmd: &mut Command) -> Result<(), String> {
     eprintln!("xtask: {what}");
+    let started = std::time::Instant::now();
     let status = cmd
         .current_dir(root)
         .status()
         .map_err(|e| format!("{what}: cannot start: {e}"))?;
+    took(what, started);
     if status.success() {
         Ok(())
     } else {
@@ -114,12 +122,14 @@ fn build_executables<const N: usize>(
     cmd: &mut Command,
 ) -> Result<[PathBuf; N], String> {
     eprintln!("xtask: {what}");
+    let started = std::time::Instant::now();
     let out = cmd
         .arg("--message-format=json-render-diagnostics")
         .current_dir(root)
         .stderr(Stdio::inherit())
         .output()
         .map_err(|e| format!("{what}: cannot start: {e}"))?;
+    took(what, started);
     if !out.status.success() {
         return Err(format!("{what} ({})", out.status));
     }
@@ -387,6 +397,7 @@ struct TestRun {
 fn counted_cargo_test(root: &Path, args: &[&str]) -> Result<TestRun, String> {
     let what = format!("cargo {}", args.join(" "));
     eprintln!("xtask: {what}");
+    let started = std::time::Instant::now();
     let mut child = cargo()
         .args(args)
         .current_dir(root)
@@ -412,6 +423,7 @@ fn counted_cargo_test(root: &Path, args: &[&str]) -> Result<TestRun, String> {
         }
     }
     let status = child.wait().map_err(|e| format!("{what}: {e}"))?;
+    took(&what, started);
     Ok(TestRun {
         what,
         passed,
