@@ -445,19 +445,14 @@ pub(crate) fn decode(elf: &Path, bytes: &[u8]) -> Result<Vec<String>, String> {
 }
 
 /// Apex heights of the same scenario on the host.
+///
+/// `hopper-sim` is the workspace test build's (the one the link sessions
+/// use): a release build of it, with fat LTO, took CI longer than both
+/// scenarios' runs.
 fn host_apexes(root: &Path, scenario: &[&str]) -> Result<Vec<f64>, String> {
-    let out = cargo()
-        .args([
-            "run",
-            "--quiet",
-            "--release",
-            "-p",
-            "hal-sim",
-            "--bin",
-            "hopper-sim",
-            "--",
-            "run",
-        ])
+    let (_, sim) = crate::session::host_binaries(root)?;
+    let out = Command::new(sim)
+        .arg("run")
         .args(scenario)
         .arg("--json")
         .current_dir(root)

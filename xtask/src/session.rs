@@ -52,7 +52,7 @@ impl Drop for Reaped {
 /// the workspace's features (dependencies at opt-level 2), so the suite
 /// that runs next builds nothing again; the virtual robot keeps 3x real
 /// time in this profile.
-fn host_binaries(root: &Path) -> Result<(PathBuf, PathBuf), String> {
+pub(crate) fn host_binaries(root: &Path) -> Result<(PathBuf, PathBuf), String> {
     let [link, sim] = build_executables(
         root,
         "workspace test build (and the hopper-link, hopper-sim binaries)",

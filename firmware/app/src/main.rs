@@ -121,6 +121,22 @@ pub mod qemu {
     pub const SYSTICK_HZ: u32 = 168_000_000;
     const _: () = assert!(SYSTICK_HZ.is_multiple_of(crate::control::CONTROL_HZ));
 
+    /// Periods per 100 us of virtual time in both QEMU images: a period's
+    /// deadline is 4,200 SysTick ticks, 25,000 instructions. Robot time is
+    /// still 100 us a period (the runner's and the plant's `dt`; the plant
+    /// advances with SysTick stopped). Most of QEMU's wall time was the
+    /// busy idle between periods: at 1 (100,000 instructions a period) the
+    /// energy-apex scenario took 44 s. The period's work within the
+    /// deadline is the step (at most about 1,100 instructions), the link's
+    /// (at most about 10,800) and the simulated sensors' noise (soft `f64`,
+    /// the ADC's and the timers' work on the board); at 6 (16,667
+    /// instructions, a 168 MHz core's 100 us at one instruction per cycle)
+    /// the sensor model overran it in 2 of 120,000 periods.
+    pub const PACE: u32 = 4;
+    /// SysTick ticks per control period.
+    pub const PERIOD_TICKS: u32 = SYSTICK_HZ / crate::control::CONTROL_HZ / PACE;
+    const _: () = assert!((SYSTICK_HZ / crate::control::CONTROL_HZ).is_multiple_of(PACE));
+
     /// TIM5 as the runner's counter: a free-running 32-bit counter that QEMU
     /// runs at 1 GHz of virtual time, so under `-icount shift=0` it counts
     /// guest instructions.
@@ -591,7 +607,7 @@ mod app {
             defmt::error!("logger did not start");
         }
 
-        crate::qemu::start_systick(&mut core.SYST, crate::qemu::SYSTICK_HZ / CONTROL_HZ);
+        crate::qemu::start_systick(&mut core.SYST, crate::qemu::PERIOD_TICKS);
         defmt::println!(
             "hopper-fw: QEMU build, {=str} scenario, {=u32} Hz, {=u32} s",
             SCENARIO,
@@ -754,12 +770,6 @@ mod app {
     /// PCLK2 on the HSI, Hz (QEMU has no RCC model, and ignores the baud
     /// rate anyway).
     const PCLK2_HZ: u32 = 16_000_000;
-    /// Periods per 100 us of virtual time: the session runs 4 times faster
-    /// in wall time (most of QEMU's work is the busy idle between periods).
-    /// Robot time is still 100 us a period (the runner's and the plant's
-    /// `dt`); the deadline is then 25,000 instructions, and a period's work
-    /// (the step, the link, at most about 10,300 instructions) fits it.
-    const PACE: u32 = 4;
 
     #[shared]
     struct Shared {}
@@ -800,7 +810,7 @@ mod app {
         let (tx_in, tx_out) = cx.local.txq.split();
         let serial = Serial::new(dp.USART1, &dp.RCC, &dp.GPIOA, PCLK2_HZ, rx_in, tx_out);
 
-        crate::qemu::start_systick(&mut core.SYST, crate::qemu::SYSTICK_HZ / CONTROL_HZ / PACE);
+        crate::qemu::start_systick(&mut core.SYST, crate::qemu::PERIOD_TICKS);
         defmt::println!(
             "hopper-fw: QEMU link image, {=u32} Hz, link on USART1; disarmed, held {=f64} m up until armed",
             CONTROL_HZ,
