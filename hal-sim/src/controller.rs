@@ -62,6 +62,10 @@ pub trait Controller {
     fn arm_refusal(&self) -> Option<&'static str> {
         None
     }
+    /// The firmware's winding temperature estimate, if it has one.
+    fn thermal(&self) -> Option<ThermalSummary> {
+        None
+    }
 }
 
 /// Times of the phase estimator's touchdown and liftoff events, s.
@@ -85,6 +89,19 @@ pub struct EstimatorEvents {
     /// Touchdowns predicted from the height encoder that load cell and
     /// potentiometer did not confirm (each withdrawn with a liftoff).
     pub withdrawn_touchdowns: u32,
+}
+
+/// The firmware's estimate of the motor's winding temperature over a run
+/// (`hopper_control::thermal`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct ThermalSummary {
+    /// Hottest winding temperature estimated, C.
+    pub peak_winding_c: f64,
+    /// Winding temperature at the end, C.
+    pub final_winding_c: f64,
+    /// When the current limit first fell below the amplifier's (the
+    /// derating band), s; null if never.
+    pub first_derated_s: Option<f64>,
 }
 
 /// A latched fault.
@@ -287,6 +304,7 @@ impl ControllerSpec {
             events: EstimatorEvents::default(),
             contact_times: ContactTimes::default(),
             arm_refusal: None,
+            thermal: ThermalSummary::default(),
             injections: self
                 .injections
                 .iter()
@@ -353,6 +371,7 @@ pub struct FirmwareController {
     events: EstimatorEvents,
     contact_times: ContactTimes,
     arm_refusal: Option<&'static str>,
+    thermal: ThermalSummary,
     injections: Vec<(Injection, InjectState)>,
     max_abs_current_after_fault_a: Option<f64>,
 }
@@ -456,6 +475,13 @@ impl Controller for FirmwareController {
         };
         // The host keeps every deadline: the plant takes no time.
         self.runner.end_period(false);
+        let motor = self.runner.hopper().supervisor().thermal();
+        let winding_c = f64::from(motor.winding_c());
+        self.thermal.peak_winding_c = self.thermal.peak_winding_c.max(winding_c);
+        self.thermal.final_winding_c = winding_c;
+        if motor.limit_scale() < 1.0 && self.thermal.first_derated_s.is_none() {
+            self.thermal.first_derated_s = Some(plant.time_s());
+        }
         let new = out.faults.0 & !before.0;
         if new != 0 {
             for f in Fault::ALL {
@@ -516,6 +542,10 @@ impl Controller for FirmwareController {
 
     fn contact_times(&self) -> Option<ContactTimes> {
         Some(self.contact_times.clone())
+    }
+
+    fn thermal(&self) -> Option<ThermalSummary> {
+        Some(self.thermal)
     }
 
     fn arm_refusal(&self) -> Option<&'static str> {

@@ -196,6 +196,9 @@ pub struct Summary {
     /// Why the firmware refused to arm (`arming::ArmRefusal::name`; the run
     /// then stays disarmed: 0 A, amplifier off); null when it armed.
     pub arm_refused: Option<&'static str>,
+    /// The firmware's estimate of the motor's winding temperature (null
+    /// without firmware).
+    pub thermal: Option<crate::controller::ThermalSummary>,
     /// The firmware's per-hop ledger, one entry per completed hop.
     pub firmware_hops: Vec<HopLedger>,
     /// Motor work (plant ledger) from the first touchdown to the first
@@ -548,6 +551,7 @@ pub fn run_with_progress(
                 estimated_events: controller.estimator_events(),
                 contact_latency,
                 arm_refused: controller.arm_refusal(),
+                thermal: controller.thermal(),
                 firmware_hops: controller.hop_ledgers(),
                 first_stance_motor_work_j: first_stance_work_j,
                 steady_hop: match tracker.hops.len() {
@@ -629,6 +633,7 @@ fn summarize(
         estimated_events: None,
         contact_latency: None,
         arm_refused: None,
+        thermal: None,
         firmware_hops: Vec::new(),
         first_stance_motor_work_j: None,
         hop_ledger: Vec::new(),

@@ -8,7 +8,9 @@ use clap::{Parser, Subcommand};
 use hopper_control::params::{self, Kind};
 use hopper_link::record::Recording;
 use hopper_link::{names, Client, Target};
-use hopper_protocol::{ArmState, Name, Request, Response, RobotMsg, Telemetry, TimingStats};
+use hopper_protocol::{
+    ArmState, Name, Request, Response, RobotMsg, Telemetry, ThermalStatus, TimingStats,
+};
 use std::io::{BufRead, IsTerminal, Write};
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
@@ -373,6 +375,13 @@ fn status_of(c: &mut Client) -> Result<hopper_protocol::Status> {
     }
 }
 
+fn thermal_of(c: &mut Client) -> Result<ThermalStatus> {
+    match c.request(Request::Thermal)? {
+        Response::Thermal(t) => Ok(t),
+        r => bail!("unexpected answer {r:?}"),
+    }
+}
+
 fn timing_of(c: &mut Client) -> Result<TimingStats> {
     match c.request(Request::Timing)? {
         Response::Timing(t) => Ok(t),
@@ -438,6 +447,16 @@ fn status(c: &mut Client) -> Result<()> {
     } else {
         println!("last apex: none yet");
     }
+    let m = thermal_of(c)?;
+    println!(
+        "motor (estimated): winding {:.1} C, housing {:.1} C; current limit {:.0}% (derates from {:.0} C, trips at {:.0} C{})",
+        m.winding_c,
+        m.housing_c,
+        m.limit_scale * 100.0,
+        m.derate_c,
+        m.trip_c,
+        if m.protect { "" } else { "; protection off" }
+    );
     println!(
         "cost per period (robot counter ticks: board cycles, QEMU instructions, simulator 0): control step mean {} max {}, link mean {} max {}",
         t.step_mean, t.step_max, t.link_mean, t.link_max

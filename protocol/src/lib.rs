@@ -114,6 +114,8 @@ pub enum Request {
         /// Pressed.
         pressed: bool,
     },
+    /// The motor's estimated temperatures ([`Response::Thermal`]).
+    Thermal,
 }
 
 /// Robot to host.
@@ -181,6 +183,25 @@ pub enum Response {
     Timing(TimingStats),
     /// A dump follows: this many [`RobotMsg::Captured`] records.
     Dump(DumpInfo),
+    /// The motor's estimated temperatures.
+    Thermal(ThermalStatus),
+}
+
+/// The motor's thermal estimate (`hopper_control::thermal`).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct ThermalStatus {
+    /// Winding temperature, C.
+    pub winding_c: f32,
+    /// Housing temperature, C.
+    pub housing_c: f32,
+    /// The current limit allowed now, as a fraction of the amplifier's.
+    pub limit_scale: f32,
+    /// Winding temperature where the derating starts, C.
+    pub derate_c: f32,
+    /// Winding temperature that latches `overtemperature`, C.
+    pub trip_c: f32,
+    /// Whether the protection acts (`thermal.protect`).
+    pub protect: bool,
 }
 
 /// The cost of the robot's periodic work, in its counter's ticks (the
@@ -567,6 +588,7 @@ mod tests {
             Just(Request::ParamCount),
             Just(Request::Timing),
             Just(Request::Dump),
+            Just(Request::Thermal),
             any::<bool>().prop_map(|pressed| Request::SimulateEstop { pressed }),
             any::<u16>().prop_map(|index| Request::ParamInfo { index }),
             name.clone().prop_map(|name| Request::ParamGet { name }),

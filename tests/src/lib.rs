@@ -27,7 +27,16 @@ pub struct CliRun<'a> {
     pub target_apex_m: Option<f64>,
     /// `--duration`, s.
     pub duration_s: Option<f64>,
+    /// `--set NAME=VALUE`s: firmware parameters.
+    pub set: &'a [(&'static hopper_control::params::Param, f32)],
 }
+
+/// `--set thermal.protect=0`: the motor's thermal protection off, for the
+/// tests that study a control law past the motor's thermal limit (on the
+/// design machine every law derates within 8 to 27 s: `tests/thermal.rs`
+/// and `docs/safety.md`). The estimate still runs and is reported.
+pub const NO_THERMAL_LIMIT: [(&hopper_control::params::Param, f32); 1] =
+    [(&hopper_control::params::THERMAL_PROTECT, 0.0)];
 
 impl CliRun<'_> {
     /// Runs it through the same layers `hopper-sim run` uses (flags as
@@ -45,6 +54,7 @@ impl CliRun<'_> {
             start_apex_m: self.start_apex_m,
             target_apex_m: self.target_apex_m,
             duration_s: self.duration_s,
+            firmware_params: (!self.set.is_empty()).then(|| self.set.to_vec()),
             ..Overrides::default()
         };
         let settings = Settings::resolve(None, &flags);

@@ -31,6 +31,9 @@ fn sim(name: &str, target: f64, start: f64, duration: f64, seed: u64, hz: f64) -
             seed,
             ..SensorConfig::DEFAULT
         },
+        // Contact detection, not the motor's heat: the thermal protection
+        // would derate the longer runs (sil_tests::NO_THERMAL_LIMIT).
+        params: sil_tests::NO_THERMAL_LIMIT.to_vec(),
         ..ControllerSpec::new(name)
     };
     let mut c = spec.build(&params, start, cfg.control_dt_s).unwrap();

@@ -36,7 +36,7 @@ mod session;
 
 const TARGET: &str = "thumbv7em-none-eabihf";
 
-/// Flash budget for the board image with defmt (text + data), bytes: 72 KiB
+/// Flash budget for the board image with defmt (text + data), bytes: 80 KiB
 /// of the STM32F405's 1 MiB. It was 32 KiB while the board could only run
 /// its compile-time default controller, and 40 KiB once every controller's
 /// constructor and validation was in the image, chosen at run time (33.8 KB
@@ -44,8 +44,10 @@ const TARGET: &str = "thumbv7em-none-eabihf";
 /// brought it to 68.4 KB: the postcard encoders and decoders of every
 /// message, the endpoint, the parameter table's names and units for
 /// `params list` (its docs stay on the host: 6 KB less), the USART driver,
-/// and `info`-level defmt logging.
-const FLASH_BUDGET_BYTES: u64 = 72 * 1024;
+/// and `info`-level defmt logging. Issue 18's thermal protection (the
+/// model, its ten parameters, the link's thermal request) brought it to
+/// 72.3 KB, and its bring-up routines are to come: 80 KiB.
+const FLASH_BUDGET_BYTES: u64 = 80 * 1024;
 /// Static RAM budget (data + bss) without the telemetry capture buffer, bytes.
 const RAM_BUDGET_BYTES: u64 = 16 * 1024;
 

@@ -327,6 +327,16 @@ fn run_session(link: &Path, addr: &str, out_dir: &Path, label: &str) -> Result<R
     if lines.iter().rev().find(|l| l.starts_with("faults: ")) != Some(&"faults: none".to_string()) {
         problems.push("a fault is latched after the garbage".into());
     }
+    // The motor heated while it hopped (8 s of it), and cools between:
+    // "motor (estimated): winding W C, housing H C; ..."
+    match numbers_after(&lines, "motor (estimated): winding ") {
+        Some(v) if v.first().is_some_and(|w| (30.0..135.0).contains(w)) => {}
+        Some(v) => problems.push(format!(
+            "the motor's winding estimate after hopping is {:?} C, not warm and below the derating",
+            v.first()
+        )),
+        None => problems.push("no motor temperature in the status".into()),
+    }
     match numbers_after(&lines, "cost per period ") {
         // "(robot counter ticks: board cycles, QEMU instructions, simulator
         // 0): control step mean A max B, link mean C max D"

@@ -276,6 +276,7 @@ impl Hopper {
     /// numbers go on) and its last supervisor input.
     pub fn continue_from(&mut self, old: &Hopper) {
         self.converter.continue_from(&old.converter);
+        self.supervisor.continue_thermal(&old.supervisor);
         let latched = old.supervisor.faults();
         for f in Fault::ALL {
             if latched.contains(f) {

@@ -59,6 +59,7 @@ pub mod pd_design;
 pub mod runner;
 pub mod supervisor;
 pub mod telemetry;
+pub mod thermal;
 pub mod watchdog;
 
 /// `f32` limits by plain comparison, for the control step. The Cortex-M4F

@@ -23,7 +23,7 @@ use crate::runner::{CycleCounter, LogItem, Period, PeriodRunner, StepStats};
 use crate::telemetry::{FaultCapture, StepRecord};
 use hopper_protocol::{
     encode, ArmState, Decoder, DumpInfo, Hop, HostMsg, ParamInfo, Request, Response, RobotMsg,
-    Status, Telemetry, TimingStats, MAX_FRAME, PROTOCOL_VERSION, TEXT_LEN,
+    Status, Telemetry, ThermalStatus, TimingStats, MAX_FRAME, PROTOCOL_VERSION, TEXT_LEN,
 };
 
 /// A transmit queue of bytes (the board's UART ring, a socket buffer).
@@ -277,6 +277,18 @@ impl Endpoint {
                 link_mean: self.cost.mean(),
                 link_max: self.cost.max,
             }),
+            Request::Thermal => {
+                let m = runner.hopper().supervisor().thermal();
+                let c = m.config();
+                Response::Thermal(ThermalStatus {
+                    winding_c: m.winding_c(),
+                    housing_c: m.housing_c(),
+                    limit_scale: m.limit_scale(),
+                    derate_c: c.derate_winding_c,
+                    trip_c: c.trip_winding_c,
+                    protect: c.protect,
+                })
+            }
             Request::SimulateEstop { pressed } if self.simulated => {
                 self.sim_estop = *pressed;
                 Response::Ok

@@ -726,6 +726,116 @@ param!(
     "To arm, nut and body must be slower than this."
 );
 param!(
+    THERMAL_PROTECT,
+    "thermal.protect",
+    "-",
+    Flag,
+    0.0,
+    1.0,
+    1.0,
+    DISARMED,
+    "Derate and fault on the winding temperature estimate; 0 only for control studies past the motor's thermal limit (the estimate is still reported), never on a robot."
+);
+param!(
+    THERMAL_RESISTANCE_OHM,
+    "thermal.winding_resistance_ohm",
+    "ohm",
+    Real,
+    1.0e-3,
+    100.0,
+    0.299,
+    DISARMED,
+    "Motor winding resistance at 25 C (the RE 40 24 V winding's; use your motor's datasheet)."
+);
+param!(
+    THERMAL_WINDING_TO_HOUSING,
+    "thermal.winding_to_housing_k_per_w",
+    "K/W",
+    Real,
+    1.0e-2,
+    100.0,
+    1.93,
+    DISARMED,
+    "Thermal resistance winding to housing (motor datasheet)."
+);
+param!(
+    THERMAL_HOUSING_TO_AMBIENT,
+    "thermal.housing_to_ambient_k_per_w",
+    "K/W",
+    Real,
+    1.0e-2,
+    100.0,
+    4.65,
+    DISARMED,
+    "Thermal resistance housing to ambient (motor datasheet; a heat sink lowers it)."
+);
+param!(
+    THERMAL_WINDING_TAU,
+    "thermal.winding_time_constant_s",
+    "s",
+    Real,
+    0.1,
+    1.0e4,
+    41.6,
+    DISARMED,
+    "Winding thermal time constant (motor datasheet)."
+);
+param!(
+    THERMAL_HOUSING_TAU,
+    "thermal.housing_time_constant_s",
+    "s",
+    Real,
+    1.0,
+    1.0e5,
+    1120.0,
+    DISARMED,
+    "Motor (housing) thermal time constant (motor datasheet)."
+);
+param!(
+    THERMAL_AMBIENT,
+    "thermal.ambient_c",
+    "degC",
+    Real,
+    -40.0,
+    80.0,
+    25.0,
+    DISARMED,
+    "Ambient temperature; the motor is taken to be at it at boot."
+);
+param!(
+    THERMAL_DERATE,
+    "thermal.derate_winding_c",
+    "degC",
+    Real,
+    0.0,
+    250.0,
+    135.0,
+    DISARMED,
+    "Estimated winding temperature where the current limit starts to fall."
+);
+param!(
+    THERMAL_TRIP,
+    "thermal.trip_winding_c",
+    "degC",
+    Real,
+    0.0,
+    250.0,
+    150.0,
+    DISARMED,
+    "Estimated winding temperature that latches overtemperature (5 K under the RE 40's 155 C)."
+);
+param!(
+    THERMAL_DERATED_FRACTION,
+    "thermal.derated_limit_fraction",
+    "1",
+    Real,
+    0.05,
+    1.0,
+    0.5,
+    DISARMED,
+    "Current limit at the trip temperature, as a fraction of the amplifier's (linear from the derate temperature)."
+);
+param!(
     EST_PREDICT_CONTACT,
     "estimator.predict_contact",
     "-",
@@ -1227,6 +1337,16 @@ pub const TABLE: &[&Param] = &[
     &SUP_CONTACT_DISAGREE_PERIODS,
     &SUP_SPRING_MISMATCH,
     &SUP_FROZEN_SPEED,
+    &THERMAL_PROTECT,
+    &THERMAL_RESISTANCE_OHM,
+    &THERMAL_WINDING_TO_HOUSING,
+    &THERMAL_HOUSING_TO_AMBIENT,
+    &THERMAL_WINDING_TAU,
+    &THERMAL_HOUSING_TAU,
+    &THERMAL_AMBIENT,
+    &THERMAL_DERATE,
+    &THERMAL_TRIP,
+    &THERMAL_DERATED_FRACTION,
     &CAL_MOTOR_COUNTS_PER_REV,
     &CAL_MOTOR_POSITIVE_DOWN,
     &CAL_HEIGHT_COUNTS_PER_REV,
@@ -1357,6 +1477,22 @@ fn slot<'a>(cfg: &'a mut HopperConfig, p: &Param) -> Result<Slot<'a>, ParamError
             "contact_disagree_periods" => Ok(Slot::U16(&mut c.contact_disagree_periods)),
             "spring_mismatch_n" => Ok(R(&mut c.spring_mismatch_n)),
             "frozen_speed_rad_s" => Ok(R(&mut c.frozen_speed_rad_s)),
+            _ => Err(ParamError::Unknown),
+        };
+    }
+    if let Some(rest) = name.strip_prefix("thermal.") {
+        let t = &mut cfg.supervisor.thermal;
+        return match rest {
+            "protect" => Ok(B(&mut t.protect)),
+            "winding_resistance_ohm" => Ok(R(&mut t.winding_resistance_ohm)),
+            "winding_to_housing_k_per_w" => Ok(R(&mut t.winding_to_housing_k_per_w)),
+            "housing_to_ambient_k_per_w" => Ok(R(&mut t.housing_to_ambient_k_per_w)),
+            "winding_time_constant_s" => Ok(R(&mut t.winding_time_constant_s)),
+            "housing_time_constant_s" => Ok(R(&mut t.housing_time_constant_s)),
+            "ambient_c" => Ok(R(&mut t.ambient_c)),
+            "derate_winding_c" => Ok(R(&mut t.derate_winding_c)),
+            "trip_winding_c" => Ok(R(&mut t.trip_winding_c)),
+            "derated_limit_fraction" => Ok(R(&mut t.derated_limit_fraction)),
             _ => Err(ParamError::Unknown),
         };
     }
@@ -1629,7 +1765,7 @@ mod tests {
                 // rules (a range's min below its max, the liftoff threshold
                 // below the touchdown one, ...) that one value at its bound
                 // may break: the construction must then refuse, not panic.
-                let coupled = ["estimator.", "supervisor.", "calibration."]
+                let coupled = ["estimator.", "supervisor.", "calibration.", "thermal."]
                     .iter()
                     .any(|prefix| p.name.starts_with(prefix));
                 for v in [p.min, p.max, p.default] {

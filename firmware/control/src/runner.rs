@@ -223,6 +223,9 @@ pub struct PeriodRunner {
     reported: Faults,
     /// Periods until a rebuilt controller's velocity filters measure.
     unsettled: u8,
+    /// The current the amplifier was told to drive last period, A (0 while
+    /// disabled): the thermal model's input.
+    applied_a: f32,
 }
 
 impl PeriodRunner {
@@ -247,6 +250,7 @@ impl PeriodRunner {
             cost: StepStats::new(),
             reported: Faults::NONE,
             unsettled: 0,
+            applied_a: 0.0,
         })
     }
 
@@ -363,6 +367,12 @@ impl PeriodRunner {
         counter: &mut C,
     ) -> Period {
         let raw = io.read().ok();
+        // The motor heated with last period's current: an overtemperature
+        // latches before this period's step, so the step's output is
+        // already the safe one (100 us late: nothing on a thermal scale).
+        self.hopper
+            .supervisor_mut()
+            .heat(self.applied_a, self.timing.period_s);
         let t0 = counter.now();
         let mut out = self.hopper.step(raw.as_ref(), self.timing.period_s);
         let t1 = counter.now();
@@ -430,6 +440,12 @@ impl PeriodRunner {
             let _ = io.set_amp_enabled(false);
             self.make_safe(&mut out, zero);
         }
+        // What the amplifier was told, for the thermal model next period.
+        self.applied_a = if out.command.amp_enable {
+            out.command.current_a
+        } else {
+            0.0
+        };
         out.record.faults = out.faults.0;
         let mut arm_event = arm_event;
         if !out.faults.is_empty() {

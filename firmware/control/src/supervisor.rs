@@ -65,11 +65,15 @@ pub enum Fault {
     /// while faulted, or a latch that cleared by itself). Latched so that no
     /// later period can enable the amplifier before the watchdog resets the MCU.
     SelfCheck = 13,
+    /// The motor winding's estimated temperature reached
+    /// `thermal.trip_winding_c` ([`crate::thermal`]); clears once it has
+    /// cooled below `thermal.derate_winding_c`.
+    Overtemperature = 14,
 }
 
 impl Fault {
     /// Every fault, in bit order.
-    pub const ALL: [Fault; 14] = [
+    pub const ALL: [Fault; 15] = [
         Fault::SensorNonFinite,
         Fault::SensorRange,
         Fault::EncoderJump,
@@ -84,6 +88,7 @@ impl Fault {
         Fault::SensorDisagree,
         Fault::EncoderFrozen,
         Fault::SelfCheck,
+        Fault::Overtemperature,
     ];
 
     /// Short kebab-case name for logs and telemetry.
@@ -103,6 +108,7 @@ impl Fault {
             Fault::SensorDisagree => "sensor-disagree",
             Fault::EncoderFrozen => "encoder-frozen",
             Fault::SelfCheck => "self-check",
+            Fault::Overtemperature => "overtemperature",
         }
     }
 
@@ -317,6 +323,8 @@ pub struct SupervisorConfig {
     /// Nut deceleration available for braking, m/s^2, in `p + pd |pd| / (2 a)`. Default 3.0
     /// (1.0 N m through the 426 kg reflected rotor inertia; spring help ignored). `> 0`.
     pub brake_decel_mps2: f32,
+    /// The motor's thermal model and the protection's thresholds.
+    pub thermal: crate::thermal::ThermalConfig,
 }
 
 impl Default for SupervisorConfig {
@@ -371,6 +379,7 @@ impl Default for SupervisorConfig {
             // at the braking distance from the largest tolerated stop-impact
             // speed: not a parameter of its own.
             brake_decel_mps2: 3.0,
+            thermal: crate::thermal::ThermalConfig::default(),
         }
     }
 }
@@ -453,7 +462,8 @@ impl SupervisorConfig {
         require(
             positive(self.brake_decel_mps2),
             "supervisor.brake_decel_mps2",
-        )
+        )?;
+        self.thermal.validate()
     }
 }
 
@@ -524,6 +534,9 @@ pub struct Supervisor {
     /// [`STOP_BAND_M`] away from both, m (NaN for bad stops: check off).
     stops_centre_m: f32,
     stops_inner_half_m: f32,
+    /// The motor's winding temperature: the current limit's derating and
+    /// [`Fault::Overtemperature`].
+    thermal: crate::thermal::MotorThermal,
 }
 
 /// A usable current limit: the configured one if finite and positive, else 0 (always safe).
@@ -564,7 +577,32 @@ impl Supervisor {
             stops_centre_m: 0.5 * (config.nut_stops_m.min + config.nut_stops_m.max),
             stops_inner_half_m: 0.5 * (config.nut_stops_m.max - config.nut_stops_m.min)
                 - STOP_BAND_M,
+            thermal: crate::thermal::MotorThermal::new(config.thermal)?,
         })
+    }
+
+    /// The motor's thermal state (winding and housing temperatures, the
+    /// current limit's derating).
+    pub const fn thermal(&self) -> &crate::thermal::MotorThermal {
+        &self.thermal
+    }
+
+    /// Carries `old`'s motor temperatures over (a rebuilt configuration
+    /// does not cool the motor).
+    pub fn continue_thermal(&mut self, old: &Supervisor) {
+        self.thermal.continue_from(&old.thermal);
+    }
+
+    /// One period of `dt_s` in which the amplifier was told to drive
+    /// `current_a` (0 when it was disabled): heats the thermal model, and
+    /// latches [`Fault::Overtemperature`] at the trip temperature. The
+    /// period runner calls it once per period with what it wrote.
+    #[inline]
+    pub fn heat(&mut self, current_a: f32, dt_s: f32) {
+        self.thermal.add(current_a, dt_s);
+        if self.thermal.tripped() {
+            self.latched.insert(Fault::Overtemperature);
+        }
     }
 
     /// Whether the motor encoder gave no count although the motor turns
@@ -759,7 +797,8 @@ impl Supervisor {
         if self.is_faulted() {
             return Command::SAFE;
         }
-        let limit = self.limit_a;
+        // Derated by the winding temperature: a scale in (0, 1].
+        let limit = self.limit_a * self.thermal.limit_scale();
         // Finite request, finite non-negative limit: the clamp is finite and in range.
         Command {
             current_a: crate::num::clamp(requested_current_a, -limit, limit),
@@ -775,7 +814,9 @@ impl Supervisor {
     /// fault) are re-evaluated on `input`; if any is still
     /// present, nothing is cleared and the faults still present are returned.
     /// Event faults (contact disagreement, overcurrent, non-finite command,
-    /// overrun, DAC error) are in the past, so they clear. `SelfCheck` never
+    /// overrun, DAC error) are in the past, so they clear. An
+    /// overtemperature clears once the winding is below
+    /// `thermal.derate_winding_c`. `SelfCheck` never
     /// clears (only the watchdog's hardware reset does). The
     /// contact-disagreement counter restarts. Call it with a fresh sample,
     /// with the amplifier disabled.
@@ -786,6 +827,10 @@ impl Supervisor {
         let mut still = self.input_faults(input).union(self_check);
         if self.encoder_frozen(input) {
             still.insert(Fault::EncoderFrozen);
+        }
+        // The winding must have cooled below the derating band.
+        if self.latched.contains(Fault::Overtemperature) && !self.thermal.cool() {
+            still.insert(Fault::Overtemperature);
         }
         if !still.is_empty() {
             return Err(still);

@@ -1,0 +1,386 @@
+//! The motor's winding temperature, estimated from the current the
+//! amplifier is told to drive: derate, then fault (issue 18).
+//!
+//! The thesis gives no thermal data for its 80 W motor, and its hopping
+//! drives far more than any such motor's continuous current: 17 to 29 A RMS
+//! with every controller on the design machine (simulated, 10 cm target),
+//! 32 A RMS for energy-apex standing on the ground, against about 6 A
+//! continuous. So a real robot needs this protection, and the simulator
+//! runs it too (it lives in the [`Supervisor`](crate::supervisor::Supervisor)).
+//!
+//! The model is the two-body one maxon's catalogue pages give the data for
+//! (winding and housing, each with a thermal resistance and a time
+//! constant), temperatures in degrees Celsius:
+//!
+//! ```text
+//! C_w dT_w/dt = i^2 R (1 + a (T_w - 25)) - (T_w - T_h) / R_wh
+//! C_h dT_h/dt = (T_w - T_h) / R_wh - (T_h - T_a) / R_ha
+//! C_w = tau_w / R_wh,   C_h = tau_h / R_ha,   a = 0.0039 / K (copper)
+//! ```
+//!
+//! Its defaults are a 40 mm graphite-brush maxon motor with the model's
+//! torque constant (the RE 40, 24 V winding: 30.2 mN m/A against the
+//! model's 29.7): 0.299 ohm, 1.93 and 4.65 K/W, 41.6 and 1120 s, at most
+//! 155 C in the winding. Replace them with your motor's datasheet values
+//! (`thermal.*` parameters). With them, the current that settles at the
+//! trip temperature (150 C) is 6.5 A, and a constant current reaches it in:
+//!
+//! | current, A RMS | 10 | 15 | 20.7 | 25.3 | 28.8 | 32 | 33.67 |
+//! |---|---|---|---|---|---|---|---|
+//! | trip, s | 392 | 52.6 | 21.1 | 13.1 | 9.8 | 7.8 | 7.0 |
+//!
+//! (`tests` below check this table against the model.) Between
+//! `derate_winding_c` and `trip_winding_c` the current limit falls
+//! linearly to `derated_limit_fraction` of the amplifier's; at
+//! `trip_winding_c` [`Fault::Overtemperature`](crate::supervisor::Fault)
+//! latches, and it clears (`reset-faults`) only once the winding has cooled
+//! below `derate_winding_c`.
+//!
+//! `thermal.protect = 0` keeps the estimate (`hopper-sim`'s summary
+//! reports it) without derating or faulting: for control studies past the
+//! motor's thermal limit, never on a robot.
+//!
+//! The state advances once per [`THERMAL_STEP_S`] of accumulated periods:
+//! at 10 kHz a period changes the housing temperature by about 1e-7 of
+//! itself, below `f32`'s resolution, and thermal time constants are tens
+//! of seconds anyway. Per period it costs a multiply-add and a compare.
+//! At boot the motor is taken to be at the ambient temperature.
+
+use crate::laws::InvalidField;
+use crate::params as p;
+
+/// How much time the model integrates at once, s (see the module docs).
+pub const THERMAL_STEP_S: f32 = 0.01;
+
+/// Copper's resistance temperature coefficient, 1/K (winding resistance
+/// is stated at 25 C).
+pub const COPPER_TEMPCO_PER_K: f32 = 0.0039;
+
+/// The motor's thermal data and the protection's thresholds; every field
+/// is a `thermal.*` parameter ([`crate::params`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct ThermalConfig {
+    /// Whether the estimate derates the current limit and latches the
+    /// fault (`false` only for control studies past the motor's thermal
+    /// limit: the temperatures are still estimated and reported).
+    pub protect: bool,
+    /// Winding (terminal) resistance at 25 C, ohm.
+    pub winding_resistance_ohm: f32,
+    /// Thermal resistance winding to housing, K/W.
+    pub winding_to_housing_k_per_w: f32,
+    /// Thermal resistance housing to ambient, K/W.
+    pub housing_to_ambient_k_per_w: f32,
+    /// Winding thermal time constant, s.
+    pub winding_time_constant_s: f32,
+    /// Motor (housing) thermal time constant, s.
+    pub housing_time_constant_s: f32,
+    /// Ambient temperature, C (the motor's at boot).
+    pub ambient_c: f32,
+    /// Winding temperature where the current limit starts to fall, C.
+    pub derate_winding_c: f32,
+    /// Winding temperature that latches the fault, C.
+    pub trip_winding_c: f32,
+    /// The current limit at `trip_winding_c`, as a fraction of the
+    /// amplifier's.
+    pub derated_limit_fraction: f32,
+}
+
+impl Default for ThermalConfig {
+    fn default() -> Self {
+        Self {
+            protect: p::THERMAL_PROTECT.default_flag(),
+            winding_resistance_ohm: p::THERMAL_RESISTANCE_OHM.default,
+            winding_to_housing_k_per_w: p::THERMAL_WINDING_TO_HOUSING.default,
+            housing_to_ambient_k_per_w: p::THERMAL_HOUSING_TO_AMBIENT.default,
+            winding_time_constant_s: p::THERMAL_WINDING_TAU.default,
+            housing_time_constant_s: p::THERMAL_HOUSING_TAU.default,
+            ambient_c: p::THERMAL_AMBIENT.default,
+            derate_winding_c: p::THERMAL_DERATE.default,
+            trip_winding_c: p::THERMAL_TRIP.default,
+            derated_limit_fraction: p::THERMAL_DERATED_FRACTION.default,
+        }
+    }
+}
+
+impl ThermalConfig {
+    /// Every field within its parameter's range, and the derating band
+    /// above the ambient and below the trip; the first one that is not is
+    /// named.
+    pub fn validate(&self) -> Result<(), InvalidField> {
+        p::THERMAL_PROTECT.check_flag(self.protect)?;
+        p::THERMAL_RESISTANCE_OHM.check(self.winding_resistance_ohm)?;
+        p::THERMAL_WINDING_TO_HOUSING.check(self.winding_to_housing_k_per_w)?;
+        p::THERMAL_HOUSING_TO_AMBIENT.check(self.housing_to_ambient_k_per_w)?;
+        p::THERMAL_WINDING_TAU.check(self.winding_time_constant_s)?;
+        p::THERMAL_HOUSING_TAU.check(self.housing_time_constant_s)?;
+        p::THERMAL_AMBIENT.check(self.ambient_c)?;
+        p::THERMAL_DERATE.check(self.derate_winding_c)?;
+        p::THERMAL_TRIP.check(self.trip_winding_c)?;
+        p::THERMAL_DERATED_FRACTION.check(self.derated_limit_fraction)?;
+        // Finite by the checks above.
+        if self.derate_winding_c <= self.ambient_c {
+            return Err(InvalidField(p::THERMAL_DERATE.name));
+        }
+        if self.trip_winding_c <= self.derate_winding_c {
+            return Err(InvalidField(p::THERMAL_TRIP.name));
+        }
+        Ok(())
+    }
+}
+
+/// The winding and housing temperatures and the current limit they allow.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct MotorThermal {
+    config: ThermalConfig,
+    /// Winding temperature, C.
+    winding_c: f32,
+    /// Housing temperature, C.
+    housing_c: f32,
+    /// `i^2 dt` not yet integrated, A^2 s.
+    heat_a2s: f32,
+    /// Time not yet integrated, s.
+    pending_s: f32,
+    /// The current limit's fraction now (1 below the derating band).
+    limit_scale: f32,
+}
+
+impl MotorThermal {
+    /// A motor at the ambient temperature, once `config` validates.
+    pub fn new(config: ThermalConfig) -> Result<Self, InvalidField> {
+        config.validate()?;
+        Ok(Self {
+            config,
+            winding_c: config.ambient_c,
+            housing_c: config.ambient_c,
+            heat_a2s: 0.0,
+            pending_s: 0.0,
+            limit_scale: 1.0,
+        })
+    }
+
+    /// The configuration.
+    pub const fn config(&self) -> &ThermalConfig {
+        &self.config
+    }
+
+    /// Winding temperature, C.
+    pub const fn winding_c(&self) -> f32 {
+        self.winding_c
+    }
+
+    /// Housing temperature, C.
+    pub const fn housing_c(&self) -> f32 {
+        self.housing_c
+    }
+
+    /// The fraction of the amplifier's current limit allowed now.
+    pub const fn limit_scale(&self) -> f32 {
+        self.limit_scale
+    }
+
+    /// Whether the winding is at or above the trip temperature, with the
+    /// protection on.
+    pub fn tripped(&self) -> bool {
+        // A NaN temperature (it cannot come from validated data and finite
+        // currents, but fail safe) counts as tripped.
+        self.config.protect
+            && (self.winding_c >= self.config.trip_winding_c || self.winding_c.is_nan())
+    }
+
+    /// Whether the winding has cooled below the derating band (an
+    /// overtemperature fault may then be reset).
+    pub fn cool(&self) -> bool {
+        self.winding_c < self.config.derate_winding_c
+    }
+
+    /// Carries the temperatures of `old` over (a rebuilt configuration
+    /// does not cool the motor).
+    pub fn continue_from(&mut self, old: &MotorThermal) {
+        self.winding_c = old.winding_c;
+        self.housing_c = old.housing_c;
+        self.heat_a2s = old.heat_a2s;
+        self.pending_s = old.pending_s;
+        self.update_limit();
+    }
+
+    /// One period of `dt_s` in which the amplifier was told to drive
+    /// `current_a` (0 when disabled). A non-finite current counts as the
+    /// largest finite one (it heats; a non-finite `dt_s` adds nothing).
+    #[inline]
+    pub fn add(&mut self, current_a: f32, dt_s: f32) {
+        if !(dt_s > 0.0 && dt_s < f32::INFINITY) {
+            return;
+        }
+        let i2 = current_a * current_a;
+        let i2 = if i2 < f32::INFINITY { i2 } else { f32::MAX };
+        self.heat_a2s += i2 * dt_s;
+        self.pending_s += dt_s;
+        if self.pending_s >= THERMAL_STEP_S {
+            self.integrate();
+        }
+    }
+
+    /// Advances both temperatures over the pending time (forward Euler:
+    /// 10 ms against a 41.6 s winding time constant).
+    fn integrate(&mut self) {
+        let c = &self.config;
+        let h = self.pending_s;
+        let mean_i2 = self.heat_a2s / h;
+        let r_ohm =
+            c.winding_resistance_ohm * (1.0 + COPPER_TEMPCO_PER_K * (self.winding_c - 25.0));
+        let power_w = mean_i2 * crate::num::max(r_ohm, 0.0);
+        let to_housing_w = (self.winding_c - self.housing_c) / c.winding_to_housing_k_per_w;
+        let to_ambient_w = (self.housing_c - c.ambient_c) / c.housing_to_ambient_k_per_w;
+        // C = tau / R_th: dT = dt (P_in - P_out) R_th / tau.
+        self.winding_c +=
+            h * (power_w - to_housing_w) * c.winding_to_housing_k_per_w / c.winding_time_constant_s;
+        self.housing_c += h * (to_housing_w - to_ambient_w) * c.housing_to_ambient_k_per_w
+            / c.housing_time_constant_s;
+        // An overflow (an absurd current for minutes) stays hot, not NaN.
+        if !self.winding_c.is_finite() {
+            self.winding_c = f32::MAX;
+        }
+        if !self.housing_c.is_finite() {
+            self.housing_c = f32::MAX;
+        }
+        self.heat_a2s = 0.0;
+        self.pending_s = 0.0;
+        self.update_limit();
+    }
+
+    fn update_limit(&mut self) {
+        let c = &self.config;
+        if !c.protect {
+            self.limit_scale = 1.0;
+            return;
+        }
+        let over = (self.winding_c - c.derate_winding_c) / (c.trip_winding_c - c.derate_winding_c);
+        let over = crate::num::clamp(over, 0.0, 1.0);
+        // NaN (not reachable: the temperatures stay finite) fails safe to
+        // the derated limit.
+        self.limit_scale = if over.is_nan() {
+            c.derated_limit_fraction
+        } else {
+            1.0 - over * (1.0 - c.derated_limit_fraction)
+        };
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Seconds of constant `current_a` until the fault would latch.
+    fn trip_time_s(current_a: f32) -> Option<f32> {
+        let mut m = MotorThermal::new(ThermalConfig::default()).unwrap_or_else(|e| panic!("{e:?}"));
+        let dt = 1.0e-4;
+        for n in 0..10_000_000u32 {
+            m.add(current_a, dt);
+            if m.tripped() {
+                return Some(n as f32 * dt);
+            }
+        }
+        None
+    }
+
+    #[test]
+    fn trip_times_are_the_documented_ones() {
+        // The module docs' table (the model integrated in f64 at 10 ms).
+        for (i, t) in [
+            (15.0, 52.6),
+            (20.7, 21.1),
+            (25.3, 13.1),
+            (28.8, 9.8),
+            (32.0, 7.8),
+            (33.67, 7.0),
+        ] {
+            let got = trip_time_s(i).unwrap_or(f32::NAN);
+            assert!(
+                (got - t).abs() < 0.02 * t,
+                "{i} A: {got} s, documented {t} s"
+            );
+        }
+    }
+
+    #[test]
+    fn continuous_current_never_trips() {
+        // 6.5 A settles just under the 150 C trip (6.54 A reaches it).
+        let mut m = MotorThermal::new(ThermalConfig::default()).unwrap_or_else(|e| panic!("{e:?}"));
+        for _ in 0..(20_000.0 / THERMAL_STEP_S) as u32 {
+            m.add(6.5, THERMAL_STEP_S);
+        }
+        assert!(!m.tripped(), "{} C", m.winding_c());
+        assert!(m.winding_c() > 140.0, "{} C", m.winding_c());
+    }
+
+    #[test]
+    fn derates_linearly_then_cools_back() {
+        let cfg = ThermalConfig::default();
+        let mut m = MotorThermal::new(cfg).unwrap_or_else(|e| panic!("{e:?}"));
+        assert_eq!(m.limit_scale(), 1.0);
+        while m.winding_c() < 0.5 * (cfg.derate_winding_c + cfg.trip_winding_c) {
+            m.add(33.67, 1.0e-3);
+        }
+        let mid = 1.0 - 0.5 * (1.0 - cfg.derated_limit_fraction);
+        assert!((m.limit_scale() - mid).abs() < 0.02, "{}", m.limit_scale());
+        assert!(!m.cool());
+        // Off: the winding cools toward the housing.
+        let mut t = 0.0;
+        while !m.cool() {
+            m.add(0.0, 0.01);
+            t += 0.01;
+        }
+        assert_eq!(m.limit_scale(), 1.0);
+        assert!(t > 1.0 && t < 60.0, "{t} s");
+    }
+
+    #[test]
+    fn unprotected_estimates_but_never_derates_or_trips() {
+        let cfg = ThermalConfig {
+            protect: false,
+            ..ThermalConfig::default()
+        };
+        let mut m = MotorThermal::new(cfg).unwrap_or_else(|e| panic!("{e:?}"));
+        for _ in 0..2000 {
+            m.add(33.67, THERMAL_STEP_S);
+        }
+        assert!(m.winding_c() > 160.0, "{}", m.winding_c());
+        assert!(!m.tripped());
+        assert_eq!(m.limit_scale(), 1.0);
+    }
+
+    #[test]
+    fn bad_configs_are_refused_by_name() {
+        let bad = |f: fn(&mut ThermalConfig)| {
+            let mut c = ThermalConfig::default();
+            f(&mut c);
+            MotorThermal::new(c).err()
+        };
+        assert_eq!(
+            bad(|c| c.winding_resistance_ohm = f32::NAN),
+            Some(InvalidField("thermal.winding_resistance_ohm"))
+        );
+        assert_eq!(
+            bad(|c| c.trip_winding_c = c.derate_winding_c),
+            Some(InvalidField("thermal.trip_winding_c"))
+        );
+        assert_eq!(
+            bad(|c| c.derate_winding_c = c.ambient_c),
+            Some(InvalidField("thermal.derate_winding_c"))
+        );
+    }
+
+    #[test]
+    fn absurd_inputs_stay_finite_and_hot() {
+        let mut m = MotorThermal::new(ThermalConfig::default()).unwrap_or_else(|e| panic!("{e:?}"));
+        for x in [f32::NAN, f32::INFINITY, 1.0e30, -1.0e30] {
+            m.add(x, THERMAL_STEP_S);
+            assert!(m.tripped());
+            assert!(m.limit_scale().is_finite() && m.limit_scale() > 0.0);
+        }
+        m.add(0.0, f32::NAN);
+        assert!(m.tripped());
+    }
+}
