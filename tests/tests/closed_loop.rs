@@ -305,7 +305,9 @@ impl Rig {
 #[test]
 fn supervisor_trips_on_each_injected_fault_and_stays_safe() {
     let t = 1.03; // mid-hop for the 0.10 m drop
-    Rig::new("open-torque").check_trip(t, "estop", 0, |f, _| f.estop = true);
+                  // The e-stop counts once pressed for 0.2 ms (`estop.press_s`): the
+                  // second period.
+    Rig::new("open-torque").check_trip(t, "estop", 1, |f, _| f.estop = true);
     Rig::new("open-torque").check_trip(t, "amp-fault", 0, |f, k| f.amp_fault = k == 0);
     Rig::new("open-torque").check_trip(t, "dac-error", 0, |f, k| f.dac_error = k == 0);
     Rig::new("open-torque").check_trip(t, "sensor-range", 0, |f, k| f.read_error = k == 0);

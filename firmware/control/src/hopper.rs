@@ -18,9 +18,7 @@
 //! write the DAC, set the enable, the watchdog decision and overruns.
 
 use crate::arming::ArmingConfig;
-#[cfg(feature = "fault-injection")]
-use crate::calibration::Measurements;
-use crate::calibration::{CalError, Calibration, Converter, DacMap};
+use crate::calibration::{CalError, Calibration, Converter, DacMap, Measurements};
 use crate::energy::{EnergyInput, EnergyModel};
 use crate::estimator::{
     EstimatorConfig, EstimatorError, Phase, PhaseEstimator, PhaseEvent, PhaseInput,
@@ -62,6 +60,8 @@ pub struct HopperConfig {
     pub target_apex_m: f32,
     /// Arming (issue 17): the period runner's gate on the output.
     pub arming: ArmingConfig,
+    /// The e-stop input's debouncing (issue 18).
+    pub estop: crate::debounce::DebounceConfig,
 }
 
 impl HopperConfig {
@@ -102,6 +102,7 @@ impl HopperConfig {
             strategy: Strategy::default(),
             target_apex_m: crate::params::TARGET_APEX_M.default,
             arming: ArmingConfig::default(),
+            estop: crate::debounce::DebounceConfig::default(),
         }
     }
 }
@@ -170,6 +171,8 @@ pub struct Hopper {
     estimator: PhaseEstimator,
     controller: Controller,
     supervisor: Supervisor,
+    /// The e-stop input, debounced: what the supervisor and arming see.
+    estop: crate::debounce::Debounce,
     ledger: HopLedgerBuilder,
     /// `E_D` of the target apex, J (every energy-based law's reference).
     desired_energy_j: f32,
@@ -254,6 +257,7 @@ impl Hopper {
             })?,
             estimator,
             supervisor: Supervisor::new(cfg.supervisor, cfg.model.usable_current_limit_a())?,
+            estop: crate::debounce::Debounce::new(cfg.estop)?,
             ledger: HopLedgerBuilder::new(),
             desired_energy_j,
             screw_m_per_rad: cfg.model.screw_m_per_rad(),
@@ -277,6 +281,8 @@ impl Hopper {
     pub fn continue_from(&mut self, old: &Hopper) {
         self.converter.continue_from(&old.converter);
         self.supervisor.continue_thermal(&old.supervisor);
+        // The debounce state, with the new configuration's times.
+        self.estop.continue_from(&old.estop);
         let latched = old.supervisor.faults();
         for f in Fault::ALL {
             if latched.contains(f) {
@@ -343,6 +349,11 @@ impl Hopper {
         &mut self.supervisor
     }
 
+    /// The e-stop, debounced ([`crate::debounce`]).
+    pub fn estop_pressed(&self) -> bool {
+        self.estop.pressed()
+    }
+
     /// The phase estimate.
     pub fn phase(&self) -> Phase {
         self.estimator.phase()
@@ -362,8 +373,12 @@ impl Hopper {
     /// could not be read (latches [`Fault::SensorRange`]).
     pub fn step(&mut self, raw: Option<&RawSample>, dt_s: f32) -> StepOutput {
         self.steps = self.steps.wrapping_add(1);
+        let estop_pressed = match raw {
+            Some(r) => self.estop.update(r.estop_pressed, dt_s),
+            None => self.estop.pressed(),
+        };
         let m = match raw.map(|r| self.converter.convert(r)) {
-            Some(Ok(m)) => m,
+            Some(Ok(m)) => Measurements { estop_pressed, ..m },
             Some(Err(e)) => return self.safe_output(cal_fault(e)),
             None => return self.safe_output(Fault::SensorRange),
         };
@@ -595,6 +610,10 @@ mod tests {
         let mut raw = crate::proptest_support::rest_sample(&h.config().calibration);
         h.step(Some(&raw), 1e-4);
         raw.estop_pressed = true;
+        // One period pressed is a glitch (`estop.press_s` = 0.2 ms); the
+        // period that completes the press is already safe.
+        let out = h.step(Some(&raw), 1e-4);
+        assert!(out.faults.is_empty(), "{out:?}");
         let out = h.step(Some(&raw), 1e-4);
         assert_eq!(out.command, Command::SAFE);
         assert_eq!(out.dac_code, 2048);

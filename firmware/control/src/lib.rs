@@ -46,6 +46,7 @@
 
 pub mod arming;
 pub mod calibration;
+pub mod debounce;
 pub mod energy;
 pub mod estimator;
 pub mod filter;

@@ -776,7 +776,10 @@ mod tests {
         assert_eq!(dumps[0], dumps[1]);
         // Released, faults reset, armed again; then no frame for 0.2 s:
         // disarmed by link loss within the timeout.
+        // The release counts after 50 ms (`estop.release_s`).
         r.io.0.estop_pressed = false;
+        r.periods(500);
+        let _ = r.take();
         r.request(9, Request::ResetFaults);
         r.request(10, Request::Arm);
         r.periods(2);

@@ -726,6 +726,28 @@ param!(
     "To arm, nut and body must be slower than this."
 );
 param!(
+    ESTOP_PRESS_S,
+    "estop.press_s",
+    "s",
+    Real,
+    0.0,
+    0.01,
+    2.0e-4,
+    DISARMED,
+    "The e-stop input pressed without a break for this long is a press (shorter is a glitch; the button also breaks the amplifier enable in hardware)."
+);
+param!(
+    ESTOP_RELEASE_S,
+    "estop.release_s",
+    "s",
+    Real,
+    0.0,
+    2.0,
+    0.05,
+    DISARMED,
+    "The e-stop input released without a break for this long is a release (arming and fault resets wait for it: longer than a contact's bounce)."
+);
+param!(
     THERMAL_PROTECT,
     "thermal.protect",
     "-",
@@ -1337,6 +1359,8 @@ pub const TABLE: &[&Param] = &[
     &SUP_CONTACT_DISAGREE_PERIODS,
     &SUP_SPRING_MISMATCH,
     &SUP_FROZEN_SPEED,
+    &ESTOP_PRESS_S,
+    &ESTOP_RELEASE_S,
     &THERMAL_PROTECT,
     &THERMAL_RESISTANCE_OHM,
     &THERMAL_WINDING_TO_HOUSING,
@@ -1477,6 +1501,14 @@ fn slot<'a>(cfg: &'a mut HopperConfig, p: &Param) -> Result<Slot<'a>, ParamError
             "contact_disagree_periods" => Ok(Slot::U16(&mut c.contact_disagree_periods)),
             "spring_mismatch_n" => Ok(R(&mut c.spring_mismatch_n)),
             "frozen_speed_rad_s" => Ok(R(&mut c.frozen_speed_rad_s)),
+            _ => Err(ParamError::Unknown),
+        };
+    }
+    if let Some(rest) = name.strip_prefix("estop.") {
+        let e = &mut cfg.estop;
+        return match rest {
+            "press_s" => Ok(R(&mut e.press_s)),
+            "release_s" => Ok(R(&mut e.release_s)),
             _ => Err(ParamError::Unknown),
         };
     }

@@ -392,7 +392,8 @@ impl PeriodRunner {
         };
         let arm_input = ArmInput {
             faults: out.faults,
-            estop_pressed: raw.is_some_and(|r| r.estop_pressed),
+            // Debounced: a release counts after `estop.release_s`.
+            estop_pressed: self.hopper.estop_pressed(),
             // A controller rebuilt less than two periods ago has velocity
             // filters that read 0 m/s whatever the robot does (it may still
             // be bouncing): not a measurement to arm on.
@@ -610,16 +611,25 @@ mod tests {
         assert_eq!(p.arm_event, Some(ArmEvent::Armed));
         assert_eq!(io.enabled, Some(true));
         assert!(p.armed);
-        // The e-stop while armed: 0 A and off in the same period.
+        // The e-stop while armed: 0 A and off in the period that completes
+        // the press (0.2 ms: the second at 10 kHz).
         io.raw.estop_pressed = true;
+        r.arming_mut().link_frame();
+        let p = r.run_period(&mut io, &mut NoCounter);
+        assert!(p.armed, "one period pressed is a glitch");
         r.arming_mut().link_frame();
         let p = r.run_period(&mut io, &mut NoCounter);
         assert_eq!((io.dac, io.enabled), (Some(2048), Some(false)));
         assert!(!p.armed);
         assert!(matches!(p.arm_event, Some(ArmEvent::Disarmed(_))));
-        // Released: the estop fault resets only while disarmed, and arming
-        // needs a new request.
+        // Released, and seen released for `estop.release_s` (50 ms): the
+        // estop fault resets only while disarmed, and arming needs a new
+        // request.
         io.raw.estop_pressed = false;
+        for _ in 0..500 {
+            r.arming_mut().link_frame();
+            r.run_period(&mut io, &mut NoCounter);
+        }
         let raw = io.raw;
         let rest = {
             let m = crate::calibration::Converter::new(HopperConfig::default().calibration)
