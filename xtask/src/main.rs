@@ -22,7 +22,11 @@
 //!   session (`tests/link-session.txt`) with `hopper-link` against the QEMU
 //!   link image: `qemu-link: steady_apex_m=... records=... dropped=...
 //!   link_lost_s=... frames_bad=... step_instr_mean=... step_instr_max=...
-//!   link_instr_mean=... link_instr_max=...`.
+//!   link_instr_mean=... link_instr_max=...`. Then the board image's init
+//!   on QEMU with `-d unimp`, checked against `tests/board-init.trace`:
+//!   `board-init: writes=... polled_registers=... longest_poll_reads=...
+//!   terminated=... golden=...`.
+//! * `cargo xtask board-init`: the board image's init check alone.
 //! * `cargo xtask link-session`: the same session against `hopper-sim
 //!   serve` (the virtual robot), `link-sim: ...` (`cargo xtask test` runs
 //!   it after the QEMU runs).
@@ -31,6 +35,7 @@ use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
 use std::process::{Command, ExitCode, Stdio};
 
+mod board_init;
 mod qemu;
 mod session;
 
@@ -59,8 +64,9 @@ fn main() -> ExitCode {
         Some("size") => setup(&root).and_then(|_| size(&root)),
         Some("qemu") => setup(&root).and_then(|_| qemu::run(&root)),
         Some("link-session") => session::against_serve(&root),
+        Some("board-init") => setup(&root).and_then(|_| board_init::run(&root)),
         _ => {
-            eprintln!("usage: cargo xtask <test|size|qemu|link-session>");
+            eprintln!("usage: cargo xtask <test|size|qemu|link-session|board-init>");
             return ExitCode::from(2);
         }
     };

@@ -100,6 +100,12 @@ pub fn run(root: &Path) -> Result<(), String> {
         }
         failed.push(e);
     }
+    if let Err(e) = crate::board_init::run(root) {
+        if !e.starts_with("board init failed") {
+            println!("board-init: error (see above)");
+        }
+        failed.push(e);
+    }
     for s in &SCENARIOS {
         if let Err(e) = run_scenario(root, s) {
             // A failure before the summary (build, QEMU, decoding, the host

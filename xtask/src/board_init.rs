@@ -1,0 +1,411 @@
+//! The board image's `init` executed in QEMU (issue 18): `board.rs` runs
+//! on no test rig otherwise, since the QEMU images replace the board with
+//! simulated I/O.
+//!
+//! netduinoplus2 models no RCC, GPIO, DAC or IWDG: QEMU logs every access
+//! to them with `-d unimp`, which makes the log a trace of the board's
+//! register writes, in order. With no RCC model every ready flag reads 0:
+//! the first clock wait (HSIRDY) times out, so `configure_clocks` stays on
+//! the HSI as it does when the crystal never starts, and the LSI never
+//! becomes ready, so the run is also the test that `init`'s waits are
+//! bounded and it still starts the watchdog. (The HSE-specific branch,
+//! HSI ready and HSE not, is beyond QEMU 7.2: it would need an RCC model.) The ADC's injected group is not modelled
+//! either, so the control task never runs, and the trace ends with the
+//! watchdog's first reload.
+//!
+//! The trace (writes by device and register, and the polled registers,
+//! each poll run collapsed to one line) must equal `tests/board-init.trace`;
+//! `HOPPER_UPDATE_GOLDEN=1 cargo xtask qemu` rewrites it after a deliberate
+//! change. Beyond the equality, the properties that matter are checked by
+//! name, so a failure says which one broke: AMP_EN (PB0) driven low before
+//! the pin becomes an output; the DAC's zero-current code written before
+//! the DAC is enabled; the alternate functions of the encoder, USART and
+//! analog pins; the watchdog's key order (unlock, prescaler, reload, start,
+//! reload); every wait bounded. The ADC trigger selection is in a register
+//! QEMU models (so not in the trace): `board.rs`'s host tests cover it.
+
+use std::fmt::Write as _;
+use std::path::Path;
+use std::process::Stdio;
+use std::time::{Duration, Instant};
+
+use crate::{build_executable, cargo, TARGET};
+
+/// The golden trace, relative to the workspace root.
+const GOLDEN: &str = "tests/board-init.trace";
+/// How long init may take in wall time before it counts as hung.
+const INIT_TIMEOUT: Duration = Duration::from_secs(90);
+
+/// One register access QEMU logged.
+#[derive(Debug, Clone, PartialEq)]
+struct Access {
+    device: String,
+    offset: u32,
+    write: Option<u32>,
+}
+
+/// The register's name (RM0090) for the trace.
+fn register(device: &str, offset: u32) -> String {
+    let name = match (device, offset) {
+        (d, o) if d.starts_with("GPIO") => match o {
+            0x00 => "MODER",
+            0x04 => "OTYPER",
+            0x08 => "OSPEEDR",
+            0x0c => "PUPDR",
+            0x10 => "IDR",
+            0x14 => "ODR",
+            0x18 => "BSRR",
+            0x20 => "AFRL",
+            0x24 => "AFRH",
+            _ => "",
+        },
+        ("RCC", o) => match o {
+            0x00 => "CR",
+            0x04 => "PLLCFGR",
+            0x08 => "CFGR",
+            0x30 => "AHB1ENR",
+            0x40 => "APB1ENR",
+            0x44 => "APB2ENR",
+            0x74 => "CSR",
+            _ => "",
+        },
+        ("DAC", o) => match o {
+            0x00 => "CR",
+            0x08 => "DHR12R1",
+            _ => "",
+        },
+        // QEMU 7.2 names the unimplemented region at 0x4000_3000, which
+        // is the IWDG's, `I2S2ext`.
+        ("IWDG", o) => match o {
+            0x00 => "KR",
+            0x04 => "PR",
+            0x08 => "RLR",
+            0x0c => "SR",
+            _ => "",
+        },
+        _ => "",
+    };
+    if name.is_empty() {
+        format!("{device}+0x{offset:03x}")
+    } else {
+        format!("{device}.{name}")
+    }
+}
+
+/// The accesses in a `-d unimp` log, in order.
+fn parse(log: &str) -> Vec<Access> {
+    let mut out = Vec::new();
+    for line in log.lines() {
+        let Some((device, rest)) = line.split_once(": unimplemented device ") else {
+            continue;
+        };
+        let device = if device == "I2S2ext" { "IWDG" } else { device };
+        let field = |key: &str| {
+            rest.split_once(key)
+                .and_then(|(_, v)| v.split([',', ')']).next())
+                .and_then(|v| u32::from_str_radix(v.trim().trim_start_matches("0x"), 16).ok())
+        };
+        let Some(offset) = field("offset ") else {
+            continue;
+        };
+        out.push(Access {
+            device: device.to_string(),
+            offset,
+            write: if rest.starts_with("write") {
+                field("value ")
+            } else {
+                None
+            },
+        });
+    }
+    out
+}
+
+/// The trace: each write as `DEV.REG = 0xVALUE`; a read followed by the
+/// write of the same register is the write's read-modify-write and is
+/// dropped; other runs of reads of one register are `poll DEV.REG`.
+/// Returns it with the longest poll run (reads).
+fn trace(accesses: &[Access]) -> (Vec<String>, usize) {
+    let mut lines = Vec::new();
+    let mut longest = 0;
+    let mut i = 0;
+    while i < accesses.len() {
+        let a = &accesses[i];
+        let reg = register(&a.device, a.offset);
+        match a.write {
+            Some(v) => {
+                lines.push(format!("{reg} = 0x{v:08x}"));
+                i += 1;
+            }
+            None => {
+                let mut j = i;
+                while j < accesses.len()
+                    && accesses[j].write.is_none()
+                    && accesses[j].device == a.device
+                    && accesses[j].offset == a.offset
+                {
+                    j += 1;
+                }
+                let reads = j - i;
+                let rmw = reads == 1
+                    && accesses
+                        .get(j)
+                        .is_some_and(|n| n.device == a.device && n.offset == a.offset);
+                if !rmw {
+                    lines.push(format!("poll {reg}"));
+                    longest = longest.max(reads);
+                }
+                i = j;
+            }
+        }
+    }
+    (lines, longest)
+}
+
+/// Index of the first line satisfying `f`.
+fn position(lines: &[String], f: impl Fn(&str) -> bool) -> Option<usize> {
+    lines.iter().position(|l| f(l))
+}
+
+fn value_of(line: &str) -> Option<u32> {
+    line.split_once(" = 0x")
+        .and_then(|(_, v)| u32::from_str_radix(v, 16).ok())
+}
+
+/// The properties that matter, by name; the problems found.
+fn check(lines: &[String]) -> Vec<String> {
+    let mut problems = Vec::new();
+    // AMP_EN: BSRR's BR0 (bit 16) before MODER0 becomes output (01).
+    let low = position(lines, |l| {
+        l.starts_with("GPIOB.BSRR = ") && value_of(l).is_some_and(|v| v & (1 << 16) != 0)
+    });
+    let output = position(lines, |l| {
+        l.starts_with("GPIOB.MODER = ") && value_of(l).is_some_and(|v| v & 0b11 == 0b01)
+    });
+    match (low, output) {
+        (Some(l), Some(o)) if l < o => {}
+        _ => problems.push(format!(
+            "AMP_EN (PB0) is not driven low before it becomes an output (BSRR BR0 at {low:?}, MODER0 = output at {output:?})"
+        )),
+    }
+    // The DAC: DHR12R1 = 0x800 (the zero-current code) before CR.EN1.
+    let zero = position(lines, |l| l == "DAC.DHR12R1 = 0x00000800");
+    let enable = position(lines, |l| {
+        l.starts_with("DAC.CR = ") && value_of(l).is_some_and(|v| v & 1 != 0)
+    });
+    match (zero, enable) {
+        (Some(z), Some(e)) if z < e => {}
+        _ => problems.push(format!(
+            "the DAC's zero code is not written before the DAC is enabled (DHR12R1 at {zero:?}, EN1 at {enable:?})"
+        )),
+    }
+    // Alternate functions: PA9/PA10 AF7 (USART1), PA15 AF1 (TIM2_CH1), PB3
+    // AF1 (TIM2_CH2), PA0/PA1 AF2 (TIM5). An unmodelled register reads 0,
+    // so each read-modify-write shows only the fields it sets: a pin's
+    // function is its field in the last write that sets it.
+    let af = |reg: &str, pin: u32| {
+        lines
+            .iter()
+            .rev()
+            .filter(|l| l.starts_with(&format!("{reg} = ")))
+            .filter_map(|l| value_of(l))
+            .map(|v| (v >> (4 * (pin % 8))) & 0xF)
+            .find(|f| *f != 0)
+    };
+    for (reg, pin, want, what) in [
+        ("GPIOA.AFRH", 9, 7, "PA9 USART1_TX"),
+        ("GPIOA.AFRH", 10, 7, "PA10 USART1_RX"),
+        ("GPIOA.AFRH", 15, 1, "PA15 TIM2_CH1"),
+        ("GPIOB.AFRL", 3, 1, "PB3 TIM2_CH2"),
+        ("GPIOA.AFRL", 0, 2, "PA0 TIM5_CH1"),
+        ("GPIOA.AFRL", 1, 2, "PA1 TIM5_CH2"),
+    ] {
+        let got = af(reg, pin);
+        if got != Some(want) {
+            problems.push(format!("{what}: AF{got:?}, not AF{want}"));
+        }
+    }
+    // The watchdog: unlock (0x5555), prescaler, reload, start (0xCCCC),
+    // then reloads (0xAAAA).
+    let iwdg: Vec<&String> = lines.iter().filter(|l| l.starts_with("IWDG.")).collect();
+    let order = [
+        "IWDG.KR = 0x00005555",
+        "IWDG.PR = ",
+        "IWDG.RLR = ",
+        "IWDG.KR = 0x0000cccc",
+        "IWDG.KR = 0x0000aaaa",
+    ];
+    let mut next = 0;
+    for l in &iwdg {
+        if next < order.len() && l.starts_with(order[next]) {
+            next += 1;
+        }
+    }
+    if next < order.len() {
+        problems.push(format!(
+            "the watchdog's keys are not in the order unlock, prescaler, reload, start, reload: {iwdg:?}"
+        ));
+    }
+    problems
+}
+
+/// Builds the board image, runs its init on QEMU and checks the trace;
+/// prints `board-init: ...`.
+pub fn run(root: &Path) -> Result<(), String> {
+    let elf = build_executable(
+        root,
+        "firmware release build",
+        "hopper-fw",
+        cargo().args(["build", "-p", "hopper-app", "--release", "--target", TARGET]),
+    )?;
+    let dir = crate::target_dir(root)?.join("board-init");
+    std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    let log_path = dir.join("unimp.log");
+    let _ = std::fs::remove_file(&log_path);
+    eprintln!("xtask: running the board image's init on qemu-system-arm (netduinoplus2, -d unimp)");
+    let started = Instant::now();
+    let mut child = crate::qemu::qemu_command(&elf, 0, "null")
+        .args(["-d", "unimp"])
+        .arg("-D")
+        .arg(&log_path)
+        .stdout(Stdio::null())
+        .stderr(Stdio::inherit())
+        .spawn()
+        .map_err(|e| format!("cannot start qemu-system-arm: {e}"))?;
+    // Init is done at the watchdog's first reload: nothing follows it in
+    // QEMU (the control task waits for an ADC interrupt that never comes).
+    let done = loop {
+        std::thread::sleep(Duration::from_millis(200));
+        let log = std::fs::read_to_string(&log_path).unwrap_or_default();
+        if log.contains("I2S2ext: unimplemented device write (size 2, offset 0x000, value 0xaaaa)")
+        {
+            break true;
+        }
+        if started.elapsed() > INIT_TIMEOUT || child.try_wait().ok().flatten().is_some() {
+            break false;
+        }
+    };
+    let _ = child.kill();
+    let _ = child.wait();
+    crate::took("board init on QEMU", started);
+    let log =
+        std::fs::read_to_string(&log_path).map_err(|e| format!("{}: {e}", log_path.display()))?;
+    let (lines, longest_poll) = trace(&parse(&log));
+    let mut problems = Vec::new();
+    if !done {
+        problems.push(format!(
+            "init did not reach the watchdog's first reload within {} s without a crystal (it hangs, or QEMU stopped)",
+            INIT_TIMEOUT.as_secs()
+        ));
+    }
+    problems.extend(check(&lines));
+    let mut text = String::from(
+        "# The board image's init on QEMU netduinoplus2 (-d unimp): writes to the\n\
+         # registers QEMU does not model, in order, and the registers polled\n\
+         # (xtask/src/board_init.rs). QEMU reads these registers as 0, so a\n\
+         # read-modify-write shows only the fields it sets, and every ready\n\
+         # flag stays low: the first clock wait (HSIRDY) and the LSI's time\n\
+         # out, and init goes on on the HSI, as when the crystal never starts.\n",
+    );
+    for l in &lines {
+        let _ = writeln!(text, "{l}");
+    }
+    let golden_path = root.join(GOLDEN);
+    let actual_path = dir.join("actual.trace");
+    let _ = std::fs::write(&actual_path, &text);
+    if std::env::var_os("HOPPER_UPDATE_GOLDEN").is_some() {
+        std::fs::write(&golden_path, &text).map_err(|e| format!("{GOLDEN}: {e}"))?;
+        eprintln!("xtask: wrote {GOLDEN}");
+    }
+    let golden = std::fs::read_to_string(&golden_path).unwrap_or_default();
+    let same = golden == text;
+    if !same {
+        let g: Vec<&str> = golden.lines().filter(|l| !l.starts_with('#')).collect();
+        let first = lines
+            .iter()
+            .zip(g.iter())
+            .position(|(a, b)| a != b)
+            .unwrap_or(lines.len().min(g.len()));
+        problems.push(format!(
+            "the trace differs from {GOLDEN} at write {first}: got {:?}, golden {:?} (whole trace: {}; HOPPER_UPDATE_GOLDEN=1 accepts a deliberate change)",
+            lines.get(first),
+            g.get(first),
+            actual_path.display()
+        ));
+    }
+    let writes = lines.iter().filter(|l| !l.starts_with("poll ")).count();
+    let polls = lines.len() - writes;
+    println!(
+        "board-init: writes={writes} polled_registers={polls} longest_poll_reads={longest_poll} terminated={done} golden={}",
+        if same { "same" } else { "DIFFERENT" }
+    );
+    if problems.is_empty() {
+        Ok(())
+    } else {
+        for p in &problems {
+            eprintln!("xtask: board-init: {p}");
+        }
+        Err(format!("board init failed: {}", problems.join("; ")))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const LOG: &str = "RCC: unimplemented device read  (size 4, offset 0x030)\n\
+RCC: unimplemented device write (size 4, offset 0x030, value 0x00000007)\n\
+GPIOB: unimplemented device write (size 4, offset 0x018, value 0x00010000)\n\
+GPIOB: unimplemented device read  (size 4, offset 0x000)\n\
+GPIOB: unimplemented device write (size 4, offset 0x000, value 0x00000001)\n\
+RCC: unimplemented device read  (size 4, offset 0x000)\n\
+RCC: unimplemented device read  (size 4, offset 0x000)\n\
+RCC: unimplemented device read  (size 4, offset 0x000)\n\
+I2S2ext: unimplemented device write (size 2, offset 0x000, value 0x5555)\n";
+
+    #[test]
+    fn a_log_becomes_named_writes_and_polls() {
+        let (lines, longest) = trace(&parse(LOG));
+        assert_eq!(
+            lines,
+            [
+                "RCC.AHB1ENR = 0x00000007",
+                "GPIOB.BSRR = 0x00010000",
+                "GPIOB.MODER = 0x00000001",
+                "poll RCC.CR",
+                "IWDG.KR = 0x00005555",
+            ]
+        );
+        assert_eq!(longest, 3);
+    }
+
+    #[test]
+    fn amp_en_made_an_output_before_it_is_low_is_caught() {
+        let lines: Vec<String> = ["GPIOB.MODER = 0x00000001", "GPIOB.BSRR = 0x00010000"]
+            .map(String::from)
+            .to_vec();
+        assert!(check(&lines).iter().any(|p| p.starts_with("AMP_EN")));
+    }
+
+    #[test]
+    fn a_dac_enabled_before_its_zero_code_is_caught() {
+        let lines: Vec<String> = ["DAC.CR = 0x00000001", "DAC.DHR12R1 = 0x00000800"]
+            .map(String::from)
+            .to_vec();
+        assert!(check(&lines).iter().any(|p| p.starts_with("the DAC")));
+    }
+
+    #[test]
+    fn a_watchdog_started_before_its_reload_is_set_is_caught() {
+        let lines: Vec<String> = [
+            "IWDG.KR = 0x00005555",
+            "IWDG.KR = 0x0000cccc",
+            "IWDG.PR = 0x00000000",
+            "IWDG.RLR = 0x00000027",
+            "IWDG.KR = 0x0000aaaa",
+        ]
+        .map(String::from)
+        .to_vec();
+        assert!(check(&lines).iter().any(|p| p.starts_with("the watchdog")));
+    }
+}
