@@ -447,6 +447,33 @@ fn status(c: &mut Client) -> Result<()> {
     } else {
         println!("last apex: none yet");
     }
+    let b = match c.request(Request::Boot)? {
+        Response::Boot(b) => b,
+        r => bail!("unexpected answer {r:?}"),
+    };
+    let resets: Vec<&str> = hopper_control::boot::ResetCauses(b.resets)
+        .iter()
+        .map(hopper_control::boot::ResetCause::name)
+        .collect();
+    println!(
+        "boot: reset by {}; core clock {:.0} MHz{}; brown-out reset {}",
+        if resets.is_empty() {
+            "nothing recorded".to_string()
+        } else {
+            resets.join(", ")
+        },
+        f64::from(b.sysclk_hz) / 1e6,
+        if b.clock_as_configured {
+            " as configured"
+        } else {
+            ", NOT the configured clock (arming refused: clock-fallback)"
+        },
+        if b.brown_out_reset_on {
+            "on"
+        } else {
+            "OFF (arming refused: brown-out-reset-off; set BOR_LEV in the option bytes, docs/safety.md)"
+        }
+    );
     let m = thermal_of(c)?;
     println!(
         "motor (estimated): winding {:.1} C, housing {:.1} C; current limit {:.0}% (derates from {:.0} C, trips at {:.0} C{})",

@@ -116,6 +116,8 @@ pub enum Request {
     },
     /// The motor's estimated temperatures ([`Response::Thermal`]).
     Thermal,
+    /// What the board found at boot ([`Response::Boot`]).
+    Boot,
 }
 
 /// Robot to host.
@@ -185,6 +187,21 @@ pub enum Response {
     Dump(DumpInfo),
     /// The motor's estimated temperatures.
     Thermal(ThermalStatus),
+    /// What the board found at boot.
+    Boot(BootInfo),
+}
+
+/// What the board found at boot (`hopper_control::boot::BootReport`).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct BootInfo {
+    /// Reset causes, one bit each (`hopper_control::boot::ResetCause`).
+    pub resets: u8,
+    /// The brown-out reset is on.
+    pub brown_out_reset_on: bool,
+    /// The core clock is the one the clock profile names.
+    pub clock_as_configured: bool,
+    /// The core clock running, Hz.
+    pub sysclk_hz: u32,
 }
 
 /// The motor's thermal estimate (`hopper_control::thermal`).
@@ -589,6 +606,7 @@ mod tests {
             Just(Request::Timing),
             Just(Request::Dump),
             Just(Request::Thermal),
+            Just(Request::Boot),
             any::<bool>().prop_map(|pressed| Request::SimulateEstop { pressed }),
             any::<u16>().prop_map(|index| Request::ParamInfo { index }),
             name.clone().prop_map(|name| Request::ParamGet { name }),

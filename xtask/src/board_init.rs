@@ -69,6 +69,11 @@ fn register(device: &str, offset: u32) -> String {
             0x74 => "CSR",
             _ => "",
         },
+        ("FLASH", o) => match o {
+            0x00 => "ACR",
+            0x14 => "OPTCR",
+            _ => "",
+        },
         ("DAC", o) => match o {
             0x00 => "CR",
             0x08 => "DHR12R1",
@@ -99,7 +104,11 @@ fn parse(log: &str) -> Vec<Access> {
         let Some((device, rest)) = line.split_once(": unimplemented device ") else {
             continue;
         };
-        let device = if device == "I2S2ext" { "IWDG" } else { device };
+        let device = match device {
+            "I2S2ext" => "IWDG",
+            "Flash Int" => "FLASH",
+            d => d,
+        };
         let field = |key: &str| {
             rest.split_once(key)
                 .and_then(|(_, v)| v.split([',', ')']).next())

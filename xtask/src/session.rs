@@ -327,6 +327,15 @@ fn run_session(link: &Path, addr: &str, out_dir: &Path, label: &str) -> Result<R
     if lines.iter().rev().find(|l| l.starts_with("faults: ")) != Some(&"faults: none".to_string()) {
         problems.push("a fault is latched after the garbage".into());
     }
+    // What the robot found at boot: the virtual robots have no reset
+    // flags, clock or option bytes of their own (`BootReport::NOT_A_BOARD`).
+    if !lines.iter().any(|l| {
+        l.starts_with(
+            "boot: reset by power-on; core clock 168 MHz as configured; brown-out reset on",
+        )
+    }) {
+        problems.push("no boot report in the status".into());
+    }
     // The motor heated while it hopped (8 s of it), and cools between:
     // "motor (estimated): winding W C, housing H C; ..."
     match numbers_after(&lines, "motor (estimated): winding ") {

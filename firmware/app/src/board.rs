@@ -226,6 +226,8 @@ pub struct Board {
     pub dump_button: DumpButton,
     /// The host link's USART1 (PA9/PA10), receiving.
     pub serial: crate::serial::Serial,
+    /// What init found: the reset causes, the brown-out reset, the clock.
+    pub boot: hopper_control::boot::BootReport,
 }
 
 /// The clocks `init` ended up with.
@@ -339,8 +341,20 @@ pub fn init(
         link.1,
     );
 
+    // The brown-out reset level in the option bytes (BOR_LEV), before the
+    // watchdog so that the watchdog's first reload stays init's last act.
+    let brown_out_reset_on = hopper_control::boot::BootReport::brown_out_reset_on_from_optcr(
+        dp.FLASH.optcr().read().bits(),
+    );
+
     // 10. The watchdog, last: from here on the control task must run.
     let watchdog = Watchdog::start(dp.IWDG, &dp.RCC);
+    let boot = hopper_control::boot::BootReport {
+        resets: watchdog.reset_causes,
+        brown_out_reset_on,
+        clock_as_configured: clocks.sysclk_hz == SYSCLK_HZ,
+        sysclk_hz: clocks.sysclk_hz,
+    };
 
     Board {
         io: BoardIo {
@@ -361,6 +375,7 @@ pub fn init(
             last_sample: true,
         },
         serial,
+        boot,
     }
 }
 
@@ -716,6 +731,8 @@ pub struct Watchdog {
     iwdg: pac::IWDG,
     /// The reset before this start was the IWDG's (`RCC_CSR.WDGRSTF`).
     caused_last_reset: bool,
+    /// Every reset flag of RCC_CSR before they were cleared.
+    reset_causes: hopper_control::boot::ResetCauses,
 }
 
 impl Watchdog {
@@ -727,7 +744,9 @@ impl Watchdog {
         // start key below forces it on anyway.
         // Why the MCU last reset: read the IWDG flag, then clear every reset
         // flag (RMVF) so that the next reset reports only its own cause.
-        let caused_last_reset = rcc.csr().read().wdgrstf().is_reset();
+        let csr = rcc.csr().read();
+        let caused_last_reset = csr.wdgrstf().is_reset();
+        let reset_causes = hopper_control::boot::ResetCauses::from_rcc_csr(csr.bits());
         rcc.csr().modify(|_, w| w.rmvf().clear());
         rcc.csr().modify(|_, w| w.lsion().on());
         let _ = wait_for(|| rcc.csr().read().lsirdy().is_ready());
@@ -747,6 +766,7 @@ impl Watchdog {
         Self {
             iwdg,
             caused_last_reset,
+            reset_causes,
         }
     }
 

@@ -329,6 +329,15 @@ mod app {
             cfg.calibration.dac_zero_code,
             (rx_in, tx_out),
         );
+        // Reported over the link; a clock that fell back to the HSI or a
+        // brown-out reset left off refuses arming.
+        runner.arming_mut().set_boot(board.boot);
+        for cause in board.boot.resets.iter() {
+            defmt::info!("reset cause: {=str}", cause.name());
+        }
+        if let Some(r) = board.boot.refusal() {
+            defmt::error!("boot check: {=str}: arming refused", r.name());
+        }
         let watchdog = board.watchdog;
         if watchdog.caused_last_reset() {
             // The control loop stopped or misbehaved last time: start faulted,

@@ -114,6 +114,11 @@ pub enum ArmRefusal {
     NutNotHome,
     /// Nut or body moves faster than the still velocity.
     Moving,
+    /// The core clock is not the one the board's clock profile names (the
+    /// PLL fell back to the HSI: [`crate::boot::BootReport`]).
+    ClockFallback,
+    /// The brown-out reset is off in the option bytes.
+    BrownOutResetOff,
 }
 
 impl ArmRefusal {
@@ -126,6 +131,8 @@ impl ArmRefusal {
             ArmRefusal::SensorsImplausible => "sensors-implausible",
             ArmRefusal::NutNotHome => "nut-not-home",
             ArmRefusal::Moving => "moving",
+            ArmRefusal::ClockFallback => "clock-fallback",
+            ArmRefusal::BrownOutResetOff => "brown-out-reset-off",
         }
     }
 }
@@ -180,6 +187,9 @@ pub struct Arming {
     since_frame_s: f32,
     arm_requested: bool,
     disarm_requested: bool,
+    /// What the board found at boot ([`crate::boot::BootReport::NOT_A_BOARD`] until the
+    /// board says otherwise).
+    boot: crate::boot::BootReport,
 }
 
 impl Arming {
@@ -193,7 +203,19 @@ impl Arming {
             since_frame_s: f32::INFINITY,
             arm_requested: false,
             disarm_requested: false,
+            boot: crate::boot::BootReport::NOT_A_BOARD,
         })
+    }
+
+    /// What the board found at boot: a clock that fell back or a
+    /// brown-out reset that is off refuses arming from now on.
+    pub fn set_boot(&mut self, report: crate::boot::BootReport) {
+        self.boot = report;
+    }
+
+    /// What the board found at boot.
+    pub const fn boot(&self) -> &crate::boot::BootReport {
+        &self.boot
     }
 
     /// The configuration in use.
@@ -313,6 +335,8 @@ impl Arming {
             Some(ArmRefusal::EstopPressed)
         } else if !input.faults.is_empty() {
             Some(ArmRefusal::Faulted)
+        } else if let Some(r) = self.boot.refusal() {
+            Some(r)
         } else if !self.link_alive() {
             Some(ArmRefusal::LinkDown)
         } else if !(input.sensors_ok
@@ -370,6 +394,35 @@ mod tests {
         assert!(a.is_armed());
         a.note_watchdog_reset(); // only at boot: no effect while armed
         assert!(a.is_armed());
+    }
+
+    #[test]
+    fn a_board_whose_clock_fell_back_or_without_brown_out_reset_never_arms() {
+        use crate::boot::BootReport;
+        for (report, want) in [
+            (
+                BootReport {
+                    clock_as_configured: false,
+                    sysclk_hz: 16_000_000,
+                    ..BootReport::NOT_A_BOARD
+                },
+                ArmRefusal::ClockFallback,
+            ),
+            (
+                BootReport {
+                    brown_out_reset_on: false,
+                    ..BootReport::NOT_A_BOARD
+                },
+                ArmRefusal::BrownOutResetOff,
+            ),
+        ] {
+            let mut a = tethered();
+            a.set_boot(report);
+            a.link_frame();
+            a.request_arm();
+            assert_eq!(a.period(DT, &at_rest()), Some(ArmEvent::Refused(want)));
+            assert!(!a.is_armed());
+        }
     }
 
     #[test]

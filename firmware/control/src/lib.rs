@@ -45,6 +45,7 @@
 )]
 
 pub mod arming;
+pub mod boot;
 pub mod calibration;
 pub mod debounce;
 pub mod energy;

@@ -22,8 +22,8 @@ use crate::params;
 use crate::runner::{CycleCounter, LogItem, Period, PeriodRunner, StepStats};
 use crate::telemetry::{FaultCapture, StepRecord};
 use hopper_protocol::{
-    encode, ArmState, Decoder, DumpInfo, Hop, HostMsg, ParamInfo, Request, Response, RobotMsg,
-    Status, Telemetry, ThermalStatus, TimingStats, MAX_FRAME, PROTOCOL_VERSION, TEXT_LEN,
+    encode, ArmState, BootInfo, Decoder, DumpInfo, Hop, HostMsg, ParamInfo, Request, Response,
+    RobotMsg, Status, Telemetry, ThermalStatus, TimingStats, MAX_FRAME, PROTOCOL_VERSION, TEXT_LEN,
 };
 
 /// A transmit queue of bytes (the board's UART ring, a socket buffer).
@@ -287,6 +287,15 @@ impl Endpoint {
                     derate_c: c.derate_winding_c,
                     trip_c: c.trip_winding_c,
                     protect: c.protect,
+                })
+            }
+            Request::Boot => {
+                let b = runner.arming().boot();
+                Response::Boot(BootInfo {
+                    resets: b.resets.0,
+                    brown_out_reset_on: b.brown_out_reset_on,
+                    clock_as_configured: b.clock_as_configured,
+                    sysclk_hz: b.sysclk_hz,
                 })
             }
             Request::SimulateEstop { pressed } if self.simulated => {
