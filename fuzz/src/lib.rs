@@ -323,6 +323,7 @@ pub fn config(input: &Input) -> (HopperConfig, Timing) {
     let timing = Timing {
         period_s: period_s(input.period),
         overrun_limit: 1 + u32::from(input.overrun_limit % 4),
+        ..Timing::default()
     };
     (cfg, timing)
 }

@@ -84,16 +84,26 @@ use heapless::spsc::{Consumer, Producer};
 use hopper_control::hal::{HopperIo, IoError, RawSample};
 use stm32f4::stm32f405::{self as pac, Peripherals};
 
-/// The DWT cycle counter as the period runner's step timer (core cycles).
+/// The DWT cycle counter as the period runner's step timer (core cycles)
+/// and its clock for the period-start jitter check.
 #[derive(Debug)]
-pub struct CycleCounter(());
+pub struct CycleCounter {
+    /// The core clock the counter runs at, Hz (0 until [`Self::set_hz`]).
+    hz: u32,
+}
 
 impl CycleCounter {
     /// Starts the counter (trace enabled in the DCB, CYCCNT on).
     pub fn start(dcb: &mut cortex_m::peripheral::DCB, dwt: &mut cortex_m::peripheral::DWT) -> Self {
         dcb.enable_trace();
         dwt.enable_cycle_counter();
-        CycleCounter(())
+        CycleCounter { hz: 0 }
+    }
+
+    /// The core clock `init` ended up with ([`BoardIo::sysclk_hz`]): the
+    /// period starts are timed with it from then on.
+    pub fn set_hz(&mut self, hz: u32) {
+        self.hz = hz;
     }
 }
 
@@ -101,6 +111,9 @@ impl hopper_control::runner::CycleCounter for CycleCounter {
     #[inline(always)]
     fn now(&mut self) -> u32 {
         cortex_m::peripheral::DWT::cycle_count()
+    }
+    fn hz(&self) -> u32 {
+        self.hz
     }
 }
 

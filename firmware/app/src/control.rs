@@ -65,6 +65,7 @@ pub type Capture = FaultCapture<CAPTURE_LEN>;
 pub const TIMING: Timing = Timing {
     period_s: CONTROL_PERIOD_S,
     overrun_limit: OVERRUN_LIMIT,
+    max_jitter_s: hopper_control::runner::DEFAULT_MAX_JITTER_S,
 };
 
 /// Log items the control task can queue for the logger before one is

@@ -320,7 +320,7 @@ mod app {
             }
         };
         let mut core = cx.core;
-        let cycles = CycleCounter::start(&mut core.DCB, &mut core.DWT);
+        let mut cycles = CycleCounter::start(&mut core.DCB, &mut core.DWT);
         let (rx_in, rx_out) = cx.local.rxq.split();
         let (tx_in, tx_out) = cx.local.txq.split();
         let board = board::init(
@@ -329,6 +329,8 @@ mod app {
             cfg.calibration.dac_zero_code,
             (rx_in, tx_out),
         );
+        // Period starts are timed with the clock that runs.
+        cycles.set_hz(board.io.sysclk_hz());
         // Reported over the link; a clock that fell back to the HSI or a
         // brown-out reset left off refuses arming.
         runner.arming_mut().set_boot(board.boot);

@@ -46,6 +46,13 @@ pub trait CycleCounter {
     fn overhead(&self) -> u32 {
         0
     }
+
+    /// Its rate, Hz, when it counts real time (the board's cycle counter
+    /// at the core clock); 0 when it does not (QEMU's instruction count,
+    /// the simulator): the period-start jitter check is then off.
+    fn hz(&self) -> u32 {
+        0
+    }
 }
 
 /// No counter (the host simulator): every step costs 0.
@@ -134,6 +141,13 @@ pub struct Timing {
     /// period is tolerated (the next one catches up); three in a row mean
     /// the loop cannot keep its rate.
     pub overrun_limit: u32,
+    /// Largest deviation of the time between two period starts from
+    /// `period_s`, s, on a counter that counts real time
+    /// ([`CycleCounter::hz`]); beyond it [`Fault::Overrun`] latches at
+    /// once: a control task that started late (a stall shorter than the
+    /// watchdog's timeout) or twice (a spurious trigger). Default 25 us, a
+    /// quarter of the 10 kHz period.
+    pub max_jitter_s: f32,
 }
 
 impl Default for Timing {
@@ -141,9 +155,13 @@ impl Default for Timing {
         Self {
             period_s: 1e-4,
             overrun_limit: 3,
+            max_jitter_s: DEFAULT_MAX_JITTER_S,
         }
     }
 }
+
+/// [`Timing::max_jitter_s`]'s default, s.
+pub const DEFAULT_MAX_JITTER_S: f32 = 25.0e-6;
 
 /// Why a [`PeriodRunner`] could not be built.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -155,6 +173,8 @@ pub enum RunnerError {
     Period,
     /// `timing.overrun_limit` is 0.
     OverrunLimit,
+    /// `timing.max_jitter_s` is not finite and positive.
+    MaxJitter,
     /// The arming configuration (`arming.*`, by name).
     Arming(crate::laws::InvalidField),
 }
@@ -226,6 +246,11 @@ pub struct PeriodRunner {
     /// The current the amplifier was told to drive last period, A (0 while
     /// disabled): the thermal model's input.
     applied_a: f32,
+    /// The counter at the last period's start (`None` before the first).
+    last_start: Option<u32>,
+    /// Largest deviation of a period-start interval from the period so
+    /// far, s (0 on a counter that does not count real time).
+    max_jitter_s: f32,
 }
 
 impl PeriodRunner {
@@ -236,6 +261,9 @@ impl PeriodRunner {
         }
         if timing.overrun_limit == 0 {
             return Err(RunnerError::OverrunLimit);
+        }
+        if !(timing.max_jitter_s > 0.0 && timing.max_jitter_s.is_finite()) {
+            return Err(RunnerError::MaxJitter);
         }
         let arming = Arming::new(cfg.arming).map_err(RunnerError::Arming)?;
         let hopper = Hopper::new(cfg).map_err(RunnerError::Config)?;
@@ -251,6 +279,8 @@ impl PeriodRunner {
             reported: Faults::NONE,
             unsettled: 0,
             applied_a: 0.0,
+            last_start: None,
+            max_jitter_s: 0.0,
         })
     }
 
@@ -366,6 +396,21 @@ impl PeriodRunner {
         io: &mut Io,
         counter: &mut C,
     ) -> Period {
+        // Each period's start, from the hardware counter: the interval
+        // since the last one must be the period, within the jitter bound.
+        let start = counter.now();
+        let hz = counter.hz();
+        if hz > 0 {
+            if let Some(last) = self.last_start {
+                let interval_s = start.wrapping_sub(last) as f32 / hz as f32;
+                let jitter_s = (interval_s - self.timing.period_s).abs();
+                self.max_jitter_s = crate::num::max(self.max_jitter_s, jitter_s);
+                if jitter_s > self.timing.max_jitter_s {
+                    self.report_overrun();
+                }
+            }
+            self.last_start = Some(start);
+        }
         let raw = io.read().ok();
         // The motor heated with last period's current: an overtemperature
         // latches before this period's step, so the step's output is
@@ -512,6 +557,12 @@ impl PeriodRunner {
         self.missed
     }
 
+    /// Largest deviation of a period-start interval from the period so
+    /// far, s (0 when the counter does not count real time).
+    pub fn max_jitter_s(&self) -> f32 {
+        self.max_jitter_s
+    }
+
     /// The control step's cost over every period so far.
     pub fn step_cost(&self) -> &StepStats {
         &self.cost
@@ -520,6 +571,7 @@ impl PeriodRunner {
 
 #[cfg(test)]
 mod tests {
+    extern crate std;
     use super::*;
     use crate::hal::{IoError, RawSample};
     use crate::hopper::Strategy;
@@ -809,16 +861,88 @@ mod tests {
         assert_eq!(io.enable_writes, 0);
     }
 
+    /// A 1 MHz real-time counter that `now` moves by the next interval.
+    struct Clock {
+        t: u32,
+        intervals: std::vec::Vec<u32>,
+        hz: u32,
+    }
+
+    impl CycleCounter for Clock {
+        fn now(&mut self) -> u32 {
+            let t = self.t;
+            // Only the period's first reading moves the clock.
+            if !self.intervals.is_empty() {
+                self.t = self.t.wrapping_add(self.intervals.remove(0));
+            }
+            t
+        }
+        fn hz(&self) -> u32 {
+            self.hz
+        }
+    }
+
+    #[test]
+    fn a_period_that_starts_late_or_early_latches_overrun() {
+        let rest = crate::proptest_support::rest_sample(&HopperConfig::default().calibration);
+        // (intervals in us between period starts, hz, whether it latches)
+        for (gaps, hz, latches) in [
+            (std::vec![100u32; 50], 1_000_000u32, false),
+            // 24 us of jitter either way: within the 25 us bound.
+            (std::vec![124, 76, 124, 76, 100], 1_000_000, false),
+            // A stall of 30 us (the task started late).
+            (std::vec![100, 100, 130, 100], 1_000_000, true),
+            // A spurious second start 40 us after the first.
+            (std::vec![100, 40, 100], 1_000_000, true),
+            // The counter wraps: still 100 us.
+            (std::vec![100; 5], 1_000_000, false),
+            // Not a real-time counter (QEMU, the simulator): no check.
+            (std::vec![100, 500, 3, 100], 0, false),
+        ] {
+            let mut r = runner(Strategy::default());
+            let mut io = Io::new(rest);
+            // Each period reads the clock twice more around the step: put
+            // the interval on the period's first reading only.
+            let mut steps = std::vec::Vec::new();
+            for g in &gaps {
+                steps.extend_from_slice(&[*g, 0, 0]);
+            }
+            let mut clock = Clock {
+                t: u32::MAX - 150,
+                intervals: steps,
+                hz,
+            };
+            for _ in 0..=gaps.len() {
+                r.arming_mut().link_frame();
+                r.run_period(&mut io, &mut clock);
+            }
+            let latched = r.hopper().supervisor().faults().contains(Fault::Overrun);
+            assert_eq!(latched, latches, "{gaps:?} at {hz} Hz");
+            if hz > 0 && !latches {
+                assert!(r.max_jitter_s() <= 24.5e-6, "{}", r.max_jitter_s());
+            }
+        }
+    }
+
     #[test]
     fn bad_timing_is_refused() {
         let cfg = HopperConfig::default();
         let t = |period_s, overrun_limit| Timing {
             period_s,
             overrun_limit,
+            ..Timing::default()
         };
         assert_eq!(
             PeriodRunner::new(cfg, t(0.0, 3)).err(),
             Some(RunnerError::Period)
+        );
+        let no_bound = Timing {
+            max_jitter_s: f32::NAN,
+            ..Timing::default()
+        };
+        assert_eq!(
+            PeriodRunner::new(cfg, no_bound).err(),
+            Some(RunnerError::MaxJitter)
         );
         assert_eq!(
             PeriodRunner::new(cfg, t(f32::NAN, 3)).err(),
