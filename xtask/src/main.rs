@@ -258,6 +258,24 @@ fn test(root: &Path) -> Result<(), String> {
             TARGET,
         ]),
     )?;
+    // The 12 MHz crystal profile (issue 18): its PLL constants pass the
+    // same compile-time checks.
+    run(
+        root,
+        "clippy (MCU target, 12 MHz crystal profile)",
+        cargo().args([
+            "clippy",
+            "-p",
+            "hopper-app",
+            "--target",
+            TARGET,
+            "--features",
+            "hse-12mhz",
+            "--",
+            "-D",
+            "warnings",
+        ]),
+    )?;
     // The QEMU variant pulls in the plant: this also checks that
     // `hopper-plant` builds `no_std` for the MCU (the QEMU images then build
     // it for real).

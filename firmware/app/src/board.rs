@@ -6,9 +6,10 @@
 //! [`Watchdog`] (already running) and the [`DumpButton`].
 //!
 //! # Clocks
-//! HSE 8 MHz crystal, PLL M = 4 (2 MHz VCO input, the RM0090 recommendation
-//! against jitter), N = 168 (336 MHz VCO), P = 2 → 168 MHz SYSCLK, Q = 7
-//! (48 MHz, unused). AHB 168 MHz, APB1 42 MHz (its timers 84 MHz), APB2
+//! HSE crystal of the clock profile ([`HSE_HZ`]: 8 MHz by default, 12 MHz
+//! with the `hse-12mhz` feature), PLL M = HSE / 2 MHz (2 MHz VCO input,
+//! the RM0090 recommendation against jitter), N = 168 (336 MHz VCO), P = 2
+//! → 168 MHz SYSCLK, Q = 7 (48 MHz, unused). AHB 168 MHz, APB1 42 MHz (its timers 84 MHz), APB2
 //! 84 MHz (its timers 168 MHz). Flash: 5 wait states (168 MHz at 2.7–3.6 V),
 //! prefetch and both caches on.
 //!
@@ -17,9 +18,12 @@
 //! or the PLL does not lock, the core stays on the 16 MHz HSI with all bus
 //! prescalers at 1 and [`BoardIo::sysclk_hz`] says so; every derived rate
 //! (control timer, ADC clock) is computed from the clock actually running.
-//! The clock security system is off: if the crystal dies later the core
-//! clock goes with it, the LSI-clocked watchdog is then not fed and resets
-//! the MCU, which leaves the amplifier disabled.
+//! Once the core runs on the PLL the clock security system is on: if the
+//! crystal dies later the hardware switches the core to the HSI and raises
+//! the NMI, whose handler drops AMP_EN and zeroes the DAC, then waits for
+//! the watchdog's reset (which boots on the HSI: `clock-fallback` then
+//! refuses arming). A clock that fell back at boot is reported the same way
+//! (`hopper_control::boot::BootReport`).
 //!
 //! # Wiring
 //! | Pin  | Peripheral / AF           | Signal                              | Direction        | Safe state / reset |
@@ -126,10 +130,25 @@ pub const ENCODER_COUNTER_BITS: u8 = 32;
 
 /// The core clock when the crystal or the PLL fails: the internal HSI oscillator.
 const HSI_HZ: u32 = 16_000_000;
-/// The crystal on the board.
-const HSE_HZ: u32 = 8_000_000;
-/// PLL input divider: 8 MHz / 4 = 2 MHz VCO input.
-const PLL_M: u8 = 4;
+/// The crystal on the board: the clock profile, a cargo feature of
+/// `hopper-app`. `hse-8mhz` (the default): the Olimex STM32-H405 and most
+/// F405 boards with an 8 MHz crystal; `hse-12mhz`: the Adafruit Feather
+/// STM32F405 Express and the MicroPython pyboard (v1.1). Every other rate
+/// follows from it: the PLL input is 2 MHz on both.
+pub const HSE_HZ: u32 = if cfg!(feature = "hse-12mhz") {
+    12_000_000
+} else {
+    8_000_000
+};
+/// The profile's name, for the logs and the docs.
+pub const CLOCK_PROFILE: &str = if cfg!(feature = "hse-12mhz") {
+    "hse-12mhz"
+} else {
+    "hse-8mhz"
+};
+/// PLL input divider: the crystal over 2 MHz (8 MHz / 4, 12 MHz / 6), the
+/// VCO input RM0090 recommends against jitter.
+const PLL_M: u8 = (HSE_HZ / 2_000_000) as u8;
 /// PLL multiplier: 2 MHz × 168 = 336 MHz VCO.
 const PLL_N: u16 = 168;
 /// PLL system-clock divider (the PAC's `div2`): 336 / 2 = 168 MHz.
@@ -529,6 +548,11 @@ fn configure_clocks(rcc: &pac::RCC, flash: &pac::FLASH, pwr: &pac::PWR) -> Clock
         }
         return hsi;
     }
+
+    // The clock security system: if the crystal stops from now on, the
+    // hardware switches the core to the HSI and raises the NMI, whose
+    // handler drops AMP_EN and zeroes the DAC (`main.rs`, `NonMaskableInt`).
+    rcc.cr().modify(|_, w| w.csson().on());
 
     Clocks {
         sysclk_hz: SYSCLK_HZ,

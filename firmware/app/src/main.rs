@@ -101,6 +101,58 @@ fn panic(_info: &core::panic::PanicInfo) -> ! {
 #[allow(unsafe_code)] // cortex-m-rt requires the HardFault handler to be `unsafe fn`.
 unsafe fn HardFault(_frame: &cortex_m_rt::ExceptionFrame) -> ! {
     disable_amplifier();
+    zero_dac();
+    #[cfg(feature = "qemu-sim")]
+    cortex_m_semihosting::debug::exit(cortex_m_semihosting::debug::EXIT_FAILURE);
+    loop {
+        cortex_m::asm::nop();
+    }
+}
+
+/// The zero-current DAC code, for the exception handlers (they own no
+/// peripheral): set once by the board's init, mid-scale until then.
+#[cfg(target_os = "none")]
+static DAC_ZERO_CODE: core::sync::atomic::AtomicU16 = core::sync::atomic::AtomicU16::new(2048);
+
+/// The DAC's channel 1 at the zero-current code, from any context (one
+/// store to DHR12R1; ignored while the DAC is not clocked).
+#[cfg(target_os = "none")]
+fn zero_dac() {
+    let code = DAC_ZERO_CODE.load(core::sync::atomic::Ordering::Relaxed);
+    // SAFETY: `DAC::ptr()` is the fixed address of the DAC register block;
+    // DHR12R1 takes a single store, so it cannot race with the owner's
+    // writes in a way that matters (either value is a current command, and
+    // the enable is already low).
+    #[allow(unsafe_code)] // Needed to reach the DAC without owning it (fault path).
+    let dac = unsafe { &*stm32f4::stm32f405::DAC::ptr() };
+    dac.dhr12r1().write(|w| w.daccdhr().set(code & 0x0FFF));
+}
+
+/// NMI: the clock security system found the crystal stopped (the core now
+/// runs on the HSI, every rate derived from the crystal is wrong). Drop
+/// AMP_EN, zero the DAC, and wait for the watchdog's reset: the next boot
+/// runs on the HSI, reports `clock-fallback` and refuses to arm.
+#[cfg(target_os = "none")]
+#[cortex_m_rt::exception]
+#[allow(unsafe_code)] // cortex-m-rt requires the NMI handler to be `unsafe fn`.
+unsafe fn NonMaskableInt() {
+    disable_amplifier();
+    zero_dac();
+    #[cfg(feature = "qemu-sim")]
+    cortex_m_semihosting::debug::exit(cortex_m_semihosting::debug::EXIT_FAILURE);
+    loop {
+        cortex_m::asm::nop();
+    }
+}
+
+/// Every exception and interrupt without a handler of its own: outputs
+/// safe, then wait for the watchdog's reset.
+#[cfg(target_os = "none")]
+#[cortex_m_rt::exception]
+#[allow(unsafe_code)] // cortex-m-rt requires the DefaultHandler to be `unsafe fn`.
+unsafe fn DefaultHandler(_irqn: i16) {
+    disable_amplifier();
+    zero_dac();
     #[cfg(feature = "qemu-sim")]
     cortex_m_semihosting::debug::exit(cortex_m_semihosting::debug::EXIT_FAILURE);
     loop {
@@ -323,6 +375,10 @@ mod app {
         let mut cycles = CycleCounter::start(&mut core.DCB, &mut core.DWT);
         let (rx_in, rx_out) = cx.local.rxq.split();
         let (tx_in, tx_out) = cx.local.txq.split();
+        crate::DAC_ZERO_CODE.store(
+            cfg.calibration.dac_zero_code,
+            core::sync::atomic::Ordering::Relaxed,
+        );
         let board = board::init(
             cx.device,
             CONTROL_HZ,
@@ -363,7 +419,8 @@ mod app {
             runner.report_overrun();
         }
         defmt::info!(
-            "hopper-fw: board build, control at {=u32} Hz, core clock {=u32} Hz, link on USART1 at {=u32} baud; disarmed until the host arms",
+            "hopper-fw: board build ({=str}), control at {=u32} Hz, core clock {=u32} Hz, link on USART1 at {=u32} baud; disarmed until the host arms",
+            board::CLOCK_PROFILE,
             board.io.control_hz(),
             board.io.sysclk_hz(),
             crate::serial::LINK_BAUD
