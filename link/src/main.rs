@@ -91,6 +91,17 @@ enum Cmd {
         #[arg(long)]
         out: PathBuf,
     },
+    /// Run a bring-up routine on the robot, disarmed (issue 18): `sensors`
+    /// (raw codes, noise, still encoders) or `tare` (the leg unloaded, the
+    /// robot held up: load-cell tare and potentiometer zero, applied).
+    Calibrate {
+        /// sensors | tare
+        #[arg(value_parser = ["sensors", "tare"])]
+        routine: String,
+        /// How long it measures, s of robot time.
+        #[arg(long, default_value_t = 0.5)]
+        seconds: f32,
+    },
     /// Press or release the simulated e-stop (QEMU and `hopper-sim serve`
     /// only; a real robot refuses).
     Estop {
@@ -284,6 +295,7 @@ fn run(c: &mut Client, cmd: &Cmd) -> Result<()> {
         } => record(c, *duration, *rate, out),
         Cmd::Watch { duration } => watch(c, *duration),
         Cmd::Dump { out } => dump(c, out),
+        Cmd::Calibrate { routine, seconds } => calibrate(c, routine, *seconds),
         Cmd::Estop { action } => {
             c.expect_ok(Request::SimulateEstop {
                 pressed: action == "press",
@@ -373,6 +385,80 @@ fn status_of(c: &mut Client) -> Result<hopper_protocol::Status> {
         Response::Status(s) => Ok(s),
         r => bail!("unexpected answer {r:?}"),
     }
+}
+
+fn calibrate(c: &mut Client, routine: &str, seconds: f32) -> Result<()> {
+    use hopper_control::bringup::{CalState, Routine};
+    let code = if routine == "tare" {
+        Routine::Tare
+    } else {
+        Routine::SensorCheck
+    } as u8;
+    let was = (
+        get(c, "calibration.loadcell_offset_code")?,
+        get(c, "calibration.pot_offset_code")?,
+    );
+    let lc_gain = get(c, "calibration.loadcell_gain_n_per_code")?;
+    let pot_gain = get(c, "calibration.pot_gain_m_per_code")?;
+    match c.request(Request::Calibrate {
+        routine: code,
+        seconds,
+    })? {
+        Response::Ok => {}
+        Response::Refused(why) => bail!("calibrate {routine} refused: {why}"),
+        r => bail!("unexpected answer {r:?}"),
+    }
+    let deadline = Instant::now() + Duration::from_secs_f32(seconds * 20.0 + 5.0);
+    let r = loop {
+        std::thread::sleep(Duration::from_millis(100));
+        let r = match c.request(Request::CalibrationReport)? {
+            Response::Calibration(r) => r,
+            r => bail!("unexpected answer {r:?}"),
+        };
+        if r.state != CalState::Running as u8 {
+            break r;
+        }
+        if Instant::now() > deadline {
+            bail!(
+                "calibrate {routine}: still running after {:.0} s",
+                seconds * 20.0 + 5.0
+            );
+        }
+    };
+    let state = CalState::ALL
+        .get(usize::from(r.state))
+        .map_or("unknown", |s| s.name());
+    println!(
+        "calibrate {routine}: {state}: {} samples; encoders moved by {} (motor) and {} (height) counts",
+        r.samples, r.motor_span_counts, r.height_span_counts
+    );
+    println!(
+        "load cell: mean {:.2} codes, noise {:.2} codes ({:.2} N)",
+        r.loadcell_mean_code,
+        r.loadcell_std_code,
+        r.loadcell_std_code * lc_gain
+    );
+    println!(
+        "potentiometer: mean {:.2} codes, noise {:.2} codes ({:.3} mm)",
+        r.pot_mean_code,
+        r.pot_std_code,
+        r.pot_std_code * pot_gain * 1000.0
+    );
+    if r.state != CalState::Done as u8 {
+        bail!("calibrate {routine} {state}");
+    }
+    if r.loadcell_offset_code.is_finite() {
+        println!(
+            "tare: calibration.loadcell_offset_code {:.2} -> {:.2} codes ({:+.2} N), calibration.pot_offset_code {:.2} -> {:.2} codes ({:+.3} mm) (applied)",
+            was.0,
+            r.loadcell_offset_code,
+            (r.loadcell_offset_code - was.0) * lc_gain,
+            was.1,
+            r.pot_offset_code,
+            (r.pot_offset_code - was.1) * pot_gain * 1000.0
+        );
+    }
+    Ok(())
 }
 
 fn thermal_of(c: &mut Client) -> Result<ThermalStatus> {

@@ -118,6 +118,16 @@ pub enum Request {
     Thermal,
     /// What the board found at boot ([`Response::Boot`]).
     Boot,
+    /// Starts a bring-up routine (`hopper_control::bringup::Routine` by
+    /// code: 0 sensor check, 1 tare) for `seconds`; refused while armed.
+    Calibrate {
+        /// The routine's code.
+        routine: u8,
+        /// How long it measures, s.
+        seconds: f32,
+    },
+    /// The last routine's report ([`Response::Calibration`]).
+    CalibrationReport,
 }
 
 /// Robot to host.
@@ -189,6 +199,36 @@ pub enum Response {
     Thermal(ThermalStatus),
     /// What the board found at boot.
     Boot(BootInfo),
+    /// A bring-up routine's report.
+    Calibration(CalibrationInfo),
+}
+
+/// A bring-up routine's report (`hopper_control::bringup::CalReport`).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct CalibrationInfo {
+    /// The routine's code.
+    pub routine: u8,
+    /// Where it is: 0 idle, 1 running, 2 done, 3 failed (moving), 4 failed
+    /// (sensors), 5 failed (out of range).
+    pub state: u8,
+    /// Samples taken.
+    pub samples: u32,
+    /// Load-cell code: mean.
+    pub loadcell_mean_code: f32,
+    /// Load-cell code: standard deviation.
+    pub loadcell_std_code: f32,
+    /// Potentiometer code: mean.
+    pub pot_mean_code: f32,
+    /// Potentiometer code: standard deviation.
+    pub pot_std_code: f32,
+    /// Largest motor-counter change from the first sample, counts.
+    pub motor_span_counts: u32,
+    /// Largest height-counter change from the first sample, counts.
+    pub height_span_counts: u32,
+    /// The tare's load-cell offset, codes (NaN otherwise).
+    pub loadcell_offset_code: f32,
+    /// The tare's potentiometer offset, codes (NaN otherwise).
+    pub pot_offset_code: f32,
 }
 
 /// What the board found at boot (`hopper_control::boot::BootReport`).
@@ -607,6 +647,9 @@ mod tests {
             Just(Request::Dump),
             Just(Request::Thermal),
             Just(Request::Boot),
+            Just(Request::CalibrationReport),
+            (any::<u8>(), any::<f32>())
+                .prop_map(|(routine, seconds)| Request::Calibrate { routine, seconds }),
             any::<bool>().prop_map(|pressed| Request::SimulateEstop { pressed }),
             any::<u16>().prop_map(|index| Request::ParamInfo { index }),
             name.clone().prop_map(|name| Request::ParamGet { name }),

@@ -46,6 +46,7 @@
 
 pub mod arming;
 pub mod boot;
+pub mod bringup;
 pub mod calibration;
 pub mod debounce;
 pub mod energy;

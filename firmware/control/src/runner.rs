@@ -248,6 +248,8 @@ pub struct PeriodRunner {
     applied_a: f32,
     /// The counter at the last period's start (`None` before the first).
     last_start: Option<u32>,
+    /// The bring-up routine running, or the last one's report.
+    cal: crate::bringup::Calibrator,
     /// Largest deviation of a period-start interval from the period so
     /// far, s (0 on a counter that does not count real time).
     max_jitter_s: f32,
@@ -280,6 +282,7 @@ impl PeriodRunner {
             unsettled: 0,
             applied_a: 0.0,
             last_start: None,
+            cal: crate::bringup::Calibrator::new(),
             max_jitter_s: 0.0,
         })
     }
@@ -373,6 +376,13 @@ impl PeriodRunner {
                 .set_target_apex(cfg.target_apex_m)
                 .map_err(|_| SetError::Param(crate::params::ParamError::OutOfRange(p.name)));
         }
+        self.rebuild(cfg)
+    }
+
+    /// Rebuilds the controller from `cfg` (disarmed), carrying the state
+    /// that must survive over ([`Hopper::continue_from`]); nothing changes
+    /// if `cfg` is refused.
+    fn rebuild(&mut self, cfg: HopperConfig) -> Result<(), SetError> {
         let arming =
             Arming::new(cfg.arming).map_err(|e| SetError::Config(RunnerError::Arming(e)))?;
         let mut hopper = Hopper::new(cfg).map_err(|e| SetError::Config(RunnerError::Config(e)))?;
@@ -383,6 +393,70 @@ impl PeriodRunner {
         self.feed
             .reconfigure(crate::watchdog::FeedConfig::for_hopper(&cfg));
         Ok(())
+    }
+
+    /// Starts a bring-up routine ([`crate::bringup`]) for `seconds` of
+    /// periods: only disarmed, with the e-stop released, one at a time.
+    pub fn start_calibration(
+        &mut self,
+        routine: crate::bringup::Routine,
+        seconds: f32,
+    ) -> Result<(), crate::bringup::CalRefusal> {
+        use crate::bringup::CalRefusal;
+        if self.arming.is_armed() {
+            return Err(CalRefusal::Armed);
+        }
+        if self.hopper.estop_pressed() {
+            return Err(CalRefusal::EstopPressed);
+        }
+        if self.cal.running() {
+            return Err(CalRefusal::Busy);
+        }
+        if !(0.01..=10.0).contains(&seconds) {
+            return Err(CalRefusal::Duration);
+        }
+        let samples = (seconds / self.timing.period_s) as u32;
+        self.cal.start(routine, samples);
+        Ok(())
+    }
+
+    /// The last bring-up routine's report.
+    pub fn calibration(&self) -> crate::bringup::CalReport {
+        self.cal.report()
+    }
+
+    /// A routine's measurement is complete: check, compute, apply.
+    fn finish_calibration(&mut self) {
+        use crate::bringup::Routine;
+        // Encoders still: a count of quantisation flicker at most.
+        const STILL_COUNTS: u32 = 1;
+        let cfg = *self.hopper.config();
+        let offsets = match self.cal.routine() {
+            Routine::SensorCheck => (f32::NAN, f32::NAN),
+            Routine::Tare => {
+                // Unloaded leg: the load cell must read the flight force
+                // k (delta0 + p) at the nut's position, the pot 0.
+                let p_m = self.hopper.last_input().map_or(0.0, |i| i.nut_position_m);
+                let s = &cfg.supervisor;
+                let force_n = s.spring_rate_n_per_m * (s.spring_preload_m + p_m);
+                let c = &cfg.calibration;
+                (
+                    self.cal.loadcell_mean_code() - force_n / c.loadcell_gain_n_per_code,
+                    self.cal.pot_mean_code(),
+                )
+            }
+        };
+        if !self.cal.finish(STILL_COUNTS, offsets) || self.cal.routine() != Routine::Tare {
+            return;
+        }
+        let mut new = cfg;
+        let set = crate::params::set(&mut new, crate::params::CAL_LOADCELL_OFFSET.name, offsets.0)
+            .and_then(|()| {
+                crate::params::set(&mut new, crate::params::CAL_POT_OFFSET.name, offsets.1)
+            });
+        if set.is_err() || self.rebuild(new).is_err() {
+            self.cal.apply_failed();
+        }
     }
 
     /// Whether the feed policy has stopped feeding for good.
@@ -418,6 +492,16 @@ impl PeriodRunner {
         self.hopper
             .supervisor_mut()
             .heat(self.applied_a, self.timing.period_s);
+        // A bring-up routine measures disarmed (armed, it stops, failed);
+        // a tare's new offsets apply before this period's step, as a
+        // parameter set between periods would.
+        if self.cal.running() {
+            if self.arming.is_armed() {
+                self.cal.sample(None);
+            } else if self.cal.sample(raw.as_ref()) {
+                self.finish_calibration();
+            }
+        }
         let t0 = counter.now();
         let mut out = self.hopper.step(raw.as_ref(), self.timing.period_s);
         let t1 = counter.now();
@@ -922,6 +1006,55 @@ mod tests {
                 assert!(r.max_jitter_s() <= 24.5e-6, "{}", r.max_jitter_s());
             }
         }
+    }
+
+    #[test]
+    fn a_tare_applies_the_offsets_it_measured_and_only_disarmed() {
+        use crate::bringup::{CalRefusal, CalState, Routine};
+        let cal = HopperConfig::default().calibration;
+        let mut rest = crate::proptest_support::rest_sample(&cal);
+        // The load cell reads 24 codes high, the pot 17.
+        rest.loadcell_code += 24;
+        rest.pot_code += 17;
+        let mut r = PeriodRunner::new(HopperConfig::default(), Timing::default())
+            .unwrap_or_else(|e| panic!("{e:?}"));
+        let mut io = Io::new(rest);
+        // Before the first sample the e-stop counts as pressed.
+        assert_eq!(
+            r.start_calibration(Routine::Tare, 0.05),
+            Err(CalRefusal::EstopPressed)
+        );
+        r.arming_mut().link_frame();
+        r.run_period(&mut io, &mut NoCounter);
+        assert_eq!(
+            r.start_calibration(Routine::Tare, 20.0),
+            Err(CalRefusal::Duration)
+        );
+        assert_eq!(r.start_calibration(Routine::Tare, 0.05), Ok(()));
+        assert_eq!(
+            r.start_calibration(Routine::Tare, 0.05),
+            Err(CalRefusal::Busy)
+        );
+        for _ in 0..501 {
+            r.arming_mut().link_frame();
+            r.run_period(&mut io, &mut NoCounter);
+        }
+        let rep = r.calibration();
+        assert_eq!(rep.state, CalState::Done, "{rep:?}");
+        assert_eq!(rep.samples, 500);
+        let c = r.hopper().config().calibration;
+        assert_eq!(c.loadcell_offset_code, cal.loadcell_offset_code + 24.0);
+        assert_eq!(c.pot_offset_code, cal.pot_offset_code + 17.0);
+        assert_eq!(rep.loadcell_offset_code, c.loadcell_offset_code);
+        // Armed: refused.
+        r.arming_mut().link_frame();
+        r.arming_mut().request_arm();
+        r.run_period(&mut io, &mut NoCounter);
+        assert!(r.arming().is_armed());
+        assert_eq!(
+            r.start_calibration(Routine::SensorCheck, 0.05),
+            Err(CalRefusal::Armed)
+        );
     }
 
     #[test]

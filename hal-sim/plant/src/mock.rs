@@ -81,6 +81,13 @@ pub struct SensorConfig {
     pub pot_sigma_m: f64,
     /// Amplifier current-loop time constant, s. Default 1.5e-4 (about 1 kHz bandwidth).
     pub amp_tau_s: f64,
+    /// What the load cell reads beyond the true spring force, N: its offset
+    /// against the firmware's calibration (a mis-calibrated sensor for the
+    /// bring-up routines of issue 18). Default 0.
+    pub loadcell_bias_n: f64,
+    /// What the potentiometer reads beyond the true leg compression, m.
+    /// Default 0.
+    pub pot_bias_m: f64,
 }
 
 impl SensorConfig {
@@ -91,6 +98,8 @@ impl SensorConfig {
         loadcell_sigma_n: 2.0,
         pot_sigma_m: 1e-4,
         amp_tau_s: 1.5e-4,
+        loadcell_bias_n: 0.0,
+        pot_bias_m: 0.0,
     };
 
     /// No noise (quantisation and lag stay).
@@ -151,6 +160,10 @@ pub struct SimHal {
     last_sample: Option<RawSample>,
     /// Injected I/O faults.
     pub faults: IoFaults,
+    /// The load cell's bias against the calibration, N ([`SensorConfig`]).
+    loadcell_bias_n: f64,
+    /// The potentiometer's bias, m.
+    pot_bias_m: f64,
 }
 
 impl SimHal {
@@ -206,6 +219,8 @@ impl SimHal {
             burst_noise: Noise::new(cfg.seed ^ 0x6275_7273_7400_0000, true),
             last_sample: None,
             faults: IoFaults::default(),
+            loadcell_bias_n: cfg.loadcell_bias_n,
+            pot_bias_m: cfg.pot_bias_m,
         }
     }
 
@@ -218,8 +233,13 @@ impl SimHal {
             _ => (p.leg_length_m - s.z_m).max(0.0),
         };
         let motor_counts = self.motor.counter(plant.motor_angle_rad());
-        let mut loadcell_code = self.loadcell.code(plant.spring_force_n(), &mut self.noise);
-        let mut pot_code = self.pot.code(leg_compression_m, &mut self.noise);
+        let mut loadcell_code = self.loadcell.code(
+            plant.spring_force_n() + self.loadcell_bias_n,
+            &mut self.noise,
+        );
+        let mut pot_code = self
+            .pot
+            .code(leg_compression_m + self.pot_bias_m, &mut self.noise);
         if self.faults.adc_burst_sigma_codes > 0 {
             let sigma = f64::from(self.faults.adc_burst_sigma_codes);
             let full = f64::from(self.loadcell.full_scale());

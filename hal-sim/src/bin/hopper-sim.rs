@@ -312,6 +312,14 @@ struct ServeArgs {
     /// Stop after this much robot time, s [default: run until killed].
     #[arg(long = "for", value_name = "SECONDS")]
     limit: Option<f64>,
+    /// A mis-calibrated load cell: it reads this much beyond the true
+    /// spring force, N (for `hopper-link calibrate tare`).
+    #[arg(long, default_value_t = 0.0, value_name = "N")]
+    loadcell_bias_n: f64,
+    /// A mis-calibrated potentiometer: it reads this much beyond the true
+    /// leg compression, m.
+    #[arg(long, default_value_t = 0.0, value_name = "M")]
+    pot_bias_m: f64,
 }
 
 fn main() {
@@ -417,10 +425,23 @@ fn cmd_serve(a: ServeArgs) -> Result<()> {
     // until armed.
     let held = a.base.start_apex.is_some();
     let start_apex_m = a.base.start_apex.unwrap_or(0.001);
+    if !(a.loadcell_bias_n.is_finite() && a.loadcell_bias_n.abs() <= 200.0) {
+        bail!(
+            "--loadcell-bias-n {} must be within +-200 N",
+            a.loadcell_bias_n
+        );
+    }
+    if !(a.pot_bias_m.is_finite() && a.pot_bias_m.abs() <= 0.01) {
+        bail!("--pot-bias-m {} must be within +-0.01 m", a.pot_bias_m);
+    }
     let cfg = settings.run_config(0.0);
     let (runner, hal) = settings
         .controller_spec()
-        .and_then(|spec| spec.runner(&cfg.params, start_apex_m, cfg.control_dt_s, false))
+        .and_then(|mut spec| {
+            spec.sensors.loadcell_bias_n = a.loadcell_bias_n;
+            spec.sensors.pot_bias_m = a.pot_bias_m;
+            spec.runner(&cfg.params, start_apex_m, cfg.control_dt_s, false)
+        })
         .map_err(anyhow::Error::msg)?;
     let plant = hopper_plant::Plant::new(cfg.params, start_apex_m)
         .map_err(|e| anyhow::anyhow!("plant: {e:?}"))?;
