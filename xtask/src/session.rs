@@ -77,6 +77,9 @@ pub fn against_serve(root: &Path) -> Result<(), String> {
             "0.05",
             // A mis-calibrated load cell and potentiometer: the session's
             // tare must find them (TARE_* below).
+            // As the board and the QEMU link image: no arming before a tare.
+            "--set",
+            "arming.require_tare=1",
             "--loadcell-bias-n",
             "12",
             "--pot-bias-m",
@@ -344,6 +347,12 @@ fn run_session(link: &Path, addr: &str, out_dir: &Path, label: &str) -> Result<R
     }
     if lines.iter().rev().find(|l| l.starts_with("faults: ")) != Some(&"faults: none".to_string()) {
         problems.push("a fault is latched after the garbage".into());
+    }
+    if !lines
+        .iter()
+        .any(|l| l == "failed as expected: arm refused: not-calibrated")
+    {
+        problems.push("missing `failed as expected: arm refused: not-calibrated`".into());
     }
     // The tare with the robot held up: the biases recovered.
     let want = if label == "link-sim" {

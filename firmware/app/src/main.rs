@@ -355,6 +355,9 @@ mod app {
         // TIM2 and TIM5 count the encoders over 32 bits.
         cfg.calibration.motor_counter_bits = board::ENCODER_COUNTER_BITS;
         cfg.calibration.height_counter_bits = board::ENCODER_COUNTER_BITS;
+        // The calibration offsets are placeholders until a tare (they are
+        // not saved to flash yet): no arming before one (issue 18).
+        cfg.arming.require_tare = true;
         // Validated before the board (and its watchdog) starts: a refused
         // configuration leaves the amplifier off (the pin is an input with
         // its external pull-down) and the MCU parked, not in a reset loop.
@@ -861,7 +864,9 @@ mod app {
         let params = Params::design();
         // The board's defaults (energy-apex, 0.05 m, tethered); the host
         // chooses the controller and target over the link.
-        let cfg = firmware_config(&params, &params, Strategy::default(), 0.05, START_APEX_M);
+        let mut cfg = firmware_config(&params, &params, Strategy::default(), 0.05, START_APEX_M);
+        // As the board: no arming before a tare (issue 18).
+        cfg.arming.require_tare = true;
         let (Ok(plant), Ok(runner)) = (
             Plant::new(params, START_APEX_M),
             PeriodRunner::new(cfg, TIMING),

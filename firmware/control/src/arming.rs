@@ -43,6 +43,10 @@ pub struct ArmingConfig {
     /// Nut and body must be slower than this to arm, m/s (finite, > 0).
     /// Default 0.05.
     pub still_velocity_mps: f32,
+    /// Refuse to arm until a tare (`hopper-link calibrate tare`) has
+    /// succeeded since boot. Default false; the board sets it, since its
+    /// calibration offsets are not saved yet and boot at placeholders.
+    pub require_tare: bool,
 }
 
 impl Default for ArmingConfig {
@@ -52,6 +56,7 @@ impl Default for ArmingConfig {
             untethered: p::ARM_UNTETHERED.default_flag(),
             home_tolerance_m: p::ARM_HOME_TOLERANCE_M.default,
             still_velocity_mps: p::ARM_STILL_MPS.default,
+            require_tare: p::ARM_REQUIRE_TARE.default_flag(),
         }
     }
 }
@@ -62,6 +67,7 @@ impl ArmingConfig {
         p::ARM_LINK_TIMEOUT_S.check(self.link_timeout_s)?;
         p::ARM_HOME_TOLERANCE_M.check(self.home_tolerance_m)?;
         p::ARM_STILL_MPS.check(self.still_velocity_mps)?;
+        p::ARM_REQUIRE_TARE.check_flag(self.require_tare)?;
         Ok(())
     }
 }
@@ -119,6 +125,8 @@ pub enum ArmRefusal {
     ClockFallback,
     /// The brown-out reset is off in the option bytes.
     BrownOutResetOff,
+    /// `arming.require_tare` is on and no tare has succeeded since boot.
+    NotCalibrated,
 }
 
 impl ArmRefusal {
@@ -133,6 +141,7 @@ impl ArmRefusal {
             ArmRefusal::Moving => "moving",
             ArmRefusal::ClockFallback => "clock-fallback",
             ArmRefusal::BrownOutResetOff => "brown-out-reset-off",
+            ArmRefusal::NotCalibrated => "not-calibrated",
         }
     }
 }
@@ -190,6 +199,8 @@ pub struct Arming {
     /// What the board found at boot ([`crate::boot::BootReport::NOT_A_BOARD`] until the
     /// board says otherwise).
     boot: crate::boot::BootReport,
+    /// A tare has succeeded since boot.
+    tared: bool,
 }
 
 impl Arming {
@@ -204,7 +215,14 @@ impl Arming {
             arm_requested: false,
             disarm_requested: false,
             boot: crate::boot::BootReport::NOT_A_BOARD,
+            tared: false,
         })
+    }
+
+    /// A tare succeeded (the period runner says so): `arming.require_tare`
+    /// is met from now on.
+    pub fn note_tared(&mut self) {
+        self.tared = true;
     }
 
     /// What the board found at boot: a clock that fell back or a
@@ -337,6 +355,8 @@ impl Arming {
             Some(ArmRefusal::Faulted)
         } else if let Some(r) = self.boot.refusal() {
             Some(r)
+        } else if self.cfg.require_tare && !self.tared {
+            Some(ArmRefusal::NotCalibrated)
         } else if !self.link_alive() {
             Some(ArmRefusal::LinkDown)
         } else if !(input.sensors_ok
@@ -423,6 +443,25 @@ mod tests {
             assert_eq!(a.period(DT, &at_rest()), Some(ArmEvent::Refused(want)));
             assert!(!a.is_armed());
         }
+    }
+
+    #[test]
+    fn a_robot_that_requires_a_tare_arms_only_after_one() {
+        let mut a = Arming::new(ArmingConfig {
+            require_tare: true,
+            ..ArmingConfig::default()
+        })
+        .unwrap_or_else(|e| panic!("{e:?}"));
+        a.link_frame();
+        a.request_arm();
+        assert_eq!(
+            a.period(DT, &at_rest()),
+            Some(ArmEvent::Refused(ArmRefusal::NotCalibrated))
+        );
+        a.note_tared();
+        a.link_frame();
+        a.request_arm();
+        assert_eq!(a.period(DT, &at_rest()), Some(ArmEvent::Armed));
     }
 
     #[test]

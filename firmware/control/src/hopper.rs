@@ -18,7 +18,9 @@
 //! write the DAC, set the enable, the watchdog decision and overruns.
 
 use crate::arming::ArmingConfig;
-use crate::calibration::{CalError, Calibration, Converter, DacMap, Measurements};
+#[cfg(feature = "fault-injection")]
+use crate::calibration::Measurements;
+use crate::calibration::{CalError, Calibration, Converter, DacMap};
 use crate::energy::{EnergyInput, EnergyModel};
 use crate::estimator::{
     EstimatorConfig, EstimatorError, Phase, PhaseEstimator, PhaseEvent, PhaseInput,
@@ -378,7 +380,7 @@ impl Hopper {
             None => self.estop.pressed(),
         };
         let m = match raw.map(|r| self.converter.convert(r)) {
-            Some(Ok(m)) => Measurements { estop_pressed, ..m },
+            Some(Ok(m)) => m,
             Some(Err(e)) => return self.safe_output(cal_fault(e)),
             None => return self.safe_output(Fault::SensorRange),
         };
@@ -434,8 +436,11 @@ impl Hopper {
             last_apex_m: self.estimator.last_apex_m(),
             dt_s,
         });
-        let sup_in =
-            SupervisorInput::from_measurements(&m, nut_velocity_mps, v.motor_rad_s, v.body_mps);
+        let sup_in = SupervisorInput {
+            // Debounced ([`crate::debounce`]), not the raw input.
+            estop_pressed,
+            ..SupervisorInput::from_measurements(&m, nut_velocity_mps, v.motor_rad_s, v.body_mps)
+        };
         let mut command = self.supervisor.check(&sup_in, requested_a, dt_s);
         self.last_input = Some(sup_in);
         if !energy_j.is_finite() {

@@ -858,6 +858,17 @@ param!(
     "Current limit at the trip temperature, as a fraction of the amplifier's (linear from the derate temperature)."
 );
 param!(
+    ARM_REQUIRE_TARE,
+    "arming.require_tare",
+    "-",
+    Flag,
+    0.0,
+    1.0,
+    0.0,
+    DISARMED,
+    "Refuse to arm until a tare (hopper-link calibrate tare) has succeeded since boot (the board sets it: its offsets are not saved yet)."
+);
+param!(
     EST_PREDICT_CONTACT,
     "estimator.predict_contact",
     "-",
@@ -1334,6 +1345,7 @@ pub const TABLE: &[&Param] = &[
     &ARM_UNTETHERED,
     &ARM_HOME_TOLERANCE_M,
     &ARM_STILL_MPS,
+    &ARM_REQUIRE_TARE,
     &SUP_MAX_MOTOR_DELTA,
     &SUP_MAX_HEIGHT_DELTA,
     &SUP_NUT_POSITION_MIN_M,
@@ -1454,6 +1466,7 @@ fn slot<'a>(cfg: &'a mut HopperConfig, p: &Param) -> Result<Slot<'a>, ParamError
             "untethered" => Ok(B(&mut a.untethered)),
             "home_tolerance_m" => Ok(R(&mut a.home_tolerance_m)),
             "still_velocity_mps" => Ok(R(&mut a.still_velocity_mps)),
+            "require_tare" => Ok(B(&mut a.require_tare)),
             _ => Err(ParamError::Unknown),
         };
     }

@@ -456,6 +456,8 @@ impl PeriodRunner {
             });
         if set.is_err() || self.rebuild(new).is_err() {
             self.cal.apply_failed();
+        } else {
+            self.arming.note_tared();
         }
     }
 
