@@ -29,8 +29,6 @@ use std::path::Path;
 use std::process::Stdio;
 use std::time::{Duration, Instant};
 
-use crate::{build_executable, cargo, TARGET};
-
 /// The golden trace, relative to the workspace root.
 const GOLDEN: &str = "tests/board-init.trace";
 /// How long init may take in wall time before it counts as hung.
@@ -261,12 +259,7 @@ fn check(lines: &[String]) -> Vec<String> {
 /// Builds the board image, runs its init on QEMU and checks the trace;
 /// prints `board-init: ...`.
 pub fn run(root: &Path) -> Result<(), String> {
-    let elf = build_executable(
-        root,
-        "firmware release build",
-        "hopper-fw",
-        cargo().args(["build", "-p", "hopper-app", "--release", "--target", TARGET]),
-    )?;
+    let elf = crate::board_image(root)?;
     let dir = crate::target_dir(root)?.join("board-init");
     std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
     let log_path = dir.join("unimp.log");

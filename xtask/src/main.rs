@@ -223,23 +223,10 @@ fn test(root: &Path) -> Result<(), String> {
             "warnings",
         ]),
     )?;
-    run(
+    mcu_clippy(
         root,
         "clippy (MCU target)",
-        cargo().args([
-            "clippy",
-            "-p",
-            "hopper-app",
-            "-p",
-            "hopper-control",
-            "-p",
-            "hopper-protocol",
-            "--target",
-            TARGET,
-            "--",
-            "-D",
-            "warnings",
-        ]),
+        &["-p", "hopper-control", "-p", "hopper-protocol"],
     )?;
     // The control period linked with a panic handler that calls an undefined
     // function (`firmware/app/src/bin/panic-check.rs`): a panic path the
@@ -260,41 +247,18 @@ fn test(root: &Path) -> Result<(), String> {
     )?;
     // The 12 MHz crystal profile (issue 18): its PLL constants pass the
     // same compile-time checks.
-    run(
+    mcu_clippy(
         root,
         "clippy (MCU target, 12 MHz crystal profile)",
-        cargo().args([
-            "clippy",
-            "-p",
-            "hopper-app",
-            "--target",
-            TARGET,
-            "--features",
-            "hse-12mhz",
-            "--",
-            "-D",
-            "warnings",
-        ]),
+        &["--features", "hse-12mhz"],
     )?;
     // The QEMU variant pulls in the plant: this also checks that
     // `hopper-plant` builds `no_std` for the MCU (the QEMU images then build
     // it for real).
-    run(
+    mcu_clippy(
         root,
         "clippy (MCU target, QEMU variant)",
-        cargo().args([
-            "clippy",
-            "-p",
-            "hopper-app",
-            "--target",
-            TARGET,
-            "--no-default-features",
-            "--features",
-            "qemu-sim",
-            "--",
-            "-D",
-            "warnings",
-        ]),
+        &["--no-default-features", "--features", "qemu-sim"],
     )?;
     size(root)?;
     qemu::run(root)?;
@@ -302,16 +266,33 @@ fn test(root: &Path) -> Result<(), String> {
     cargo_test(root)
 }
 
-fn size(root: &Path) -> Result<(), String> {
-    // The image cargo reports having just built, not a path guessed from
-    // `target/`: with CARGO_TARGET_DIR set (or `build.target-dir`), the
-    // guess fails on a fresh clone and reads a stale image on an old one.
-    let elf = build_executable(
+/// `cargo clippy -p hopper-app --target MCU EXTRA -- -D warnings`.
+fn mcu_clippy(root: &Path, what: &str, extra: &[&str]) -> Result<(), String> {
+    run(
+        root,
+        what,
+        cargo()
+            .args(["clippy", "-p", "hopper-app", "--target", TARGET])
+            .args(extra)
+            .args(["--", "-D", "warnings"]),
+    )
+}
+
+/// The board image (default features), built: the image cargo reports
+/// having just built, not a path guessed from `target/` (with
+/// CARGO_TARGET_DIR set, or `build.target-dir`, the guess fails on a fresh
+/// clone and reads a stale image on an old one).
+fn board_image(root: &Path) -> Result<PathBuf, String> {
+    build_executable(
         root,
         "firmware release build",
         "hopper-fw",
         cargo().args(["build", "-p", "hopper-app", "--release", "--target", TARGET]),
-    )?;
+    )
+}
+
+fn size(root: &Path) -> Result<(), String> {
+    let elf = board_image(root)?;
     let tool = llvm_size()?;
     let out = Command::new(&tool)
         .arg(&elf)

@@ -87,7 +87,15 @@ fn disable_amplifier() {
 fn panic(_info: &core::panic::PanicInfo) -> ! {
     disable_amplifier();
     cortex_m::interrupt::disable();
+    safe_and_parked()
+}
+
+/// What every fault path ends in: `AMP_EN` low, the DAC at its zero code,
+/// then nothing until the watchdog resets the MCU (QEMU: exit with failure).
+#[cfg(target_os = "none")]
+fn safe_and_parked() -> ! {
     disable_amplifier();
+    zero_dac();
     #[cfg(feature = "qemu-sim")]
     cortex_m_semihosting::debug::exit(cortex_m_semihosting::debug::EXIT_FAILURE);
     loop {
@@ -100,13 +108,7 @@ fn panic(_info: &core::panic::PanicInfo) -> ! {
 #[cortex_m_rt::exception]
 #[allow(unsafe_code)] // cortex-m-rt requires the HardFault handler to be `unsafe fn`.
 unsafe fn HardFault(_frame: &cortex_m_rt::ExceptionFrame) -> ! {
-    disable_amplifier();
-    zero_dac();
-    #[cfg(feature = "qemu-sim")]
-    cortex_m_semihosting::debug::exit(cortex_m_semihosting::debug::EXIT_FAILURE);
-    loop {
-        cortex_m::asm::nop();
-    }
+    safe_and_parked()
 }
 
 /// The zero-current DAC code, for the exception handlers (they own no
@@ -136,13 +138,7 @@ fn zero_dac() {
 #[cortex_m_rt::exception]
 #[allow(unsafe_code)] // cortex-m-rt requires the NMI handler to be `unsafe fn`.
 unsafe fn NonMaskableInt() {
-    disable_amplifier();
-    zero_dac();
-    #[cfg(feature = "qemu-sim")]
-    cortex_m_semihosting::debug::exit(cortex_m_semihosting::debug::EXIT_FAILURE);
-    loop {
-        cortex_m::asm::nop();
-    }
+    safe_and_parked()
 }
 
 /// Every exception and interrupt without a handler of its own: outputs
@@ -151,13 +147,7 @@ unsafe fn NonMaskableInt() {
 #[cortex_m_rt::exception]
 #[allow(unsafe_code)] // cortex-m-rt requires the DefaultHandler to be `unsafe fn`.
 unsafe fn DefaultHandler(_irqn: i16) {
-    disable_amplifier();
-    zero_dac();
-    #[cfg(feature = "qemu-sim")]
-    cortex_m_semihosting::debug::exit(cortex_m_semihosting::debug::EXIT_FAILURE);
-    loop {
-        cortex_m::asm::nop();
-    }
+    safe_and_parked()
 }
 
 /// What both QEMU images share: the amplifier pin and the instruction

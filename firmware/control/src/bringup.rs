@@ -23,9 +23,10 @@
 
 use crate::hal::RawSample;
 
-/// What a routine does.
+/// What a routine does (the discriminant is the wire code).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[repr(u8)]
 pub enum Routine {
     /// Raw codes, noise and still counters, amplifier off.
     SensorCheck = 0,
@@ -165,34 +166,6 @@ impl CalState {
     }
 }
 
-/// What a routine measured.
-#[derive(Debug, Clone, Copy, PartialEq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct CalReport {
-    /// The routine.
-    pub routine: Routine,
-    /// Where it is.
-    pub state: CalState,
-    /// Samples taken.
-    pub samples: u32,
-    /// Load-cell code, mean and standard deviation.
-    pub loadcell_mean_code: f32,
-    /// Load-cell code's standard deviation.
-    pub loadcell_std_code: f32,
-    /// Potentiometer code, mean.
-    pub pot_mean_code: f32,
-    /// Potentiometer code's standard deviation.
-    pub pot_std_code: f32,
-    /// Largest change of the motor counter from its first value, counts.
-    pub motor_span_counts: u32,
-    /// Largest change of the height counter from its first value, counts.
-    pub height_span_counts: u32,
-    /// The load-cell offset a tare found, codes (NaN otherwise).
-    pub loadcell_offset_code: f32,
-    /// The potentiometer offset a tare found, codes (NaN otherwise).
-    pub pot_offset_code: f32,
-}
-
 /// A routine in progress, or the last one's report.
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -313,11 +286,16 @@ impl Calibrator {
         self.pot.mean
     }
 
-    /// What it measured (so far, while running).
-    pub fn report(&self) -> CalReport {
-        CalReport {
-            routine: self.routine,
-            state: self.state,
+    /// Where it is.
+    pub const fn state(&self) -> CalState {
+        self.state
+    }
+
+    /// What it measured (so far, while running), as the link sends it.
+    pub fn report(&self) -> hopper_protocol::CalibrationInfo {
+        hopper_protocol::CalibrationInfo {
+            routine: self.routine as u8,
+            state: self.state as u8,
             samples: self.loadcell.count(),
             loadcell_mean_code: self.loadcell.mean(),
             loadcell_std_code: self.loadcell.std(),
@@ -357,7 +335,7 @@ mod tests {
         }
         assert!(c.finish(0, (f32::NAN, f32::NAN)));
         let r = c.report();
-        assert_eq!(r.state, CalState::Done);
+        assert_eq!(r.state, CalState::Done as u8);
         assert_eq!(r.samples, 4);
         assert_eq!(r.loadcell_mean_code, 200.0);
         // Sample std of 0, 4, -4, 0: sqrt(32 / 3).
@@ -375,7 +353,7 @@ mod tests {
         c.sample(Some(&raw(200, 100, 1, 0)));
         assert!(!c.finish(2, (1.0, 2.0)));
         let r = c.report();
-        assert_eq!(r.state, CalState::FailedMoving);
+        assert_eq!(r.state, CalState::FailedMoving as u8);
         assert_eq!(r.motor_span_counts, 4);
         assert!(r.loadcell_offset_code.is_nan());
     }
@@ -386,7 +364,7 @@ mod tests {
         c.start(Routine::SensorCheck, 10);
         c.sample(Some(&raw(1, 1, 0, 0)));
         assert!(!c.sample(None));
-        assert_eq!(c.report().state, CalState::FailedSensors);
+        assert_eq!(c.state(), CalState::FailedSensors);
         assert!(!c.finish(0, (0.0, 0.0)));
     }
 

@@ -22,9 +22,8 @@ use crate::params;
 use crate::runner::{CycleCounter, LogItem, Period, PeriodRunner, StepStats};
 use crate::telemetry::{FaultCapture, StepRecord};
 use hopper_protocol::{
-    encode, ArmState, BootInfo, CalibrationInfo, Decoder, DumpInfo, Hop, HostMsg, ParamInfo,
-    Request, Response, RobotMsg, Status, Telemetry, ThermalStatus, TimingStats, MAX_FRAME,
-    PROTOCOL_VERSION, TEXT_LEN,
+    encode, ArmState, BootInfo, Decoder, DumpInfo, Hop, HostMsg, ParamInfo, Request, Response,
+    RobotMsg, Status, Telemetry, ThermalStatus, TimingStats, MAX_FRAME, PROTOCOL_VERSION, TEXT_LEN,
 };
 
 /// A transmit queue of bytes (the board's UART ring, a socket buffer).
@@ -216,9 +215,7 @@ impl Endpoint {
         };
         let resp = match req {
             Request::Status => Response::Status(self.status(runner)),
-            Request::Arm if runner.calibration().state == crate::bringup::CalState::Running => {
-                Response::Refused(text("calibrating"))
-            }
+            Request::Arm if runner.calibrating() => Response::Refused(text("calibrating")),
             Request::Arm => {
                 runner.arming_mut().request_arm();
                 self.pending_arm = Some(id);
@@ -311,22 +308,7 @@ impl Endpoint {
                     },
                 }
             }
-            Request::CalibrationReport => {
-                let r = runner.calibration();
-                Response::Calibration(CalibrationInfo {
-                    routine: r.routine as u8,
-                    state: r.state as u8,
-                    samples: r.samples,
-                    loadcell_mean_code: r.loadcell_mean_code,
-                    loadcell_std_code: r.loadcell_std_code,
-                    pot_mean_code: r.pot_mean_code,
-                    pot_std_code: r.pot_std_code,
-                    motor_span_counts: r.motor_span_counts,
-                    height_span_counts: r.height_span_counts,
-                    loadcell_offset_code: r.loadcell_offset_code,
-                    pot_offset_code: r.pot_offset_code,
-                })
-            }
+            Request::CalibrationReport => Response::Calibration(runner.calibration()),
             Request::SimulateEstop { pressed } if self.simulated => {
                 self.sim_estop = *pressed;
                 Response::Ok

@@ -421,8 +421,13 @@ impl PeriodRunner {
     }
 
     /// The last bring-up routine's report.
-    pub fn calibration(&self) -> crate::bringup::CalReport {
+    pub fn calibration(&self) -> hopper_protocol::CalibrationInfo {
         self.cal.report()
+    }
+
+    /// Whether a bring-up routine is measuring.
+    pub fn calibrating(&self) -> bool {
+        self.cal.running()
     }
 
     /// A routine's measurement is complete: check, compute, apply.
@@ -1042,7 +1047,7 @@ mod tests {
             r.run_period(&mut io, &mut NoCounter);
         }
         let rep = r.calibration();
-        assert_eq!(rep.state, CalState::Done, "{rep:?}");
+        assert_eq!(rep.state, CalState::Done as u8, "{rep:?}");
         assert_eq!(rep.samples, 500);
         let c = r.hopper().config().calibration;
         assert_eq!(c.loadcell_offset_code, cal.loadcell_offset_code + 24.0);
