@@ -389,6 +389,15 @@ mod app {
         if let Some(r) = board.boot.refusal() {
             defmt::error!("boot check: {=str}: arming refused", r.name());
         }
+        {
+            use hopper_control::boot::ResetCause;
+            let r = board.boot.resets;
+            if !(r.contains(ResetCause::PowerOn) || r.contains(ResetCause::BrownOut)) {
+                // A warm reset: the motor may still be hot from before.
+                defmt::info!("warm reset: motor temperature estimate starts at the derating");
+                runner.assume_motor_warm();
+            }
+        }
         let watchdog = board.watchdog;
         if watchdog.caused_last_reset() {
             // The control loop stopped or misbehaved last time: start faulted,

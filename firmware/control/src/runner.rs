@@ -395,6 +395,12 @@ impl PeriodRunner {
         Ok(())
     }
 
+    /// The MCU came out of a warm reset (no power-on or brown-out flag):
+    /// the motor estimate starts hot ([`crate::thermal`]).
+    pub fn assume_motor_warm(&mut self) {
+        self.hopper.supervisor_mut().assume_motor_warm();
+    }
+
     /// Starts a bring-up routine ([`crate::bringup`]) for `seconds` of
     /// periods: only disarmed, with the e-stop released, one at a time.
     pub fn start_calibration(

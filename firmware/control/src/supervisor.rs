@@ -587,6 +587,12 @@ impl Supervisor {
         &self.thermal
     }
 
+    /// After a warm reset: the motor may still be hot
+    /// ([`crate::thermal::MotorThermal::assume_warm`]).
+    pub fn assume_motor_warm(&mut self) {
+        self.thermal.assume_warm();
+    }
+
     /// Carries `old`'s motor temperatures over (a rebuilt configuration
     /// does not cool the motor).
     pub fn continue_thermal(&mut self, old: &Supervisor) {

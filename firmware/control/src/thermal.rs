@@ -44,7 +44,8 @@
 //! at 10 kHz a period changes the housing temperature by about 1e-7 of
 //! itself, below `f32`'s resolution, and thermal time constants are tens
 //! of seconds anyway. Per period it costs a multiply-add and a compare.
-//! At boot the motor is taken to be at the ambient temperature.
+//! At a power-on the motor is taken to be at the ambient temperature;
+//! after a warm reset the board calls [`MotorThermal::assume_warm`].
 
 use crate::laws::InvalidField;
 use crate::params as p;
@@ -195,6 +196,21 @@ impl MotorThermal {
         self.winding_c < self.config.derate_winding_c
     }
 
+    /// After a warm reset (not a power-on: a watchdog, the reset pin, a
+    /// debugger) the motor may still be hot from before: take the winding
+    /// at the derating temperature and the housing at its steady-state
+    /// share of that rise (`R_ha / (R_wh + R_ha)`), so the estimate errs
+    /// hot. It then cools as the model says.
+    pub fn assume_warm(&mut self) {
+        let c = &self.config;
+        let rise = c.derate_winding_c - c.ambient_c;
+        let share = c.housing_to_ambient_k_per_w
+            / (c.winding_to_housing_k_per_w + c.housing_to_ambient_k_per_w);
+        self.winding_c = crate::num::max(self.winding_c, c.derate_winding_c);
+        self.housing_c = crate::num::max(self.housing_c, c.ambient_c + rise * share);
+        self.update_limit();
+    }
+
     /// Carries the temperatures of `old` over (a rebuilt configuration
     /// does not cool the motor).
     pub fn continue_from(&mut self, old: &MotorThermal) {
@@ -334,6 +350,22 @@ mod tests {
         }
         assert_eq!(m.limit_scale(), 1.0);
         assert!(t > 1.0 && t < 60.0, "{t} s");
+    }
+
+    #[test]
+    fn after_a_warm_reset_it_starts_at_the_derating_and_cools() {
+        let cfg = ThermalConfig::default();
+        let mut m = MotorThermal::new(cfg).unwrap_or_else(|e| panic!("{e:?}"));
+        m.assume_warm();
+        assert_eq!(m.winding_c(), cfg.derate_winding_c);
+        // 25 + 110 x 4.65 / 6.58 = 102.7 C.
+        assert!((m.housing_c() - 102.73).abs() < 0.05, "{}", m.housing_c());
+        assert_eq!(m.limit_scale(), 1.0);
+        // Off for 60 s: the winding falls toward the (slowly cooling) housing.
+        for _ in 0..6000 {
+            m.add(0.0, THERMAL_STEP_S);
+        }
+        assert!(m.winding_c() < 110.0 && m.winding_c() > m.housing_c());
     }
 
     #[test]
