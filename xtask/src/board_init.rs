@@ -381,33 +381,39 @@ I2S2ext: unimplemented device write (size 2, offset 0x000, value 0x5555)\n";
         assert_eq!(longest, 3);
     }
 
+    /// Whether `check` names a problem starting with `what` in `trace`.
+    fn caught(trace: &[&str], what: &str) -> bool {
+        let lines: Vec<String> = trace.iter().map(|l| l.to_string()).collect();
+        check(&lines).iter().any(|p| p.starts_with(what))
+    }
+
     #[test]
     fn amp_en_made_an_output_before_it_is_low_is_caught() {
-        let lines: Vec<String> = ["GPIOB.MODER = 0x00000001", "GPIOB.BSRR = 0x00010000"]
-            .map(String::from)
-            .to_vec();
-        assert!(check(&lines).iter().any(|p| p.starts_with("AMP_EN")));
+        assert!(caught(
+            &["GPIOB.MODER = 0x00000001", "GPIOB.BSRR = 0x00010000"],
+            "AMP_EN"
+        ));
     }
 
     #[test]
     fn a_dac_enabled_before_its_zero_code_is_caught() {
-        let lines: Vec<String> = ["DAC.CR = 0x00000001", "DAC.DHR12R1 = 0x00000800"]
-            .map(String::from)
-            .to_vec();
-        assert!(check(&lines).iter().any(|p| p.starts_with("the DAC")));
+        assert!(caught(
+            &["DAC.CR = 0x00000001", "DAC.DHR12R1 = 0x00000800"],
+            "the DAC"
+        ));
     }
 
     #[test]
     fn a_watchdog_started_before_its_reload_is_set_is_caught() {
-        let lines: Vec<String> = [
-            "IWDG.KR = 0x00005555",
-            "IWDG.KR = 0x0000cccc",
-            "IWDG.PR = 0x00000000",
-            "IWDG.RLR = 0x00000027",
-            "IWDG.KR = 0x0000aaaa",
-        ]
-        .map(String::from)
-        .to_vec();
-        assert!(check(&lines).iter().any(|p| p.starts_with("the watchdog")));
+        assert!(caught(
+            &[
+                "IWDG.KR = 0x00005555",
+                "IWDG.KR = 0x0000cccc",
+                "IWDG.PR = 0x00000000",
+                "IWDG.RLR = 0x00000027",
+                "IWDG.KR = 0x0000aaaa",
+            ],
+            "the watchdog"
+        ));
     }
 }

@@ -93,8 +93,22 @@ const QEMU_TIMEOUT: Duration = Duration::from_secs(900);
 
 pub fn run(root: &Path) -> Result<(), String> {
     ensure_qemu()?;
+    // `hopper-link` for the link session, `hopper-sim` for the golden
+    // checks: one workspace test build for both.
+    let (link, sim) = match crate::session::host_binaries(root) {
+        Ok(b) => b,
+        Err(e) => {
+            // Every summary line still printed, `qemu:` last.
+            println!("qemu-link: error (see above)");
+            println!("board-init: error (see above)");
+            for s in &SCENARIOS {
+                println!("{}: error (see above)", s.label);
+            }
+            return Err(e);
+        }
+    };
     let mut failed = Vec::new();
-    if let Err(e) = link_session(root) {
+    if let Err(e) = link_session(root, &link) {
         if !e.starts_with("qemu-link session failed") {
             println!("qemu-link: error (see above)");
         }
@@ -107,7 +121,7 @@ pub fn run(root: &Path) -> Result<(), String> {
         failed.push(e);
     }
     for s in &SCENARIOS {
-        if let Err(e) = run_scenario(root, s) {
+        if let Err(e) = run_scenario(root, s, &sim) {
             // A failure before the summary (build, QEMU, decoding, the host
             // run) printed no summary line: print one, so the last line is
             // still the `qemu:` line whatever happened.
@@ -155,7 +169,7 @@ fn build_image(
 
 /// The link image (`--features qemu-link`) and the scripted session
 /// against it (the `qemu-link:` line).
-fn link_session(root: &Path) -> Result<(), String> {
+fn link_session(root: &Path, link: &Path) -> Result<(), String> {
     // The scenario images' directory: the same dependencies, built once.
     let target_dir = crate::target_dir(root)?.join("qemu");
     let elf = build_image(
@@ -165,10 +179,10 @@ fn link_session(root: &Path) -> Result<(), String> {
         cargo(),
         &target_dir,
     )?;
-    crate::session::against_qemu(root, &elf)
+    crate::session::against_qemu(root, link, &elf)
 }
 
-fn run_scenario(root: &Path, scenario: &Scenario) -> Result<(), String> {
+fn run_scenario(root: &Path, scenario: &Scenario, sim: &Path) -> Result<(), String> {
     // One target directory for both images: the second build recompiles
     // only the application crate (the scenario is an `option_env!`), and the
     // scenarios run one after the other.
@@ -209,7 +223,7 @@ fn run_scenario(root: &Path, scenario: &Scenario) -> Result<(), String> {
         .filter_map(|l| l.strip_prefix("apex "))
         .filter_map(|r| r.split_whitespace().nth(1)?.parse().ok())
         .collect();
-    let host_apexes = host_apexes(root, &scenario.host)?;
+    let host_apexes = host_apexes(root, sim, &scenario.host)?;
     let golden = compare(&host_apexes, &qemu_apexes);
 
     let mut problems = Vec::new();
@@ -455,8 +469,7 @@ pub(crate) fn decode(elf: &Path, bytes: &[u8]) -> Result<Vec<String>, String> {
 /// `hopper-sim` is the workspace test build's (the one the link sessions
 /// use): a release build of it, with fat LTO, took CI longer than both
 /// scenarios' runs.
-fn host_apexes(root: &Path, scenario: &[&str]) -> Result<Vec<f64>, String> {
-    let (_, sim) = crate::session::host_binaries(root)?;
+fn host_apexes(root: &Path, sim: &Path, scenario: &[&str]) -> Result<Vec<f64>, String> {
     let out = Command::new(sim)
         .arg("run")
         .args(scenario)

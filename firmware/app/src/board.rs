@@ -766,8 +766,6 @@ impl HopperIo for BoardIo {
 pub struct Watchdog {
     /// The IWDG registers.
     iwdg: pac::IWDG,
-    /// The reset before this start was the IWDG's (`RCC_CSR.WDGRSTF`).
-    caused_last_reset: bool,
     /// Every reset flag of RCC_CSR before they were cleared.
     reset_causes: hopper_control::boot::ResetCauses,
 }
@@ -779,11 +777,9 @@ impl Watchdog {
         // runs; start it first so the new values apply at once, not after the
         // default 512 ms timeout. Bounded: if it never reports ready, the
         // start key below forces it on anyway.
-        // Why the MCU last reset: read the IWDG flag, then clear every reset
-        // flag (RMVF) so that the next reset reports only its own cause.
-        let csr = rcc.csr().read();
-        let caused_last_reset = csr.wdgrstf().is_reset();
-        let reset_causes = hopper_control::boot::ResetCauses::from_rcc_csr(csr.bits());
+        // Why the MCU last reset: read every reset flag, then clear them
+        // (RMVF) so that the next reset reports only its own cause.
+        let reset_causes = hopper_control::boot::ResetCauses::from_rcc_csr(rcc.csr().read().bits());
         rcc.csr().modify(|_, w| w.rmvf().clear());
         rcc.csr().modify(|_, w| w.lsion().on());
         let _ = wait_for(|| rcc.csr().read().lsirdy().is_ready());
@@ -800,11 +796,7 @@ impl Watchdog {
         iwdg.kr().write(|w| w.key().start());
         // Load the 5 ms reload now rather than counting down from 0xFFF.
         iwdg.kr().write(|w| w.key().feed());
-        Self {
-            iwdg,
-            caused_last_reset,
-            reset_causes,
-        }
+        Self { iwdg, reset_causes }
     }
 
     /// Whether the IWDG caused the reset the firmware is starting from: the
@@ -814,7 +806,8 @@ impl Watchdog {
     /// the controller by itself. QEMU models no IWDG (nor RCC): there it
     /// reads `false`.
     pub fn caused_last_reset(&self) -> bool {
-        self.caused_last_reset
+        self.reset_causes
+            .contains(hopper_control::boot::ResetCause::IndependentWatchdog)
     }
 
     /// Reloads the counter (key 0xAAAA). Call once per control period, from

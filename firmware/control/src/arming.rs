@@ -127,6 +127,8 @@ pub enum ArmRefusal {
     BrownOutResetOff,
     /// `arming.require_tare` is on and no tare has succeeded since boot.
     NotCalibrated,
+    /// A bring-up routine is measuring.
+    Calibrating,
 }
 
 impl ArmRefusal {
@@ -142,6 +144,7 @@ impl ArmRefusal {
             ArmRefusal::ClockFallback => "clock-fallback",
             ArmRefusal::BrownOutResetOff => "brown-out-reset-off",
             ArmRefusal::NotCalibrated => "not-calibrated",
+            ArmRefusal::Calibrating => "calibrating",
         }
     }
 }
@@ -172,6 +175,9 @@ pub struct ArmInput {
     pub nut_velocity_mps: f32,
     /// Body velocity, m/s.
     pub body_velocity_mps: f32,
+    /// A bring-up routine is measuring ([`crate::bringup`]: it must see the
+    /// robot with the amplifier off).
+    pub calibrating: bool,
 }
 
 /// A change this period made.
@@ -353,6 +359,8 @@ impl Arming {
             Some(ArmRefusal::EstopPressed)
         } else if !input.faults.is_empty() {
             Some(ArmRefusal::Faulted)
+        } else if input.calibrating {
+            Some(ArmRefusal::Calibrating)
         } else if let Some(r) = self.boot.refusal() {
             Some(r)
         } else if self.cfg.require_tare && !self.tared {
@@ -392,6 +400,7 @@ mod tests {
             nut_position_m: 0.0,
             nut_velocity_mps: 0.0,
             body_velocity_mps: 0.0,
+            calibrating: false,
         }
     }
 
@@ -515,6 +524,13 @@ mod tests {
                     ..at_rest()
                 },
                 ArmRefusal::Moving,
+            ),
+            (
+                ArmInput {
+                    calibrating: true,
+                    ..at_rest()
+                },
+                ArmRefusal::Calibrating,
             ),
         ];
         for (input, want) in cases {

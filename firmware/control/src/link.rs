@@ -215,7 +215,6 @@ impl Endpoint {
         };
         let resp = match req {
             Request::Status => Response::Status(self.status(runner)),
-            Request::Arm if runner.calibrating() => Response::Refused(text("calibrating")),
             Request::Arm => {
                 runner.arming_mut().request_arm();
                 self.pending_arm = Some(id);

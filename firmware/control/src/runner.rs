@@ -431,11 +431,6 @@ impl PeriodRunner {
         self.cal.report()
     }
 
-    /// Whether a bring-up routine is measuring.
-    pub fn calibrating(&self) -> bool {
-        self.cal.running()
-    }
-
     /// A routine's measurement is complete: check, compute, apply.
     fn finish_calibration(&mut self) {
         use crate::bringup::Routine;
@@ -505,15 +500,12 @@ impl PeriodRunner {
         self.hopper
             .supervisor_mut()
             .heat(self.applied_a, self.timing.period_s);
-        // A bring-up routine measures disarmed (armed, it stops, failed);
-        // a tare's new offsets apply before this period's step, as a
-        // parameter set between periods would.
-        if self.cal.running() {
-            if self.arming.is_armed() {
-                self.cal.sample(None);
-            } else if self.cal.sample(raw.as_ref()) {
-                self.finish_calibration();
-            }
+        // A bring-up routine measures disarmed: it starts only disarmed,
+        // and arming is refused while it runs. A tare's new offsets apply
+        // before this period's step, as a parameter set between periods
+        // would.
+        if self.cal.sample(raw.as_ref()) {
+            self.finish_calibration();
         }
         let t0 = counter.now();
         let mut out = self.hopper.step(raw.as_ref(), self.timing.period_s);
@@ -543,6 +535,7 @@ impl PeriodRunner {
             nut_position_m: out.record.nut_position_m,
             nut_velocity_mps,
             body_velocity_mps,
+            calibrating: self.cal.running(),
         };
         self.unsettled = self.unsettled.saturating_sub(1);
         let arm_event = self.arming.period(self.timing.period_s, &arm_input);
