@@ -91,16 +91,33 @@ enum Cmd {
         #[arg(long)]
         out: PathBuf,
     },
-    /// Run a bring-up routine on the robot, disarmed (issue 18): `sensors`
-    /// (raw codes, noise, still encoders) or `tare` (the leg unloaded, the
-    /// robot held up: load-cell tare and potentiometer zero, applied).
+    /// Run a bring-up routine on the robot, disarmed (issue 18, in this
+    /// order on a new robot; docs/board.md): `sensors` (raw codes, noise,
+    /// still encoders), `height` (standing: the height encoder's zero),
+    /// then on the hoist with the toe free `direction` (a current pulse:
+    /// motor, encoder and load cell the right way round), `home` (the nut
+    /// to its upper stop, the motor encoder zeroed there), `spring` (a
+    /// nut sweep: the spring rate by least squares), `tare` (load-cell
+    /// tare and potentiometer zero). `direction`, `home` and `spring`
+    /// drive the motor at up to `bringup.current_limit_a`.
     Calibrate {
-        /// sensors | tare
-        #[arg(value_parser = ["sensors", "tare"])]
+        /// sensors | tare | direction | home | spring | height
+        #[arg(value_parser = ["sensors", "tare", "direction", "home", "spring", "height"])]
         routine: String,
         /// How long it measures, s of robot time.
         #[arg(long, default_value_t = 0.5)]
         seconds: f32,
+    },
+    /// Move the simulated robot (QEMU and `hopper-sim serve` only; a real
+    /// robot refuses): `hoist` clamps the body and lifts it until the toe
+    /// is `--toe` above the ground (at 0.1 m/s); `release` lets go.
+    Mount {
+        /// hoist | release
+        #[arg(value_parser = ["hoist", "release"])]
+        action: String,
+        /// Toe height to lift to, m.
+        #[arg(long, default_value_t = 0.05)]
+        toe: f32,
     },
     /// Press or release the simulated e-stop (QEMU and `hopper-sim serve`
     /// only; a real robot refuses).
@@ -296,6 +313,14 @@ fn run(c: &mut Client, cmd: &Cmd) -> Result<()> {
         Cmd::Watch { duration } => watch(c, *duration),
         Cmd::Dump { out } => dump(c, out),
         Cmd::Calibrate { routine, seconds } => calibrate(c, routine, *seconds),
+        Cmd::Mount { action, toe } => {
+            c.expect_ok(Request::SimulateMount {
+                hoisted: action == "hoist",
+                lift_m: *toe,
+            })?;
+            println!("mount: {action}");
+            Ok(())
+        }
         Cmd::Estop { action } => {
             c.expect_ok(Request::SimulateEstop {
                 pressed: action == "press",
@@ -389,11 +414,11 @@ fn status_of(c: &mut Client) -> Result<hopper_protocol::Status> {
 
 fn calibrate(c: &mut Client, routine: &str, seconds: f32) -> Result<()> {
     use hopper_control::bringup::{CalState, Routine};
-    let code = if routine == "tare" {
-        Routine::Tare
-    } else {
-        Routine::SensorCheck
-    } as u8;
+    let r = Routine::ALL
+        .into_iter()
+        .find(|r| r.name() == routine)
+        .unwrap_or(Routine::SensorCheck);
+    let code = r as u8;
     let was = (
         get(c, "calibration.loadcell_offset_code")?,
         get(c, "calibration.pot_offset_code")?,
@@ -408,7 +433,14 @@ fn calibrate(c: &mut Client, routine: &str, seconds: f32) -> Result<()> {
         Response::Refused(why) => bail!("calibrate {routine} refused: {why}"),
         r => bail!("unexpected answer {r:?}"),
     }
-    let deadline = Instant::now() + Duration::from_secs_f32(seconds * 20.0 + 5.0);
+    // The measuring routines take `seconds` of robot time; the driving ones
+    // as long as their moves (homing across the whole stroke: 12 s).
+    let limit_s = if r.drives_motor() {
+        60.0
+    } else {
+        seconds * 20.0 + 5.0
+    };
+    let deadline = Instant::now() + Duration::from_secs_f32(limit_s);
     let r = loop {
         std::thread::sleep(Duration::from_millis(100));
         let r = match c.request(Request::CalibrationReport)? {
@@ -419,10 +451,7 @@ fn calibrate(c: &mut Client, routine: &str, seconds: f32) -> Result<()> {
             break r;
         }
         if Instant::now() > deadline {
-            bail!(
-                "calibrate {routine}: still running after {:.0} s",
-                seconds * 20.0 + 5.0
-            );
+            bail!("calibrate {routine}: still running after {limit_s:.0} s");
         }
     };
     let state = CalState::ALL
@@ -444,6 +473,11 @@ fn calibrate(c: &mut Client, routine: &str, seconds: f32) -> Result<()> {
         r.pot_std_code,
         r.pot_std_code * pot_gain * 1000.0
     );
+    let b = match c.request(Request::BringupResults)? {
+        Response::BringupResults(b) => b,
+        r => bail!("unexpected answer {r:?}"),
+    };
+    print_results(routine, &b, r.state == CalState::Done as u8);
     if r.state != CalState::Done as u8 {
         bail!("calibrate {routine} {state}");
     }
@@ -459,6 +493,43 @@ fn calibrate(c: &mut Client, routine: &str, seconds: f32) -> Result<()> {
         );
     }
     Ok(())
+}
+
+/// What a motor-driving or height routine found, one line each.
+fn print_results(routine: &str, b: &hopper_protocol::BringupResults, done: bool) {
+    let applied = if done { "applied" } else { "not applied" };
+    if b.peak_current_a > 0.0 {
+        println!("current: up to {:.2} A", b.peak_current_a);
+    }
+    if b.nut_travel_m.is_finite() {
+        println!(
+            "direction: a pulse down moved the nut {:+.3} mm and the load cell {:+.2} N",
+            b.nut_travel_m * 1000.0,
+            b.force_change_n
+        );
+    }
+    if b.nut_offset_m.is_finite() && routine == "home" {
+        println!(
+            "home: the upper stop was at {:+.3} mm in the motor encoder's frame; zeroed there ({applied})",
+            b.nut_offset_m * 1000.0
+        );
+    }
+    if b.spring_rate_n_per_m.is_finite() {
+        println!(
+            "spring: rate {:.0} N/m, force at zero compression {:+.2} N, fit RMS {:.2} N over {} points spanning {:.2} mm (1 sigma); supervisor.spring_rate_n_per_m ({applied})",
+            b.spring_rate_n_per_m,
+            b.spring_intercept_n,
+            b.fit_rms_n,
+            b.fit_points,
+            b.fit_span_m * 1000.0
+        );
+    }
+    if b.height_offset_m.is_finite() {
+        println!(
+            "height: the body height corrected by {:+.3} mm ({applied})",
+            b.height_offset_m * 1000.0
+        );
+    }
 }
 
 fn thermal_of(c: &mut Client) -> Result<ThermalStatus> {

@@ -119,7 +119,9 @@ pub enum Request {
     /// What the board found at boot ([`Response::Boot`]).
     Boot,
     /// Starts a bring-up routine (`hopper_control::bringup::Routine` by
-    /// code: 0 sensor check, 1 tare) for `seconds`; refused while armed.
+    /// code: 0 sensor check, 1 tare, 2 direction, 3 home, 4 spring, 5
+    /// height) for `seconds` (the measuring ones; the motor-driving ones
+    /// end when their moves are done); refused while armed.
     Calibrate {
         /// The routine's code.
         routine: u8,
@@ -128,6 +130,19 @@ pub enum Request {
     },
     /// The last routine's report ([`Response::Calibration`]).
     CalibrationReport,
+    /// What the last routine found ([`Response::BringupResults`]).
+    BringupResults,
+    /// Moves the simulated robot (the QEMU image and `hopper-sim serve`; a
+    /// real robot refuses it): `hoisted` clamps the body where it is and
+    /// lifts it to `lift_m` above where the toe leaves the ground (at 0.1
+    /// m/s, so the encoders see a motion, not a jump); not `hoisted` lets
+    /// go of it.
+    SimulateMount {
+        /// Held by the hoist.
+        hoisted: bool,
+        /// The toe's height to lift it to, m (with `hoisted`).
+        lift_m: f32,
+    },
 }
 
 /// Robot to host.
@@ -201,6 +216,39 @@ pub enum Response {
     Boot(BootInfo),
     /// A bring-up routine's report.
     Calibration(CalibrationInfo),
+    /// What the last bring-up routine found.
+    BringupResults(BringupResults),
+}
+
+/// What the motor-driving and height routines found
+/// (`hopper_control::bringup`); NaN where the routine does not measure it.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct BringupResults {
+    /// The routine's code.
+    pub routine: u8,
+    /// Where it is (`hopper_control::bringup::CalState` by code).
+    pub state: u8,
+    /// Direction check: the nut's travel in the pulse, m (down positive).
+    pub nut_travel_m: f32,
+    /// Direction check: the load cell's change in the pulse, N.
+    pub force_change_n: f32,
+    /// Homing: where the upper stop was in the encoder's frame before it
+    /// was zeroed there, m.
+    pub nut_offset_m: f32,
+    /// Spring sweep: the fitted rate, N/m.
+    pub spring_rate_n_per_m: f32,
+    /// Spring sweep: the fit's force at zero compression, N.
+    pub spring_intercept_n: f32,
+    /// Spring sweep: RMS of the residuals, N.
+    pub fit_rms_n: f32,
+    /// Spring sweep: points fitted.
+    pub fit_points: u32,
+    /// Spring sweep: the compressions' standard deviation, m.
+    pub fit_span_m: f32,
+    /// Height zero: the correction applied to the body height, m.
+    pub height_offset_m: f32,
+    /// Largest current commanded, A.
+    pub peak_current_a: f32,
 }
 
 /// A bring-up routine's report (`hopper_control::bringup::CalReport`).
@@ -648,6 +696,9 @@ mod tests {
             Just(Request::Thermal),
             Just(Request::Boot),
             Just(Request::CalibrationReport),
+            Just(Request::BringupResults),
+            (any::<bool>(), any::<f32>())
+                .prop_map(|(hoisted, lift_m)| Request::SimulateMount { hoisted, lift_m }),
             (any::<u8>(), any::<f32>())
                 .prop_map(|(routine, seconds)| Request::Calibrate { routine, seconds }),
             any::<bool>().prop_map(|pressed| Request::SimulateEstop { pressed }),

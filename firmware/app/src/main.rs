@@ -830,8 +830,8 @@ mod app {
     use hopper_control::hopper::Strategy;
     use hopper_control::runner::PeriodRunner;
     use hopper_plant::mock::{firmware_config, SensorConfig, SimHal};
-    use hopper_plant::robot::VirtualRobot;
-    use hopper_plant::{Params, Plant};
+    use hopper_plant::robot::{Miscalibration, VirtualRobot};
+    use hopper_plant::Params;
 
     /// Where the body is held until armed, m (toe height).
     const START_APEX_M: f64 = 0.05;
@@ -861,13 +861,25 @@ mod app {
         let counter = crate::qemu::start(&dp.RCC, &dp.GPIOB, dp.TIM5);
 
         let params = Params::design();
+        // The CI session's mis-calibrated robot (as `hopper-sim serve`'s):
+        // the firmware configured for the nominal machine, the plant the
+        // real one; the session's bring-up routines must find the
+        // difference.
+        let mis = Miscalibration::SESSION;
         // The board's defaults (energy-apex, 0.05 m, tethered); the host
         // chooses the controller and target over the link.
-        let mut cfg = firmware_config(&params, &params, Strategy::default(), 0.05, START_APEX_M);
-        // As the board: no arming before a tare (issue 18).
+        let mut cfg = firmware_config(
+            &params,
+            &params,
+            Strategy::default(),
+            0.05,
+            mis.believed_start_apex_m(START_APEX_M),
+        );
+        // As the board: no arming before a tare and homing (issue 18).
         cfg.arming.require_tare = true;
+        cfg.arming.require_home = true;
         let (Ok(plant), Ok(runner)) = (
-            Plant::new(params, START_APEX_M),
+            mis.plant(params, START_APEX_M),
             PeriodRunner::new(cfg, TIMING),
         ) else {
             defmt::error!("link image set-up failed");
@@ -875,7 +887,10 @@ mod app {
             #[allow(clippy::empty_loop)]
             loop {}
         };
-        let hal = SimHal::new(&cfg.calibration, &SensorConfig::DEFAULT);
+        let hal = mis.hal(
+            SimHal::new(&cfg.calibration, &mis.sensors(SensorConfig::DEFAULT)),
+            &plant,
+        );
         let robot = VirtualRobot::new(plant, hal, runner, f64::from(CONTROL_PERIOD_S)).hold();
 
         let (rx_in, rx_out) = cx.local.rxq.split();

@@ -47,6 +47,11 @@ pub struct ArmingConfig {
     /// succeeded since boot. Default false; the board sets it, since its
     /// calibration offsets are not saved yet and boot at placeholders.
     pub require_tare: bool,
+    /// Refuse to arm until the nut was homed since boot
+    /// ([`crate::bringup::Routine::Home`], which needs a direction check
+    /// first). Default false; the board sets it: its motor encoder is
+    /// incremental and boots wherever the nut stands.
+    pub require_home: bool,
 }
 
 impl Default for ArmingConfig {
@@ -57,6 +62,7 @@ impl Default for ArmingConfig {
             home_tolerance_m: p::ARM_HOME_TOLERANCE_M.default,
             still_velocity_mps: p::ARM_STILL_MPS.default,
             require_tare: p::ARM_REQUIRE_TARE.default_flag(),
+            require_home: p::ARM_REQUIRE_HOME.default_flag(),
         }
     }
 }
@@ -68,6 +74,7 @@ impl ArmingConfig {
         p::ARM_HOME_TOLERANCE_M.check(self.home_tolerance_m)?;
         p::ARM_STILL_MPS.check(self.still_velocity_mps)?;
         p::ARM_REQUIRE_TARE.check_flag(self.require_tare)?;
+        p::ARM_REQUIRE_HOME.check_flag(self.require_home)?;
         Ok(())
     }
 }
@@ -129,6 +136,11 @@ pub enum ArmRefusal {
     NotCalibrated,
     /// A bring-up routine is measuring.
     Calibrating,
+    /// The direction check found the motor encoder or the load cell
+    /// counting the wrong way (`calibrate direction`).
+    DirectionReversed,
+    /// `arming.require_home` is on and the nut was not homed since boot.
+    NotHomed,
 }
 
 impl ArmRefusal {
@@ -145,6 +157,8 @@ impl ArmRefusal {
             ArmRefusal::BrownOutResetOff => "brown-out-reset-off",
             ArmRefusal::NotCalibrated => "not-calibrated",
             ArmRefusal::Calibrating => "calibrating",
+            ArmRefusal::DirectionReversed => "encoder-or-motor-direction-reversed",
+            ArmRefusal::NotHomed => "not-homed",
         }
     }
 }
@@ -207,6 +221,12 @@ pub struct Arming {
     boot: crate::boot::BootReport,
     /// A tare has succeeded since boot.
     tared: bool,
+    /// The nut was homed since boot.
+    homed: bool,
+    /// The last direction check found a sensor or the motor reversed.
+    reversed: bool,
+    /// A direction check ran to a verdict since boot.
+    direction_checked: bool,
 }
 
 impl Arming {
@@ -222,6 +242,9 @@ impl Arming {
             disarm_requested: false,
             boot: crate::boot::BootReport::NOT_A_BOARD,
             tared: false,
+            homed: false,
+            reversed: false,
+            direction_checked: false,
         })
     }
 
@@ -229,6 +252,29 @@ impl Arming {
     /// is met from now on.
     pub fn note_tared(&mut self) {
         self.tared = true;
+    }
+
+    /// The nut was homed (the period runner says so): `arming.require_home`
+    /// is met from now on.
+    pub fn note_homed(&mut self) {
+        self.homed = true;
+    }
+
+    /// A direction check's verdict: `reversed` refuses arming until a check
+    /// passes.
+    pub fn note_direction(&mut self, reversed: bool) {
+        self.reversed = reversed;
+        self.direction_checked = true;
+    }
+
+    /// A direction check has passed since boot (and none failed since).
+    pub fn direction_ok(&self) -> bool {
+        self.direction_checked && !self.reversed
+    }
+
+    /// The nut was homed since boot.
+    pub fn homed(&self) -> bool {
+        self.homed
     }
 
     /// What the board found at boot: a clock that fell back or a
@@ -363,6 +409,10 @@ impl Arming {
             Some(ArmRefusal::Calibrating)
         } else if let Some(r) = self.boot.refusal() {
             Some(r)
+        } else if self.reversed {
+            Some(ArmRefusal::DirectionReversed)
+        } else if self.cfg.require_home && !self.homed {
+            Some(ArmRefusal::NotHomed)
         } else if self.cfg.require_tare && !self.tared {
             Some(ArmRefusal::NotCalibrated)
         } else if !self.link_alive() {

@@ -17,11 +17,197 @@
 //! samples; the statistics are Welford's running mean and variance in
 //! `f32`, a few operations a period.
 //!
-//! Not yet: nut homing, the direction check, the spring sweep and the
-//! height-encoder zero (they drive the motor), and saving the results to
-//! flash.
+//! - [`Routine::Height`]: with the toe on the ground (the robot standing,
+//!   amplifier off), the height encoder's origin moved so that the body
+//!   height reads `l0 - x` (the potentiometer's leg compression `x`);
+//!   refused when the load cell does not carry the robot.
+//!
+//! The motor-driving routines enable the amplifier, disarmed, at no more
+//! than `bringup.current_limit_a`, with the supervisor checking every
+//! period as when armed: a fault, the e-stop or a lost link ends them with
+//! the amplifier off ([`CalState::FailedFault`]).
+//! - [`Routine::Direction`] (toe free): a 0.1 s current pulse down; the
+//!   motor encoder must count the nut down and the load cell must see the
+//!   spring compress (`k dp` within a factor of three), else arming is
+//!   refused as `encoder-or-motor-direction-reversed` until a check passes.
+//! - [`Routine::Home`] (after a passed direction check): the nut driven up
+//!   at `bringup.speed_mps` until it stalls on its upper stop (0.5 mm
+//!   behind its reference), the motor encoder's zero put there. The
+//!   incremental encoder boots wherever the nut stands, so this is a
+//!   per-boot routine (`arming.require_home`).
+//! - [`Routine::Spring`] (homed, body held): a slow sweep of
+//!   `bringup.sweep_m` down and back; the least-squares line of the load
+//!   cell's force against the spring compression `p + x` gives the rate
+//!   `k`, applied as `supervisor.spring_rate_n_per_m` (what the spring
+//!   cross-check and the contact evidence use), and an intercept
+//!   `k delta0 + F_offset`: a load-cell offset and the preload are both
+//!   constant forces, not separable by a sweep, so the preload stays as
+//!   configured and the tare (run after the sweep) takes the offset.
+//!
+//! The moves track a reference at `bringup.speed_mps` with the flight PD's
+//! gains (eq 4.4) plus the spring's measured force as feed-forward, so the
+//! nut moves at the set speed whatever the spring pushes.
+//!
+//! Not yet: saving the results to flash; the stroke to the lower stop.
 
 use crate::hal::RawSample;
+use crate::laws::InvalidField;
+use crate::params as p;
+
+/// The motor-driving routines' limits (the parameter table's `bringup.*`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct BringupConfig {
+    /// Largest current commanded, A. Default 6.
+    pub current_limit_a: f32,
+    /// Nut speed of the homing move and the spring sweep, m/s. Default 0.005.
+    pub speed_mps: f32,
+    /// Spring sweep travel, m. Default 0.01.
+    pub sweep_m: f32,
+}
+
+impl Default for BringupConfig {
+    fn default() -> Self {
+        Self {
+            current_limit_a: p::BRINGUP_CURRENT_LIMIT_A.default,
+            speed_mps: p::BRINGUP_SPEED_MPS.default,
+            sweep_m: p::BRINGUP_SWEEP_M.default,
+        }
+    }
+}
+
+impl BringupConfig {
+    /// Every field within its parameter's range, else the first that is not.
+    pub fn validate(&self) -> Result<(), InvalidField> {
+        p::BRINGUP_CURRENT_LIMIT_A.check(self.current_limit_a)?;
+        p::BRINGUP_SPEED_MPS.check(self.speed_mps)?;
+        p::BRINGUP_SWEEP_M.check(self.sweep_m)?;
+        Ok(())
+    }
+}
+
+/// What a motor-driving routine needs to know of the machine, from the
+/// configuration at its start.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct DriveParams {
+    /// The routines' limits.
+    pub limits: BringupConfig,
+    /// Force on the nut per ampere, `eta k_m / r`, N/A.
+    pub newtons_per_amp: f32,
+    /// Screw ratio `r`, m/rad.
+    pub screw_m_per_rad: f32,
+    /// The nut's weight `m_s g`, N.
+    pub nut_weight_n: f32,
+    /// The PD's gains, A/rad and A s/rad (the flight PD's, eq 4.4).
+    pub kp_a_per_rad: f32,
+    /// See `kp_a_per_rad`.
+    pub kd_a_s_per_rad: f32,
+    /// The spring rate as configured, N/m (the direction check's scale and
+    /// the spring fit's plausibility).
+    pub spring_rate_n_per_m: f32,
+    /// The nut's stroke, m (the homing move's longest travel beyond it).
+    pub stroke_m: f32,
+    /// Where homing leaves the nut, m below the stop: where the spring
+    /// carries its weight, `max(0, m_s g / k - delta0)` (an unpowered nut
+    /// released anywhere else swings on its spring).
+    pub park_m: f32,
+}
+
+/// One period's converted measurements, for a motor-driving routine.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct DriveInput {
+    /// Motor angle, rad.
+    pub motor_angle_rad: f32,
+    /// Filtered motor rate (eq 4.1), rad/s.
+    pub motor_rate_rad_s: f32,
+    /// Spring force from the load cell, N.
+    pub spring_force_n: f32,
+    /// Leg compression from the potentiometer, m.
+    pub leg_compression_m: f32,
+    /// The period, s.
+    pub dt_s: f32,
+}
+
+/// The homing move stalls when the nut is this far behind its reference, m.
+pub const STALL_LAG_M: f32 = 5.0e-4;
+/// Pushing on the stop this long after the stall before the zero is set, s.
+const STALL_PUSH_S: f32 = 0.05;
+/// The direction check: baseline, pulse and return times, s.
+const DIRECTION_BASELINE_S: f32 = 0.05;
+const DIRECTION_PULSE_S: f32 = 0.1;
+const DIRECTION_RETURN_S: f32 = 0.3;
+/// Smallest nut travel the direction pulse must cause, m.
+const DIRECTION_MIN_TRAVEL_M: f32 = 1.0e-4;
+/// Holding still after a move before a routine ends, s.
+const SETTLE_S: f32 = 0.1;
+
+/// Running means and co-moments of two variables (Welford's update): the
+/// least-squares line of the spring sweep.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Regression {
+    n: u32,
+    mean_x: f32,
+    mean_y: f32,
+    cxx: f32,
+    cxy: f32,
+    cyy: f32,
+}
+
+impl Regression {
+    /// Adds one point.
+    pub fn add(&mut self, x: f32, y: f32) {
+        self.n = self.n.saturating_add(1);
+        let n = self.n as f32;
+        let dx = x - self.mean_x;
+        self.mean_x += dx / n;
+        let dy = y - self.mean_y;
+        self.mean_y += dy / n;
+        // Co-moments with the updated mean on one side.
+        self.cxx += dx * (x - self.mean_x);
+        self.cxy += dx * (y - self.mean_y);
+        self.cyy += dy * (y - self.mean_y);
+    }
+
+    /// Points added.
+    pub const fn count(&self) -> u32 {
+        self.n
+    }
+
+    /// Slope of the least-squares line (NaN below two distinct `x`).
+    pub fn slope(&self) -> f32 {
+        if self.n < 2 || self.cxx <= 0.0 {
+            f32::NAN
+        } else {
+            self.cxy / self.cxx
+        }
+    }
+
+    /// Intercept of the least-squares line.
+    pub fn intercept(&self) -> f32 {
+        self.mean_y - self.slope() * self.mean_x
+    }
+
+    /// RMS of the residuals about the line.
+    pub fn residual_rms(&self) -> f32 {
+        if self.n < 3 || self.cxx <= 0.0 {
+            return f32::NAN;
+        }
+        let ss = self.cyy - self.cxy * self.cxy / self.cxx;
+        libm::sqrtf(crate::num::max(ss, 0.0) / (self.n - 2) as f32)
+    }
+
+    /// The range of `x` seen, as a standard deviation.
+    pub fn x_std(&self) -> f32 {
+        if self.n < 2 {
+            0.0
+        } else {
+            libm::sqrtf(crate::num::max(self.cxx, 0.0) / (self.n - 1) as f32)
+        }
+    }
+}
 
 /// What a routine does (the discriminant is the wire code).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -32,6 +218,15 @@ pub enum Routine {
     SensorCheck = 0,
     /// Load-cell tare and potentiometer zero with the leg unloaded.
     Tare = 1,
+    /// A current pulse: do the motor encoder and the load cell count the
+    /// right way?
+    Direction = 2,
+    /// The nut driven to its upper stop, the motor encoder zeroed there.
+    Home = 3,
+    /// A nut sweep: the spring rate by least squares.
+    Spring = 4,
+    /// The height encoder zeroed with the toe on the ground.
+    Height = 5,
 }
 
 impl Routine {
@@ -40,6 +235,10 @@ impl Routine {
         match code {
             0 => Some(Routine::SensorCheck),
             1 => Some(Routine::Tare),
+            2 => Some(Routine::Direction),
+            3 => Some(Routine::Home),
+            4 => Some(Routine::Spring),
+            5 => Some(Routine::Height),
             _ => None,
         }
     }
@@ -49,7 +248,26 @@ impl Routine {
         match self {
             Routine::SensorCheck => "sensors",
             Routine::Tare => "tare",
+            Routine::Direction => "direction",
+            Routine::Home => "home",
+            Routine::Spring => "spring",
+            Routine::Height => "height",
         }
+    }
+
+    /// Every routine, by wire code.
+    pub const ALL: [Routine; 6] = [
+        Routine::SensorCheck,
+        Routine::Tare,
+        Routine::Direction,
+        Routine::Home,
+        Routine::Spring,
+        Routine::Height,
+    ];
+
+    /// Whether it drives the motor (the amplifier is on while it runs).
+    pub const fn drives_motor(self) -> bool {
+        matches!(self, Routine::Direction | Routine::Home | Routine::Spring)
     }
 }
 
@@ -67,6 +285,15 @@ pub enum CalRefusal {
     Unknown,
     /// The duration is not within 0.01..=10 s.
     Duration,
+    /// A fault is latched (reset it first).
+    Faulted,
+    /// No valid link frame within the timeout: a routine that drives the
+    /// motor needs the operator's host on the line.
+    LinkDown,
+    /// Homing needs a passed direction check since boot.
+    DirectionFirst,
+    /// The spring sweep needs the nut homed since boot.
+    HomeFirst,
 }
 
 impl CalRefusal {
@@ -78,6 +305,10 @@ impl CalRefusal {
             CalRefusal::Busy => "busy",
             CalRefusal::Unknown => "unknown-routine",
             CalRefusal::Duration => "bad-duration",
+            CalRefusal::Faulted => "faulted",
+            CalRefusal::LinkDown => "link-down",
+            CalRefusal::DirectionFirst => "check-direction-first",
+            CalRefusal::HomeFirst => "home-first",
         }
     }
 }
@@ -140,17 +371,43 @@ pub enum CalState {
     /// The new offsets were refused by the parameter table (out of range):
     /// nothing applied.
     FailedApply,
+    /// A fault latched, the e-stop was pressed or the link was lost while
+    /// the motor was driven: amplifier off, nothing applied.
+    FailedFault,
+    /// The direction pulse moved the nut less than 0.1 mm.
+    FailedNoMotion,
+    /// The direction pulse moved the nut up: the motor or its encoder is
+    /// reversed.
+    FailedReversed,
+    /// The nut moved down but the load cell did not see the spring
+    /// compress: the load cell is reversed (or not on the spring).
+    FailedLoadcellReversed,
+    /// The homing move found no stop within the stroke and 10 mm more.
+    FailedNoStop,
+    /// The spring fit is implausible: too few points, or a rate not within
+    /// a factor of two of the configured one.
+    FailedFit,
+    /// The load cell does not carry the robot's weight: the toe is not on
+    /// the ground.
+    FailedNotOnGround,
 }
 
 impl CalState {
     /// Every state, by wire code.
-    pub const ALL: [CalState; 6] = [
+    pub const ALL: [CalState; 13] = [
         CalState::Idle,
         CalState::Running,
         CalState::Done,
         CalState::FailedMoving,
         CalState::FailedSensors,
         CalState::FailedApply,
+        CalState::FailedFault,
+        CalState::FailedNoMotion,
+        CalState::FailedReversed,
+        CalState::FailedLoadcellReversed,
+        CalState::FailedNoStop,
+        CalState::FailedFit,
+        CalState::FailedNotOnGround,
     ];
 
     /// Kebab-case name.
@@ -162,6 +419,13 @@ impl CalState {
             CalState::FailedMoving => "failed: an encoder moved (hold the robot still)",
             CalState::FailedSensors => "failed: the sensors could not be read",
             CalState::FailedApply => "failed: the new offsets are out of the parameters' ranges",
+            CalState::FailedFault => "failed: a fault, the e-stop or a lost link stopped it (amplifier off)",
+            CalState::FailedNoMotion => "failed: the nut did not move (amplifier not enabled or not wired?)",
+            CalState::FailedReversed => "failed: the nut moved up on a down command: the motor or its encoder is reversed",
+            CalState::FailedLoadcellReversed => "failed: the nut moved down but the load cell did not see the spring compress (reversed?)",
+            CalState::FailedNoStop => "failed: no stop within the stroke",
+            CalState::FailedFit => "failed: the spring fit is implausible",
+            CalState::FailedNotOnGround => "failed: the load cell does not carry the robot (put the toe on the ground)",
         }
     }
 }
@@ -179,6 +443,33 @@ pub struct Calibrator {
     motor_span: u32,
     height_span: u32,
     offsets: (f32, f32),
+    /// A motor-driving routine's machine constants (`None`: measuring only).
+    drive: Option<DriveParams>,
+    /// Time since the routine's first driven period, s.
+    t_s: f32,
+    /// Where the routine is, and since when, s.
+    stage: u8,
+    stage_t_s: f32,
+    /// The motor angle at the start and the reference the PD tracks, rad.
+    theta0_rad: f32,
+    theta_ref_rad: f32,
+    /// Force statistics: the direction check's baseline and pulse end.
+    force_before: Stats,
+    force_after: Stats,
+    /// Nut positions pushed on the stop, m.
+    at_stop: Stats,
+    /// Nut positions while measuring, m (an unpowered nut may swing on its
+    /// spring: the tare takes the mean).
+    nut: Stats,
+    fit: Regression,
+    /// Results, NaN where the routine does not measure them.
+    travel_m: f32,
+    force_change_n: f32,
+    nut_offset_m: f32,
+    height_offset_m: f32,
+    peak_a: f32,
+    /// A driven routine ended in the last period (the runner acts once).
+    ended: bool,
 }
 
 impl Default for Calibrator {
@@ -187,6 +478,12 @@ impl Default for Calibrator {
     }
 }
 
+const NO_STATS: Stats = Stats {
+    n: 0,
+    mean: 0.0,
+    m2: 0.0,
+};
+
 impl Calibrator {
     /// Nothing run yet.
     pub const fn new() -> Self {
@@ -194,20 +491,36 @@ impl Calibrator {
             routine: Routine::SensorCheck,
             state: CalState::Idle,
             wanted: 0,
-            loadcell: Stats {
-                n: 0,
-                mean: 0.0,
-                m2: 0.0,
-            },
-            pot: Stats {
-                n: 0,
-                mean: 0.0,
-                m2: 0.0,
-            },
+            loadcell: NO_STATS,
+            pot: NO_STATS,
             first: None,
             motor_span: 0,
             height_span: 0,
             offsets: (f32::NAN, f32::NAN),
+            drive: None,
+            t_s: 0.0,
+            stage: 0,
+            stage_t_s: 0.0,
+            theta0_rad: 0.0,
+            theta_ref_rad: 0.0,
+            force_before: NO_STATS,
+            force_after: NO_STATS,
+            at_stop: NO_STATS,
+            nut: NO_STATS,
+            fit: Regression {
+                n: 0,
+                mean_x: 0.0,
+                mean_y: 0.0,
+                cxx: 0.0,
+                cxy: 0.0,
+                cyy: 0.0,
+            },
+            travel_m: f32::NAN,
+            force_change_n: f32::NAN,
+            nut_offset_m: f32::NAN,
+            height_offset_m: f32::NAN,
+            peak_a: 0.0,
+            ended: false,
         }
     }
 
@@ -216,25 +529,34 @@ impl Calibrator {
         self.state == CalState::Running
     }
 
+    /// Whether a motor-driving routine is running (the amplifier may be on).
+    pub fn driving(&self) -> bool {
+        self.running() && self.drive.is_some()
+    }
+
     /// Starts `routine` for `samples` periods (the caller checked the
-    /// preconditions).
-    pub fn start(&mut self, routine: Routine, samples: u32) {
+    /// preconditions). A motor-driving routine needs `drive` (else it
+    /// measures only) and ends when its moves are done.
+    pub fn start(&mut self, routine: Routine, samples: u32, drive: Option<DriveParams>) {
         *self = Self {
             routine,
             state: CalState::Running,
             wanted: samples.max(2),
+            drive: if routine.drives_motor() { drive } else { None },
             ..Self::new()
         };
     }
 
     /// One period's raw sample (`None`: unreadable); returns whether the
-    /// measurement just completed (the caller then finishes it).
+    /// measurement just completed (the caller then finishes it). A
+    /// motor-driving routine only keeps the statistics (it ends by
+    /// [`Self::drive`]).
     pub fn sample(&mut self, raw: Option<&RawSample>) -> bool {
         if self.state != CalState::Running {
             return false;
         }
         let Some(r) = raw else {
-            self.state = CalState::FailedSensors;
+            self.end(CalState::FailedSensors);
             return false;
         };
         self.loadcell.add(f32::from(r.loadcell_code));
@@ -246,17 +568,243 @@ impl Calibrator {
         };
         self.motor_span = self.motor_span.max(span(r.motor_counts, m0));
         self.height_span = self.height_span.max(span(r.height_counts, h0));
-        self.loadcell.count() >= self.wanted
+        self.drive.is_none() && self.loadcell.count() >= self.wanted
     }
 
-    /// Ends the measurement: a counter that moved fails it; otherwise it is
-    /// done, with `offsets` (load cell, pot; a tare's, NaN otherwise).
-    /// Returns whether it is done.
-    pub fn finish(&mut self, still_counts: u32, offsets: (f32, f32)) -> bool {
+    /// One period's converted nut position, m, while measuring.
+    pub fn add_nut_position(&mut self, p_m: f32) {
+        if self.state == CalState::Running && self.drive.is_none() {
+            self.nut.add(p_m);
+        }
+    }
+
+    /// The mean nut position while measuring, m (NaN before a sample).
+    pub fn nut_mean_m(&self) -> f32 {
+        if self.nut.count() == 0 {
+            f32::NAN
+        } else {
+            self.nut.mean()
+        }
+    }
+
+    fn end(&mut self, state: CalState) {
+        if self.state == CalState::Running {
+            self.ended = self.drive.is_some();
+        }
+        self.state = state;
+    }
+
+    /// Stops a motor-driving routine: a fault latched, the e-stop or a
+    /// lost link (the caller has made the output safe).
+    pub fn abort(&mut self) {
+        if self.driving() {
+            self.end(CalState::FailedFault);
+        }
+    }
+
+    /// Whether a driven routine ended since the last call (once per end).
+    pub fn take_ended(&mut self) -> bool {
+        core::mem::take(&mut self.ended)
+    }
+
+    /// One period of a motor-driving routine on its converted measurements:
+    /// the current it asks for, A (within `bringup.current_limit_a`; 0
+    /// once it has ended). Out of line: it runs only during bring-up, and
+    /// inlined it would crowd the control step's registers.
+    #[inline(never)]
+    #[cold]
+    pub fn drive(&mut self, m: &DriveInput) -> f32 {
+        let Some(d) = self.drive else {
+            return 0.0;
+        };
+        if self.state != CalState::Running {
+            return 0.0;
+        }
+        let finite = (m.motor_angle_rad + m.motor_rate_rad_s + m.spring_force_n + m.dt_s)
+            .is_finite()
+            && m.leg_compression_m.is_finite();
+        if !finite {
+            self.end(CalState::FailedSensors);
+            return 0.0;
+        }
+        if self.t_s == 0.0 {
+            self.theta0_rad = m.motor_angle_rad;
+            self.theta_ref_rad = m.motor_angle_rad;
+        }
+        self.t_s += m.dt_s;
+        // What holds the nut against the spring: `eta tau / r = F - m_s g`
+        // (the nut's equation with `pdd = 0`), from the measured force.
+        let hold_a = (m.spring_force_n - d.nut_weight_n) / d.newtons_per_amp;
+        let rate_rad_s = d.limits.speed_mps / d.screw_m_per_rad;
+        // The PD of eq 4.4 on the reference and its rate, plus the hold.
+        let track = |theta_ref: f32, omega_ref: f32| {
+            hold_a
+                + d.kp_a_per_rad * (theta_ref - m.motor_angle_rad)
+                + d.kd_a_s_per_rad * (omega_ref - m.motor_rate_rad_s)
+        };
+        let in_stage = self.t_s - self.stage_t_s;
+        let i = match self.routine {
+            Routine::Direction => self.direction(m, &d, in_stage, track(self.theta0_rad, 0.0)),
+            Routine::Home => self
+                .home(m, &d, in_stage, rate_rad_s)
+                .unwrap_or_else(|(r, w)| track(r, w)),
+            Routine::Spring => {
+                let (r, w) = self.sweep(m, &d, rate_rad_s);
+                track(r, w)
+            }
+            _ => 0.0,
+        };
+        if self.state != CalState::Running {
+            return 0.0;
+        }
+        let lim = d.limits.current_limit_a;
+        let i = crate::num::clamp(i, -lim, lim);
+        self.peak_a = crate::num::max(self.peak_a, i.abs());
+        i
+    }
+
+    fn next_stage(&mut self) {
+        self.stage += 1;
+        self.stage_t_s = self.t_s;
+    }
+
+    /// The direction check: a baseline, a pulse down, the verdict, then
+    /// back to the start (`back_a`: the PD toward it).
+    fn direction(&mut self, m: &DriveInput, d: &DriveParams, in_stage: f32, back_a: f32) -> f32 {
+        match self.stage {
+            0 => {
+                self.force_before.add(m.spring_force_n);
+                if in_stage >= DIRECTION_BASELINE_S {
+                    self.next_stage();
+                }
+                0.0
+            }
+            1 => {
+                // The force over the pulse's last 20 ms.
+                if in_stage >= DIRECTION_PULSE_S - 0.02 {
+                    self.force_after.add(m.spring_force_n);
+                }
+                if in_stage < DIRECTION_PULSE_S {
+                    return d.limits.current_limit_a / 3.0;
+                }
+                let travel_m = (m.motor_angle_rad - self.theta0_rad) * d.screw_m_per_rad;
+                let force_change_n = self.force_after.mean() - self.force_before.mean();
+                self.travel_m = travel_m;
+                self.force_change_n = force_change_n;
+                if travel_m < -DIRECTION_MIN_TRAVEL_M {
+                    self.end(CalState::FailedReversed);
+                } else if travel_m <= DIRECTION_MIN_TRAVEL_M {
+                    self.end(CalState::FailedNoMotion);
+                } else if force_change_n < d.spring_rate_n_per_m * travel_m / 3.0 {
+                    self.end(CalState::FailedLoadcellReversed);
+                } else {
+                    self.next_stage();
+                }
+                0.0
+            }
+            _ => {
+                if in_stage >= DIRECTION_RETURN_S {
+                    self.end(CalState::Done);
+                }
+                back_a
+            }
+        }
+    }
+
+    /// The homing move: `Ok(current)` or `Err((reference, its rate))` for
+    /// the PD.
+    fn home(
+        &mut self,
+        m: &DriveInput,
+        d: &DriveParams,
+        in_stage: f32,
+        rate_rad_s: f32,
+    ) -> Result<f32, (f32, f32)> {
+        let r = d.screw_m_per_rad;
+        match self.stage {
+            0 => {
+                // Up at the set speed until the nut lags its reference: the stop.
+                self.theta_ref_rad -= rate_rad_s * m.dt_s;
+                let lag_m = (m.motor_angle_rad - self.theta_ref_rad) * r;
+                if lag_m > STALL_LAG_M {
+                    self.theta_ref_rad = m.motor_angle_rad - STALL_LAG_M / r;
+                    self.next_stage();
+                    return Err((self.theta_ref_rad, 0.0));
+                }
+                if (self.theta0_rad - self.theta_ref_rad) * r > d.stroke_m + 0.01 {
+                    self.end(CalState::FailedNoStop);
+                    return Ok(0.0);
+                }
+                Err((self.theta_ref_rad, -rate_rad_s))
+            }
+            1 => {
+                // Pushing on the stop: where it is.
+                self.at_stop.add(m.motor_angle_rad * r);
+                if in_stage >= STALL_PUSH_S {
+                    self.nut_offset_m = self.at_stop.mean();
+                    self.theta_ref_rad = (self.nut_offset_m + d.park_m) / r;
+                    self.next_stage();
+                }
+                Err((self.theta_ref_rad, 0.0))
+            }
+            _ => {
+                // Parked where the spring carries the nut, then released.
+                if in_stage >= 2.0 * SETTLE_S {
+                    self.end(CalState::Done);
+                    return Ok(0.0);
+                }
+                Err((self.theta_ref_rad, 0.0))
+            }
+        }
+    }
+
+    /// The spring sweep's reference (and its rate): down by the sweep, back,
+    /// hold; the fit's points on the way.
+    fn sweep(&mut self, m: &DriveInput, d: &DriveParams, rate_rad_s: f32) -> (f32, f32) {
+        let r = d.screw_m_per_rad;
+        let bottom = self.theta0_rad + d.limits.sweep_m / r;
+        match self.stage {
+            0 | 1 => {
+                self.fit.add(
+                    m.motor_angle_rad * r + m.leg_compression_m,
+                    m.spring_force_n,
+                );
+                let down = self.stage == 0;
+                let w = if down { rate_rad_s } else { -rate_rad_s };
+                self.theta_ref_rad += w * m.dt_s;
+                if down && self.theta_ref_rad >= bottom {
+                    self.theta_ref_rad = bottom;
+                    self.next_stage();
+                } else if !down && self.theta_ref_rad <= self.theta0_rad {
+                    self.theta_ref_rad = self.theta0_rad;
+                    self.next_stage();
+                }
+                (self.theta_ref_rad, w)
+            }
+            _ => {
+                if self.t_s - self.stage_t_s >= SETTLE_S {
+                    let k = self.fit.slope();
+                    let k0 = d.spring_rate_n_per_m;
+                    let plausible = self.fit.count() >= 100 && k >= 0.5 * k0 && k <= 2.0 * k0;
+                    self.end(if plausible {
+                        CalState::Done
+                    } else {
+                        CalState::FailedFit
+                    });
+                }
+                (self.theta0_rad, 0.0)
+            }
+        }
+    }
+
+    /// Ends the measurement: a counter that moved more than its allowance
+    /// (motor, height) fails it; otherwise it is done, with `offsets` (load
+    /// cell, pot; a tare's, NaN otherwise). Returns whether it is done.
+    pub fn finish(&mut self, still_counts: (u32, u32), offsets: (f32, f32)) -> bool {
         if self.state != CalState::Running {
             return false;
         }
-        if self.motor_span > still_counts || self.height_span > still_counts {
+        if self.motor_span > still_counts.0 || self.height_span > still_counts.1 {
             self.state = CalState::FailedMoving;
             return false;
         }
@@ -265,10 +813,21 @@ impl Calibrator {
         true
     }
 
+    /// Marks the routine failed with `state` (its results were not
+    /// applied: out of range, or the toe not on the ground).
+    pub fn fail(&mut self, state: CalState) {
+        self.state = state;
+        self.offsets = (f32::NAN, f32::NAN);
+    }
+
     /// Marks the routine failed because its results could not be applied.
     pub fn apply_failed(&mut self) {
-        self.state = CalState::FailedApply;
-        self.offsets = (f32::NAN, f32::NAN);
+        self.fail(CalState::FailedApply);
+    }
+
+    /// Records the height routine's correction, m.
+    pub fn set_height_offset(&mut self, offset_m: f32) {
+        self.height_offset_m = offset_m;
     }
 
     /// The routine being measured.
@@ -291,6 +850,17 @@ impl Calibrator {
         self.state
     }
 
+    /// Where the homing move found the stop in the encoder's old frame, m
+    /// (NaN before).
+    pub const fn nut_offset_m(&self) -> f32 {
+        self.nut_offset_m
+    }
+
+    /// The spring sweep's fit.
+    pub const fn fit(&self) -> &Regression {
+        &self.fit
+    }
+
     /// What it measured (so far, while running), as the link sends it.
     pub fn report(&self) -> hopper_protocol::CalibrationInfo {
         hopper_protocol::CalibrationInfo {
@@ -305,6 +875,27 @@ impl Calibrator {
             height_span_counts: self.height_span,
             loadcell_offset_code: self.offsets.0,
             pot_offset_code: self.offsets.1,
+        }
+    }
+
+    /// What the motor-driving and height routines found, as the link sends
+    /// it (NaN where the routine does not measure a value).
+    pub fn results(&self) -> hopper_protocol::BringupResults {
+        let fitted = self.routine == Routine::Spring && self.fit.count() >= 2;
+        let nan_unless = |ok: bool, x: f32| if ok { x } else { f32::NAN };
+        hopper_protocol::BringupResults {
+            routine: self.routine as u8,
+            state: self.state as u8,
+            nut_travel_m: self.travel_m,
+            force_change_n: self.force_change_n,
+            nut_offset_m: self.nut_offset_m,
+            spring_rate_n_per_m: nan_unless(fitted, self.fit.slope()),
+            spring_intercept_n: nan_unless(fitted, self.fit.intercept()),
+            fit_rms_n: nan_unless(fitted, self.fit.residual_rms()),
+            fit_points: self.fit.count(),
+            fit_span_m: nan_unless(fitted, self.fit.x_std()),
+            height_offset_m: self.height_offset_m,
+            peak_current_a: self.peak_a,
         }
     }
 }
@@ -328,12 +919,12 @@ mod tests {
     #[test]
     fn mean_and_noise_of_still_sensors() {
         let mut c = Calibrator::new();
-        c.start(Routine::SensorCheck, 4);
+        c.start(Routine::SensorCheck, 4, None);
         for (i, lc) in [200u16, 204, 196, 200].into_iter().enumerate() {
             let done = c.sample(Some(&raw(lc, 100, u32::MAX, 7)));
             assert_eq!(done, i == 3);
         }
-        assert!(c.finish(0, (f32::NAN, f32::NAN)));
+        assert!(c.finish((0, 0), (f32::NAN, f32::NAN)));
         let r = c.report();
         assert_eq!(r.state, CalState::Done as u8);
         assert_eq!(r.samples, 4);
@@ -347,11 +938,11 @@ mod tests {
     #[test]
     fn a_moving_encoder_fails_it_across_the_wrap() {
         let mut c = Calibrator::new();
-        c.start(Routine::Tare, 3);
+        c.start(Routine::Tare, 3, None);
         c.sample(Some(&raw(200, 100, u32::MAX - 1, 0)));
         c.sample(Some(&raw(200, 100, 2, 0)));
         c.sample(Some(&raw(200, 100, 1, 0)));
-        assert!(!c.finish(2, (1.0, 2.0)));
+        assert!(!c.finish((2, 2), (1.0, 2.0)));
         let r = c.report();
         assert_eq!(r.state, CalState::FailedMoving as u8);
         assert_eq!(r.motor_span_counts, 4);
@@ -361,11 +952,11 @@ mod tests {
     #[test]
     fn an_unreadable_sample_fails_it() {
         let mut c = Calibrator::new();
-        c.start(Routine::SensorCheck, 10);
+        c.start(Routine::SensorCheck, 10, None);
         c.sample(Some(&raw(1, 1, 0, 0)));
         assert!(!c.sample(None));
         assert_eq!(c.state(), CalState::FailedSensors);
-        assert!(!c.finish(0, (0.0, 0.0)));
+        assert!(!c.finish((0, 0), (0.0, 0.0)));
     }
 
     proptest! {

@@ -404,6 +404,27 @@ impl Converter {
         &self.cal
     }
 
+    /// Moves the encoders' origin (issue 18's homing and height zero): from
+    /// the next sample on the nut position reads `nut_m` less and the body
+    /// height `height_m` more than it would, to the nearest count.
+    pub fn shift_origin(&mut self, nut_m: f32, height_m: f32) {
+        let counts = |x_m: f32, m_per_count: f32| {
+            let c = libm::roundf(x_m / m_per_count);
+            // Within the accumulator's exact range, else no shift at all.
+            if c.abs() <= MAX_ACCUMULATED_COUNTS as f32 {
+                c as i32
+            } else {
+                0
+            }
+        };
+        self.motor_counts = self
+            .motor_counts
+            .saturating_sub(counts(nut_m, self.nut_m_per_count));
+        self.height_counts = self
+            .height_counts
+            .saturating_add(counts(height_m, self.height_m_per_count));
+    }
+
     /// Makes the next sample the origin again.
     pub fn rezero(&mut self) {
         self.last = None;

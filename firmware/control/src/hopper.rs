@@ -64,6 +64,8 @@ pub struct HopperConfig {
     pub arming: ArmingConfig,
     /// The e-stop input's debouncing (issue 18).
     pub estop: crate::debounce::DebounceConfig,
+    /// The motor-driving bring-up routines (issue 18).
+    pub bringup: crate::bringup::BringupConfig,
 }
 
 impl HopperConfig {
@@ -105,6 +107,7 @@ impl HopperConfig {
             target_apex_m: crate::params::TARGET_APEX_M.default,
             arming: ArmingConfig::default(),
             estop: crate::debounce::DebounceConfig::default(),
+            bringup: crate::bringup::BringupConfig::default(),
         }
     }
 }
@@ -232,6 +235,7 @@ impl Hopper {
     /// Validates `cfg` and builds the controller (in flight, no fault).
     pub fn new(cfg: HopperConfig) -> Result<Self, ConfigError> {
         cfg.model.validate().map_err(ConfigError::Model)?;
+        cfg.bringup.validate()?;
         let converter = Converter::new(cfg.calibration).map_err(ConfigError::Calibration)?;
         // The estimator's contact evidence (load-cell force in excess of
         // `k (delta0 + p)`) is a cross-check of two sensors through the spring,
@@ -371,9 +375,29 @@ impl Hopper {
         &self.estimator
     }
 
+    /// Moves the encoders' origin ([`Converter::shift_origin`]): the
+    /// period runner's homing and height zero, followed by a rebuild (the
+    /// velocity filters must not see the step).
+    pub(crate) fn shift_origin(&mut self, nut_m: f32, height_m: f32) {
+        self.converter.shift_origin(nut_m, height_m);
+    }
+
     /// One control period of `dt_s` seconds. `raw` is `None` when the sensors
     /// could not be read (latches [`Fault::SensorRange`]).
+    #[inline]
     pub fn step(&mut self, raw: Option<&RawSample>, dt_s: f32) -> StepOutput {
+        self.step_with(raw, dt_s, None)
+    }
+
+    /// [`Self::step`], with a motor-driving bring-up routine
+    /// ([`crate::bringup`]) asking for the current instead of the
+    /// controller while it runs; the supervisor checks it the same way.
+    pub fn step_with(
+        &mut self,
+        raw: Option<&RawSample>,
+        dt_s: f32,
+        bringup: Option<&mut crate::bringup::Calibrator>,
+    ) -> StepOutput {
         self.steps = self.steps.wrapping_add(1);
         let estop_pressed = match raw {
             Some(r) => self.estop.update(r.estop_pressed, dt_s),
@@ -418,24 +442,33 @@ impl Hopper {
             Some(e) => self.on_event(e, energy_j),
             None => None,
         };
-        let requested_a = self.controller.current_a(&ControlInput {
-            phase,
-            body_height_m: m.body_height_m,
-            toe_height_m: m.body_height_m - self.cfg.model.leg_length_m,
-            body_velocity_mps: v.body_mps,
-            motor_angle_rad: m.motor_angle_rad,
-            motor_rate_rad_s: v.motor_rad_s,
-            nut_position_m: m.nut_position_m,
-            nut_velocity_mps,
-            spring_force_n: m.spring_force_n,
-            leg_compression_m: m.leg_compression_m,
-            energy_j,
-            desired_energy_j: self.desired_energy_j,
-            target_apex_m: self.cfg.target_apex_m,
-            flight_peak_toe_m: self.estimator.flight_peak_toe_m(),
-            last_apex_m: self.estimator.last_apex_m(),
-            dt_s,
-        });
+        let requested_a = match bringup {
+            Some(cal) if cal.driving() => cal.drive(&crate::bringup::DriveInput {
+                motor_angle_rad: m.motor_angle_rad,
+                motor_rate_rad_s: v.motor_rad_s,
+                spring_force_n: m.spring_force_n,
+                leg_compression_m: m.leg_compression_m,
+                dt_s,
+            }),
+            _ => self.controller.current_a(&ControlInput {
+                phase,
+                body_height_m: m.body_height_m,
+                toe_height_m: m.body_height_m - self.cfg.model.leg_length_m,
+                body_velocity_mps: v.body_mps,
+                motor_angle_rad: m.motor_angle_rad,
+                motor_rate_rad_s: v.motor_rad_s,
+                nut_position_m: m.nut_position_m,
+                nut_velocity_mps,
+                spring_force_n: m.spring_force_n,
+                leg_compression_m: m.leg_compression_m,
+                energy_j,
+                desired_energy_j: self.desired_energy_j,
+                target_apex_m: self.cfg.target_apex_m,
+                flight_peak_toe_m: self.estimator.flight_peak_toe_m(),
+                last_apex_m: self.estimator.last_apex_m(),
+                dt_s,
+            }),
+        };
         let sup_in = SupervisorInput {
             // Debounced ([`crate::debounce`]), not the raw input.
             estop_pressed,

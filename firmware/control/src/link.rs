@@ -68,6 +68,9 @@ pub struct Endpoint {
     simulated: bool,
     /// The simulated e-stop, as last asked.
     sim_estop: bool,
+    /// A simulated mount change not yet taken by the application:
+    /// (hoisted, lift to this toe height, m).
+    sim_mount: Option<(bool, f32)>,
 }
 
 fn text(s: &str) -> heapless::String<TEXT_LEN> {
@@ -149,6 +152,13 @@ impl Endpoint {
     /// real robot); the application applies it to its sensor models.
     pub fn sim_estop(&self) -> bool {
         self.sim_estop
+    }
+
+    /// The simulated mount change the host asked for since the last call
+    /// (hoisted, toe height to lift to, m); the application moves its
+    /// plant (never on a real robot).
+    pub fn take_sim_mount(&mut self) -> Option<(bool, f32)> {
+        self.sim_mount.take()
     }
 
     /// Telemetry records the transmit queue could not take so far.
@@ -308,6 +318,16 @@ impl Endpoint {
                 }
             }
             Request::CalibrationReport => Response::Calibration(runner.calibration()),
+            Request::BringupResults => Response::BringupResults(runner.bringup_results()),
+            Request::SimulateMount { hoisted, lift_m } if self.simulated => {
+                if (0.0..=0.5).contains(lift_m) {
+                    self.sim_mount = Some((*hoisted, *lift_m));
+                    Response::Ok
+                } else {
+                    Response::Refused(text("lift-out-of-range"))
+                }
+            }
+            Request::SimulateMount { .. } => Response::Refused(text("not-simulated")),
             Request::SimulateEstop { pressed } if self.simulated => {
                 self.sim_estop = *pressed;
                 Response::Ok

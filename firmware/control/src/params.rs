@@ -869,6 +869,50 @@ param!(
     "Refuse to arm until a tare (hopper-link calibrate tare) has succeeded since boot (the board sets it: its offsets are not saved yet)."
 );
 param!(
+    ARM_REQUIRE_HOME,
+    "arming.require_home",
+    "-",
+    Flag,
+    0.0,
+    1.0,
+    0.0,
+    DISARMED,
+    "Refuse to arm until the nut was homed (hopper-link calibrate home, after calibrate direction) since boot: the motor encoder is incremental, its zero is lost at power-off."
+);
+param!(
+    BRINGUP_CURRENT_LIMIT_A,
+    "bringup.current_limit_a",
+    "A",
+    Real,
+    0.1,
+    10.0,
+    6.0,
+    DISARMED,
+    "Largest current a motor-driving bring-up routine commands (6 A: 200 N on the nut, 18% of the amplifier's limit)."
+);
+param!(
+    BRINGUP_SPEED_MPS,
+    "bringup.speed_mps",
+    "m/s",
+    Real,
+    0.001,
+    0.05,
+    0.005,
+    DISARMED,
+    "Nut speed of the homing move and the spring sweep (5 mm/s: a stop reached at it stores 5 mJ in the 426 kg reflected rotor inertia)."
+);
+param!(
+    BRINGUP_SWEEP_M,
+    "bringup.sweep_m",
+    "m",
+    Real,
+    0.002,
+    0.03,
+    0.01,
+    DISARMED,
+    "Nut travel of the spring sweep, down from the upper stop and back."
+);
+param!(
     EST_PREDICT_CONTACT,
     "estimator.predict_contact",
     "-",
@@ -1346,6 +1390,10 @@ pub const TABLE: &[&Param] = &[
     &ARM_HOME_TOLERANCE_M,
     &ARM_STILL_MPS,
     &ARM_REQUIRE_TARE,
+    &ARM_REQUIRE_HOME,
+    &BRINGUP_CURRENT_LIMIT_A,
+    &BRINGUP_SPEED_MPS,
+    &BRINGUP_SWEEP_M,
     &SUP_MAX_MOTOR_DELTA,
     &SUP_MAX_HEIGHT_DELTA,
     &SUP_NUT_POSITION_MIN_M,
@@ -1467,6 +1515,7 @@ fn slot<'a>(cfg: &'a mut HopperConfig, p: &Param) -> Result<Slot<'a>, ParamError
             "home_tolerance_m" => Ok(R(&mut a.home_tolerance_m)),
             "still_velocity_mps" => Ok(R(&mut a.still_velocity_mps)),
             "require_tare" => Ok(B(&mut a.require_tare)),
+            "require_home" => Ok(B(&mut a.require_home)),
             _ => Err(ParamError::Unknown),
         };
     }
@@ -1514,6 +1563,15 @@ fn slot<'a>(cfg: &'a mut HopperConfig, p: &Param) -> Result<Slot<'a>, ParamError
             "contact_disagree_periods" => Ok(Slot::U16(&mut c.contact_disagree_periods)),
             "spring_mismatch_n" => Ok(R(&mut c.spring_mismatch_n)),
             "frozen_speed_rad_s" => Ok(R(&mut c.frozen_speed_rad_s)),
+            _ => Err(ParamError::Unknown),
+        };
+    }
+    if let Some(rest) = name.strip_prefix("bringup.") {
+        let b = &mut cfg.bringup;
+        return match rest {
+            "current_limit_a" => Ok(R(&mut b.current_limit_a)),
+            "speed_mps" => Ok(R(&mut b.speed_mps)),
+            "sweep_m" => Ok(R(&mut b.sweep_m)),
             _ => Err(ParamError::Unknown),
         };
     }

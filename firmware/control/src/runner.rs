@@ -402,13 +402,16 @@ impl PeriodRunner {
     }
 
     /// Starts a bring-up routine ([`crate::bringup`]) for `seconds` of
-    /// periods: only disarmed, with the e-stop released, one at a time.
+    /// periods (a motor-driving one ends when its moves are done): only
+    /// disarmed, with the e-stop released, one at a time; one that drives
+    /// the motor also needs no latched fault and a live link, homing a
+    /// passed direction check and the spring sweep a homed nut.
     pub fn start_calibration(
         &mut self,
         routine: crate::bringup::Routine,
         seconds: f32,
     ) -> Result<(), crate::bringup::CalRefusal> {
-        use crate::bringup::CalRefusal;
+        use crate::bringup::{CalRefusal, DriveParams, Routine};
         if self.arming.is_armed() {
             return Err(CalRefusal::Armed);
         }
@@ -421,8 +424,42 @@ impl PeriodRunner {
         if !(0.01..=10.0).contains(&seconds) {
             return Err(CalRefusal::Duration);
         }
+        let drive = if routine.drives_motor() {
+            if self.hopper.supervisor().is_faulted() {
+                return Err(CalRefusal::Faulted);
+            }
+            if !self.arming.link_alive() {
+                return Err(CalRefusal::LinkDown);
+            }
+            if routine == Routine::Home && !self.arming.direction_ok() {
+                return Err(CalRefusal::DirectionFirst);
+            }
+            if routine == Routine::Spring && !self.arming.homed() {
+                return Err(CalRefusal::HomeFirst);
+            }
+            let cfg = self.hopper.config();
+            let m = &cfg.model;
+            let r = m.screw_m_per_rad();
+            Some(DriveParams {
+                limits: cfg.bringup,
+                newtons_per_amp: m.efficiency * m.torque_constant_nm_per_a / r,
+                screw_m_per_rad: r,
+                nut_weight_n: m.nut_mass_kg * m.gravity_mps2,
+                kp_a_per_rad: cfg.flight.gains.kp,
+                kd_a_s_per_rad: cfg.flight.gains.kd,
+                spring_rate_n_per_m: cfg.supervisor.spring_rate_n_per_m,
+                stroke_m: m.stroke_m,
+                park_m: crate::num::max(
+                    0.0,
+                    m.nut_mass_kg * m.gravity_mps2 / cfg.supervisor.spring_rate_n_per_m
+                        - cfg.supervisor.spring_preload_m,
+                ),
+            })
+        } else {
+            None
+        };
         let samples = (seconds / self.timing.period_s) as u32;
-        self.cal.start(routine, samples);
+        self.cal.start(routine, samples, drive);
         Ok(())
     }
 
@@ -431,39 +468,123 @@ impl PeriodRunner {
         self.cal.report()
     }
 
-    /// A routine's measurement is complete: check, compute, apply.
+    /// What the last bring-up routine found.
+    pub fn bringup_results(&self) -> hopper_protocol::BringupResults {
+        self.cal.results()
+    }
+
+    /// A measuring routine's samples are complete: check, compute, apply.
     fn finish_calibration(&mut self) {
-        use crate::bringup::Routine;
-        // Encoders still: a count of quantisation flicker at most.
+        use crate::bringup::{CalState, Routine};
+        // The body still: a count of quantisation flicker at most. The
+        // nut, unpowered, may swing on its spring (it has no brake; a
+        // frictionless simulated screw swings for ever): up to 2 mm, its
+        // mean position is what the averages were taken at (the spring is
+        // linear: the mean force is that of the mean position).
         const STILL_COUNTS: u32 = 1;
+        const NUT_SWING_M: f32 = 2.0e-3;
         let cfg = *self.hopper.config();
+        let c = &cfg.calibration;
+        let s = &cfg.supervisor;
+        let nut_swing_counts = (NUT_SWING_M / c.nut_m_per_count()) as u32;
+        let last = self.hopper.last_input().copied();
+        let p_m = self.cal.nut_mean_m();
+        let p_m = if p_m.is_finite() { p_m } else { 0.0 };
         let offsets = match self.cal.routine() {
-            Routine::SensorCheck => (f32::NAN, f32::NAN),
             Routine::Tare => {
                 // Unloaded leg: the load cell must read the flight force
                 // k (delta0 + p) at the nut's position, the pot 0.
-                let p_m = self.hopper.last_input().map_or(0.0, |i| i.nut_position_m);
-                let s = &cfg.supervisor;
                 let force_n = s.spring_rate_n_per_m * (s.spring_preload_m + p_m);
-                let c = &cfg.calibration;
                 (
                     self.cal.loadcell_mean_code() - force_n / c.loadcell_gain_n_per_code,
                     self.cal.pot_mean_code(),
                 )
             }
+            _ => (f32::NAN, f32::NAN),
         };
-        if !self.cal.finish(STILL_COUNTS, offsets) || self.cal.routine() != Routine::Tare {
+        if !self.cal.finish((nut_swing_counts, STILL_COUNTS), offsets) {
             return;
         }
-        let mut new = cfg;
-        let set = crate::params::set(&mut new, crate::params::CAL_LOADCELL_OFFSET.name, offsets.0)
-            .and_then(|()| {
-                crate::params::set(&mut new, crate::params::CAL_POT_OFFSET.name, offsets.1)
-            });
-        if set.is_err() || self.rebuild(new).is_err() {
-            self.cal.apply_failed();
-        } else {
-            self.arming.note_tared();
+        match self.cal.routine() {
+            Routine::Tare => {
+                let mut new = cfg;
+                let set = crate::params::set(
+                    &mut new,
+                    crate::params::CAL_LOADCELL_OFFSET.name,
+                    offsets.0,
+                )
+                .and_then(|()| {
+                    crate::params::set(&mut new, crate::params::CAL_POT_OFFSET.name, offsets.1)
+                });
+                if set.is_err() || self.rebuild(new).is_err() {
+                    self.cal.apply_failed();
+                } else {
+                    self.arming.note_tared();
+                }
+            }
+            Routine::Height => {
+                // Toe on the ground: the load cell carries the robot beyond
+                // the flight force (half its weight at least: friction
+                // holds the rest at worst), and then `z = l0 - x`.
+                let force_n = (self.cal.loadcell_mean_code() - c.loadcell_offset_code)
+                    * c.loadcell_gain_n_per_code;
+                let x_m = (self.cal.pot_mean_code() - c.pot_offset_code) * c.pot_gain_m_per_code;
+                let weight_n = cfg.model.body_mass_kg * cfg.model.gravity_mps2;
+                let carried_n = force_n - s.spring_rate_n_per_m * (s.spring_preload_m + p_m);
+                let Some(z_m) = last.map(|i| i.body_height_m) else {
+                    self.cal.fail(CalState::FailedSensors);
+                    return;
+                };
+                if carried_n.is_nan() || carried_n <= 0.5 * weight_n {
+                    self.cal.fail(CalState::FailedNotOnGround);
+                    return;
+                }
+                let offset_m = cfg.model.leg_length_m - x_m - z_m;
+                self.hopper.shift_origin(0.0, offset_m);
+                if self.rebuild(cfg).is_err() {
+                    self.cal.apply_failed();
+                } else {
+                    self.cal.set_height_offset(offset_m);
+                }
+            }
+            _ => {}
+        }
+    }
+
+    /// A motor-driving routine ended (the amplifier is off from this
+    /// period on): its verdict to arming, its results applied.
+    fn finish_drive(&mut self) {
+        use crate::bringup::{CalState, Routine};
+        let state = self.cal.state();
+        match self.cal.routine() {
+            Routine::Direction => match state {
+                CalState::Done => self.arming.note_direction(false),
+                CalState::FailedReversed | CalState::FailedLoadcellReversed => {
+                    self.arming.note_direction(true)
+                }
+                _ => {}
+            },
+            Routine::Home if state == CalState::Done => {
+                // The stop is the zero from now on.
+                self.hopper.shift_origin(self.cal.nut_offset_m(), 0.0);
+                if self.rebuild(*self.hopper.config()).is_ok() {
+                    self.arming.note_homed();
+                } else {
+                    self.cal.apply_failed();
+                }
+            }
+            Routine::Spring if state == CalState::Done => {
+                let mut new = *self.hopper.config();
+                let set = crate::params::set(
+                    &mut new,
+                    crate::params::SUP_SPRING_RATE.name,
+                    self.cal.fit().slope(),
+                );
+                if set.is_err() || self.rebuild(new).is_err() {
+                    self.cal.apply_failed();
+                }
+            }
+            _ => {}
         }
     }
 
@@ -508,8 +629,22 @@ impl PeriodRunner {
             self.finish_calibration();
         }
         let t0 = counter.now();
-        let mut out = self.hopper.step(raw.as_ref(), self.timing.period_s);
+        let mut out =
+            self.hopper
+                .step_with(raw.as_ref(), self.timing.period_s, Some(&mut self.cal));
         let t1 = counter.now();
+        // A motor-driving routine stops at a fault (the e-stop latches one)
+        // or a lost link; the output below is then the safe one.
+        if self.cal.driving() && (!out.faults.is_empty() || !self.arming.link_alive()) {
+            self.cal.abort();
+        }
+        // Whether this period's command is a routine's (approved by the
+        // supervisor above) rather than disarmed's zero.
+        let driven = self.cal.driving();
+        if self.cal.take_ended() {
+            self.finish_drive();
+        }
+        self.cal.add_nut_position(out.record.nut_position_m);
         let step_cost = t1.wrapping_sub(t0).saturating_sub(counter.overhead());
         self.cost.add(step_cost);
         self.periods = self.periods.wrapping_add(1);
@@ -540,7 +675,7 @@ impl PeriodRunner {
         self.unsettled = self.unsettled.saturating_sub(1);
         let arm_event = self.arming.period(self.timing.period_s, &arm_input);
         let armed = self.arming.is_armed();
-        if !armed {
+        if !armed && !driven {
             // Disarmed: the safe output, without a fault.
             out.command = Command::SAFE;
             out.dac_code = zero;

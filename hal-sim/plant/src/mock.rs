@@ -167,6 +167,14 @@ pub struct SimHal {
 }
 
 impl SimHal {
+    /// The height encoder's true origin, m: where the body really was at
+    /// the firmware's first sample (by default where the calibration says;
+    /// another value is a mis-calibrated height zero, issue 18).
+    pub fn with_height_origin(mut self, z_m: f64) -> Self {
+        self.height_origin_m = z_m;
+        self
+    }
+
     /// Models matching `cal` (the firmware's calibration), with `cfg`'s noise.
     pub fn new(cal: &Calibration, cfg: &SensorConfig) -> Self {
         let two_pi = 2.0 * core::f64::consts::PI;

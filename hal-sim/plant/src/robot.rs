@@ -9,13 +9,20 @@
 //! at rest above it ([`VirtualRobot::held`]: a simulated hoist, as hoppers
 //! are started by hand or from a support) and released when armed: the
 //! laws hop from a release; from standing they have no touchdown to start
-//! from.
+//! from. The hoist clamps the body only ([`Plant::clamp_body`]): the nut
+//! moves under the motor and the spring, so the bring-up routines can
+//! drive it. The host moves the robot with `Request::SimulateMount`: the
+//! hoist lifts the body at [`LIFT_SPEED_MPS`] to a toe height, or lets go.
 
 use crate::mock::SimHal;
 use crate::{Event, Plant, PlantError};
 use hopper_control::link::{Endpoint, Tx};
 use hopper_control::runner::{CycleCounter, Period, PeriodRunner};
 use hopper_control::telemetry::{FaultCapture, CAPTURE_LEN};
+
+/// How fast the hoist lifts or lowers the body, m/s (2 um a period at 10
+/// kHz: the height encoder sees a motion, not a jump).
+pub const LIFT_SPEED_MPS: f64 = 0.1;
 
 /// The firmware on the simulated hopper, behind a link.
 pub struct VirtualRobot {
@@ -29,9 +36,11 @@ pub struct VirtualRobot {
     pub link: Endpoint,
     /// The capture, frozen around a fault.
     pub capture: FaultCapture<CAPTURE_LEN>,
-    /// Held at rest where it started until the first armed period (the
-    /// plant does not move while held).
+    /// Held by the hoist (the body clamped, the nut free) until the first
+    /// armed period.
     pub held: bool,
+    /// The body height the hoist is moving the body to, m.
+    lift_to_m: Option<f64>,
     dt_s: f64,
 }
 
@@ -46,14 +55,35 @@ impl VirtualRobot {
             link: Endpoint::simulated(),
             capture: FaultCapture::new(),
             held: false,
+            lift_to_m: None,
             dt_s,
         }
     }
 
-    /// Holds the body at rest where the plant starts until armed.
+    /// Holds the body at rest where the plant starts (a hoist) until armed.
     pub fn hold(mut self) -> Self {
+        self.plant.clamp_body();
         self.held = true;
         self
+    }
+
+    /// Hoists the body (clamps it where it is) and lifts it until the toe
+    /// is `toe_m` above the ground, or lets go (`None`).
+    pub fn mount(&mut self, toe_m: Option<f64>) {
+        match toe_m {
+            Some(h) => {
+                self.plant.clamp_body();
+                self.held = true;
+                self.lift_to_m = Some(self.plant.params().leg_length_m + h);
+            }
+            None => self.release(),
+        }
+    }
+
+    fn release(&mut self) {
+        self.plant.release_body();
+        self.held = false;
+        self.lift_to_m = None;
     }
 
     /// One control period on the sensors' present state, then the link's
@@ -67,6 +97,9 @@ impl VirtualRobot {
         counter: &mut C,
     ) -> Period {
         self.hal.faults.estop = self.link.sim_estop();
+        if let Some((hoisted, lift_m)) = self.link.take_sim_mount() {
+            self.mount(hoisted.then_some(f64::from(lift_m)));
+        }
         let p = {
             let mut io = self.hal.io(&self.plant);
             self.runner.run_period(&mut io, counter)
@@ -75,19 +108,108 @@ impl VirtualRobot {
             .record(&p.out.record, !p.newly_latched.is_empty());
         self.link
             .service(&mut self.runner, &p, rx, &mut self.capture, tx, counter);
-        if p.armed {
-            self.held = false;
+        if p.armed && self.held {
+            // Armed: the hoist lets go (the laws start from the release).
+            self.release();
         }
         p
     }
 
     /// The plant from this period to the next, under the amplifier's
-    /// current (nothing moves while held).
+    /// current (the hoist's move first).
     pub fn advance(&mut self, on_event: &mut impl FnMut(Event)) -> Result<(), PlantError> {
         let current_a = self.hal.mean_current_a(self.dt_s);
-        if self.held {
-            return Ok(());
+        if let Some(z) = self.lift_to_m {
+            let step = LIFT_SPEED_MPS * self.dt_s;
+            let dz = (z - self.plant.state().z_m).clamp(-step, step);
+            self.plant.move_clamped_body(dz);
+            if dz.abs() < step {
+                self.lift_to_m = None;
+            }
         }
         self.plant.advance(self.dt_s, current_a, on_event)
+    }
+}
+
+/// A robot whose firmware is configured for the nominal machine while the
+/// machine differs (issue 18): what the bring-up routines must find.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Miscalibration {
+    /// The load cell reads this much beyond the true spring force, N.
+    pub loadcell_bias_n: f64,
+    /// The potentiometer reads this much beyond the true leg compression, m.
+    pub pot_bias_m: f64,
+    /// The nut boots this far below its upper stop, m (the incremental
+    /// motor encoder takes it for 0).
+    pub nut_start_m: f64,
+    /// The real spring's rate is off the configured one by this fraction.
+    pub spring_rate_error: f64,
+    /// The firmware takes the boot height for this much more than it is, m.
+    pub height_zero_error_m: f64,
+}
+
+impl Miscalibration {
+    /// A robot as configured.
+    pub const NONE: Miscalibration = Miscalibration {
+        loadcell_bias_n: 0.0,
+        pot_bias_m: 0.0,
+        nut_start_m: 0.0,
+        spring_rate_error: 0.0,
+        height_zero_error_m: 0.0,
+    };
+
+    /// The CI's link sessions' robot (`hopper-sim serve` and the QEMU link
+    /// image): 12 N of load-cell offset, 0.5 mm of potentiometer offset,
+    /// the nut 1 mm below its stop, a spring 15% stiffer than configured,
+    /// the height zero 30 mm off. Each stays within what the supervisor
+    /// accepts at boot (its 30 N spring cross-check).
+    pub const SESSION: Miscalibration = Miscalibration {
+        loadcell_bias_n: 12.0,
+        pot_bias_m: 5.0e-4,
+        nut_start_m: 1.0e-3,
+        spring_rate_error: 0.15,
+        height_zero_error_m: 0.03,
+    };
+
+    /// The start height the firmware believes for a real `start_apex_m`, m
+    /// (what its configuration is built for).
+    pub fn believed_start_apex_m(&self, start_apex_m: f64) -> f64 {
+        start_apex_m + self.height_zero_error_m
+    }
+
+    /// The sensor models with the offsets.
+    pub fn sensors(&self, s: crate::mock::SensorConfig) -> crate::mock::SensorConfig {
+        crate::mock::SensorConfig {
+            loadcell_bias_n: self.loadcell_bias_n,
+            pot_bias_m: self.pot_bias_m,
+            ..s
+        }
+    }
+
+    /// The real machine: `nominal` with the spring off, at rest in flight
+    /// `start_apex_m` up with the nut where it boots.
+    pub fn plant(
+        &self,
+        nominal: crate::Params,
+        start_apex_m: f64,
+    ) -> Result<Plant, crate::ParamError> {
+        let mut real = nominal;
+        real.spring_stiffness_n_per_m *= 1.0 + self.spring_rate_error;
+        Plant::with_state(
+            real,
+            crate::Mode::Flight,
+            crate::State {
+                z_m: real.leg_length_m + start_apex_m,
+                zd_mps: 0.0,
+                p_m: self.nut_start_m,
+                pd_mps: 0.0,
+            },
+        )
+    }
+
+    /// The sensor models `hal` (built from the firmware's calibration) with
+    /// the height encoder's true origin: the plant's start.
+    pub fn hal(&self, hal: SimHal, plant: &Plant) -> SimHal {
+        hal.with_height_origin(plant.state().z_m)
     }
 }

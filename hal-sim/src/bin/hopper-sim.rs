@@ -320,6 +320,24 @@ struct ServeArgs {
     /// leg compression, m.
     #[arg(long, default_value_t = 0.0, value_name = "M")]
     pot_bias_m: f64,
+    /// Where the nut really is at boot, m below its upper stop (the
+    /// firmware's incremental motor encoder takes it for 0: for
+    /// `hopper-link calibrate home`).
+    #[arg(long, default_value_t = 0.0, value_name = "M")]
+    nut_start_m: f64,
+    /// The real spring's rate off the configured one by this fraction, e.g.
+    /// 0.15 (for `hopper-link calibrate spring`).
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    spring_rate_error: f64,
+    /// The firmware takes the boot height for this much more than it is, m
+    /// (for `hopper-link calibrate height`).
+    #[arg(
+        long,
+        default_value_t = 0.0,
+        allow_negative_numbers = true,
+        value_name = "M"
+    )]
+    height_zero_error_m: f64,
 }
 
 fn main() {
@@ -435,16 +453,50 @@ fn cmd_serve(a: ServeArgs) -> Result<()> {
         bail!("--pot-bias-m {} must be within +-0.01 m", a.pot_bias_m);
     }
     let cfg = settings.run_config(0.0);
+    if !(a.nut_start_m.is_finite() && (0.0..=cfg.params.stroke_m).contains(&a.nut_start_m)) {
+        bail!(
+            "--nut-start-m {} must be within the stroke, 0 ..= {} m",
+            a.nut_start_m,
+            cfg.params.stroke_m
+        );
+    }
+    if !(a.spring_rate_error.is_finite() && a.spring_rate_error.abs() <= 0.5) {
+        bail!(
+            "--spring-rate-error {} must be within +-0.5",
+            a.spring_rate_error
+        );
+    }
+    if !(a.height_zero_error_m.is_finite() && a.height_zero_error_m.abs() <= 0.1) {
+        bail!(
+            "--height-zero-error-m {} must be within +-0.1 m",
+            a.height_zero_error_m
+        );
+    }
+    // The firmware is configured for the nominal machine, started where it
+    // believes; the plant is the real one.
+    let mis = hopper_plant::robot::Miscalibration {
+        loadcell_bias_n: a.loadcell_bias_n,
+        pot_bias_m: a.pot_bias_m,
+        nut_start_m: a.nut_start_m,
+        spring_rate_error: a.spring_rate_error,
+        height_zero_error_m: a.height_zero_error_m,
+    };
     let (runner, hal) = settings
         .controller_spec()
         .and_then(|mut spec| {
-            spec.sensors.loadcell_bias_n = a.loadcell_bias_n;
-            spec.sensors.pot_bias_m = a.pot_bias_m;
-            spec.runner(&cfg.params, start_apex_m, cfg.control_dt_s, false)
+            spec.sensors = mis.sensors(spec.sensors);
+            spec.runner(
+                &cfg.params,
+                mis.believed_start_apex_m(start_apex_m),
+                cfg.control_dt_s,
+                false,
+            )
         })
         .map_err(anyhow::Error::msg)?;
-    let plant = hopper_plant::Plant::new(cfg.params, start_apex_m)
+    let plant = mis
+        .plant(cfg.params, start_apex_m)
         .map_err(|e| anyhow::anyhow!("plant: {e:?}"))?;
+    let hal = mis.hal(hal, &plant);
     let robot = hopper_plant::robot::VirtualRobot::new(plant, hal, runner, cfg.control_dt_s);
     let robot = if held { robot.hold() } else { robot };
     let listener = std::net::TcpListener::bind(&a.tcp)

@@ -86,6 +86,8 @@ impl Plant {
             Guard::Touchdown => c.l0 - y.z_m,
             Guard::Liftoff => y.z_m - c.l0,
             Guard::ZeroVelocity => -cfg.z_dir * y.zd_mps,
+            // A clamped body never comes unstuck.
+            Guard::Unstick if self.clamped => -1.0,
             Guard::Unstick => libm::fabs(self.z_hold_force(cfg, y)) - self.friction_level(cfg),
             Guard::Release => {
                 let r = self.p_hold_force(cfg, y);

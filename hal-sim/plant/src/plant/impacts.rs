@@ -17,7 +17,7 @@ impl Plant {
     pub(super) fn decide_stick_or_slide(&mut self) {
         self.y.zd_mps = 0.0;
         let hold = self.z_hold_force(&self.cfg, &self.y);
-        if libm::fabs(hold) <= self.friction_level(&self.cfg) {
+        if self.clamped || libm::fabs(hold) <= self.friction_level(&self.cfg) {
             self.cfg.z_stuck = true;
         } else {
             self.cfg.z_stuck = false;
@@ -43,8 +43,11 @@ impl Plant {
                 // The stop's impulse acts on p only: m_zz zd - m_s pd is
                 // conserved. A body held by stiction or standing is knocked
                 // loose by it (stiction cannot absorb an impulse).
+                // A clamp takes the impulse instead.
                 let m_zz = self.m_zz(&self.cfg);
-                self.y.zd_mps -= c.m_nut * pd / m_zz;
+                if !self.clamped {
+                    self.y.zd_mps -= c.m_nut * pd / m_zz;
+                }
                 self.cfg.nut = stop;
                 let zd = self.y.zd_mps;
                 let loss = e_before - self.energy_j();

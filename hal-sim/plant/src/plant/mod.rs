@@ -270,6 +270,9 @@ pub struct Plant {
     /// checked when the last [`Plant::advance`] ended. The next call only has
     /// to re-check the guards that depend on the (new) command.
     guards_clear: bool,
+    /// The body is clamped (a hoist or a stand holds it): `z` moves only by
+    /// [`Plant::move_clamped_body`], the nut moves freely against the spring.
+    clamped: bool,
 }
 
 impl Plant {
@@ -322,6 +325,7 @@ impl Plant {
             max_step_s: Self::DEFAULT_MAX_STEP_S,
             maps: StepMaps::new(&c, Self::DEFAULT_MAX_STEP_S),
             guards_clear: false,
+            clamped: false,
         };
         // A nut starting on a stop at rest may be seated on it.
         if s.pd_mps == 0.0 && (s.p_m <= 0.0 || s.p_m >= c.stroke) {
@@ -385,6 +389,66 @@ impl Plant {
     /// Whether stiction holds the body.
     pub fn body_stuck(&self) -> bool {
         self.cfg.z_stuck
+    }
+
+    /// Whether the body is clamped ([`Self::clamp_body`]).
+    pub fn body_clamped(&self) -> bool {
+        self.clamped
+    }
+
+    /// Clamps the body where it is (a hoist or a test stand holds it, issue
+    /// 18's bring-up mounts): `z` stays put whatever the forces, until
+    /// [`Self::release_body`]; the nut still moves under the motor and the
+    /// spring, so a bring-up routine can drive it. In flight the toe hangs
+    /// free (the spring compression is `delta0 + p`); on the ground the
+    /// stance equations hold with `z` fixed. The clamp's force does no work
+    /// (`zd = 0`); a stop impact's impulse goes into the clamp.
+    pub fn clamp_body(&mut self) {
+        self.clamped = true;
+        self.y.zd_mps = 0.0;
+        self.cfg.z_stuck = true;
+        if self.cfg.mode == Mode::Standing {
+            // The standing mode's own guards (sink, lift) decide between
+            // stance and flight by forces; a clamp decides instead. With
+            // `z = l0` locked the stance equations are the standing ones.
+            self.cfg.mode = Mode::Stance;
+        }
+        self.guards_clear = false;
+    }
+
+    /// Lets go of a clamped body: from rest it sticks or slides as the
+    /// forces say (in flight it falls).
+    pub fn release_body(&mut self) {
+        if !self.clamped {
+            return;
+        }
+        self.clamped = false;
+        self.decide_stick_or_slide();
+        self.guards_clear = false;
+    }
+
+    /// Moves a clamped body by `dz_m` (a hoist lifting or lowering it, in
+    /// steps small against a period's motion): the toe leaves the ground at
+    /// rest when `z` passes `l0` going up (the unsprung mass is picked up
+    /// at zero speed: no loss) and touches at rest going down. The hoist's
+    /// work is outside the ledger: the starting energy moves with it, so
+    /// [`Self::energy_residual_j`] still closes. Nothing happens to a body
+    /// that is not clamped.
+    pub fn move_clamped_body(&mut self, dz_m: f64) {
+        if !self.clamped || !dz_m.is_finite() {
+            return;
+        }
+        let before = self.energy_j();
+        let l0 = self.c.l0;
+        let z = self.y.z_m + dz_m;
+        match self.cfg.mode {
+            Mode::Flight if z < l0 => self.cfg.mode = Mode::Stance,
+            Mode::Stance | Mode::Standing if z > l0 => self.cfg.mode = Mode::Flight,
+            _ => {}
+        }
+        self.y.z_m = z;
+        self.e0_j += self.energy_j() - before;
+        self.guards_clear = false;
     }
 
     /// Energy ledger since the start.
