@@ -8,7 +8,7 @@
 //! (`hal_sim::plant`, `hal_sim::mock`, ...), so the simulator's users reach
 //! the whole model through one crate.
 
-pub use hopper_plant::{metrics, mock, params, plant, sensors};
+pub use hopper_plant::{metrics, mock, params, plant, robot, sensors};
 
 pub mod controller;
 pub mod csv_out;

@@ -39,6 +39,68 @@ impl Tx for Queue {
     }
 }
 
+/// The virtual robot's flash: two 2 KiB pages in RAM, kept in a file
+/// when one is given (`hopper-sim serve --flash FILE`), so a saved
+/// calibration survives a restart of the simulator as a board's does.
+pub struct Flash {
+    store: hopper_store::Store<SimFlash>,
+    path: Option<std::path::PathBuf>,
+}
+
+/// The simulator's flash.
+pub type SimFlash = hopper_store::RamFlash<2, 2048>;
+
+impl Flash {
+    /// The flash, read from `path` if it exists, and the record it holds.
+    pub fn open(path: Option<&std::path::Path>) -> Result<(Self, Option<Vec<u8>>), String> {
+        let mut flash = SimFlash::new();
+        if let Some(p) = path {
+            match std::fs::read(p) {
+                Ok(bytes) => flash.load_bytes(&bytes),
+                Err(e) if e.kind() == ErrorKind::NotFound => {}
+                Err(e) => return Err(format!("{}: {e}", p.display())),
+            }
+        }
+        let mut store =
+            hopper_store::Store::new(flash, 0..4096).map_err(|e| e.name().to_string())?;
+        let mut out = [0u8; hopper_control::persist::MAX_RECORD];
+        let record = hopper_store::block_on(store.load(&mut out))
+            .map_err(|e| format!("flash: {}", e.name()))?
+            .map(|n| out[..n].to_vec());
+        Ok((
+            Self {
+                store,
+                path: path.map(std::path::Path::to_path_buf),
+            },
+            record,
+        ))
+    }
+
+    /// Writes `record` (and the file).
+    pub fn save(&mut self, record: &[u8]) -> Result<(), String> {
+        hopper_store::block_on(self.store.save(record)).map_err(|e| e.name().to_string())?;
+        if let Some(p) = &self.path {
+            // The store is taken apart to read its pages, then rebuilt on them.
+            let flash = std::mem::replace(
+                &mut self.store,
+                hopper_store::Store::new(SimFlash::new(), 0..4096)
+                    .map_err(|e| e.name().to_string())?,
+            )
+            .into_flash();
+            let bytes: Vec<u8> = flash.pages().iter().flatten().copied().collect();
+            self.store =
+                hopper_store::Store::new(flash, 0..4096).map_err(|e| e.name().to_string())?;
+            std::fs::write(p, bytes).map_err(|e| format!("{}: {e}", p.display()))?;
+        }
+        Ok(())
+    }
+}
+
+/// Loads the calibration `flash` holds into `robot` (as a board does at boot).
+pub fn load_at_boot(robot: &mut VirtualRobot, record: Option<&[u8]>) {
+    robot.runner.load_calibration(record);
+}
+
 /// How the loop runs.
 #[derive(Debug, Clone, Copy)]
 pub struct ServeOptions {
@@ -54,6 +116,7 @@ pub struct ServeOptions {
 /// Messages about clients go to stderr.
 pub fn serve(
     mut robot: VirtualRobot,
+    mut flash: Flash,
     listener: &TcpListener,
     opts: ServeOptions,
 ) -> Result<(), String> {
@@ -113,6 +176,15 @@ pub fn serve(
             let rx = std::mem::take(&mut inbox);
             robot.control(rx.into_iter(), &mut tx, &mut NoCounter);
             robot.runner.end_period(false);
+            // A save: written between two periods, as the host's clock
+            // allows (a board defers it to its next boot).
+            if let Some(record) = robot.link.take_save().map(<[u8]>::to_vec) {
+                let ok = flash.save(&record);
+                if let Err(e) = &ok {
+                    eprintln!("hopper-sim: save failed: {e}");
+                }
+                robot.link.save_done(ok.is_ok(), false);
+            }
             robot
                 .advance(&mut |_| {})
                 .map_err(|e| format!("plant integration failed: {e:?}"))?;

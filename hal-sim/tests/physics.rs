@@ -375,3 +375,75 @@ proptest! {
         prop_assert!(worst / e0 < 1e-6, "ledger residual {worst}");
     }
 }
+
+/// The hoist's clamp (issue 18's bring-up mounts): the body stays put
+/// whatever the motor does, the nut moves against the spring, the stops'
+/// impacts go into the clamp, and the books close.
+#[test]
+fn a_clamped_body_stays_put_while_the_nut_moves() {
+    let mut plant = Plant::new(Params::design(), 0.05).unwrap();
+    plant.clamp_body();
+    let z0 = plant.state().z_m;
+    let mut deepest: f64 = 0.0;
+    // 3 A down for 0.5 s (the nut runs into the spring), then 3 A up (it
+    // hits the upper stop), then nothing.
+    simulate(
+        &mut plant,
+        2.0,
+        |t| {
+            if t < 0.5 {
+                3.0
+            } else if t < 1.0 {
+                -3.0
+            } else {
+                0.0
+            }
+        },
+        |p| {
+            assert_eq!(p.state().z_m, z0);
+            assert_eq!(p.state().zd_mps, 0.0);
+            assert_eq!(p.mode(), Mode::Flight);
+            deepest = deepest.max(p.state().p_m);
+        },
+    );
+    // 3 A is 101 N on the nut: 9 mm of an 11 kN/m spring at rest, twice
+    // that at the swing's bottom.
+    assert!(deepest > 0.012 && deepest < 0.02, "{deepest}");
+    assert!(plant.ledger().stop_impact_loss_j > 0.0);
+    assert!(
+        plant.energy_residual_j().abs() < 1e-6,
+        "{}",
+        plant.energy_residual_j()
+    );
+    // Let go: it falls.
+    plant.release_body();
+    simulate(&mut plant, 0.05, |_| 0.0, |_| {});
+    assert!(plant.state().zd_mps < -0.4);
+}
+
+/// The hoist lifting a standing robot: the toe leaves the ground at rest
+/// when the body passes `l0`, and lowering puts it back; the hoist's work
+/// stays out of the books.
+#[test]
+fn the_hoist_lifts_a_standing_robot_off_the_ground() {
+    let params = Params::design();
+    let mut plant = Plant::new(params, 0.001).unwrap();
+    simulate(&mut plant, 1.0, |_| 0.0, |_| {});
+    assert_ne!(plant.mode(), Mode::Flight, "standing after 1 s");
+    plant.clamp_body();
+    for _ in 0..5000 {
+        plant.move_clamped_body(1e-5);
+        plant.advance(DT, 0.0, &mut |_| {}).unwrap();
+    }
+    assert_eq!(plant.mode(), Mode::Flight);
+    // 50 mm up, less the standing compression (weight / k = 8.8 mm).
+    let toe = plant.toe_height_m();
+    assert!((toe - 0.0412).abs() < 1e-3, "{toe}");
+    assert!(plant.energy_residual_j().abs() < 1e-6);
+    for _ in 0..5000 {
+        plant.move_clamped_body(-1e-5);
+        plant.advance(DT, 0.0, &mut |_| {}).unwrap();
+    }
+    assert_ne!(plant.mode(), Mode::Flight);
+    assert!(plant.energy_residual_j().abs() < 1e-6);
+}

@@ -119,6 +119,10 @@ enum Cmd {
         #[arg(long, default_value_t = 0.05)]
         toe: f32,
     },
+    /// Save the calibration (the `calibration.*` parameters and the spring's
+    /// rate and preload: what the bring-up routines set) to the robot's
+    /// flash, to load at every boot; refused while armed.
+    Save,
     /// Press or release the simulated e-stop (QEMU and `hopper-sim serve`
     /// only; a real robot refuses).
     Estop {
@@ -313,6 +317,7 @@ fn run(c: &mut Client, cmd: &Cmd) -> Result<()> {
         Cmd::Watch { duration } => watch(c, *duration),
         Cmd::Dump { out } => dump(c, out),
         Cmd::Calibrate { routine, seconds } => calibrate(c, routine, *seconds),
+        Cmd::Save => save(c),
         Cmd::Mount { action, toe } => {
             c.expect_ok(Request::SimulateMount {
                 hoisted: action == "hoist",
@@ -532,6 +537,64 @@ fn print_results(routine: &str, b: &hopper_protocol::BringupResults, done: bool)
     }
 }
 
+fn stored_of(c: &mut Client) -> Result<hopper_protocol::StoredInfo> {
+    match c.request(Request::Stored)? {
+        Response::Stored(s) => Ok(s),
+        r => bail!("unexpected answer {r:?}"),
+    }
+}
+
+/// The saved calibration's state in words.
+fn stored_line(s: &hopper_protocol::StoredInfo) -> String {
+    let boot = match s.boot {
+        0 => "no flash store on this robot".to_string(),
+        1 => "nothing saved: the defaults (tare before arming)".to_string(),
+        2 => format!("loaded from flash at boot ({} parameters)", s.entries),
+        _ => format!(
+            "the saved record was refused at boot ({}): the defaults (tare before arming)",
+            hopper_control::persist::LoadError::name_of(s.boot_error).unwrap_or("unknown")
+        ),
+    };
+    let save = match s.save {
+        0 => "",
+        1 => "; a save is pending",
+        2 => "; saved since boot",
+        3 => "; the last save FAILED",
+        _ => "; saved: written to flash at the next restart",
+    };
+    format!("{boot}{save}")
+}
+
+/// `save`: the calibration to flash, and how it went.
+fn save(c: &mut Client) -> Result<()> {
+    match c.request(Request::Save)? {
+        Response::Ok => {}
+        Response::Refused(why) => bail!("save refused: {why}"),
+        r => bail!("unexpected answer {r:?}"),
+    }
+    let deadline = Instant::now() + Duration::from_secs(5);
+    loop {
+        std::thread::sleep(Duration::from_millis(50));
+        let s = stored_of(c)?;
+        match s.save {
+            1 if Instant::now() < deadline => continue,
+            1 => bail!("save: still pending after 5 s"),
+            2 => {
+                println!(
+                    "saved: {} calibration parameters to flash (they load at the next boot)",
+                    hopper_control::persist::saved_count()
+                );
+                return Ok(());
+            }
+            4 => {
+                println!("saved: the robot restarts to write its flash (home it again after)");
+                return Ok(());
+            }
+            _ => bail!("save failed: {}", stored_line(&s)),
+        }
+    }
+}
+
 fn thermal_of(c: &mut Client) -> Result<ThermalStatus> {
     match c.request(Request::Thermal)? {
         Response::Thermal(t) => Ok(t),
@@ -631,6 +694,7 @@ fn status(c: &mut Client) -> Result<()> {
             "OFF (arming refused: brown-out-reset-off; set BOR_LEV in the option bytes, docs/safety.md)"
         }
     );
+    println!("calibration: {}", stored_line(&stored_of(c)?));
     let m = thermal_of(c)?;
     println!(
         "motor (estimated): winding {:.1} C, housing {:.1} C; current limit {:.0}% (derates from {:.0} C, trips at {:.0} C{})",

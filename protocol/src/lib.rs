@@ -49,6 +49,12 @@ pub type Name = heapless::String<NAME_LEN>;
 /// burst error up to 16 bits on a UART line.
 const CRC: crc::Crc<u16> = crc::Crc::<u16>::new(&crc::CRC_16_XMODEM);
 
+/// CRC-16/XMODEM of `bytes`: the frames' check, and the saved
+/// calibration's (`hopper_control::persist`).
+pub fn crc16(bytes: &[u8]) -> u16 {
+    CRC.checksum(bytes)
+}
+
 /// Host to robot.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub enum HostMsg {
@@ -143,6 +149,12 @@ pub enum Request {
         /// The toe's height to lift it to, m (with `hoisted`).
         lift_m: f32,
     },
+    /// Saves the calibration (`hopper_control::persist`) to flash; refused
+    /// while armed or calibrating. [`Request::Stored`] says how it went.
+    Save,
+    /// What was loaded at boot and how the last save went
+    /// ([`Response::Stored`]).
+    Stored,
 }
 
 /// Robot to host.
@@ -218,6 +230,24 @@ pub enum Response {
     Calibration(CalibrationInfo),
     /// What the last bring-up routine found.
     BringupResults(BringupResults),
+    /// The saved calibration's state.
+    Stored(StoredInfo),
+}
+
+/// The saved calibration's state (`hopper_control::persist`).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct StoredInfo {
+    /// At boot: 0 no flash store, 1 nothing saved, 2 loaded, 3 refused
+    /// (`boot_error` says why).
+    pub boot: u8,
+    /// Why the saved record was refused (`hopper_control::persist::LoadError`
+    /// by code), 0 otherwise.
+    pub boot_error: u8,
+    /// Parameters the loaded record set.
+    pub entries: u8,
+    /// The last save: 0 none since boot, 1 pending, 2 saved, 3 failed, 4
+    /// pending until a restart (the board writes its flash in `init`).
+    pub save: u8,
 }
 
 /// What the motor-driving and height routines found
@@ -697,6 +727,8 @@ mod tests {
             Just(Request::Boot),
             Just(Request::CalibrationReport),
             Just(Request::BringupResults),
+            Just(Request::Save),
+            Just(Request::Stored),
             (any::<bool>(), any::<f32>())
                 .prop_map(|(hoisted, lift_m)| Request::SimulateMount { hoisted, lift_m }),
             (any::<u8>(), any::<f32>())

@@ -65,8 +65,65 @@ pub(crate) fn host_binaries(root: &Path) -> Result<(PathBuf, PathBuf), String> {
 /// `cargo xtask test`'s session against `hopper-sim serve`.
 pub fn against_serve(root: &Path) -> Result<(), String> {
     let (link, sim) = host_binaries(root)?;
+    let out_dir = crate::target_dir(root)?.join("link-session").join("sim");
+    let _ = std::fs::remove_dir_all(&out_dir);
+    std::fs::create_dir_all(&out_dir).map_err(|e| format!("{}: {e}", out_dir.display()))?;
+    // The robot's flash in a file: the session saves its calibration, and
+    // the next start of the simulator must load it.
+    let flash = out_dir.join("flash.bin");
+    let (server, addr) = start_serve(&sim, &flash)?;
+    let report = run_session(&link, &addr, &out_dir.join("session"), "link-sim");
+    drop(server);
+    let report = report.and_then(|mut r| {
+        let (server, addr) = start_serve(&sim, &flash)?;
+        r.reboot = after_reboot(&link, &addr)?;
+        drop(server);
+        Ok(r)
+    });
+    report.map(|r| println!("{}", r.line("link-sim", "ticks")))
+}
+
+/// After a restart of the simulator on the saved flash: the calibration
+/// loaded, arming refused only for homing.
+fn after_reboot(link: &Path, addr: &str) -> Result<String, String> {
+    let out = Command::new(link)
+        .args(["--tcp", addr, "status"])
+        .output()
+        .map_err(|e| format!("cannot start hopper-link: {e}"))?;
+    let text = String::from_utf8_lossy(&out.stdout).to_string();
+    let line = text
+        .lines()
+        .find_map(|l| l.strip_prefix("calibration: "))
+        .unwrap_or("")
+        .to_string();
+    for l in text.lines() {
+        println!("link-sim (restarted)| {l}");
+    }
+    if !line.starts_with("loaded from flash at boot") {
+        return Err(format!(
+            "after a restart on the saved flash the calibration is `{line}`, not loaded"
+        ));
+    }
+    let arm = Command::new(link)
+        .args(["--tcp", addr, "arm"])
+        .output()
+        .map_err(|e| format!("cannot start hopper-link: {e}"))?;
+    let err = String::from_utf8_lossy(&arm.stderr).to_string();
+    println!("link-sim (restarted)| arm: {}", err.trim());
+    if !err.contains("arm refused: not-homed") {
+        return Err(format!(
+            "after a restart on the saved flash arming is not refused for homing only: {}",
+            err.trim()
+        ));
+    }
+    Ok("loaded".into())
+}
+
+/// `hopper-sim serve` on the session's mis-calibrated robot with its flash
+/// in `flash`; the server (killed when dropped) and its address.
+fn start_serve(sim: &Path, flash: &Path) -> Result<(Reaped, String), String> {
     eprintln!("xtask: starting hopper-sim serve (virtual robot, {SERVE_SPEED}x real time)");
-    let mut child = Command::new(&sim)
+    let mut child = Command::new(sim)
         .args([
             "serve",
             "--tcp",
@@ -94,6 +151,8 @@ pub fn against_serve(root: &Path) -> Result<(), String> {
         .arg(MIS.spring_rate_error.to_string())
         .arg("--height-zero-error-m")
         .arg(MIS.height_zero_error_m.to_string())
+        .arg("--flash")
+        .arg(flash)
         .stdout(Stdio::piped())
         .stderr(Stdio::inherit())
         .spawn()
@@ -113,10 +172,7 @@ pub fn against_serve(root: &Path) -> Result<(), String> {
         .and_then(|r| r.split_whitespace().next())
         .ok_or_else(|| format!("hopper-sim serve printed no address: {first}"))?
         .to_string();
-    let out_dir = crate::target_dir(root)?.join("link-session").join("sim");
-    let report = run_session(&link, &addr, &out_dir, "link-sim");
-    drop(server);
-    report.map(|r| println!("{}", r.line("link-sim", "ticks")))
+    Ok((server, addr))
 }
 
 /// `cargo xtask qemu`'s session against the QEMU link image `elf`.
@@ -171,6 +227,9 @@ struct Report {
     home_mm: f64,
     spring_n_per_m: f64,
     height_mm: f64,
+    /// The saved calibration after a restart (`loaded`; the QEMU image's
+    /// flash is RAM: `-`).
+    reboot: String,
     steady_apex_m: f64,
     records: u64,
     dropped: u64,
@@ -196,8 +255,13 @@ impl Report {
             self.link_mean,
             self.link_max
         ) + &format!(
-            " tare_loadcell_n={:+.3} tare_pot_mm={:+.4} home_mm={:+.4} spring_n_per_m={:.0} height_mm={:+.3}",
-            self.tare_n, self.tare_mm, self.home_mm, self.spring_n_per_m, self.height_mm
+            " tare_loadcell_n={:+.3} tare_pot_mm={:+.4} home_mm={:+.4} spring_n_per_m={:.0} height_mm={:+.3} saved_after_restart={}",
+            self.tare_n,
+            self.tare_mm,
+            self.home_mm,
+            self.spring_n_per_m,
+            self.height_mm,
+            if self.reboot.is_empty() { "-" } else { &self.reboot }
         )
     }
 }
@@ -338,6 +402,7 @@ fn run_session(link: &Path, addr: &str, out_dir: &Path, label: &str) -> Result<R
     for expected in [
         "failed as expected: arm refused: not-homed",
         "failed as expected: calibrate home refused: check-direction-first",
+        "saved: 13 calibration parameters to flash (they load at the next boot)",
         "failed as expected: arm refused: estop-pressed",
         "failed as expected: set target_apex_m = 2.0 refused: out-of-range (unchanged: 0.12 m)",
         "target_apex_m = 0.12 m",

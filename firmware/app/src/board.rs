@@ -260,6 +260,8 @@ pub struct Board {
     pub serial: crate::serial::Serial,
     /// What init found: the reset causes, the brown-out reset, the clock.
     pub boot: hopper_control::boot::BootReport,
+    /// The saved calibration: a pending save written, the record read.
+    pub stored: crate::flash::AtBoot,
 }
 
 /// The clocks `init` ended up with.
@@ -379,6 +381,11 @@ pub fn init(
         dp.FLASH.optcr().read().bits(),
     );
 
+    // The saved calibration: a save waiting in RAM is written now (a
+    // sector erase stalls the core for a second or two: before the
+    // watchdog, with the amplifier off), then the record is read.
+    let stored = crate::flash::at_boot(&dp.FLASH);
+
     // 10. The watchdog, last: from here on the control task must run.
     let watchdog = Watchdog::start(dp.IWDG, &dp.RCC);
     let boot = hopper_control::boot::BootReport {
@@ -389,6 +396,7 @@ pub fn init(
     };
 
     Board {
+        stored,
         io: BoardIo {
             tim2: dp.TIM2,
             tim5: dp.TIM5,

@@ -55,6 +55,9 @@ pub mod serial;
 mod board;
 
 #[cfg(all(target_os = "none", not(feature = "qemu-sim")))]
+mod flash;
+
+#[cfg(all(target_os = "none", not(feature = "qemu-sim")))]
 use defmt_rtt as _;
 
 // Board logs carry the time since boot (the QEMU log stays bare: the xtask
@@ -345,9 +348,11 @@ mod app {
         // TIM2 and TIM5 count the encoders over 32 bits.
         cfg.calibration.motor_counter_bits = board::ENCODER_COUNTER_BITS;
         cfg.calibration.height_counter_bits = board::ENCODER_COUNTER_BITS;
-        // The calibration offsets are placeholders until a tare (they are
-        // not saved to flash yet): no arming before one (issue 18).
+        // The calibration offsets are placeholders until a tare or a saved
+        // calibration loads, and the incremental motor encoder boots
+        // wherever the nut stands: no arming before both (issue 18).
         cfg.arming.require_tare = true;
+        cfg.arming.require_home = true;
         // Validated before the board (and its watchdog) starts: a refused
         // configuration leaves the amplifier off (the pin is an input with
         // its external pull-down) and the MCU parked, not in a reset loop.
@@ -380,6 +385,21 @@ mod app {
         );
         // Period starts are timed with the clock that runs.
         cycles.set_hz(board.io.sysclk_hz());
+        // The saved calibration (written by this init if a save waited).
+        let mut link = Endpoint::new();
+        if let Some(ok) = board.stored.saved {
+            link.save_done(ok, false);
+            if ok {
+                defmt::info!("calibration saved to flash");
+            } else {
+                defmt::error!("calibration save to flash failed");
+            }
+        }
+        if let Some(e) = board.stored.error {
+            defmt::error!("calibration store: {=str}: the defaults run", e.name());
+        }
+        runner.load_calibration(board.stored.record());
+        defmt::info!("calibration at boot: {}", runner.calibration_at_boot());
         // Reported over the link; a clock that fell back to the HSI or a
         // brown-out reset left off refuses arming.
         runner.arming_mut().set_boot(board.boot);
@@ -438,7 +458,7 @@ mod app {
                 runner,
                 cycles,
                 log: Log::new(tx),
-                link: Endpoint::new(),
+                link,
                 link_rx: rx_out,
                 link_tx: LinkTx::new(tx_in),
                 serial: board.serial,
@@ -458,7 +478,7 @@ mod app {
     /// capture, services the link (the received bytes since the last
     /// period, the period's messages queued) and queues the log. Nothing
     /// here waits.
-    #[task(binds = ADC, priority = 3, local = [io, watchdog, dump, runner, cycles, log, link, link_rx, link_tx, polls: u32 = 0], shared = [capture])]
+    #[task(binds = ADC, priority = 3, local = [io, watchdog, dump, runner, cycles, log, link, link_rx, link_tx, polls: u32 = 0, reset_in: u32 = 0], shared = [capture])]
     fn control(mut cx: control::Context) {
         if !cx.local.io.ack_control_irq() {
             return;
@@ -485,6 +505,20 @@ mod app {
                 cycles,
             );
         });
+        // A save (the link accepts it only disarmed): into the RAM slot,
+        // and a reset in 0.2 s, once the answer is out; `init` writes it.
+        if let Some(r) = link.take_save() {
+            crate::flash::queue_save(r);
+            link.save_done(true, true);
+            *cx.local.reset_in = CONTROL_HZ / 5;
+        }
+        if *cx.local.reset_in > 0 {
+            *cx.local.reset_in -= 1;
+            if *cx.local.reset_in == 0 {
+                crate::disable_amplifier();
+                cortex_m::peripheral::SCB::sys_reset();
+            }
+        }
         // The next conversion already finished: this period (with its link
         // work) overran.
         runner.end_period(NVIC::is_pending(Interrupt::ADC));
@@ -844,9 +878,14 @@ mod app {
     #[shared]
     struct Shared {}
 
+    /// The link image's flash: RAM (QEMU models no flash writes), kept for
+    /// the run only.
+    type Flash = hopper_store::Store<hopper_store::RamFlash<2, 2048>>;
+
     #[local]
     struct Local {
         robot: VirtualRobot,
+        flash: Flash,
         counter: crate::qemu::Instructions,
         syst: SYST,
         link_rx: Consumer<'static, u8>,
@@ -891,7 +930,15 @@ mod app {
             SimHal::new(&cfg.calibration, &mis.sensors(SensorConfig::DEFAULT)),
             &plant,
         );
-        let robot = VirtualRobot::new(plant, hal, runner, f64::from(CONTROL_PERIOD_S)).hold();
+        let mut robot = VirtualRobot::new(plant, hal, runner, f64::from(CONTROL_PERIOD_S)).hold();
+        // Its flash is erased at every start: nothing saved.
+        let Ok(flash) = Flash::new(hopper_store::RamFlash::new(), 0..4096) else {
+            defmt::error!("link image flash set-up failed");
+            debug::exit(debug::EXIT_FAILURE);
+            #[allow(clippy::empty_loop)]
+            loop {}
+        };
+        robot.runner.load_calibration(None);
 
         let (rx_in, rx_out) = cx.local.rxq.split();
         let (tx_in, tx_out) = cx.local.txq.split();
@@ -907,6 +954,7 @@ mod app {
             Shared {},
             Local {
                 robot,
+                flash,
                 counter,
                 syst: core.SYST,
                 link_rx: rx_out,
@@ -926,7 +974,7 @@ mod app {
 
     /// One control period and the link's work, then the plant to the next
     /// tick with SysTick stopped (as in the scenario image).
-    #[task(binds = SysTick, priority = 3, local = [robot, counter, syst, link_rx, link_tx])]
+    #[task(binds = SysTick, priority = 3, local = [robot, flash, counter, syst, link_rx, link_tx])]
     fn control(cx: control::Context) {
         let robot = &mut *cx.local.robot;
         let rx = &mut *cx.local.link_rx;
@@ -936,6 +984,14 @@ mod app {
             cx.local.counter,
         );
         cx.local.syst.disable_counter();
+        // A save, like the plant, outside the robot's time.
+        let mut record = [0u8; hopper_control::persist::MAX_RECORD];
+        if let Some(r) = robot.link.take_save() {
+            let n = r.len().min(record.len());
+            record[..n].copy_from_slice(&r[..n]);
+            let ok = hopper_store::block_on(cx.local.flash.save(&record[..n])).is_ok();
+            robot.link.save_done(ok, false);
+        }
         if robot.advance(&mut |_| {}).is_err() {
             defmt::error!("plant integration failed");
             debug::exit(debug::EXIT_FAILURE);

@@ -902,6 +902,7 @@ impl Calibrator {
 
 #[cfg(test)]
 mod tests {
+    extern crate std;
     use super::*;
     use proptest::prelude::*;
 
@@ -959,6 +960,84 @@ mod tests {
         assert!(!c.finish((0, 0), (0.0, 0.0)));
     }
 
+    fn params() -> DriveParams {
+        DriveParams {
+            limits: BringupConfig::default(),
+            newtons_per_amp: 33.6,
+            screw_m_per_rad: 7.957_747e-4,
+            nut_weight_n: 2.45,
+            kp_a_per_rad: 20.3,
+            kd_a_s_per_rad: 0.6,
+            spring_rate_n_per_m: 11_000.0,
+            stroke_m: 0.05,
+            park_m: 2.2e-4,
+        }
+    }
+
+    /// A direction check on a scripted nut: `travel` m and `force` N at
+    /// the pulse's end.
+    fn direction_on(travel_m: f32, force_n: f32) -> CalState {
+        let d = params();
+        let mut c = Calibrator::new();
+        c.start(Routine::Direction, 10, Some(d));
+        for i in 0..10_000 {
+            let t = i as f32 * 1e-4;
+            let (theta, f) = if t < DIRECTION_BASELINE_S {
+                (0.0, 0.0)
+            } else {
+                (travel_m / d.screw_m_per_rad, force_n)
+            };
+            c.drive(&DriveInput {
+                motor_angle_rad: theta,
+                motor_rate_rad_s: 0.0,
+                spring_force_n: f,
+                leg_compression_m: 0.0,
+                dt_s: 1e-4,
+            });
+            if !c.running() {
+                break;
+            }
+        }
+        assert!(c.take_ended() && !c.take_ended());
+        c.state()
+    }
+
+    #[test]
+    fn the_direction_verdicts() {
+        // 0.8 mm down and the spring's 8.8 N: right.
+        assert_eq!(direction_on(8e-4, 8.8), CalState::Done);
+        assert_eq!(direction_on(-8e-4, -8.8), CalState::FailedReversed);
+        assert_eq!(direction_on(5e-5, 0.5), CalState::FailedNoMotion);
+        // Down, but the load cell reads a third of k dp or less (or less).
+        assert_eq!(direction_on(8e-4, -8.8), CalState::FailedLoadcellReversed);
+        assert_eq!(direction_on(8e-4, 2.9), CalState::FailedLoadcellReversed);
+        assert_eq!(direction_on(8e-4, 3.0), CalState::Done);
+    }
+
+    #[test]
+    fn homing_with_no_stop_gives_up_after_the_stroke() {
+        // A nut that follows its reference exactly never lags: no stop.
+        let d = params();
+        let mut c = Calibrator::new();
+        c.start(Routine::Home, 10, Some(d));
+        let mut theta = 0.0;
+        let mut periods = 0u32;
+        while c.running() && periods < 200_000 {
+            c.drive(&DriveInput {
+                motor_angle_rad: theta,
+                motor_rate_rad_s: 0.0,
+                spring_force_n: 0.0,
+                leg_compression_m: 0.0,
+                dt_s: 1e-4,
+            });
+            theta -= d.limits.speed_mps / d.screw_m_per_rad * 1e-4;
+            periods += 1;
+        }
+        assert_eq!(c.state(), CalState::FailedNoStop);
+        // 60 mm at 5 mm/s.
+        assert!((periods as f32 * 1e-4 - 12.0).abs() < 0.01, "{periods}");
+    }
+
     proptest! {
         /// Welford's mean and deviation agree with the two-pass ones.
         #[test]
@@ -972,6 +1051,64 @@ mod tests {
             let var = xs.iter().map(|&x| (f64::from(x) - mean).powi(2)).sum::<f64>() / (n - 1.0);
             prop_assert!((f64::from(s.mean()) - mean).abs() < 1e-3 * (1.0 + mean));
             prop_assert!((f64::from(s.std()) - var.sqrt()).abs() < 1e-2 * (1.0 + var.sqrt()));
+        }
+
+        /// The running least squares agrees with the two-pass fit on a
+        /// spring-like line with noise.
+        #[test]
+        fn regression_matches_two_pass(
+            k in 5_000.0f32..20_000.0,
+            f0 in -50.0f32..50.0,
+            noise in proptest::collection::vec(-3.0f32..3.0, 100..2000),
+        ) {
+            let mut r = Regression::default();
+            let pts: std::vec::Vec<(f64, f64)> = noise
+                .iter()
+                .enumerate()
+                .map(|(i, e)| {
+                    let x = 0.012 * (i as f32 / noise.len() as f32);
+                    (f64::from(x), f64::from(k * x + f0 + e))
+                })
+                .collect();
+            for &(x, y) in &pts {
+                r.add(x as f32, y as f32);
+            }
+            let n = pts.len() as f64;
+            let mx = pts.iter().map(|p| p.0).sum::<f64>() / n;
+            let my = pts.iter().map(|p| p.1).sum::<f64>() / n;
+            let sxx: f64 = pts.iter().map(|p| (p.0 - mx).powi(2)).sum();
+            let sxy: f64 = pts.iter().map(|p| (p.0 - mx) * (p.1 - my)).sum();
+            let slope = sxy / sxx;
+            prop_assert!((f64::from(r.slope()) / slope - 1.0).abs() < 1e-3, "{} {}", r.slope(), slope);
+            prop_assert!((f64::from(r.intercept()) - (my - slope * mx)).abs() < 0.05);
+        }
+
+        /// Any measurements, however wild: the drive asks for a finite
+        /// current within the routines' limit, and never panics.
+        #[test]
+        fn drive_is_bounded_on_any_input(
+            routine in 2u8..5,
+            inputs in proptest::collection::vec(
+                (-1e6f32..1e6, -1e6f32..1e6, -1e5f32..1e5, -1.0f32..1.0), 1..300),
+            nan_at in proptest::option::of(0usize..300),
+        ) {
+            let mut c = Calibrator::new();
+            let routine = Routine::from_code(routine).unwrap_or(Routine::Home);
+            c.start(routine, 10, Some(params()));
+            for (i, &(theta, omega, f, x)) in inputs.iter().enumerate() {
+                let f = if nan_at == Some(i) { f32::NAN } else { f };
+                let a = c.drive(&DriveInput {
+                    motor_angle_rad: theta,
+                    motor_rate_rad_s: omega,
+                    spring_force_n: f,
+                    leg_compression_m: x,
+                    dt_s: 1e-4,
+                });
+                prop_assert!(a.is_finite() && a.abs() <= 6.0, "{a}");
+                if nan_at == Some(i) {
+                    prop_assert_eq!(c.state(), CalState::FailedSensors);
+                }
+            }
         }
     }
 }

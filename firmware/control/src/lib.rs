@@ -59,6 +59,7 @@ pub mod link;
 pub mod model;
 pub mod params;
 pub mod pd_design;
+pub mod persist;
 pub mod runner;
 pub mod supervisor;
 pub mod telemetry;

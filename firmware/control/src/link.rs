@@ -23,7 +23,8 @@ use crate::runner::{CycleCounter, LogItem, Period, PeriodRunner, StepStats};
 use crate::telemetry::{FaultCapture, StepRecord};
 use hopper_protocol::{
     encode, ArmState, BootInfo, Decoder, DumpInfo, Hop, HostMsg, ParamInfo, Request, Response,
-    RobotMsg, Status, Telemetry, ThermalStatus, TimingStats, MAX_FRAME, PROTOCOL_VERSION, TEXT_LEN,
+    RobotMsg, Status, StoredInfo, Telemetry, ThermalStatus, TimingStats, MAX_FRAME,
+    PROTOCOL_VERSION, TEXT_LEN,
 };
 
 /// A transmit queue of bytes (the board's UART ring, a socket buffer).
@@ -71,7 +72,29 @@ pub struct Endpoint {
     /// A simulated mount change not yet taken by the application:
     /// (hoisted, lift to this toe height, m).
     sim_mount: Option<(bool, f32)>,
+    /// The calibration record of the last save request, its length, and
+    /// whether the application has taken it.
+    save_record: SaveRecord,
+    save_len: usize,
+    save_taken: bool,
+    /// The last save's state (`StoredInfo::save`).
+    save_state: u8,
 }
+
+/// A calibration record's bytes (an array too long for a derived `Default`).
+#[derive(Debug, Clone)]
+struct SaveRecord([u8; crate::persist::MAX_RECORD]);
+
+impl Default for SaveRecord {
+    fn default() -> Self {
+        Self([0; crate::persist::MAX_RECORD])
+    }
+}
+
+const SAVE_PENDING: u8 = 1;
+const SAVE_SAVED: u8 = 2;
+const SAVE_FAILED: u8 = 3;
+const SAVE_AT_RESTART: u8 = 4;
 
 fn text(s: &str) -> heapless::String<TEXT_LEN> {
     let mut t = heapless::String::new();
@@ -159,6 +182,27 @@ impl Endpoint {
     /// plant (never on a real robot).
     pub fn take_sim_mount(&mut self) -> Option<(bool, f32)> {
         self.sim_mount.take()
+    }
+
+    /// The calibration record a host asked to save, once (the
+    /// application writes it to its flash, then calls
+    /// [`save_done`](Self::save_done)); `None` when there is none.
+    pub fn take_save(&mut self) -> Option<&[u8]> {
+        if self.save_state != SAVE_PENDING || self.save_taken {
+            return None;
+        }
+        self.save_taken = true;
+        self.save_record.0.get(..self.save_len)
+    }
+
+    /// How the save went: written, failed, or to be written at the next
+    /// boot (`deferred`: the board writes its flash in `init`).
+    pub fn save_done(&mut self, ok: bool, deferred: bool) {
+        self.save_state = match (ok, deferred) {
+            (true, false) => SAVE_SAVED,
+            (true, true) => SAVE_AT_RESTART,
+            (false, _) => SAVE_FAILED,
+        };
     }
 
     /// Telemetry records the transmit queue could not take so far.
@@ -328,6 +372,24 @@ impl Endpoint {
                 }
             }
             Request::SimulateMount { .. } => Response::Refused(text("not-simulated")),
+            Request::Save if runner.arming().is_armed() => Response::Refused(text("disarm-first")),
+            Request::Save if runner.calibrating() => Response::Refused(text("calibrating")),
+            Request::Save if self.save_state == SAVE_PENDING => Response::Refused(text("busy")),
+            Request::Save => {
+                self.save_len = runner.calibration_record(&mut self.save_record.0);
+                self.save_taken = false;
+                self.save_state = SAVE_PENDING;
+                Response::Ok
+            }
+            Request::Stored => {
+                let (boot, boot_error, entries) = runner.calibration_at_boot().wire();
+                Response::Stored(StoredInfo {
+                    boot,
+                    boot_error,
+                    entries,
+                    save: self.save_state,
+                })
+            }
             Request::SimulateEstop { pressed } if self.simulated => {
                 self.sim_estop = *pressed;
                 Response::Ok

@@ -1695,8 +1695,15 @@ fn slot<'a>(cfg: &'a mut HopperConfig, p: &Param) -> Result<Slot<'a>, ParamError
 pub fn get(cfg: &HopperConfig, name: &str) -> Result<f32, ParamError> {
     let p = find(name).ok_or(ParamError::Unknown)?;
     let mut c = *cfg;
+    read(&mut c, p)
+}
+
+/// [`get`] by table entry, through a configuration the caller lends
+/// mutably (the slots are reached by `&mut`; nothing is changed): reading
+/// many parameters costs no lookups by name and no copies.
+pub fn read(c: &mut HopperConfig, p: &Param) -> Result<f32, ParamError> {
     let index = controller_index(&c.strategy);
-    Ok(match slot(&mut c, p)? {
+    Ok(match slot(c, p)? {
         Slot::Real(v) => *v,
         Slot::Flag(b) => f32::from(u8::from(*b)),
         // Counts are checked against their (below 2^24) ranges on set, so

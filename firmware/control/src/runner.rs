@@ -253,6 +253,8 @@ pub struct PeriodRunner {
     /// Largest deviation of a period-start interval from the period so
     /// far, s (0 on a counter that does not count real time).
     max_jitter_s: f32,
+    /// What was found in flash at boot.
+    at_boot: crate::persist::AtBoot,
 }
 
 impl PeriodRunner {
@@ -284,6 +286,7 @@ impl PeriodRunner {
             last_start: None,
             cal: crate::bringup::Calibrator::new(),
             max_jitter_s: 0.0,
+            at_boot: crate::persist::AtBoot::NoStore,
         })
     }
 
@@ -393,6 +396,43 @@ impl PeriodRunner {
         self.feed
             .reconfigure(crate::watchdog::FeedConfig::for_hopper(&cfg));
         Ok(())
+    }
+
+    /// At boot, before the first period: the saved calibration record read
+    /// from flash (`None`: the store holds none). A record that checks
+    /// out is applied (every entry range-checked, the whole configuration
+    /// validated) and counts as the calibration `arming.require_tare`
+    /// asks for; a refused one changes nothing.
+    pub fn load_calibration(&mut self, record: Option<&[u8]>) {
+        use crate::persist::{decode, AtBoot, LoadError};
+        self.at_boot = match record {
+            None => AtBoot::NothingSaved,
+            Some(r) => match decode(r, self.hopper.config()) {
+                Ok(cfg) => match self.rebuild(cfg) {
+                    Ok(()) => {
+                        self.arming.note_tared();
+                        AtBoot::Loaded(r.get(6).copied().unwrap_or(0))
+                    }
+                    Err(_) => AtBoot::Refused(LoadError::Refused("configuration")),
+                },
+                Err(e) => AtBoot::Refused(e),
+            },
+        };
+    }
+
+    /// What was found in flash at boot.
+    pub fn calibration_at_boot(&self) -> crate::persist::AtBoot {
+        self.at_boot
+    }
+
+    /// The record of the calibration in use, for saving; its length.
+    pub fn calibration_record(&self, out: &mut [u8; crate::persist::MAX_RECORD]) -> usize {
+        crate::persist::encode(self.hopper.config(), out)
+    }
+
+    /// Whether a bring-up routine is running.
+    pub fn calibrating(&self) -> bool {
+        self.cal.running()
     }
 
     /// The MCU came out of a warm reset (no power-on or brown-out flag):

@@ -338,6 +338,11 @@ struct ServeArgs {
         value_name = "M"
     )]
     height_zero_error_m: f64,
+    /// Keep the robot's flash in FILE (created on the first `hopper-link
+    /// save`): a saved calibration then loads at the next start, as on a
+    /// board [default: a flash that lasts as long as the simulator].
+    #[arg(long, value_name = "FILE")]
+    flash: Option<std::path::PathBuf>,
 }
 
 fn main() {
@@ -498,7 +503,10 @@ fn cmd_serve(a: ServeArgs) -> Result<()> {
         .map_err(|e| anyhow::anyhow!("plant: {e:?}"))?;
     let hal = mis.hal(hal, &plant);
     let robot = hopper_plant::robot::VirtualRobot::new(plant, hal, runner, cfg.control_dt_s);
-    let robot = if held { robot.hold() } else { robot };
+    let mut robot = if held { robot.hold() } else { robot };
+    let (flash, record) =
+        hal_sim::serve::Flash::open(a.flash.as_deref()).map_err(anyhow::Error::msg)?;
+    hal_sim::serve::load_at_boot(&mut robot, record.as_deref());
     let listener = std::net::TcpListener::bind(&a.tcp)
         .with_context(|| format!("cannot listen on {}", a.tcp))?;
     let addr = listener.local_addr().context("socket address")?;
@@ -518,6 +526,7 @@ fn cmd_serve(a: ServeArgs) -> Result<()> {
     let _ = std::io::stdout().flush();
     hal_sim::serve::serve(
         robot,
+        flash,
         &listener,
         hal_sim::serve::ServeOptions {
             speed: a.speed,
