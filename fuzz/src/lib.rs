@@ -29,6 +29,7 @@
 //!   runner never reports itself starved.
 
 pub mod link;
+pub mod persist;
 
 use arbitrary::{Arbitrary, Unstructured};
 use hopper_control::hal::{HopperIo, IoError, RawSample};

@@ -233,6 +233,10 @@ pub fn decode(record: &[u8], cfg: &HopperConfig) -> Result<HopperConfig, LoadErr
         params::set(&mut new, p.name, f32::from_le_bytes(v))
             .map_err(|_| LoadError::Refused(p.name))?;
     }
+    // Each value in its range is not yet a configuration the controller
+    // takes (a DAC zero beyond a changed resolution, say): the whole of it
+    // is checked as a boot would build it.
+    crate::hopper::Hopper::new(new).map_err(|_| LoadError::Refused("configuration"))?;
     Ok(new)
 }
 
