@@ -694,6 +694,29 @@ fn status(c: &mut Client) -> Result<()> {
             "OFF (arming refused: brown-out-reset-off; set BOR_LEV in the option bytes, docs/safety.md)"
         }
     );
+    match c.request(Request::Crystal)? {
+        Response::Crystal(x) if x.expected_hz == 0 => {}
+        Response::Crystal(x) => println!(
+            "crystal: {}; the profile names {:.3} MHz{}",
+            if x.measured_hz == 0 {
+                "not measured (it did not start)".to_string()
+            } else {
+                format!(
+                    "{:.3} MHz measured against the internal oscillator",
+                    f64::from(x.measured_hz) / 1e6
+                )
+            },
+            f64::from(x.expected_hz) / 1e6,
+            if x.measured_hz != 0
+                && !hopper_control::boot::Crystal::matches(x.measured_hz, x.expected_hz)
+            {
+                " (arming refused: crystal-not-the-profiles: build for this board's crystal, docs/board.md)"
+            } else {
+                ""
+            }
+        ),
+        r => bail!("unexpected answer {r:?}"),
+    }
     println!("calibration: {}", stored_line(&stored_of(c)?));
     let m = thermal_of(c)?;
     println!(

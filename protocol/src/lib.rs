@@ -155,6 +155,9 @@ pub enum Request {
     /// What was loaded at boot and how the last save went
     /// ([`Response::Stored`]).
     Stored,
+    /// The crystal: the profile's and as measured at boot
+    /// ([`Response::Crystal`]).
+    Crystal,
 }
 
 /// Robot to host.
@@ -232,6 +235,18 @@ pub enum Response {
     BringupResults(BringupResults),
     /// The saved calibration's state.
     Stored(StoredInfo),
+    /// The crystal.
+    Crystal(CrystalInfo),
+}
+
+/// The crystal (`hopper_control::boot::BootReport`).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct CrystalInfo {
+    /// What the clock profile names, Hz (0: no crystal, a virtual robot).
+    pub expected_hz: u32,
+    /// As measured against the internal oscillator at boot, Hz (0: not
+    /// measured).
+    pub measured_hz: u32,
 }
 
 /// The saved calibration's state (`hopper_control::persist`).
@@ -729,6 +744,7 @@ mod tests {
             Just(Request::BringupResults),
             Just(Request::Save),
             Just(Request::Stored),
+            Just(Request::Crystal),
             (any::<bool>(), any::<f32>())
                 .prop_map(|(hoisted, lift_m)| Request::SimulateMount { hoisted, lift_m }),
             (any::<u8>(), any::<f32>())

@@ -267,6 +267,8 @@ pub struct Board {
 /// The clocks `init` ended up with.
 #[derive(Debug, Clone, Copy)]
 struct Clocks {
+    /// The crystal as measured against the HSI, Hz (0: not measured).
+    hse_measured_hz: u32,
     /// Core and AHB clock, Hz.
     sysclk_hz: u32,
     /// Clock of the APB1 timers (TIM2..TIM5), Hz.
@@ -343,7 +345,7 @@ pub fn init(
     configure_analog_and_encoder_pins(&dp.GPIOA, &dp.GPIOB);
 
     // 4. Clocks. Everything timed below derives from the clock that runs.
-    let clocks = configure_clocks(&dp.RCC, &dp.FLASH, &dp.PWR);
+    let clocks = configure_clocks(&dp.RCC, &dp.FLASH, &dp.PWR, &dp.TIM11);
 
     // 5. Encoders.
     dp.RCC
@@ -393,6 +395,8 @@ pub fn init(
         brown_out_reset_on,
         clock_as_configured: clocks.sysclk_hz == SYSCLK_HZ,
         sysclk_hz: clocks.sysclk_hz,
+        hse_expected_hz: HSE_HZ,
+        hse_measured_hz: clocks.hse_measured_hz,
     };
 
     Board {
@@ -476,8 +480,14 @@ fn wait_for(mut ready: impl FnMut() -> bool) -> bool {
 }
 
 /// HSE → PLL → 168 MHz, or the HSI at 16 MHz if that fails. Never hangs.
-fn configure_clocks(rcc: &pac::RCC, flash: &pac::FLASH, pwr: &pac::PWR) -> Clocks {
-    let hsi = Clocks {
+fn configure_clocks(
+    rcc: &pac::RCC,
+    flash: &pac::FLASH,
+    pwr: &pac::PWR,
+    tim11: &pac::TIM11,
+) -> Clocks {
+    let mut hsi = Clocks {
+        hse_measured_hz: 0,
         sysclk_hz: HSI_HZ,
         apb1_timer_hz: HSI_HZ,
         pclk2_hz: HSI_HZ,
@@ -512,6 +522,16 @@ fn configure_clocks(rcc: &pac::RCC, flash: &pac::FLASH, pwr: &pac::PWR) -> Clock
     rcc.cr().modify(|_, w| w.hsebyp().not_bypassed());
     rcc.cr().modify(|_, w| w.hseon().on());
     if !wait_for(|| rcc.cr().read().hserdy().is_ready()) {
+        rcc.cr().modify(|_, w| w.hseon().off());
+        return hsi;
+    }
+
+    // The crystal against the HSI, before the PLL multiplies it: a crystal
+    // other than the profile's (a 12 MHz board on the 8 MHz build) would
+    // run the core at 1.5 times 168 MHz. Then the HSI stays, and arming is
+    // refused (`crystal-not-the-profiles`).
+    hsi.hse_measured_hz = measure_hse(rcc, tim11);
+    if !hopper_control::boot::Crystal::matches(hsi.hse_measured_hz, HSE_HZ) {
         rcc.cr().modify(|_, w| w.hseon().off());
         return hsi;
     }
@@ -563,11 +583,78 @@ fn configure_clocks(rcc: &pac::RCC, flash: &pac::FLASH, pwr: &pac::PWR) -> Clock
     rcc.cr().modify(|_, w| w.csson().on());
 
     Clocks {
+        hse_measured_hz: hsi.hse_measured_hz,
         sysclk_hz: SYSCLK_HZ,
         // APB1 prescaler ≠ 1: its timers run at twice PCLK1.
         apb1_timer_hz: 2 * PLL_PCLK1_HZ,
         pclk2_hz: SYSCLK_HZ / 2,
     }
+}
+
+/// The crystal's divider for the measurement (RCC_CFGR.RTCPRE): 8 MHz / 8
+/// = 1 MHz, within TIM11's reach at 16 MHz.
+const MEASURE_DIVIDER: u32 = 8;
+/// Captures every 8th edge (IC1PSC = /8): 128 HSI counts at 8 MHz.
+const MEASURE_EDGES: u32 = 8;
+/// Captures averaged.
+const MEASURE_CAPTURES: u32 = 8;
+
+/// The crystal's frequency against the HSI, Hz (0 when no capture came):
+/// HSE / RTCPRE is routed to TIM11's channel 1 (TIM11_OR.TI1_RMP = 0b10,
+/// RM0090 section 18.5.9), captured on every 8th rising edge with TIM11
+/// counting APB2, the HSI at 16 MHz here (the core is still on it).
+#[allow(unsafe_code)] // RTCPRE and TIM11's registers are written as raw words.
+fn measure_hse(rcc: &pac::RCC, tim11: &pac::TIM11) -> u32 {
+    rcc.apb2enr()
+        .modify(|r, w| unsafe { w.bits(r.bits() | (1 << 18)) });
+    let _ = rcc.apb2enr().read();
+    // RTCPRE (bits 20:16): HSE / 8. It only feeds the RTC clock mux and
+    // this capture; the RTC is unused.
+    rcc.cfgr()
+        .modify(|r, w| unsafe { w.bits((r.bits() & !(0x1F << 16)) | (MEASURE_DIVIDER << 16)) });
+    // SAFETY (all the writes below): TIM11's documented register values;
+    // the timer is unused elsewhere and is switched off again at the end.
+    tim11.or().write(|w| unsafe { w.bits(0b10) }); // TI1 = HSE_RTC
+    tim11.psc().write(|w| unsafe { w.bits(0) });
+    tim11.arr().write(|w| unsafe { w.bits(0xFFFF) });
+    // CC1S = 01 (IC1 on TI1), IC1PSC = 11 (every 8th edge), no filter.
+    tim11
+        .ccmr1_input()
+        .write(|w| unsafe { w.bits(0b01 | (0b11 << 2)) });
+    tim11.ccer().write(|w| unsafe { w.bits(1) }); // CC1E, rising edge
+    tim11.egr().write(|w| unsafe { w.bits(1) }); // UG: load PSC
+    tim11.sr().write(|w| unsafe { w.bits(0) });
+    tim11.cr1().write(|w| unsafe { w.bits(1) }); // CEN
+    let capture = || -> Option<u32> {
+        if wait_for(|| tim11.sr().read().bits() & (1 << 1) != 0) {
+            // Reading CCR1 clears CC1IF.
+            Some(tim11.ccr1().read().bits() & 0xFFFF)
+        } else {
+            None
+        }
+    };
+    let mut total = 0u32;
+    let mut ok = 0u32;
+    let mut last = capture();
+    for _ in 0..MEASURE_CAPTURES {
+        let next = capture();
+        if let (Some(a), Some(b)) = (last, next) {
+            total += b.wrapping_sub(a) & 0xFFFF;
+            ok += 1;
+        }
+        last = next;
+    }
+    tim11.cr1().write(|w| unsafe { w.bits(0) });
+    tim11.or().write(|w| unsafe { w.bits(0) });
+    rcc.apb2enr()
+        .modify(|r, w| unsafe { w.bits(r.bits() & !(1 << 18)) });
+    // All the captures' edges over all their counts.
+    hopper_control::boot::Crystal {
+        timer_hz: HSI_HZ,
+        divider: MEASURE_DIVIDER,
+        edges: MEASURE_EDGES * ok,
+    }
+    .hz_from_ticks(total)
 }
 
 /// Writes PLLCFGR: source HSE, M, N, P, Q as the constants above. PLL must be off.

@@ -132,6 +132,9 @@ pub enum ArmRefusal {
     ClockFallback,
     /// The brown-out reset is off in the option bytes.
     BrownOutResetOff,
+    /// The crystal measured at boot is not the one the clock profile names
+    /// (a build for another board: the board stays on the HSI).
+    CrystalMismatch,
     /// `arming.require_tare` is on and no tare has succeeded since boot.
     NotCalibrated,
     /// A bring-up routine is measuring.
@@ -155,6 +158,7 @@ impl ArmRefusal {
             ArmRefusal::Moving => "moving",
             ArmRefusal::ClockFallback => "clock-fallback",
             ArmRefusal::BrownOutResetOff => "brown-out-reset-off",
+            ArmRefusal::CrystalMismatch => "crystal-not-the-profiles",
             ArmRefusal::NotCalibrated => "not-calibrated",
             ArmRefusal::Calibrating => "calibrating",
             ArmRefusal::DirectionReversed => "encoder-or-motor-direction-reversed",

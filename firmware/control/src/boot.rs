@@ -97,6 +97,57 @@ pub struct BootReport {
     pub clock_as_configured: bool,
     /// The core clock running, Hz.
     pub sysclk_hz: u32,
+    /// The crystal the clock profile names, Hz (0: no crystal, not a board).
+    pub hse_expected_hz: u32,
+    /// The crystal as measured against the internal oscillator at boot, Hz
+    /// ([`Crystal`]; 0: not measured: the crystal did not start, or no
+    /// board).
+    pub hse_measured_hz: u32,
+}
+
+/// The crystal measured against the internal 16 MHz RC oscillator (HSI,
+/// factory-trimmed to 1% at 25 C, within 4% over temperature: DS8626): a
+/// timer clocked from the HSI captures every `edges`-th edge of the
+/// crystal's frequency divided by `divider` (the F405 routes HSE/RTCPRE to
+/// TIM11's channel 1), `ticks` timer counts apart.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Crystal {
+    /// The timer's clock, Hz (the HSI).
+    pub timer_hz: u32,
+    /// The crystal's frequency divider before the capture (RTCPRE).
+    pub divider: u32,
+    /// Edges per capture (the capture prescaler).
+    pub edges: u32,
+}
+
+impl Crystal {
+    /// How far the measured crystal may be from the profile's, as a
+    /// fraction: the HSI's 4% over temperature and a count of quantisation
+    /// (1.2% at 8 MHz), with margin; the boards' crystals (8, 12, 16, 25
+    /// MHz) are at least a third apart.
+    pub const TOLERANCE: f32 = 0.1;
+
+    /// The crystal's frequency from the timer counts between two captures,
+    /// Hz (0 for no counts).
+    pub const fn hz_from_ticks(&self, ticks: u32) -> u32 {
+        if ticks == 0 {
+            return 0;
+        }
+        let hz = self.timer_hz as u64 * self.divider as u64 * self.edges as u64 / ticks as u64;
+        if hz > u32::MAX as u64 {
+            u32::MAX
+        } else {
+            hz as u32
+        }
+    }
+
+    /// Whether `measured_hz` is the `expected_hz` crystal, within
+    /// [`Self::TOLERANCE`].
+    pub fn matches(measured_hz: u32, expected_hz: u32) -> bool {
+        let (m, e) = (measured_hz as f32, expected_hz as f32);
+        expected_hz > 0 && (m - e).abs() <= Self::TOLERANCE * e
+    }
 }
 
 impl BootReport {
@@ -107,18 +158,28 @@ impl BootReport {
         brown_out_reset_on: true,
         clock_as_configured: true,
         sysclk_hz: 168_000_000,
+        hse_expected_hz: 0,
+        hse_measured_hz: 0,
     };
+
+    /// Whether the crystal was measured and is not the profile's.
+    pub fn crystal_mismatch(&self) -> bool {
+        self.hse_measured_hz != 0 && !Crystal::matches(self.hse_measured_hz, self.hse_expected_hz)
+    }
 
     /// FLASH_OPTCR's BOR_LEV field (bits 3:2) means "on" unless it is `0b11`.
     pub const fn brown_out_reset_on_from_optcr(optcr: u32) -> bool {
         (optcr >> 2) & 0b11 != 0b11
     }
 
-    /// Why arming must be refused, if it must: the clock first (every
-    /// timing, the watchdog's excepted, would be off), then the brown-out
-    /// reset.
-    pub const fn refusal(&self) -> Option<ArmRefusal> {
-        if !self.clock_as_configured {
+    /// Why arming must be refused, if it must: the crystal (a board built
+    /// for another crystal: the board then stays on the HSI rather than
+    /// run the PLL too fast), the clock (every timing, the watchdog's
+    /// excepted, would be off), then the brown-out reset.
+    pub fn refusal(&self) -> Option<ArmRefusal> {
+        if self.crystal_mismatch() {
+            Some(ArmRefusal::CrystalMismatch)
+        } else if !self.clock_as_configured {
             Some(ArmRefusal::ClockFallback)
         } else if !self.brown_out_reset_on {
             Some(ArmRefusal::BrownOutResetOff)
@@ -172,5 +233,44 @@ mod tests {
             ..BootReport::NOT_A_BOARD
         };
         assert_eq!(no_bor.refusal(), Some(ArmRefusal::BrownOutResetOff));
+    }
+
+    /// The capture arithmetic and the tolerance: an 8 MHz crystal on the
+    /// 8 MHz profile passes with the HSI 4% off either way, a 12 MHz one
+    /// (a Feather with the default build) does not, and refuses arming.
+    #[test]
+    fn the_crystal_is_told_from_another_one() {
+        // HSE / 8 (RTCPRE), every 8th edge, counted at 16 MHz.
+        let c = Crystal {
+            timer_hz: 16_000_000,
+            divider: 8,
+            edges: 8,
+        };
+        assert_eq!(c.hz_from_ticks(128), 8_000_000);
+        assert_eq!(c.hz_from_ticks(85), 12_047_058);
+        assert_eq!(c.hz_from_ticks(0), 0);
+        // The HSI 4% fast counts 4% more ticks: the crystal reads 4% low.
+        let fast = c.hz_from_ticks(133);
+        assert!(Crystal::matches(fast, 8_000_000), "{fast}");
+        assert!(Crystal::matches(c.hz_from_ticks(123), 8_000_000));
+        assert!(!Crystal::matches(c.hz_from_ticks(85), 8_000_000));
+        assert!(!Crystal::matches(c.hz_from_ticks(128), 12_000_000));
+        assert!(!Crystal::matches(8_000_000, 0));
+        let wrong = BootReport {
+            hse_expected_hz: 8_000_000,
+            hse_measured_hz: 12_047_058,
+            clock_as_configured: false,
+            sysclk_hz: 16_000_000,
+            ..BootReport::NOT_A_BOARD
+        };
+        assert_eq!(wrong.refusal(), Some(ArmRefusal::CrystalMismatch));
+        let right = BootReport {
+            hse_expected_hz: 8_000_000,
+            hse_measured_hz: 7_950_000,
+            ..BootReport::NOT_A_BOARD
+        };
+        assert_eq!(right.refusal(), None);
+        // Not measured (no crystal start, or no board): not a mismatch.
+        assert!(!BootReport::NOT_A_BOARD.crystal_mismatch());
     }
 }

@@ -381,6 +381,13 @@ impl Endpoint {
                 self.save_state = SAVE_PENDING;
                 Response::Ok
             }
+            Request::Crystal => {
+                let b = runner.arming().boot();
+                Response::Crystal(hopper_protocol::CrystalInfo {
+                    expected_hz: b.hse_expected_hz,
+                    measured_hz: b.hse_measured_hz,
+                })
+            }
             Request::Stored => {
                 let (boot, boot_error, entries) = runner.calibration_at_boot().wire();
                 Response::Stored(StoredInfo {
