@@ -320,3 +320,40 @@ fn saved_and_loaded_at_the_next_boot(r: &VirtualRobot, mis: Miscalibration) {
     run(&mut next, 0.05);
     assert_eq!(arm_refusal(&next), Some(ArmRefusal::NotCalibrated));
 }
+
+/// The operator's disarm stops a motor-driving routine like the e-stop; a
+/// parameter cannot change under a running routine; changing what the
+/// direction check and homing were made on undoes them, changing the
+/// load cell's offset by hand undoes the tare.
+#[test]
+fn disarm_stops_a_routine_and_hand_changes_undo_its_verdicts() {
+    let mut r = robot(Miscalibration::SESSION, &[("bringup.speed_mps", 0.001)]);
+    run(&mut r, 0.05);
+    done(&mut r, Routine::Direction);
+    r.runner
+        .start_calibration(Routine::Home, 0.5)
+        .unwrap_or_else(|e| panic!("{e:?}"));
+    run(&mut r, 0.2);
+    assert_eq!(
+        r.runner
+            .set_param("calibration.motor_counts_positive_down", 0.0),
+        Err(hopper_control::runner::SetError::Calibrating)
+    );
+    r.runner.arming_mut().request_disarm();
+    run(&mut r, 0.001);
+    assert_eq!(r.runner.calibration().state, CalState::FailedFault as u8);
+    run(&mut r, 0.01);
+    assert!(r.hal.mean_current_a(DT_S).abs() < 1e-6);
+    // Home properly, tare, then change things by hand.
+    done(&mut r, Routine::Home);
+    done(&mut r, Routine::Tare);
+    assert!(r.runner.arming().homed() && r.runner.arming().tared());
+    r.runner
+        .set_param("calibration.loadcell_offset_code", 230.0)
+        .unwrap_or_else(|e| panic!("{e:?}"));
+    assert!(!r.runner.arming().tared() && r.runner.arming().homed());
+    r.runner
+        .set_param("calibration.motor_counts_positive_down", 0.0)
+        .unwrap_or_else(|e| panic!("{e:?}"));
+    assert!(!r.runner.arming().homed() && !r.runner.arming().direction_ok());
+}

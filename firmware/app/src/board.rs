@@ -628,26 +628,44 @@ fn measure_hse(rcc: &pac::RCC, tim11: &pac::TIM11) -> u32 {
     let capture = || -> Option<u32> {
         if wait_for(|| tim11.sr().read().bits() & (1 << 1) != 0) {
             // Reading CCR1 clears CC1IF.
-            Some(tim11.ccr1().read().bits() & 0xFFFF)
+            let ccr = tim11.ccr1().read().bits() & 0xFFFF;
+            // CC1OF: a capture came before this one was read, so the
+            // interval would span two: useless (a 16 MHz crystal missing
+            // every other capture would read as 8 MHz).
+            let sr = tim11.sr().read().bits();
+            tim11.sr().write(|w| unsafe { w.bits(!(1 << 9) & 0xFFFF) });
+            (sr & (1 << 9) == 0).then_some(ccr)
         } else {
             None
         }
     };
     let mut total = 0u32;
     let mut ok = 0u32;
+    let (mut shortest, mut longest) = (u32::MAX, 0u32);
     let mut last = capture();
     for _ in 0..MEASURE_CAPTURES {
         let next = capture();
         if let (Some(a), Some(b)) = (last, next) {
-            total += b.wrapping_sub(a) & 0xFFFF;
+            let interval = b.wrapping_sub(a) & 0xFFFF;
+            total += interval;
+            shortest = shortest.min(interval);
+            longest = longest.max(interval);
             ok += 1;
         }
         last = next;
+    }
+    // Every interval the same to a count or two (HSI jitter), all of them
+    // there: else no measurement (the core then stays on the HSI).
+    if ok < MEASURE_CAPTURES || longest > shortest + 2 {
+        ok = 0;
     }
     tim11.cr1().write(|w| unsafe { w.bits(0) });
     tim11.or().write(|w| unsafe { w.bits(0) });
     rcc.apb2enr()
         .modify(|r, w| unsafe { w.bits(r.bits() & !(1 << 18)) });
+    if ok == 0 {
+        return 0;
+    }
     // All the captures' edges over all their counts.
     hopper_control::boot::Crystal {
         timer_hz: HSI_HZ,

@@ -93,11 +93,16 @@ impl<'a> InternalFlash<'a> {
     #[allow(unsafe_code)] // CR takes raw words.
     fn lock(&self) {
         self.flash.cr().write(|w| unsafe { w.bits(CR_LOCK) });
-        // The data cache may hold what was there before the erase.
+        // The data cache may hold what was there before the erase: reset it,
+        // which RM0090 allows only with the cache off (off, reset, reset
+        // released, back on).
         let acr = self.flash.acr().read().bits();
+        let off = acr & !ACR_DCEN;
+        self.flash.acr().write(|w| unsafe { w.bits(off) });
         self.flash
             .acr()
-            .write(|w| unsafe { w.bits((acr & !ACR_DCEN) | ACR_DCRST) });
+            .write(|w| unsafe { w.bits(off | ACR_DCRST) });
+        self.flash.acr().write(|w| unsafe { w.bits(off) });
         self.flash.acr().write(|w| unsafe { w.bits(acr) });
     }
 
@@ -119,7 +124,9 @@ impl<'a> InternalFlash<'a> {
     }
 
     fn address(offset: u32, len: usize) -> Result<u32, FlashError> {
-        let end = offset as usize + len;
+        let end = (offset as usize)
+            .checked_add(len)
+            .ok_or(FlashError::Bounds)?;
         if end > SECTORS as usize * SECTOR_BYTES {
             return Err(FlashError::Bounds);
         }

@@ -210,6 +210,62 @@ pub mod qemu {
         syst.enable_counter();
     }
 
+    /// The stack's depth, measured: `idle` paints the free stack below
+    /// its own frame with a pattern ([`paint_stack`]); at the end the
+    /// lowest word no longer the pattern is how deep the tasks went
+    /// ([`stack_depths`]).
+    const PAINT: u32 = 0x5AA5_C33C;
+    static PAINTED_FROM: AtomicUsize = AtomicUsize::new(0);
+    static PAINTED_TO: AtomicUsize = AtomicUsize::new(0);
+    use core::sync::atomic::{AtomicUsize, Ordering};
+
+    extern "C" {
+        static _stack_start: u32;
+        static _stack_end: u32;
+    }
+
+    /// From `idle`, once: paints from 256 bytes below its stack pointer down
+    /// to the end of the statics (the linker's `_stack_end`). A task that
+    /// preempts it meanwhile runs below `idle`'s frame and is gone when
+    /// `idle` paints on: nothing live is overwritten.
+    #[allow(unsafe_code)] // Raw writes to the free stack below idle's frame.
+    #[inline(never)]
+    pub fn paint_stack() {
+        let here = cortex_m::register::msp::read() as usize;
+        let from = (here - 256) & !3;
+        let to = (core::ptr::addr_of!(_stack_end) as usize + 3) & !3;
+        let mut a = from;
+        while a > to {
+            a -= 4;
+            // SAFETY: between the end of the statics and below idle's
+            // frame: the free stack, used only by tasks that preempt idle,
+            // which have returned whenever this runs.
+            unsafe { core::ptr::write_volatile(a as *mut u32, PAINT) };
+        }
+        PAINTED_TO.store(to, Ordering::Relaxed);
+        PAINTED_FROM.store(from, Ordering::Relaxed);
+    }
+
+    /// (`idle`'s depth, the deepest the stack went), bytes from its top;
+    /// (0, 0) before [`paint_stack`] finished.
+    #[allow(unsafe_code)] // Raw reads of the painted stack.
+    pub fn stack_depths() -> (u32, u32) {
+        let (from, to) = (
+            PAINTED_FROM.load(Ordering::Relaxed),
+            PAINTED_TO.load(Ordering::Relaxed),
+        );
+        if from == 0 {
+            return (0, 0);
+        }
+        let top = core::ptr::addr_of!(_stack_start) as usize;
+        let mut a = to;
+        // SAFETY: the painted range, word-aligned, in RAM.
+        while a < from && unsafe { core::ptr::read_volatile(a as *const u32) } == PAINT {
+            a += 4;
+        }
+        ((top - from) as u32, (top - a) as u32)
+    }
+
     /// AMP_EN (PB0) low before anything else, as on the board; then TIM5
     /// free-running as the instruction counter.
     pub fn start(rcc: &pac::RCC, gpiob: &pac::GPIOB, tim5: pac::TIM5) -> Instructions {
@@ -324,8 +380,10 @@ mod app {
 
     #[shared]
     struct Shared {
-        /// The capture, frozen around the first fault.
-        capture: Capture,
+        /// The capture, frozen around the first fault: a static built in
+        /// place (32 KiB: built in `init` and moved, it was most of `init`'s
+        /// 81 KB stack peak).
+        capture: &'static mut Capture,
     }
 
     #[local]
@@ -342,7 +400,7 @@ mod app {
         serial: Serial,
     }
 
-    #[init(local = [rxq: RxQueue = RxQueue::new(), txq: TxQueue = TxQueue::new()])]
+    #[init(local = [rxq: RxQueue = RxQueue::new(), txq: TxQueue = TxQueue::new(), capture: Capture = Capture::new()])]
     fn init(cx: init::Context) -> (Shared, Local) {
         let mut cfg = HopperConfig::default();
         // TIM2 and TIM5 count the encoders over 32 bits.
@@ -449,7 +507,7 @@ mod app {
         );
         (
             Shared {
-                capture: Capture::new(),
+                capture: cx.local.capture,
             },
             Local {
                 io: board.io,
@@ -741,6 +799,7 @@ mod app {
     /// Busy idle: QEMU 7.2 loses SysTick ticks while the core sleeps in `wfi`.
     #[idle]
     fn idle(_: idle::Context) -> ! {
+        crate::qemu::paint_stack();
         loop {
             cortex_m::asm::nop();
         }
@@ -808,12 +867,13 @@ mod app {
     /// Logs the summary and exits QEMU: success only if the hop converged
     /// and no fault or deadline miss occurred.
     fn finish(sim: &Sim, runner: &PeriodRunner, log: &Log) -> ! {
+        let (stack_idle_b, stack_peak_b) = crate::qemu::stack_depths();
         let steady = steady_apex(&sim.apexes);
         let converged = hops_to_converge(&sim.apexes, TARGET_APEX_M, 0.02);
         let faults = runner.hopper().supervisor().faults();
         let cost = runner.step_cost();
         defmt::println!(
-            "summary steady_apex_m={=f64} hops_to_converge={=i32} step_instr_min={=u32} step_instr_mean={=u32} step_instr_max={=u32} missed={=u32} faults={=u16} periods={=u32} fault_period={=i64} amp_enabled={=bool} max_current_after_fault_a={=f32} log_dropped={=u32}",
+            "summary steady_apex_m={=f64} hops_to_converge={=i32} step_instr_min={=u32} step_instr_mean={=u32} step_instr_max={=u32} missed={=u32} faults={=u16} periods={=u32} fault_period={=i64} amp_enabled={=bool} max_current_after_fault_a={=f32} log_dropped={=u32} stack_idle_b={=u32} stack_peak_b={=u32}",
             steady.unwrap_or(-1.0),
             converged.map_or(-1, |k| i32::try_from(k).unwrap_or(i32::MAX)),
             cost.min,
@@ -825,7 +885,9 @@ mod app {
             sim.fault_period.map_or(-1, i64::from),
             sim.hal.amp_enabled(),
             sim.max_current_after_fault_a,
-            log.dropped()
+            log.dropped(),
+            stack_idle_b,
+            stack_peak_b
         );
         let ok = converged.is_some() && faults.is_empty() && runner.missed() == 0;
         debug::exit(if ok {

@@ -340,6 +340,31 @@ impl Arming {
         self.arm_requested
     }
 
+    /// Whether a disarm request waits for the next period (it also stops a
+    /// motor-driving bring-up routine).
+    pub const fn disarm_pending(&self) -> bool {
+        self.disarm_requested
+    }
+
+    /// A tare succeeded or a saved calibration was loaded since boot.
+    pub const fn tared(&self) -> bool {
+        self.tared
+    }
+
+    /// The encoders' or the motor's configuration changed: the direction
+    /// check and the homing are to be done again.
+    pub fn forget_direction_and_home(&mut self) {
+        self.direction_checked = false;
+        self.reversed = false;
+        self.homed = false;
+    }
+
+    /// The load cell's or the potentiometer's configuration changed by hand:
+    /// the tare is to be done again.
+    pub fn forget_tare(&mut self) {
+        self.tared = false;
+    }
+
     /// Ask to disarm; done at the next period, before its output.
     pub fn request_disarm(&mut self) {
         self.disarm_requested = true;

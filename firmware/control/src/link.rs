@@ -269,6 +269,10 @@ impl Endpoint {
         };
         let resp = match req {
             Request::Status => Response::Status(self.status(runner)),
+            // The board resets shortly to write a save: nothing starts.
+            Request::Arm | Request::Calibrate { .. } if self.save_state == SAVE_AT_RESTART => {
+                Response::Refused(text("restarting"))
+            }
             Request::Arm => {
                 runner.arming_mut().request_arm();
                 self.pending_arm = Some(id);
@@ -374,6 +378,9 @@ impl Endpoint {
             Request::SimulateMount { .. } => Response::Refused(text("not-simulated")),
             Request::Save if runner.arming().is_armed() => Response::Refused(text("disarm-first")),
             Request::Save if runner.calibrating() => Response::Refused(text("calibrating")),
+            // The placeholders are not a calibration: a tare (or a loaded
+            // record) first, else the saved record would stand for one.
+            Request::Save if !runner.arming().tared() => Response::Refused(text("not-calibrated")),
             Request::Save if self.save_state == SAVE_PENDING => Response::Refused(text("busy")),
             Request::Save => {
                 self.save_len = runner.calibration_record(&mut self.save_record.0);
@@ -713,6 +720,41 @@ mod tests {
             );
             assert_eq!(r.ep.sim_estop(), sim);
         }
+    }
+
+    /// A save needs a calibration (placeholders are none); once tared it is
+    /// queued once for the application, and after a deferred save (the
+    /// board's restart) nothing starts.
+    #[test]
+    fn a_save_needs_a_tare_and_is_taken_once() {
+        let mut r = Robot::new();
+        r.request(1, Request::Save);
+        r.periods(1);
+        assert_eq!(
+            r.take(),
+            [RobotMsg::Response {
+                id: 1,
+                resp: Response::Refused(text("not-calibrated"))
+            }]
+        );
+        assert!(r.ep.take_save().is_none());
+        r.runner.arming_mut().note_tared();
+        r.request(2, Request::Save);
+        r.periods(1);
+        let _ = r.take();
+        let n = r.ep.take_save().map(<[u8]>::len);
+        assert_eq!(n, Some(7 + 13 * 8 + 2));
+        assert!(r.ep.take_save().is_none());
+        r.ep.save_done(true, true);
+        r.request(3, Request::Arm);
+        r.periods(1);
+        assert_eq!(
+            r.take(),
+            [RobotMsg::Response {
+                id: 3,
+                resp: Response::Refused(text("restarting"))
+            }]
+        );
     }
 
     /// The scripted session of issue 17 at the library level (no transport):

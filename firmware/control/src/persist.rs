@@ -199,6 +199,26 @@ pub fn encode(cfg: &HopperConfig, out: &mut [u8; MAX_RECORD]) -> usize {
     at + 2
 }
 
+/// Whether `record` (already decoded) carries the tare's two offsets.
+pub fn has_offsets(record: &[u8]) -> bool {
+    let n = usize::from(record.get(6).copied().unwrap_or(0));
+    let keys = record
+        .get(HEADER..HEADER + n * ENTRY)
+        .unwrap_or_default()
+        .chunks_exact(ENTRY)
+        .filter_map(|e| word(e, 0).map(u32::from_le_bytes));
+    let (lc, pot) = (
+        name_hash(params::CAL_LOADCELL_OFFSET.name),
+        name_hash(params::CAL_POT_OFFSET.name),
+    );
+    let (mut has_lc, mut has_pot) = (false, false);
+    for k in keys {
+        has_lc |= k == lc;
+        has_pot |= k == pot;
+    }
+    has_lc && has_pot
+}
+
 /// Checks `record` and applies its entries to a copy of `cfg`: the new
 /// configuration, or why nothing is applied.
 pub fn decode(record: &[u8], cfg: &HopperConfig) -> Result<HopperConfig, LoadError> {
@@ -260,6 +280,18 @@ mod tests {
         assert!(saved_count() >= 13, "{}", saved_count());
         let back = decode(&buf[..n], &HopperConfig::default());
         assert_eq!(back, Ok(tuned()));
+        assert!(has_offsets(&buf[..n]));
+        // A record without entries decodes (nothing to set) but is no tare.
+        let mut empty = [0u8; MAX_RECORD];
+        empty[..HEADER].copy_from_slice(&buf[..HEADER]);
+        empty[6] = 0;
+        let crc = hopper_protocol::crc16(&empty[..HEADER]).to_le_bytes();
+        empty[HEADER..HEADER + 2].copy_from_slice(&crc);
+        assert_eq!(
+            decode(&empty[..HEADER + 2], &HopperConfig::default()),
+            Ok(HopperConfig::default())
+        );
+        assert!(!has_offsets(&empty[..HEADER + 2]));
         // The names hash apart.
         for (i, h) in KEYS.iter().enumerate() {
             assert!(!KEYS[i + 1..].contains(h));

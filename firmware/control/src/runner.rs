@@ -188,6 +188,8 @@ pub enum SetError {
     Param(crate::params::ParamError),
     /// The parameter may be set only while disarmed.
     WhileArmed(&'static str),
+    /// Nothing may be set while a bring-up routine runs.
+    Calibrating,
     /// The new configuration as a whole is refused (a cross-field rule).
     Config(RunnerError),
 }
@@ -201,6 +203,7 @@ impl SetError {
             SetError::Param(P::OutOfRange(_)) => "out-of-range",
             SetError::Param(P::NotSelected(_)) => "controller-not-selected",
             SetError::WhileArmed(_) => "disarm-first",
+            SetError::Calibrating => "calibrating",
             SetError::Config(_) => "invalid-configuration",
         }
     }
@@ -368,6 +371,11 @@ impl PeriodRunner {
     pub fn set_param(&mut self, name: &str, value: f32) -> Result<(), SetError> {
         let p =
             crate::params::find(name).ok_or(SetError::Param(crate::params::ParamError::Unknown))?;
+        if self.cal.running() {
+            // A routine's loop was built on the configuration it started
+            // with (a flipped encoder sign would turn its PD around).
+            return Err(SetError::Calibrating);
+        }
         let mut cfg = *self.hopper.config();
         crate::params::set(&mut cfg, p.name, value).map_err(SetError::Param)?;
         if self.arming.is_armed() {
@@ -379,7 +387,25 @@ impl PeriodRunner {
                 .set_target_apex(cfg.target_apex_m)
                 .map_err(|_| SetError::Param(crate::params::ParamError::OutOfRange(p.name)));
         }
-        self.rebuild(cfg)
+        let old = *self.hopper.config();
+        self.rebuild(cfg)?;
+        // What the bring-up verdicts were made on, changed by hand: they no
+        // longer hold (a flipped encoder sign, another lead or count).
+        if old.calibration.motor_counts_positive_down != cfg.calibration.motor_counts_positive_down
+            || old.calibration.motor_counts_per_rev != cfg.calibration.motor_counts_per_rev
+            || old.model.screw_lead_m != cfg.model.screw_lead_m
+        {
+            self.arming.forget_direction_and_home();
+        }
+        let c = (&old.calibration, &cfg.calibration);
+        if c.0.loadcell_gain_n_per_code != c.1.loadcell_gain_n_per_code
+            || c.0.loadcell_offset_code != c.1.loadcell_offset_code
+            || c.0.pot_gain_m_per_code != c.1.pot_gain_m_per_code
+            || c.0.pot_offset_code != c.1.pot_offset_code
+        {
+            self.arming.forget_tare();
+        }
+        Ok(())
     }
 
     /// Rebuilds the controller from `cfg` (disarmed), carrying the state
@@ -410,7 +436,10 @@ impl PeriodRunner {
             Some(r) => match decode(r, self.hopper.config()) {
                 Ok(cfg) => match self.rebuild(cfg) {
                     Ok(()) => {
-                        self.arming.note_tared();
+                        // Only a record with the tare's offsets stands for one.
+                        if crate::persist::has_offsets(r) {
+                            self.arming.note_tared();
+                        }
                         AtBoot::Loaded(r.get(6).copied().unwrap_or(0))
                     }
                     Err(_) => AtBoot::Refused(LoadError::Refused("configuration")),
@@ -526,7 +555,8 @@ impl PeriodRunner {
         let cfg = *self.hopper.config();
         let c = &cfg.calibration;
         let s = &cfg.supervisor;
-        let nut_swing_counts = (NUT_SWING_M / c.nut_m_per_count()) as u32;
+        // (The count's size: negative with the encoder counting up.)
+        let nut_swing_counts = ((NUT_SWING_M / c.nut_m_per_count()).abs() as u32).max(STILL_COUNTS);
         let last = self.hopper.last_input().copied();
         let p_m = self.cal.nut_mean_m();
         let p_m = if p_m.is_finite() { p_m } else { 0.0 };
@@ -675,7 +705,9 @@ impl PeriodRunner {
         let t1 = counter.now();
         // A motor-driving routine stops at a fault (the e-stop latches one)
         // or a lost link; the output below is then the safe one.
-        if self.cal.driving() && (!out.faults.is_empty() || !self.arming.link_alive()) {
+        if self.cal.driving()
+            && (!out.faults.is_empty() || !self.arming.link_alive() || self.arming.disarm_pending())
+        {
             self.cal.abort();
         }
         // Whether this period's command is a routine's (approved by the
