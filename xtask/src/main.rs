@@ -337,7 +337,8 @@ fn size(root: &Path) -> Result<(), String> {
     Ok(())
 }
 
-/// Size of the telemetry capture buffer (the RTIC shared resource `capture`), bytes.
+/// Size of the telemetry capture buffer, bytes: the board's `init` local
+/// `capture` (built in place since issue 18; a shared resource before).
 fn capture_bytes(llvm_size: &Path, elf: &Path) -> Result<u64, String> {
     let nm = llvm_size.with_file_name("llvm-nm");
     let out = Command::new(&nm)
@@ -347,7 +348,7 @@ fn capture_bytes(llvm_size: &Path, elf: &Path) -> Result<u64, String> {
         .map_err(|e| format!("cannot run {}: {e}", nm.display()))?;
     String::from_utf8_lossy(&out.stdout)
         .lines()
-        .find(|l| l.contains("shared_resource_capture"))
+        .find(|l| l.contains("local_init_capture") || l.contains("shared_resource_capture"))
         .and_then(|l| u64::from_str_radix(l.split_whitespace().nth(1)?, 16).ok())
         .ok_or_else(|| "no capture buffer symbol in the firmware".to_string())
 }
