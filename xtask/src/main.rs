@@ -266,6 +266,27 @@ fn test(root: &Path) -> Result<(), String> {
         "clippy (MCU target, QEMU variant)",
         &["--no-default-features", "--features", "qemu-sim"],
     )?;
+    // The on-target self-test image (issue 18) links: built here, before
+    // the board image's own build (the size check) overwrites `hopper-fw`.
+    mcu_clippy(
+        root,
+        "clippy (MCU target, self-test image)",
+        &["--features", "selftest"],
+    )?;
+    run(
+        root,
+        "self-test image build (MCU target)",
+        cargo().args([
+            "build",
+            "-p",
+            "hopper-app",
+            "--release",
+            "--target",
+            TARGET,
+            "--features",
+            "selftest",
+        ]),
+    )?;
     size(root)?;
     qemu::run(root)?;
     session::against_serve(root)?;

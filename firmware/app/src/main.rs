@@ -52,9 +52,12 @@ pub mod control;
 pub mod serial;
 
 #[cfg(all(target_os = "none", not(feature = "qemu-sim")))]
+// The self-test uses the board's init and I/O, not its controller's parts.
+#[cfg_attr(feature = "selftest", allow(dead_code))]
 mod board;
 
 #[cfg(all(target_os = "none", not(feature = "qemu-sim")))]
+#[cfg_attr(feature = "selftest", allow(dead_code))]
 mod flash;
 
 #[cfg(all(target_os = "none", not(feature = "qemu-sim")))]
@@ -363,7 +366,11 @@ pub mod log {
 }
 
 /// The board application.
-#[cfg(all(target_os = "none", not(feature = "qemu-sim")))]
+#[cfg(all(
+    target_os = "none",
+    not(feature = "qemu-sim"),
+    not(feature = "selftest")
+))]
 #[rtic::app(device = stm32f4::stm32f405, peripherals = true, dispatchers = [FSMC, FPU])]
 mod app {
     use crate::board::{self, BoardIo, CycleCounter, DumpButton, Watchdog};
@@ -625,6 +632,143 @@ mod app {
             }
         }
         defmt::info!("capture dump ends ({=u32} log items dropped)", log_dropped);
+    }
+}
+
+/// The on-target self-test (`--features selftest`): the board's `init`,
+/// then one [`hopper_control::selftest`] step per control period on the
+/// loopback harness (docs/board.md, "Self-test"), the verdicts over defmt.
+#[cfg(all(target_os = "none", feature = "selftest", not(feature = "qemu-sim")))]
+#[rtic::app(device = stm32f4::stm32f405, peripherals = true)]
+mod app {
+    use crate::board::{self, BoardIo, Watchdog};
+    use crate::control::CONTROL_HZ;
+    use crate::serial::{RxQueue, TxQueue};
+    use hopper_control::hal::HopperIo;
+    use hopper_control::hopper::HopperConfig;
+    use hopper_control::selftest::{Inputs, SelfTest};
+    use stm32f4::stm32f405 as pac;
+
+    #[shared]
+    struct Shared {}
+
+    #[local]
+    struct Local {
+        io: BoardIo,
+        watchdog: Watchdog,
+        test: SelfTest,
+    }
+
+    #[init(local = [rxq: RxQueue = RxQueue::new(), txq: TxQueue = TxQueue::new()])]
+    fn init(cx: init::Context) -> (Shared, Local) {
+        let zero = HopperConfig::default().calibration.dac_zero_code;
+        let (rx_in, _rx_out) = cx.local.rxq.split();
+        let (_tx_in, tx_out) = cx.local.txq.split();
+        let board = board::init(cx.device, CONTROL_HZ, zero, (rx_in, tx_out));
+        harness_pins();
+        defmt::info!(
+            "hopper-fw self-test ({=str}): unplug the amplifier; the loopback harness of docs/board.md",
+            board::CLOCK_PROFILE
+        );
+        // What init found: the clock, the crystal, the saved calibration.
+        let b = board.boot;
+        defmt::info!(
+            "selftest: core clock {=u32} Hz (as configured: {=bool}), crystal {=u32} Hz measured against the HSI (profile {=u32} Hz), brown-out reset on: {=bool}, a saved calibration: {=bool}",
+            b.sysclk_hz,
+            b.clock_as_configured,
+            b.hse_measured_hz,
+            b.hse_expected_hz,
+            b.brown_out_reset_on,
+            board.stored.len.is_some()
+        );
+        (
+            Shared {},
+            Local {
+                io: board.io,
+                watchdog: board.watchdog,
+                test: SelfTest::new(zero),
+            },
+        )
+    }
+
+    /// PC6..PC10 push-pull outputs, low (quadrature for both encoders, the
+    /// probe); PC11, PC12 inputs with pull-downs (the probe's and AMP_EN's
+    /// loopbacks: an open harness reads low).
+    #[allow(unsafe_code)] // GPIOC belongs to the board (PC13); these pins are free.
+    fn harness_pins() {
+        // SAFETY: GPIOC's other pins are only PC13 (an input the self-test
+        // does not use); the writes below touch PC6..PC12 alone.
+        let gpioc = unsafe { &*pac::GPIOC::ptr() };
+        gpioc
+            .bsrr()
+            .write(|w| unsafe { w.bits(0b11111 << (6 + 16)) });
+        gpioc.moder().modify(|r, w| unsafe {
+            let mut m = r.bits() & !(0x3FFF << 12);
+            for pin in 6..=10 {
+                m |= 0b01 << (2 * pin);
+            }
+            w.bits(m)
+        });
+        gpioc.pupdr().modify(|r, w| unsafe {
+            w.bits((r.bits() & !(0xF << 22)) | (0b10 << 22) | (0b10 << 24))
+        });
+    }
+
+    #[idle]
+    fn idle(_: idle::Context) -> ! {
+        loop {
+            cortex_m::asm::nop();
+        }
+    }
+
+    /// One step per period, with fresh ADC samples; the watchdog fed as by
+    /// the controller.
+    #[task(binds = ADC, priority = 3, local = [io, watchdog, test, reported: bool = false])]
+    #[allow(unsafe_code)] // GPIOC's harness pins (see `harness_pins`).
+    fn control(cx: control::Context) {
+        if !cx.local.io.ack_control_irq() {
+            return;
+        }
+        cx.local.watchdog.feed();
+        let Ok(sample) = cx.local.io.read() else {
+            // (Infallible on the board: its reads are register reads.)
+            return;
+        };
+        // SAFETY: as in `harness_pins`.
+        let gpioc = unsafe { &*pac::GPIOC::ptr() };
+        let idr = gpioc.idr().read().bits();
+        let test = &mut *cx.local.test;
+        let o = test.period(&Inputs {
+            sample,
+            harness_in: idr & (1 << 11) != 0,
+            amp_loop_in: idr & (1 << 12) != 0,
+        });
+        let _ = cx.local.io.write_dac(o.dac_code);
+        let _ = cx.local.io.set_amp_enabled(o.amp_enable);
+        let bit = |on: bool, pin: u32| if on { 1 << pin } else { 1 << (pin + 16) };
+        let bsrr = bit(o.motor_ab.0, 6)
+            | bit(o.motor_ab.1, 7)
+            | bit(o.height_ab.0, 8)
+            | bit(o.height_ab.1, 9)
+            | bit(o.probe, 10);
+        gpioc.bsrr().write(|w| unsafe { w.bits(bsrr) });
+        if test.done() && !*cx.local.reported {
+            *cx.local.reported = true;
+            for v in test.verdicts() {
+                defmt::info!(
+                    "selftest: {} {=str}: measured {=i32}, expected {=i32}",
+                    v.check,
+                    if v.passed { "PASS" } else { "FAIL" },
+                    v.measured,
+                    v.expected
+                );
+            }
+            if test.passed() {
+                defmt::info!("selftest: all checks passed");
+            } else {
+                defmt::error!("selftest: FAILED (docs/board.md, \"Self-test\")");
+            }
+        }
     }
 }
 

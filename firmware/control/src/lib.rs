@@ -61,6 +61,7 @@ pub mod params;
 pub mod pd_design;
 pub mod persist;
 pub mod runner;
+pub mod selftest;
 pub mod supervisor;
 pub mod telemetry;
 pub mod thermal;
