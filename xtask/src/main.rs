@@ -194,6 +194,7 @@ fn target_dir(root: &Path) -> Result<PathBuf, String> {
 /// `rust-toolchain.toml` names (rustup does not add them to an installed
 /// toolchain by itself). Idempotent.
 fn setup(root: &Path) -> Result<(), String> {
+    ensure_flip_link(root)?;
     if Command::new("rustup").arg("--version").output().is_err() {
         eprintln!("xtask: rustup not found; assuming the toolchain is complete");
         return Ok(());
@@ -207,6 +208,19 @@ fn setup(root: &Path) -> Result<(), String> {
         root,
         "rustup component add",
         Command::new("rustup").args(["component", "add", "rustfmt", "clippy", "llvm-tools"]),
+    )
+}
+
+/// The MCU images link through flip-link (`.cargo/config.toml`): installs
+/// it when missing (a few seconds of `cargo install`).
+pub(crate) fn ensure_flip_link(root: &Path) -> Result<(), String> {
+    if Command::new("flip-link").arg("--version").output().is_ok() {
+        return Ok(());
+    }
+    run(
+        root,
+        "cargo install flip-link",
+        cargo().args(["install", "flip-link", "--locked"]),
     )
 }
 
@@ -310,6 +324,7 @@ fn mcu_clippy(root: &Path, what: &str, extra: &[&str]) -> Result<(), String> {
 /// CARGO_TARGET_DIR set, or `build.target-dir`, the guess fails on a fresh
 /// clone and reads a stale image on an old one).
 fn board_image(root: &Path) -> Result<PathBuf, String> {
+    ensure_flip_link(root)?;
     build_executable(
         root,
         "firmware release build",

@@ -92,6 +92,7 @@ const STEP_MAX_CEILING: u64 = 1_680;
 const QEMU_TIMEOUT: Duration = Duration::from_secs(900);
 
 pub fn run(root: &Path) -> Result<(), String> {
+    crate::ensure_flip_link(root)?;
     ensure_qemu()?;
     // `hopper-link` for the link session, `hopper-sim` for the golden
     // checks: one workspace test build for both.
