@@ -287,11 +287,14 @@ const HEIGHT_TOLERANCE_MM: f64 = 0.1;
 /// The numbers of a line after `prefix` (`1,234` and `0.12` alike), in order.
 fn numbers_after(lines: &[String], prefix: &str) -> Option<Vec<f64>> {
     let l = lines.iter().rev().find_map(|l| l.strip_prefix(prefix))?;
-    Some(
-        l.split(|c: char| !(c.is_ascii_digit() || c == '.' || c == '-'))
-            .filter_map(|w| w.trim_matches('.').parse().ok())
-            .collect(),
-    )
+    Some(numbers(l))
+}
+
+/// The numbers in `l` (`1,234` and `0.12` alike), in order.
+fn numbers(l: &str) -> Vec<f64> {
+    l.split(|c: char| !(c.is_ascii_digit() || c == '.' || c == '-'))
+        .filter_map(|w| w.trim_matches('.').parse().ok())
+        .collect()
 }
 
 fn run_session(link: &Path, addr: &str, out_dir: &Path, label: &str) -> Result<Report, String> {
@@ -495,11 +498,7 @@ fn run_session(link: &Path, addr: &str, out_dir: &Path, label: &str) -> Result<R
     let tares: Vec<Vec<f64>> = lines
         .iter()
         .filter_map(|l| l.strip_prefix("tare: calibration.loadcell_offset_code "))
-        .map(|l| {
-            l.split(|c: char| !(c.is_ascii_digit() || c == '.' || c == '-'))
-                .filter_map(|w| w.trim_matches('.').parse().ok())
-                .collect()
-        })
+        .map(numbers)
         .collect();
     // "A -> B codes (+N N), calibration.pot_offset_code C -> D codes (+M mm) (applied)"
     match tares

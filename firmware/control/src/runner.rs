@@ -564,7 +564,7 @@ impl PeriodRunner {
             Routine::Tare => {
                 // Unloaded leg: the load cell must read the flight force
                 // k (delta0 + p) at the nut's position, the pot 0.
-                let force_n = s.spring_rate_n_per_m * (s.spring_preload_m + p_m);
+                let force_n = s.flight_force_n(p_m);
                 (
                     self.cal.loadcell_mean_code() - force_n / c.loadcell_gain_n_per_code,
                     self.cal.pot_mean_code(),
@@ -600,7 +600,7 @@ impl PeriodRunner {
                     * c.loadcell_gain_n_per_code;
                 let x_m = (self.cal.pot_mean_code() - c.pot_offset_code) * c.pot_gain_m_per_code;
                 let weight_n = cfg.model.body_mass_kg * cfg.model.gravity_mps2;
-                let carried_n = force_n - s.spring_rate_n_per_m * (s.spring_preload_m + p_m);
+                let carried_n = force_n - s.flight_force_n(p_m);
                 let Some(z_m) = last.map(|i| i.body_height_m) else {
                     self.cal.fail(CalState::FailedSensors);
                     return;

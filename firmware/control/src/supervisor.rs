@@ -385,6 +385,14 @@ impl Default for SupervisorConfig {
 }
 
 impl SupervisorConfig {
+    /// The spring force with the leg unloaded (toe free, leg on its
+    /// extension stop), N: `k (delta0 + p)` with the calibrated rate and
+    /// preload, at nut position `nut_m`. What the load cell reads in flight.
+    #[inline(always)]
+    pub fn flight_force_n(&self, nut_m: f32) -> f32 {
+        self.spring_rate_n_per_m * (self.spring_preload_m + nut_m)
+    }
+
     /// Checks every field, naming the first one out of range: finite,
     /// ordered ranges and stroke limits, a positive current limit with the
     /// trip level at or above it, a positive braking deceleration and spring
@@ -737,8 +745,7 @@ impl Supervisor {
     /// Whether load cell and pot disagree about contact in this sample.
     fn contact_disagrees(&self, input: &SupervisorInput) -> bool {
         let c = &self.config;
-        let flight_force_n = c.spring_rate_n_per_m * (c.spring_preload_m + input.nut_position_m);
-        let contact_force_n = input.spring_force_n - flight_force_n;
+        let contact_force_n = input.spring_force_n - c.flight_force_n(input.nut_position_m);
         let x = input.leg_compression_m;
         let cell_contact = contact_force_n > c.contact_force_n;
         let cell_free = contact_force_n < c.free_force_n;
