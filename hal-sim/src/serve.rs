@@ -10,6 +10,7 @@
 
 use hopper_control::link::Tx;
 use hopper_control::runner::NoCounter;
+use hopper_control::telemetry::{FaultCapture, CAPTURE_LEN};
 use hopper_plant::robot::VirtualRobot;
 use std::io::{ErrorKind, Read, Write};
 use std::net::{TcpListener, TcpStream};
@@ -125,6 +126,8 @@ pub fn serve(
         .map_err(|e| format!("socket: {e}"))?;
     let mut client: Option<TcpStream> = None;
     let mut tx = Queue::default();
+    // The robot's capture, frozen around a fault (32 KiB: on the heap).
+    let mut capture = Box::new(FaultCapture::<CAPTURE_LEN>::new());
     let mut inbox: Vec<u8> = Vec::new();
     let mut buf = [0u8; 4096];
     let start = Instant::now();
@@ -174,7 +177,7 @@ pub fn serve(
         let batch = due.saturating_sub(done).min(MAX_BATCH);
         for _ in 0..batch {
             let rx = std::mem::take(&mut inbox);
-            robot.control(rx.into_iter(), &mut tx, &mut NoCounter);
+            robot.control(rx.into_iter(), &mut tx, &mut capture, &mut NoCounter);
             robot.runner.end_period(false);
             // A save: written between two periods, as the host's clock
             // allows (a board defers it to its next boot).

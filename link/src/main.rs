@@ -98,11 +98,15 @@ enum Cmd {
     /// motor, encoder and load cell the right way round), `home` (the nut
     /// to its upper stop, the motor encoder zeroed there), `spring` (a
     /// nut sweep: the spring rate by least squares), `tare` (load-cell
-    /// tare and potentiometer zero). `direction`, `home` and `spring`
-    /// drive the motor at up to `bringup.current_limit_a`.
+    /// tare and potentiometer zero), then standing again `weight` (a nut
+    /// sweep lifting and lowering the body: the weight, hence the load
+    /// cell's gain, and the stance friction). `direction`, `home`, `spring`
+    /// and `weight` drive the motor at up to `bringup.current_limit_a`.
     Calibrate {
-        /// sensors | tare | direction | home | spring | height
-        #[arg(value_parser = ["sensors", "tare", "direction", "home", "spring", "height"])]
+        /// sensors | tare | direction | home | spring | height | weight
+        #[arg(value_parser = clap::builder::PossibleValuesParser::new(
+            hopper_control::bringup::Routine::ALL.map(|r| r.name())
+        ))]
         routine: String,
         /// How long it measures, s of robot time.
         #[arg(long, default_value_t = 0.5)]
@@ -430,6 +434,7 @@ fn calibrate(c: &mut Client, routine: &str, seconds: f32) -> Result<()> {
     );
     let lc_gain = get(c, "calibration.loadcell_gain_n_per_code")?;
     let pot_gain = get(c, "calibration.pot_gain_m_per_code")?;
+    let rate = get(c, "supervisor.spring_rate_n_per_m")?;
     match c.request(Request::Calibrate {
         routine: code,
         seconds,
@@ -483,8 +488,22 @@ fn calibrate(c: &mut Client, routine: &str, seconds: f32) -> Result<()> {
         r => bail!("unexpected answer {r:?}"),
     };
     print_results(routine, &b, r.state == CalState::Done as u8);
+    if routine == Routine::Weight.name() {
+        let w = match c.request(Request::Weighing)? {
+            Response::Weighing(w) => w,
+            r => bail!("unexpected answer {r:?}"),
+        };
+        print_weighing(&w);
+    }
     if r.state != CalState::Done as u8 {
         bail!("calibrate {routine} {state}");
+    }
+    if routine == Routine::Weight.name() {
+        println!(
+            "weight: calibration.loadcell_gain_n_per_code {lc_gain:.5} -> {:.5} N/code, supervisor.spring_rate_n_per_m {rate:.0} -> {:.0} N/m (applied)",
+            get(c, "calibration.loadcell_gain_n_per_code")?,
+            get(c, "supervisor.spring_rate_n_per_m")?
+        );
     }
     if r.loadcell_offset_code.is_finite() {
         println!(
@@ -506,7 +525,7 @@ fn print_results(routine: &str, b: &hopper_protocol::BringupResults, done: bool)
     if b.peak_current_a > 0.0 {
         println!("current: up to {:.2} A", b.peak_current_a);
     }
-    if b.nut_travel_m.is_finite() {
+    if b.nut_travel_m.is_finite() && routine == "direction" {
         println!(
             "direction: a pulse down moved the nut {:+.3} mm and the load cell {:+.2} N",
             b.nut_travel_m * 1000.0,
@@ -533,6 +552,20 @@ fn print_results(routine: &str, b: &hopper_protocol::BringupResults, done: bool)
         println!(
             "height: the body height corrected by {:+.3} mm ({applied})",
             b.height_offset_m * 1000.0
+        );
+    }
+}
+
+/// What the weighing found, one line.
+fn print_weighing(w: &hopper_protocol::WeighingInfo) {
+    if w.weight_n.is_finite() {
+        println!(
+            "weight: the robot weighs {:.2} N as the load cell reads it, {:.2} N as configured: the load cell reads {:+.2}%; stance friction {:.2} N; the body rose {:.2} mm",
+            w.weight_n,
+            w.configured_weight_n,
+            (w.weight_n / w.configured_weight_n - 1.0) * 100.0,
+            w.friction_n,
+            w.body_rise_m * 1000.0
         );
     }
 }

@@ -158,6 +158,8 @@ pub enum Request {
     /// The crystal: the profile's and as measured at boot
     /// ([`Response::Crystal`]).
     Crystal,
+    /// What the last weighing found ([`Response::Weighing`]).
+    Weighing,
 }
 
 /// Robot to host.
@@ -237,6 +239,27 @@ pub enum Response {
     Stored(StoredInfo),
     /// The crystal.
     Crystal(CrystalInfo),
+    /// What the last weighing found.
+    Weighing(WeighingInfo),
+}
+
+/// What the weighing found (`hopper_control::bringup::Routine::Weight`): a
+/// standing nut sweep, the body lifted and lowered on the spring; NaN where
+/// it did not measure (no weighing yet, or it failed before the sweep).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct WeighingInfo {
+    /// Where it is (`hopper_control::bringup::CalState` by code).
+    pub state: u8,
+    /// The robot's weight as the load cell read it, the mean force of the
+    /// lift and the lowering, N.
+    pub weight_n: f32,
+    /// The weight the configuration gives, `(M + m_s) g`, N.
+    pub configured_weight_n: f32,
+    /// Half the difference of the lift's and the lowering's forces: the
+    /// friction on the leg in stance, N.
+    pub friction_n: f32,
+    /// How far the body rose while the nut went down, m.
+    pub body_rise_m: f32,
 }
 
 /// The crystal (`hopper_control::boot::BootReport`).
@@ -745,6 +768,7 @@ mod tests {
             Just(Request::Save),
             Just(Request::Stored),
             Just(Request::Crystal),
+            Just(Request::Weighing),
             (any::<bool>(), any::<f32>())
                 .prop_map(|(hoisted, lift_m)| Request::SimulateMount { hoisted, lift_m }),
             (any::<u8>(), any::<f32>())

@@ -10,6 +10,7 @@ use hopper_control::bringup::{CalRefusal, CalState, Routine};
 use hopper_control::hopper::Strategy;
 use hopper_control::link::Tx;
 use hopper_control::runner::{NoCounter, PeriodRunner, Timing};
+use hopper_control::telemetry::{FaultCapture, CAPTURE_LEN};
 use hopper_protocol::BringupResults;
 
 const DT_S: f64 = 1e-4;
@@ -58,8 +59,15 @@ fn robot(mis: Miscalibration, set: &[(&str, f32)]) -> VirtualRobot {
 /// largest current commanded while disarmed.
 fn run(r: &mut VirtualRobot, seconds: f64) -> Vec<f64> {
     let mut apexes = Vec::new();
+    // Faults are not the subject here: a fresh capture each run.
+    let mut capture = Box::new(FaultCapture::<CAPTURE_LEN>::new());
     for _ in 0..(seconds / DT_S).round() as u64 {
-        r.control(core::iter::empty(), &mut NullTx, &mut NoCounter);
+        r.control(
+            core::iter::empty(),
+            &mut NullTx,
+            &mut capture,
+            &mut NoCounter,
+        );
         r.runner.end_period(false);
         r.advance(&mut |e| {
             if let Event::Apex { toe_height_m, .. } = e {
@@ -115,14 +123,16 @@ fn offsets(r: &VirtualRobot) -> (f32, f32) {
 }
 
 /// The whole bring-up of docs/board.md, then the shaped controller: with
-/// the spring 15% stiffer and 15% softer than configured, the routines
-/// recover every constant within its tolerance (the CI sessions' figures)
-/// and the robot then hops at its target, measured on the plant.
+/// the spring 15% stiffer and the load cell 5% low, and the spring 15%
+/// softer and the load cell 5% high, the routines recover every constant
+/// within its tolerance (the CI sessions' figures) and the robot then hops
+/// at its target, measured on the plant.
 #[test]
 fn bring_up_recovers_the_machine_and_the_shaped_controller_then_converges() {
-    for spring_rate_error in [0.15, -0.15] {
+    for (spring_rate_error, loadcell_gain_error) in [(0.15, -0.05), (-0.15, 0.05)] {
         let mis = Miscalibration {
             spring_rate_error,
+            loadcell_gain_error,
             ..Miscalibration::SESSION
         };
         let mut r = robot(mis, &[("controller", 8.0), ("target_apex_m", 0.12)]);
@@ -148,11 +158,18 @@ fn bring_up_recovers_the_machine_and_the_shaped_controller_then_converges() {
         );
         assert!(h.peak_current_a <= 6.0 + 1e-4, "{h:?}");
         assert_eq!(arm_refusal(&r), Some(ArmRefusal::NotCalibrated));
+        // The weighing reads forces through the tare's offset.
+        assert_eq!(
+            r.runner.start_calibration(Routine::Weight, 0.5),
+            Err(CalRefusal::TareFirst)
+        );
         let before = offsets(&r);
         done(&mut r, Routine::Tare);
         let s = done(&mut r, Routine::Spring);
+        // The rate as the load cell reads it: its gain error included.
         let k = f64::from(s.spring_rate_n_per_m);
-        assert!((k / k_true - 1.0).abs() < 0.01, "{k} vs {k_true}: {s:?}");
+        let k_read = k_true * (1.0 + loadcell_gain_error);
+        assert!((k / k_read - 1.0).abs() < 0.01, "{k} vs {k_read}: {s:?}");
         assert_eq!(
             r.runner.hopper().config().supervisor.spring_rate_n_per_m,
             s.spring_rate_n_per_m
@@ -163,10 +180,43 @@ fn bring_up_recovers_the_machine_and_the_shaped_controller_then_converges() {
         let pot = f64::from(after.1 - before.1);
         assert!((lc - mis.loadcell_bias_n).abs() < 0.24, "load cell {lc}");
         assert!((pot - mis.pot_bias_m).abs() < 1e-5, "pot {pot}");
-        // Off the hoist onto the ground, the height zero, up again.
+        // On the hoist the leg carries nothing: no weighing.
+        assert_eq!(
+            calibrate(&mut r, Routine::Weight).0,
+            CalState::FailedNotOnGround
+        );
+        // Off the hoist onto the ground: the weighing, the height zero, up
+        // again.
         r.mount(None);
         let bounces = run(&mut r, 3.0);
         eprintln!("after the drop: {bounces:?}");
+        let gain_before = r
+            .runner
+            .hopper()
+            .config()
+            .calibration
+            .loadcell_gain_n_per_code;
+        done(&mut r, Routine::Weight);
+        let w = r.runner.weighing();
+        let c = r.runner.hopper().config();
+        let found = f64::from(gain_before / c.calibration.loadcell_gain_n_per_code) - 1.0;
+        eprintln!("weighing: {w:?}: gain error {found:+.4}");
+        assert!(
+            (found - loadcell_gain_error).abs() < 0.005,
+            "gain error {found} vs {loadcell_gain_error}: {w:?}"
+        );
+        let k = f64::from(c.supervisor.spring_rate_n_per_m);
+        assert!(
+            (k / k_true - 1.0).abs() < 0.01,
+            "{k} vs {k_true} after the weighing"
+        );
+        // The stance friction, within a tenth of the plant's.
+        let f_true = Params::design().leg_friction_n + Params::design().planarizer_friction_n;
+        assert!(
+            (f64::from(w.friction_n) - f_true).abs() < 0.1 * f_true,
+            "friction {} vs {f_true}",
+            w.friction_n
+        );
         let z = done(&mut r, Routine::Height);
         assert!(
             (f64::from(z.height_offset_m) + mis.height_zero_error_m).abs() < 1e-4,

@@ -151,6 +151,8 @@ fn start_serve(sim: &Path, flash: &Path) -> Result<(Reaped, String), String> {
         .arg(MIS.spring_rate_error.to_string())
         .arg("--height-zero-error-m")
         .arg(MIS.height_zero_error_m.to_string())
+        .arg("--loadcell-gain-error")
+        .arg(MIS.loadcell_gain_error.to_string())
         .arg("--flash")
         .arg(flash)
         .stdout(Stdio::piped())
@@ -222,11 +224,13 @@ struct Report {
     /// The tare's load-cell and potentiometer corrections, N and mm.
     tare_n: f64,
     tare_mm: f64,
-    /// Where homing found the stop, mm; the spring rate found, N/m; the
-    /// height correction, mm.
+    /// Where homing found the stop, mm; the spring rate found (after the
+    /// weighing's correction), N/m; the height correction, mm.
     home_mm: f64,
     spring_n_per_m: f64,
     height_mm: f64,
+    /// The load cell's gain error the weighing found.
+    gain_error: f64,
     /// The saved calibration after a restart (`loaded`; the QEMU image's
     /// flash is RAM: `-`).
     reboot: String,
@@ -255,13 +259,14 @@ impl Report {
             self.link_mean,
             self.link_max
         ) + &format!(
-            " tare_loadcell_n={:+.3} tare_pot_mm={:+.4} home_mm={:+.4} spring_n_per_m={:.0} height_mm={:+.3} saved_after_restart={}",
+            " tare_loadcell_n={:+.3} tare_pot_mm={:+.4} home_mm={:+.4} spring_n_per_m={:.0} height_mm={:+.3} saved_after_restart={} loadcell_gain_error={:+.4}",
             self.tare_n,
             self.tare_mm,
             self.home_mm,
             self.spring_n_per_m,
             self.height_mm,
-            if self.reboot.is_empty() { "-" } else { &self.reboot }
+            if self.reboot.is_empty() { "-" } else { &self.reboot },
+            self.gain_error
         )
     }
 }
@@ -279,6 +284,10 @@ const HOME_TOLERANCE_MM: f64 = 0.02;
 /// How close the spring sweep's rate must come: 1% (the fit of 40,000
 /// points over 10 mm; the residual's 2.4 N RMS is the load cell's noise).
 const SPRING_TOLERANCE: f64 = 0.01;
+/// How close the weighing must find the load cell's gain: 0.5% (its 5%
+/// error found to a tenth; the two halves' means over some 5,000 samples
+/// each are good to 0.03 N of the 95 N, the rest is the sweep's dynamics).
+const GAIN_TOLERANCE: f64 = 0.005;
 /// How close the height zero must come, mm: the potentiometer's 0.1 mm
 /// noise averaged over 5,000 samples, its 29 um code and the encoder's
 /// count.
@@ -464,20 +473,50 @@ fn run_session(link: &Path, addr: &str, out_dir: &Path, label: &str) -> Result<R
         }
         _ => problems.push("no homing result".into()),
     }
+    // The sweep finds the rate as the load cell reads it (its gain error
+    // included); the weighing then takes the gain error out of both.
+    let k_true =
+        hopper_plant::Params::design().spring_stiffness_n_per_m * (1.0 + MIS.spring_rate_error);
     match numbers_after(&lines, "spring: rate ") {
         Some(v) if !v.is_empty() => {
-            r.spring_n_per_m = v[0];
-            let want = hopper_plant::Params::design().spring_stiffness_n_per_m
-                * (1.0 + MIS.spring_rate_error);
-            if (r.spring_n_per_m / want - 1.0).abs() > SPRING_TOLERANCE {
+            let want = k_true * (1.0 + MIS.loadcell_gain_error);
+            if (v[0] / want - 1.0).abs() > SPRING_TOLERANCE {
                 problems.push(format!(
                     "the spring sweep found {:.0} N/m, not {want:.0} N/m (within {:.0}%)",
-                    r.spring_n_per_m,
+                    v[0],
                     SPRING_TOLERANCE * 100.0
                 ));
             }
         }
         _ => problems.push("no spring result".into()),
+    }
+    // "weighs W N as the load cell reads it, C N as configured: the load
+    // cell reads E%; stance friction F N; the body rose R mm"
+    match numbers_after(&lines, "weight: the robot weighs ") {
+        Some(v) if v.len() >= 3 => {
+            r.gain_error = v[0] / v[1] - 1.0;
+            if (r.gain_error - MIS.loadcell_gain_error).abs() > GAIN_TOLERANCE {
+                problems.push(format!(
+                    "the weighing found the load cell's gain off by {:+.4}, not {:+} (within {GAIN_TOLERANCE})",
+                    r.gain_error, MIS.loadcell_gain_error
+                ));
+            }
+        }
+        _ => problems.push("no weighing result".into()),
+    }
+    // "gain A -> B N/code, supervisor.spring_rate_n_per_m C -> D N/m"
+    match numbers_after(&lines, "weight: calibration.loadcell_gain_n_per_code ") {
+        Some(v) if v.len() >= 4 => {
+            r.spring_n_per_m = v[3];
+            if (r.spring_n_per_m / k_true - 1.0).abs() > SPRING_TOLERANCE {
+                problems.push(format!(
+                    "after the weighing the spring rate is {:.0} N/m, not {k_true:.0} N/m (within {:.0}%)",
+                    r.spring_n_per_m,
+                    SPRING_TOLERANCE * 100.0
+                ));
+            }
+        }
+        _ => problems.push("no weighing correction".into()),
     }
     match numbers_after(&lines, "height: the body height corrected by ") {
         Some(v) if !v.is_empty() => {

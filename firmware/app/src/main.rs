@@ -863,7 +863,9 @@ mod app {
 
     #[shared]
     struct Shared {
-        capture: Capture,
+        /// The capture: a static built in place, as the board's (32 KiB
+        /// off `init`'s stack).
+        capture: &'static mut Capture,
     }
 
     #[local]
@@ -875,7 +877,7 @@ mod app {
         log: Log,
     }
 
-    #[init]
+    #[init(local = [capture: Capture = Capture::new()])]
     fn init(cx: init::Context) -> (Shared, Local) {
         let dp = cx.device;
         let mut core = cx.core;
@@ -922,7 +924,7 @@ mod app {
         );
         (
             Shared {
-                capture: Capture::new(),
+                capture: cx.local.capture,
             },
             Local {
                 runner,
@@ -1062,7 +1064,7 @@ mod app {
 #[cfg(all(target_os = "none", feature = "qemu-link"))]
 #[rtic::app(device = stm32f4::stm32f405, peripherals = true, dispatchers = [FSMC])]
 mod app {
-    use crate::control::{CONTROL_HZ, CONTROL_PERIOD_S, TIMING};
+    use crate::control::{Capture, CONTROL_HZ, CONTROL_PERIOD_S, TIMING};
     use crate::serial::{LinkTx, RxQueue, Serial, TxQueue};
     use cortex_m::peripheral::{SCB, SYST};
     use cortex_m_semihosting::debug;
@@ -1091,6 +1093,10 @@ mod app {
     #[local]
     struct Local {
         robot: VirtualRobot,
+        /// The capture, frozen around a fault: a static built in place, as
+        /// the board's (32 KiB; inside the robot, built in `init` and moved,
+        /// it took `init`'s stack past the room flip-link leaves).
+        capture: &'static mut Capture,
         flash: Flash,
         counter: crate::qemu::Instructions,
         syst: SYST,
@@ -1099,7 +1105,7 @@ mod app {
         serial: Serial,
     }
 
-    #[init(local = [rxq: RxQueue = RxQueue::new(), txq: TxQueue = TxQueue::new()])]
+    #[init(local = [rxq: RxQueue = RxQueue::new(), txq: TxQueue = TxQueue::new(), capture_buf: Capture = Capture::new()])]
     fn init(cx: init::Context) -> (Shared, Local) {
         let dp = cx.device;
         let mut core = cx.core;
@@ -1160,6 +1166,7 @@ mod app {
             Shared {},
             Local {
                 robot,
+                capture: cx.local.capture_buf,
                 flash,
                 counter,
                 syst: core.SYST,
@@ -1180,13 +1187,14 @@ mod app {
 
     /// One control period and the link's work, then the plant to the next
     /// tick with SysTick stopped (as in the scenario image).
-    #[task(binds = SysTick, priority = 3, local = [robot, flash, counter, syst, link_rx, link_tx])]
+    #[task(binds = SysTick, priority = 3, local = [robot, capture, flash, counter, syst, link_rx, link_tx])]
     fn control(cx: control::Context) {
         let robot = &mut *cx.local.robot;
         let rx = &mut *cx.local.link_rx;
         let _ = robot.control(
             core::iter::from_fn(|| rx.dequeue()),
             cx.local.link_tx,
+            cx.local.capture,
             cx.local.counter,
         );
         cx.local.syst.disable_counter();

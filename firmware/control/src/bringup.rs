@@ -44,11 +44,28 @@
 //!   constant forces, not separable by a sweep, so the preload stays as
 //!   configured and the tare (run after the sweep) takes the offset.
 //!
+//! - [`Routine::Weight`] (homed and tared, standing on the toe): a slow
+//!   nut sweep down and back that lifts the body on the spring and lowers
+//!   it again. Quasi-static, the spring carries the robot's weight plus the
+//!   friction on the leg lifting it and minus it lowering it: the mean of
+//!   the two forces is the weight `(M + m_s) g` as the load cell reads it,
+//!   half their difference the stance friction. The load cell's gain is
+//!   the one error a tare (a zero) cannot see and the spring sweep cannot
+//!   tell from the rate (both scale with it): the weight it reads against
+//!   the configured one is that gain, and both
+//!   `calibration.loadcell_gain_n_per_code` and
+//!   `supervisor.spring_rate_n_per_m` (fitted with the same load cell) are
+//!   divided by it. The sweep is 60% of the standing leg compression at
+//!   most (the leg stays in its stroke), refused when the leg is not
+//!   compressed by half the weight's spring deflection (the toe is not on
+//!   the ground), and it fails when the body did not rise (held).
+//!
 //! The moves track a reference at `bringup.speed_mps` with the flight PD's
 //! gains (eq 4.4) plus the spring's measured force as feed-forward, so the
 //! nut moves at the set speed whatever the spring pushes.
 //!
-//! Not yet: saving the results to flash; the stroke to the lower stop.
+//! Saving the results is `crate::persist`'s. Not built: the stroke to the
+//! lower stop (optional in issue 18).
 
 use crate::hal::RawSample;
 use crate::laws::InvalidField;
@@ -108,6 +125,9 @@ pub struct DriveParams {
     pub spring_rate_n_per_m: f32,
     /// The nut's stroke, m (the homing move's longest travel beyond it).
     pub stroke_m: f32,
+    /// The robot's weight as configured, `(M + m_s) g`, N (the weighing's
+    /// reference).
+    pub weight_n: f32,
     /// Where homing leaves the nut, m below the stop: where the spring
     /// carries its weight, `max(0, m_s g / k - delta0)` (an unpowered nut
     /// released anywhere else swings on its spring).
@@ -126,6 +146,8 @@ pub struct DriveInput {
     pub spring_force_n: f32,
     /// Leg compression from the potentiometer, m.
     pub leg_compression_m: f32,
+    /// Body height from its encoder, m.
+    pub body_height_m: f32,
     /// The period, s.
     pub dt_s: f32,
 }
@@ -142,6 +164,11 @@ const DIRECTION_RETURN_S: f32 = 0.3;
 const DIRECTION_MIN_TRAVEL_M: f32 = 1.0e-4;
 /// Holding still after a move before a routine ends, s.
 const SETTLE_S: f32 = 0.1;
+/// The weighing ignores each half's first this long (the body and the
+/// friction's breakaway settling to the steady sweep), s.
+const WEIGH_SKIP_S: f32 = 0.25;
+/// The weighing's sweep as a fraction of the standing leg compression.
+const WEIGH_SWEEP_FRACTION: f32 = 0.6;
 
 /// Running means and co-moments of two variables (Welford's update): the
 /// least-squares line of the spring sweep.
@@ -227,6 +254,8 @@ pub enum Routine {
     Spring = 4,
     /// The height encoder zeroed with the toe on the ground.
     Height = 5,
+    /// A standing nut sweep: the robot's weight, hence the load cell's gain.
+    Weight = 6,
 }
 
 impl Routine {
@@ -239,6 +268,7 @@ impl Routine {
             3 => Some(Routine::Home),
             4 => Some(Routine::Spring),
             5 => Some(Routine::Height),
+            6 => Some(Routine::Weight),
             _ => None,
         }
     }
@@ -252,22 +282,27 @@ impl Routine {
             Routine::Home => "home",
             Routine::Spring => "spring",
             Routine::Height => "height",
+            Routine::Weight => "weight",
         }
     }
 
     /// Every routine, by wire code.
-    pub const ALL: [Routine; 6] = [
+    pub const ALL: [Routine; 7] = [
         Routine::SensorCheck,
         Routine::Tare,
         Routine::Direction,
         Routine::Home,
         Routine::Spring,
         Routine::Height,
+        Routine::Weight,
     ];
 
     /// Whether it drives the motor (the amplifier is on while it runs).
     pub const fn drives_motor(self) -> bool {
-        matches!(self, Routine::Direction | Routine::Home | Routine::Spring)
+        matches!(
+            self,
+            Routine::Direction | Routine::Home | Routine::Spring | Routine::Weight
+        )
     }
 }
 
@@ -292,8 +327,10 @@ pub enum CalRefusal {
     LinkDown,
     /// Homing needs a passed direction check since boot.
     DirectionFirst,
-    /// The spring sweep needs the nut homed since boot.
+    /// The spring sweep and the weighing need the nut homed since boot.
     HomeFirst,
+    /// The weighing needs the load cell tared (or a saved calibration).
+    TareFirst,
 }
 
 impl CalRefusal {
@@ -309,6 +346,7 @@ impl CalRefusal {
             CalRefusal::LinkDown => "link-down",
             CalRefusal::DirectionFirst => "check-direction-first",
             CalRefusal::HomeFirst => "home-first",
+            CalRefusal::TareFirst => "tare-first",
         }
     }
 }
@@ -390,11 +428,17 @@ pub enum CalState {
     /// The load cell does not carry the robot's weight: the toe is not on
     /// the ground.
     FailedNotOnGround,
+    /// The weighing's sweep did not lift the body by half the sweep: the
+    /// body is held.
+    FailedBodyHeld,
+    /// The weight read is not within a factor of two of the configured one,
+    /// or a half of the sweep gave fewer than 100 samples.
+    FailedWeight,
 }
 
 impl CalState {
     /// Every state, by wire code.
-    pub const ALL: [CalState; 13] = [
+    pub const ALL: [CalState; 15] = [
         CalState::Idle,
         CalState::Running,
         CalState::Done,
@@ -408,6 +452,8 @@ impl CalState {
         CalState::FailedNoStop,
         CalState::FailedFit,
         CalState::FailedNotOnGround,
+        CalState::FailedBodyHeld,
+        CalState::FailedWeight,
     ];
 
     /// Kebab-case name.
@@ -426,6 +472,8 @@ impl CalState {
             CalState::FailedNoStop => "failed: no stop within the stroke",
             CalState::FailedFit => "failed: the spring fit is implausible",
             CalState::FailedNotOnGround => "failed: the load cell does not carry the robot (put the toe on the ground)",
+            CalState::FailedBodyHeld => "failed: the body did not rise with the nut (let go of it)",
+            CalState::FailedWeight => "failed: the weight read is implausible (not within a factor of two of the configured one)",
         }
     }
 }
@@ -453,7 +501,8 @@ pub struct Calibrator {
     /// The motor angle at the start and the reference the PD tracks, rad.
     theta0_rad: f32,
     theta_ref_rad: f32,
-    /// Force statistics: the direction check's baseline and pulse end.
+    /// Force statistics: the direction check's baseline and pulse end;
+    /// the weighing's lift and lowering.
     force_before: Stats,
     force_after: Stats,
     /// Nut positions pushed on the stop, m.
@@ -468,6 +517,9 @@ pub struct Calibrator {
     nut_offset_m: f32,
     height_offset_m: f32,
     peak_a: f32,
+    /// The weighing: the body height at the start and how far it rose, m.
+    body_start_m: f32,
+    body_rise_m: f32,
     /// A driven routine ended in the last period (the runner acts once).
     ended: bool,
 }
@@ -520,6 +572,8 @@ impl Calibrator {
             nut_offset_m: f32::NAN,
             height_offset_m: f32::NAN,
             peak_a: 0.0,
+            body_start_m: f32::NAN,
+            body_rise_m: f32::NAN,
             ended: false,
         }
     }
@@ -622,7 +676,7 @@ impl Calibrator {
         }
         let finite = (m.motor_angle_rad + m.motor_rate_rad_s + m.spring_force_n + m.dt_s)
             .is_finite()
-            && m.leg_compression_m.is_finite();
+            && (m.leg_compression_m + m.body_height_m).is_finite();
         if !finite {
             self.end(CalState::FailedSensors);
             return 0.0;
@@ -650,6 +704,10 @@ impl Calibrator {
                 .unwrap_or_else(|(r, w)| track(r, w)),
             Routine::Spring => {
                 let (r, w) = self.sweep(m, &d, rate_rad_s);
+                track(r, w)
+            }
+            Routine::Weight => {
+                let (r, w) = self.weigh(m, &d, in_stage, rate_rad_s);
                 track(r, w)
             }
             _ => 0.0,
@@ -794,6 +852,115 @@ impl Calibrator {
                 }
                 (self.theta0_rad, 0.0)
             }
+        }
+    }
+
+    /// The weighing's reference (and its rate): the sweep chosen at the
+    /// start, down (the body lifted), back up (lowered), hold, verdict; the
+    /// force averaged over each half after its first `WEIGH_SKIP_S`.
+    fn weigh(
+        &mut self,
+        m: &DriveInput,
+        d: &DriveParams,
+        in_stage: f32,
+        rate_rad_s: f32,
+    ) -> (f32, f32) {
+        let r = d.screw_m_per_rad;
+        match self.stage {
+            0 => {
+                // Standing, the leg is compressed by about the weight's
+                // deflection less the preload: half the deflection at
+                // least, else the toe is off the ground.
+                let x0 = m.leg_compression_m;
+                if x0.is_nan() || x0 < 0.5 * d.weight_n / d.spring_rate_n_per_m {
+                    self.end(CalState::FailedNotOnGround);
+                    return (self.theta0_rad, 0.0);
+                }
+                self.travel_m = crate::num::clamp(WEIGH_SWEEP_FRACTION * x0, 0.0, d.limits.sweep_m);
+                self.body_start_m = m.body_height_m;
+                self.next_stage();
+                (self.theta0_rad, 0.0)
+            }
+            1 | 2 => {
+                let down = self.stage == 1;
+                if in_stage >= WEIGH_SKIP_S {
+                    if down {
+                        self.force_before.add(m.spring_force_n);
+                    } else {
+                        self.force_after.add(m.spring_force_n);
+                    }
+                }
+                let w = if down { rate_rad_s } else { -rate_rad_s };
+                self.theta_ref_rad += w * m.dt_s;
+                let bottom = self.theta0_rad + self.travel_m / r;
+                if down && self.theta_ref_rad >= bottom {
+                    self.theta_ref_rad = bottom;
+                    self.body_rise_m = m.body_height_m - self.body_start_m;
+                    self.next_stage();
+                } else if !down && self.theta_ref_rad <= self.theta0_rad {
+                    self.theta_ref_rad = self.theta0_rad;
+                    self.next_stage();
+                }
+                (self.theta_ref_rad, w)
+            }
+            _ => {
+                if in_stage >= SETTLE_S {
+                    let w = self.measured_weight_n();
+                    let enough =
+                        self.force_before.count() >= 100 && self.force_after.count() >= 100;
+                    let rise = self.body_rise_m;
+                    let state = if rise.is_nan() || rise < 0.5 * self.travel_m {
+                        CalState::FailedBodyHeld
+                    } else if enough && w >= 0.5 * d.weight_n && w <= 2.0 * d.weight_n {
+                        CalState::Done
+                    } else {
+                        CalState::FailedWeight
+                    };
+                    self.end(state);
+                }
+                (self.theta0_rad, 0.0)
+            }
+        }
+    }
+
+    /// The weighing's weight: the mean of the lift's and the lowering's
+    /// mean forces, N (NaN before both halves have samples).
+    fn measured_weight_n(&self) -> f32 {
+        if self.force_before.count() == 0 || self.force_after.count() == 0 {
+            f32::NAN
+        } else {
+            0.5 * (self.force_before.mean() + self.force_after.mean())
+        }
+    }
+
+    /// The weighing's weight as measured against the configured one: the
+    /// load cell's gain relative to its calibration (NaN unless the last
+    /// routine was a weighing that measured both halves).
+    pub fn weight_gain(&self) -> f32 {
+        match (self.routine, self.drive) {
+            (Routine::Weight, Some(d)) => self.measured_weight_n() / d.weight_n,
+            _ => f32::NAN,
+        }
+    }
+
+    /// What the last weighing found, as the link sends it (NaN where it did
+    /// not measure, state idle when the last routine was another).
+    pub fn weighing(&self) -> hopper_protocol::WeighingInfo {
+        let weighed = self.routine == Routine::Weight;
+        let nan_unless = |ok: bool, x: f32| if ok { x } else { f32::NAN };
+        let halves = self.force_before.count() > 0 && self.force_after.count() > 0;
+        hopper_protocol::WeighingInfo {
+            state: if weighed { self.state } else { CalState::Idle } as u8,
+            weight_n: nan_unless(weighed, self.measured_weight_n()),
+            configured_weight_n: match self.drive {
+                Some(d) if weighed => d.weight_n,
+                _ => f32::NAN,
+            },
+            friction_n: nan_unless(
+                weighed && halves,
+                0.5 * (self.force_before.mean() - self.force_after.mean()),
+            ),
+            body_rise_m: nan_unless(weighed, self.body_rise_m),
         }
     }
 
@@ -970,6 +1137,7 @@ mod tests {
             kd_a_s_per_rad: 0.6,
             spring_rate_n_per_m: 11_000.0,
             stroke_m: 0.05,
+            weight_n: 95.0,
             park_m: 2.2e-4,
         }
     }
@@ -992,6 +1160,7 @@ mod tests {
                 motor_rate_rad_s: 0.0,
                 spring_force_n: f,
                 leg_compression_m: 0.0,
+                body_height_m: 0.6,
                 dt_s: 1e-4,
             });
             if !c.running() {
@@ -1028,6 +1197,7 @@ mod tests {
                 motor_rate_rad_s: 0.0,
                 spring_force_n: 0.0,
                 leg_compression_m: 0.0,
+                body_height_m: 0.6,
                 dt_s: 1e-4,
             });
             theta -= d.limits.speed_mps / d.screw_m_per_rad * 1e-4;
@@ -1036,6 +1206,94 @@ mod tests {
         assert_eq!(c.state(), CalState::FailedNoStop);
         // 60 mm at 5 mm/s.
         assert!((periods as f32 * 1e-4 - 12.0).abs() < 0.01, "{periods}");
+    }
+
+    /// A weighing on a scripted standing robot: the nut follows the PD
+    /// (half its correction a period); standing (`held` false) the body
+    /// rises with the nut and the spring carries `weight + friction`
+    /// lifting, `weight - friction` lowering; held, the spring is
+    /// compressed by the nut instead. Returns the verdict and the info.
+    fn weigh_on(
+        x0_m: f32,
+        weight_n: f32,
+        friction_n: f32,
+        held: bool,
+    ) -> (CalState, hopper_protocol::WeighingInfo) {
+        let d = params();
+        let r = d.screw_m_per_rad;
+        let mut c = Calibrator::new();
+        c.start(Routine::Weight, 10, Some(d));
+        let (mut theta, mut last) = (0.0f32, 0.0f32);
+        for _ in 0..100_000 {
+            let dp_m = (theta - last) * r;
+            let p_m = theta * r;
+            let force = if held {
+                weight_n + d.spring_rate_n_per_m * p_m
+            } else if dp_m > 1e-9 {
+                weight_n + friction_n
+            } else if dp_m < -1e-9 {
+                weight_n - friction_n
+            } else {
+                weight_n
+            };
+            let rise = if held { 0.0 } else { p_m };
+            let a = c.drive(&DriveInput {
+                motor_angle_rad: theta,
+                // (The rate unmeasured: the scripted nut has no dynamics
+                // for the PD's damping to act on.)
+                motor_rate_rad_s: 0.0,
+                spring_force_n: force,
+                leg_compression_m: x0_m - rise,
+                body_height_m: 0.6 + rise,
+                dt_s: 1e-4,
+            });
+            if !c.running() {
+                break;
+            }
+            let hold_a = (force - d.nut_weight_n) / d.newtons_per_amp;
+            last = theta;
+            theta += 0.5 * (a - hold_a) / d.kp_a_per_rad;
+        }
+        (c.state(), c.weighing())
+    }
+
+    #[test]
+    fn the_weighing_reads_weight_and_friction_and_its_verdicts() {
+        // 5% light against the configured 95 N, 8 N of friction, 6.6 mm
+        // standing compression: a 3.96 mm sweep.
+        let (s, w) = weigh_on(6.6e-3, 90.25, 8.0, false);
+        assert_eq!(s, CalState::Done, "{w:?}");
+        assert!((w.weight_n - 90.25).abs() < 0.05, "{w:?}");
+        assert!((w.friction_n - 8.0).abs() < 0.05, "{w:?}");
+        assert_eq!(w.configured_weight_n, 95.0);
+        // (The scripted nut leads its reference by the PD's damping term.)
+        assert!((w.body_rise_m - 3.96e-3).abs() < 0.2e-3, "{w:?}");
+        // Hoisted: the leg is not compressed.
+        assert_eq!(
+            weigh_on(0.0, 12.0, 0.0, false).0,
+            CalState::FailedNotOnGround
+        );
+        assert_eq!(
+            weigh_on(4.0e-3, 95.0, 0.0, false).0,
+            CalState::FailedNotOnGround
+        );
+        // The body held: it does not rise.
+        assert_eq!(
+            weigh_on(6.6e-3, 95.0, 0.0, true).0,
+            CalState::FailedBodyHeld
+        );
+        // Far off the configured weight.
+        assert_eq!(weigh_on(6.6e-3, 40.0, 0.0, false).0, CalState::FailedWeight);
+        assert_eq!(
+            weigh_on(6.6e-3, 200.0, 0.0, false).0,
+            CalState::FailedWeight
+        );
+        // Another routine since: no weighing to report.
+        let mut c = Calibrator::new();
+        c.start(Routine::Tare, 10, None);
+        let w = c.weighing();
+        assert_eq!(w.state, CalState::Idle as u8);
+        assert!(w.weight_n.is_nan() && c.weight_gain().is_nan());
     }
 
     proptest! {
@@ -1087,7 +1345,7 @@ mod tests {
         /// current within the routines' limit, and never panics.
         #[test]
         fn drive_is_bounded_on_any_input(
-            routine in 2u8..5,
+            routine in proptest::sample::select(std::vec![2u8, 3, 4, 6]),
             inputs in proptest::collection::vec(
                 (-1e6f32..1e6, -1e6f32..1e6, -1e5f32..1e5, -1.0f32..1.0), 1..300),
             nan_at in proptest::option::of(0usize..300),
@@ -1097,15 +1355,18 @@ mod tests {
             c.start(routine, 10, Some(params()));
             for (i, &(theta, omega, f, x)) in inputs.iter().enumerate() {
                 let f = if nan_at == Some(i) { f32::NAN } else { f };
+                let was_running = c.running();
                 let a = c.drive(&DriveInput {
                     motor_angle_rad: theta,
                     motor_rate_rad_s: omega,
                     spring_force_n: f,
                     leg_compression_m: x,
+                    body_height_m: 0.6 - x,
                     dt_s: 1e-4,
                 });
                 prop_assert!(a.is_finite() && a.abs() <= 6.0, "{a}");
-                if nan_at == Some(i) {
+                // (A weighing off the ground ends at its first period.)
+                if nan_at == Some(i) && was_running {
                     prop_assert_eq!(c.state(), CalState::FailedSensors);
                 }
             }

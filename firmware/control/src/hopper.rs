@@ -452,6 +452,7 @@ impl Hopper {
                 motor_rate_rad_s: v.motor_rad_s,
                 spring_force_n: m.spring_force_n,
                 leg_compression_m: m.leg_compression_m,
+                body_height_m: m.body_height_m,
                 dt_s,
             }),
             _ => self.controller.current_a(&ControlInput {

@@ -388,6 +388,7 @@ impl Endpoint {
                 self.save_state = SAVE_PENDING;
                 Response::Ok
             }
+            Request::Weighing => Response::Weighing(runner.weighing()),
             Request::Crystal => {
                 let b = runner.arming().boot();
                 Response::Crystal(hopper_protocol::CrystalInfo {

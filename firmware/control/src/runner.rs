@@ -503,10 +503,15 @@ impl PeriodRunner {
             if routine == Routine::Home && !self.arming.direction_ok() {
                 return Err(CalRefusal::DirectionFirst);
             }
-            if routine == Routine::Spring && !self.arming.homed() {
+            if matches!(routine, Routine::Spring | Routine::Weight) && !self.arming.homed() {
                 return Err(CalRefusal::HomeFirst);
             }
             let cfg = self.hopper.config();
+            // The weighing reads forces through the offset: a tare's (or a
+            // saved one), unless the configuration says its offsets hold.
+            if routine == Routine::Weight && cfg.arming.require_tare && !self.arming.tared() {
+                return Err(CalRefusal::TareFirst);
+            }
             let m = &cfg.model;
             let r = m.screw_m_per_rad();
             Some(DriveParams {
@@ -518,6 +523,7 @@ impl PeriodRunner {
                 kd_a_s_per_rad: cfg.flight.gains.kd,
                 spring_rate_n_per_m: cfg.supervisor.spring_rate_n_per_m,
                 stroke_m: m.stroke_m,
+                weight_n: (m.body_mass_kg + m.nut_mass_kg) * m.gravity_mps2,
                 park_m: crate::num::max(
                     0.0,
                     m.nut_mass_kg * m.gravity_mps2 / cfg.supervisor.spring_rate_n_per_m
@@ -540,6 +546,11 @@ impl PeriodRunner {
     /// What the last bring-up routine found.
     pub fn bringup_results(&self) -> hopper_protocol::BringupResults {
         self.cal.results()
+    }
+
+    /// What the last weighing found.
+    pub fn weighing(&self) -> hopper_protocol::WeighingInfo {
+        self.cal.weighing()
     }
 
     /// A measuring routine's samples are complete: check, compute, apply.
@@ -650,6 +661,30 @@ impl PeriodRunner {
                     crate::params::SUP_SPRING_RATE.name,
                     self.cal.fit().slope(),
                 );
+                if set.is_err() || self.rebuild(new).is_err() {
+                    self.cal.apply_failed();
+                }
+            }
+            Routine::Weight if state == CalState::Done => {
+                // The load cell read the weight `gain` times too much: its
+                // gain, and the spring rate fitted through it, are that
+                // much too high. The tare's offset (in codes) stays: the
+                // flight force it was set to read scales with the rate.
+                let gain = self.cal.weight_gain();
+                let old = *self.hopper.config();
+                let mut new = old;
+                let set = crate::params::set(
+                    &mut new,
+                    crate::params::CAL_LOADCELL_GAIN.name,
+                    old.calibration.loadcell_gain_n_per_code / gain,
+                )
+                .and_then(|()| {
+                    crate::params::set(
+                        &mut new,
+                        crate::params::SUP_SPRING_RATE.name,
+                        old.supervisor.spring_rate_n_per_m / gain,
+                    )
+                });
                 if set.is_err() || self.rebuild(new).is_err() {
                     self.cal.apply_failed();
                 }

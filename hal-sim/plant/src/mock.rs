@@ -88,6 +88,11 @@ pub struct SensorConfig {
     /// What the potentiometer reads beyond the true leg compression, m.
     /// Default 0.
     pub pot_bias_m: f64,
+    /// The load cell's gain error against the firmware's calibration: it
+    /// reads `F (1 + e) + bias` for a spring force `F` (a load cell whose
+    /// datasheet sensitivity or amplifier gain is off; what the weighing
+    /// routine finds). Default 0.
+    pub loadcell_gain_error: f64,
 }
 
 impl SensorConfig {
@@ -100,6 +105,7 @@ impl SensorConfig {
         amp_tau_s: 1.5e-4,
         loadcell_bias_n: 0.0,
         pot_bias_m: 0.0,
+        loadcell_gain_error: 0.0,
     };
 
     /// No noise (quantisation and lag stay).
@@ -162,6 +168,8 @@ pub struct SimHal {
     pub faults: IoFaults,
     /// The load cell's bias against the calibration, N ([`SensorConfig`]).
     loadcell_bias_n: f64,
+    /// What it reads per newton of spring force (`1 + loadcell_gain_error`).
+    loadcell_scale: f64,
     /// The potentiometer's bias, m.
     pot_bias_m: f64,
 }
@@ -228,6 +236,7 @@ impl SimHal {
             last_sample: None,
             faults: IoFaults::default(),
             loadcell_bias_n: cfg.loadcell_bias_n,
+            loadcell_scale: 1.0 + cfg.loadcell_gain_error,
             pot_bias_m: cfg.pot_bias_m,
         }
     }
@@ -242,7 +251,7 @@ impl SimHal {
         };
         let motor_counts = self.motor.counter(plant.motor_angle_rad());
         let mut loadcell_code = self.loadcell.code(
-            plant.spring_force_n() + self.loadcell_bias_n,
+            plant.spring_force_n() * self.loadcell_scale + self.loadcell_bias_n,
             &mut self.noise,
         );
         let mut pot_code = self

@@ -34,8 +34,6 @@ pub struct VirtualRobot {
     pub runner: PeriodRunner,
     /// The link's robot end.
     pub link: Endpoint,
-    /// The capture, frozen around a fault.
-    pub capture: FaultCapture<CAPTURE_LEN>,
     /// Held by the hoist (the body clamped, the nut free) until the first
     /// armed period.
     pub held: bool,
@@ -53,7 +51,6 @@ impl VirtualRobot {
             hal,
             runner,
             link: Endpoint::simulated(),
-            capture: FaultCapture::new(),
             held: false,
             lift_to_m: None,
             dt_s,
@@ -88,12 +85,17 @@ impl VirtualRobot {
 
     /// One control period on the sensors' present state, then the link's
     /// work: the period's messages into `tx`, and `rx` (the bytes that
-    /// arrived since the last period) decoded and answered. The caller
-    /// reports the period's lateness with `runner.end_period`.
+    /// arrived since the last period) decoded and answered; the period's
+    /// record into `capture`, frozen around a fault. The caller owns the
+    /// capture (32 KiB: the QEMU link image keeps it in a static of its
+    /// own, as the board does, instead of building it on `init`'s stack
+    /// inside the robot) and reports the period's lateness with
+    /// `runner.end_period`.
     pub fn control<C: CycleCounter>(
         &mut self,
         rx: impl Iterator<Item = u8>,
         tx: &mut impl Tx,
+        capture: &mut FaultCapture<CAPTURE_LEN>,
         counter: &mut C,
     ) -> Period {
         self.hal.faults.estop = self.link.sim_estop();
@@ -104,10 +106,9 @@ impl VirtualRobot {
             let mut io = self.hal.io(&self.plant);
             self.runner.run_period(&mut io, counter)
         };
-        self.capture
-            .record(&p.out.record, !p.newly_latched.is_empty());
+        capture.record(&p.out.record, !p.newly_latched.is_empty());
         self.link
-            .service(&mut self.runner, &p, rx, &mut self.capture, tx, counter);
+            .service(&mut self.runner, &p, rx, capture, tx, counter);
         if p.armed && self.held {
             // Armed: the hoist lets go (the laws start from the release).
             self.release();
@@ -146,6 +147,8 @@ pub struct Miscalibration {
     pub spring_rate_error: f64,
     /// The firmware takes the boot height for this much more than it is, m.
     pub height_zero_error_m: f64,
+    /// The load cell's gain is off by this fraction (it reads `F (1 + e)`).
+    pub loadcell_gain_error: f64,
 }
 
 impl Miscalibration {
@@ -156,19 +159,22 @@ impl Miscalibration {
         nut_start_m: 0.0,
         spring_rate_error: 0.0,
         height_zero_error_m: 0.0,
+        loadcell_gain_error: 0.0,
     };
 
     /// The CI's link sessions' robot (`hopper-sim serve` and the QEMU link
     /// image): 12 N of load-cell offset, 0.5 mm of potentiometer offset,
     /// the nut 1 mm below its stop, a spring 15% stiffer than configured,
-    /// the height zero 30 mm off. Each stays within what the supervisor
-    /// accepts at boot (its 30 N spring cross-check).
+    /// the height zero 30 mm off, the load cell reading 5% low. Each stays
+    /// within what the supervisor accepts at boot (its 30 N spring
+    /// cross-check).
     pub const SESSION: Miscalibration = Miscalibration {
         loadcell_bias_n: 12.0,
         pot_bias_m: 5.0e-4,
         nut_start_m: 1.0e-3,
         spring_rate_error: 0.15,
         height_zero_error_m: 0.03,
+        loadcell_gain_error: -0.05,
     };
 
     /// The start height the firmware believes for a real `start_apex_m`, m
@@ -182,6 +188,7 @@ impl Miscalibration {
         crate::mock::SensorConfig {
             loadcell_bias_n: self.loadcell_bias_n,
             pot_bias_m: self.pot_bias_m,
+            loadcell_gain_error: self.loadcell_gain_error,
             ..s
         }
     }

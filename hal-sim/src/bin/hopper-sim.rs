@@ -338,6 +338,11 @@ struct ServeArgs {
         value_name = "M"
     )]
     height_zero_error_m: f64,
+    /// A load cell whose gain is off by this fraction: it reads `F (1 + e)`
+    /// for a spring force `F`, e.g. -0.05 reads 5% low (for `hopper-link
+    /// calibrate weight`).
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    loadcell_gain_error: f64,
     /// Keep the robot's flash in FILE (created on the first `hopper-link
     /// save`): a saved calibration then loads at the next start, as on a
     /// board [default: a flash that lasts as long as the simulator].
@@ -477,6 +482,12 @@ fn cmd_serve(a: ServeArgs) -> Result<()> {
             a.height_zero_error_m
         );
     }
+    if !(a.loadcell_gain_error.is_finite() && a.loadcell_gain_error.abs() <= 0.5) {
+        bail!(
+            "--loadcell-gain-error {} must be within +-0.5",
+            a.loadcell_gain_error
+        );
+    }
     // The firmware is configured for the nominal machine, started where it
     // believes; the plant is the real one.
     let mis = hopper_plant::robot::Miscalibration {
@@ -485,6 +496,7 @@ fn cmd_serve(a: ServeArgs) -> Result<()> {
         nut_start_m: a.nut_start_m,
         spring_rate_error: a.spring_rate_error,
         height_zero_error_m: a.height_zero_error_m,
+        loadcell_gain_error: a.loadcell_gain_error,
     };
     let (runner, hal) = settings
         .controller_spec()
