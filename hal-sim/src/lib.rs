@@ -21,6 +21,7 @@ pub mod plot;
 pub mod run;
 pub mod scenario;
 pub mod serve;
+pub mod spring;
 pub mod sweep;
 
 pub use params::{ParamError, Params};
