@@ -357,6 +357,35 @@ impl Metrics {
         }
     }
 
+    /// From its values in [`METRICS`] order, as [`Metrics::values`] gives
+    /// them (a merged shard's CSV row); None when a count is not a whole
+    /// number or a value that is always defined is missing.
+    pub fn from_values(v: &[Option<f64>; METRICS.len()]) -> Option<Metrics> {
+        let count = |x: Option<f64>| -> Option<usize> {
+            let x = x?;
+            (x >= 0.0 && x.fract() == 0.0 && x <= usize::MAX as f64).then_some(x as usize)
+        };
+        let [steady, converge, last, hops, work, impact, per_stance, first_work, current, stroke, faults, first_apex] =
+            *v;
+        Some(Metrics {
+            steady_apex_m: steady,
+            hops_to_converge: match converge {
+                None => None,
+                c => Some(count(c)?),
+            },
+            last_apex_m: last,
+            hops: count(hops)?,
+            motor_work_j: work?,
+            stop_impact_loss_j: impact?,
+            energy_per_stance_j: per_stance,
+            first_stance_motor_work_j: first_work,
+            max_current_a: current?,
+            max_stroke_m: stroke?,
+            fault_count: count(faults)?,
+            first_apex_m: first_apex,
+        })
+    }
+
     /// Every metric in [`METRICS`] order (None: not defined for this run).
     pub fn values(&self) -> [Option<f64>; METRICS.len()] {
         [
@@ -384,6 +413,235 @@ impl Metrics {
     }
 }
 
+/// A deterministic slice of a grid: shard `index` (1-based) of `count`
+/// takes the points whose grid index is `index - 1` modulo `count`
+/// (interleaved, so that the slices of a grid whose run time grows along
+/// an axis cost about the same).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Shard {
+    /// Which slice, 1..=count.
+    pub index: usize,
+    /// How many slices.
+    pub count: usize,
+}
+
+impl Shard {
+    /// The whole grid.
+    pub const WHOLE: Shard = Shard { index: 1, count: 1 };
+
+    /// `K/N`, 1 <= K <= N.
+    pub fn parse(spec: &str) -> Result<Shard, String> {
+        let bad = || format!("--shard `{spec}`: expected K/N with 1 <= K <= N, e.g. 3/8");
+        let (k, n) = spec.split_once('/').ok_or_else(bad)?;
+        let (index, count) = (
+            k.trim().parse::<usize>().map_err(|_| bad())?,
+            n.trim().parse::<usize>().map_err(|_| bad())?,
+        );
+        if index == 0 || index > count {
+            return Err(bad());
+        }
+        Ok(Shard { index, count })
+    }
+
+    /// Whether grid point `point` is in this slice.
+    pub fn owns(&self, point: usize) -> bool {
+        point % self.count == self.index - 1
+    }
+}
+
+/// A shard's CSV: `point` (the grid index), then sweep.csv's columns.
+pub const PART_CSV: &str = "sweep-part.csv";
+/// A shard's manifest: which grid, which slice ([`PartManifest`]).
+pub const PART_MANIFEST: &str = "sweep-part.json";
+
+/// What a shard's directory says about the grid it is a slice of: what
+/// `sweep merge` needs to check the parts belong together and to draw the
+/// plots of the whole.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct PartManifest {
+    /// Layout version (1).
+    pub format: u32,
+    /// Fingerprint of the grid's settings, axes and metric (FNV-1a, hex):
+    /// parts of different sweeps never merge.
+    pub grid: String,
+    /// This slice: `shard` of `of`.
+    pub shard: usize,
+    /// How many slices.
+    pub of: usize,
+    /// Points in the whole grid.
+    pub runs: usize,
+    /// The axes as given (`NAME=START:END:N`).
+    pub axes: Vec<String>,
+    /// The plotted metric.
+    pub metric: String,
+    /// The plots' title.
+    pub title: String,
+}
+
+/// `sweep merge`: the parts of one sharded grid, checked to be every
+/// slice of the same grid exactly once, as the whole grid's [`Sweep`]
+/// (its base settings the defaults: what a grid writes depends on its axes
+/// and metric only, the title carries the rest), its rows in grid order
+/// and the title.
+pub fn merge(parts: &[PathBuf]) -> Result<(Sweep, Vec<Row>, String), String> {
+    let Some(first_dir) = parts.first() else {
+        return Err("sweep merge: no part directories given".into());
+    };
+    let read = |dir: &Path| -> Result<(PartManifest, String), String> {
+        let m = dir.join(PART_MANIFEST);
+        let text = std::fs::read_to_string(&m).map_err(|e| {
+            format!(
+                "{}: {e} (not a `hopper-sim sweep --shard` output directory?)",
+                m.display()
+            )
+        })?;
+        let manifest: PartManifest =
+            serde_json::from_str(&text).map_err(|e| format!("{}: {e}", m.display()))?;
+        let c = dir.join(PART_CSV);
+        let csv = std::fs::read_to_string(&c).map_err(|e| format!("{}: {e}", c.display()))?;
+        Ok((manifest, csv))
+    };
+    let (first, _) = read(first_dir)?;
+    if first.format != 1 {
+        return Err(format!(
+            "{}: part format {}, this hopper-sim reads 1",
+            first_dir.display(),
+            first.format
+        ));
+    }
+    let axes = first
+        .axes
+        .iter()
+        .map(|a| parse_axis(a))
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(|e| format!("{}: {e}", first_dir.display()))?;
+    let sweep = Sweep {
+        base: Settings::resolve(None, &crate::scenario::Overrides::default()),
+        axes,
+        metric: first.metric.clone(),
+    };
+    let header: Vec<String> = sweep.header(true).into_iter().map(String::from).collect();
+    let n_axes = sweep.axes.len();
+    let mut rows: Vec<Option<Row>> = vec![None; first.runs];
+    let mut seen = vec![false; first.of];
+    for dir in parts {
+        let (m, csv) = read(dir)?;
+        if m.grid != first.grid || m.of != first.of || m.runs != first.runs {
+            return Err(format!(
+                "{} is a slice of another sweep than {} (grid {} of {} shards, not {} of {})",
+                dir.display(),
+                first_dir.display(),
+                m.grid,
+                m.of,
+                first.grid,
+                first.of
+            ));
+        }
+        match seen.get_mut(m.shard.wrapping_sub(1)) {
+            Some(s) if !*s => *s = true,
+            Some(_) => {
+                return Err(format!(
+                    "shard {}/{} given twice ({})",
+                    m.shard,
+                    m.of,
+                    dir.display()
+                ))
+            }
+            None => return Err(format!("{}: shard {} of {}?", dir.display(), m.shard, m.of)),
+        }
+        let path = dir.join(PART_CSV);
+        let mut r = csv::ReaderBuilder::new()
+            .has_headers(true)
+            .from_reader(csv.as_bytes());
+        let got: Vec<String> = r
+            .headers()
+            .map_err(|e| format!("{}: {e}", path.display()))?
+            .iter()
+            .map(String::from)
+            .collect();
+        if got != header {
+            return Err(format!(
+                "{}: columns {got:?}, not {header:?}",
+                path.display()
+            ));
+        }
+        for (line, rec) in r.records().enumerate() {
+            let at = || format!("{} row {}", path.display(), line + 1);
+            let rec = rec.map_err(|e| format!("{}: {e}", at()))?;
+            let cell = |i: usize| -> Result<Option<f64>, String> {
+                match rec.get(i) {
+                    None | Some("") => Ok(None),
+                    Some(t) => t
+                        .parse::<f64>()
+                        .map(Some)
+                        .map_err(|_| format!("{}: `{t}` is not a number", at())),
+                }
+            };
+            let point = cell(0)?
+                .filter(|p| p.fract() == 0.0 && *p >= 0.0)
+                .map(|p| p as usize)
+                .ok_or_else(|| format!("{}: no grid index", at()))?;
+            let shard = Shard {
+                index: m.shard,
+                count: m.of,
+            };
+            if !shard.owns(point) {
+                return Err(format!(
+                    "{}: point {point} is not in shard {}/{}",
+                    at(),
+                    m.shard,
+                    m.of
+                ));
+            }
+            let values = (1..=n_axes)
+                .map(|i| cell(i)?.ok_or_else(|| format!("{}: no swept value", at())))
+                .collect::<Result<Vec<f64>, String>>()?;
+            let mut metrics = [None; METRICS.len()];
+            for (k, slot) in metrics.iter_mut().enumerate() {
+                *slot = cell(1 + n_axes + k)?;
+            }
+            let metrics = Metrics::from_values(&metrics)
+                .ok_or_else(|| format!("{}: a metric is missing or not a count", at()))?;
+            match rows.get_mut(point) {
+                Some(slot @ None) => *slot = Some(Row { values, metrics }),
+                Some(Some(_)) => return Err(format!("{}: point {point} twice", at())),
+                None => {
+                    return Err(format!(
+                        "{}: point {point} beyond the grid's {} points",
+                        at(),
+                        first.runs
+                    ))
+                }
+            }
+        }
+    }
+    let missing: Vec<String> = seen
+        .iter()
+        .enumerate()
+        .filter(|(_, s)| !**s)
+        .map(|(i, _)| format!("{}/{}", i + 1, first.of))
+        .collect();
+    if !missing.is_empty() {
+        return Err(format!(
+            "sweep merge: missing shards {}",
+            missing.join(", ")
+        ));
+    }
+    let rows = rows
+        .into_iter()
+        .enumerate()
+        .map(|(i, r)| r.ok_or_else(|| format!("sweep merge: grid point {i} is in no part")))
+        .collect::<Result<Vec<Row>, String>>()?;
+    Ok((sweep, rows, first.title))
+}
+
+/// FNV-1a over `bytes`.
+fn fnv1a(bytes: &[u8]) -> u64 {
+    bytes.iter().fold(0xcbf2_9ce4_8422_2325, |h, &b| {
+        (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3)
+    })
+}
+
 /// A sweep to run.
 pub struct Sweep {
     /// The settings every run starts from.
@@ -407,6 +665,60 @@ impl Sweep {
     /// Every grid point's swept values (first axis outermost) and settings,
     /// each checked: an error names the point and what is wrong with it.
     pub fn points(&self) -> Result<Vec<(Vec<f64>, Settings)>, String> {
+        Ok(self
+            .shard_points(Shard::WHOLE)?
+            .into_iter()
+            .map(|(_, v, s)| (v, s))
+            .collect())
+    }
+
+    /// The points of `shard` with their grid indices, each checked (a
+    /// shard builds its own points only: a 10^6-point grid in 100 shards
+    /// holds 10^4 settings at a time). At most [`MAX_RUNS`] a shard.
+    pub fn shard_points(&self, shard: Shard) -> Result<Vec<(usize, Vec<f64>, Settings)>, String> {
+        let runs = self.grid_runs()?;
+        let mine = (0..runs).filter(|&i| shard.owns(i)).count();
+        if mine > MAX_RUNS {
+            return Err(format!(
+                "{mine} runs is too many for one sweep (at most {MAX_RUNS}; split it with --shard K/N)"
+            ));
+        }
+        let points: Vec<(usize, Vec<f64>, Settings)> = (0..runs)
+            .filter(|&i| shard.owns(i))
+            .map(|i| {
+                let (vals, s) = self.point(i);
+                (i, vals, s)
+            })
+            .collect();
+        for (_, vals, s) in &points {
+            s.check()
+                .map_err(|e| format!("sweep point {}: {e}", self.describe(vals)))?;
+        }
+        Ok(points)
+    }
+
+    /// Grid point `index`'s swept values and settings (first axis
+    /// outermost: the last axis's index varies fastest).
+    pub fn point(&self, index: usize) -> (Vec<f64>, Settings) {
+        let mut s = self.base.clone();
+        let mut rest = index;
+        let mut vals = vec![0.0; self.axes.len()];
+        for (k, a) in self.axes.iter().enumerate().rev() {
+            let n = a.values.len().max(1);
+            let v = a.values.get(rest % n).copied().unwrap_or(f64::NAN);
+            rest /= n;
+            if let Some(slot) = vals.get_mut(k) {
+                *slot = v;
+            }
+        }
+        for (a, &v) in self.axes.iter().zip(&vals) {
+            a.knob.apply(&mut s, v);
+        }
+        (vals, s)
+    }
+
+    /// The grid's checks (axes, metric, knobs) and its size.
+    fn grid_runs(&self) -> Result<usize, String> {
         if self.axes.is_empty() || self.axes.len() > 2 {
             return Err(format!(
                 "a sweep needs one or two --param, got {}",
@@ -446,32 +758,7 @@ impl Sweep {
                 ));
             }
         }
-        let runs: usize = self.axes.iter().map(|a| a.values.len()).product();
-        if runs > MAX_RUNS {
-            return Err(format!(
-                "{runs} runs is too many for one sweep (at most {MAX_RUNS})"
-            ));
-        }
-        let mut points = vec![(Vec::new(), self.base.clone())];
-        for a in &self.axes {
-            points = points
-                .into_iter()
-                .flat_map(|(vals, s)| {
-                    a.values.iter().map(move |&v| {
-                        let mut s = s.clone();
-                        a.knob.apply(&mut s, v);
-                        let mut vals = vals.clone();
-                        vals.push(v);
-                        (vals, s)
-                    })
-                })
-                .collect();
-        }
-        for (vals, s) in &points {
-            s.check()
-                .map_err(|e| format!("sweep point {}: {e}", self.describe(vals)))?;
-        }
-        Ok(points)
+        Ok(self.axes.iter().map(|a| a.values.len()).product())
     }
 
     /// `name=value, ...` of a point, for messages.
@@ -487,10 +774,23 @@ impl Sweep {
     /// Run the grid on every core (rayon). `progress` is called once per
     /// finished run, from the worker threads. Rows come back in grid order.
     pub fn run(&self, progress: &(dyn Fn() + Sync)) -> Result<Vec<Row>, String> {
-        let points = self.points()?;
-        points
+        Ok(self
+            .run_shard(Shard::WHOLE, progress)?
+            .into_iter()
+            .map(|(_, r)| r)
+            .collect())
+    }
+
+    /// [`Self::run`] on the points of `shard` only, each with its grid index.
+    pub fn run_shard(
+        &self,
+        shard: Shard,
+        progress: &(dyn Fn() + Sync),
+    ) -> Result<Vec<(usize, Row)>, String> {
+        self.shard_points(shard)?
             .par_iter()
-            .map(|(vals, s)| {
+            .map(|(i, vals, s)| {
+                let i = *i;
                 let cfg = s.run_config(0.0);
                 let mut ctl = s
                     .controller_spec()
@@ -499,34 +799,90 @@ impl Sweep {
                 let result = run::run(&cfg, &s.params_name, &mut ctl)
                     .map_err(|e| format!("sweep point {}: {e}", self.describe(vals)))?;
                 progress();
-                Ok(Row {
-                    values: vals.clone(),
-                    metrics: Metrics::of(&result.summary),
-                })
+                Ok((
+                    i,
+                    Row {
+                        values: vals.clone(),
+                        metrics: Metrics::of(&result.summary),
+                    },
+                ))
             })
             .collect()
+    }
+
+    /// The grid's fingerprint: its resolved settings, axes and metric.
+    pub fn fingerprint(&self) -> String {
+        let specs: Vec<&str> = self.axes.iter().map(|a| a.spec.as_str()).collect();
+        let text = format!("{:?}|{specs:?}|{}", self.base, self.metric);
+        format!("{:016x}", fnv1a(text.as_bytes()))
+    }
+
+    /// Write shard `shard`'s rows (grid index and row) into `dir`: its CSV
+    /// ([`PART_CSV`]) and manifest ([`PART_MANIFEST`]), whole or not at all.
+    pub fn write_part(
+        &self,
+        shard: Shard,
+        rows: &[(usize, Row)],
+        dir: &Path,
+        title: &str,
+    ) -> Result<Vec<PathBuf>, String> {
+        let manifest = PartManifest {
+            format: 1,
+            grid: self.fingerprint(),
+            shard: shard.index,
+            of: shard.count,
+            runs: self.axes.iter().map(|a| a.values.len()).product(),
+            axes: self.axes.iter().map(|a| a.spec.clone()).collect(),
+            metric: self.metric.clone(),
+            title: title.to_string(),
+        };
+        let json = serde_json::to_string_pretty(&manifest)
+            .map_err(|e| format!("cannot format {PART_MANIFEST}: {e}"))?;
+        let csv = self.table(true, rows.iter().map(|(i, r)| (Some(*i), r)))?;
+        crate::out_dir::write_whole(dir, |staging| {
+            let io =
+                |n: &str, e: std::io::Error| format!("cannot write {}: {e}", dir.join(n).display());
+            std::fs::write(staging.join(PART_CSV), &csv).map_err(|e| io(PART_CSV, e))?;
+            std::fs::write(staging.join(PART_MANIFEST), &json).map_err(|e| io(PART_MANIFEST, e))?;
+            Ok(vec![PART_CSV.to_string(), PART_MANIFEST.to_string()])
+        })
     }
 
     /// The CSV text: the swept columns, then [`METRICS`]; empty cells for
     /// undefined metrics. The columns depend on the sweep, so a row is a
     /// sequence, not a struct.
     pub fn csv(&self, rows: &[Row]) -> Result<String, String> {
-        let header: Vec<&str> = self
-            .axes
-            .iter()
-            .map(|a| a.knob.column())
+        self.table(false, rows.iter().map(|r| (None, r)))
+    }
+
+    /// The header of sweep.csv (with `point` first for a shard's part).
+    fn header(&self, point: bool) -> Vec<&str> {
+        point
+            .then_some("point")
+            .into_iter()
+            .chain(self.axes.iter().map(|a| a.knob.column()))
             .chain(METRICS.iter().map(|(n, _)| *n))
-            .collect();
+            .collect()
+    }
+
+    /// sweep.csv's text, or a part's with each row's grid index first.
+    fn table<'a>(
+        &self,
+        point: bool,
+        rows: impl Iterator<Item = (Option<usize>, &'a Row)>,
+    ) -> Result<String, String> {
+        let header = self.header(point);
         let mut out = csv::WriterBuilder::new()
             .has_headers(false)
             .from_writer(Vec::new());
         let failed = |e: csv::Error| format!("cannot format sweep.csv: {e}");
         out.write_record(&header).map_err(failed)?;
-        for r in rows {
-            let cells: Vec<Option<Shown>> = r
-                .values
-                .iter()
-                .map(|&v| Some(Shown(v)))
+        for (i, r) in rows {
+            let cells: Vec<Option<Shown>> = i
+                .map(|i| Shown(i as f64))
+                .into_iter()
+                .map(Some)
+                .chain(r.values.iter().map(|&v| Some(Shown(v))))
                 .chain(r.metrics.values().iter().map(|m| m.map(Shown)))
                 .collect();
             out.serialize(cells).map_err(failed)?;

@@ -1,4 +1,5 @@
-//! The design tools of issue 19 on the command line: `hopper-sim spring`.
+//! The design tools of issue 19 on the command line: `hopper-sim spring`,
+//! `hopper-sim sweep --shard` and `sweep merge`.
 
 // Test helpers may panic on impossible setup errors: that is a failed test.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
@@ -46,4 +47,103 @@ fn spring_refuses_an_impossible_coil() {
     assert_eq!(err.trim().lines().count(), 1, "{err}");
     assert!(err.contains("spring index"), "{err}");
     assert!(out.stdout.is_empty());
+}
+
+const GRID: [&str; 10] = [
+    "--params",
+    "identified",
+    "--controller",
+    "open-torque",
+    "--param",
+    "k=8000:20000:5",
+    "--param",
+    "torque=0.4:1.0:3",
+    "--duration",
+    "1",
+];
+
+fn sweep(extra: &[&str]) -> Output {
+    let mut args = vec!["sweep"];
+    args.extend_from_slice(&GRID);
+    args.extend_from_slice(extra);
+    let o = sim(&args);
+    assert!(
+        o.status.success(),
+        "{args:?}: {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    o
+}
+
+/// A 15-run grid in three shards, merged in another order: the same
+/// sweep.csv, sweep.svg and sweep.png, byte for byte, as the unsharded run.
+#[test]
+fn sharded_and_merged_is_the_unsharded_sweep() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = |n: &str| dir.path().join(n).to_str().unwrap().to_string();
+    sweep(&["--out", &p("whole")]);
+    for k in 1..=3 {
+        let o = sweep(&[
+            "--shard",
+            &format!("{k}/3"),
+            "--out",
+            &p(&format!("part{k}")),
+        ]);
+        let text = String::from_utf8_lossy(&o.stdout);
+        assert!(
+            text.contains(&format!("shard {k}/3: 5 of 15 runs")),
+            "{text}"
+        );
+    }
+    let o = sim(&[
+        "sweep",
+        "merge",
+        &p("part3"),
+        &p("part1"),
+        &p("part2"),
+        "--out",
+        &p("merged"),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    for f in ["sweep.csv", "sweep.svg", "sweep.png"] {
+        let a = std::fs::read(dir.path().join("whole").join(f)).unwrap();
+        let b = std::fs::read(dir.path().join("merged").join(f)).unwrap();
+        assert!(a == b, "{f} differs");
+    }
+    // The first shard of another grid (1.5 s runs).
+    let mut args = vec!["sweep"];
+    args.extend_from_slice(&GRID[..9]);
+    args.extend_from_slice(&["1.5", "--shard", "1/3", "--out"]);
+    let other = p("other");
+    args.push(&other);
+    assert!(sim(&args).status.success());
+    // One part missing, one twice, a part of another grid, or no part at
+    // all: refused, nothing written.
+    for (parts, needle) in [
+        (
+            vec![p("other"), p("part2"), p("part3")],
+            "a slice of another sweep",
+        ),
+        (vec![p("part1"), p("part2")], "missing shards 3/3"),
+        (vec![p("part1"), p("part1"), p("part2")], "given twice"),
+        (
+            vec![p("part1"), p("whole")],
+            "not a `hopper-sim sweep --shard` output",
+        ),
+    ] {
+        let mut args = vec!["sweep".to_string(), "merge".to_string()];
+        args.extend(parts);
+        args.extend(["--out".to_string(), p("bad")]);
+        let o = sim(&args.iter().map(String::as_str).collect::<Vec<_>>());
+        assert_eq!(o.status.code(), Some(2));
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(err.contains(needle), "{err}");
+        assert!(!dir.path().join("bad").exists());
+    }
+    let mut args = vec!["sweep"];
+    args.extend_from_slice(&GRID);
+    args.extend_from_slice(&["--shard", "4/3", "--out", "unused"]);
+    let o = sim(&args);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("1 <= K <= N"));
 }

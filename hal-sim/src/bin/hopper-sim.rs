@@ -312,7 +312,11 @@ struct RunArgs {
 }
 
 #[derive(Parser)]
+#[command(args_conflicts_with_subcommands = true, subcommand_negates_reqs = true)]
 struct SweepArgs {
+    /// `merge`: combine the parts of a sharded sweep.
+    #[command(subcommand)]
+    cmd: Option<SweepCmd>,
     #[command(flatten)]
     base: BaseArgs,
     /// A swept parameter, NAME=START:END:N (N values from START to END);
@@ -332,9 +336,32 @@ struct SweepArgs {
     /// steady_apex_m, falling back to the last apex where not steady].
     #[arg(long)]
     metric: Option<String>,
+    /// Run only slice K of N of the grid (1 <= K <= N: the points whose
+    /// grid index is K-1 modulo N) and write its part (sweep-part.csv and
+    /// sweep-part.json) into --out; `sweep merge` combines the N parts into
+    /// the sweep.csv and plots of the whole grid (docs/design.md, "Sweeps
+    /// past one machine").
+    #[arg(long, value_name = "K/N")]
+    shard: Option<String>,
     /// Directory for sweep.csv, sweep.png and sweep.svg (created if missing).
-    #[arg(long)]
-    out: PathBuf,
+    #[arg(long, required = true)]
+    out: Option<PathBuf>,
+}
+
+#[derive(Subcommand)]
+enum SweepCmd {
+    /// Combine the parts of a sharded sweep (`sweep --shard K/N --out
+    /// PART_DIR`, every K of the same N) into the sweep.csv and plots an
+    /// unsharded run of the grid writes.
+    Merge {
+        /// The parts' directories, in any order.
+        #[arg(required = true, value_name = "PART_DIR")]
+        parts: Vec<PathBuf>,
+        /// Directory for sweep.csv, sweep.png and sweep.svg (created if
+        /// missing).
+        #[arg(long)]
+        out: PathBuf,
+    },
 }
 
 #[derive(Parser)]
@@ -899,7 +926,33 @@ fn cmd_run(a: RunArgs) -> Result<()> {
     Ok(())
 }
 
+fn cmd_sweep_merge(parts: &[PathBuf], out: &std::path::Path) -> Result<()> {
+    let (sw, rows, title) = sweep::merge(parts).map_err(anyhow::Error::msg)?;
+    let written = sw.write(&rows, out, &title).map_err(anyhow::Error::msg)?;
+    say!(
+        "hopper-sim sweep merge: {} parts, {} runs",
+        parts.len(),
+        rows.len()
+    );
+    for p in &written {
+        say!("  wrote {}", p.display());
+    }
+    Ok(())
+}
+
 fn cmd_sweep(a: SweepArgs) -> Result<()> {
+    if let Some(SweepCmd::Merge { parts, out }) = &a.cmd {
+        return cmd_sweep_merge(parts, out);
+    }
+    let Some(out) = a.out.clone() else {
+        bail!("--out DIR is required");
+    };
+    let shard = a
+        .shard
+        .as_deref()
+        .map(sweep::Shard::parse)
+        .transpose()
+        .map_err(anyhow::Error::msg)?;
     // Everything is parsed and every grid point checked before any run or
     // any file: bad input writes nothing.
     let file = match &a.preset {
@@ -939,7 +992,9 @@ fn cmd_sweep(a: SweepArgs) -> Result<()> {
         .or_else(|| file.as_ref().and_then(|f| f.sweep.metric.clone()))
         .unwrap_or_else(|| sweep::DEFAULT_METRIC.to_string());
     let sw = Sweep { base, axes, metric };
-    let runs = sw.points().map_err(anyhow::Error::msg)?.len();
+    let slice = shard.unwrap_or(sweep::Shard::WHOLE);
+    let runs = sw.shard_points(slice).map_err(anyhow::Error::msg)?.len();
+    let grid_runs: usize = sw.axes.iter().map(|x| x.values.len()).product();
 
     // A progress bar for sweeps worth waiting for; indicatif also draws
     // nothing when stderr is not a terminal.
@@ -955,7 +1010,9 @@ fn cmd_sweep(a: SweepArgs) -> Result<()> {
         bar.set_draw_target(indicatif::ProgressDrawTarget::hidden());
     }
     let started = std::time::Instant::now();
-    let rows = sw.run(&|| bar.inc(1)).map_err(anyhow::Error::msg)?;
+    let indexed = sw
+        .run_shard(slice, &|| bar.inc(1))
+        .map_err(anyhow::Error::msg)?;
     bar.finish_and_clear();
     let elapsed_s = started.elapsed().as_secs_f64();
 
@@ -966,9 +1023,24 @@ fn cmd_sweep(a: SweepArgs) -> Result<()> {
         sw.base.controller,
         sw.base.params_name
     );
-    let written = sw
-        .write(&rows, &a.out, &title)
-        .map_err(anyhow::Error::msg)?;
+    if let Some(k) = shard {
+        let written = sw
+            .write_part(k, &indexed, &out, &title)
+            .map_err(anyhow::Error::msg)?;
+        say!(
+            "hopper-sim sweep: shard {}/{}: {runs} of {grid_runs} runs of {} s in {elapsed_s:.1} s on {} threads",
+            k.index,
+            k.count,
+            sw.base.duration_s,
+            rayon::current_num_threads()
+        );
+        for p in &written {
+            say!("  wrote {}", p.display());
+        }
+        return Ok(());
+    }
+    let rows: Vec<sweep::Row> = indexed.into_iter().map(|(_, r)| r).collect();
+    let written = sw.write(&rows, &out, &title).map_err(anyhow::Error::msg)?;
 
     say!(
         "hopper-sim sweep: {runs} runs of {} s ({} controller, {} parameters) in {elapsed_s:.1} s on {} threads",
