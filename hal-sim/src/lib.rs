@@ -12,6 +12,7 @@ pub use hopper_plant::{metrics, mock, params, plant, robot, sensors};
 
 pub mod controller;
 pub mod csv_out;
+pub mod design;
 pub mod figures;
 pub mod flight_stability;
 pub mod inject;

@@ -1,5 +1,5 @@
 //! The design tools of issue 19 on the command line: `hopper-sim spring`,
-//! `hopper-sim sweep --shard` and `sweep merge`.
+//! `hopper-sim sweep --shard` and `sweep merge`, `hopper-sim design`.
 
 // Test helpers may panic on impossible setup errors: that is a failed test.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
@@ -146,4 +146,39 @@ fn sharded_and_merged_is_the_unsharded_sweep() {
     let o = sim(&args);
     assert_eq!(o.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&o.stderr).contains("1 <= K <= N"));
+}
+
+/// `design motors --json`: Table 3.1's four rows and the two catalogue
+/// motors; `design leads --out`: the nine leads and both plots.
+#[test]
+fn design_motors_and_leads() {
+    let out = sim(&["design", "motors", "--json"]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let rows = v["table_3_1"].as_array().unwrap();
+    assert_eq!(rows.len(), 4);
+    let e: Vec<f64> = rows
+        .iter()
+        .map(|r| r["first_stance"]["motor_work_j"].as_f64().unwrap())
+        .collect();
+    assert!((e[2] / 25.67 - 1.0).abs() < 0.02, "{e:?}");
+    assert!(e[0] < e[1] && e[1] < e[2], "{e:?}");
+    assert_eq!(v["catalogue"].as_array().unwrap().len(), 2);
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path().join("leads");
+    let out = sim(&["design", "leads", "--json", "--out", d.to_str().unwrap()]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v.as_array().unwrap().len(), 9);
+    for f in ["lead-study.png", "lead-study.svg"] {
+        assert!(std::fs::metadata(d.join(f)).unwrap().len() > 1000, "{f}");
+    }
 }

@@ -66,6 +66,13 @@ enum Cmd {
     /// pitch, lengths, stresses, allowable forces and stroke; optionally
     /// checked against the peak spring force of a simulated hop.
     Spring(SpringArgs),
+    /// The actuator studies of thesis section 3.1 on the motor's own
+    /// torque-speed curve (docs/design.md): `motors` (Table 3.1) and
+    /// `leads` (Figures 3.1-3.3).
+    Design {
+        #[command(subcommand)]
+        cmd: DesignCmd,
+    },
     /// Parameter sets.
     Params {
         #[command(subcommand)]
@@ -118,6 +125,30 @@ struct SpringArgs {
     /// Print JSON instead of text.
     #[arg(long)]
     json: bool,
+}
+
+#[derive(Subcommand)]
+enum DesignCmd {
+    /// Table 3.1: the energy each candidate motor adds in the first stance
+    /// (k = 10 kN/m, 5 mm lead), at the table's stall torque and, where a
+    /// catalogue motor was found, with its datasheet constants.
+    Motors {
+        /// Print JSON instead of text.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Figures 3.1-3.3: the design motor on its torque-speed curve through
+    /// leads of 2 ..= 10 mm (k = 10 kN/m): the energy added in the first
+    /// stance, the first apex, and with --out the plots.
+    Leads {
+        /// Directory for lead-study.png and lead-study.svg (created if
+        /// missing).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Print JSON instead of text.
+        #[arg(long)]
+        json: bool,
+    },
 }
 
 #[derive(Subcommand)]
@@ -432,6 +463,7 @@ fn main() {
         } => cmd_params_show(&preset),
         Cmd::Figures { out, quick } => cmd_figures(&out, quick),
         Cmd::Spring(args) => cmd_spring(&args),
+        Cmd::Design { cmd } => cmd_design(&cmd),
     };
     if let Err(e) = result {
         if is_closed_pipe(&e) {
@@ -590,6 +622,113 @@ fn cmd_spring(a: &SpringArgs) -> Result<()> {
             c.allowable_stroke_m * 1e3,
             if c.within { "within" } else { "EXCEEDED" }
         );
+    }
+    Ok(())
+}
+
+fn cmd_design(cmd: &DesignCmd) -> Result<()> {
+    use hal_sim::design::{first_stance, table_3_1, CATALOGUE, DESIGN_MOTOR, STUDY_LEADS_M};
+    match cmd {
+        DesignCmd::Motors { json } => {
+            let table = table_3_1()
+                .iter()
+                .map(|m| first_stance(m, 0.005).map(|f| (*m, f)))
+                .collect::<Result<Vec<_>, _>>()
+                .map_err(anyhow::Error::msg)?;
+            let catalogue = CATALOGUE
+                .iter()
+                .map(|m| first_stance(m, 0.005).map(|f| (*m, f)))
+                .collect::<Result<Vec<_>, _>>()
+                .map_err(anyhow::Error::msg)?;
+            if *json {
+                let row = |(m, f): &(hal_sim::design::Motor, hal_sim::design::FirstStance)| {
+                    serde_json::json!({
+                        "motor": m, "stall_torque_nm": m.stall_torque_nm(),
+                        "no_load_speed_rad_s": m.no_load_speed_rad_s(), "first_stance": f
+                    })
+                };
+                let v = serde_json::json!({
+                    "table_3_1": table.iter().map(row).collect::<Vec<_>>(),
+                    "catalogue": catalogue.iter().map(row).collect::<Vec<_>>(),
+                });
+                say!("{}", serde_json::to_string_pretty(&v)?);
+                return Ok(());
+            }
+            say!("Table 3.1: energy added in the first stance (k = 10 kN/m, 5 mm lead, dropped from 0.15 m, the stall torque commanded on the motor's torque-speed line)");
+            say!(
+                "  {:<15} {:>10} {:>10} {:>10} {:>12} {:>11}",
+                "motor",
+                "stall N m",
+                "thesis J",
+                "here J",
+                "first apex m",
+                "peak rad/s"
+            );
+            for (m, f) in &table {
+                say!(
+                    "  {:<15} {:>10.3} {:>10.1} {:>10.2} {:>12.4} {:>11.0}",
+                    m.thesis_name,
+                    m.stall_torque_nm(),
+                    m.thesis_energy_j,
+                    f.motor_work_j,
+                    f.first_apex_m,
+                    f.peak_speed_rad_s
+                );
+            }
+            say!("catalogue motors (datasheet constants, 24 V, the rotor plus the transmission's inertia):");
+            for (m, f) in &catalogue {
+                say!(
+                    "  {} for \"{}\": stall {:.3} N m, no-load {:.0} rad/s: {:.2} J, first apex {:.4} m (thesis {:.1} J)",
+                    m.model,
+                    m.thesis_name,
+                    m.stall_torque_nm(),
+                    m.no_load_speed_rad_s(),
+                    f.motor_work_j,
+                    f.first_apex_m,
+                    m.thesis_energy_j
+                );
+            }
+        }
+        DesignCmd::Leads { out, json } => {
+            let study = STUDY_LEADS_M
+                .iter()
+                .map(|&l| first_stance(&DESIGN_MOTOR, l))
+                .collect::<Result<Vec<_>, _>>()
+                .map_err(anyhow::Error::msg)?;
+            let written = match out {
+                Some(dir) => hal_sim::design::write_lead_plot(&DESIGN_MOTOR, &study, dir)
+                    .map_err(anyhow::Error::msg)?,
+                None => Vec::new(),
+            };
+            if *json {
+                say!("{}", serde_json::to_string_pretty(&study)?);
+                return Ok(());
+            }
+            say!("lead study: the design motor (2.0 N m stall, 808 rad/s no-load) on its torque-speed curve, k = 10 kN/m, dropped from 0.15 m");
+            say!(
+                "  {:>8} {:>14} {:>12} {:>14} {:>11} {:>10}",
+                "lead mm",
+                "motor work J",
+                "first apex m",
+                "apex gain J",
+                "peak rad/s",
+                "stance ms"
+            );
+            for f in &study {
+                say!(
+                    "  {:>8.0} {:>14.2} {:>12.4} {:>14.2} {:>11.0} {:>10.1}",
+                    f.lead_m * 1e3,
+                    f.motor_work_j,
+                    f.first_apex_m,
+                    f.hop_energy_gain_j,
+                    f.peak_speed_rad_s,
+                    f.stance_s * 1e3
+                );
+            }
+            for p in &written {
+                say!("  wrote {}", p.display());
+            }
+        }
     }
     Ok(())
 }

@@ -1,0 +1,525 @@
+//! The actuator studies of thesis section 3.1 (Table 3.1, Figures 3.1-3.3):
+//! the energy a motor adds in the first stance through a ball screw into
+//! the spring, with the motor on its own voltage-limited torque-speed curve
+//! rather than behind the amplifier's 1 N m.
+//!
+//! One run per point, the same as `hopper-sim run`: the design machine with
+//! the motor's constants and the screw's lead, dropped from 0.15 m, the
+//! firmware's open-torque law commanding the motor's stall torque in
+//! stance. The plant's motor limit `|R i + k_e omega| <= V` with the current
+//! limit at the stall current `V / R` is the straight torque-speed line
+//! `tau <= tau_stall (1 - omega / omega_0)`; the DAC's scale is set to reach
+//! that current (calibration.dac_amps_per_code). `docs/design.md` compares
+//! the figures with the thesis's.
+
+use crate::controller::ControllerSpec;
+use crate::params_toml::PlantSet;
+use crate::run::{self, Sample};
+use crate::scenario::{Overrides, Settings};
+use crate::Params;
+use hopper_control::laws::ControllerKind;
+use serde::Serialize;
+
+/// A candidate motor (datasheet values at its nominal voltage).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct Motor {
+    /// The thesis's name (Table 3.1).
+    pub thesis_name: &'static str,
+    /// The catalogue motor taken for it.
+    pub model: &'static str,
+    /// Torque constant, N m/A.
+    pub torque_constant_nm_per_a: f64,
+    /// Terminal resistance, ohm.
+    pub resistance_ohm: f64,
+    /// Rotor inertia, kg m^2.
+    pub rotor_inertia_kg_m2: f64,
+    /// Supply (nominal) voltage, V.
+    pub supply_v: f64,
+    /// Table 3.1's stall torque, N m.
+    pub thesis_stall_nm: f64,
+    /// Table 3.1's energy added in the first stance, J.
+    pub thesis_energy_j: f64,
+}
+
+impl Motor {
+    /// Stall current `V / R`, A.
+    pub fn stall_current_a(&self) -> f64 {
+        self.supply_v / self.resistance_ohm
+    }
+
+    /// Stall torque `k_t V / R`, N m.
+    pub fn stall_torque_nm(&self) -> f64 {
+        self.torque_constant_nm_per_a * self.stall_current_a()
+    }
+
+    /// No-load speed `V / k_e`, rad/s.
+    pub fn no_load_speed_rad_s(&self) -> f64 {
+        self.supply_v / self.torque_constant_nm_per_a
+    }
+}
+
+/// The design machine's motor (`Params::design`: the 80 W class of Table
+/// 3.1, 2.0 N m stall at 24 V, Table 2.1's inertia for rotor and screw).
+pub const DESIGN_MOTOR: Motor = Motor {
+    thesis_name: "Maxon 80",
+    model: "the design preset's motor (Table 2.1, 2.0 N m stall at 24 V)",
+    torque_constant_nm_per_a: hopper_control::model::design::TORQUE_CONSTANT_NM_PER_A,
+    resistance_ohm: hopper_control::model::design::TORQUE_CONSTANT_NM_PER_A * 24.0 / 2.0,
+    rotor_inertia_kg_m2: hopper_control::model::design::ROTOR_INERTIA_KG_M2,
+    supply_v: 24.0,
+    thesis_stall_nm: 2.0,
+    thesis_energy_j: 15.0,
+};
+
+/// Table 3.1's four motors as the table defines them: its stall torque on
+/// the design motor's torque constant and 24 V (the resistance set for that
+/// stall torque, so each runs on the straight line from its stall torque to
+/// the design's 808 rad/s no-load speed) and Table 2.1's inertia.
+pub fn table_3_1() -> [Motor; 4] {
+    let at = |thesis_name: &'static str, stall_nm: f64, energy_j: f64| Motor {
+        thesis_name,
+        model: "Table 3.1's stall torque on the design motor's k_t and 24 V",
+        resistance_ohm: DESIGN_MOTOR.torque_constant_nm_per_a * DESIGN_MOTOR.supply_v / stall_nm,
+        thesis_stall_nm: stall_nm,
+        thesis_energy_j: energy_j,
+        ..DESIGN_MOTOR
+    };
+    [
+        at("Maxon 100 WEC", 0.382, 1.8),
+        at("Maxon 100 EC", 0.470, 1.5),
+        at("Maxon 80", 2.0, 15.0),
+        at("Pittman 14006", 2.0, 14.8),
+    ]
+}
+
+/// Table 2.1's rotor-and-screw inertia less the Maxon RE 40's rotor: what
+/// the transmission adds to a catalogue motor's rotor, kg m^2.
+pub const TRANSMISSION_INERTIA_KG_M2: f64 =
+    hopper_control::model::design::ROTOR_INERTIA_KG_M2 - 142.0e-7;
+
+/// The catalogue motors found for two of Table 3.1's (docs/design.md
+/// gives the sources; none was found for the two brushless Maxons): 24 V
+/// windings, the rotor plus [`TRANSMISSION_INERTIA_KG_M2`].
+pub const CATALOGUE: [Motor; 2] = [
+    Motor {
+        thesis_name: "Maxon 80",
+        model: "Maxon RE 40 (148867, 24 V)",
+        torque_constant_nm_per_a: 0.0302,
+        resistance_ohm: 0.299,
+        rotor_inertia_kg_m2: 142.0e-7 + TRANSMISSION_INERTIA_KG_M2,
+        supply_v: 24.0,
+        thesis_stall_nm: 2.0,
+        thesis_energy_j: 15.0,
+    },
+    Motor {
+        thesis_name: "Pittman 14006",
+        model: "Pittman 14204S006 (24 V)",
+        torque_constant_nm_per_a: 0.0612,
+        resistance_ohm: 1.01,
+        rotor_inertia_kg_m2: 260.0e-7 + TRANSMISSION_INERTIA_KG_M2,
+        supply_v: 24.0,
+        thesis_stall_nm: 2.0,
+        thesis_energy_j: 14.8,
+    },
+];
+
+/// The thesis's spring rate for these studies, N/m (`k = 10`, kN/m).
+pub const STUDY_SPRING_N_PER_M: f64 = 10_000.0;
+/// The drop: the toe this high at rest, m (the lead-study preset's).
+pub const STUDY_START_APEX_M: f64 = 0.15;
+/// Drop (0.17 s), first stance (about 0.1 s) and the flight after, s.
+const STUDY_DURATION_S: f64 = 0.6;
+
+/// What the first stance did.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct FirstStance {
+    /// Screw lead, m.
+    pub lead_m: f64,
+    /// The motor's thesis name.
+    pub motor: &'static str,
+    /// Motor work from the first touchdown to the first liftoff (the
+    /// plant's ledger): the thesis's "energy added", J.
+    pub motor_work_j: f64,
+    /// The first apex after it, m (what the stance did to the hop: the
+    /// motor's work also spins the rotor, and that part does not lift the
+    /// body).
+    pub first_apex_m: f64,
+    /// The energy the first apex has over the drop's, `m_t g (h1 - h0)`, J.
+    pub hop_energy_gain_j: f64,
+    /// Stance duration, s.
+    pub stance_s: f64,
+    /// Fastest motor speed in the stance, rad/s.
+    pub peak_speed_rad_s: f64,
+    /// Largest motor torque in the stance, N m.
+    pub peak_torque_nm: f64,
+    /// The stance's operating points: (time since touchdown s, motor speed
+    /// rad/s, motor torque N m, motor work so far J: `eta tau omega`
+    /// integrated, what reaches the nut), one a period.
+    #[serde(skip)]
+    pub points: Vec<(f64, f64, f64, f64)>,
+}
+
+/// The design machine with `motor` and `lead_m` and the study's spring.
+pub fn study_params(motor: &Motor, lead_m: f64) -> Params {
+    Params {
+        spring_stiffness_n_per_m: STUDY_SPRING_N_PER_M,
+        screw_lead_m: lead_m,
+        torque_constant_nm_per_a: motor.torque_constant_nm_per_a,
+        winding_resistance_ohm: motor.resistance_ohm,
+        rotor_inertia_kg_m2: motor.rotor_inertia_kg_m2,
+        supply_voltage_v: motor.supply_v,
+        current_limit_a: motor.stall_current_a(),
+        ..Params::design()
+    }
+}
+
+/// The first stance of `motor` through a `lead_m` screw (module docs).
+pub fn first_stance(motor: &Motor, lead_m: f64) -> Result<FirstStance, String> {
+    let params = study_params(motor, lead_m);
+    params
+        .validate()
+        .map_err(|e| format!("{} with a {} mm lead: {e}", motor.thesis_name, lead_m * 1e3))?;
+    let cli = Overrides {
+        plant: Some(PlantSet {
+            params,
+            name: format!("{} motor, {} mm lead", motor.thesis_name, lead_m * 1e3),
+            preset: Some("design"),
+        }),
+        controller: Some(ControllerKind::OpenTorque),
+        torque_nm: Some(motor.stall_torque_nm()),
+        noise: Some(false),
+        start_apex_m: Some(STUDY_START_APEX_M),
+        duration_s: Some(STUDY_DURATION_S),
+        // The DAC's full scale (2047 codes) a little beyond the stall current.
+        firmware_params: Some(vec![(
+            &hopper_control::params::CAL_DAC_AMPS,
+            (motor.stall_current_a() / 2000.0) as f32,
+        )]),
+        ..Overrides::default()
+    };
+    let settings = Settings::resolve(None, &cli);
+    settings.check()?;
+    let cfg = settings.run_config(1.0 / settings.control_hz);
+    let spec: ControllerSpec = settings.controller_spec()?;
+    let mut ctl = spec.build(&cfg.params, cfg.start_apex_m, cfg.control_dt_s)?;
+    let r = run::run(&cfg, &settings.params_name, &mut ctl)?;
+    let s = &r.summary;
+    let work = s
+        .first_stance_motor_work_j
+        .ok_or_else(|| format!("{}: no complete first stance", settings.params_name))?;
+    let first_apex = s.apex_heights_m.first().copied().unwrap_or(f64::NAN);
+    let (t_td, t_lo) = first_stance_times(&r.events)
+        .ok_or_else(|| format!("{}: no complete first stance", settings.params_name))?;
+    let rr = params.screw_m_per_rad();
+    let mut points = Vec::new();
+    let mut work_so_far = 0.0;
+    let mut last: Option<&Sample> = None;
+    for smp in r.samples.iter().filter(|x| x.t_s >= t_td && x.t_s <= t_lo) {
+        let omega = smp.pd_mps / rr;
+        if let Some(l) = last {
+            let p0 = l.torque_nm * l.pd_mps / rr;
+            let p1 = smp.torque_nm * omega;
+            // What reaches the nut, `eta tau omega`: the ledger's motor work.
+            work_so_far += params.efficiency * 0.5 * (p0 + p1) * (smp.t_s - l.t_s);
+        }
+        points.push((smp.t_s - t_td, omega, smp.torque_nm, work_so_far));
+        last = Some(smp);
+    }
+    let m_total = params.body_mass_kg + params.nut_mass_kg + params.unsprung_mass_kg;
+    Ok(FirstStance {
+        lead_m,
+        motor: motor.thesis_name,
+        motor_work_j: work,
+        first_apex_m: first_apex,
+        hop_energy_gain_j: m_total * params.gravity_mps2 * (first_apex - STUDY_START_APEX_M),
+        stance_s: t_lo - t_td,
+        peak_speed_rad_s: points.iter().map(|p| p.1.abs()).fold(0.0, f64::max),
+        peak_torque_nm: points.iter().map(|p| p.2.abs()).fold(0.0, f64::max),
+        points,
+    })
+}
+
+/// The first touchdown's and the first liftoff's times, s.
+fn first_stance_times(events: &[crate::Event]) -> Option<(f64, f64)> {
+    let td = events.iter().find_map(|e| match *e {
+        crate::Event::Touchdown { t_s, .. } => Some(t_s),
+        _ => None,
+    })?;
+    let lo = events.iter().find_map(|e| match *e {
+        crate::Event::Liftoff { t_s, .. } if t_s > td => Some(t_s),
+        _ => None,
+    })?;
+    Some((td, lo))
+}
+
+/// The lead study's leads (Figures 3.1-3.3: 2, 5 and 10 mm) and the points
+/// between, m.
+pub const STUDY_LEADS_M: [f64; 9] = [
+    0.002, 0.003, 0.004, 0.005, 0.006, 0.007, 0.008, 0.009, 0.010,
+];
+
+/// The lead study's figure (Figures 3.1-3.3 side by side): the motor's
+/// work in the first stance and the first apex against the lead, the work
+/// through the stance and the torque-speed operating points (with the
+/// motor's line) for 2, 5 and 10 mm; written as `lead-study.png` and
+/// `lead-study.svg` into `dir`, whole or not at all.
+pub fn write_lead_plot(
+    motor: &Motor,
+    study: &[FirstStance],
+    dir: &std::path::Path,
+) -> Result<Vec<std::path::PathBuf>, String> {
+    use plotters::prelude::*;
+    crate::plot::ensure_font()?;
+    const SIZE: (u32, u32) = (1200, 900);
+    fn draw<DB: DrawingBackend>(
+        root: DrawingArea<DB, plotters::coord::Shift>,
+        motor: &Motor,
+        study: &[FirstStance],
+    ) -> Result<(), Box<dyn std::error::Error>>
+    where
+        DB::ErrorType: 'static,
+    {
+        root.fill(&WHITE)?;
+        let root = root.titled(
+            &format!(
+                "Ball-screw lead study on the torque-speed curve ({}, k = 10 kN/m, dropped from 0.15 m)",
+                motor.thesis_name
+            ),
+            ("sans-serif", 20),
+        )?;
+        let panels = root.split_evenly((2, 2));
+        let mm = |x: f64| x * 1e3;
+        let leads: Vec<f64> = study.iter().map(|x| mm(x.lead_m)).collect();
+        let (l_lo, l_hi) = (
+            leads.iter().copied().fold(f64::INFINITY, f64::min) - 0.5,
+            leads.iter().copied().fold(0.0, f64::max) + 0.5,
+        );
+        let style = |c: &mut ChartBuilder<'_, '_, DB>| {
+            c.margin(12).x_label_area_size(40).y_label_area_size(60);
+        };
+        // (a) work against the lead.
+        let w_hi = study.iter().map(|x| x.motor_work_j).fold(0.0, f64::max) * 1.1;
+        let mut b = ChartBuilder::on(&panels[0]);
+        style(&mut b);
+        let mut c = b
+            .caption("energy added in the first stance", ("sans-serif", 16))
+            .build_cartesian_2d(l_lo..l_hi, 0.0..w_hi)?;
+        c.configure_mesh()
+            .x_desc("lead [mm]")
+            .y_desc("motor work [J]")
+            .draw()?;
+        c.draw_series(LineSeries::new(
+            study.iter().map(|x| (mm(x.lead_m), x.motor_work_j)),
+            BLUE.stroke_width(2),
+        ))?;
+        c.draw_series(
+            study
+                .iter()
+                .map(|x| Circle::new((mm(x.lead_m), x.motor_work_j), 4, BLUE.filled())),
+        )?;
+        // (b) the first apex against the lead.
+        let a_lo = study
+            .iter()
+            .map(|x| x.first_apex_m)
+            .fold(f64::INFINITY, f64::min)
+            * 0.95;
+        let a_hi = study.iter().map(|x| x.first_apex_m).fold(0.0, f64::max) * 1.05;
+        let mut b = ChartBuilder::on(&panels[1]);
+        style(&mut b);
+        let mut c = b
+            .caption("first apex after it (from 0.15 m)", ("sans-serif", 16))
+            .build_cartesian_2d(l_lo..l_hi, a_lo..a_hi)?;
+        c.configure_mesh()
+            .x_desc("lead [mm]")
+            .y_desc("apex [m]")
+            .draw()?;
+        c.draw_series(LineSeries::new(
+            study.iter().map(|x| (mm(x.lead_m), x.first_apex_m)),
+            RED.stroke_width(2),
+        ))?;
+        c.draw_series(
+            study
+                .iter()
+                .map(|x| Circle::new((mm(x.lead_m), x.first_apex_m), 4, RED.filled())),
+        )?;
+        let shown: Vec<&FirstStance> = study
+            .iter()
+            .filter(|x| {
+                [2.0, 5.0, 10.0]
+                    .iter()
+                    .any(|l| (mm(x.lead_m) - l).abs() < 1e-6)
+            })
+            .collect();
+        let colors = [BLUE, GREEN, RED];
+        // (c) work through the stance.
+        let t_hi = shown.iter().map(|x| x.stance_s).fold(0.0, f64::max) * 1000.0 * 1.05;
+        let mut b = ChartBuilder::on(&panels[2]);
+        style(&mut b);
+        let mut c = b
+            .caption("through the stance", ("sans-serif", 16))
+            .build_cartesian_2d(0.0..t_hi, 0.0..w_hi)?;
+        c.configure_mesh()
+            .x_desc("time since touchdown [ms]")
+            .y_desc("motor work [J]")
+            .draw()?;
+        for (x, col) in shown.iter().zip(colors) {
+            c.draw_series(LineSeries::new(
+                x.points.iter().map(|p| (p.0 * 1000.0, p.3)),
+                col.stroke_width(2),
+            ))?
+            .label(format!("{} mm", mm(x.lead_m)))
+            .legend(move |(a, b)| PathElement::new(vec![(a, b), (a + 20, b)], col.stroke_width(2)));
+        }
+        c.configure_series_labels()
+            .position(SeriesLabelPosition::LowerRight)
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .draw()?;
+        // (d) torque-speed points and the motor's line.
+        let w0 = motor.no_load_speed_rad_s();
+        let t0 = motor.stall_torque_nm();
+        let mut b = ChartBuilder::on(&panels[3]);
+        style(&mut b);
+        let mut c = b
+            .caption(
+                "torque-speed operating points in the stance",
+                ("sans-serif", 16),
+            )
+            .build_cartesian_2d(0.0..w0 * 1.05, 0.0..t0 * 1.1)?;
+        c.configure_mesh()
+            .x_desc("motor speed [rad/s]")
+            .y_desc("motor torque [N m]")
+            .draw()?;
+        c.draw_series(LineSeries::new(
+            [(0.0, t0), (w0, 0.0)],
+            BLACK.stroke_width(1),
+        ))?
+        .label("the motor's limit")
+        .legend(|(a, b)| PathElement::new(vec![(a, b), (a + 20, b)], BLACK));
+        for (x, col) in shown.iter().zip(colors) {
+            c.draw_series(
+                x.points
+                    .iter()
+                    .step_by(10)
+                    .map(|p| Circle::new((p.1.abs(), p.2.abs()), 2, col.filled())),
+            )?
+            .label(format!("{} mm", mm(x.lead_m)))
+            .legend(move |(a, b)| Circle::new((a + 10, b), 3, col.filled()));
+        }
+        c.configure_series_labels()
+            .position(SeriesLabelPosition::UpperRight)
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .draw()?;
+        root.present()?;
+        Ok(())
+    }
+    let mut svg = String::new();
+    draw(
+        SVGBackend::with_string(&mut svg, SIZE).into_drawing_area(),
+        motor,
+        study,
+    )
+    .map_err(|e| format!("cannot draw the lead study: {e}"))?;
+    crate::out_dir::write_whole(dir, |staging| {
+        draw(
+            BitMapBackend::new(&staging.join("lead-study.png"), SIZE).into_drawing_area(),
+            motor,
+            study,
+        )
+        .map_err(|e| format!("cannot draw the lead study: {e}"))?;
+        std::fs::write(staging.join("lead-study.svg"), &svg)
+            .map_err(|e| format!("cannot write {}: {e}", dir.join("lead-study.svg").display()))?;
+        Ok(vec!["lead-study.png".into(), "lead-study.svg".into()])
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The design motor on its curve through 2, 5 and 10 mm leads: the
+    /// motor's work falls with the lead (a small lead spins the rotor:
+    /// 2700 kg reflected at 2 mm) while the first apex rises.
+    #[test]
+    fn the_lead_study_on_the_torque_speed_curve() {
+        let s: Vec<FirstStance> = [0.002, 0.005, 0.010]
+            .iter()
+            .map(|&l| first_stance(&DESIGN_MOTOR, l).unwrap_or_else(|e| panic!("{e}")))
+            .collect();
+        for x in &s {
+            eprintln!(
+                "{} mm: {:.2} J, apex {:.4} m, stance {:.3} s, {:.0} rad/s, {:.2} N m",
+                x.lead_m * 1e3,
+                x.motor_work_j,
+                x.first_apex_m,
+                x.stance_s,
+                x.peak_speed_rad_s,
+                x.peak_torque_nm
+            );
+        }
+        let near = |x: f64, want: f64| (x / want - 1.0).abs() < 0.02;
+        assert!(near(s[0].motor_work_j, 28.31), "{:?}", s[0].motor_work_j);
+        assert!(near(s[1].motor_work_j, 25.67), "{:?}", s[1].motor_work_j);
+        assert!(near(s[2].motor_work_j, 21.05), "{:?}", s[2].motor_work_j);
+        assert!(s[0].first_apex_m < s[1].first_apex_m && s[1].first_apex_m < s[2].first_apex_m);
+        // The trapezoid of the points agrees with the ledger.
+        for x in &s {
+            let w = x.points.last().map_or(0.0, |p| p.3);
+            assert!(
+                (w - x.motor_work_j).abs() < 0.01 * x.motor_work_j,
+                "{w} vs {}",
+                x.motor_work_j
+            );
+            // On or under the motor's line.
+            let m = DESIGN_MOTOR;
+            for &(_, om, tau, _) in &x.points {
+                let line = m.stall_torque_nm() * (1.0 - om.abs() / m.no_load_speed_rad_s());
+                assert!(
+                    tau.abs() <= line + 1e-6,
+                    "{om} rad/s {tau} N m above {line}"
+                );
+            }
+        }
+    }
+}
+
+/// A tiny check of the motor tables, on the figures docs/design.md quotes.
+#[cfg(test)]
+mod motor_tests {
+    use super::*;
+
+    #[test]
+    fn table_3_1_on_each_stall_torque() {
+        let t = table_3_1();
+        let e: Vec<f64> = t
+            .iter()
+            .map(|m| {
+                first_stance(m, 0.005)
+                    .unwrap_or_else(|e| panic!("{e}"))
+                    .motor_work_j
+            })
+            .collect();
+        for (m, e) in t.iter().zip(&e) {
+            eprintln!(
+                "{}: stall {:.3} N m: {e:.2} J (thesis {} J)",
+                m.thesis_name,
+                m.stall_torque_nm(),
+                m.thesis_energy_j
+            );
+        }
+        for m in CATALOGUE {
+            let f = first_stance(&m, 0.005).unwrap_or_else(|e| panic!("{e}"));
+            eprintln!(
+                "{}: stall {:.3} N m: {:.2} J",
+                m.model,
+                m.stall_torque_nm(),
+                f.motor_work_j
+            );
+        }
+        // The stall torque is what orders them, as in the thesis: the two
+        // small ones add an order of magnitude less.
+        assert!(e[0] < e[1] && e[1] < 0.2 * e[2]);
+        assert!((e[2] - e[3]).abs() < 1e-9);
+    }
+}
