@@ -15,6 +15,7 @@ pub mod csv_out;
 pub mod design;
 pub mod figures;
 pub mod flight_stability;
+pub mod identify;
 pub mod inject;
 pub mod out_dir;
 pub mod params_toml;

@@ -182,3 +182,80 @@ fn design_motors_and_leads() {
         assert!(std::fs::metadata(d.join(f)).unwrap().len() > 1000, "{f}");
     }
 }
+
+/// Section 4.5 on simulated logs (default sensor noise, the identified
+/// machine): from a passive drop the frictions come back from the design
+/// preset's 5 N and 5 N to within 5% of 13 N and 15 N; then, with those,
+/// an open-torque hop's effective stance torque (0.62 N m, as
+/// current_limit_a = 20.87 A) from the design's 33.67 A within 5%.
+#[test]
+fn identify_recovers_the_frictions_and_the_stance_torque() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = |n: &str| dir.path().join(n).to_str().unwrap().to_string();
+    for (name, controller, duration) in [
+        ("passive", "passive", "2"),
+        ("torque", "open-torque", "1.5"),
+    ] {
+        let o = sim(&[
+            "run",
+            "--params",
+            "identified",
+            "--controller",
+            controller,
+            "--start-apex",
+            "0.15",
+            "--duration",
+            duration,
+            "--out",
+            &p(name),
+        ]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    }
+    let out = sim(&[
+        "identify",
+        "--log",
+        &p("passive"),
+        "--params",
+        "design",
+        "--json",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let fp = v["planarizer_friction_n"].as_f64().unwrap();
+    let fl = v["leg_friction_n"].as_f64().unwrap();
+    eprintln!("passive: {v}");
+    assert!((fp / 13.0 - 1.0).abs() < 0.05, "planarizer {fp}");
+    assert!((fl / 15.0 - 1.0).abs() < 0.05, "leg {fl}");
+    let toml = dir.path().join("known.toml");
+    std::fs::write(
+        &toml,
+        format!("base = \"design\"\nplanarizer_friction_n = {fp}\nleg_friction_n = {fl}\n"),
+    )
+    .unwrap();
+    let out = sim(&[
+        "identify",
+        "--log",
+        &p("torque"),
+        "--experiment",
+        "open-torque",
+        "--params",
+        toml.to_str().unwrap(),
+        "--json",
+        "--out",
+        &p("plot"),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    eprintln!("open-torque: {v}");
+    let t = v["stance_torque_nm"].as_f64().unwrap();
+    assert!((t / 0.62 - 1.0).abs() < 0.05, "stance torque {t}");
+    assert!(dir.path().join("plot").join("identify.png").is_file());
+}
