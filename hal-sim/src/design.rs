@@ -434,6 +434,386 @@ pub fn write_lead_plot(
     })
 }
 
+/// Which controller holds the hop: the project's best (shaped, target
+/// 0.05 m) or the thesis's law of section 4.6 (open-loop torque at the
+/// torque limit, stance only, eq 4.13's flight PD).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+pub enum Holder {
+    /// `shaped` at a 0.05 m target.
+    Shaped,
+    /// `open-torque` commanding the torque limit.
+    OpenTorque,
+}
+
+impl Holder {
+    /// Both, in the order they are reported.
+    pub const ALL: [Holder; 2] = [Holder::Shaped, Holder::OpenTorque];
+
+    /// The controller's command-line name.
+    pub fn name(self) -> &'static str {
+        match self {
+            Holder::Shaped => "shaped",
+            Holder::OpenTorque => "open-torque",
+        }
+    }
+}
+
+/// The hop to hold, m (toe apex), and how long the run lasts, s.
+pub const HOLD_APEX_M: f64 = 0.05;
+const HOLD_DURATION_S: f64 = 15.0;
+
+/// The steady apex of `holder` on `params` released from 0.05 m, 15 s
+/// (None: it never becomes steady; the torque limit is `current_limit_a`
+/// with the DAC's scale set to reach it). `protect`: the firmware's motor
+/// thermal protection on, as on a robot; off (`thermal.protect = 0`), the
+/// mechanics alone.
+pub fn steady_apex(params: &Params, holder: Holder, protect: bool) -> Result<Option<f64>, String> {
+    let (controller, torque) = match holder {
+        Holder::Shaped => (ControllerKind::Shaped, None),
+        Holder::OpenTorque => (
+            ControllerKind::OpenTorque,
+            Some(params.torque_constant_nm_per_a * params.current_limit_a),
+        ),
+    };
+    let cli = Overrides {
+        plant: Some(PlantSet {
+            params: *params,
+            name: "candidate".into(),
+            preset: None,
+        }),
+        controller: Some(controller),
+        torque_nm: torque,
+        target_apex_m: Some(HOLD_APEX_M),
+        start_apex_m: Some(HOLD_APEX_M),
+        duration_s: Some(HOLD_DURATION_S),
+        firmware_params: Some(vec![
+            (
+                &hopper_control::params::CAL_DAC_AMPS,
+                (params.current_limit_a.max(40.0) / 2000.0) as f32,
+            ),
+            (
+                &hopper_control::params::THERMAL_PROTECT,
+                if protect { 1.0 } else { 0.0 },
+            ),
+        ]),
+        ..Overrides::default()
+    };
+    let s = Settings::resolve(None, &cli);
+    s.check()?;
+    let cfg = s.run_config(0.0);
+    let mut ctl = s
+        .controller_spec()?
+        .build(&cfg.params, cfg.start_apex_m, cfg.control_dt_s)?;
+    Ok(run::run(&cfg, "candidate", &mut ctl)?.summary.steady_apex_m)
+}
+
+/// Whether a steady apex holds the 5 cm hop: within 2% of it for shaped
+/// (its target), at or above 98% of it for open-loop torque (no target).
+pub fn holds(apex: Option<f64>, holder: Holder) -> bool {
+    match (apex, holder) {
+        (Some(a), Holder::Shaped) => (a - HOLD_APEX_M).abs() <= 0.02 * HOLD_APEX_M,
+        (Some(a), Holder::OpenTorque) => a >= 0.98 * HOLD_APEX_M,
+        (None, _) => false,
+    }
+}
+
+/// One design parameter changed alone from the identified machine.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+pub enum Change {
+    /// Both frictions scaled together (the thesis's "friction fix").
+    Friction,
+    /// The stance torque limit (the amplifier's current limit).
+    TorqueLimit,
+    /// The ball-screw lead.
+    Lead,
+    /// The spring rate.
+    SpringRate,
+    /// The spring preload.
+    Preload,
+}
+
+impl Change {
+    /// Every change, in the order reported.
+    pub const ALL: [Change; 5] = [
+        Change::Friction,
+        Change::TorqueLimit,
+        Change::Lead,
+        Change::SpringRate,
+        Change::Preload,
+    ];
+
+    /// Name and unit.
+    pub fn label(self) -> (&'static str, &'static str) {
+        match self {
+            Change::Friction => ("friction (both, scaled)", "x"),
+            Change::TorqueLimit => ("stance torque limit", "N m"),
+            Change::Lead => ("screw lead", "mm"),
+            Change::SpringRate => ("spring rate", "kN/m"),
+            Change::Preload => ("spring preload", "mm"),
+        }
+    }
+
+    /// The identified machine's value, in the label's unit.
+    pub fn identified(self) -> f64 {
+        let p = Params::identified();
+        match self {
+            Change::Friction => 1.0,
+            Change::TorqueLimit => p.torque_constant_nm_per_a * p.current_limit_a,
+            Change::Lead => p.screw_lead_m * 1e3,
+            Change::SpringRate => p.spring_stiffness_n_per_m * 1e-3,
+            Change::Preload => p.spring_preload_m * 1e3,
+        }
+    }
+
+    /// The values tried, nearest the identified first.
+    pub fn candidates(self) -> Vec<f64> {
+        let mut v: Vec<f64> = match self {
+            Change::Friction => (1..20).map(|i| 1.0 - 0.05 * f64::from(i)).collect(),
+            Change::TorqueLimit => (1..=44)
+                .map(|i| 0.62 * (1.0 + 0.05 * f64::from(i)))
+                .collect(),
+            Change::Lead => (4..=20)
+                .map(|i| 0.5 * f64::from(i))
+                .filter(|l| (l - 5.0).abs() > 1e-9)
+                .collect(),
+            Change::SpringRate => (-10..=20)
+                .filter(|&i| i != 0)
+                .map(|i| 11.0 * (1.0 + 0.05 * f64::from(i)))
+                .collect(),
+            Change::Preload => (1..=40).map(|i| 0.5 * f64::from(i)).collect(),
+        };
+        let id = self.identified();
+        v.sort_by(|a, b| {
+            ((a - id) / id.max(1.0))
+                .abs()
+                .total_cmp(&((b - id) / id.max(1.0)).abs())
+        });
+        v
+    }
+
+    /// The identified machine with this parameter at `value` (label's unit).
+    pub fn apply(self, value: f64) -> Params {
+        let mut p = Params::identified();
+        match self {
+            Change::Friction => {
+                p.planarizer_friction_n *= value;
+                p.leg_friction_n *= value;
+            }
+            Change::TorqueLimit => p.current_limit_a = value / p.torque_constant_nm_per_a,
+            Change::Lead => p.screw_lead_m = value * 1e-3,
+            Change::SpringRate => p.spring_stiffness_n_per_m = value * 1e3,
+            Change::Preload => p.spring_preload_m = value * 1e-3,
+        }
+        p
+    }
+}
+
+/// The smallest single change that holds the hop: the first candidate (in
+/// the order of [`Change::candidates`]) whose run holds it, with its
+/// steady apex; None when none of them does.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Smallest {
+    /// What changed.
+    pub change: Change,
+    /// Which controller.
+    pub holder: Holder,
+    /// The motor's thermal protection on.
+    pub thermal_protection: bool,
+    /// The identified value and the one that holds (label's unit).
+    pub identified: f64,
+    /// The smallest change that holds, None if no candidate does.
+    pub holds_at: Option<f64>,
+    /// Its steady apex, m.
+    pub apex_m: Option<f64>,
+    /// Candidates run.
+    pub tried: usize,
+}
+
+/// [`Smallest`] for every change and both controllers (in parallel).
+pub fn smallest_changes(protect: bool) -> Result<Vec<Smallest>, String> {
+    use rayon::prelude::*;
+    let jobs: Vec<(Change, Holder, f64)> = Change::ALL
+        .iter()
+        .flat_map(|&c| {
+            Holder::ALL
+                .iter()
+                .flat_map(move |&h| c.candidates().into_iter().map(move |v| (c, h, v)))
+        })
+        .collect();
+    let results: Vec<Option<f64>> = jobs
+        .par_iter()
+        .map(|&(c, h, v)| steady_apex(&c.apply(v), h, protect))
+        .collect::<Result<Vec<_>, String>>()?;
+    let mut out = Vec::new();
+    for c in Change::ALL {
+        for h in Holder::ALL {
+            let mine: Vec<(f64, Option<f64>)> = jobs
+                .iter()
+                .zip(&results)
+                .filter(|((jc, jh, _), _)| *jc == c && *jh == h)
+                .map(|((_, _, v), a)| (*v, *a))
+                .collect();
+            let first = mine.iter().find(|(_, a)| holds(*a, h));
+            out.push(Smallest {
+                change: c,
+                holder: h,
+                thermal_protection: protect,
+                identified: c.identified(),
+                holds_at: first.map(|f| f.0),
+                apex_m: first.and_then(|f| f.1),
+                tried: mine.len(),
+            });
+        }
+    }
+    Ok(out)
+}
+
+/// The feasibility map: steady apex over friction scale x torque limit for
+/// `holder` (rows: friction scales, columns: torque limits).
+pub struct FeasibilityMap {
+    /// Friction scales (1 = identified).
+    pub friction: Vec<f64>,
+    /// Torque limits, N m.
+    pub torque_nm: Vec<f64>,
+    /// Steady apex per cell, m (None: never steady).
+    pub apex: Vec<Vec<Option<f64>>>,
+    /// Which controller.
+    pub holder: Holder,
+    /// The motor's thermal protection on.
+    pub thermal_protection: bool,
+}
+
+/// The map for `holder`: friction 0.1..1.0 (10) x torque 0.5..1.5 N m (11).
+pub fn feasibility_map(holder: Holder, protect: bool) -> Result<FeasibilityMap, String> {
+    use rayon::prelude::*;
+    let friction: Vec<f64> = (1..=10).map(|i| 0.1 * f64::from(i)).collect();
+    let torque_nm: Vec<f64> = (0..=10).map(|i| 0.5 + 0.1 * f64::from(i)).collect();
+    let cells: Vec<(f64, f64)> = friction
+        .iter()
+        .flat_map(|&f| torque_nm.iter().map(move |&t| (f, t)))
+        .collect();
+    let apex: Vec<Option<f64>> = cells
+        .par_iter()
+        .map(|&(f, t)| {
+            let mut p = Change::Friction.apply(f);
+            p.current_limit_a = t / p.torque_constant_nm_per_a;
+            steady_apex(&p, holder, protect)
+        })
+        .collect::<Result<Vec<_>, String>>()?;
+    let apex = apex
+        .chunks(torque_nm.len())
+        .map(<[Option<f64>]>::to_vec)
+        .collect();
+    Ok(FeasibilityMap {
+        friction,
+        torque_nm,
+        apex,
+        holder,
+        thermal_protection: protect,
+    })
+}
+
+/// The maps side by side as `feasibility.png` and `.svg` in `dir`: steady
+/// apex as colour (grey: never steady), cells that hold 5 cm outlined, the
+/// identified machine marked.
+pub fn write_feasibility_plot(
+    maps: &[FeasibilityMap],
+    dir: &std::path::Path,
+) -> Result<Vec<std::path::PathBuf>, String> {
+    use plotters::prelude::*;
+    crate::plot::ensure_font()?;
+    const SIZE: (u32, u32) = (1300, 1150);
+    fn draw<DB: DrawingBackend>(
+        root: DrawingArea<DB, plotters::coord::Shift>,
+        maps: &[FeasibilityMap],
+    ) -> Result<(), Box<dyn std::error::Error>>
+    where
+        DB::ErrorType: 'static,
+    {
+        root.fill(&WHITE)?;
+        let root = root.titled(
+            "The identified machine: steady apex over friction and stance torque (outlined: holds 5 cm; X: as identified)",
+            ("sans-serif", 18),
+        )?;
+        let panels = root.split_evenly((maps.len().div_ceil(2).max(1), 2));
+        let hi = maps
+            .iter()
+            .flat_map(|m| m.apex.iter().flatten().flatten())
+            .copied()
+            .fold(0.0, f64::max)
+            .max(0.06);
+        for (m, panel) in maps.iter().zip(panels.iter()) {
+            let (df, dt) = (0.05, 0.05);
+            let mut c = ChartBuilder::on(panel)
+                .caption(
+                    format!(
+                        "{}, {}",
+                        m.holder.name(),
+                        if m.thermal_protection {
+                            "thermal protection on (as on the robot)"
+                        } else {
+                            "mechanics only (thermal.protect = 0)"
+                        }
+                    ),
+                    ("sans-serif", 16),
+                )
+                .margin(16)
+                .x_label_area_size(44)
+                .y_label_area_size(56)
+                .build_cartesian_2d(0.45..1.55, 0.05..1.05)?;
+            c.configure_mesh()
+                .x_desc("stance torque limit [N m]")
+                .y_desc("friction (x identified: 13 N + 15 N)")
+                .disable_mesh()
+                .draw()?;
+            for (fi, f) in m.friction.iter().enumerate() {
+                for (ti, t) in m.torque_nm.iter().enumerate() {
+                    let a = m.apex.get(fi).and_then(|r| r.get(ti)).copied().flatten();
+                    let col = match a {
+                        Some(a) => ViridisRGB::get_color(a / hi),
+                        None => RGBColor(200, 200, 200),
+                    };
+                    let rect = [(t - dt, f - df), (t + dt, f + df)];
+                    c.draw_series(std::iter::once(Rectangle::new(rect, col.filled())))?;
+                    if holds(a, m.holder) {
+                        c.draw_series(std::iter::once(Rectangle::new(
+                            rect,
+                            BLACK.stroke_width(2),
+                        )))?;
+                    }
+                }
+            }
+            c.draw_series(std::iter::once(Cross::new(
+                (0.62, 1.0),
+                8,
+                RED.stroke_width(3),
+            )))?;
+        }
+        root.present()?;
+        Ok(())
+    }
+    let mut svg = String::new();
+    draw(
+        SVGBackend::with_string(&mut svg, SIZE).into_drawing_area(),
+        maps,
+    )
+    .map_err(|e| format!("cannot draw the feasibility map: {e}"))?;
+    crate::out_dir::write_whole(dir, |staging| {
+        draw(
+            BitMapBackend::new(&staging.join("feasibility.png"), SIZE).into_drawing_area(),
+            maps,
+        )
+        .map_err(|e| format!("cannot draw the feasibility map: {e}"))?;
+        std::fs::write(staging.join("feasibility.svg"), &svg).map_err(|e| {
+            format!(
+                "cannot write {}: {e}",
+                dir.join("feasibility.svg").display()
+            )
+        })?;
+        Ok(vec!["feasibility.png".into(), "feasibility.svg".into()])
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -521,5 +901,47 @@ mod motor_tests {
         // small ones add an order of magnitude less.
         assert!(e[0] < e[1] && e[1] < 0.2 * e[2]);
         assert!((e[2] - e[3]).abs() < 1e-9);
+    }
+}
+
+/// The machine that would hop, on the figures docs/design.md quotes.
+#[cfg(test)]
+mod would_hop_tests {
+    use super::*;
+
+    fn apex(c: Change, v: f64, h: Holder, protect: bool) -> Option<f64> {
+        steady_apex(&c.apply(v), h, protect).unwrap_or_else(|e| panic!("{e}"))
+    }
+
+    #[test]
+    fn friction_at_40_percent_holds_5_cm_and_torque_alone_only_without_thermal_protection() {
+        // As identified: no hop.
+        assert!(!holds(
+            apex(Change::Friction, 1.0, Holder::Shaped, true),
+            Holder::Shaped
+        ));
+        // The friction at 40% (shaped) and 20% (open-loop torque): 5 cm.
+        assert!(holds(
+            apex(Change::Friction, 0.4, Holder::Shaped, true),
+            Holder::Shaped
+        ));
+        assert!(!holds(
+            apex(Change::Friction, 0.45, Holder::Shaped, true),
+            Holder::Shaped
+        ));
+        assert!(holds(
+            apex(Change::Friction, 0.2, Holder::OpenTorque, true),
+            Holder::OpenTorque
+        ));
+        // 1.71 N m of open-loop torque holds it mechanically, but the
+        // motor's thermal protection stops it.
+        assert!(holds(
+            apex(Change::TorqueLimit, 1.705, Holder::OpenTorque, false),
+            Holder::OpenTorque
+        ));
+        assert!(!holds(
+            apex(Change::TorqueLimit, 1.705, Holder::OpenTorque, true),
+            Holder::OpenTorque
+        ));
     }
 }

@@ -181,6 +181,18 @@ enum DesignCmd {
         #[arg(long)]
         json: bool,
     },
+    /// The machine that would hop: the smallest single change (friction,
+    /// torque limit, lead, spring rate, preload) that makes the identified
+    /// machine hold a 5 cm hop under shaped and under open-loop torque, and
+    /// with --out the feasibility map over friction and torque limit.
+    WouldHop {
+        /// Directory for feasibility.png and feasibility.svg.
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Print JSON instead of text.
+        #[arg(long)]
+        json: bool,
+    },
 }
 
 #[derive(Subcommand)]
@@ -798,6 +810,60 @@ fn cmd_design(cmd: &DesignCmd) -> Result<()> {
                     f.first_apex_m,
                     m.thesis_energy_j
                 );
+            }
+        }
+        DesignCmd::WouldHop { out, json } => {
+            use hal_sim::design::{
+                feasibility_map, smallest_changes, write_feasibility_plot, Holder,
+            };
+            let bar = indicatif::ProgressBar::new_spinner();
+            bar.set_message("searching single changes and the maps (about 1,000 runs of 15 s)");
+            bar.enable_steady_tick(std::time::Duration::from_millis(200));
+            let started = std::time::Instant::now();
+            let mut smallest = smallest_changes(true).map_err(anyhow::Error::msg)?;
+            smallest.extend(smallest_changes(false).map_err(anyhow::Error::msg)?);
+            let maps = match out {
+                Some(_) => [true, false]
+                    .iter()
+                    .flat_map(|&p| Holder::ALL.iter().map(move |&h| (h, p)))
+                    .map(|(h, p)| feasibility_map(h, p))
+                    .collect::<Result<Vec<_>, _>>()
+                    .map_err(anyhow::Error::msg)?,
+                None => Vec::new(),
+            };
+            bar.finish_and_clear();
+            let written = match out {
+                Some(dir) => write_feasibility_plot(&maps, dir).map_err(anyhow::Error::msg)?,
+                None => Vec::new(),
+            };
+            if *json {
+                say!("{}", serde_json::to_string_pretty(&smallest)?);
+                return Ok(());
+            }
+            say!(
+                "the smallest single change that makes the identified machine hold a 5 cm hop (released from 0.05 m, 15 s; {:.1} s):",
+                started.elapsed().as_secs_f64()
+            );
+            for s in &smallest {
+                let (name, unit) = s.change.label();
+                let found = match (s.holds_at, s.apex_m) {
+                    (Some(v), Some(a)) => format!("{v:.3} {unit} (steady apex {a:.4} m)"),
+                    _ => format!("none of {} values tried holds it", s.tried),
+                };
+                say!(
+                    "  {:<24} {:<12} {:<19} identified {:.3} {unit} -> {found}",
+                    name,
+                    s.holder.name(),
+                    if s.thermal_protection {
+                        "thermal protection"
+                    } else {
+                        "mechanics only"
+                    },
+                    s.identified
+                );
+            }
+            for p in &written {
+                say!("  wrote {}", p.display());
             }
         }
         DesignCmd::Leads { out, json } => {
