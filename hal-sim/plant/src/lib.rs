@@ -14,6 +14,7 @@
 pub mod metrics;
 pub mod mock;
 pub mod params;
+pub mod planar;
 pub mod plant;
 pub mod robot;
 pub mod sensors;
