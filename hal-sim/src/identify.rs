@@ -64,6 +64,10 @@ pub fn read_log(dir: &Path) -> Result<Log, String> {
             .ok_or_else(|| format!("{shown}: no `{name}` column"))
     };
     let (ti, zi) = (col(time_col)?, col("toe_height_m")?);
+    // hopper-link's toe height is the body height less the leg length: it
+    // goes negative by the spring's compression in stance, where the
+    // plant's is 0 (the toe on the ground).
+    let ground_clamp = time_col == "t_s";
     let (mut t_s, mut toe_m) = (Vec::new(), Vec::new());
     for (i, rec) in r.records().enumerate() {
         let rec = rec.map_err(|e| format!("{shown} row {}: {e}", i + 1))?;
@@ -76,7 +80,8 @@ pub fn read_log(dir: &Path) -> Result<Log, String> {
                 .ok_or_else(|| format!("{shown} row {}: `{s}` is not a number", i + 1))
         };
         t_s.push(num(ti)?);
-        toe_m.push(num(zi)?);
+        let z = num(zi)?;
+        toe_m.push(if ground_clamp { z.max(0.0) } else { z });
     }
     if t_s.len() < 100 {
         return Err(format!(
@@ -193,17 +198,17 @@ struct Fit<'a> {
 }
 
 impl Fit<'_> {
-    /// The simulated toe height at the log's times (None: the candidate is
-    /// out of the parameters' ranges or the run failed).
-    fn simulate(&self, x: &[f64]) -> Option<Vec<f64>> {
+    /// The simulated toe height at the log's times (an error: the candidate
+    /// is out of the parameters' ranges or the run failed).
+    fn simulate(&self, x: &[f64]) -> Result<Vec<f64>, String> {
         self.runs.set(self.runs.get() + 1);
         let params = with(&self.base, self.experiment, x);
-        params.validate().ok()?;
+        params.validate().map_err(|e| e.to_string())?;
         let (controller, torque) = match self.experiment {
             Experiment::Passive => (ControllerKind::Passive, None),
             Experiment::OpenTorque { torque_nm } => (ControllerKind::OpenTorque, Some(torque_nm)),
         };
-        let duration = self.log.t_s.last().copied()? + 0.002;
+        let duration = self.log.t_s.last().copied().unwrap_or(0.0) + 0.002;
         let cli = Overrides {
             plant: Some(PlantSet {
                 params,
@@ -222,13 +227,12 @@ impl Fit<'_> {
             ..Overrides::default()
         };
         let s = Settings::resolve(None, &cli);
-        s.check().ok()?;
+        s.check()?;
         let cfg = s.run_config(1.0 / s.control_hz);
         let mut ctl = s
             .controller_spec()
-            .and_then(|spec| spec.build(&cfg.params, cfg.start_apex_m, cfg.control_dt_s))
-            .ok()?;
-        let r = run::run(&cfg, "candidate", &mut ctl).ok()?;
+            .and_then(|spec| spec.build(&cfg.params, cfg.start_apex_m, cfg.control_dt_s))?;
+        let r = run::run(&cfg, "candidate", &mut ctl)?;
         // Linear interpolation of the samples (one a control period) at
         // the log's times.
         let samples = &r.samples;
@@ -238,7 +242,7 @@ impl Fit<'_> {
             while k + 1 < samples.len() && samples[k + 1].t_s < t {
                 k += 1;
             }
-            let a = samples.get(k)?;
+            let a = samples.get(k).ok_or("the run recorded no samples")?;
             let b = samples.get(k + 1).unwrap_or(a);
             let w = if b.t_s > a.t_s {
                 ((t - a.t_s) / (b.t_s - a.t_s)).clamp(0.0, 1.0)
@@ -247,7 +251,7 @@ impl Fit<'_> {
             };
             out.push(a.toe_height_m + w * (b.toe_height_m - a.toe_height_m));
         }
-        Some(out)
+        Ok(out)
     }
 
     fn unscale(&self, u: &[f64]) -> Vec<f64> {
@@ -255,14 +259,13 @@ impl Fit<'_> {
         u.iter().zip(x0).map(|(u, x)| u * x).collect()
     }
 
-    fn residuals(&self, x: &[f64]) -> Option<Vec<f64>> {
+    fn residuals(&self, x: &[f64]) -> Result<Vec<f64>, String> {
         let sim = self.simulate(x)?;
-        Some(
-            sim.iter()
-                .zip(&self.log.toe_m)
-                .map(|(s, m)| s - m)
-                .collect(),
-        )
+        Ok(sim
+            .iter()
+            .zip(&self.log.toe_m)
+            .map(|(s, m)| s - m)
+            .collect())
     }
 }
 
@@ -275,9 +278,9 @@ impl CostFunction for Fit<'_> {
     fn cost(&self, u: &Self::Param) -> Result<f64, argmin::core::Error> {
         let x = self.unscale(u);
         Ok(match self.residuals(&x) {
-            Some(r) => 1e6 * r.iter().map(|v| v * v).sum::<f64>() / r.len() as f64,
+            Ok(r) => 1e6 * r.iter().map(|v| v * v).sum::<f64>() / r.len() as f64,
             // Out of range: worse than any candidate in range.
-            None => 1e12,
+            Err(_) => 1e12,
         })
     }
 }
@@ -335,6 +338,11 @@ pub fn identify(log: &Log, base: &Params, experiment: Experiment) -> Result<Iden
             fields(experiment)[1]
         ));
     }
+    // The start must simulate (else the log or the base cannot be fitted:
+    // say why, once).
+    fit.residuals(&x0).map_err(|e| {
+        format!("identify: the experiment does not run from the base parameters: {e}")
+    })?;
     // The simplex, in multiples of the start: the start and 30% up each.
     let simplex = vec![vec![1.0, 1.0], vec![1.3, 1.0], vec![1.0, 1.3]];
     let solver = NelderMead::new(simplex)
@@ -351,7 +359,7 @@ pub fn identify(log: &Log, base: &Params, experiment: Experiment) -> Result<Iden
     );
     let r0 = fit
         .residuals(&best)
-        .ok_or("identify: the best parameters do not simulate")?;
+        .map_err(|e| format!("identify: the best parameters do not simulate: {e}"))?;
     let n = r0.len();
     let ssr: f64 = r0.iter().map(|v| v * v).sum();
     // The Jacobian by central differences, 1% of each value.
@@ -364,7 +372,7 @@ pub fn identify(log: &Log, base: &Params, experiment: Experiment) -> Result<Iden
         // (A step out of the parameters' ranges leaves the column NaN: no
         // uncertainty, the estimate stands.)
         match (fit.residuals(&up), fit.residuals(&down)) {
-            (Some(ru), Some(rd)) => {
+            (Ok(ru), Ok(rd)) => {
                 for (c, (u, d)) in col.iter_mut().zip(ru.iter().zip(&rd)) {
                     *c = (u - d) / (2.0 * h);
                 }
@@ -507,17 +515,20 @@ mod tests {
             let t = 12.5 + f64::from(i) * 0.001;
             text += &format!(
                 "{t:.6},{i},0,flight,1,none,0.66,{:.6},0,0,60,0\n",
-                0.05 - f64::from(i) * 1e-4
+                0.05 - f64::from(i) * 5e-4
             );
         }
         std::fs::write(dir.path().join("telemetry.csv"), &text).unwrap_or_else(|e| panic!("{e}"));
         let log = read_log(dir.path()).unwrap_or_else(|e| panic!("{e}"));
         assert_eq!(log.t_s.len(), 150);
         assert!(log.t_s[0].abs() < 1e-12 && (log.t_s[149] - 0.149).abs() < 1e-9);
-        assert!((log.toe_m[1] - 0.0499).abs() < 1e-9);
+        assert!((log.toe_m[1] - 0.0495).abs() < 1e-9);
+        // Body height less leg length goes negative in stance: the toe is
+        // on the ground.
+        assert_eq!(log.toe_m[149], 0.0);
         std::fs::write(
             dir.path().join("telemetry.csv"),
-            text.replace("0.049900", "oops"),
+            text.replace("0.049500", "oops"),
         )
         .unwrap_or_else(|e| panic!("{e}"));
         let e = read_log(dir.path()).err().unwrap_or_default();

@@ -167,6 +167,8 @@ pub enum SpringError {
     NotPositive(&'static str),
     /// The wire is as thick as the coil: no coil (index below 1.5).
     IndexTooSmall(f64),
+    /// More than 10,000 active coils: the wire is far too thin for the rate.
+    TooManyCoils(f64),
     /// The spring is solid before it is free: `d N_t >= L_0`.
     NoStroke {
         /// Solid length, m.
@@ -181,6 +183,10 @@ impl core::fmt::Display for SpringError {
             SpringError::IndexTooSmall(c) => write!(
                 f,
                 "spring index D/d = {c:.2}: the wire is too thick for the outer diameter (at least 1.5)"
+            ),
+            SpringError::TooManyCoils(n) => write!(
+                f,
+                "{n:.0} active coils: the wire is far too thin (or the rate far too low) for a spring"
             ),
             SpringError::NoStroke { solid_m } => write!(
                 f,
@@ -216,6 +222,9 @@ pub fn design(s: &SpringSpec) -> Result<SpringDesign, SpringError> {
     let g = s.material.shear_modulus_pa;
     let rate_per_coil = d.powi(4) * g / (8.0 * mean.powi(3));
     let exact = rate_per_coil / s.stiffness_n_per_m;
+    if exact.is_nan() || exact > 10_000.0 {
+        return Err(SpringError::TooManyCoils(exact));
+    }
     // Whole coils, at least one; rounding up leaves the rate at or below
     // the one asked.
     let n = exact.ceil().max(1.0) as u32;
@@ -401,6 +410,9 @@ mod tests {
         s.wire_m = 0.03;
         assert!(matches!(design(&s), Err(SpringError::IndexTooSmall(_))));
         s.wire_m = 5.53e-3;
+        s.stiffness_n_per_m = 1e-5;
+        assert!(matches!(design(&s), Err(SpringError::TooManyCoils(_))));
+        s.stiffness_n_per_m = 10_000.0;
         s.free_length_m = 0.05;
         assert!(matches!(design(&s), Err(SpringError::NoStroke { .. })));
         assert!(Material::by_name("unobtainium").is_none());

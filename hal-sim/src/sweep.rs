@@ -414,9 +414,12 @@ impl Metrics {
 }
 
 /// A deterministic slice of a grid: shard `index` (1-based) of `count`
-/// takes the points whose grid index is `index - 1` modulo `count`
-/// (interleaved, so that the slices of a grid whose run time grows along
-/// an axis cost about the same).
+/// takes the points `i = a n + b` (row `a`, last-axis index `b` of `n`)
+/// with `(a + b) mod count = index - 1`: diagonal stripes, so that every
+/// slice has its share of both axes' values (the slices of a grid whose
+/// run time grows along an axis cost about the same, also when `count`
+/// shares factors with `n`: 1000 shards of a 1000 x 1000 grid each get
+/// every value of both axes once).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Shard {
     /// Which slice, 1..=count.
@@ -443,9 +446,11 @@ impl Shard {
         Ok(Shard { index, count })
     }
 
-    /// Whether grid point `point` is in this slice.
-    pub fn owns(&self, point: usize) -> bool {
-        point % self.count == self.index - 1
+    /// Whether grid point `point` is in this slice, the last axis having
+    /// `last_len` values.
+    pub fn owns(&self, point: usize, last_len: usize) -> bool {
+        let n = last_len.max(1);
+        (point / n + point % n) % self.count == self.index - 1
     }
 }
 
@@ -522,6 +527,16 @@ pub fn merge(parts: &[PathBuf]) -> Result<(Sweep, Vec<Row>, String), String> {
     };
     let header: Vec<String> = sweep.header(true).into_iter().map(String::from).collect();
     let n_axes = sweep.axes.len();
+    let last_len = sweep.axes.last().map_or(1, |a| a.values.len());
+    let grid: usize = sweep.axes.iter().map(|a| a.values.len()).product();
+    if first.runs != grid || first.of == 0 || first.of > MAX_VALUES * MAX_VALUES {
+        return Err(format!(
+            "{}: {} runs in {} shards does not fit its axes' {grid} points",
+            first_dir.display(),
+            first.runs,
+            first.of
+        ));
+    }
     let mut rows: Vec<Option<Row>> = vec![None; first.runs];
     let mut seen = vec![false; first.of];
     for dir in parts {
@@ -585,7 +600,7 @@ pub fn merge(parts: &[PathBuf]) -> Result<(Sweep, Vec<Row>, String), String> {
                 index: m.shard,
                 count: m.of,
             };
-            if !shard.owns(point) {
+            if !shard.owns(point, last_len) {
                 return Err(format!(
                     "{}: point {point} is not in shard {}/{}",
                     at(),
@@ -596,6 +611,12 @@ pub fn merge(parts: &[PathBuf]) -> Result<(Sweep, Vec<Row>, String), String> {
             let values = (1..=n_axes)
                 .map(|i| cell(i)?.ok_or_else(|| format!("{}: no swept value", at())))
                 .collect::<Result<Vec<f64>, String>>()?;
+            if values != sweep.point(point).0 {
+                return Err(format!(
+                    "{}: the swept values {values:?} are not grid point {point}'s",
+                    at()
+                ));
+            }
             let mut metrics = [None; METRICS.len()];
             for (k, slot) in metrics.iter_mut().enumerate() {
                 *slot = cell(1 + n_axes + k)?;
@@ -677,14 +698,15 @@ impl Sweep {
     /// holds 10^4 settings at a time). At most [`MAX_RUNS`] a shard.
     pub fn shard_points(&self, shard: Shard) -> Result<Vec<(usize, Vec<f64>, Settings)>, String> {
         let runs = self.grid_runs()?;
-        let mine = (0..runs).filter(|&i| shard.owns(i)).count();
+        let last_len = self.axes.last().map_or(1, |a| a.values.len());
+        let mine = (0..runs).filter(|&i| shard.owns(i, last_len)).count();
         if mine > MAX_RUNS {
             return Err(format!(
                 "{mine} runs is too many for one sweep (at most {MAX_RUNS}; split it with --shard K/N)"
             ));
         }
         let points: Vec<(usize, Vec<f64>, Settings)> = (0..runs)
-            .filter(|&i| shard.owns(i))
+            .filter(|&i| shard.owns(i, last_len))
             .map(|i| {
                 let (vals, s) = self.point(i);
                 (i, vals, s)

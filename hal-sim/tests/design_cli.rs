@@ -187,7 +187,8 @@ fn design_motors_and_leads() {
 /// machine): from a passive drop the frictions come back from the design
 /// preset's 5 N and 5 N to within 5% of 13 N and 15 N; then, with those,
 /// an open-torque hop's effective stance torque (0.62 N m, as
-/// current_limit_a = 20.87 A) from the design's 33.67 A within 5%.
+/// current_limit_a = 20.87 A) within 5%, from 26.9 A (the design's 33.67 A
+/// capped where it binds the 1 N m command).
 #[test]
 fn identify_recovers_the_frictions_and_the_stance_torque() {
     let dir = tempfile::tempdir().unwrap();

@@ -690,7 +690,8 @@ fn cmd_identify(a: &IdentifyArgs) -> Result<()> {
         _ => Experiment::Passive,
     };
     let log = read_log(&a.log).map_err(anyhow::Error::msg)?;
-    let bar = indicatif::ProgressBar::new_spinner();
+    let bar =
+        indicatif::ProgressBar::new_spinner().with_finish(indicatif::ProgressFinish::AndClear);
     bar.set_message(format!("fitting {} samples", log.t_s.len()));
     bar.enable_steady_tick(std::time::Duration::from_millis(200));
     let id = identify(&log, &base.params, experiment).map_err(anyhow::Error::msg)?;
@@ -816,7 +817,8 @@ fn cmd_design(cmd: &DesignCmd) -> Result<()> {
             use hal_sim::design::{
                 feasibility_map, smallest_changes, write_feasibility_plot, Holder,
             };
-            let bar = indicatif::ProgressBar::new_spinner();
+            let bar = indicatif::ProgressBar::new_spinner()
+                .with_finish(indicatif::ProgressFinish::AndClear);
             bar.set_message("searching single changes and the maps (about 1,000 runs of 15 s)");
             bar.enable_steady_tick(std::time::Duration::from_millis(200));
             let started = std::time::Instant::now();
