@@ -8,7 +8,22 @@
 //! of sections 2.2.2.4-2.2.2.5: from the step period `T_step`, the stance
 //! fraction `rho` and the running speed, the spring constants (eqs 2.73,
 //! 2.75) and the initial conditions (eqs 2.76-2.78). The flight and stance
-//! dynamics (eqs 2.54-2.61) are not built yet.
+//! dynamics (eqs 2.54-2.61) are not built yet (below).
+//!
+//! The dynamics to build next. Eqs 2.54-2.61 give the leg spring's force
+//! along the leg but not the ground force across it that a pinned toe
+//! needs (the hip spring's torque on the leg, `J_l theta''`). Appendix A
+//! writes stance in polar coordinates about the toe (eqs A.14-A.17), and
+//! the section 2.2 model is its special case (no offsets, no unsprung
+//! mass, no friction): with `m = m_b + m_l`, the toe at `x_f`, `x = x_f -
+//! r sin theta`, `z = r cos theta`, Lagrange gives
+//! `m (r'' - r theta'^2) = k_l (r_0 - r) - m g cos theta`,
+//! `(m r^2 + J_l) theta'' + 2 m r r' theta' = m g r sin theta + k_h (phi - theta)`,
+//! `J_b phi'' = k_h (theta - phi)`; flight is eqs 2.54-2.57 with `F = 0`.
+//! At touchdown the hip's velocity is continuous and the leg's rate jumps
+//! to the pinned toe's `theta' = -(x' cos theta + z' sin theta) / r_0`
+//! (zero when the toe lands at rest, which the passive design aims at):
+//! the energy that jump takes is to be reported, not hidden.
 //!
 //! Erratum: eq 2.77 prints the zero-angular-momentum condition as
 //! `phi_dot / J_l = -theta_dot / J_d`; the angular momentum of body and leg
