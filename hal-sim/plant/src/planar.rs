@@ -8,9 +8,10 @@
 //! of sections 2.2.2.4-2.2.2.5: from the step period `T_step`, the stance
 //! fraction `rho` and the running speed, the spring constants (eqs 2.73,
 //! 2.75) and the initial conditions (eqs 2.76-2.78). The flight and stance
-//! dynamics (eqs 2.54-2.61) are not built yet (below).
+//! dynamics ([`PlanarRunner`]: eqs 2.54-2.57 in flight, the pinned-toe
+//! stance below, the stabiliser of eqs 2.79-2.80).
 //!
-//! The dynamics to build next. Eqs 2.54-2.61 give the leg spring's force
+//! The stance. Eqs 2.54-2.61 give the leg spring's force
 //! along the leg but not the ground force across it that a pinned toe
 //! needs (the hip spring's torque on the leg, `J_l theta''`). Appendix A
 //! writes stance in polar coordinates about the toe (eqs A.14-A.17), and
@@ -20,10 +21,11 @@
 //! `m (r'' - r theta'^2) = k_l (r_0 - r) - m g cos theta`,
 //! `(m r^2 + J_l) theta'' + 2 m r r' theta' = m g r sin theta + k_h (phi - theta)`,
 //! `J_b phi'' = k_h (theta - phi)`; flight is eqs 2.54-2.57 with `F = 0`.
-//! At touchdown the hip's velocity is continuous and the leg's rate jumps
-//! to the pinned toe's `theta' = -(x' cos theta + z' sin theta) / r_0`
-//! (zero when the toe lands at rest, which the passive design aims at):
-//! the energy that jump takes is to be reported, not hidden.
+//! At touchdown a plastic impact stops the toe's velocity across the leg
+//! (along it the massless spring gives way): the impulse changes the hip's
+//! velocity and the leg's rate, and takes energy unless the toe lands
+//! without sliding speed, which the passive design aims at;
+//! [`PlanarEvent::Touchdown`] reports what it took.
 //!
 //! Erratum: eq 2.77 prints the zero-angular-momentum condition as
 //! `phi_dot / J_l = -theta_dot / J_d`; the angular momentum of body and leg
@@ -189,6 +191,364 @@ pub fn passive_design(p: &PlanarParams, gait: &Gait) -> Result<PassiveDesign, Pl
     })
 }
 
+/// Where the runner is.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum PlanarPhase {
+    /// In the air: `[x, z, phi, theta, x', z', phi', theta']`.
+    Flight,
+    /// The toe pinned at `toe_x_m`: `[r, theta, phi, r', theta', phi']`
+    /// about it.
+    Stance {
+        /// The toe's position, m.
+        toe_x_m: f64,
+    },
+}
+
+/// A transition, as [`PlanarRunner::step`] reports it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum PlanarEvent {
+    /// The toe landed: a plastic impact stopped its sliding, which took
+    /// `loss_j` of kinetic energy (0 when it lands without sliding speed).
+    Touchdown {
+        /// Time, s.
+        t_s: f64,
+        /// Kinetic energy the leg's rate jump took, J.
+        loss_j: f64,
+    },
+    /// The leg spring reached its rest length.
+    Liftoff {
+        /// Time, s.
+        t_s: f64,
+    },
+    /// The top of a flight.
+    Apex {
+        /// Time, s.
+        t_s: f64,
+        /// Hip height, m.
+        z_m: f64,
+        /// Forward speed, m/s.
+        x_dot_mps: f64,
+        /// Body pitch, rad.
+        phi_rad: f64,
+    },
+}
+
+/// The section 2.2 runner (module docs): fixed-step RK4, transitions
+/// located by bisection inside the step.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PlanarRunner {
+    p: PlanarParams,
+    phase: PlanarPhase,
+    /// Flight: `[x, z, phi, theta, x', z', phi', theta']`; stance: `[r,
+    /// theta, phi, r', theta', phi', 0, 0]`.
+    s: [f64; 8],
+    t_s: f64,
+    /// The stabiliser's gain `K_c` (eq 2.79), N s/m (0: passive), and the
+    /// speed it holds, m/s.
+    gain_ns_per_m: f64,
+    speed_mps: f64,
+}
+
+/// The state in Cartesian form, whatever the phase.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PlanarState {
+    /// Time, s.
+    pub t_s: f64,
+    /// Hip position, m.
+    pub x_m: f64,
+    /// Hip height, m.
+    pub z_m: f64,
+    /// Body pitch, rad.
+    pub phi_rad: f64,
+    /// Leg angle from the vertical (toe ahead positive), rad.
+    pub theta_rad: f64,
+    /// Hip velocity, m/s.
+    pub x_dot_mps: f64,
+    /// Hip vertical velocity, m/s.
+    pub z_dot_mps: f64,
+    /// Body pitch rate, rad/s.
+    pub phi_dot_rad_s: f64,
+    /// Leg rate, rad/s.
+    pub theta_dot_rad_s: f64,
+    /// Leg length, m (`r_0` in flight).
+    pub leg_length_m: f64,
+    /// On the ground.
+    pub stance: bool,
+}
+
+impl PlanarRunner {
+    /// At the apex of a passive design's gait: hip `d.apex_height_m` up,
+    /// moving at `speed_mps`, angles zero, the design's rates.
+    pub fn at_apex(
+        p: PlanarParams,
+        d: &PassiveDesign,
+        speed_mps: f64,
+    ) -> Result<Self, PlanarError> {
+        p.validate()?;
+        Ok(PlanarRunner {
+            p,
+            phase: PlanarPhase::Flight,
+            s: [
+                0.0,
+                d.apex_height_m,
+                0.0,
+                0.0,
+                speed_mps,
+                0.0,
+                d.body_rate0_rad_s,
+                d.leg_rate0_rad_s,
+            ],
+            t_s: 0.0,
+            gain_ns_per_m: 0.0,
+            speed_mps,
+        })
+    }
+
+    /// With the forward-speed stabiliser of eqs 2.79-2.80: in stance the
+    /// leg force is `k_l (r_0 - r) - K_c (x_dot_d - x')`.
+    pub fn stabilised(mut self, gain_ns_per_m: f64, speed_mps: f64) -> Self {
+        self.gain_ns_per_m = gain_ns_per_m;
+        self.speed_mps = speed_mps;
+        self
+    }
+
+    /// The phase.
+    pub fn phase(&self) -> PlanarPhase {
+        self.phase
+    }
+
+    /// The state in Cartesian form.
+    pub fn state(&self) -> PlanarState {
+        let s = &self.s;
+        match self.phase {
+            PlanarPhase::Flight => PlanarState {
+                t_s: self.t_s,
+                x_m: s[0],
+                z_m: s[1],
+                phi_rad: s[2],
+                theta_rad: s[3],
+                x_dot_mps: s[4],
+                z_dot_mps: s[5],
+                phi_dot_rad_s: s[6],
+                theta_dot_rad_s: s[7],
+                leg_length_m: self.p.leg_rest_length_m,
+                stance: false,
+            },
+            PlanarPhase::Stance { toe_x_m } => {
+                let (r, th, rd, thd) = (s[0], s[1], s[3], s[4]);
+                let (sn, cs) = (libm::sin(th), libm::cos(th));
+                PlanarState {
+                    t_s: self.t_s,
+                    x_m: toe_x_m - r * sn,
+                    z_m: r * cs,
+                    phi_rad: s[2],
+                    theta_rad: th,
+                    x_dot_mps: -rd * sn - r * cs * thd,
+                    z_dot_mps: rd * cs - r * sn * thd,
+                    phi_dot_rad_s: s[5],
+                    theta_dot_rad_s: thd,
+                    leg_length_m: r,
+                    stance: true,
+                }
+            }
+        }
+    }
+
+    /// Total mechanical energy (kinetic, gravity from the ground, both
+    /// springs), J.
+    pub fn energy_j(&self) -> f64 {
+        let q = self.state();
+        let p = &self.p;
+        let m = p.total_mass_kg();
+        let spring = p.leg_rest_length_m - q.leg_length_m;
+        0.5 * m * (q.x_dot_mps * q.x_dot_mps + q.z_dot_mps * q.z_dot_mps)
+            + 0.5 * p.body_inertia_kg_m2 * q.phi_dot_rad_s * q.phi_dot_rad_s
+            + 0.5 * p.leg_inertia_kg_m2 * q.theta_dot_rad_s * q.theta_dot_rad_s
+            + m * p.gravity_mps2 * q.z_m
+            + 0.5
+                * p.hip_stiffness_nm_per_rad
+                * (q.theta_rad - q.phi_rad)
+                * (q.theta_rad - q.phi_rad)
+            + 0.5 * p.leg_stiffness_n_per_m * spring * spring
+    }
+
+    /// The state's rate in `phase` (eqs 2.54-2.57 in flight; the polar
+    /// stance equations of the module docs, with the stabiliser).
+    fn rate(&self, phase: PlanarPhase, s: &[f64; 8]) -> [f64; 8] {
+        let p = &self.p;
+        let m = p.total_mass_kg();
+        let g = p.gravity_mps2;
+        match phase {
+            PlanarPhase::Flight => {
+                let hip = p.hip_stiffness_nm_per_rad * (s[3] - s[2]);
+                [
+                    s[4],
+                    s[5],
+                    s[6],
+                    s[7],
+                    0.0,
+                    -g,
+                    hip / p.body_inertia_kg_m2,
+                    -hip / p.leg_inertia_kg_m2,
+                ]
+            }
+            PlanarPhase::Stance { .. } => {
+                let (r, th, ph, rd, thd, phd) = (s[0], s[1], s[2], s[3], s[4], s[5]);
+                let (sn, cs) = (libm::sin(th), libm::cos(th));
+                let x_dot = -rd * sn - r * cs * thd;
+                let force = p.leg_stiffness_n_per_m * (p.leg_rest_length_m - r)
+                    - self.gain_ns_per_m * (self.speed_mps - x_dot);
+                let hip = p.hip_stiffness_nm_per_rad * (th - ph);
+                let rdd = r * thd * thd + force / m - g * cs;
+                let thdd = (m * g * r * sn - hip - 2.0 * m * r * rd * thd)
+                    / (m * r * r + p.leg_inertia_kg_m2);
+                [
+                    rd,
+                    thd,
+                    phd,
+                    rdd,
+                    thdd,
+                    hip / p.body_inertia_kg_m2,
+                    0.0,
+                    0.0,
+                ]
+            }
+        }
+    }
+
+    fn rk4(&self, phase: PlanarPhase, s: &[f64; 8], h: f64) -> [f64; 8] {
+        let add = |a: &[f64; 8], b: &[f64; 8], k: f64| {
+            let mut o = *a;
+            for (o, b) in o.iter_mut().zip(b) {
+                *o += k * b;
+            }
+            o
+        };
+        let k1 = self.rate(phase, s);
+        let k2 = self.rate(phase, &add(s, &k1, h / 2.0));
+        let k3 = self.rate(phase, &add(s, &k2, h / 2.0));
+        let k4 = self.rate(phase, &add(s, &k3, h));
+        let mut o = *s;
+        for i in 0..8 {
+            o[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
+        }
+        o
+    }
+
+    /// The quantity whose sign change ends `phase`: flight, the toe's
+    /// height (landing when it falls through 0 moving down); stance, the
+    /// spring's compression (lifting off when it reaches 0).
+    fn guard(&self, phase: PlanarPhase, s: &[f64; 8]) -> f64 {
+        match phase {
+            PlanarPhase::Flight => s[1] - self.p.leg_rest_length_m * libm::cos(s[3]),
+            PlanarPhase::Stance { .. } => self.p.leg_rest_length_m - s[0],
+        }
+    }
+
+    /// Advances `dt_s`, reporting transitions (and apexes) to `on_event`.
+    pub fn step(&mut self, dt_s: f64, on_event: &mut impl FnMut(PlanarEvent)) {
+        let mut left = dt_s;
+        // At most a few transitions in one step.
+        for _ in 0..4 {
+            if left <= 0.0 {
+                break;
+            }
+            let next = self.rk4(self.phase, &self.s, left);
+            let (g0, g1) = (
+                self.guard(self.phase, &self.s),
+                self.guard(self.phase, &next),
+            );
+            let crossed = match self.phase {
+                PlanarPhase::Flight => g0 > 0.0 && g1 <= 0.0 && next[5] < 0.0,
+                PlanarPhase::Stance { .. } => g0 > 0.0 && g1 <= 0.0,
+            };
+            if let PlanarPhase::Flight = self.phase {
+                if self.s[5] > 0.0 && next[5] <= 0.0 && !crossed {
+                    // The apex within the step: z' = 0, by the flight's
+                    // exact parabola.
+                    let tau = self.s[5] / self.p.gravity_mps2;
+                    let at = self.rk4(self.phase, &self.s, tau);
+                    on_event(PlanarEvent::Apex {
+                        t_s: self.t_s + tau,
+                        z_m: at[1],
+                        x_dot_mps: at[4],
+                        phi_rad: at[2],
+                    });
+                }
+            }
+            if !crossed {
+                self.s = next;
+                self.t_s += left;
+                break;
+            }
+            // Bisection on the step fraction.
+            let (mut lo, mut hi) = (0.0, left);
+            for _ in 0..60 {
+                let mid = 0.5 * (lo + hi);
+                let g = self.guard(self.phase, &self.rk4(self.phase, &self.s, mid));
+                if g > 0.0 {
+                    lo = mid;
+                } else {
+                    hi = mid;
+                }
+            }
+            let at = self.rk4(self.phase, &self.s, hi);
+            self.t_s += hi;
+            left -= hi;
+            self.transition(&at, on_event);
+        }
+    }
+
+    fn transition(&mut self, at: &[f64; 8], on_event: &mut impl FnMut(PlanarEvent)) {
+        let r0 = self.p.leg_rest_length_m;
+        match self.phase {
+            PlanarPhase::Flight => {
+                // The toe may not slide: a plastic impact across the leg
+                // (along it the massless spring gives way) stops the toe's
+                // velocity across the leg, `v_n = x' cos + z' sin + r_0
+                // theta'`, with the impulse `lambda = v_n / (1/m + r_0^2 /
+                // J_l)` through `G = [cos, sin, 0, r_0]`: it takes `v_n
+                // lambda / 2` (nothing when the toe lands without sliding
+                // speed, as the passive design aims).
+                let (x, th, xd, zd, thd) = (at[0], at[3], at[4], at[5], at[7]);
+                let (sn, cs) = (libm::sin(th), libm::cos(th));
+                let m = self.p.total_mass_kg();
+                let j = self.p.leg_inertia_kg_m2;
+                let v_n = xd * cs + zd * sn + r0 * thd;
+                let lambda = v_n / (1.0 / m + r0 * r0 / j);
+                let (xd, zd) = (xd - cs * lambda / m, zd - sn * lambda / m);
+                let thd = thd - r0 * lambda / j;
+                let loss = 0.5 * v_n * lambda;
+                let rd = -xd * sn + zd * cs;
+                self.phase = PlanarPhase::Stance {
+                    toe_x_m: x + r0 * sn,
+                };
+                self.s = [r0, th, at[2], rd, thd, at[6], 0.0, 0.0];
+                on_event(PlanarEvent::Touchdown {
+                    t_s: self.t_s,
+                    loss_j: loss,
+                });
+            }
+            PlanarPhase::Stance { toe_x_m } => {
+                let (th, rd, thd) = (at[1], at[3], at[4]);
+                let (sn, cs) = (libm::sin(th), libm::cos(th));
+                self.phase = PlanarPhase::Flight;
+                self.s = [
+                    toe_x_m - r0 * sn,
+                    r0 * cs,
+                    at[2],
+                    th,
+                    -rd * sn - r0 * cs * thd,
+                    rd * cs - r0 * sn * thd,
+                    at[5],
+                    thd,
+                ];
+                on_event(PlanarEvent::Liftoff { t_s: self.t_s });
+            }
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -265,5 +625,86 @@ mod tests {
             passive_design(&bad, &TABLE_GAIT),
             Err(PlanarError::NotPositive("leg_inertia_kg_m2"))
         );
+    }
+
+    /// Running from the design's apex, 5 s: passive at 2 m/s nearly
+    /// reentrant (the apexes within 2 cm of the design's, 0.025 J taken by
+    /// the touchdowns), passive at 4 m/s drifting (Figures 2.18-2.20: the
+    /// apexes 0.63-1.19 m, falling within four hops), and 4 m/s with the
+    /// stabiliser of eq 2.79 at K_c = 1000 holding them within 2 cm again
+    /// (Figures 2.21-2.22). Passive, the energy is conserved to 1e-6 J a
+    /// hop apart from what the touchdowns report, and in flight the
+    /// angular momentum about the hip holds.
+    #[test]
+    fn passive_running_conserves_energy_and_drifts_at_4_mps() {
+        let p = PlanarParams::table_2_2();
+        for (v, kc, drift_lo, drift_hi) in [
+            (2.0, 0.0, 0.0, 0.02),
+            (4.0, 0.0, 0.02, 10.0),
+            (4.0, 1000.0, 0.0, 0.02),
+        ] {
+            let d = passive_design(
+                &p,
+                &Gait {
+                    speed_mps: v,
+                    ..TABLE_GAIT
+                },
+            )
+            .unwrap_or_else(|e| panic!("{e:?}"));
+            let mut r = PlanarRunner::at_apex(p, &d, v)
+                .unwrap_or_else(|e| panic!("{e:?}"))
+                .stabilised(kc, v);
+            let e0 = r.energy_j();
+            let mut lost = 0.0;
+            let mut apexes = std::vec::Vec::new();
+            let mut touchdowns = 0;
+            let mut last_h: Option<(bool, f64)> = None;
+            for _ in 0..(5.0 / 1e-4) as usize {
+                r.step(1e-4, &mut |e| match e {
+                    PlanarEvent::Touchdown { loss_j, .. } => {
+                        lost += loss_j;
+                        touchdowns += 1;
+                    }
+                    PlanarEvent::Apex { z_m, .. } => apexes.push(z_m),
+                    PlanarEvent::Liftoff { .. } => {}
+                });
+                let q = r.state();
+                // The hip spring is internal: in flight the angular
+                // momentum about the hip holds (the ground's force across
+                // the leg changes it in stance).
+                let h = p.body_inertia_kg_m2 * q.phi_dot_rad_s
+                    + p.leg_inertia_kg_m2 * q.theta_dot_rad_s;
+                if let (false, Some((false, h0))) = (q.stance, last_h) {
+                    assert!((h - h0).abs() < 1e-9, "{v}: angular momentum {h0} -> {h}");
+                }
+                last_h = Some((q.stance, h));
+                if q.z_m < 0.3 {
+                    break;
+                }
+            }
+            let e1 = r.energy_j();
+            std::eprintln!("{v} m/s, K_c {kc}: {touchdowns} touchdowns, lost {lost:.4} J, energy {e0:.4} -> {e1:.4}, apexes {apexes:?}");
+            // (The stabiliser's force does work: no bookkeeping for it.)
+            if kc == 0.0 {
+                assert!(
+                    (e0 - lost - e1).abs() < 1e-6 * f64::from(touchdowns.max(1)),
+                    "{e0} {lost} {e1}"
+                );
+            }
+            assert!(touchdowns >= 5, "{touchdowns}");
+            if drift_hi < 1.0 {
+                assert!(
+                    touchdowns >= 9,
+                    "{v} m/s, K_c {kc}: {touchdowns} touchdowns in 5 s"
+                );
+            }
+            let spread = apexes
+                .iter()
+                .fold(0.0f64, |m, a| m.max((a - d.apex_height_m).abs()));
+            assert!(
+                spread >= drift_lo && spread < drift_hi,
+                "{v}: apex spread {spread}"
+            );
+        }
     }
 }
