@@ -19,6 +19,7 @@ pub mod identify;
 pub mod inject;
 pub mod out_dir;
 pub mod params_toml;
+pub mod planar_sim;
 pub mod plot;
 pub mod run;
 pub mod scenario;

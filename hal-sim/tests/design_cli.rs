@@ -260,3 +260,24 @@ fn identify_recovers_the_frictions_and_the_stance_torque() {
     assert!((t / 0.62 - 1.0).abs() < 0.05, "stance torque {t}");
     assert!(dir.path().join("plot").join("identify.png").is_file());
 }
+
+/// `planar run --json` (issue 20): 2 m/s passive for 5 s keeps its apexes
+/// within 2 cm of the design's; 4 m/s passive falls within 5 s.
+#[test]
+fn planar_run_json() {
+    let run = |args: &[&str]| -> serde_json::Value {
+        let mut a = vec!["planar", "run", "--json", "--duration", "5"];
+        a.extend_from_slice(args);
+        let o = sim(&a);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        serde_json::from_slice(&o.stdout).unwrap()
+    };
+    let v = run(&["--speed", "2"]);
+    assert_eq!(v["fell"], false, "{v}");
+    assert!(v["apex_drift_m"].as_f64().unwrap() < 0.02, "{v}");
+    assert!(v["touchdowns"].as_u64().unwrap() >= 9, "{v}");
+    let v = run(&["--speed", "4"]);
+    assert_eq!(v["fell"], true, "{v}");
+    let o = sim(&["planar", "run", "--speed", "-1"]);
+    assert_eq!(o.status.code(), Some(2));
+}

@@ -77,6 +77,12 @@ enum Cmd {
     /// a passive hop gives the planarizer and leg friction, an open-torque
     /// hop the effective stance torque and the nut mass (docs/design.md).
     Identify(IdentifyArgs),
+    /// The planar one-legged runner of thesis section 2.2 (Table 2.2,
+    /// passive dynamics and the forward-speed stabiliser of eq 2.79).
+    Planar {
+        #[command(subcommand)]
+        cmd: PlanarCmd,
+    },
     /// Parameter sets.
     Params {
         #[command(subcommand)]
@@ -157,6 +163,32 @@ struct IdentifyArgs {
     /// Print the estimates as JSON under the parameter files' field names.
     #[arg(long)]
     json: bool,
+}
+
+#[derive(Subcommand)]
+enum PlanarCmd {
+    /// Run from the passive design's apex (T_step 0.5 s, rho 0.125): the
+    /// apexes, their drift from the design's, what the touchdowns took.
+    Run {
+        /// Running speed, m/s.
+        #[arg(long, default_value_t = 2.0)]
+        speed: f64,
+        /// The stabiliser's gain K_c (eq 2.79), N s/m; 0: passive.
+        #[arg(long, default_value_t = 0.0)]
+        kc: f64,
+        /// Simulated time, s.
+        #[arg(long, default_value_t = 10.0)]
+        duration: f64,
+        /// Print JSON instead of text.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Figures 2.18-2.22 (fig-2-18.png/.svg ...) into DIR.
+    Figures {
+        /// Directory (created if missing).
+        #[arg(long)]
+        out: PathBuf,
+    },
 }
 
 #[derive(Subcommand)]
@@ -509,6 +541,7 @@ fn main() {
         Cmd::Spring(args) => cmd_spring(&args),
         Cmd::Design { cmd } => cmd_design(&cmd),
         Cmd::Identify(args) => cmd_identify(&args),
+        Cmd::Planar { cmd } => cmd_planar(&cmd),
     };
     if let Err(e) = result {
         if is_closed_pipe(&e) {
@@ -667,6 +700,51 @@ fn cmd_spring(a: &SpringArgs) -> Result<()> {
             c.allowable_stroke_m * 1e3,
             if c.within { "within" } else { "EXCEEDED" }
         );
+    }
+    Ok(())
+}
+
+fn planar_summary(r: &hal_sim::planar_sim::PlanarRun) -> String {
+    let apexes: Vec<String> = r.apex_heights_m.iter().map(|a| format!("{a:.4}")).collect();
+    format!(
+        "planar: {} m/s, K_c {} N s/m: {} touchdowns ({:.3} J taken by their impacts), {}; apexes (m, design {:.4}): {}; largest drift {:.4} m",
+        r.speed_mps,
+        r.gain_ns_per_m,
+        r.touchdowns,
+        r.touchdown_loss_j,
+        if r.fell { "fell" } else { "still running" },
+        r.design_apex_m,
+        apexes.join(" "),
+        r.apex_drift_m
+    )
+}
+
+fn cmd_planar(cmd: &PlanarCmd) -> Result<()> {
+    match cmd {
+        PlanarCmd::Run {
+            speed,
+            kc,
+            duration,
+            json,
+        } => {
+            let r = hal_sim::planar_sim::simulate(*speed, *kc, *duration)
+                .map_err(anyhow::Error::msg)?;
+            if *json {
+                say!("{}", serde_json::to_string_pretty(&r)?);
+            } else {
+                say!("{}", planar_summary(&r));
+            }
+        }
+        PlanarCmd::Figures { out } => {
+            let (written, runs) =
+                hal_sim::planar_sim::write_figures(out).map_err(anyhow::Error::msg)?;
+            for r in &runs {
+                say!("{}", planar_summary(r));
+            }
+            for p in &written {
+                say!("  wrote {}", p.display());
+            }
+        }
     }
     Ok(())
 }

@@ -1,0 +1,278 @@
+//! `hopper-sim planar run` and `planar figures`: the section 2.2 runner
+//! ([`hopper_plant::planar`]) from its passive design's apex, and the
+//! simulation counterparts of the thesis's Figures 2.18-2.22.
+
+use hopper_plant::planar::{
+    passive_design, Gait, PlanarEvent, PlanarParams, PlanarRunner, PlanarState,
+};
+use serde::Serialize;
+use std::path::{Path, PathBuf};
+
+/// The integration step, s.
+const DT_S: f64 = 1e-4;
+
+/// One run's apexes and what the touchdowns took.
+#[derive(Clone, Debug, Serialize)]
+pub struct PlanarRun {
+    /// Running speed asked for, m/s.
+    pub speed_mps: f64,
+    /// The stabiliser's gain (0: passive), N s/m.
+    pub gain_ns_per_m: f64,
+    /// The design's apex (hip height), m.
+    pub design_apex_m: f64,
+    /// Hip height at each apex, m.
+    pub apex_heights_m: Vec<f64>,
+    /// Forward speed at each apex, m/s.
+    pub apex_speeds_mps: Vec<f64>,
+    /// Body pitch at each apex, rad.
+    pub apex_pitch_rad: Vec<f64>,
+    /// Touchdowns.
+    pub touchdowns: usize,
+    /// Energy the touchdown impacts took, J.
+    pub touchdown_loss_j: f64,
+    /// The largest |apex - design apex|, m.
+    pub apex_drift_m: f64,
+    /// Whether the body fell (hip below half the leg's length).
+    pub fell: bool,
+    /// Samples every millisecond.
+    #[serde(skip)]
+    pub samples: Vec<PlanarState>,
+}
+
+/// Table 2.2's runner at `speed_mps` (its step period 0.5 s and stance
+/// fraction 0.125), stabilised with `gain_ns_per_m` (0: passive), for
+/// `duration_s`.
+pub fn simulate(speed_mps: f64, gain_ns_per_m: f64, duration_s: f64) -> Result<PlanarRun, String> {
+    if !(speed_mps.is_finite() && (0.0..=10.0).contains(&speed_mps)) {
+        return Err(format!("--speed {speed_mps} must be within 0 ..= 10 m/s"));
+    }
+    if !(gain_ns_per_m.is_finite() && (0.0..=10_000.0).contains(&gain_ns_per_m)) {
+        return Err(format!(
+            "--kc {gain_ns_per_m} must be within 0 ..= 10000 N s/m"
+        ));
+    }
+    if !(duration_s.is_finite() && duration_s > 0.0 && duration_s <= 600.0) {
+        return Err(format!(
+            "--duration {duration_s} must be within 0 ..= 600 s"
+        ));
+    }
+    let p = PlanarParams::table_2_2();
+    let gait = Gait {
+        step_period_s: 0.5,
+        stance_fraction: 0.125,
+        speed_mps,
+    };
+    let d = passive_design(&p, &gait).map_err(|e| format!("planar design: {e:?}"))?;
+    let mut r = PlanarRunner::at_apex(p, &d, speed_mps)
+        .map_err(|e| format!("planar runner: {e:?}"))?
+        .stabilised(gain_ns_per_m, speed_mps);
+    let mut run = PlanarRun {
+        speed_mps,
+        gain_ns_per_m,
+        design_apex_m: d.apex_height_m,
+        apex_heights_m: Vec::new(),
+        apex_speeds_mps: Vec::new(),
+        apex_pitch_rad: Vec::new(),
+        touchdowns: 0,
+        touchdown_loss_j: 0.0,
+        apex_drift_m: 0.0,
+        fell: false,
+        samples: vec![r.state()],
+    };
+    let steps = (duration_s / DT_S).round() as u64;
+    for k in 1..=steps {
+        r.step(DT_S, &mut |e| match e {
+            PlanarEvent::Apex {
+                z_m,
+                x_dot_mps,
+                phi_rad,
+                ..
+            } => {
+                run.apex_heights_m.push(z_m);
+                run.apex_speeds_mps.push(x_dot_mps);
+                run.apex_pitch_rad.push(phi_rad);
+            }
+            PlanarEvent::Touchdown { loss_j, .. } => {
+                run.touchdowns += 1;
+                run.touchdown_loss_j += loss_j;
+            }
+            PlanarEvent::Liftoff { .. } => {}
+        });
+        let q = r.state();
+        if k % 10 == 0 {
+            run.samples.push(q);
+        }
+        if q.z_m < 0.5 * p.leg_rest_length_m {
+            run.fell = true;
+            break;
+        }
+    }
+    run.apex_drift_m = run
+        .apex_heights_m
+        .iter()
+        .map(|a| (a - d.apex_height_m).abs())
+        .fold(0.0, f64::max);
+    Ok(run)
+}
+
+/// Hip height, forward speed, body pitch and leg angle against time, as
+/// `NAME.png` and `NAME.svg` (Figures 2.18, 2.19, 2.21).
+fn time_plot<DB: plotters::prelude::DrawingBackend>(
+    root: plotters::prelude::DrawingArea<DB, plotters::coord::Shift>,
+    run: &PlanarRun,
+    title: &str,
+) -> Result<(), Box<dyn std::error::Error>>
+where
+    DB::ErrorType: 'static,
+{
+    use plotters::prelude::*;
+    root.fill(&WHITE)?;
+    let root = root.titled(title, ("sans-serif", 18))?;
+    let panels = root.split_evenly((4, 1));
+    let t_hi = run.samples.last().map_or(1.0, |q| q.t_s).max(0.1);
+    type Get = fn(&PlanarState) -> f64;
+    let series: [(&str, Get); 4] = [
+        ("hip height [m]", |q| q.z_m),
+        ("forward speed [m/s]", |q| q.x_dot_mps),
+        ("body pitch [rad]", |q| q.phi_rad),
+        ("leg angle [rad]", |q| q.theta_rad),
+    ];
+    for ((label, get), panel) in series.iter().zip(panels.iter()) {
+        let lo = run.samples.iter().map(get).fold(f64::INFINITY, f64::min);
+        let hi = run
+            .samples
+            .iter()
+            .map(get)
+            .fold(f64::NEG_INFINITY, f64::max);
+        let pad = ((hi - lo) * 0.1).max(1e-3);
+        let mut c = ChartBuilder::on(panel)
+            .margin(8)
+            .x_label_area_size(30)
+            .y_label_area_size(70)
+            .build_cartesian_2d(0.0..t_hi, (lo - pad)..(hi + pad))?;
+        c.configure_mesh()
+            .x_desc("time [s]")
+            .y_desc(*label)
+            .draw()?;
+        c.draw_series(LineSeries::new(
+            run.samples.iter().map(|q| (q.t_s, get(q))),
+            BLUE.stroke_width(2),
+        ))?;
+    }
+    root.present()?;
+    Ok(())
+}
+
+/// Body pitch against hip height (Figures 2.20, 2.22).
+fn phase_plot<DB: plotters::prelude::DrawingBackend>(
+    root: plotters::prelude::DrawingArea<DB, plotters::coord::Shift>,
+    run: &PlanarRun,
+    title: &str,
+) -> Result<(), Box<dyn std::error::Error>>
+where
+    DB::ErrorType: 'static,
+{
+    use plotters::prelude::*;
+    root.fill(&WHITE)?;
+    let zs = run.samples.iter().map(|q| q.z_m);
+    let (z_lo, z_hi) = (
+        zs.clone().fold(f64::INFINITY, f64::min),
+        zs.fold(f64::NEG_INFINITY, f64::max),
+    );
+    let ps = run.samples.iter().map(|q| q.phi_rad);
+    let (p_lo, p_hi) = (
+        ps.clone().fold(f64::INFINITY, f64::min),
+        ps.fold(f64::NEG_INFINITY, f64::max),
+    );
+    let mut c = ChartBuilder::on(&root)
+        .caption(title, ("sans-serif", 18))
+        .margin(16)
+        .x_label_area_size(44)
+        .y_label_area_size(70)
+        .build_cartesian_2d((z_lo - 0.01)..(z_hi + 0.01), (p_lo - 0.01)..(p_hi + 0.01))?;
+    c.configure_mesh()
+        .x_desc("hip height [m]")
+        .y_desc("body pitch [rad]")
+        .draw()?;
+    c.draw_series(LineSeries::new(
+        run.samples.iter().map(|q| (q.z_m, q.phi_rad)),
+        BLUE.stroke_width(1),
+    ))?;
+    root.present()?;
+    Ok(())
+}
+
+/// Writes one figure as PNG and SVG into `staging`.
+fn figure(
+    staging: &Path,
+    name: &str,
+    draw: impl Fn(
+        plotters::prelude::DrawingArea<plotters::prelude::SVGBackend<'_>, plotters::coord::Shift>,
+    ) -> Result<(), Box<dyn std::error::Error>>,
+    draw_png: impl Fn(
+        plotters::prelude::DrawingArea<plotters::prelude::BitMapBackend<'_>, plotters::coord::Shift>,
+    ) -> Result<(), Box<dyn std::error::Error>>,
+) -> Result<Vec<String>, String> {
+    use plotters::prelude::*;
+    const SIZE: (u32, u32) = (1000, 900);
+    let mut svg = String::new();
+    draw(SVGBackend::with_string(&mut svg, SIZE).into_drawing_area())
+        .map_err(|e| format!("{name}: {e}"))?;
+    std::fs::write(staging.join(format!("{name}.svg")), &svg)
+        .map_err(|e| format!("{name}.svg: {e}"))?;
+    let png = staging.join(format!("{name}.png"));
+    draw_png(BitMapBackend::new(&png, SIZE).into_drawing_area())
+        .map_err(|e| format!("{name}: {e}"))?;
+    Ok(vec![format!("{name}.png"), format!("{name}.svg")])
+}
+
+/// Figures 2.18-2.22 (10 s runs) into `dir`, whole or not at all; the
+/// three runs' summaries.
+pub fn write_figures(dir: &Path) -> Result<(Vec<PathBuf>, Vec<PlanarRun>), String> {
+    crate::plot::ensure_font()?;
+    let runs = vec![
+        simulate(2.0, 0.0, 10.0)?,
+        simulate(4.0, 0.0, 10.0)?,
+        simulate(4.0, 1000.0, 10.0)?,
+    ];
+    let titles = [
+        "Figure 2.18: passive running at 2 m/s (Table 2.2)",
+        "Figure 2.19: passive running at 4 m/s",
+        "Figure 2.21: 4 m/s with the speed stabiliser, K_c = 1000",
+    ];
+    let written = crate::out_dir::write_whole(dir, |staging| {
+        let mut names = Vec::new();
+        for (run, (name, title)) in runs
+            .iter()
+            .zip(["fig-2-18", "fig-2-19", "fig-2-21"].iter().zip(titles))
+        {
+            names.extend(figure(
+                staging,
+                name,
+                |a| time_plot(a, run, title),
+                |a| time_plot(a, run, title),
+            )?);
+        }
+        for (run, name, title) in [
+            (
+                &runs[1],
+                "fig-2-20",
+                "Figure 2.20: pitch against hip height, passive, 4 m/s",
+            ),
+            (
+                &runs[2],
+                "fig-2-22",
+                "Figure 2.22: pitch against hip height, K_c = 1000, 4 m/s",
+            ),
+        ] {
+            names.extend(figure(
+                staging,
+                name,
+                |a| phase_plot(a, run, title),
+                |a| phase_plot(a, run, title),
+            )?);
+        }
+        Ok(names)
+    })?;
+    Ok((written, runs))
+}
