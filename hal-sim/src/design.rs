@@ -414,23 +414,15 @@ pub fn write_lead_plot(
         root.present()?;
         Ok(())
     }
-    let mut svg = String::new();
-    draw(
-        SVGBackend::with_string(&mut svg, SIZE).into_drawing_area(),
-        motor,
-        study,
-    )
-    .map_err(|e| format!("cannot draw the lead study: {e}"))?;
     crate::out_dir::write_whole(dir, |staging| {
-        draw(
-            BitMapBackend::new(&staging.join("lead-study.png"), SIZE).into_drawing_area(),
-            motor,
-            study,
+        crate::plot::png_and_svg(
+            staging,
+            "lead-study",
+            SIZE,
+            "the lead study",
+            |a| draw(a, motor, study),
+            |a| draw(a, motor, study),
         )
-        .map_err(|e| format!("cannot draw the lead study: {e}"))?;
-        std::fs::write(staging.join("lead-study.svg"), &svg)
-            .map_err(|e| format!("cannot write {}: {e}", dir.join("lead-study.svg").display()))?;
-        Ok(vec!["lead-study.png".into(), "lead-study.svg".into()])
     })
 }
 
@@ -792,25 +784,15 @@ pub fn write_feasibility_plot(
         root.present()?;
         Ok(())
     }
-    let mut svg = String::new();
-    draw(
-        SVGBackend::with_string(&mut svg, SIZE).into_drawing_area(),
-        maps,
-    )
-    .map_err(|e| format!("cannot draw the feasibility map: {e}"))?;
     crate::out_dir::write_whole(dir, |staging| {
-        draw(
-            BitMapBackend::new(&staging.join("feasibility.png"), SIZE).into_drawing_area(),
-            maps,
+        crate::plot::png_and_svg(
+            staging,
+            "feasibility",
+            SIZE,
+            "the feasibility map",
+            |a| draw(a, maps),
+            |a| draw(a, maps),
         )
-        .map_err(|e| format!("cannot draw the feasibility map: {e}"))?;
-        std::fs::write(staging.join("feasibility.svg"), &svg).map_err(|e| {
-            format!(
-                "cannot write {}: {e}",
-                dir.join("feasibility.svg").display()
-            )
-        })?;
-        Ok(vec!["feasibility.png".into(), "feasibility.svg".into()])
     })
 }
 

@@ -477,25 +477,15 @@ pub fn write_plot(
         root.present()?;
         Ok(())
     }
-    let mut svg = String::new();
-    draw(
-        SVGBackend::with_string(&mut svg, SIZE).into_drawing_area(),
-        log,
-        id,
-        title,
-    )
-    .map_err(|e| format!("cannot draw the fit: {e}"))?;
     crate::out_dir::write_whole(dir, |staging| {
-        draw(
-            BitMapBackend::new(&staging.join("identify.png"), SIZE).into_drawing_area(),
-            log,
-            id,
-            title,
+        crate::plot::png_and_svg(
+            staging,
+            "identify",
+            SIZE,
+            "the fit",
+            |a| draw(a, log, id, title),
+            |a| draw(a, log, id, title),
         )
-        .map_err(|e| format!("cannot draw the fit: {e}"))?;
-        std::fs::write(staging.join("identify.svg"), &svg)
-            .map_err(|e| format!("cannot write {}: {e}", dir.join("identify.svg").display()))?;
-        Ok(vec!["identify.png".into(), "identify.svg".into()])
     })
 }
 

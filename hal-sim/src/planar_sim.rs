@@ -10,6 +10,8 @@ use std::path::{Path, PathBuf};
 
 /// The integration step, s.
 const DT_S: f64 = 1e-4;
+/// The figures' size, pixels.
+const FIGURE_SIZE: (u32, u32) = (1000, 900);
 
 /// One run's apexes and what the touchdowns took.
 #[derive(Clone, Debug, Serialize)]
@@ -57,12 +59,8 @@ pub fn simulate(speed_mps: f64, gain_ns_per_m: f64, duration_s: f64) -> Result<P
         ));
     }
     let p = PlanarParams::table_2_2();
-    let gait = Gait {
-        step_period_s: 0.5,
-        stance_fraction: 0.125,
-        speed_mps,
-    };
-    let d = passive_design(&p, &gait).map_err(|e| format!("planar design: {e:?}"))?;
+    let d = passive_design(&p, &Gait::table_2_2(speed_mps))
+        .map_err(|e| format!("planar design: {e:?}"))?;
     let mut r = PlanarRunner::at_apex(p, &d, speed_mps)
         .map_err(|e| format!("planar runner: {e:?}"))?
         .stabilised(gain_ns_per_m, speed_mps);
@@ -202,30 +200,6 @@ where
     Ok(())
 }
 
-/// Writes one figure as PNG and SVG into `staging`.
-fn figure(
-    staging: &Path,
-    name: &str,
-    draw: impl Fn(
-        plotters::prelude::DrawingArea<plotters::prelude::SVGBackend<'_>, plotters::coord::Shift>,
-    ) -> Result<(), Box<dyn std::error::Error>>,
-    draw_png: impl Fn(
-        plotters::prelude::DrawingArea<plotters::prelude::BitMapBackend<'_>, plotters::coord::Shift>,
-    ) -> Result<(), Box<dyn std::error::Error>>,
-) -> Result<Vec<String>, String> {
-    use plotters::prelude::*;
-    const SIZE: (u32, u32) = (1000, 900);
-    let mut svg = String::new();
-    draw(SVGBackend::with_string(&mut svg, SIZE).into_drawing_area())
-        .map_err(|e| format!("{name}: {e}"))?;
-    std::fs::write(staging.join(format!("{name}.svg")), &svg)
-        .map_err(|e| format!("{name}.svg: {e}"))?;
-    let png = staging.join(format!("{name}.png"));
-    draw_png(BitMapBackend::new(&png, SIZE).into_drawing_area())
-        .map_err(|e| format!("{name}: {e}"))?;
-    Ok(vec![format!("{name}.png"), format!("{name}.svg")])
-}
-
 /// Figures 2.18-2.22 (10 s runs) into `dir`, whole or not at all; the
 /// three runs' summaries.
 pub fn write_figures(dir: &Path) -> Result<(Vec<PathBuf>, Vec<PlanarRun>), String> {
@@ -246,8 +220,10 @@ pub fn write_figures(dir: &Path) -> Result<(Vec<PathBuf>, Vec<PlanarRun>), Strin
             .iter()
             .zip(["fig-2-18", "fig-2-19", "fig-2-21"].iter().zip(titles))
         {
-            names.extend(figure(
+            names.extend(crate::plot::png_and_svg(
                 staging,
+                name,
+                FIGURE_SIZE,
                 name,
                 |a| time_plot(a, run, title),
                 |a| time_plot(a, run, title),
@@ -265,8 +241,10 @@ pub fn write_figures(dir: &Path) -> Result<(Vec<PathBuf>, Vec<PlanarRun>), Strin
                 "Figure 2.22: pitch against hip height, K_c = 1000, 4 m/s",
             ),
         ] {
-            names.extend(figure(
+            names.extend(crate::plot::png_and_svg(
                 staging,
+                name,
+                FIGURE_SIZE,
                 name,
                 |a| phase_plot(a, run, title),
                 |a| phase_plot(a, run, title),

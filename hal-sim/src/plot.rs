@@ -39,6 +39,32 @@ pub(crate) fn ensure_font() -> Result<(), String> {
     .clone()
 }
 
+/// What a figure's drawing function returns.
+pub(crate) type DrawResult = Result<(), Box<dyn std::error::Error>>;
+
+/// One figure as `NAME.png` and `NAME.svg` in `dir` (the staging directory
+/// of [`crate::out_dir::write_whole`]), `size` pixels: the same drawing,
+/// given once per backend (`svg`, `png`); `what` names it in errors.
+/// Returns the two file names.
+pub(crate) fn png_and_svg(
+    dir: &Path,
+    name: &str,
+    size: (u32, u32),
+    what: &str,
+    svg: impl FnOnce(DrawingArea<SVGBackend<'_>, plotters::coord::Shift>) -> DrawResult,
+    png: impl FnOnce(DrawingArea<BitMapBackend<'_>, plotters::coord::Shift>) -> DrawResult,
+) -> Result<Vec<String>, String> {
+    let (svg_name, png_name) = (format!("{name}.svg"), format!("{name}.png"));
+    let mut text = String::new();
+    svg(SVGBackend::with_string(&mut text, size).into_drawing_area())
+        .map_err(|e| format!("cannot draw {what}: {e}"))?;
+    std::fs::write(dir.join(&svg_name), &text)
+        .map_err(|e| format!("cannot write {svg_name}: {e}"))?;
+    png(BitMapBackend::new(&dir.join(&png_name), size).into_drawing_area())
+        .map_err(|e| format!("cannot draw {what}: {e}"))?;
+    Ok(vec![png_name, svg_name])
+}
+
 type Series<'a> = (&'a str, &'a str, fn(&Sample) -> f64);
 
 /// Draw toe height (cm), actuator position (mm) and total energy (J) against

@@ -816,6 +816,26 @@ impl Calibrator {
         }
     }
 
+    /// One period of the sweeps' reference ramp, the spring fit's and the
+    /// weighing's: `down` from the start to `bottom_rad`, else back, at
+    /// `rate_rad_s`; at either end the reference stops there and the next
+    /// stage begins. Returns the reference's rate and whether it just
+    /// reached the bottom.
+    fn ramp(&mut self, down: bool, bottom_rad: f32, rate_rad_s: f32, dt_s: f32) -> (f32, bool) {
+        let w = if down { rate_rad_s } else { -rate_rad_s };
+        self.theta_ref_rad += w * dt_s;
+        if down && self.theta_ref_rad >= bottom_rad {
+            self.theta_ref_rad = bottom_rad;
+            self.next_stage();
+            return (w, true);
+        }
+        if !down && self.theta_ref_rad <= self.theta0_rad {
+            self.theta_ref_rad = self.theta0_rad;
+            self.next_stage();
+        }
+        (w, false)
+    }
+
     /// The spring sweep's reference (and its rate): down by the sweep, back,
     /// hold; the fit's points on the way.
     fn sweep(&mut self, m: &DriveInput, d: &DriveParams, rate_rad_s: f32) -> (f32, f32) {
@@ -827,16 +847,7 @@ impl Calibrator {
                     m.motor_angle_rad * r + m.leg_compression_m,
                     m.spring_force_n,
                 );
-                let down = self.stage == 0;
-                let w = if down { rate_rad_s } else { -rate_rad_s };
-                self.theta_ref_rad += w * m.dt_s;
-                if down && self.theta_ref_rad >= bottom {
-                    self.theta_ref_rad = bottom;
-                    self.next_stage();
-                } else if !down && self.theta_ref_rad <= self.theta0_rad {
-                    self.theta_ref_rad = self.theta0_rad;
-                    self.next_stage();
-                }
+                let (w, _) = self.ramp(self.stage == 0, bottom, rate_rad_s, m.dt_s);
                 (self.theta_ref_rad, w)
             }
             _ => {
@@ -890,16 +901,10 @@ impl Calibrator {
                         self.force_after.add(m.spring_force_n);
                     }
                 }
-                let w = if down { rate_rad_s } else { -rate_rad_s };
-                self.theta_ref_rad += w * m.dt_s;
                 let bottom = self.theta0_rad + self.travel_m / r;
-                if down && self.theta_ref_rad >= bottom {
-                    self.theta_ref_rad = bottom;
+                let (w, at_bottom) = self.ramp(down, bottom, rate_rad_s, m.dt_s);
+                if at_bottom {
                     self.body_rise_m = m.body_height_m - self.body_start_m;
-                    self.next_stage();
-                } else if !down && self.theta_ref_rad <= self.theta0_rad {
-                    self.theta_ref_rad = self.theta0_rad;
-                    self.next_stage();
                 }
                 (self.theta_ref_rad, w)
             }

@@ -127,6 +127,17 @@ pub struct Gait {
     pub speed_mps: f64,
 }
 
+impl Gait {
+    /// Table 2.2's gait (`T_step` 0.5 s, `rho` 0.125) at `speed_mps`.
+    pub const fn table_2_2(speed_mps: f64) -> Self {
+        Gait {
+            step_period_s: 0.5,
+            stance_fraction: 0.125,
+            speed_mps,
+        }
+    }
+}
+
 /// A gait or parameter set that cannot be designed.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum PlanarError {
@@ -553,11 +564,7 @@ impl PlanarRunner {
 mod tests {
     use super::*;
 
-    const TABLE_GAIT: Gait = Gait {
-        step_period_s: 0.5,
-        stance_fraction: 0.125,
-        speed_mps: 2.0,
-    };
+    const TABLE_GAIT: Gait = Gait::table_2_2(2.0);
 
     /// Table 2.2's springs are the design's for its T_step = 0.5 s and rho
     /// = 0.125: 28.4 N m/rad and 40 425 N/m.
@@ -579,14 +586,7 @@ mod tests {
             (2.0, 3.0769, -0.8630, 0.8819),
             (4.0, 6.1538, -1.7261, 0.8733),
         ] {
-            let d = passive_design(
-                &p,
-                &Gait {
-                    speed_mps: v,
-                    ..TABLE_GAIT
-                },
-            )
-            .unwrap_or_else(|e| panic!("{e:?}"));
+            let d = passive_design(&p, &Gait::table_2_2(v)).unwrap_or_else(|e| panic!("{e:?}"));
             assert!((d.leg_rate0_rad_s - theta0).abs() < 1e-4, "{d:?}");
             assert!((d.body_rate0_rad_s - phi0).abs() < 1e-4, "{d:?}");
             assert!((d.flight_time_s - 0.4375).abs() < 1e-12);
@@ -643,14 +643,7 @@ mod tests {
             (4.0, 0.0, 0.02, 10.0),
             (4.0, 1000.0, 0.0, 0.02),
         ] {
-            let d = passive_design(
-                &p,
-                &Gait {
-                    speed_mps: v,
-                    ..TABLE_GAIT
-                },
-            )
-            .unwrap_or_else(|e| panic!("{e:?}"));
+            let d = passive_design(&p, &Gait::table_2_2(v)).unwrap_or_else(|e| panic!("{e:?}"));
             let mut r = PlanarRunner::at_apex(p, &d, v)
                 .unwrap_or_else(|e| panic!("{e:?}"))
                 .stabilised(kc, v);
