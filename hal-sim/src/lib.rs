@@ -20,6 +20,7 @@ pub mod inject;
 pub mod out_dir;
 pub mod params_toml;
 pub mod planar_sim;
+pub mod planar_stability;
 pub mod plot;
 pub mod run;
 pub mod scenario;

@@ -3,7 +3,7 @@
 //! simulation counterparts of the thesis's Figures 2.18-2.22.
 
 use hopper_plant::planar::{
-    passive_design, Gait, PlanarEvent, PlanarParams, PlanarRunner, PlanarState,
+    passive_design, ApexState, Gait, PlanarEvent, PlanarParams, PlanarRunner, PlanarState,
 };
 use serde::Serialize;
 use std::path::{Path, PathBuf};
@@ -20,6 +20,10 @@ pub struct PlanarRun {
     pub speed_mps: f64,
     /// The stabiliser's gain (0: passive), N s/m.
     pub gain_ns_per_m: f64,
+    /// Where it started.
+    pub start: Start,
+    /// The hip height it started from, m.
+    pub start_apex_m: f64,
     /// The design's apex (hip height), m.
     pub design_apex_m: f64,
     /// Hip height at each apex, m.
@@ -32,7 +36,7 @@ pub struct PlanarRun {
     pub touchdowns: usize,
     /// Energy the touchdown impacts took, J.
     pub touchdown_loss_j: f64,
-    /// The largest |apex - design apex|, m.
+    /// The largest |apex - the apex it started from|, m.
     pub apex_drift_m: f64,
     /// Whether the body fell (hip below half the leg's length).
     pub fell: bool,
@@ -41,10 +45,31 @@ pub struct PlanarRun {
     pub samples: Vec<PlanarState>,
 }
 
+/// Where a run starts.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Start {
+    /// The passive design's apex (eqs 2.76-2.78), as the thesis.
+    Design,
+    /// The gait's fixed point of the apex return map
+    /// ([`crate::planar_stability`]).
+    FixedPoint,
+}
+
 /// Table 2.2's runner at `speed_mps` (its step period 0.5 s and stance
 /// fraction 0.125), stabilised with `gain_ns_per_m` (0: passive), for
-/// `duration_s`.
+/// `duration_s` from the design's apex.
 pub fn simulate(speed_mps: f64, gain_ns_per_m: f64, duration_s: f64) -> Result<PlanarRun, String> {
+    simulate_from(speed_mps, gain_ns_per_m, duration_s, Start::Design)
+}
+
+/// As [`simulate`], from `start`.
+pub fn simulate_from(
+    speed_mps: f64,
+    gain_ns_per_m: f64,
+    duration_s: f64,
+    start: Start,
+) -> Result<PlanarRun, String> {
     if !(speed_mps.is_finite() && (0.0..=10.0).contains(&speed_mps)) {
         return Err(format!("--speed {speed_mps} must be within 0 ..= 10 m/s"));
     }
@@ -61,12 +86,26 @@ pub fn simulate(speed_mps: f64, gain_ns_per_m: f64, duration_s: f64) -> Result<P
     let p = PlanarParams::table_2_2();
     let d = passive_design(&p, &Gait::table_2_2(speed_mps))
         .map_err(|e| format!("planar design: {e:?}"))?;
-    let mut r = PlanarRunner::at_apex(p, &d, speed_mps)
+    let apex = match start {
+        Start::Design => ApexState::of_design(&d, speed_mps),
+        Start::FixedPoint => ApexState::from_array(
+            crate::planar_stability::fixed_point(
+                &p,
+                gain_ns_per_m,
+                speed_mps,
+                &ApexState::of_design(&d, speed_mps).to_array(),
+            )?
+            .apex,
+        ),
+    };
+    let mut r = PlanarRunner::from_apex(p, &apex)
         .map_err(|e| format!("planar runner: {e:?}"))?
         .stabilised(gain_ns_per_m, speed_mps);
     let mut run = PlanarRun {
         speed_mps,
         gain_ns_per_m,
+        start,
+        start_apex_m: apex.z_m,
         design_apex_m: d.apex_height_m,
         apex_heights_m: Vec::new(),
         apex_speeds_mps: Vec::new(),
@@ -80,15 +119,10 @@ pub fn simulate(speed_mps: f64, gain_ns_per_m: f64, duration_s: f64) -> Result<P
     let steps = (duration_s / DT_S).round() as u64;
     for k in 1..=steps {
         r.step(DT_S, &mut |e| match e {
-            PlanarEvent::Apex {
-                z_m,
-                x_dot_mps,
-                phi_rad,
-                ..
-            } => {
-                run.apex_heights_m.push(z_m);
-                run.apex_speeds_mps.push(x_dot_mps);
-                run.apex_pitch_rad.push(phi_rad);
+            PlanarEvent::Apex { apex, .. } => {
+                run.apex_heights_m.push(apex.z_m);
+                run.apex_speeds_mps.push(apex.x_dot_mps);
+                run.apex_pitch_rad.push(apex.phi_rad);
             }
             PlanarEvent::Touchdown { loss_j, .. } => {
                 run.touchdowns += 1;
@@ -108,7 +142,7 @@ pub fn simulate(speed_mps: f64, gain_ns_per_m: f64, duration_s: f64) -> Result<P
     run.apex_drift_m = run
         .apex_heights_m
         .iter()
-        .map(|a| (a - d.apex_height_m).abs())
+        .map(|a| (a - apex.z_m).abs())
         .fold(0.0, f64::max);
     Ok(run)
 }

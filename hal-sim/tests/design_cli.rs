@@ -281,3 +281,60 @@ fn planar_run_json() {
     let o = sim(&["planar", "run", "--speed", "-1"]);
     assert_eq!(o.status.code(), Some(2));
 }
+
+/// `planar stability --json` (issue 20): the 4 m/s fixed points, passive
+/// and with K_c = 1000, their growth per hop (5.51 and 1.230), and
+/// `planar run --start fixed-point` holding the stabilised gait for 30 s
+/// (the design's apex falls within 10 s); bad lists are refused.
+#[test]
+fn planar_stability_json() {
+    let o = sim(&[
+        "planar",
+        "stability",
+        "--speeds",
+        "4",
+        "--kc",
+        "0,1000",
+        "--json",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let row = &v["speeds"][0];
+    let growth = |k: usize| row["points"][k]["growth"].as_f64().unwrap();
+    assert!((growth(0) / 5.510 - 1.0).abs() < 0.02, "{row}");
+    assert!((growth(1) / 1.230 - 1.0).abs() < 0.02, "{row}");
+    assert_eq!(row["best_gain_ns_per_m"], 1000.0);
+    assert!(row["attracts_ns_per_m"].is_null());
+    let run = |start: &str| -> serde_json::Value {
+        let o = sim(&[
+            "planar",
+            "run",
+            "--speed",
+            "4",
+            "--kc",
+            "1000",
+            "--duration",
+            "30",
+            "--start",
+            start,
+            "--json",
+        ]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        serde_json::from_slice(&o.stdout).unwrap()
+    };
+    let fixed = run("fixed-point");
+    assert_eq!(fixed["fell"], false, "{fixed}");
+    assert!(fixed["apex_drift_m"].as_f64().unwrap() < 1e-3, "{fixed}");
+    assert_eq!(run("design")["fell"], true);
+    for (bad, names) in [
+        (&["planar", "stability", "--speeds", "0"][..], "--speeds 0"),
+        (&["planar", "stability", "--kc", "NaN"][..], "--kc NaN"),
+        (&["planar", "run", "--start", "apex"][..], "'--start"),
+    ] {
+        let o = sim(bad);
+        assert_eq!(o.status.code(), Some(2), "{bad:?}");
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(err.trim().lines().count(), 1, "{err}");
+        assert!(err.contains(names), "{err}");
+    }
+}

@@ -235,13 +235,66 @@ pub enum PlanarEvent {
     Apex {
         /// Time, s.
         t_s: f64,
-        /// Hip height, m.
-        z_m: f64,
-        /// Forward speed, m/s.
-        x_dot_mps: f64,
-        /// Body pitch, rad.
-        phi_rad: f64,
+        /// The state there.
+        apex: ApexState,
     },
+}
+
+/// The state at the top of a flight (`z' = 0`), the return map's
+/// coordinates: everything but the forward position, which the dynamics
+/// do not depend on.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ApexState {
+    /// Hip height, m.
+    pub z_m: f64,
+    /// Forward speed, m/s.
+    pub x_dot_mps: f64,
+    /// Body pitch, rad.
+    pub phi_rad: f64,
+    /// Leg angle, rad.
+    pub theta_rad: f64,
+    /// Body pitch rate, rad/s.
+    pub phi_dot_rad_s: f64,
+    /// Leg rate, rad/s.
+    pub theta_dot_rad_s: f64,
+}
+
+impl ApexState {
+    /// The design's apex at `speed_mps`: angles zero, the design's rates.
+    pub fn of_design(d: &PassiveDesign, speed_mps: f64) -> Self {
+        ApexState {
+            z_m: d.apex_height_m,
+            x_dot_mps: speed_mps,
+            phi_rad: 0.0,
+            theta_rad: 0.0,
+            phi_dot_rad_s: d.body_rate0_rad_s,
+            theta_dot_rad_s: d.leg_rate0_rad_s,
+        }
+    }
+
+    /// As `[z, x', phi, theta, phi', theta']`.
+    pub fn to_array(&self) -> [f64; 6] {
+        [
+            self.z_m,
+            self.x_dot_mps,
+            self.phi_rad,
+            self.theta_rad,
+            self.phi_dot_rad_s,
+            self.theta_dot_rad_s,
+        ]
+    }
+
+    /// From `[z, x', phi, theta, phi', theta']`.
+    pub fn from_array(a: [f64; 6]) -> Self {
+        ApexState {
+            z_m: a[0],
+            x_dot_mps: a[1],
+            phi_rad: a[2],
+            theta_rad: a[3],
+            phi_dot_rad_s: a[4],
+            theta_dot_rad_s: a[5],
+        }
+    }
 }
 
 /// The section 2.2 runner (module docs): fixed-step RK4, transitions
@@ -295,24 +348,51 @@ impl PlanarRunner {
         d: &PassiveDesign,
         speed_mps: f64,
     ) -> Result<Self, PlanarError> {
+        Self::from_apex(p, &ApexState::of_design(d, speed_mps))
+    }
+
+    /// At `apex` (forward position 0, time 0), passive; the stabiliser's
+    /// speed is the apex's until [`PlanarRunner::stabilised`] sets it.
+    pub fn from_apex(p: PlanarParams, apex: &ApexState) -> Result<Self, PlanarError> {
         p.validate()?;
         Ok(PlanarRunner {
             p,
             phase: PlanarPhase::Flight,
             s: [
                 0.0,
-                d.apex_height_m,
+                apex.z_m,
+                apex.phi_rad,
+                apex.theta_rad,
+                apex.x_dot_mps,
                 0.0,
-                0.0,
-                speed_mps,
-                0.0,
-                d.body_rate0_rad_s,
-                d.leg_rate0_rad_s,
+                apex.phi_dot_rad_s,
+                apex.theta_dot_rad_s,
             ],
             t_s: 0.0,
             gain_ns_per_m: 0.0,
-            speed_mps,
+            speed_mps: apex.x_dot_mps,
         })
+    }
+
+    /// Runs in steps of `dt_s` to the next apex, at most `max_s`: that
+    /// apex and what its touchdown took, or `None` if the hip fell below
+    /// half the leg's length or no apex came.
+    pub fn next_apex(&mut self, dt_s: f64, max_s: f64) -> Option<(ApexState, f64)> {
+        let mut loss = 0.0;
+        let mut found = None;
+        let floor = 0.5 * self.p.leg_rest_length_m;
+        let t_end = self.t_s + max_s;
+        while found.is_none() && self.t_s < t_end {
+            self.step(dt_s, &mut |e| match e {
+                PlanarEvent::Apex { apex, .. } => found = Some(apex),
+                PlanarEvent::Touchdown { loss_j, .. } => loss += loss_j,
+                PlanarEvent::Liftoff { .. } => {}
+            });
+            if self.state().z_m < floor {
+                return None;
+            }
+        }
+        found.map(|a| (a, loss))
     }
 
     /// With the forward-speed stabiliser of eqs 2.79-2.80: in stance the
@@ -481,9 +561,14 @@ impl PlanarRunner {
                     let at = self.rk4(self.phase, &self.s, tau);
                     on_event(PlanarEvent::Apex {
                         t_s: self.t_s + tau,
-                        z_m: at[1],
-                        x_dot_mps: at[4],
-                        phi_rad: at[2],
+                        apex: ApexState {
+                            z_m: at[1],
+                            x_dot_mps: at[4],
+                            phi_rad: at[2],
+                            theta_rad: at[3],
+                            phi_dot_rad_s: at[6],
+                            theta_dot_rad_s: at[7],
+                        },
                     });
                 }
             }
@@ -658,7 +743,7 @@ mod tests {
                         lost += loss_j;
                         touchdowns += 1;
                     }
-                    PlanarEvent::Apex { z_m, .. } => apexes.push(z_m),
+                    PlanarEvent::Apex { apex, .. } => apexes.push(apex.z_m),
                     PlanarEvent::Liftoff { .. } => {}
                 });
                 let q = r.state();

@@ -179,6 +179,10 @@ enum PlanarCmd {
         /// Simulated time, s.
         #[arg(long, default_value_t = 10.0)]
         duration: f64,
+        /// Start from the passive design's apex (eqs 2.76-2.78) or from the
+        /// gait's fixed point of the apex return map (`planar stability`).
+        #[arg(long, value_parser = ["design", "fixed-point"], default_value = "design")]
+        start: String,
         /// Print JSON instead of text.
         #[arg(long)]
         json: bool,
@@ -188,6 +192,23 @@ enum PlanarCmd {
         /// Directory (created if missing).
         #[arg(long)]
         out: PathBuf,
+    },
+    /// The apex return map: each gait's fixed point by Newton iteration
+    /// and how much a deviation grows per hop (the largest |eigenvalue| of
+    /// the map's Jacobian off the energy family), over speeds x K_c.
+    Stability {
+        /// Speeds, m/s (comma-separated).
+        #[arg(long, value_delimiter = ',', default_values_t = [0.5, 1.0, 1.5, 2.0, 2.5, 3.0, 3.5, 4.0, 4.5, 5.0])]
+        speeds: Vec<f64>,
+        /// Stabiliser gains K_c, N s/m (comma-separated; 0 is passive).
+        #[arg(long, value_delimiter = ',', default_values_t = [-1000.0, -500.0, 0.0, 250.0, 500.0, 750.0, 1000.0, 1250.0, 1500.0, 2000.0, 2500.0, 3000.0])]
+        kc: Vec<f64>,
+        /// Directory for stability.csv and stability.png/.svg.
+        #[arg(long, value_name = "DIR")]
+        out: Option<PathBuf>,
+        /// Print JSON instead of text.
+        #[arg(long)]
+        json: bool,
     },
 }
 
@@ -705,18 +726,152 @@ fn cmd_spring(a: &SpringArgs) -> Result<()> {
 }
 
 fn planar_summary(r: &hal_sim::planar_sim::PlanarRun) -> String {
-    let apexes: Vec<String> = r.apex_heights_m.iter().map(|a| format!("{a:.4}")).collect();
+    let n = r.apex_heights_m.len();
+    // A long run's apexes: the first 12 and the last 4.
+    let apexes: Vec<String> = r
+        .apex_heights_m
+        .iter()
+        .enumerate()
+        .filter(|(k, _)| *k < 12 || *k + 4 >= n)
+        .map(|(k, a)| {
+            if k + 4 == n && n > 16 {
+                format!("... {a:.4}")
+            } else {
+                format!("{a:.4}")
+            }
+        })
+        .collect();
+    let start = match r.start {
+        hal_sim::planar_sim::Start::Design => format!("design {:.4}", r.design_apex_m),
+        hal_sim::planar_sim::Start::FixedPoint => format!(
+            "fixed point {:.4}, design {:.4}",
+            r.start_apex_m, r.design_apex_m
+        ),
+    };
     format!(
-        "planar: {} m/s, K_c {} N s/m: {} touchdowns ({:.3} J taken by their impacts), {}; apexes (m, design {:.4}): {}; largest drift {:.4} m",
+        "planar: {} m/s, K_c {} N s/m: {} touchdowns ({:.3} J taken by their impacts), {}; {n} apexes (m, {start}): {}; largest drift {:.4} m",
         r.speed_mps,
         r.gain_ns_per_m,
         r.touchdowns,
         r.touchdown_loss_j,
         if r.fell { "fell" } else { "still running" },
-        r.design_apex_m,
         apexes.join(" "),
         r.apex_drift_m
     )
+}
+
+fn cmd_planar_stability(
+    speeds: &[f64],
+    gains: &[f64],
+    out: Option<&std::path::Path>,
+    json: bool,
+) -> Result<()> {
+    use hal_sim::planar_stability::scan;
+    if speeds.is_empty() || speeds.len() > 40 {
+        bail!("--speeds takes 1 to 40 speeds");
+    }
+    if gains.is_empty() || gains.len() > 100 {
+        bail!("--kc takes 1 to 100 gains");
+    }
+    for &v in speeds {
+        if !(v.is_finite() && v > 0.0 && v <= 10.0) {
+            bail!("--speeds {v} must be within 0 (excluded) ..= 10 m/s");
+        }
+    }
+    for &k in gains {
+        if !(k.is_finite() && k.abs() <= 10_000.0) {
+            bail!("--kc {k} must be within -10000 ..= 10000 N s/m");
+        }
+    }
+    let bar = indicatif::ProgressBar::new((speeds.len() * gains.len()) as u64)
+        .with_finish(indicatif::ProgressFinish::AndClear);
+    bar.set_style(
+        indicatif::ProgressStyle::with_template("fixed points {pos}/{len} {wide_bar} {eta}")
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+    );
+    let rows = scan(speeds, gains, &mut || bar.inc(1));
+    bar.finish_and_clear();
+    let written = match out {
+        Some(dir) => hal_sim::planar_stability::write_outputs(dir, &rows, gains)
+            .map_err(anyhow::Error::msg)?,
+        None => Vec::new(),
+    };
+    if json {
+        say!(
+            "{}",
+            serde_json::to_string_pretty(
+                &serde_json::json!({ "kc_ns_per_m": gains, "speeds": rows })
+            )?
+        );
+        return Ok(());
+    }
+    let opt = |x: Option<f64>| x.map_or("-".to_string(), |x| format!("{x:.3}"));
+    let range =
+        |r: Option<[f64; 2]>| r.map_or("none".to_string(), |r| format!("{} ..= {}", r[0], r[1]));
+    say!("growth = largest |eigenvalue| of the apex map's Jacobian off the energy family (below 1: attracting)");
+    say!(
+        "{:>6} {:>8} {:>8} {:>9} {:>8} {:>22} {:>14}",
+        "speed",
+        "apex",
+        "passive",
+        "best K_c",
+        "growth",
+        "K_c lowering growth",
+        "K_c attracting"
+    );
+    for row in &rows {
+        // The passive gait's apex, else the first found.
+        let apex = gains
+            .iter()
+            .position(|&g| g == 0.0)
+            .and_then(|k| row.points[k].as_ref())
+            .or_else(|| row.points.iter().flatten().next())
+            .map(|f| format!("{:.4}", f.apex[0]));
+        say!(
+            "{:>4.1} m/s {:>6} m {:>8} {:>9} {:>8} {:>22} {:>14}",
+            row.speed_mps,
+            apex.unwrap_or_else(|| "-".into()),
+            opt(row.passive_growth),
+            row.best_gain_ns_per_m
+                .map_or("-".into(), |g| format!("{g}")),
+            opt(row.best_growth),
+            range(row.helps_ns_per_m),
+            range(row.attracts_ns_per_m)
+        );
+    }
+    if speeds.len() * gains.len() <= 12 {
+        for row in &rows {
+            for (g, f) in gains.iter().zip(&row.points) {
+                match f {
+                    Some(f) => {
+                        let eig: Vec<String> = f
+                            .eigenvalues
+                            .iter()
+                            .map(|z| {
+                                if z[1].abs() < 1e-9 {
+                                    format!("{:.4}", z[0])
+                                } else {
+                                    format!("{:.4}{:+.4}i", z[0], z[1])
+                                }
+                            })
+                            .collect();
+                        say!(
+                            "{} m/s, K_c {g}: apex {:.4} m, |P(a)-a| {:.1e}, eigenvalues {}",
+                            row.speed_mps,
+                            f.apex[0],
+                            f.residual,
+                            eig.join(" ")
+                        );
+                    }
+                    None => say!("{} m/s, K_c {g}: no fixed point found", row.speed_mps),
+                }
+            }
+        }
+    }
+    for p in &written {
+        say!("  wrote {}", p.display());
+    }
+    Ok(())
 }
 
 fn cmd_planar(cmd: &PlanarCmd) -> Result<()> {
@@ -725,16 +880,28 @@ fn cmd_planar(cmd: &PlanarCmd) -> Result<()> {
             speed,
             kc,
             duration,
+            start,
             json,
         } => {
-            let r = hal_sim::planar_sim::simulate(*speed, *kc, *duration)
-                .map_err(anyhow::Error::msg)?;
+            use hal_sim::planar_sim::{simulate_from, Start};
+            let start = if start == "fixed-point" {
+                Start::FixedPoint
+            } else {
+                Start::Design
+            };
+            let r = simulate_from(*speed, *kc, *duration, start).map_err(anyhow::Error::msg)?;
             if *json {
                 say!("{}", serde_json::to_string_pretty(&r)?);
             } else {
                 say!("{}", planar_summary(&r));
             }
         }
+        PlanarCmd::Stability {
+            speeds,
+            kc,
+            out,
+            json,
+        } => cmd_planar_stability(speeds, kc, out.as_deref(), *json)?,
         PlanarCmd::Figures { out } => {
             let (written, runs) =
                 hal_sim::planar_sim::write_figures(out).map_err(anyhow::Error::msg)?;
