@@ -15,6 +15,7 @@ pub mod metrics;
 pub mod mock;
 pub mod params;
 pub mod planar;
+pub mod planar_general;
 pub mod plant;
 pub mod robot;
 pub mod sensors;

@@ -145,6 +145,9 @@ pub enum PlanarError {
     NotPositive(&'static str),
     /// `rho` is not within (0, 1).
     StanceFraction,
+    /// A field that must be finite and not negative (or, for the leg's
+    /// centre, on the leg) is not (its name).
+    OutOfRange(&'static str),
 }
 
 /// What the passive-dynamics design gives: the springs and the initial
@@ -226,10 +229,13 @@ pub enum PlanarEvent {
         /// Kinetic energy the leg's rate jump took, J.
         loss_j: f64,
     },
-    /// The leg spring reached its rest length.
+    /// The leg spring reached its rest length (the leg its stop).
     Liftoff {
         /// Time, s.
         t_s: f64,
+        /// Kinetic energy the stop's pick-up of the toe mass took, J (0
+        /// for a massless toe).
+        loss_j: f64,
     },
     /// The top of a flight.
     Apex {
@@ -374,27 +380,6 @@ impl PlanarRunner {
         })
     }
 
-    /// Runs in steps of `dt_s` to the next apex, at most `max_s`: that
-    /// apex and what its touchdown took, or `None` if the hip fell below
-    /// half the leg's length or no apex came.
-    pub fn next_apex(&mut self, dt_s: f64, max_s: f64) -> Option<(ApexState, f64)> {
-        let mut loss = 0.0;
-        let mut found = None;
-        let floor = 0.5 * self.p.leg_rest_length_m;
-        let t_end = self.t_s + max_s;
-        while found.is_none() && self.t_s < t_end {
-            self.step(dt_s, &mut |e| match e {
-                PlanarEvent::Apex { apex, .. } => found = Some(apex),
-                PlanarEvent::Touchdown { loss_j, .. } => loss += loss_j,
-                PlanarEvent::Liftoff { .. } => {}
-            });
-            if self.state().z_m < floor {
-                return None;
-            }
-        }
-        found.map(|a| (a, loss))
-    }
-
     /// With the forward-speed stabiliser of eqs 2.79-2.80: in stance the
     /// leg force is `k_l (r_0 - r) - K_c (x_dot_d - x')`.
     pub fn stabilised(mut self, gain_ns_per_m: f64, speed_mps: f64) -> Self {
@@ -507,95 +492,19 @@ impl PlanarRunner {
         }
     }
 
-    fn rk4(&self, phase: PlanarPhase, s: &[f64; 8], h: f64) -> [f64; 8] {
-        let add = |a: &[f64; 8], b: &[f64; 8], k: f64| {
-            let mut o = *a;
-            for (o, b) in o.iter_mut().zip(b) {
-                *o += k * b;
-            }
-            o
-        };
-        let k1 = self.rate(phase, s);
-        let k2 = self.rate(phase, &add(s, &k1, h / 2.0));
-        let k3 = self.rate(phase, &add(s, &k2, h / 2.0));
-        let k4 = self.rate(phase, &add(s, &k3, h));
-        let mut o = *s;
-        for i in 0..8 {
-            o[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
-        }
-        o
-    }
-
-    /// The quantity whose sign change ends `phase`: flight, the toe's
-    /// height (landing when it falls through 0 moving down); stance, the
-    /// spring's compression (lifting off when it reaches 0).
-    fn guard(&self, phase: PlanarPhase, s: &[f64; 8]) -> f64 {
-        match phase {
-            PlanarPhase::Flight => s[1] - self.p.leg_rest_length_m * libm::cos(s[3]),
-            PlanarPhase::Stance { .. } => self.p.leg_rest_length_m - s[0],
-        }
-    }
-
     /// Advances `dt_s`, reporting transitions (and apexes) to `on_event`.
     pub fn step(&mut self, dt_s: f64, on_event: &mut impl FnMut(PlanarEvent)) {
-        let mut left = dt_s;
-        // At most a few transitions in one step.
-        for _ in 0..4 {
-            if left <= 0.0 {
-                break;
-            }
-            let next = self.rk4(self.phase, &self.s, left);
-            let (g0, g1) = (
-                self.guard(self.phase, &self.s),
-                self.guard(self.phase, &next),
-            );
-            let crossed = match self.phase {
-                PlanarPhase::Flight => g0 > 0.0 && g1 <= 0.0 && next[5] < 0.0,
-                PlanarPhase::Stance { .. } => g0 > 0.0 && g1 <= 0.0,
-            };
-            if let PlanarPhase::Flight = self.phase {
-                if self.s[5] > 0.0 && next[5] <= 0.0 && !crossed {
-                    // The apex within the step: z' = 0, by the flight's
-                    // exact parabola.
-                    let tau = self.s[5] / self.p.gravity_mps2;
-                    let at = self.rk4(self.phase, &self.s, tau);
-                    on_event(PlanarEvent::Apex {
-                        t_s: self.t_s + tau,
-                        apex: ApexState {
-                            z_m: at[1],
-                            x_dot_mps: at[4],
-                            phi_rad: at[2],
-                            theta_rad: at[3],
-                            phi_dot_rad_s: at[6],
-                            theta_dot_rad_s: at[7],
-                        },
-                    });
-                }
-            }
-            if !crossed {
-                self.s = next;
-                self.t_s += left;
-                break;
-            }
-            // Bisection on the step fraction.
-            let (mut lo, mut hi) = (0.0, left);
-            for _ in 0..60 {
-                let mid = 0.5 * (lo + hi);
-                let g = self.guard(self.phase, &self.rk4(self.phase, &self.s, mid));
-                if g > 0.0 {
-                    lo = mid;
-                } else {
-                    hi = mid;
-                }
-            }
-            let at = self.rk4(self.phase, &self.s, hi);
-            self.t_s += hi;
-            left -= hi;
-            self.transition(&at, on_event);
-        }
+        step_hybrid(self, dt_s, on_event);
     }
 
-    fn transition(&mut self, at: &[f64; 8], on_event: &mut impl FnMut(PlanarEvent)) {
+    /// Runs in steps of `dt_s` to the next apex, at most `max_s`: that
+    /// apex and what its touchdown took, or `None` if the hip fell below
+    /// half the leg's length or no apex came.
+    pub fn next_apex(&mut self, dt_s: f64, max_s: f64) -> Option<(ApexState, f64)> {
+        let floor = 0.5 * self.p.leg_rest_length_m;
+        next_apex_hybrid(self, dt_s, max_s, floor, |r| r.state().z_m)
+    }
+    fn transition_at(&mut self, at: &[f64; 8], on_event: &mut dyn FnMut(PlanarEvent)) {
         let r0 = self.p.leg_rest_length_m;
         match self.phase {
             PlanarPhase::Flight => {
@@ -639,9 +548,159 @@ impl PlanarRunner {
                     at[5],
                     thd,
                 ];
-                on_event(PlanarEvent::Liftoff { t_s: self.t_s });
+                on_event(PlanarEvent::Liftoff {
+                    t_s: self.t_s,
+                    loss_j: 0.0,
+                });
             }
         }
+    }
+}
+
+/// A planar runner as the shared stepper sees it: an 8-element state whose
+/// flight layout is `[x, z, phi, theta, x', z', phi', theta']`, a guard
+/// that is positive within the phase, and the transition that ends it.
+/// [`PlanarRunner`] and [`crate::planar_general::GeneralRunner`] both run
+/// on [`step_hybrid`].
+pub(crate) trait Hybrid {
+    /// In flight (the apex and the landing are looked for).
+    fn in_flight(&self) -> bool;
+    /// The state's rate in the present phase.
+    fn rate_of(&self, s: &[f64; 8]) -> [f64; 8];
+    /// Positive within the present phase; its fall through 0 ends it.
+    fn guard_of(&self, s: &[f64; 8]) -> f64;
+    /// Gravity, m/s^2 (the apex within a step is found by the flight's
+    /// exact parabola).
+    fn gravity(&self) -> f64;
+    /// The state and the time.
+    fn state_time(&mut self) -> (&mut [f64; 8], &mut f64);
+    /// Ends the phase at `at` (the state where the guard reached 0).
+    fn transition(&mut self, at: &[f64; 8], on_event: &mut dyn FnMut(PlanarEvent));
+}
+
+/// One classical RK4 step of `h` in `m`'s present phase.
+pub(crate) fn rk4<H: Hybrid>(m: &H, s: &[f64; 8], h: f64) -> [f64; 8] {
+    let add = |a: &[f64; 8], b: &[f64; 8], k: f64| {
+        let mut o = *a;
+        for (o, b) in o.iter_mut().zip(b) {
+            *o += k * b;
+        }
+        o
+    };
+    let k1 = m.rate_of(s);
+    let k2 = m.rate_of(&add(s, &k1, h / 2.0));
+    let k3 = m.rate_of(&add(s, &k2, h / 2.0));
+    let k4 = m.rate_of(&add(s, &k3, h));
+    let mut o = *s;
+    for i in 0..8 {
+        o[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
+    }
+    o
+}
+
+/// Advances `m` by `dt_s`: fixed-step RK4, a transition located by
+/// bisection on the step fraction (60 halvings: to rounding), at most four
+/// in one step; an apex reported when the hip's vertical speed passes 0 in
+/// flight. Flight ends when the guard falls through 0 with the hip moving
+/// down; stance when it falls through 0.
+pub(crate) fn step_hybrid<H: Hybrid>(m: &mut H, dt_s: f64, on_event: &mut impl FnMut(PlanarEvent)) {
+    let mut left = dt_s;
+    for _ in 0..4 {
+        if left <= 0.0 {
+            break;
+        }
+        let s = *m.state_time().0;
+        let t = *m.state_time().1;
+        let next = rk4(m, &s, left);
+        let (g0, g1) = (m.guard_of(&s), m.guard_of(&next));
+        let flight = m.in_flight();
+        let crossed = g0 > 0.0 && g1 <= 0.0 && (!flight || next[5] < 0.0);
+        if flight && s[5] > 0.0 && next[5] <= 0.0 && !crossed {
+            // The apex within the step: z' = 0, by the flight's exact
+            // parabola.
+            let tau = s[5] / m.gravity();
+            let at = rk4(m, &s, tau);
+            on_event(PlanarEvent::Apex {
+                t_s: t + tau,
+                apex: ApexState {
+                    z_m: at[1],
+                    x_dot_mps: at[4],
+                    phi_rad: at[2],
+                    theta_rad: at[3],
+                    phi_dot_rad_s: at[6],
+                    theta_dot_rad_s: at[7],
+                },
+            });
+        }
+        if !crossed {
+            *m.state_time().0 = next;
+            *m.state_time().1 = t + left;
+            break;
+        }
+        let (mut lo, mut hi) = (0.0, left);
+        for _ in 0..60 {
+            let mid = 0.5 * (lo + hi);
+            if m.guard_of(&rk4(m, &s, mid)) > 0.0 {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        let at = rk4(m, &s, hi);
+        *m.state_time().1 = t + hi;
+        left -= hi;
+        m.transition(&at, &mut |e| on_event(e));
+    }
+}
+
+/// Runs `m` in steps of `dt_s` to its next apex, at most `max_s`: that
+/// apex and what the touchdowns on the way took, or `None` if the hip
+/// (`hip_z`) fell below `floor_m` or no apex came.
+pub(crate) fn next_apex_hybrid<H: Hybrid>(
+    m: &mut H,
+    dt_s: f64,
+    max_s: f64,
+    floor_m: f64,
+    hip_z: impl Fn(&H) -> f64,
+) -> Option<(ApexState, f64)> {
+    let mut loss = 0.0;
+    let mut found = None;
+    let t_end = *m.state_time().1 + max_s;
+    while found.is_none() && *m.state_time().1 < t_end {
+        step_hybrid(m, dt_s, &mut |e| match e {
+            PlanarEvent::Apex { apex, .. } => found = Some(apex),
+            PlanarEvent::Touchdown { loss_j, .. } => loss += loss_j,
+            PlanarEvent::Liftoff { .. } => {}
+        });
+        if hip_z(m) < floor_m {
+            return None;
+        }
+    }
+    found.map(|a| (a, loss))
+}
+
+impl Hybrid for PlanarRunner {
+    fn in_flight(&self) -> bool {
+        matches!(self.phase, PlanarPhase::Flight)
+    }
+    fn rate_of(&self, s: &[f64; 8]) -> [f64; 8] {
+        self.rate(self.phase, s)
+    }
+    /// Flight: the toe's height; stance: the spring's compression.
+    fn guard_of(&self, s: &[f64; 8]) -> f64 {
+        match self.phase {
+            PlanarPhase::Flight => s[1] - self.p.leg_rest_length_m * libm::cos(s[3]),
+            PlanarPhase::Stance { .. } => self.p.leg_rest_length_m - s[0],
+        }
+    }
+    fn gravity(&self) -> f64 {
+        self.p.gravity_mps2
+    }
+    fn state_time(&mut self) -> (&mut [f64; 8], &mut f64) {
+        (&mut self.s, &mut self.t_s)
+    }
+    fn transition(&mut self, at: &[f64; 8], on_event: &mut dyn FnMut(PlanarEvent)) {
+        self.transition_at(at, on_event);
     }
 }
 
@@ -784,5 +843,54 @@ mod tests {
                 "{v}: apex spread {spread}"
             );
         }
+    }
+
+    /// The passive-dynamics conditions (sections 2.2.2.4-2.2.2.5) as the
+    /// runner meets them from the design's apex at 2 m/s: the hip swings
+    /// by eq 2.72 exactly, so the toe lands at half the flight time
+    /// `T_step (1 - rho) / 2` = 0.21875 s with the design's leg angle; the
+    /// stance lasts about `rho T_step` = 62.5 ms (eq 2.66; the leg is not
+    /// vertical and the hip not only bouncing, so not exactly: 63.85 ms).
+    #[test]
+    fn the_design_meets_its_passive_dynamics_conditions() {
+        let table = PlanarParams::table_2_2();
+        let d = passive_design(&table, &TABLE_GAIT).unwrap_or_else(|e| panic!("{e:?}"));
+        // The design's springs, not Table 2.2's rounded ones.
+        let p = PlanarParams {
+            hip_stiffness_nm_per_rad: d.hip_stiffness_nm_per_rad,
+            leg_stiffness_n_per_m: d.leg_stiffness_n_per_m,
+            ..table
+        };
+        let mut r = PlanarRunner::at_apex(p, &d, 2.0).unwrap_or_else(|e| panic!("{e:?}"));
+        let (mut landed, mut lifted) = (None, None);
+        let mut angle = 0.0;
+        while lifted.is_none() {
+            let before = r;
+            r.step(1e-4, &mut |e| match e {
+                PlanarEvent::Touchdown { t_s, .. } => landed = Some(t_s),
+                PlanarEvent::Liftoff { t_s, .. } => lifted = Some(t_s),
+                PlanarEvent::Apex { .. } => {}
+            });
+            if landed.is_some() && angle == 0.0 {
+                angle = before.state().theta_rad;
+                // Eq 2.72 in flight, to RK4's error.
+                let w = p.hip_rate_rad_s();
+                let t = before.state().t_s;
+                let exact = d.leg_rate0_rad_s / w * libm::sin(w * t);
+                assert!((angle - exact).abs() < 1e-9, "{angle} {exact}");
+            }
+        }
+        let (td, lo) = (landed.unwrap_or(0.0), lifted.unwrap_or(0.0));
+        std::eprintln!(
+            "touchdown {td} (design {}), stance {} s",
+            d.flight_time_s / 2.0,
+            lo - td
+        );
+        assert!(
+            (td - d.flight_time_s / 2.0).abs() < 1e-9,
+            "touchdown at {td}"
+        );
+        let stance = lo - td;
+        assert!((stance / 0.0625 - 1.0).abs() < 0.05, "stance {stance}");
     }
 }
