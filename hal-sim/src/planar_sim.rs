@@ -3,8 +3,10 @@
 //! simulation counterparts of the thesis's Figures 2.18-2.22.
 
 use hopper_plant::planar::{
-    passive_design, ApexState, Gait, PlanarEvent, PlanarParams, PlanarRunner, PlanarState,
+    passive_design, ApexState, Gait, PlanarError, PlanarEvent, PlanarParams, PlanarRunner,
+    PlanarState,
 };
+use hopper_plant::planar_general::{GeneralParams, GeneralRunner};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 
@@ -16,6 +18,8 @@ const FIGURE_SIZE: (u32, u32) = (1000, 900);
 /// One run's apexes and what the touchdowns took.
 #[derive(Clone, Debug, Serialize)]
 pub struct PlanarRun {
+    /// The runner: `section-2-2` or `appendix-a`.
+    pub model: &'static str,
     /// Running speed asked for, m/s.
     pub speed_mps: f64,
     /// The stabiliser's gain (0: passive), N s/m.
@@ -36,6 +40,9 @@ pub struct PlanarRun {
     pub touchdowns: usize,
     /// Energy the touchdown impacts took, J.
     pub touchdown_loss_j: f64,
+    /// Energy the liftoffs' pick-up of the toe mass took, J (0 without
+    /// one).
+    pub liftoff_loss_j: f64,
     /// The largest |apex - the apex it started from|, m.
     pub apex_drift_m: f64,
     /// Whether the body fell (hip below half the leg's length).
@@ -63,12 +70,71 @@ pub fn simulate(speed_mps: f64, gain_ns_per_m: f64, duration_s: f64) -> Result<P
     simulate_from(speed_mps, gain_ns_per_m, duration_s, Start::Design)
 }
 
+/// Which planar runner a run uses.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Model {
+    /// Section 2.2's (Table 2.2).
+    Section22,
+    /// Appendix A's with these parameters ([`GeneralParams`]; Table 2.2's
+    /// design still gives the start).
+    AppendixA(GeneralParams),
+}
+
+impl Model {
+    /// Its name in `--model` and in the JSON.
+    pub fn name(&self) -> &'static str {
+        match self {
+            Model::Section22 => "section-2-2",
+            Model::AppendixA(_) => "appendix-a",
+        }
+    }
+}
+
+/// Either runner, stepped alike.
+enum Runner {
+    Section22(PlanarRunner),
+    AppendixA(GeneralRunner),
+}
+
+impl Runner {
+    fn step(&mut self, dt_s: f64, on_event: &mut impl FnMut(PlanarEvent)) {
+        match self {
+            Runner::Section22(r) => r.step(dt_s, on_event),
+            Runner::AppendixA(r) => r.step(dt_s, on_event),
+        }
+    }
+    fn state(&self) -> PlanarState {
+        match self {
+            Runner::Section22(r) => r.state(),
+            Runner::AppendixA(r) => r.state(),
+        }
+    }
+}
+
 /// As [`simulate`], from `start`.
 pub fn simulate_from(
     speed_mps: f64,
     gain_ns_per_m: f64,
     duration_s: f64,
     start: Start,
+) -> Result<PlanarRun, String> {
+    simulate_model(
+        speed_mps,
+        gain_ns_per_m,
+        duration_s,
+        start,
+        &Model::Section22,
+    )
+}
+
+/// As [`simulate_from`], with `model`'s runner (the fixed point is the
+/// section 2.2 runner's only).
+pub fn simulate_model(
+    speed_mps: f64,
+    gain_ns_per_m: f64,
+    duration_s: f64,
+    start: Start,
+    model: &Model,
 ) -> Result<PlanarRun, String> {
     if !(speed_mps.is_finite() && (0.0..=10.0).contains(&speed_mps)) {
         return Err(format!("--speed {speed_mps} must be within 0 ..= 10 m/s"));
@@ -98,10 +164,33 @@ pub fn simulate_from(
             .apex,
         ),
     };
-    let mut r = PlanarRunner::from_apex(p, &apex)
-        .map_err(|e| format!("planar runner: {e:?}"))?
-        .stabilised(gain_ns_per_m, speed_mps);
+    let mut r = match model {
+        Model::Section22 => Runner::Section22(
+            PlanarRunner::from_apex(p, &apex)
+                .map_err(|e| format!("planar runner: {e:?}"))?
+                .stabilised(gain_ns_per_m, speed_mps),
+        ),
+        Model::AppendixA(g) => {
+            if start == Start::FixedPoint {
+                return Err(
+                    "--start fixed-point is the section 2.2 runner's (--model section-2-2)"
+                        .to_string(),
+                );
+            }
+            Runner::AppendixA(
+                GeneralRunner::from_apex(*g, &apex)
+                    .map_err(|e| match e {
+                        PlanarError::NotPositive(f) | PlanarError::OutOfRange(f) => {
+                            format!("Appendix A parameter {f} is out of range")
+                        }
+                        PlanarError::StanceFraction => format!("{e:?}"),
+                    })?
+                    .stabilised(gain_ns_per_m, speed_mps),
+            )
+        }
+    };
     let mut run = PlanarRun {
+        model: model.name(),
         speed_mps,
         gain_ns_per_m,
         start,
@@ -112,6 +201,7 @@ pub fn simulate_from(
         apex_pitch_rad: Vec::new(),
         touchdowns: 0,
         touchdown_loss_j: 0.0,
+        liftoff_loss_j: 0.0,
         apex_drift_m: 0.0,
         fell: false,
         samples: vec![r.state()],
@@ -128,7 +218,7 @@ pub fn simulate_from(
                 run.touchdowns += 1;
                 run.touchdown_loss_j += loss_j;
             }
-            PlanarEvent::Liftoff { .. } => {}
+            PlanarEvent::Liftoff { loss_j, .. } => run.liftoff_loss_j += loss_j,
         });
         let q = r.state();
         if k % 10 == 0 {

@@ -338,3 +338,60 @@ fn planar_stability_json() {
         assert!(err.contains(names), "{err}");
     }
 }
+
+/// `planar run --model appendix-a` (issue 20): with no Appendix A terms it
+/// gives the section 2.2 runner's apexes (1e-9 m); a 0.5 kg toe mass
+/// makes the touchdowns and the liftoffs' pick-up take energy; terms are
+/// refused by their flag out of range or without the model.
+#[test]
+fn planar_run_appendix_a() {
+    let run = |args: &[&str]| -> serde_json::Value {
+        let mut a = vec!["planar", "run", "--json", "--duration", "3"];
+        a.extend_from_slice(args);
+        let o = sim(&a);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        serde_json::from_slice(&o.stdout).unwrap()
+    };
+    let simple = run(&[]);
+    let general = run(&["--model", "appendix-a"]);
+    assert_eq!(general["model"], "appendix-a");
+    assert_eq!(simple["model"], "section-2-2");
+    let (a, b) = (
+        simple["apex_heights_m"].as_array().unwrap(),
+        general["apex_heights_m"].as_array().unwrap(),
+    );
+    assert_eq!(a.len(), b.len());
+    assert!(a.len() >= 5);
+    for (x, y) in a.iter().zip(b) {
+        assert!(
+            (x.as_f64().unwrap() - y.as_f64().unwrap()).abs() < 1e-9,
+            "{a:?} {b:?}"
+        );
+    }
+    let toe = run(&["--model", "appendix-a", "--toe-mass", "0.5"]);
+    assert!(toe["touchdown_loss_j"].as_f64().unwrap() > 1.0, "{toe}");
+    assert!(toe["liftoff_loss_j"].as_f64().unwrap() > 1.0, "{toe}");
+    for (bad, says) in [
+        (&["--toe-mass", "1"][..], "--toe-mass is an Appendix A term"),
+        (
+            &["--model", "appendix-a", "--leg-com", "0.9"][..],
+            "--leg-com 0.9",
+        ),
+        (
+            &["--model", "appendix-a", "--hip-friction=-1"][..],
+            "--hip-friction -1",
+        ),
+        (
+            &["--model", "appendix-a", "--start", "fixed-point"][..],
+            "--start fixed-point",
+        ),
+    ] {
+        let mut a = vec!["planar", "run"];
+        a.extend_from_slice(bad);
+        let o = sim(&a);
+        assert_eq!(o.status.code(), Some(2), "{bad:?}");
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(err.trim().lines().count(), 1, "{err}");
+        assert!(err.contains(says), "{err}");
+    }
+}

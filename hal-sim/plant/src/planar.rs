@@ -278,6 +278,21 @@ impl ApexState {
         }
     }
 
+    /// The flight state there, the hip at forward position 0: `[x, z,
+    /// phi, theta, x', z', phi', theta']`.
+    pub(crate) fn flight_state(&self) -> [f64; 8] {
+        [
+            0.0,
+            self.z_m,
+            self.phi_rad,
+            self.theta_rad,
+            self.x_dot_mps,
+            0.0,
+            self.phi_dot_rad_s,
+            self.theta_dot_rad_s,
+        ]
+    }
+
     /// As `[z, x', phi, theta, phi', theta']`.
     pub fn to_array(&self) -> [f64; 6] {
         [
@@ -313,10 +328,30 @@ pub struct PlanarRunner {
     /// theta, phi, r', theta', phi', 0, 0]`.
     s: [f64; 8],
     t_s: f64,
-    /// The stabiliser's gain `K_c` (eq 2.79), N s/m (0: passive), and the
-    /// speed it holds, m/s.
-    gain_ns_per_m: f64,
-    speed_mps: f64,
+    stabiliser: Stabiliser,
+}
+
+/// The forward-speed stabiliser of eqs 2.79-2.80: in stance the leg's
+/// force is less by `F_c = K_c (x_dot_d - x')`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Stabiliser {
+    /// `K_c`, N s/m (0: passive).
+    pub gain_ns_per_m: f64,
+    /// `x_dot_d`, m/s.
+    pub speed_mps: f64,
+}
+
+impl Stabiliser {
+    /// None: passive running.
+    pub const PASSIVE: Stabiliser = Stabiliser {
+        gain_ns_per_m: 0.0,
+        speed_mps: 0.0,
+    };
+
+    /// `F_c` at the hip's forward speed `x_dot_mps` (eq 2.79), N.
+    pub fn force_n(&self, x_dot_mps: f64) -> f64 {
+        self.gain_ns_per_m * (self.speed_mps - x_dot_mps)
+    }
 }
 
 /// The state in Cartesian form, whatever the phase.
@@ -357,34 +392,26 @@ impl PlanarRunner {
         Self::from_apex(p, &ApexState::of_design(d, speed_mps))
     }
 
-    /// At `apex` (forward position 0, time 0), passive; the stabiliser's
-    /// speed is the apex's until [`PlanarRunner::stabilised`] sets it.
+    /// At `apex` (forward position 0, time 0), passive until
+    /// [`PlanarRunner::stabilised`].
     pub fn from_apex(p: PlanarParams, apex: &ApexState) -> Result<Self, PlanarError> {
         p.validate()?;
         Ok(PlanarRunner {
             p,
             phase: PlanarPhase::Flight,
-            s: [
-                0.0,
-                apex.z_m,
-                apex.phi_rad,
-                apex.theta_rad,
-                apex.x_dot_mps,
-                0.0,
-                apex.phi_dot_rad_s,
-                apex.theta_dot_rad_s,
-            ],
+            s: apex.flight_state(),
             t_s: 0.0,
-            gain_ns_per_m: 0.0,
-            speed_mps: apex.x_dot_mps,
+            stabiliser: Stabiliser::PASSIVE,
         })
     }
 
     /// With the forward-speed stabiliser of eqs 2.79-2.80: in stance the
     /// leg force is `k_l (r_0 - r) - K_c (x_dot_d - x')`.
     pub fn stabilised(mut self, gain_ns_per_m: f64, speed_mps: f64) -> Self {
-        self.gain_ns_per_m = gain_ns_per_m;
-        self.speed_mps = speed_mps;
+        self.stabiliser = Stabiliser {
+            gain_ns_per_m,
+            speed_mps,
+        };
         self
     }
 
@@ -473,7 +500,7 @@ impl PlanarRunner {
                 let (sn, cs) = (libm::sin(th), libm::cos(th));
                 let x_dot = -rd * sn - r * cs * thd;
                 let force = p.leg_stiffness_n_per_m * (p.leg_rest_length_m - r)
-                    - self.gain_ns_per_m * (self.speed_mps - x_dot);
+                    - self.stabiliser.force_n(x_dot);
                 let hip = p.hip_stiffness_nm_per_rad * (th - ph);
                 let rdd = r * thd * thd + force / m - g * cs;
                 let thdd = (m * g * r * sn - hip - 2.0 * m * r * rd * thd)

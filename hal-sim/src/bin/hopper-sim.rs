@@ -165,6 +165,123 @@ struct IdentifyArgs {
     json: bool,
 }
 
+/// Appendix A's terms on Table 2.2's runner (`--model appendix-a`).
+#[derive(clap::Args)]
+struct AppendixArgs {
+    /// Appendix A: the trunk's centre ahead of the hip (body frame), m.
+    #[arg(long, value_name = "M")]
+    trunk_offset_x: Option<f64>,
+    /// Appendix A: the trunk's centre above the hip (body frame), m.
+    #[arg(long, value_name = "M")]
+    trunk_offset_z: Option<f64>,
+    /// Appendix A: the leg's centre from the hip along the leg, m.
+    #[arg(long, value_name = "M")]
+    leg_com: Option<f64>,
+    /// Appendix A: the unsprung mass at the toe, kg.
+    #[arg(long, value_name = "KG")]
+    toe_mass: Option<f64>,
+    /// Appendix A: the leg spring's damper, N s/m.
+    #[arg(long, value_name = "NS_PER_M")]
+    leg_damping: Option<f64>,
+    /// Appendix A: the hip spring's damper, N m s/rad.
+    #[arg(long, value_name = "NMS_PER_RAD")]
+    hip_damping: Option<f64>,
+    /// Appendix A: planarizer dry friction on the hip's motion, N.
+    #[arg(long, value_name = "N")]
+    planarizer_friction: Option<f64>,
+    /// Appendix A: dry friction on the leg's sliding in stance, N.
+    #[arg(long, value_name = "N")]
+    leg_friction: Option<f64>,
+    /// Appendix A: dry friction torque at the hip, N m.
+    #[arg(long, value_name = "NM")]
+    hip_friction: Option<f64>,
+}
+
+impl AppendixArgs {
+    /// The runner `--model` names, with these terms; each term refused by
+    /// its flag when out of range or given without `--model appendix-a`.
+    fn model(&self, name: &str) -> Result<hal_sim::planar_sim::Model> {
+        use hopper_plant::planar::{PlanarError, PlanarParams};
+        use hopper_plant::planar_general::GeneralParams;
+        type Set = fn(&mut GeneralParams, f64);
+        let terms: [(&str, &str, Option<f64>, Set); 9] = [
+            (
+                "--trunk-offset-x",
+                "trunk_offset_x_m",
+                self.trunk_offset_x,
+                |p, v| p.trunk_offset_x_m = v,
+            ),
+            (
+                "--trunk-offset-z",
+                "trunk_offset_z_m",
+                self.trunk_offset_z,
+                |p, v| p.trunk_offset_z_m = v,
+            ),
+            ("--leg-com", "leg_com_from_hip_m", self.leg_com, |p, v| {
+                p.leg_com_from_hip_m = v
+            }),
+            ("--toe-mass", "toe_mass_kg", self.toe_mass, |p, v| {
+                p.toe_mass_kg = v
+            }),
+            (
+                "--leg-damping",
+                "leg_damping_ns_per_m",
+                self.leg_damping,
+                |p, v| p.leg_damping_ns_per_m = v,
+            ),
+            (
+                "--hip-damping",
+                "hip_damping_nms_per_rad",
+                self.hip_damping,
+                |p, v| p.hip_damping_nms_per_rad = v,
+            ),
+            (
+                "--planarizer-friction",
+                "planarizer_friction_n",
+                self.planarizer_friction,
+                |p, v| p.planarizer_friction_n = v,
+            ),
+            (
+                "--leg-friction",
+                "leg_friction_n",
+                self.leg_friction,
+                |p, v| p.leg_friction_n = v,
+            ),
+            (
+                "--hip-friction",
+                "hip_friction_nm",
+                self.hip_friction,
+                |p, v| p.hip_friction_nm = v,
+            ),
+        ];
+        if name != "appendix-a" {
+            if let Some((flag, ..)) = terms.iter().find(|t| t.2.is_some()) {
+                bail!("{flag} is an Appendix A term: it needs --model appendix-a");
+            }
+            return Ok(hal_sim::planar_sim::Model::Section22);
+        }
+        let mut g = GeneralParams::from_section_2_2(&PlanarParams::table_2_2());
+        for (_, _, v, set) in &terms {
+            if let Some(v) = v {
+                set(&mut g, *v);
+            }
+        }
+        if let Err(PlanarError::NotPositive(f) | PlanarError::OutOfRange(f)) = g.validate() {
+            let (flag, _, v, _) = terms.iter().find(|t| t.1 == f).copied().unwrap_or((
+                "a parameter",
+                f,
+                None,
+                |_, _| {},
+            ));
+            bail!(
+                "{flag} {} is out of range (not negative, finite; the leg's centre within the leg's 0.65 m)",
+                v.map_or(String::new(), |v| v.to_string())
+            );
+        }
+        Ok(hal_sim::planar_sim::Model::AppendixA(g))
+    }
+}
+
 #[derive(Subcommand)]
 enum PlanarCmd {
     /// Run from the passive design's apex (T_step 0.5 s, rho 0.125): the
@@ -183,6 +300,13 @@ enum PlanarCmd {
         /// gait's fixed point of the apex return map (`planar stability`).
         #[arg(long, value_parser = ["design", "fixed-point"], default_value = "design")]
         start: String,
+        /// The runner: section-2-2 (Table 2.2) or appendix-a (Table 2.2
+        /// with Appendix A's terms, set by the flags below; all zero by
+        /// default, which is the section 2.2 runner again).
+        #[arg(long, value_parser = ["section-2-2", "appendix-a"], default_value = "section-2-2")]
+        model: String,
+        #[command(flatten)]
+        appendix: AppendixArgs,
         /// Print JSON instead of text.
         #[arg(long)]
         json: bool,
@@ -748,8 +872,16 @@ fn planar_summary(r: &hal_sim::planar_sim::PlanarRun) -> String {
             r.start_apex_m, r.design_apex_m
         ),
     };
+    let (model, lifts) = if r.model == "appendix-a" {
+        (
+            " (Appendix A)",
+            format!(", {:.3} J by the liftoffs' pick-up", r.liftoff_loss_j),
+        )
+    } else {
+        ("", String::new())
+    };
     format!(
-        "planar: {} m/s, K_c {} N s/m: {} touchdowns ({:.3} J taken by their impacts), {}; {n} apexes (m, {start}): {}; largest drift {:.4} m",
+        "planar{model}: {} m/s, K_c {} N s/m: {} touchdowns ({:.3} J taken by their impacts{lifts}), {}; {n} apexes (m, {start}): {}; largest drift {:.4} m",
         r.speed_mps,
         r.gain_ns_per_m,
         r.touchdowns,
@@ -881,15 +1013,19 @@ fn cmd_planar(cmd: &PlanarCmd) -> Result<()> {
             kc,
             duration,
             start,
+            model,
+            appendix,
             json,
         } => {
-            use hal_sim::planar_sim::{simulate_from, Start};
+            use hal_sim::planar_sim::{simulate_model, Start};
             let start = if start == "fixed-point" {
                 Start::FixedPoint
             } else {
                 Start::Design
             };
-            let r = simulate_from(*speed, *kc, *duration, start).map_err(anyhow::Error::msg)?;
+            let model = appendix.model(model)?;
+            let r = simulate_model(*speed, *kc, *duration, start, &model)
+                .map_err(anyhow::Error::msg)?;
             if *json {
                 say!("{}", serde_json::to_string_pretty(&r)?);
             } else {
