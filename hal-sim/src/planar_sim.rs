@@ -2,9 +2,10 @@
 //! ([`hopper_plant::planar`]) from its passive design's apex, and the
 //! simulation counterparts of the thesis's Figures 2.18-2.22.
 
+use crate::csv_out::Fixed;
 use hopper_plant::planar::{
     passive_design, ApexState, Gait, PlanarError, PlanarEvent, PlanarParams, PlanarRunner,
-    PlanarState,
+    PlanarState, Stabiliser,
 };
 use hopper_plant::planar_general::{GeneralParams, GeneralRunner};
 use serde::Serialize;
@@ -43,6 +44,13 @@ pub struct PlanarRun {
     /// Energy the liftoffs' pick-up of the toe mass took, J (0 without
     /// one).
     pub liftoff_loss_j: f64,
+    /// The largest leg force in stance (the spring's less the
+    /// stabiliser's, eq 2.80), N.
+    pub max_leg_force_n: f64,
+    /// The largest |stabiliser force| `|K_c (x_dot_d - x')|` in stance (eq
+    /// 2.79), N: the thesis chose K_c so that it stays below a tenth of the
+    /// largest ground force.
+    pub max_stabiliser_force_n: f64,
     /// The largest |apex - the apex it started from|, m.
     pub apex_drift_m: f64,
     /// Whether the body fell (hip below half the leg's length).
@@ -202,6 +210,8 @@ pub fn simulate_model(
         touchdowns: 0,
         touchdown_loss_j: 0.0,
         liftoff_loss_j: 0.0,
+        max_leg_force_n: 0.0,
+        max_stabiliser_force_n: 0.0,
         apex_drift_m: 0.0,
         fell: false,
         samples: vec![r.state()],
@@ -221,6 +231,16 @@ pub fn simulate_model(
             PlanarEvent::Liftoff { loss_j, .. } => run.liftoff_loss_j += loss_j,
         });
         let q = r.state();
+        if q.stance {
+            let fc = Stabiliser {
+                gain_ns_per_m,
+                speed_mps,
+            }
+            .force_n(q.x_dot_mps);
+            let spring = p.leg_stiffness_n_per_m * (p.leg_rest_length_m - q.leg_length_m);
+            run.max_leg_force_n = run.max_leg_force_n.max(spring - fc);
+            run.max_stabiliser_force_n = run.max_stabiliser_force_n.max(fc.abs());
+        }
         if k % 10 == 0 {
             run.samples.push(q);
         }
@@ -377,4 +397,70 @@ pub fn write_figures(dir: &Path) -> Result<(Vec<PathBuf>, Vec<PlanarRun>), Strin
         Ok(names)
     })?;
     Ok((written, runs))
+}
+
+/// One row of a planar run's `trajectory.csv`.
+#[derive(Serialize)]
+struct TrajectoryRow {
+    t_s: Fixed<6>,
+    x_m: Fixed<9>,
+    z_m: Fixed<9>,
+    phi_rad: Fixed<9>,
+    theta_rad: Fixed<9>,
+    x_dot_mps: Fixed<9>,
+    z_dot_mps: Fixed<9>,
+    phi_dot_rad_s: Fixed<9>,
+    theta_dot_rad_s: Fixed<9>,
+    leg_length_m: Fixed<9>,
+    stance: u8,
+}
+
+/// `trajectory.csv` (the run's samples, every millisecond: time, the hip,
+/// the angles, their rates, the leg's length, 1 in stance) and
+/// `run.png`/`run.svg` (height, speed, pitch and leg angle against time)
+/// into `dir`, whole or not at all.
+pub fn write_run(dir: &Path, run: &PlanarRun) -> Result<Vec<PathBuf>, String> {
+    crate::plot::ensure_font()?;
+    let title = format!(
+        "planar run ({}): {} m/s, K_c {} N s/m, from the {}",
+        run.model,
+        run.speed_mps,
+        run.gain_ns_per_m,
+        match run.start {
+            Start::Design => "design's apex",
+            Start::FixedPoint => "fixed point",
+        }
+    );
+    crate::out_dir::write_whole(dir, |staging| {
+        let mut w = csv::Writer::from_path(staging.join("trajectory.csv"))
+            .map_err(|e| format!("cannot write trajectory.csv: {e}"))?;
+        for q in &run.samples {
+            w.serialize(TrajectoryRow {
+                t_s: Fixed(q.t_s),
+                x_m: Fixed(q.x_m),
+                z_m: Fixed(q.z_m),
+                phi_rad: Fixed(q.phi_rad),
+                theta_rad: Fixed(q.theta_rad),
+                x_dot_mps: Fixed(q.x_dot_mps),
+                z_dot_mps: Fixed(q.z_dot_mps),
+                phi_dot_rad_s: Fixed(q.phi_dot_rad_s),
+                theta_dot_rad_s: Fixed(q.theta_dot_rad_s),
+                leg_length_m: Fixed(q.leg_length_m),
+                stance: u8::from(q.stance),
+            })
+            .map_err(|e| format!("cannot write trajectory.csv: {e}"))?;
+        }
+        w.flush()
+            .map_err(|e| format!("cannot write trajectory.csv: {e}"))?;
+        let mut names = vec!["trajectory.csv".to_string()];
+        names.extend(crate::plot::png_and_svg(
+            staging,
+            "run",
+            FIGURE_SIZE,
+            "the run's plot",
+            |a| time_plot(a, run, &title),
+            |a| time_plot(a, run, &title),
+        )?);
+        Ok(names)
+    })
 }

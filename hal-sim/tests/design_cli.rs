@@ -285,7 +285,8 @@ fn planar_run_json() {
 /// `planar stability --json` (issue 20): the 4 m/s fixed points, passive
 /// and with K_c = 1000, their growth per hop (5.51 and 1.230), and
 /// `planar run --start fixed-point` holding the stabilised gait for 30 s
-/// (the design's apex falls within 10 s); bad lists are refused.
+/// (the design's apex falls within 10 s) with the stabiliser's force at
+/// 9.3% of the leg's; bad lists are refused.
 #[test]
 fn planar_stability_json() {
     let o = sim(&[
@@ -325,6 +326,11 @@ fn planar_stability_json() {
     let fixed = run("fixed-point");
     assert_eq!(fixed["fell"], false, "{fixed}");
     assert!(fixed["apex_drift_m"].as_f64().unwrap() < 1e-3, "{fixed}");
+    // The thesis's choice of K_c: its force below a tenth of the largest
+    // ground force; on the fixed point 184 N against 1975 N.
+    let ratio = fixed["max_stabiliser_force_n"].as_f64().unwrap()
+        / fixed["max_leg_force_n"].as_f64().unwrap();
+    assert!((ratio / 0.0932 - 1.0).abs() < 0.03, "{ratio}");
     assert_eq!(run("design")["fell"], true);
     for (bad, names) in [
         (&["planar", "stability", "--speeds", "0"][..], "--speeds 0"),
@@ -394,4 +400,38 @@ fn planar_run_appendix_a() {
         assert_eq!(err.trim().lines().count(), 1, "{err}");
         assert!(err.contains(says), "{err}");
     }
+}
+
+/// `planar run --out DIR`: trajectory.csv every millisecond (1 s: 1001
+/// rows after the header) with the hip, the angles, their rates, the leg
+/// and the phase, and run.png.
+#[test]
+fn planar_run_writes_its_trajectory() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("run");
+    let o = sim(&[
+        "planar",
+        "run",
+        "--duration",
+        "1",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let text = std::fs::read_to_string(out.join("trajectory.csv")).unwrap();
+    let mut lines = text.lines();
+    assert_eq!(
+        lines.next(),
+        Some("t_s,x_m,z_m,phi_rad,theta_rad,x_dot_mps,z_dot_mps,phi_dot_rad_s,theta_dot_rad_s,leg_length_m,stance")
+    );
+    let rows: Vec<Vec<f64>> = lines
+        .map(|l| l.split(',').map(|x| x.parse().unwrap()).collect())
+        .collect();
+    assert_eq!(rows.len(), 1001);
+    // Two stances in the first second (0.5 s steps), the leg shorter in them.
+    let stance: Vec<&Vec<f64>> = rows.iter().filter(|r| r[10] == 1.0).collect();
+    assert!((100..=140).contains(&stance.len()), "{}", stance.len());
+    assert!(stance.iter().all(|r| r[9] <= 0.65 + 1e-12));
+    assert!((rows[1000][0] - 1.0).abs() < 1e-9);
+    assert!(out.join("run.png").is_file() && out.join("run.svg").is_file());
 }

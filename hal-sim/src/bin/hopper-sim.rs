@@ -307,6 +307,10 @@ enum PlanarCmd {
         model: String,
         #[command(flatten)]
         appendix: AppendixArgs,
+        /// Directory for trajectory.csv (every millisecond) and
+        /// run.png/.svg (created if missing).
+        #[arg(long, value_name = "DIR")]
+        out: Option<PathBuf>,
         /// Print JSON instead of text.
         #[arg(long)]
         json: bool,
@@ -881,14 +885,16 @@ fn planar_summary(r: &hal_sim::planar_sim::PlanarRun) -> String {
         ("", String::new())
     };
     format!(
-        "planar{model}: {} m/s, K_c {} N s/m: {} touchdowns ({:.3} J taken by their impacts{lifts}), {}; {n} apexes (m, {start}): {}; largest drift {:.4} m",
+        "planar{model}: {} m/s, K_c {} N s/m: {} touchdowns ({:.3} J taken by their impacts{lifts}), {}; {n} apexes (m, {start}): {}; largest drift {:.4} m; largest leg force {:.0} N, stabiliser force {:.0} N",
         r.speed_mps,
         r.gain_ns_per_m,
         r.touchdowns,
         r.touchdown_loss_j,
         if r.fell { "fell" } else { "still running" },
         apexes.join(" "),
-        r.apex_drift_m
+        r.apex_drift_m,
+        r.max_leg_force_n,
+        r.max_stabiliser_force_n
     )
 }
 
@@ -1015,6 +1021,7 @@ fn cmd_planar(cmd: &PlanarCmd) -> Result<()> {
             start,
             model,
             appendix,
+            out,
             json,
         } => {
             use hal_sim::planar_sim::{simulate_model, Start};
@@ -1026,10 +1033,17 @@ fn cmd_planar(cmd: &PlanarCmd) -> Result<()> {
             let model = appendix.model(model)?;
             let r = simulate_model(*speed, *kc, *duration, start, &model)
                 .map_err(anyhow::Error::msg)?;
+            let written = match out {
+                Some(dir) => hal_sim::planar_sim::write_run(dir, &r).map_err(anyhow::Error::msg)?,
+                None => Vec::new(),
+            };
             if *json {
                 say!("{}", serde_json::to_string_pretty(&r)?);
             } else {
                 say!("{}", planar_summary(&r));
+                for p in &written {
+                    say!("  wrote {}", p.display());
+                }
             }
         }
         PlanarCmd::Stability {
