@@ -5,7 +5,7 @@
 use crate::csv_out::Fixed;
 use hopper_plant::planar::{
     passive_design, ApexState, Gait, PlanarError, PlanarEvent, PlanarParams, PlanarRunner,
-    PlanarState, Stabiliser,
+    PlanarState,
 };
 use hopper_plant::planar_general::{GeneralParams, GeneralRunner};
 use serde::Serialize;
@@ -117,6 +117,13 @@ impl Runner {
             Runner::AppendixA(r) => r.state(),
         }
     }
+    /// The leg's force and the stabiliser's, N.
+    fn forces(&self) -> (f64, f64) {
+        match self {
+            Runner::Section22(r) => (r.leg_force_n(), r.stabiliser_force_n()),
+            Runner::AppendixA(r) => (r.leg_force_n(), r.stabiliser_force_n()),
+        }
+    }
 }
 
 /// As [`simulate`], from `start`.
@@ -147,10 +154,15 @@ pub fn simulate_model(
     if !(speed_mps.is_finite() && (0.0..=10.0).contains(&speed_mps)) {
         return Err(format!("--speed {speed_mps} must be within 0 ..= 10 m/s"));
     }
-    if !(gain_ns_per_m.is_finite() && (0.0..=10_000.0).contains(&gain_ns_per_m)) {
+    if !(gain_ns_per_m.is_finite() && gain_ns_per_m.abs() <= 10_000.0) {
         return Err(format!(
-            "--kc {gain_ns_per_m} must be within 0 ..= 10000 N s/m"
+            "--kc {gain_ns_per_m} must be within -10000 ..= 10000 N s/m"
         ));
+    }
+    if start == Start::FixedPoint && matches!(model, Model::AppendixA(_)) {
+        return Err(
+            "--start fixed-point is the section 2.2 runner's (--model section-2-2)".to_string(),
+        );
     }
     if !(duration_s.is_finite() && duration_s > 0.0 && duration_s <= 600.0) {
         return Err(format!(
@@ -162,15 +174,21 @@ pub fn simulate_model(
         .map_err(|e| format!("planar design: {e:?}"))?;
     let apex = match start {
         Start::Design => ApexState::of_design(&d, speed_mps),
-        Start::FixedPoint => ApexState::from_array(
-            crate::planar_stability::fixed_point(
+        Start::FixedPoint => {
+            let f = crate::planar_stability::fixed_point(
                 &p,
                 gain_ns_per_m,
                 speed_mps,
                 &ApexState::of_design(&d, speed_mps).to_array(),
-            )?
-            .apex,
-        ),
+            )?;
+            if f.residual > crate::planar_stability::FOUND {
+                return Err(format!(
+                    "no fixed point found at {speed_mps} m/s, K_c {gain_ns_per_m} N s/m (Newton's residual {:.1e})",
+                    f.residual
+                ));
+            }
+            ApexState::from_array(f.apex)
+        }
     };
     let mut r = match model {
         Model::Section22 => Runner::Section22(
@@ -178,24 +196,16 @@ pub fn simulate_model(
                 .map_err(|e| format!("planar runner: {e:?}"))?
                 .stabilised(gain_ns_per_m, speed_mps),
         ),
-        Model::AppendixA(g) => {
-            if start == Start::FixedPoint {
-                return Err(
-                    "--start fixed-point is the section 2.2 runner's (--model section-2-2)"
-                        .to_string(),
-                );
-            }
-            Runner::AppendixA(
-                GeneralRunner::from_apex(*g, &apex)
-                    .map_err(|e| match e {
-                        PlanarError::NotPositive(f) | PlanarError::OutOfRange(f) => {
-                            format!("Appendix A parameter {f} is out of range")
-                        }
-                        PlanarError::StanceFraction => format!("{e:?}"),
-                    })?
-                    .stabilised(gain_ns_per_m, speed_mps),
-            )
-        }
+        Model::AppendixA(g) => Runner::AppendixA(
+            GeneralRunner::from_apex(*g, &apex)
+                .map_err(|e| match e {
+                    PlanarError::NotPositive(f) | PlanarError::OutOfRange(f) => {
+                        format!("Appendix A parameter {f} is out of range")
+                    }
+                    PlanarError::StanceFraction => format!("{e:?}"),
+                })?
+                .stabilised(gain_ns_per_m, speed_mps),
+        ),
     };
     let mut run = PlanarRun {
         model: model.name(),
@@ -231,16 +241,16 @@ pub fn simulate_model(
             PlanarEvent::Liftoff { loss_j, .. } => run.liftoff_loss_j += loss_j,
         });
         let q = r.state();
-        if q.stance {
-            let fc = Stabiliser {
-                gain_ns_per_m,
-                speed_mps,
-            }
-            .force_n(q.x_dot_mps);
-            let spring = p.leg_stiffness_n_per_m * (p.leg_rest_length_m - q.leg_length_m);
-            run.max_leg_force_n = run.max_leg_force_n.max(spring - fc);
-            run.max_stabiliser_force_n = run.max_stabiliser_force_n.max(fc.abs());
+        if !(q.z_m.is_finite() && q.x_dot_mps.is_finite()) {
+            return Err(format!(
+                "the {} runner's state became non-finite at {:.4} s",
+                model.name(),
+                q.t_s
+            ));
         }
+        let (leg, fc) = r.forces();
+        run.max_leg_force_n = run.max_leg_force_n.max(leg);
+        run.max_stabiliser_force_n = run.max_stabiliser_force_n.max(fc.abs());
         if k % 10 == 0 {
             run.samples.push(q);
         }

@@ -306,6 +306,20 @@ fn planar_stability_json() {
     assert!((growth(1) / 1.230 - 1.0).abs() < 0.02, "{row}");
     assert_eq!(row["best_gain_ns_per_m"], 1000.0);
     assert!(row["attracts_ns_per_m"].is_null());
+    // Negative gains as typed: at 2 m/s -500 lowers the growth (1.134
+    // against 1.168).
+    let o = sim(&[
+        "planar",
+        "stability",
+        "--speeds",
+        "2",
+        "--kc",
+        "-500,0",
+        "--json",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(v["speeds"][0]["best_gain_ns_per_m"], -500.0, "{v}");
     let run = |start: &str| -> serde_json::Value {
         let o = sim(&[
             "planar",
@@ -374,18 +388,26 @@ fn planar_run_appendix_a() {
             "{a:?} {b:?}"
         );
     }
+    // The toe mass's impacts: 6.66 J at the two touchdowns, 4.09 J at the
+    // pick-ups, before it falls (the design assumes no toe mass).
     let toe = run(&["--model", "appendix-a", "--toe-mass", "0.5"]);
-    assert!(toe["touchdown_loss_j"].as_f64().unwrap() > 1.0, "{toe}");
-    assert!(toe["liftoff_loss_j"].as_f64().unwrap() > 1.0, "{toe}");
+    let near = |k: &str, v: f64| (toe[k].as_f64().unwrap() / v - 1.0).abs() < 0.02;
+    assert!(near("touchdown_loss_j", 6.656), "{toe}");
+    assert!(near("liftoff_loss_j", 4.094), "{toe}");
+    assert_eq!(toe["fell"], true);
     for (bad, says) in [
         (&["--toe-mass", "1"][..], "--toe-mass is an Appendix A term"),
         (
             &["--model", "appendix-a", "--leg-com", "0.9"][..],
-            "--leg-com 0.9",
+            "--leg-com 0.9 must be within 0 ..= 0.65 m",
         ),
         (
             &["--model", "appendix-a", "--hip-friction=-1"][..],
-            "--hip-friction -1",
+            "--hip-friction -1 must be within 0 ..= 1 N m",
+        ),
+        (
+            &["--model", "appendix-a", "--trunk-offset-x", "2"][..],
+            "--trunk-offset-x 2 must be within -1 ..= 1 m",
         ),
         (
             &["--model", "appendix-a", "--start", "fixed-point"][..],

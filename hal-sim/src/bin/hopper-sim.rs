@@ -169,10 +169,10 @@ struct IdentifyArgs {
 #[derive(clap::Args)]
 struct AppendixArgs {
     /// Appendix A: the trunk's centre ahead of the hip (body frame), m.
-    #[arg(long, value_name = "M")]
+    #[arg(long, value_name = "M", allow_negative_numbers = true)]
     trunk_offset_x: Option<f64>,
     /// Appendix A: the trunk's centre above the hip (body frame), m.
-    #[arg(long, value_name = "M")]
+    #[arg(long, value_name = "M", allow_negative_numbers = true)]
     trunk_offset_z: Option<f64>,
     /// Appendix A: the leg's centre from the hip along the leg, m.
     #[arg(long, value_name = "M")]
@@ -202,7 +202,7 @@ impl AppendixArgs {
     /// its flag when out of range or given without `--model appendix-a`.
     fn model(&self, name: &str) -> Result<hal_sim::planar_sim::Model> {
         use hopper_plant::planar::{PlanarError, PlanarParams};
-        use hopper_plant::planar_general::GeneralParams;
+        use hopper_plant::planar_general::{GeneralParams, TERM_LIMITS};
         type Set = fn(&mut GeneralParams, f64);
         let terms: [(&str, &str, Option<f64>, Set); 9] = [
             (
@@ -267,16 +267,25 @@ impl AppendixArgs {
             }
         }
         if let Err(PlanarError::NotPositive(f) | PlanarError::OutOfRange(f)) = g.validate() {
-            let (flag, _, v, _) = terms.iter().find(|t| t.1 == f).copied().unwrap_or((
-                "a parameter",
-                f,
-                None,
-                |_, _| {},
-            ));
-            bail!(
-                "{flag} {} is out of range (not negative, finite; the leg's centre within the leg's 0.65 m)",
-                v.map_or(String::new(), |v| v.to_string())
+            let flag = terms.iter().find(|t| t.1 == f).map_or(f, |t| t.0);
+            let value = terms
+                .iter()
+                .find(|t| t.1 == f)
+                .and_then(|t| t.2)
+                .map_or(String::new(), |v| format!(" {v}"));
+            let range = TERM_LIMITS.iter().find(|l| l.field == f).map_or(
+                String::from("out of range"),
+                |l| {
+                    // The leg's centre must also lie on the leg.
+                    let max = if f == "leg_com_from_hip_m" {
+                        l.max.min(g.leg_length_m)
+                    } else {
+                        l.max
+                    };
+                    format!("must be within {} ..= {} {}", l.min, max, l.unit)
+                },
             );
+            bail!("{flag}{value} {range}");
         }
         Ok(hal_sim::planar_sim::Model::AppendixA(g))
     }
@@ -291,7 +300,7 @@ enum PlanarCmd {
         #[arg(long, default_value_t = 2.0)]
         speed: f64,
         /// The stabiliser's gain K_c (eq 2.79), N s/m; 0: passive.
-        #[arg(long, default_value_t = 0.0)]
+        #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
         kc: f64,
         /// Simulated time, s.
         #[arg(long, default_value_t = 10.0)]
@@ -329,7 +338,7 @@ enum PlanarCmd {
         #[arg(long, value_delimiter = ',', default_values_t = [0.5, 1.0, 1.5, 2.0, 2.5, 3.0, 3.5, 4.0, 4.5, 5.0])]
         speeds: Vec<f64>,
         /// Stabiliser gains K_c, N s/m (comma-separated; 0 is passive).
-        #[arg(long, value_delimiter = ',', default_values_t = [-1000.0, -500.0, 0.0, 250.0, 500.0, 750.0, 1000.0, 1250.0, 1500.0, 2000.0, 2500.0, 3000.0])]
+        #[arg(long, allow_hyphen_values = true, value_delimiter = ',', default_values_t = [-1000.0, -500.0, 0.0, 250.0, 500.0, 750.0, 1000.0, 1250.0, 1500.0, 2000.0, 2500.0, 3000.0])]
         kc: Vec<f64>,
         /// Directory for stability.csv and stability.png/.svg.
         #[arg(long, value_name = "DIR")]
@@ -910,6 +919,12 @@ fn cmd_planar_stability(
     }
     if gains.is_empty() || gains.len() > 100 {
         bail!("--kc takes 1 to 100 gains");
+    }
+    if speeds.len() * gains.len() > 400 {
+        bail!(
+            "--speeds x --kc is {} fixed points; at most 400 (each takes up to a few seconds)",
+            speeds.len() * gains.len()
+        );
     }
     for &v in speeds {
         if !(v.is_finite() && v > 0.0 && v <= 10.0) {

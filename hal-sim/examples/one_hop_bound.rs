@@ -1,0 +1,334 @@
+//! How much can one hop raise the apex at all? A numerical search over
+//! open-loop current schedules on the full plant model, with perfect
+//! knowledge of the plant's state and events: whatever a controller does with
+//! its sensors, on this (deterministic) plant it amounts to one such
+//! schedule, so the best schedule there is bounds every controller. The
+//! best one a search finds is a numerical estimate of that bound, not a
+//! proof: a search can miss a better schedule.
+//!
+//! A hop (apex to apex) gets `3 * SEG` current levels in `[-I_max, I_max]`,
+//! each held over a segment timed from the hop's own events: the descent
+//! (apex to touchdown) in `SEG` equal parts of its predicted duration, the
+//! stance in `SEG` parts of the model's half-period `pi sqrt((M + m_s) / k)`
+//! times `STANCE_SPAN` from the environment (default 1; the last
+//! level held until liftoff), the ascent in `SEG` parts of its predicted
+//! duration (the last held until the apex). The nut's position in its stroke
+//! and its speed (up to 0.8 m/s either way) at the starting apex are free
+//! too: the best state any earlier hop could have left. A
+//! differential-evolution search (five independent runs, three started from
+//! the push-reverse-push shape with the nut at rest on its upper stop, two
+//! from random schedules and states alone; their spread is printed)
+//! maximises the next apex, less `PENALTY` m per joule of stop impacts
+//! (default 0.01; 0 allows them, and finds the same rises).
+//!
+//! For each starting apex it prints the best next apex and that hop's energy
+//! ledger. Climbing from 0.05 m to 98 % of 0.15 m then takes at least
+//! `0.097 m / rise` hops, `rise` being the largest per-hop rise found at any
+//! height; a height from which even the best hop ends lower cannot be held.
+//! `SEG=4` or `SEG=16` in the environment changes the grid (8 by default),
+//! to check that a finer one finds no more.
+//!
+//! ```sh
+//! cargo run --release -p hal-sim --example one_hop_bound [PENALTY] [PARAMS] [H1,H2,...]
+//! ```
+//!
+//! `PARAMS`: `design` (default), `identified`, or `identified-1nm` (the
+//! identified plant with the design's 1 N m current limit).
+#![allow(missing_docs)]
+
+use hal_sim::{Event, Mode, Params, Plant, State};
+use rand_distr::{Distribution, StandardUniform};
+use rand_xoshiro::rand_core::{Rng, SeedableRng};
+use rand_xoshiro::Xoshiro256PlusPlus;
+
+const DT_S: f64 = 1e-4;
+const START_M: f64 = 0.05;
+const TARGET_M: f64 = 0.15;
+/// Largest nut speed at the starting apex, m/s (about the
+/// motor's no-load speed through the screw).
+const NUT_SPEED_RANGE_MPS: f64 = 0.8;
+
+/// The schedule's grid: `seg` levels per phase (`SEG`, default 8), the
+/// stance's spread over `stance_span` model stance times (`STANCE_SPAN`,
+/// default 1); from the environment, to check that the grid does not limit
+/// the result.
+#[derive(Clone, Copy)]
+struct Grid {
+    seg: usize,
+    stance_span: f64,
+}
+
+impl Grid {
+    fn from_env() -> Self {
+        let env = |name: &str| std::env::var(name).ok();
+        Grid {
+            seg: env("SEG")
+                .and_then(|s| s.parse().ok())
+                .filter(|&n| n > 0)
+                .unwrap_or(8),
+            stance_span: env("STANCE_SPAN")
+                .and_then(|s| s.parse().ok())
+                .filter(|&x: &f64| x > 0.0 && x.is_finite())
+                .unwrap_or(1.0),
+        }
+    }
+
+    /// Levels per hop.
+    fn levels(self) -> usize {
+        3 * self.seg
+    }
+}
+
+/// What one hop's schedule did.
+struct Outcome {
+    /// The apex after the hop's liftoff, m (`None`: no such apex).
+    apex_m: Option<f64>,
+    impact_j: f64,
+    /// The plant at that apex (or where the hop ended).
+    plant: Plant,
+}
+
+/// Run one hop's `levels` from `plant`, which must be at an apex.
+fn simulate(plant: &Plant, levels: &[f64], grid: Grid) -> Outcome {
+    let p = *plant.params();
+    let mut plant = plant.clone();
+    let impact0 = plant.ledger().stop_impact_loss_j;
+    let i_max = p.current_limit_a;
+    let m_t = p.body_mass_kg + p.nut_mass_kg + p.unsprung_mass_kg;
+    let g_up = p.gravity_mps2 + p.planarizer_friction_n / m_t;
+    let g_dn = p.gravity_mps2 - p.planarizer_friction_n / m_t;
+    let t_stance = core::f64::consts::PI
+        * ((p.body_mass_kg + p.nut_mass_kg) / p.spring_stiffness_n_per_m).sqrt();
+    // Phase: 0 descent, 1 stance, 2 ascent; its start time and expected length.
+    let mut phase = 0usize;
+    let mut phase_t0 = plant.time_s();
+    let mut phase_len = (2.0 * plant.toe_height_m().max(1e-4) / g_dn).sqrt();
+    let mut apex_m = None;
+    let mut events = Vec::new();
+    let t_end = plant.time_s() + 2.0;
+    while apex_m.is_none() && plant.time_s() < t_end {
+        let part = (((plant.time_s() - phase_t0) / phase_len * grid.seg as f64) as usize)
+            .min(grid.seg - 1);
+        let cmd = levels.get(phase * grid.seg + part).copied().unwrap_or(0.0) * i_max;
+        events.clear();
+        if plant.advance(DT_S, cmd, &mut |e| events.push(e)).is_err() {
+            break;
+        }
+        for &e in &events {
+            match e {
+                Event::Touchdown { t_s, .. } => {
+                    phase = 1;
+                    phase_t0 = t_s;
+                    phase_len = grid.stance_span * t_stance;
+                }
+                Event::Liftoff {
+                    t_s, zd_after_mps, ..
+                } => {
+                    phase = 2;
+                    phase_t0 = t_s;
+                    phase_len = zd_after_mps.max(1e-3) / g_up;
+                }
+                // Only the apex after a liftoff ends the hop (a nut started
+                // moving can lift the body off its starting apex at once).
+                Event::Apex { toe_height_m, .. } if phase == 2 => apex_m = Some(toe_height_m),
+                _ => {}
+            }
+        }
+    }
+    Outcome {
+        apex_m,
+        impact_j: plant.ledger().stop_impact_loss_j - impact0,
+        plant,
+    }
+}
+
+fn uniform(rng: &mut Xoshiro256PlusPlus) -> f64 {
+    StandardUniform.sample(rng)
+}
+
+/// Differential evolution (rand/1/bin) over `[-1, 1]^dim`, maximising `f`.
+/// `seeds` join the random initial population.
+fn maximise(
+    dim: usize,
+    generations: usize,
+    seed: u64,
+    seeds: &[Vec<f64>],
+    f: impl Fn(&[f64]) -> f64,
+) -> (Vec<f64>, f64) {
+    let np = 40usize.max(dim);
+    let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
+    let mut pop: Vec<Vec<f64>> = (0..np)
+        .map(|_| (0..dim).map(|_| 2.0 * uniform(&mut rng) - 1.0).collect())
+        .collect();
+    for (member, s) in pop.iter_mut().zip(seeds) {
+        member.clone_from(s);
+    }
+    let mut fit: Vec<f64> = pop.iter().map(|x| f(x)).collect();
+    let (weight, crossover) = (0.6, 0.9);
+    for _ in 0..generations {
+        for i in 0..np {
+            let mut pick = |not: &[usize]| loop {
+                let k = (rng.next_u64() % np as u64) as usize;
+                if !not.contains(&k) {
+                    break k;
+                }
+            };
+            let a = pick(&[i]);
+            let b = pick(&[i, a]);
+            let c = pick(&[i, a, b]);
+            let jr = (rng.next_u64() % dim as u64) as usize;
+            let trial: Vec<f64> = (0..dim)
+                .map(|j| {
+                    if j == jr || uniform(&mut rng) < crossover {
+                        (pop[a][j] + weight * (pop[b][j] - pop[c][j])).clamp(-1.0, 1.0)
+                    } else {
+                        pop[i][j]
+                    }
+                })
+                .collect();
+            let s = f(&trial);
+            if s >= fit[i] {
+                pop[i] = trial;
+                fit[i] = s;
+            }
+        }
+    }
+    let best = (0..np).fold(0, |b, i| if fit[i] > fit[b] { i } else { b });
+    (pop[best].clone(), fit[best])
+}
+
+/// The bang-bang structure of the yardstick (`bang_bang_climb`) as one
+/// hop's levels: reverse, then push in the descent; push in stance; reverse
+/// in the ascent.
+fn bang_bang_levels(grid: Grid) -> Vec<f64> {
+    (0..grid.levels())
+        .map(|i| match i / grid.seg {
+            0 if i < grid.seg / 2 => -1.0,
+            0 | 1 => 1.0,
+            _ => -1.0,
+        })
+        .collect()
+}
+
+fn apex_plant(p: &Params, apex_m: f64, nut_pos: f64, nut_speed: f64) -> Plant {
+    let state = State {
+        z_m: p.leg_length_m + apex_m,
+        zd_mps: 0.0,
+        p_m: 0.5 * (nut_pos + 1.0) * p.stroke_m,
+        pd_mps: NUT_SPEED_RANGE_MPS * nut_speed,
+    };
+    match Plant::with_state(*p, Mode::Flight, state) {
+        Ok(pl) => pl,
+        Err(e) => panic!("{e}"),
+    }
+}
+
+/// What the actuator holds, J: the plant's energy less that of the same
+/// body with the nut at rest on its upper stop.
+fn actuator_energy_j(plant: &Plant) -> f64 {
+    let rest = State {
+        p_m: 0.0,
+        pd_mps: 0.0,
+        ..plant.state()
+    };
+    plant.energy_j()
+        - Plant::with_state(*plant.params(), Mode::Flight, rest)
+            .map_or(f64::NAN, |pl| pl.energy_j())
+}
+
+fn gain(p: &Params, penalty: f64, heights: &[f64], grid: Grid) {
+    println!("largest next apex from an apex h, nut state at h free, stop impacts {penalty} m/J");
+    println!("   h (m)   next (m)   rise (m)   impacts (J)   nut p (mm)   nut v (m/s)   below best (mm): seeded worst, unseeded best");
+    let mut best_rise = f64::NEG_INFINITY;
+    for &h in heights {
+        let dim = grid.levels() + 2;
+        let mut start = bang_bang_levels(grid);
+        start.extend([-1.0, 0.0]);
+        let score = |x: &[f64]| {
+            let plant = apex_plant(p, h, x[dim - 2], x[dim - 1]);
+            let o = simulate(&plant, &x[..dim - 2], grid);
+            o.apex_m.unwrap_or(-1.0) - penalty * o.impact_j
+        };
+        // Five searches: three start from the push-reverse-push shape (nut at
+        // rest on its upper stop), two from random schedules and states
+        // alone. What the unseeded ones reach (printed) says whether the
+        // seed steers the result.
+        let runs: Vec<(Vec<f64>, f64)> = (1..=5)
+            .map(|seed| {
+                let seeded = if seed <= 3 {
+                    vec![start.clone()]
+                } else {
+                    Vec::new()
+                };
+                maximise(dim, 250, seed, &seeded, score)
+            })
+            .collect();
+        let seeded_lo = runs[..3].iter().map(|r| r.1).fold(f64::INFINITY, f64::min);
+        let unseeded_best = runs[3..]
+            .iter()
+            .map(|r| r.1)
+            .fold(f64::NEG_INFINITY, f64::max);
+        let Some((x, hi)) = runs
+            .into_iter()
+            .reduce(|a, b| if b.1 > a.1 { b } else { a })
+        else {
+            continue;
+        };
+        let plant = apex_plant(p, h, x[dim - 2], x[dim - 1]);
+        let o = simulate(&plant, &x[..dim - 2], grid);
+        let next = o.apex_m.unwrap_or(f64::NAN);
+        best_rise = best_rise.max(next - h);
+        println!(
+            "  {h:.3}     {next:.4}     {:+.4}     {:8.2}     {:8.1}     {:+.3}     {:.1}     {:.1}",
+            next - h,
+            o.impact_j,
+            1e3 * plant.state().p_m,
+            plant.state().pd_mps,
+            1e3 * (hi - seeded_lo),
+            1e3 * (hi - unseeded_best)
+        );
+        let (l0, l1) = (plant.ledger(), o.plant.ledger());
+        println!(
+            "          J: motor {:.2}, friction {:.2}, touchdown {:.2}, liftoff {:.2}, stops {:.2}, actuator at apex {:.2} -> {:.2}",
+            l1.motor_work_j - l0.motor_work_j,
+            l1.friction_j - l0.friction_j,
+            l1.touchdown_loss_j - l0.touchdown_loss_j,
+            l1.liftoff_loss_j - l0.liftoff_loss_j,
+            l1.stop_impact_loss_j - l0.stop_impact_loss_j,
+            actuator_energy_j(&plant),
+            actuator_energy_j(&o.plant)
+        );
+    }
+    let need = 0.98 * TARGET_M - START_M;
+    if best_rise > 0.0 {
+        println!(
+            "largest rise per hop {best_rise:.4} m: {START_M} -> {:.3} m takes at least {:.1} hops",
+            0.98 * TARGET_M,
+            need / best_rise
+        );
+    } else {
+        println!("no hop from these heights ends higher than it started: no steady hop there");
+    }
+}
+
+fn main() {
+    let args: Vec<String> = std::env::args().collect();
+    let penalty = args.get(1).and_then(|s| s.parse().ok()).unwrap_or(0.01);
+    let name = args.get(2).map_or("design", String::as_str);
+    // `identified-1nm`: the identified plant with the design's 1 N m limit.
+    let p = match name {
+        "identified-1nm" => Params::preset("identified").map(|mut p| {
+            p.current_limit_a = Params::design().current_limit_a;
+            p
+        }),
+        _ => Params::preset(name),
+    };
+    let Some(p) = p else {
+        panic!("unknown preset {name}: design, identified or identified-1nm")
+    };
+    let heights: Vec<f64> = args
+        .get(3)
+        .map(|s| s.split(',').filter_map(|h| h.parse().ok()).collect())
+        .unwrap_or_else(|| vec![0.01, 0.03, 0.05, 0.07, 0.09, 0.11, 0.13, 0.15]);
+    gain(&p, penalty, &heights, Grid::from_env());
+}
