@@ -27,6 +27,12 @@
 //! without sliding speed, which the passive design aims at;
 //! [`PlanarEvent::Touchdown`] reports what it took.
 //!
+//! This runner keeps section 2.2's own equations on purpose: Appendix A's
+//! general runner ([`crate::planar_general`]) is derived independently and
+//! tested against it (it must reduce to this one to 1e-9); both run on the
+//! one stepper (`step_hybrid`). The return map and its eigenvalues are
+//! this runner's (`hal_sim::planar_stability`).
+//!
 //! Erratum: eq 2.77 prints the zero-angular-momentum condition as
 //! `phi_dot / J_l = -theta_dot / J_d`; the angular momentum of body and leg
 //! about the hip is `J_b phi_dot + J_l theta_dot`, so the condition is
