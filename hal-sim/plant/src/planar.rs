@@ -559,6 +559,8 @@ impl PlanarRunner {
         let floor = 0.5 * self.p.leg_rest_length_m;
         next_apex_hybrid(self, dt_s, max_s, floor, |r| r.state().z_m)
     }
+
+    /// Touchdown (the plastic impact across the leg) or liftoff at `at`.
     fn transition_at(&mut self, at: &[f64; 8], on_event: &mut dyn FnMut(PlanarEvent)) {
         let r0 = self.p.leg_rest_length_m;
         match self.phase {
