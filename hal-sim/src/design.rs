@@ -370,11 +370,7 @@ pub fn write_lead_plot(
             .label(format!("{} mm", mm(x.lead_m)))
             .legend(move |(a, b)| PathElement::new(vec![(a, b), (a + 20, b)], col.stroke_width(2)));
         }
-        c.configure_series_labels()
-            .position(SeriesLabelPosition::LowerRight)
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .draw()?;
+        crate::plot::legend(&mut c, SeriesLabelPosition::LowerRight)?;
         // (d) torque-speed points and the motor's line.
         let w0 = motor.no_load_speed_rad_s();
         let t0 = motor.stall_torque_nm();
@@ -406,11 +402,7 @@ pub fn write_lead_plot(
             .label(format!("{} mm", mm(x.lead_m)))
             .legend(move |(a, b)| Circle::new((a + 10, b), 3, col.filled()));
         }
-        c.configure_series_labels()
-            .position(SeriesLabelPosition::UpperRight)
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .draw()?;
+        crate::plot::legend(&mut c, SeriesLabelPosition::UpperRight)?;
         root.present()?;
         Ok(())
     }

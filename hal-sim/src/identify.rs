@@ -469,11 +469,7 @@ pub fn write_plot(
         ))?
         .label("fitted")
         .legend(|(a, b)| PathElement::new(vec![(a, b), (a + 20, b)], RED));
-        c.configure_series_labels()
-            .position(SeriesLabelPosition::UpperRight)
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .draw()?;
+        crate::plot::legend(&mut c, SeriesLabelPosition::UpperRight)?;
         root.present()?;
         Ok(())
     }

@@ -290,12 +290,7 @@ where
         ("leg angle [rad]", |q| q.theta_rad),
     ];
     for ((label, get), panel) in series.iter().zip(panels.iter()) {
-        let lo = run.samples.iter().map(get).fold(f64::INFINITY, f64::min);
-        let hi = run
-            .samples
-            .iter()
-            .map(get)
-            .fold(f64::NEG_INFINITY, f64::max);
+        let (lo, hi) = crate::plot::extent(run.samples.iter().map(get));
         let pad = ((hi - lo) * 0.1).max(1e-3);
         let mut c = ChartBuilder::on(panel)
             .margin(8)
@@ -326,16 +321,8 @@ where
 {
     use plotters::prelude::*;
     root.fill(&WHITE)?;
-    let zs = run.samples.iter().map(|q| q.z_m);
-    let (z_lo, z_hi) = (
-        zs.clone().fold(f64::INFINITY, f64::min),
-        zs.fold(f64::NEG_INFINITY, f64::max),
-    );
-    let ps = run.samples.iter().map(|q| q.phi_rad);
-    let (p_lo, p_hi) = (
-        ps.clone().fold(f64::INFINITY, f64::min),
-        ps.fold(f64::NEG_INFINITY, f64::max),
-    );
+    let (z_lo, z_hi) = crate::plot::extent(run.samples.iter().map(|q| q.z_m));
+    let (p_lo, p_hi) = crate::plot::extent(run.samples.iter().map(|q| q.phi_rad));
     let mut c = ChartBuilder::on(&root)
         .caption(title, ("sans-serif", 18))
         .margin(16)

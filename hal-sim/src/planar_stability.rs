@@ -315,10 +315,7 @@ where
         .flat_map(|r| r.points.iter().flatten().map(|f| f.growth));
     let hi = all.clone().fold(1.0, f64::max) * 1.2;
     let lo = all.fold(1.0, f64::min).min(0.9) / 1.1;
-    let (g_lo, g_hi) = (
-        gains.iter().copied().fold(f64::INFINITY, f64::min),
-        gains.iter().copied().fold(f64::NEG_INFINITY, f64::max),
-    );
+    let (g_lo, g_hi) = crate::plot::extent(gains.iter().copied());
     let mut c = ChartBuilder::on(&root)
         .caption(
             "Section 2.2 runner: growth of a deviation per hop at the fixed point",
@@ -352,11 +349,7 @@ where
             });
         c.draw_series(pts.iter().map(|&p| Circle::new(p, 3, colour.filled())))?;
     }
-    c.configure_series_labels()
-        .background_style(WHITE.mix(0.8))
-        .border_style(BLACK)
-        .position(SeriesLabelPosition::UpperRight)
-        .draw()?;
+    crate::plot::legend(&mut c, SeriesLabelPosition::UpperRight)?;
     root.present()?;
     Ok(())
 }

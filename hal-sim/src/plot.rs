@@ -15,6 +15,31 @@ const FONT_CANDIDATES: [&str; 4] = [
     "/usr/share/fonts/truetype/liberation/LiberationSans-Regular.ttf",
 ];
 
+/// The least and the greatest of `values` (`(inf, -inf)` when empty).
+pub(crate) fn extent(values: impl Iterator<Item = f64> + Clone) -> (f64, f64) {
+    (
+        values.clone().fold(f64::INFINITY, f64::min),
+        values.fold(f64::NEG_INFINITY, f64::max),
+    )
+}
+
+/// The project's legend: at `position`, on a white 80% background with a
+/// black border.
+pub(crate) fn legend<'a, DB, CT>(
+    c: &mut ChartContext<'a, DB, CT>,
+    position: SeriesLabelPosition,
+) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>>
+where
+    DB: DrawingBackend + 'a,
+    CT: plotters::coord::CoordTranslate,
+{
+    c.configure_series_labels()
+        .position(position)
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .draw()
+}
+
 /// Load a system font once and register it as "sans-serif" for plotters'
 /// pure-Rust text renderer (no fontconfig needed at build time).
 pub(crate) fn ensure_font() -> Result<(), String> {
@@ -131,12 +156,7 @@ pub fn hop_plot(
                     .label("target apex [cm]")
                     .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], red));
             }
-            chart
-                .configure_series_labels()
-                .position(SeriesLabelPosition::UpperRight)
-                .background_style(WHITE.mix(0.8))
-                .border_style(BLACK)
-                .draw()?;
+            legend(&mut chart, SeriesLabelPosition::UpperRight)?;
         }
         root.present()?;
         Ok(())

@@ -1029,12 +1029,7 @@ impl Sweep {
                 .label("last apex (never steady)")
                 .legend(|(x, y)| Cross::new((x + 10, y), 6, RED.stroke_width(2)));
         }
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::UpperRight)
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .draw()?;
+        crate::plot::legend(&mut chart, SeriesLabelPosition::UpperRight)?;
         Ok(())
     }
 

@@ -615,8 +615,9 @@ impl PlanarRunner {
 }
 
 /// A planar runner as the shared stepper sees it: an 8-element state whose
-/// flight layout is `[x, z, phi, theta, x', z', phi', theta']`, a guard
-/// that is positive within the phase, and the transition that ends it.
+/// flight layout is `[x, z, phi, theta, x', z', phi', theta']` and whose
+/// stance layout starts with the leg's length, the leg's length at its
+/// stop, and the transition that ends a phase.
 /// [`PlanarRunner`] and [`crate::planar_general::GeneralRunner`] both run
 /// on [`step_hybrid`].
 pub(crate) trait Hybrid {
@@ -624,8 +625,17 @@ pub(crate) trait Hybrid {
     fn in_flight(&self) -> bool;
     /// The state's rate in the present phase.
     fn rate_of(&self, s: &[f64; 8]) -> [f64; 8];
+    /// The leg's length at its stop (the leg spring's rest), m.
+    fn leg_length_m(&self) -> f64;
     /// Positive within the present phase; its fall through 0 ends it.
-    fn guard_of(&self, s: &[f64; 8]) -> f64;
+    /// Flight: the toe's height; stance: the leg's distance from its stop.
+    fn guard_of(&self, s: &[f64; 8]) -> f64 {
+        if self.in_flight() {
+            s[1] - self.leg_length_m() * libm::cos(s[3])
+        } else {
+            self.leg_length_m() - s[0]
+        }
+    }
     /// Gravity, m/s^2 (the apex within a step is found by the flight's
     /// exact parabola).
     fn gravity(&self) -> f64;
@@ -753,12 +763,8 @@ impl Hybrid for PlanarRunner {
     fn rate_of(&self, s: &[f64; 8]) -> [f64; 8] {
         self.rate(self.phase, s)
     }
-    /// Flight: the toe's height; stance: the spring's compression.
-    fn guard_of(&self, s: &[f64; 8]) -> f64 {
-        match self.phase {
-            PlanarPhase::Flight => s[1] - self.p.leg_rest_length_m * libm::cos(s[3]),
-            PlanarPhase::Stance { .. } => self.p.leg_rest_length_m - s[0],
-        }
+    fn leg_length_m(&self) -> f64 {
+        self.p.leg_rest_length_m
     }
     fn gravity(&self) -> f64 {
         self.p.gravity_mps2

@@ -778,12 +778,8 @@ impl Hybrid for GeneralRunner {
     fn rate_of(&self, s: &[f64; 8]) -> [f64; 8] {
         self.rate(self.phase, s)
     }
-    /// Flight: the toe's height; stance: the leg's distance from its stop.
-    fn guard_of(&self, s: &[f64; 8]) -> f64 {
-        match self.phase {
-            GeneralPhase::Flight => s[1] - self.p.leg_length_m * libm::cos(s[3]),
-            GeneralPhase::Stance { .. } => self.p.leg_length_m - s[0],
-        }
+    fn leg_length_m(&self) -> f64 {
+        self.p.leg_length_m
     }
     fn gravity(&self) -> f64 {
         self.p.gravity_mps2
