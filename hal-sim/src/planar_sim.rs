@@ -75,7 +75,13 @@ pub enum Start {
 /// fraction 0.125), stabilised with `gain_ns_per_m` (0: passive), for
 /// `duration_s` from the design's apex.
 pub fn simulate(speed_mps: f64, gain_ns_per_m: f64, duration_s: f64) -> Result<PlanarRun, String> {
-    simulate_from(speed_mps, gain_ns_per_m, duration_s, Start::Design)
+    simulate_model(
+        speed_mps,
+        gain_ns_per_m,
+        duration_s,
+        Start::Design,
+        &Model::Section22,
+    )
 }
 
 /// Which planar runner a run uses.
@@ -126,23 +132,7 @@ impl Runner {
     }
 }
 
-/// As [`simulate`], from `start`.
-pub fn simulate_from(
-    speed_mps: f64,
-    gain_ns_per_m: f64,
-    duration_s: f64,
-    start: Start,
-) -> Result<PlanarRun, String> {
-    simulate_model(
-        speed_mps,
-        gain_ns_per_m,
-        duration_s,
-        start,
-        &Model::Section22,
-    )
-}
-
-/// As [`simulate_from`], with `model`'s runner (the fixed point is the
+/// As [`simulate`], from `start` with `model`'s runner (the fixed point is the
 /// section 2.2 runner's only).
 pub fn simulate_model(
     speed_mps: f64,
