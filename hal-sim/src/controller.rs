@@ -23,6 +23,7 @@ use hopper_control::pd_design::{self, PdGains};
 use hopper_control::runner::{NoCounter, PeriodRunner, Timing};
 use hopper_control::supervisor::Fault;
 use hopper_control::telemetry::HopLedger;
+use hopper_control::thermal::ThermalConfig;
 use serde::Serialize;
 
 /// Computes the amplifier current once per control period.
@@ -66,6 +67,10 @@ pub trait Controller {
     fn thermal(&self) -> Option<ThermalSummary> {
         None
     }
+    /// The firmware's winding temperature estimate now, C, if it has one.
+    fn winding_c(&self) -> Option<f64> {
+        None
+    }
 }
 
 /// Times of the phase estimator's touchdown and liftoff events, s.
@@ -100,8 +105,93 @@ pub struct ThermalSummary {
     /// Winding temperature at the end, C.
     pub final_winding_c: f64,
     /// When the current limit first fell below the amplifier's (the
-    /// derating band), s; null if never.
+    /// derating band), s; null if never (always null with the protection
+    /// off).
     pub first_derated_s: Option<f64>,
+    /// Whether the protection derated and faulted (`thermal.protect`); off,
+    /// the run is the thesis's motor without a thermal limit.
+    pub protect: bool,
+    /// Whose thermal data the estimate used: `stand-in` (the defaults, a
+    /// catalogue motor's: the thesis gives none for its motor) or
+    /// `configured` (a `thermal.*` parameter was set).
+    pub motor_data: &'static str,
+    /// Winding temperature where derating starts, C.
+    pub derate_winding_c: f64,
+    /// Winding temperature that latches the overtemperature fault, C.
+    pub trip_winding_c: f64,
+    /// When the winding first reached the derating temperature, s (with
+    /// the protection off too: when it would have derated); null if never.
+    pub reached_derate_s: Option<f64>,
+    /// When the winding first reached the trip temperature, s (with the
+    /// protection off too: when it would have tripped); null if never.
+    pub reached_trip_s: Option<f64>,
+    /// The current limit at the end of the run, A: the amplifier's, times
+    /// the derating (0 once tripped is not shown here: see `faults`).
+    pub final_current_limit_a: f64,
+    /// The amplifier's current limit, A.
+    pub amplifier_limit_a: f64,
+}
+
+impl ThermalSummary {
+    /// A motor at the ambient temperature under `supervisor`'s protection.
+    fn at_start(supervisor: &hopper_control::supervisor::Supervisor) -> Self {
+        let t = *supervisor.thermal().config();
+        let limit_a = f64::from(supervisor.current_limit_a());
+        // `protect` off runs the same motor's data.
+        let stand_in = ThermalConfig { protect: true, ..t }
+            == ThermalConfig {
+                protect: true,
+                ..ThermalConfig::default()
+            };
+        ThermalSummary {
+            peak_winding_c: f64::from(t.ambient_c),
+            final_winding_c: f64::from(t.ambient_c),
+            first_derated_s: None,
+            protect: t.protect,
+            motor_data: if stand_in { "stand-in" } else { "configured" },
+            derate_winding_c: f64::from(t.derate_winding_c),
+            trip_winding_c: f64::from(t.trip_winding_c),
+            reached_derate_s: None,
+            reached_trip_s: None,
+            final_current_limit_a: limit_a,
+            amplifier_limit_a: limit_a,
+        }
+    }
+}
+
+/// The run summary's thermal line: which motor's data, the protection's
+/// state, the peak winding temperature, when it derated (or would have)
+/// and tripped (or would have), and the current limit at the end.
+pub fn heat_line(t: &ThermalSummary) -> String {
+    let data = match t.motor_data {
+        "stand-in" => "stand-in motor data (maxon RE 40; the thesis gives none)",
+        _ => "configured thermal.* data",
+    };
+    let at = |what: &str, v: Option<f64>| {
+        v.map_or(format!("no {what}"), |s| format!("{what} from {s:.2} s"))
+    };
+    if t.protect {
+        format!(
+            "{data}: winding peak {:.0} C; {}, {}; limit at end {:.1} of {:.1} A",
+            t.peak_winding_c,
+            at("derating", t.first_derated_s),
+            at("trip", t.reached_trip_s),
+            t.final_current_limit_a,
+            t.amplifier_limit_a,
+        )
+    } else {
+        let would = |what: &str, v: Option<f64>| {
+            v.map_or(format!("no {what}"), |s| {
+                format!("would {what} at {s:.2} s")
+            })
+        };
+        format!(
+            "{data}, protection OFF (thermal.protect=0: no thermal limit, as the thesis modelled): winding peak {:.0} C; {}, {}",
+            t.peak_winding_c,
+            would("derate", t.reached_derate_s),
+            would("trip", t.reached_trip_s),
+        )
+    }
 }
 
 /// A latched fault.
@@ -292,6 +382,7 @@ impl ControllerSpec {
         let cfg = *runner.hopper().config();
         // The name of what actually runs (a strategy override names its own).
         let name = cfg.strategy.kind().name();
+        let thermal = ThermalSummary::at_start(runner.hopper().supervisor());
         Ok(FirmwareController {
             name,
             runner,
@@ -304,7 +395,7 @@ impl ControllerSpec {
             events: EstimatorEvents::default(),
             contact_times: ContactTimes::default(),
             arm_refusal: None,
-            thermal: ThermalSummary::default(),
+            thermal,
             injections: self
                 .injections
                 .iter()
@@ -475,13 +566,22 @@ impl Controller for FirmwareController {
         };
         // The host keeps every deadline: the plant takes no time.
         self.runner.end_period(false);
-        let motor = self.runner.hopper().supervisor().thermal();
+        let supervisor = self.runner.hopper().supervisor();
+        let motor = supervisor.thermal();
         let winding_c = f64::from(motor.winding_c());
-        self.thermal.peak_winding_c = self.thermal.peak_winding_c.max(winding_c);
-        self.thermal.final_winding_c = winding_c;
-        if motor.limit_scale() < 1.0 && self.thermal.first_derated_s.is_none() {
-            self.thermal.first_derated_s = Some(plant.time_s());
+        let th = &mut self.thermal;
+        th.peak_winding_c = th.peak_winding_c.max(winding_c);
+        th.final_winding_c = winding_c;
+        if motor.limit_scale() < 1.0 && th.first_derated_s.is_none() {
+            th.first_derated_s = Some(plant.time_s());
         }
+        if winding_c >= th.derate_winding_c && th.reached_derate_s.is_none() {
+            th.reached_derate_s = Some(plant.time_s());
+        }
+        if winding_c >= th.trip_winding_c && th.reached_trip_s.is_none() {
+            th.reached_trip_s = Some(plant.time_s());
+        }
+        th.final_current_limit_a = f64::from(supervisor.current_limit_a() * motor.limit_scale());
         let new = out.faults.0 & !before.0;
         if new != 0 {
             for f in Fault::ALL {
@@ -546,6 +646,10 @@ impl Controller for FirmwareController {
 
     fn thermal(&self) -> Option<ThermalSummary> {
         Some(self.thermal)
+    }
+
+    fn winding_c(&self) -> Option<f64> {
+        Some(self.thermal.final_winding_c)
     }
 
     fn arm_refusal(&self) -> Option<&'static str> {

@@ -219,7 +219,11 @@ fn durations(opts: &FigureOptions) -> (f64, f64) {
     }
 }
 
-/// Run a named firmware controller; samples at 1 kHz, default sensor noise, seed 1.
+/// What every simulated hopping figure's title says of the motor's heat.
+pub const NO_THERMAL_LIMIT: &str = "no motor thermal limit (as the thesis)";
+
+/// Run a named firmware controller as the thesis simulated it, without the
+/// motor's thermal protection; samples at 1 kHz, default sensor noise, seed 1.
 fn simulate(
     params: Params,
     params_name: &str,
@@ -233,6 +237,11 @@ fn simulate(
         sample_dt_s: 1e-3,
         ..RunConfig::new(params)
     };
+    // The thesis's simulations had no motor thermal limit: run as it did
+    // (every hopping figure's title says so, [`NO_THERMAL_LIMIT`]).
+    let mut spec = spec;
+    spec.params
+        .push((&hopper_control::params::THERMAL_PROTECT, 0.0));
     let mut ctl = spec.build(&cfg.params, cfg.start_apex_m, cfg.control_dt_s)?;
     let r = run::run(&cfg, params_name, &mut ctl)?;
     Ok((r.samples, r.summary))
@@ -293,7 +302,7 @@ fn chapter2_figures(
         let (samples, summary) = simulate(params, "design", spec, CH2_START_APEX_M, duration_s)?;
         notes.push(format!("{state_file}/{phase_file} {}", hop_note(&summary)));
         let title = format!(
-            "{caption}; design parameters, start apex {CH2_START_APEX_M} m, E_D = {e_d:.2} J"
+            "{caption}; design parameters, start apex {CH2_START_APEX_M} m, E_D = {e_d:.2} J; {NO_THERMAL_LIMIT}"
         );
         figs.push(Figure {
             file: state_file,
@@ -525,7 +534,9 @@ fn chapter4_figures(
         let rows = panels.len();
         figs.push(Figure {
             file,
-            title: format!("{caption}; identified parameters, start apex {CH4_START_APEX_M} m"),
+            title: format!(
+                "{caption}; identified parameters, start apex {CH4_START_APEX_M} m; {NO_THERMAL_LIMIT}"
+            ),
             rows,
             cols: 1,
             size: (1000, 280 * rows as u32 + 60),
@@ -757,13 +768,44 @@ fn padded_range(values: impl Iterator<Item = f64>) -> (f64, f64) {
 fn draw<DB: DrawingBackend>(f: &Figure, root: &DrawingArea<DB, Shift>) -> Result<(), String> {
     let err = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
     root.fill(&WHITE).map_err(err)?;
-    let (head, body) = root.split_vertically(44);
-    head.titled(&f.title, ("sans-serif", 20)).map_err(err)?;
+    // A long title goes on two lines, split at its last "; ".
+    let lines: Vec<&str> = match f.title.rsplit_once("; ") {
+        Some((a, b)) if f.title.len() > 90 => vec![a, b],
+        _ => vec![f.title.as_str()],
+    };
+    let (head, body) = root.split_vertically(20 + 24 * lines.len() as u32);
+    for (k, line) in lines.iter().enumerate() {
+        let (w, _) = head.dim_in_pixel();
+        let style = ("sans-serif", 20).into_font().color(&BLACK).pos(
+            plotters::style::text_anchor::Pos::new(
+                plotters::style::text_anchor::HPos::Center,
+                plotters::style::text_anchor::VPos::Top,
+            ),
+        );
+        head.draw(&Text::new(*line, (w as i32 / 2, 8 + 24 * k as i32), style))
+            .map_err(err)?;
+    }
     let areas = body.split_evenly((f.rows, f.cols));
     for (area, panel) in areas.iter().zip(&f.panels) {
         let all = || panel.lines.iter().flat_map(|l| l.points.iter());
         let (x0, x1) = padded_range(all().map(|p| p.0));
         let (y0, y1) = padded_range(all().map(|p| p.1));
+        // Room above (or below) the data for the legend, so it never
+        // covers a line: the legend box's share of the plot's height.
+        let (_, h_px) = area.dim_in_pixel();
+        let plot_px = (f64::from(h_px) - 85.0).max(40.0);
+        let legend_px = 20.0 * panel.lines.len() as f64 + 14.0;
+        let share = (legend_px / plot_px).min(0.6);
+        let room = (y1 - y0) * share / (1.0 - share);
+        let (y0, y1) = match panel.legend {
+            SeriesLabelPosition::UpperLeft
+            | SeriesLabelPosition::UpperMiddle
+            | SeriesLabelPosition::UpperRight => (y0, y1 + room),
+            SeriesLabelPosition::LowerLeft
+            | SeriesLabelPosition::LowerMiddle
+            | SeriesLabelPosition::LowerRight => (y0 - room, y1),
+            _ => (y0, y1),
+        };
         let mut chart = ChartBuilder::on(area)
             .caption(&panel.caption, ("sans-serif", 17))
             .margin(8)
@@ -831,6 +873,7 @@ mod tests {
             spring_force_n: 0.0,
             torque_nm: 0.0,
             energy_j: e,
+            winding_c: None,
         };
         let s = [
             mk(0.0, Mode::Flight, 10.0),

@@ -92,6 +92,47 @@ pub(crate) fn png_and_svg(
 
 type Series<'a> = (&'a str, &'a str, fn(&Sample) -> f64);
 
+/// The winding temperatures the motor's protection acts at, C, drawn on
+/// the hop plot's temperature panel.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct HeatLevels {
+    /// Derating starts.
+    pub derate_c: f64,
+    /// The overtemperature fault latches.
+    pub trip_c: f64,
+    /// Whether the protection acted (off: the levels are where it would
+    /// have).
+    pub protect: bool,
+}
+
+/// One entry of a legend drawn beside a chart: its label, colour and
+/// whether its line is dashed.
+type LegendEntry = (String, RGBColor, bool);
+
+/// Width of the legend column right of each hop plot panel, px.
+const SIDE_LEGEND_PX: u32 = 190;
+
+/// Draws `entries` as a legend in `area` (a column beside the chart, so the
+/// legend never covers data).
+fn side_legend<DB: DrawingBackend>(
+    area: &DrawingArea<DB, plotters::coord::Shift>,
+    entries: &[LegendEntry],
+) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
+    let style = ("sans-serif", 14).into_font().color(&BLACK);
+    for (k, (label, colour, dashed)) in entries.iter().enumerate() {
+        let y = 40 + 22 * k as i32;
+        let stroke = colour.stroke_width(2);
+        if *dashed {
+            area.draw(&PathElement::new(vec![(4, y), (12, y)], stroke))?;
+            area.draw(&PathElement::new(vec![(18, y), (26, y)], stroke))?;
+        } else {
+            area.draw(&PathElement::new(vec![(4, y), (26, y)], stroke))?;
+        }
+        area.draw(&Text::new(label.clone(), (32, y - 8), style.clone()))?;
+    }
+    Ok(())
+}
+
 /// Draw toe height (cm), actuator position (mm) and total energy (J) against
 /// time into a PNG at `path`; `target_apex_m` adds the apex target as a
 /// dashed line on the height panel.
@@ -101,36 +142,69 @@ pub fn hop_plot(
     target_apex_m: Option<f64>,
     path: &Path,
 ) -> Result<(), String> {
+    hop_plot_with_heat(samples, title, target_apex_m, None, path)
+}
+
+/// [`hop_plot`], and when the samples carry the firmware's winding
+/// temperature a fourth panel with it and the protection's `heat` levels.
+/// Legends sit in a column right of the panels, clear of the data.
+pub fn hop_plot_with_heat(
+    samples: &[Sample],
+    title: &str,
+    target_apex_m: Option<f64>,
+    heat: Option<HeatLevels>,
+    path: &Path,
+) -> Result<(), String> {
     if samples.len() < 2 {
         return Err("not enough samples to plot (is the sample rate 0?)".into());
     }
     ensure_font()?;
-    let panels: [Series; 3] = [
+    let mut panels: Vec<Series> = vec![
         ("Hopping height", "toe height [cm]", |s| {
             s.toe_height_m * 100.0
         }),
         ("Actuator position", "nut p [mm]", |s| s.p_m * 1000.0),
         ("Total energy", "energy [J]", |s| s.energy_j),
     ];
-    let root = BitMapBackend::new(path, (1000, 900)).into_drawing_area();
+    let with_heat = samples.iter().all(|s| s.winding_c.is_some());
+    if with_heat {
+        panels.push(("Motor winding (firmware estimate)", "winding [C]", |s| {
+            s.winding_c.unwrap_or(f64::NAN)
+        }));
+    }
+    let height = 40 + 290 * panels.len() as u32;
+    let root = BitMapBackend::new(path, (1100, height)).into_drawing_area();
     let res = (|| -> Result<(), Box<dyn std::error::Error>> {
         root.fill(&WHITE)?;
         let (head, body) = root.split_vertically(40);
         head.titled(title, ("sans-serif", 22))?;
         let t_end = samples.last().map(|s| s.t_s).unwrap_or(1.0);
+        let n = panels.len();
         for (k, (area, (name, ylabel, get))) in
-            body.split_evenly((3, 1)).iter().zip(panels).enumerate()
+            body.split_evenly((n, 1)).iter().zip(panels).enumerate()
         {
-            let target_cm = target_apex_m.filter(|_| k == 0).map(|t| t * 100.0);
-            let (mut lo, mut hi) = samples
-                .iter()
-                .map(get)
-                .chain(target_cm)
-                .fold((f64::MAX, f64::MIN), |(a, b), v| (a.min(v), b.max(v)));
+            let (area, key) = area.split_horizontally(1100 - SIDE_LEGEND_PX);
+            let mut entries: Vec<LegendEntry> = vec![(ylabel.to_string(), BLUE, false)];
+            // Horizontal reference lines: (value, label, colour).
+            let mut levels: Vec<(f64, String, RGBColor)> = Vec::new();
+            if let Some(t) = target_apex_m.filter(|_| k == 0) {
+                levels.push((t * 100.0, format!("target apex {:.1} cm", t * 100.0), RED));
+            }
+            if let (Some(h), true) = (heat, k == 3) {
+                let would = if h.protect { "" } else { " (off)" };
+                levels.push((
+                    h.derate_c,
+                    format!("derating {:.0} C{would}", h.derate_c),
+                    RGBColor(230, 140, 0),
+                ));
+                levels.push((h.trip_c, format!("trip {:.0} C{would}", h.trip_c), RED));
+            }
+            let (mut lo, mut hi) =
+                extent(samples.iter().map(get).chain(levels.iter().map(|l| l.0)));
             let pad = ((hi - lo) * 0.05).max(0.5);
             lo -= pad;
             hi += pad;
-            let mut chart = ChartBuilder::on(area)
+            let mut chart = ChartBuilder::on(&area)
                 .caption(name, ("sans-serif", 18))
                 .margin(8)
                 .x_label_area_size(36)
@@ -142,21 +216,20 @@ pub fn hop_plot(
                 .y_desc(ylabel)
                 .light_line_style(WHITE.mix(0.0))
                 .draw()?;
-            chart
-                .draw_series(LineSeries::new(
-                    samples.iter().map(|s| (s.t_s, get(s))),
-                    BLUE.stroke_width(2),
-                ))?
-                .label(ylabel)
-                .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLUE.stroke_width(2)));
-            if let Some(t) = target_cm {
-                let red = RED.stroke_width(2);
-                chart
-                    .draw_series(DashedLineSeries::new([(0.0, t), (t_end, t)], 8, 6, red))?
-                    .label("target apex [cm]")
-                    .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], red));
+            chart.draw_series(LineSeries::new(
+                samples.iter().map(|s| (s.t_s, get(s))),
+                BLUE.stroke_width(2),
+            ))?;
+            for (v, label, colour) in levels {
+                chart.draw_series(DashedLineSeries::new(
+                    [(0.0, v), (t_end, v)],
+                    8,
+                    6,
+                    colour.stroke_width(2),
+                ))?;
+                entries.push((label, colour, true));
             }
-            legend(&mut chart, SeriesLabelPosition::UpperRight)?;
+            side_legend(&key, &entries)?;
         }
         root.present()?;
         Ok(())

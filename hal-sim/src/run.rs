@@ -104,6 +104,9 @@ pub struct Sample {
     pub torque_nm: f64,
     /// Total mechanical energy, J.
     pub energy_j: f64,
+    /// The firmware's estimate of the motor's winding temperature, C
+    /// (`None` without firmware).
+    pub winding_c: Option<f64>,
 }
 
 fn mode_name<S: serde::Serializer>(m: &Mode, s: S) -> Result<S::Ok, S::Error> {
@@ -111,7 +114,7 @@ fn mode_name<S: serde::Serializer>(m: &Mode, s: S) -> Result<S::Ok, S::Error> {
 }
 
 impl Sample {
-    fn of(plant: &Plant) -> Self {
+    fn of(plant: &Plant, winding_c: Option<f64>) -> Self {
         let s = plant.state();
         Sample {
             t_s: plant.time_s(),
@@ -124,6 +127,7 @@ impl Sample {
             spring_force_n: plant.spring_force_n(),
             torque_nm: plant.motor_torque_nm(),
             energy_j: plant.energy_j(),
+            winding_c,
         }
     }
 }
@@ -442,7 +446,7 @@ pub fn run_with_progress(
     let mut peak_stroke: f64 = 0.0;
     let mut peak_current: f64 = 0.0;
     if sample_every > 0 {
-        samples.push(Sample::of(&plant));
+        samples.push(Sample::of(&plant, controller.winding_c()));
     }
     let report_every = ((0.1 / cfg.control_dt_s).round() as u64).max(1);
     // Motor work at the first touchdown, then over the first stance.
@@ -500,7 +504,7 @@ pub fn run_with_progress(
             to_sample -= 1;
             if to_sample == 0 {
                 to_sample = sample_every;
-                samples.push(Sample::of(&plant));
+                samples.push(Sample::of(&plant, controller.winding_c()));
             }
         }
     }
@@ -643,7 +647,7 @@ fn summarize(
 
 /// The columns of `trajectory.csv`, in order: [`TrajectoryRow`]'s fields.
 /// Written by hand so that a run without samples still has its header.
-pub const TRAJECTORY_COLUMNS: [&str; 10] = [
+pub const TRAJECTORY_COLUMNS: [&str; 11] = [
     "time_s",
     "phase",
     "z_m",
@@ -654,10 +658,12 @@ pub const TRAJECTORY_COLUMNS: [&str; 10] = [
     "spring_force_n",
     "torque_nm",
     "energy_j",
+    "winding_c",
 ];
 
 /// One row of `trajectory.csv`: a [`Sample`] with its columns' decimals
-/// (forces and torque 1 uN m, time 1 us, lengths 1 nm).
+/// (forces and torque 1 uN m, time 1 us, lengths 1 nm, temperature 1 mK;
+/// an empty temperature without firmware).
 #[derive(Serialize)]
 struct TrajectoryRow {
     time_s: Fixed<6>,
@@ -670,6 +676,7 @@ struct TrajectoryRow {
     spring_force_n: Fixed<6>,
     torque_nm: Fixed<6>,
     energy_j: Fixed<9>,
+    winding_c: Option<Fixed<3>>,
 }
 
 impl From<&Sample> for TrajectoryRow {
@@ -685,6 +692,7 @@ impl From<&Sample> for TrajectoryRow {
             spring_force_n: Fixed(s.spring_force_n),
             torque_nm: Fixed(s.torque_nm),
             energy_j: Fixed(s.energy_j),
+            winding_c: s.winding_c.map(Fixed),
         }
     }
 }
@@ -725,6 +733,7 @@ mod tests {
             spring_force_n: 0.0,
             torque_nm: 0.0,
             energy_j: 0.0,
+            winding_c: Some(25.0),
         };
         let mut w = csv::Writer::from_writer(Vec::new());
         w.serialize(TrajectoryRow::from(&s)).unwrap();

@@ -27,6 +27,10 @@
 //!   `board-init: writes=... polled_registers=... longest_poll_reads=...
 //!   terminated=... golden=...`.
 //! * `cargo xtask board-init`: the board image's init check alone.
+//! * `cargo xtask docs`: every `console` example in README.md and docs/
+//!   run and compared with the output the doc shows, and the figures they
+//!   regenerate compared with the committed ones ([`docs`]): `docs: N
+//!   commands checked, M stale` (`cargo xtask test` runs it after clippy).
 //! * `cargo xtask link-session`: the same session against `hopper-sim
 //!   serve` (the virtual robot), `link-sim: ...` (`cargo xtask test` runs
 //!   it after the QEMU runs).
@@ -36,6 +40,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, ExitCode, Stdio};
 
 mod board_init;
+mod docs;
 mod qemu;
 mod session;
 
@@ -72,8 +77,9 @@ fn main() -> ExitCode {
         Some("qemu") => setup(&root).and_then(|_| qemu::run(&root)),
         Some("link-session") => session::against_serve(&root),
         Some("board-init") => setup(&root).and_then(|_| board_init::run(&root)),
+        Some("docs") => docs_check(&root),
         _ => {
-            eprintln!("usage: cargo xtask <test|size|qemu|link-session|board-init>");
+            eprintln!("usage: cargo xtask <test|size|qemu|link-session|board-init|docs>");
             return ExitCode::from(2);
         }
     };
@@ -243,6 +249,7 @@ fn test(root: &Path) -> Result<(), String> {
             "warnings",
         ]),
     )?;
+    docs_check(root)?;
     mcu_clippy(
         root,
         "clippy (MCU target)",
@@ -305,6 +312,17 @@ fn test(root: &Path) -> Result<(), String> {
     qemu::run(root)?;
     session::against_serve(root)?;
     cargo_test(root)
+}
+
+/// The docs' examples against the release `hopper-sim` they name.
+fn docs_check(root: &Path) -> Result<(), String> {
+    let sim = build_executable(
+        root,
+        "hopper-sim release build (for the docs' examples)",
+        "hopper-sim",
+        cargo().args(["build", "--release", "-p", "hal-sim", "--bin", "hopper-sim"]),
+    )?;
+    docs::check(root, &sim)
 }
 
 /// `cargo clippy -p hopper-app --target MCU EXTRA -- -D warnings`.

@@ -1509,10 +1509,15 @@ fn cmd_run(a: RunArgs) -> Result<()> {
             let mut f = std::io::BufWriter::new(std::fs::File::create(&csv_path).map_err(io)?);
             run::write_csv(&result.samples, &mut f).map_err(io)?;
             std::io::Write::flush(&mut f).map_err(io)?;
-            hal_sim::plot::hop_plot(
+            hal_sim::plot::hop_plot_with_heat(
                 &result.samples,
                 &title,
                 s.target_apex_m,
+                s.thermal.map(|t| hal_sim::plot::HeatLevels {
+                    derate_c: t.derate_winding_c,
+                    trip_c: t.trip_winding_c,
+                    protect: t.protect,
+                }),
                 &staging.join("hop.png"),
             )?;
             Ok(vec!["trajectory.csv".into(), "hop.png".into()])
@@ -1560,7 +1565,12 @@ fn cmd_run(a: RunArgs) -> Result<()> {
             "  target apex        {t:.4} m, {}",
             match s.hops_to_converge {
                 Some(k) => format!("within 2% from hop {k} on"),
-                None => "not converged (within 2%)".to_string(),
+                None => match s.thermal.and_then(|t| t.first_derated_s) {
+                    Some(d) => format!(
+                        "not converged (within 2%); the motor's current limit derated from {d:.2} s (motor heat)"
+                    ),
+                    None => "not converged (within 2%)".to_string(),
+                },
             }
         );
     }
@@ -1580,6 +1590,9 @@ fn cmd_run(a: RunArgs) -> Result<()> {
             )
         }
     );
+    if let Some(t) = &s.thermal {
+        say!("  motor heat         {}", hal_sim::controller::heat_line(t));
+    }
     say!(
         "  steady apex        {}",
         fmt_opt(s.steady_apex_m, "m", 1.0)

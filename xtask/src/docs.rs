@@ -1,0 +1,320 @@
+//! The docs' examples, run and compared with what the docs print: a
+//! command shown with a figure beside it is a contract, so a change of model
+//! or default that moves the figure fails CI until the doc says the new one.
+//!
+//! Why examples in the docs rather than docs generated from runs: the pages
+//! explain their numbers in prose around the output, which a generator would
+//! have to own; a checked example keeps the prose where the author wrote it
+//! and pins the numbers it talks about. The format is `trycmd`'s (its
+//! matching is `snapbox`'s, used here): in README.md and docs/*.md every
+//! fenced block marked `console` is a session of `$ COMMAND` lines, each
+//! followed by the output it must print (stdout and stderr as one stream):
+//!
+//! * a line `...` stands for any number of lines (output not shown);
+//! * `[..]` within a line stands for any text (wall-clock times, speeds);
+//! * a command ends with a line ending in `\`'s continuation;
+//! * `cargo run --release -p hal-sim --bin hopper-sim -- ARGS` and
+//!   `hopper-sim ARGS` run the release `hopper-sim` just built, from the
+//!   workspace root, and must exit 0 unless the block says otherwise: a
+//!   `$ ` line whose output starts with `? failed` expects a failure.
+//!
+//! A block marked `text` or `sh` is not run: commands that need a robot,
+//! a board or minutes of time are shown that way. After the run the
+//! figures the examples regenerate in `docs/img/` must match the committed
+//! ones byte for byte (PNG drawing is deterministic for one font).
+//!
+//! The last line is `docs: N commands checked, M stale`.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+/// One example: where it is, the command, the output it must print.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Example {
+    /// `FILE:LINE` of its `$ ` line.
+    pub at: String,
+    /// The command as the doc shows it (continuations joined).
+    pub command: String,
+    /// The output the doc shows.
+    pub expected: String,
+    /// Whether the doc expects it to fail (`? failed`).
+    pub fails: bool,
+}
+
+/// Every `console` example in `text` (the file `name`).
+pub fn examples(name: &str, text: &str) -> Vec<Example> {
+    let mut out = Vec::new();
+    let mut in_console = false;
+    let mut in_other = false;
+    let mut current: Option<Example> = None;
+    let mut continuing = false;
+    let finish = |cur: &mut Option<Example>, out: &mut Vec<Example>| {
+        if let Some(mut e) = cur.take() {
+            if let Some(rest) = e.expected.strip_prefix("? failed\n") {
+                e.expected = rest.to_string();
+                e.fails = true;
+            }
+            out.push(e);
+        }
+    };
+    for (i, line) in text.lines().enumerate() {
+        let trimmed = line.trim_start();
+        if let Some(fence) = trimmed.strip_prefix("```") {
+            if in_console {
+                finish(&mut current, &mut out);
+                in_console = false;
+            } else if in_other {
+                in_other = false;
+            } else if fence.trim() == "console" {
+                in_console = true;
+            } else {
+                in_other = true;
+            }
+            continuing = false;
+            continue;
+        }
+        if !in_console {
+            continue;
+        }
+        if continuing {
+            if let Some(e) = current.as_mut() {
+                let part = line.trim();
+                continuing = part.ends_with('\\');
+                e.command.push(' ');
+                e.command.push_str(part.trim_end_matches('\\').trim());
+            }
+            continue;
+        }
+        if let Some(cmd) = line.strip_prefix("$ ") {
+            finish(&mut current, &mut out);
+            continuing = cmd.trim_end().ends_with('\\');
+            current = Some(Example {
+                at: format!("{name}:{}", i + 1),
+                command: cmd.trim_end().trim_end_matches('\\').trim().to_string(),
+                expected: String::new(),
+                fails: false,
+            });
+        } else if let Some(e) = current.as_mut() {
+            e.expected.push_str(line);
+            e.expected.push('\n');
+        }
+    }
+    out
+}
+
+/// The arguments of `command` for the `hopper-sim` binary, or why it is
+/// not a command this check runs.
+fn hopper_sim_args(command: &str) -> Result<Vec<String>, String> {
+    let words = shell_words(command)?;
+    let prefix: &[&str] = &[
+        "cargo",
+        "run",
+        "--release",
+        "-p",
+        "hal-sim",
+        "--bin",
+        "hopper-sim",
+        "--",
+    ];
+    if words.len() >= prefix.len() && words.iter().zip(prefix).all(|(w, p)| w == p) {
+        return Ok(words[prefix.len()..].to_vec());
+    }
+    if words.first().map(String::as_str) == Some("hopper-sim") {
+        return Ok(words[1..].to_vec());
+    }
+    Err(format!(
+        "`{command}`: a console example runs `hopper-sim` (or its `cargo run --release -p hal-sim --bin hopper-sim --` form); show other commands in a `sh` or `text` block"
+    ))
+}
+
+/// Splits `s` into words as a POSIX shell would for the quoting docs use:
+/// single and double quotes, no expansions.
+fn shell_words(s: &str) -> Result<Vec<String>, String> {
+    let mut words = Vec::new();
+    let mut word = String::new();
+    let mut in_word = false;
+    let mut quote: Option<char> = None;
+    for c in s.chars() {
+        match (quote, c) {
+            (Some(q), c) if c == q => quote = None,
+            (Some(_), c) => word.push(c),
+            (None, '\'' | '"') => {
+                quote = Some(c);
+                in_word = true;
+            }
+            (None, c) if c.is_whitespace() => {
+                if in_word {
+                    words.push(std::mem::take(&mut word));
+                    in_word = false;
+                }
+            }
+            (None, '|' | '>' | '<' | '&' | ';' | '$' | '`') => {
+                return Err(format!(
+                    "`{s}`: shell syntax `{c}` is not run by the docs check"
+                ));
+            }
+            (None, c) => {
+                word.push(c);
+                in_word = true;
+            }
+        }
+    }
+    if quote.is_some() {
+        return Err(format!("`{s}`: unterminated quote"));
+    }
+    if in_word {
+        words.push(word);
+    }
+    Ok(words)
+}
+
+/// The markdown files whose examples are checked: README.md and docs/*.md.
+fn doc_files(root: &Path) -> Result<Vec<PathBuf>, String> {
+    let mut files = vec![root.join("README.md")];
+    let dir = root.join("docs");
+    let mut pages: Vec<PathBuf> = std::fs::read_dir(&dir)
+        .map_err(|e| format!("{}: {e}", dir.display()))?
+        .filter_map(Result::ok)
+        .map(|e| e.path())
+        .filter(|p| p.extension().is_some_and(|x| x == "md"))
+        .collect();
+    pages.sort();
+    files.extend(pages);
+    Ok(files)
+}
+
+/// Runs every example against `sim` (the release `hopper-sim`) from
+/// `root`, then checks the figures they wrote into `docs/img` are the
+/// committed ones. Prints `docs: N commands checked, M stale`.
+pub fn check(root: &Path, sim: &Path) -> Result<(), String> {
+    let started = std::time::Instant::now();
+    let mut all = Vec::new();
+    for file in doc_files(root)? {
+        let text =
+            std::fs::read_to_string(&file).map_err(|e| format!("{}: {e}", file.display()))?;
+        let name = file
+            .strip_prefix(root)
+            .unwrap_or(&file)
+            .display()
+            .to_string();
+        all.extend(examples(&name, &text));
+    }
+    let assert = snapbox::Assert::new();
+    let mut stale = Vec::new();
+    for e in &all {
+        let args = hopper_sim_args(&e.command)?;
+        let t0 = std::time::Instant::now();
+        let out = Command::new(sim)
+            .args(&args)
+            .current_dir(root)
+            .env("NO_COLOR", "1")
+            .output()
+            .map_err(|err| format!("{}: cannot run {}: {err}", e.at, sim.display()))?;
+        let mut actual = String::from_utf8_lossy(&out.stdout).into_owned();
+        actual.push_str(&String::from_utf8_lossy(&out.stderr));
+        let status_ok = out.status.success() != e.fails;
+        let matched = assert.try_eq(
+            None,
+            snapbox::Data::text(actual.clone()),
+            snapbox::Data::text(e.expected.clone()),
+        );
+        let secs = t0.elapsed().as_secs_f64();
+        match (status_ok, matched) {
+            (true, Ok(())) => eprintln!("docs: ok    {} ({secs:.1} s) {}", e.at, e.command),
+            (ok, m) => {
+                eprintln!("docs: STALE {} {}", e.at, e.command);
+                if !ok {
+                    eprintln!(
+                        "      exit status {} (the doc expects {})",
+                        out.status,
+                        if e.fails { "a failure" } else { "success" }
+                    );
+                }
+                if let Err(diff) = m {
+                    eprintln!("{diff}");
+                }
+                eprintln!("      it printed:\n{actual}");
+                stale.push(e.at.clone());
+            }
+        }
+    }
+    // Figures the examples regenerated into the docs must be the
+    // committed ones.
+    let diff = Command::new("git")
+        .args(["status", "--porcelain", "--", "docs/img"])
+        .current_dir(root)
+        .output()
+        .map_err(|e| format!("git status: {e}"))?;
+    let changed = String::from_utf8_lossy(&diff.stdout).into_owned();
+    for line in changed.lines() {
+        eprintln!(
+            "docs: STALE figure {line} (an example regenerated it differently: commit the new one)"
+        );
+        stale.push(line.to_string());
+    }
+    crate::took("docs check", started);
+    println!(
+        "docs: {} commands checked, {} stale",
+        all.len(),
+        stale.len()
+    );
+    if stale.is_empty() {
+        Ok(())
+    } else {
+        Err(format!(
+            "{} stale doc example(s): {}",
+            stale.len(),
+            stale.join(", ")
+        ))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn examples_are_console_blocks_with_continuations() {
+        let md = "text\n```console\n$ hopper-sim run \\\n    --ledger\nline 1\n...\n$ hopper-sim bad\n? failed\nerror\n```\n```sh\n$ hopper-sim not-run\n```\n";
+        let ex = examples("X.md", md);
+        assert_eq!(ex.len(), 2);
+        assert_eq!(ex[0].at, "X.md:3");
+        assert_eq!(ex[0].command, "hopper-sim run --ledger");
+        assert_eq!(ex[0].expected, "line 1\n...\n");
+        assert!(!ex[0].fails);
+        assert_eq!(ex[1].command, "hopper-sim bad");
+        assert_eq!(ex[1].expected, "error\n");
+        assert!(ex[1].fails);
+    }
+
+    #[test]
+    fn commands_map_to_hopper_sim_or_are_refused() {
+        let a =
+            hopper_sim_args("cargo run --release -p hal-sim --bin hopper-sim -- run --set 'a b=1'");
+        assert_eq!(a, Ok(vec!["run".into(), "--set".into(), "a b=1".into()]));
+        assert_eq!(
+            hopper_sim_args("hopper-sim figures"),
+            Ok(vec!["figures".to_string()])
+        );
+        assert!(hopper_sim_args("hopper-link status").is_err());
+        assert!(hopper_sim_args("hopper-sim run | head").is_err());
+    }
+
+    #[test]
+    fn elisions_match_and_figures_do_not() {
+        let a = snapbox::Assert::new();
+        let expected = "a [..] s\n...\nz 0.150\n";
+        let ok = a.try_eq(
+            None,
+            snapbox::Data::text("a 1.23 s\nb\nc\nz 0.150\n"),
+            snapbox::Data::text(expected),
+        );
+        assert!(ok.is_ok());
+        let stale = a.try_eq(
+            None,
+            snapbox::Data::text("a 1.23 s\nz 0.151\n"),
+            snapbox::Data::text(expected),
+        );
+        assert!(stale.is_err());
+    }
+}
