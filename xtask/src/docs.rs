@@ -185,11 +185,16 @@ fn doc_files(root: &Path) -> Result<Vec<PathBuf>, String> {
 
 /// Runs every example against `sim` (the release `hopper-sim`) from
 /// `root`, then checks the figures they wrote into `docs/img` are the
-/// committed ones. Prints `docs: N commands checked, M stale`.
-pub fn check(root: &Path, sim: &Path) -> Result<(), String> {
+/// committed ones. Prints `docs: N commands checked, M stale`. `only`
+/// (paths from the root) limits the examples to those files.
+pub fn check(root: &Path, sim: &Path, only: &[String]) -> Result<(), String> {
     let started = std::time::Instant::now();
     let mut all = Vec::new();
-    for file in doc_files(root)? {
+    let files: Vec<PathBuf> = match only {
+        [] => doc_files(root)?,
+        some => some.iter().map(|f| root.join(f)).collect(),
+    };
+    for file in files {
         let text =
             std::fs::read_to_string(&file).map_err(|e| format!("{}: {e}", file.display()))?;
         let name = file

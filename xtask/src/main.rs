@@ -30,7 +30,8 @@
 //! * `cargo xtask docs`: every `console` example in README.md and docs/
 //!   run and compared with the output the doc shows, and the figures they
 //!   regenerate compared with the committed ones ([`docs`]): `docs: N
-//!   commands checked, M stale` (`cargo xtask test` runs it after clippy).
+//!   commands checked, M stale` (`cargo xtask test` runs it after clippy;
+//!   `cargo xtask docs FILE.md...` checks only those files).
 //! * `cargo xtask link-session`: the same session against `hopper-sim
 //!   serve` (the virtual robot), `link-sim: ...` (`cargo xtask test` runs
 //!   it after the QEMU runs).
@@ -77,7 +78,7 @@ fn main() -> ExitCode {
         Some("qemu") => setup(&root).and_then(|_| qemu::run(&root)),
         Some("link-session") => session::against_serve(&root),
         Some("board-init") => setup(&root).and_then(|_| board_init::run(&root)),
-        Some("docs") => docs_check(&root),
+        Some("docs") => docs_check(&root, &args[1..]),
         _ => {
             eprintln!("usage: cargo xtask <test|size|qemu|link-session|board-init|docs>");
             return ExitCode::from(2);
@@ -249,7 +250,7 @@ fn test(root: &Path) -> Result<(), String> {
             "warnings",
         ]),
     )?;
-    docs_check(root)?;
+    docs_check(root, &[])?;
     mcu_clippy(
         root,
         "clippy (MCU target)",
@@ -314,15 +315,16 @@ fn test(root: &Path) -> Result<(), String> {
     cargo_test(root)
 }
 
-/// The docs' examples against the release `hopper-sim` they name.
-fn docs_check(root: &Path) -> Result<(), String> {
+/// The docs' examples against the release `hopper-sim` they name; `only`
+/// (markdown paths from the root) limits the check to those files.
+fn docs_check(root: &Path, only: &[String]) -> Result<(), String> {
     let sim = build_executable(
         root,
         "hopper-sim release build (for the docs' examples)",
         "hopper-sim",
         cargo().args(["build", "--release", "-p", "hal-sim", "--bin", "hopper-sim"]),
     )?;
-    docs::check(root, &sim)
+    docs::check(root, &sim, only)
 }
 
 /// `cargo clippy -p hopper-app --target MCU EXTRA -- -D warnings`.
