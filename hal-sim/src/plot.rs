@@ -42,7 +42,7 @@ where
 
 /// Load a system font once and register it as "sans-serif" for plotters'
 /// pure-Rust text renderer (no fontconfig needed at build time).
-pub(crate) fn ensure_font() -> Result<(), String> {
+pub fn ensure_font() -> Result<(), String> {
     static FONT: OnceLock<Result<(), String>> = OnceLock::new();
     FONT.get_or_init(|| {
         let env = std::env::var("HOPPER_SIM_FONT").ok();
@@ -105,28 +105,40 @@ pub struct HeatLevels {
     pub protect: bool,
 }
 
-/// One entry of a legend drawn beside a chart: its label, colour and
-/// whether its line is dashed.
-type LegendEntry = (String, RGBColor, bool);
+/// How a legend entry beside a chart is drawn.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum LegendKey {
+    /// A solid line of this colour.
+    Line(RGBColor),
+    /// A dashed line.
+    Dashed(RGBColor),
+    /// A filled box (a shaded span).
+    Fill(RGBColor),
+}
 
 /// Width of the legend column right of each hop plot panel, px.
 const SIDE_LEGEND_PX: u32 = 190;
 
-/// Draws `entries` as a legend in `area` (a column beside the chart, so the
-/// legend never covers data).
-fn side_legend<DB: DrawingBackend>(
+/// Draws `entries` as a legend in `area`, a column beside a chart, so the
+/// legend never covers data.
+pub fn side_legend<DB: DrawingBackend>(
     area: &DrawingArea<DB, plotters::coord::Shift>,
-    entries: &[LegendEntry],
+    entries: &[(String, LegendKey)],
 ) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
     let style = ("sans-serif", 14).into_font().color(&BLACK);
-    for (k, (label, colour, dashed)) in entries.iter().enumerate() {
+    for (k, (label, key)) in entries.iter().enumerate() {
         let y = 40 + 22 * k as i32;
-        let stroke = colour.stroke_width(2);
-        if *dashed {
-            area.draw(&PathElement::new(vec![(4, y), (12, y)], stroke))?;
-            area.draw(&PathElement::new(vec![(18, y), (26, y)], stroke))?;
-        } else {
-            area.draw(&PathElement::new(vec![(4, y), (26, y)], stroke))?;
+        match key {
+            LegendKey::Line(c) => {
+                area.draw(&PathElement::new(vec![(4, y), (26, y)], c.stroke_width(2)))?
+            }
+            LegendKey::Dashed(c) => {
+                area.draw(&PathElement::new(vec![(4, y), (12, y)], c.stroke_width(2)))?;
+                area.draw(&PathElement::new(vec![(18, y), (26, y)], c.stroke_width(2)))?;
+            }
+            LegendKey::Fill(c) => {
+                area.draw(&Rectangle::new([(4, y - 6), (26, y + 6)], c.filled()))?
+            }
         }
         area.draw(&Text::new(label.clone(), (32, y - 8), style.clone()))?;
     }
@@ -184,7 +196,7 @@ pub fn hop_plot_with_heat(
             body.split_evenly((n, 1)).iter().zip(panels).enumerate()
         {
             let (area, key) = area.split_horizontally(1100 - SIDE_LEGEND_PX);
-            let mut entries: Vec<LegendEntry> = vec![(ylabel.to_string(), BLUE, false)];
+            let mut entries = vec![(ylabel.to_string(), LegendKey::Line(BLUE))];
             // Horizontal reference lines: (value, label, colour).
             let mut levels: Vec<(f64, String, RGBColor)> = Vec::new();
             if let Some(t) = target_apex_m.filter(|_| k == 0) {
@@ -227,7 +239,7 @@ pub fn hop_plot_with_heat(
                     6,
                     colour.stroke_width(2),
                 ))?;
-                entries.push((label, colour, true));
+                entries.push((label, LegendKey::Dashed(colour)));
             }
             side_legend(&key, &entries)?;
         }

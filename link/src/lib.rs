@@ -56,6 +56,20 @@ impl std::fmt::Display for Target {
     }
 }
 
+/// What [`Client::connect`]'s errors carry when the address itself is
+/// wrong or leads nowhere (it does not resolve, no such serial device,
+/// nobody listening there): a caller can then say how to give another.
+#[derive(Debug)]
+pub struct BadAddress(pub String);
+
+impl std::fmt::Display for BadAddress {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl std::error::Error for BadAddress {}
+
 type Writer = Arc<Mutex<Box<dyn Write + Send>>>;
 
 /// A connected robot.
@@ -93,13 +107,14 @@ impl Client {
         let (reader, writer): (Box<dyn Read + Send>, Box<dyn Write + Send>) = match target {
             Target::Tcp(addr) => {
                 use std::net::ToSocketAddrs;
+                let bad = |why: String| anyhow::Error::new(BadAddress(why));
                 let sock = addr
                     .to_socket_addrs()
-                    .with_context(|| format!("cannot resolve {addr}"))?
+                    .map_err(|e| bad(format!("cannot resolve {addr} as HOST:PORT: {e}")))?
                     .next()
-                    .ok_or_else(|| anyhow!("cannot resolve {addr}"))?;
-                let s = TcpStream::connect_timeout(&sock, CONNECT_TIMEOUT).with_context(|| {
-                    format!("cannot connect to {addr}: is `hopper-sim serve` or the QEMU image running?")
+                    .ok_or_else(|| bad(format!("cannot resolve {addr} as HOST:PORT")))?;
+                let s = TcpStream::connect_timeout(&sock, CONNECT_TIMEOUT).map_err(|e| {
+                    bad(format!("cannot connect to {addr}: is `hopper-sim serve` or the QEMU image running?: {e}"))
                 })?;
                 let _ = s.set_nodelay(true);
                 s.set_read_timeout(Some(Duration::from_millis(50)))?;
@@ -109,7 +124,11 @@ impl Client {
                 let p = serialport::new(port, *baud)
                     .timeout(Duration::from_millis(50))
                     .open()
-                    .with_context(|| format!("cannot open serial port {port}"))?;
+                    .map_err(|e| {
+                        anyhow::Error::new(BadAddress(format!(
+                            "cannot open serial port {port}: {e}"
+                        )))
+                    })?;
                 (Box::new(p.try_clone()?), Box::new(p))
             }
         };

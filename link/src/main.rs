@@ -21,18 +21,16 @@ use std::time::{Duration, Instant};
     version,
     about = "Operate the hopper over its link: status, parameters, arming, recording, watch, dump"
 )]
+// One group for the robot's address, so that clap's errors about it (none
+// given, both given) name both ways of giving it.
+#[command(group(clap::ArgGroup::new("robot").args(["tcp", "serial"]).required(true)))]
 struct Cli {
     /// The robot on a TCP address (QEMU's -serial tcp:, `hopper-sim serve`).
-    #[arg(
-        long,
-        value_name = "HOST:PORT",
-        conflicts_with = "serial",
-        required_unless_present = "serial"
-    )]
+    #[arg(long, value_name = "HOST:PORT", value_parser = clap::builder::NonEmptyStringValueParser::new())]
     tcp: Option<String>,
     /// The robot on a serial port (the board's USART1 through a USB-UART
     /// adapter, e.g. /dev/ttyUSB0).
-    #[arg(long, value_name = "PORT")]
+    #[arg(long, value_name = "PORT", value_parser = clap::builder::NonEmptyStringValueParser::new())]
     serial: Option<String>,
     /// Baud rate of --serial (the firmware's USART1 runs at 921,600).
     #[arg(long, default_value_t = 921_600)]
@@ -52,7 +50,9 @@ enum Cmd {
     },
     /// Enable the amplifier and run the selected controller (refused with
     /// the reason unless no fault is latched, the e-stop is released, the
-    /// nut is home and the robot is still). The link must stay up: use it
+    /// nut is home and the robot is still, and homed and tared since boot
+    /// where `arming.require_home` and `arming.require_tare` are set:
+    /// `status` says what this robot needs). The link must stay up: use it
     /// inside `shell`, or the robot disarms 0.2 s after this command exits.
     Arm {
         /// Ask again until accepted or this many wall seconds passed (e.g.
@@ -184,10 +184,37 @@ struct ShellLine {
     cmd: Cmd,
 }
 
+/// How to give the robot's address: every error about a missing or bad
+/// address ends with it.
+const ADDRESS_HELP: &str =
+    "the robot's address is --tcp HOST:PORT (`hopper-sim serve`, the QEMU image) or --serial PORT (the board, e.g. /dev/ttyUSB0), given before the command";
+
+/// `e` with [`ADDRESS_HELP`] as a tip when it is about `--tcp` or
+/// `--serial` (missing, both given, no value, or given after the command).
+fn with_address_tip(mut e: clap::Error) -> clap::Error {
+    use clap::error::{ContextKind, ContextValue};
+    let about_address = e.context().any(|(kind, value)| {
+        matches!(kind, ContextKind::InvalidArg | ContextKind::PriorArg) && {
+            let v = value.to_string();
+            v.contains("--tcp") || v.contains("--serial")
+        }
+    });
+    if about_address {
+        let mut tips = match e.get(ContextKind::Suggested) {
+            Some(ContextValue::StyledStrs(t)) => t.clone(),
+            _ => Vec::new(),
+        };
+        tips.push(ADDRESS_HELP.into());
+        e.insert(ContextKind::Suggested, ContextValue::StyledStrs(tips));
+    }
+    e
+}
+
 fn main() {
     let cli = match Cli::try_parse() {
         Ok(c) => c,
         Err(e) => {
+            let e = with_address_tip(e);
             let _ = e.print();
             std::process::exit(if e.use_stderr() { 2 } else { 0 });
         }
@@ -195,15 +222,24 @@ fn main() {
     let target = match (&cli.tcp, &cli.serial) {
         (Some(a), _) => Target::Tcp(a.clone()),
         (None, Some(p)) => Target::Serial(p.clone(), cli.baud),
+        // The argument group requires one; kept as a clear error anyway.
         (None, None) => {
-            eprintln!("hopper-link: error: give --tcp HOST:PORT or --serial PORT");
+            eprintln!("hopper-link: error: no robot address: {ADDRESS_HELP}");
             std::process::exit(2);
         }
     };
-    let result = Client::connect(&target).and_then(|mut c| match cli.cmd {
-        Cmd::Shell => shell(&mut c),
-        cmd => run(&mut c, &cmd),
-    });
+    let result = Client::connect(&target)
+        .map_err(|e| {
+            if e.chain().any(|c| c.is::<hopper_link::BadAddress>()) {
+                anyhow!("{e:#}; {ADDRESS_HELP}")
+            } else {
+                e
+            }
+        })
+        .and_then(|mut c| match cli.cmd {
+            Cmd::Shell => shell(&mut c),
+            cmd => run(&mut c, &cmd),
+        });
     if let Err(e) = result {
         eprintln!("hopper-link: error: {e:#}");
         std::process::exit(1);
@@ -255,7 +291,13 @@ fn run(c: &mut Client, cmd: &Cmd) -> Result<()> {
         Cmd::Params { cmd } => match cmd {
             ParamsCmd::List => params_list(c),
             ParamsCmd::Get { name } => {
-                let v = get(c, name)?;
+                let v = match read_param(c, name)? {
+                    Ok(v) => v,
+                    Err(why) => match inactive_hint(c, name) {
+                        Some(hint) => bail!("get {name}: {hint}"),
+                        None => bail!("get {name}: {why}"),
+                    },
+                };
                 println!("{name} = {}", shown(name, v));
                 Ok(())
             }
@@ -270,10 +312,16 @@ fn run(c: &mut Client, cmd: &Cmd) -> Result<()> {
                         println!("{name} = {} (set)", shown(name, now));
                         Ok(())
                     }
-                    Response::Refused(why) => {
-                        let now = get(c, name).map(|v| shown(name, v)).unwrap_or_default();
-                        bail!("set {name} = {value} refused: {why} (unchanged: {now})")
-                    }
+                    Response::Refused(why) => match read_param(c, name)? {
+                        Ok(now) => bail!(
+                            "set {name} = {value} refused: {why} (unchanged: {})",
+                            shown(name, now)
+                        ),
+                        Err(_) => match inactive_hint(c, name) {
+                            Some(hint) => bail!("set {name} = {value} refused: {why} ({hint})"),
+                            None => bail!("set {name} = {value} refused: {why}"),
+                        },
+                    },
                     r => bail!("unexpected answer {r:?}"),
                 }
             }
@@ -404,12 +452,41 @@ fn shown(name: &str, v: f32) -> String {
     }
 }
 
+/// For a parameter of the table that the robot's configuration lacks
+/// (another controller's, which the robot refuses to read or set): why,
+/// its default, and the command(s) that make it active.
+fn inactive_hint(c: &mut Client, name: &str) -> Option<String> {
+    let p = params::find(name)?;
+    names::owner(name)?;
+    let selected = selected_controller(c);
+    let steps: Vec<String> = names::activation(name, selected)
+        .iter()
+        .map(|s| format!("`{s}`"))
+        .collect();
+    let mut hint = format!(
+        "{}; default {}",
+        names::inactive_reason(name, selected),
+        shown(name, p.default)
+    );
+    if !steps.is_empty() {
+        hint += &format!("; activate it with {}", steps.join(" then "));
+    }
+    Some(hint)
+}
+
 fn get(c: &mut Client, name: &str) -> Result<f32> {
+    read_param(c, name)?.map_err(|why| anyhow!("get {name}: {why}"))
+}
+
+/// A parameter's value, or the robot's reason for refusing to read it (a
+/// name it does not know, or one its configuration lacks); `Err` only when
+/// the link failed.
+fn read_param(c: &mut Client, name: &str) -> Result<std::result::Result<f32, String>> {
     match c.request(Request::ParamGet {
         name: wire_name(name)?,
     })? {
-        Response::Value(v) => Ok(v),
-        Response::Refused(why) => bail!("get {name}: {why}"),
+        Response::Value(v) => Ok(Ok(v)),
+        Response::Refused(why) => Ok(Err(why.to_string())),
         r => bail!("unexpected answer {r:?}"),
     }
 }
@@ -577,14 +654,20 @@ fn stored_of(c: &mut Client) -> Result<hopper_protocol::StoredInfo> {
     }
 }
 
-/// The saved calibration's state in words.
-fn stored_line(s: &hopper_protocol::StoredInfo) -> String {
+/// The saved calibration's state in words; `require_tare`: whether the
+/// robot's arming waits for a tare (`arming.require_tare`; `None`: unknown).
+fn stored_line(s: &hopper_protocol::StoredInfo, require_tare: Option<bool>) -> String {
+    let defaults = match require_tare {
+        Some(true) => "the defaults (tare before arming: arming.require_tare is 1)",
+        Some(false) => "the defaults",
+        None => "the defaults (tare before arming if arming.require_tare is 1)",
+    };
     let boot = match s.boot {
         0 => "no flash store on this robot".to_string(),
-        1 => "nothing saved: the defaults (tare before arming)".to_string(),
+        1 => format!("nothing saved: {defaults}"),
         2 => format!("loaded from flash at boot ({} parameters)", s.entries),
         _ => format!(
-            "the saved record was refused at boot ({}): the defaults (tare before arming)",
+            "the saved record was refused at boot ({}): {defaults}",
             hopper_control::persist::LoadError::name_of(s.boot_error).unwrap_or("unknown")
         ),
     };
@@ -623,8 +706,88 @@ fn save(c: &mut Client) -> Result<()> {
                 println!("saved: the robot restarts to write its flash (home it again after)");
                 return Ok(());
             }
-            _ => bail!("save failed: {}", stored_line(&s)),
+            _ => {
+                let require_tare = flag(c, "arming.require_tare");
+                bail!("save failed: {}", stored_line(&s, require_tare))
+            }
         }
+    }
+}
+
+/// A flag parameter, if the robot has it.
+fn flag(c: &mut Client, name: &str) -> Option<bool> {
+    get(c, name).ok().map(|v| v != 0.0)
+}
+
+/// The `arming.*` parameters of the robot that decide what arming needs
+/// (`None`: the robot did not say; its firmware may lack the parameter).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+struct ArmingParams {
+    link_timeout_s: Option<f32>,
+    untethered: Option<bool>,
+    home_tolerance_m: Option<f32>,
+    still_velocity_mps: Option<f32>,
+    require_tare: Option<bool>,
+    require_home: Option<bool>,
+}
+
+impl ArmingParams {
+    fn read(c: &mut Client) -> Self {
+        Self {
+            link_timeout_s: get(c, "arming.link_timeout_s").ok(),
+            untethered: flag(c, "arming.untethered"),
+            home_tolerance_m: get(c, "arming.home_tolerance_m").ok(),
+            still_velocity_mps: get(c, "arming.still_velocity_mps").ok(),
+            require_tare: flag(c, "arming.require_tare"),
+            require_home: flag(c, "arming.require_home"),
+        }
+    }
+
+    /// What an arm request needs on this robot, in the order the robot
+    /// checks (`arming::Arming::refusal`), the boot checks aside (the
+    /// `boot:` and `crystal:` lines say when those refuse).
+    fn requirements(&self) -> String {
+        let mut needs = vec![
+            "no latched fault".to_string(),
+            "the e-stop released".to_string(),
+            "no bring-up routine running".to_string(),
+        ];
+        let mut not = Vec::new();
+        match self.require_home {
+            Some(true) => needs.push(
+                "the nut homed since boot (`calibrate direction`, `calibrate home`; arming.require_home is 1)"
+                    .to_string(),
+            ),
+            Some(false) => not.push("homing (arming.require_home is 0)"),
+            None => {}
+        }
+        match self.require_tare {
+            Some(true) => needs.push(
+                "a tare since boot or a saved calibration loaded at boot (`calibrate tare`; arming.require_tare is 1)"
+                    .to_string(),
+            ),
+            Some(false) => not.push("a tare (arming.require_tare is 0)"),
+            None => {}
+        }
+        match (self.untethered, self.link_timeout_s) {
+            (Some(true), _) => not.push("the link (arming.untethered is 1)"),
+            (_, Some(t)) => needs.push(format!("the link up (a frame from the host within {t} s)")),
+            (_, None) => needs.push("the link up".to_string()),
+        }
+        needs.push("plausible sensors".to_string());
+        needs.push(match self.home_tolerance_m {
+            Some(m) => format!("the nut within {} mm of its upper stop", m * 1000.0),
+            None => "the nut at its upper stop".to_string(),
+        });
+        needs.push(match self.still_velocity_mps {
+            Some(v) => format!("nut and body slower than {v} m/s"),
+            None => "nut and body still".to_string(),
+        });
+        let mut line = format!("needs {}", needs.join(", "));
+        if !not.is_empty() {
+            line += &format!("; not required: {}", not.join(", "));
+        }
+        line
     }
 }
 
@@ -750,7 +913,12 @@ fn status(c: &mut Client) -> Result<()> {
         ),
         r => bail!("unexpected answer {r:?}"),
     }
-    println!("calibration: {}", stored_line(&stored_of(c)?));
+    let arming = ArmingParams::read(c);
+    println!(
+        "calibration: {}",
+        stored_line(&stored_of(c)?, arming.require_tare)
+    );
+    println!("arming: {}", arming.requirements());
     let m = thermal_of(c)?;
     println!(
         "motor (estimated): winding {:.1} C, housing {:.1} C; current limit {:.0}% (derates from {:.0} C, trips at {:.0} C{})",
@@ -773,35 +941,68 @@ fn params_list(c: &mut Client) -> Result<()> {
         Response::ParamCount(n) => n,
         r => bail!("unexpected answer {r:?}"),
     };
+    let selected = selected_controller(c);
     println!(
         "{:<42} {:>14} {:<8} {:>25} {:>12}  armed",
         "name", "value", "unit", "range", "default"
     );
+    let mut inactive = 0;
     for index in 0..n {
         match c.request(Request::ParamInfo { index })? {
             Response::ParamInfo(p) => {
-                let value = match params::find(&p.name).map(|x| x.kind) {
-                    Some(Kind::Choice(names)) => names
-                        .get(p.value as usize)
-                        .map_or(format!("{}", p.value), |s| (*s).to_string()),
-                    _ => format!("{}", p.value),
-                };
-                println!(
-                    "{:<42} {:>14} {:<8} {:>25} {:>12}  {}",
-                    p.name.as_str(),
-                    value,
-                    p.unit.as_str(),
-                    format!("{} ..= {}", p.min, p.max),
-                    p.default,
-                    if p.live { "settable" } else { "-" }
-                );
+                inactive += usize::from(p.value.is_nan());
+                println!("{}", param_row(&p, selected));
             }
             Response::Refused(why) => bail!("parameter {index}: {why}"),
             r => bail!("unexpected answer {r:?}"),
         }
     }
-    println!("{n} parameters");
+    if inactive > 0 {
+        println!(
+            "{n} parameters; {inactive} inactive (not used by the selected controller{}: shown at their defaults)",
+            selected
+                .and_then(|i| params::CONTROLLER_NAMES.get(i))
+                .map_or(String::new(), |c| format!(", {c}"))
+        );
+    } else {
+        println!("{n} parameters");
+    }
     Ok(())
+}
+
+/// The selected controller's index, if the robot says.
+fn selected_controller(c: &mut Client) -> Option<usize> {
+    get(c, params::CONTROLLER.name)
+        .ok()
+        .filter(|v| *v >= 0.0)
+        .map(|v| v as usize)
+}
+
+/// One row of `params list`. The robot reports no value (NaN) for a
+/// parameter its configuration lacks (another controller's): the row shows
+/// the default, which selecting that controller starts it from, and says
+/// what would make it active.
+fn param_row(p: &hopper_protocol::ParamInfo, selected: Option<usize>) -> String {
+    let name = p.name.as_str();
+    let (value, note) = if p.value.is_nan() {
+        (
+            p.default,
+            format!("  ({})", names::inactive_reason(name, selected)),
+        )
+    } else {
+        (p.value, String::new())
+    };
+    format!(
+        "{:<42} {:>14} {:<8} {:>25} {:>12}  {:<8}{note}",
+        name,
+        names::param_value(name, value),
+        p.unit.as_str(),
+        format!("{} ..= {}", p.min, p.max),
+        names::param_value(name, p.default),
+        if p.live { "settable" } else { "-" }
+    )
+    .trim_end()
+    .to_string()
 }
 
 fn disarm(c: &mut Client) -> Result<()> {
@@ -1026,14 +1227,20 @@ fn dump(c: &mut Client, out: &std::path::Path) -> Result<()> {
         rec.t0_step = Some(info.fault_step);
     }
     let title = if info.frozen {
+        // The faults of the first period after the fault's: what latched.
+        let latched = rec
+            .records
+            .iter()
+            .find(|r| r.step.wrapping_sub(info.fault_step) as i32 >= 0 && r.faults != 0)
+            .map_or_else(String::new, |r| format!(" ({})", names::faults(r.faults)));
         format!(
-            "capture frozen by a fault at step {} (t = 0 s there)",
+            "capture around the fault{latched} at step {} (t = 0 there)",
             info.fault_step
         )
     } else {
         "capture of the latest periods (no fault)".to_string()
     };
-    let written = rec.write(out, ("capture.csv", "capture.png"), false, &title, None)?;
+    let written = rec.write_capture(out, &title)?;
     let span_ms = rec.records.len() as f64 * rec.period_s * 1000.0;
     if info.frozen {
         println!(
@@ -1100,4 +1307,166 @@ fn silence(c: &mut Client, max_s: f64) -> Result<()> {
         bail!("disarmed for another reason: {:?}", reason);
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use hopper_protocol::ParamInfo;
+
+    fn info(name: &str, value: f32, default: f32) -> ParamInfo {
+        let p = params::find(name).unwrap_or_else(|| panic!("{name}"));
+        let mut n = Name::new();
+        n.push_str(name).unwrap();
+        ParamInfo {
+            name: n,
+            unit: p.unit.try_into().unwrap(),
+            min: p.min,
+            max: p.max,
+            default,
+            value,
+            live: false,
+        }
+    }
+
+    fn index(controller: &str) -> Option<usize> {
+        params::CONTROLLER_NAMES
+            .iter()
+            .position(|c| *c == controller)
+    }
+
+    #[test]
+    fn an_inactive_parameter_shows_its_default_and_why() {
+        let row = param_row(
+            &info("energy.gain_nm_per_j", f32::NAN, 0.2),
+            index("shaped"),
+        );
+        assert!(!row.contains("NaN"), "{row}");
+        let cells: Vec<&str> = row.split_whitespace().collect();
+        assert_eq!(cells[..2], ["energy.gain_nm_per_j", "0.2"], "{row}");
+        assert!(
+            row.ends_with("(inactive: controller energy not selected)"),
+            "{row}"
+        );
+        // The parameter table's row filter (` ..= `) still finds it.
+        assert!(row.contains("0 ..= 100"), "{row}");
+    }
+
+    #[test]
+    fn an_inactive_choice_is_not_shown_as_its_first_name() {
+        // NaN cast to an index is 0: it used to read `fixed`.
+        let row = param_row(&info("step_closed.gain", f32::NAN, 0.0), index("shaped"));
+        assert!(
+            row.ends_with("(inactive: controller step-closed not selected)"),
+            "{row}"
+        );
+    }
+
+    #[test]
+    fn choices_show_by_name_value_and_default() {
+        let row = param_row(&info("controller", 8.0, 5.0), index("shaped"));
+        let cells: Vec<&str> = row.split_whitespace().collect();
+        assert_eq!(cells[1], "shaped", "{row}");
+        assert!(row.contains(" energy-apex "), "{row}");
+        assert!(!row.contains("inactive"), "{row}");
+    }
+
+    #[test]
+    fn arming_requirements_follow_the_robots_parameters() {
+        let mut a = ArmingParams {
+            link_timeout_s: Some(0.2),
+            untethered: Some(false),
+            home_tolerance_m: Some(0.001),
+            still_velocity_mps: Some(0.05),
+            require_tare: Some(false),
+            require_home: Some(false),
+        };
+        let line = a.requirements();
+        assert!(
+            line.contains("the nut within 1 mm of its upper stop"),
+            "{line}"
+        );
+        assert!(
+            line.contains("a frame from the host within 0.2 s"),
+            "{line}"
+        );
+        assert!(
+            line.ends_with(
+                "not required: homing (arming.require_home is 0), a tare (arming.require_tare is 0)"
+            ),
+            "{line}"
+        );
+        assert!(
+            !line.contains("needs a tare") && !line.contains("tare since boot"),
+            "{line}"
+        );
+        a.require_tare = Some(true);
+        a.require_home = Some(true);
+        a.untethered = Some(true);
+        let line = a.requirements();
+        assert!(line.contains("a tare since boot"), "{line}");
+        assert!(line.contains("the nut homed since boot"), "{line}");
+        assert!(
+            line.contains("not required: the link (arming.untethered is 1)"),
+            "{line}"
+        );
+        // A robot that does not say: neither claimed.
+        let line = ArmingParams::default().requirements();
+        assert!(!line.contains("tare") && !line.contains("homed"), "{line}");
+    }
+
+    #[test]
+    fn the_saved_calibration_line_says_tare_only_when_required() {
+        let nothing = hopper_protocol::StoredInfo {
+            boot: 1,
+            boot_error: 0,
+            entries: 0,
+            save: 0,
+        };
+        assert_eq!(
+            stored_line(&nothing, Some(false)),
+            "nothing saved: the defaults"
+        );
+        assert_eq!(
+            stored_line(&nothing, Some(true)),
+            "nothing saved: the defaults (tare before arming: arming.require_tare is 1)"
+        );
+    }
+
+    /// Every clap error about the address names both ways to give one.
+    #[test]
+    fn address_errors_name_tcp_and_serial() {
+        for args in [
+            &["hopper-link", "status"][..],
+            &["hopper-link", "params", "list"],
+            &[
+                "hopper-link",
+                "--tcp",
+                "a:1",
+                "--serial",
+                "/dev/x",
+                "status",
+            ],
+            &["hopper-link", "--tcp"],
+            &["hopper-link", "--tcp=", "status"],
+            &["hopper-link", "--serial", "", "status"],
+            &["hopper-link", "status", "--tcp", "a:1"],
+        ] {
+            let e = match Cli::try_parse_from(args) {
+                Ok(_) => panic!("{args:?} parsed"),
+                Err(e) => with_address_tip(e).render().to_string(),
+            };
+            assert!(
+                e.contains("--tcp HOST:PORT") && e.contains("--serial PORT"),
+                "{args:?}: {e}"
+            );
+        }
+        // Not about the address: no tip.
+        let e = match Cli::try_parse_from(["hopper-link", "--tcp", "a:1", "--baud", "x", "status"])
+        {
+            Ok(_) => panic!("parsed"),
+            Err(e) => with_address_tip(e).render().to_string(),
+        };
+        assert!(!e.contains("the robot's address"), "{e}");
+    }
 }

@@ -1,10 +1,14 @@
 //! Recordings: telemetry and hop ledgers from the link, written as CSV with
-//! units in the headers and plotted like `hopper-sim run` (hop.png).
+//! units in the headers and plotted like `hopper-sim run` (hop.png); the
+//! fault capture (`dump`) with a plot of its own around the fault
+//! (capture.png).
 
 use anyhow::{Context, Result};
+use hal_sim::plot::{side_legend, LegendKey};
 use hopper_control::model::design::LEG_LENGTH_M;
 use hopper_plant::Mode;
 use hopper_protocol::{Hop, Telemetry};
+use plotters::prelude::*;
 use std::path::{Path, PathBuf};
 
 /// What a recording holds.
@@ -62,9 +66,37 @@ impl Recording {
         target_apex_m: Option<f64>,
     ) -> Result<Vec<PathBuf>> {
         std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
-        let mut written = Vec::new();
-        let path = dir.join(files.0);
-        let mut w = csv::Writer::from_path(&path)
+        let mut written = vec![self.write_records(&dir.join(files.0))?];
+        if hops {
+            written.push(self.write_hops(dir)?);
+        }
+        if self.records.len() >= 2 {
+            let path = dir.join(files.1);
+            hal_sim::plot::hop_plot(&self.samples(), title, target_apex_m, &path)
+                .map_err(anyhow::Error::msg)?;
+            written.push(path);
+        }
+        Ok(written)
+    }
+
+    /// Writes a capture (`dump`) into `dir` (created if missing):
+    /// `capture.csv`, the records as [`write`](Self::write) writes them,
+    /// and `capture.png`, [`capture_plot`](Self::capture_plot); returns
+    /// the paths written.
+    pub fn write_capture(&self, dir: &Path, title: &str) -> Result<Vec<PathBuf>> {
+        std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+        let mut written = vec![self.write_records(&dir.join("capture.csv"))?];
+        if self.records.len() >= 2 {
+            let path = dir.join("capture.png");
+            self.capture_plot(title, &path)?;
+            written.push(path);
+        }
+        Ok(written)
+    }
+
+    /// The records as CSV at `path`, units in the headers.
+    fn write_records(&self, path: &Path) -> Result<PathBuf> {
+        let mut w = csv::Writer::from_path(path)
             .with_context(|| format!("cannot write {}", path.display()))?;
         w.write_record([
             "t_s",
@@ -97,17 +129,165 @@ impl Recording {
             ])?;
         }
         w.flush()?;
-        written.push(path);
-        if hops {
-            written.push(self.write_hops(dir)?);
+        Ok(path.to_path_buf())
+    }
+
+    /// The time axis of the capture plot, ms: from the first record to the
+    /// last, relative to [`t0_step`](Self::t0_step) (negative before a
+    /// fault). `None` with fewer than two records.
+    pub fn span_ms(&self) -> Option<(f64, f64)> {
+        let (first, last) = (self.records.first()?, self.records.last()?);
+        let (a, b) = (self.t_s(first) * 1e3, self.t_s(last) * 1e3);
+        (a < b).then_some((a, b))
+    }
+
+    /// The stance phases among the records, as (start, end) in ms: each
+    /// from its first stance record to the record after its last (or the
+    /// last record).
+    pub fn stance_spans_ms(&self) -> Vec<(f64, f64)> {
+        let mut spans = Vec::new();
+        let mut start = None;
+        for r in &self.records {
+            let t = self.t_s(r) * 1e3;
+            match (r.phase == 1, start) {
+                (true, None) => start = Some(t),
+                (false, Some(s)) => {
+                    spans.push((s, t));
+                    start = None;
+                }
+                _ => {}
+            }
         }
-        if self.records.len() >= 2 {
-            let path = dir.join(files.1);
-            hal_sim::plot::hop_plot(&self.samples(), title, target_apex_m, &path)
-                .map_err(anyhow::Error::msg)?;
-            written.push(path);
+        if let (Some(s), Some(last)) = (start, self.records.last()) {
+            spans.push((s, self.t_s(last) * 1e3));
         }
-        Ok(written)
+        spans
+    }
+
+    /// Draws the capture into a PNG at `path`, titled `title`: toe height,
+    /// nut position, spring force, motor current command and energy
+    /// against time in ms over the whole capture, stance shaded. With
+    /// [`t0_step`](Self::t0_step) set (a capture a fault froze) the time is
+    /// relative to the fault, negative before it, and a dashed vertical line
+    /// labelled "fault" marks it. Legends stand right of the panels, clear
+    /// of the data; non-finite values (a `sensor-nonfinite` fault's) are
+    /// gaps in the lines.
+    pub fn capture_plot(&self, title: &str, path: &Path) -> Result<()> {
+        let (t_first, t_last) = self
+            .span_ms()
+            .ok_or_else(|| anyhow::anyhow!("not enough records to plot the capture"))?;
+        hal_sim::plot::ensure_font().map_err(anyhow::Error::msg)?;
+        type Get = fn(&Telemetry) -> f64;
+        let panels: [(&str, &str, Get); 5] = [
+            ("Toe height", "toe height [cm]", |r| {
+                (f64::from(r.body_height_m) - LEG_LENGTH_M) * 100.0
+            }),
+            ("Nut position", "nut p [mm]", |r| {
+                f64::from(r.nut_position_m) * 1000.0
+            }),
+            ("Spring force", "spring force [N]", |r| {
+                f64::from(r.spring_force_n)
+            }),
+            ("Motor current command", "command [A]", |r| {
+                f64::from(r.command_a)
+            }),
+            ("Total energy", "energy [J]", |r| f64::from(r.energy_j)),
+        ];
+        let fault_ms = self
+            .t0_step
+            .map(|_| 0.0)
+            .filter(|t| (t_first..=t_last).contains(t));
+        let stance = self.stance_spans_ms();
+        let x_desc = if self.t0_step.is_some() {
+            "time from the fault [ms]"
+        } else {
+            "time from the first record [ms]"
+        };
+        const WIDTH: u32 = 1100;
+        const KEY_WIDTH: u32 = 190;
+        let height = 40 + 250 * panels.len() as u32;
+        let root = BitMapBackend::new(path, (WIDTH, height)).into_drawing_area();
+        let stance_fill = RGBColor(225, 225, 225);
+        let res = (|| -> std::result::Result<(), Box<dyn std::error::Error>> {
+            root.fill(&WHITE)?;
+            let (head, body) = root.split_vertically(40);
+            head.titled(title, ("sans-serif", 22))?;
+            for (area, (name, ylabel, get)) in
+                body.split_evenly((panels.len(), 1)).iter().zip(panels)
+            {
+                let (area, key) = area.split_horizontally(WIDTH - KEY_WIDTH);
+                let finite = self.records.iter().map(get).filter(|v| v.is_finite());
+                let (lo, hi) = finite
+                    .clone()
+                    .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
+                        (a.min(v), b.max(v))
+                    });
+                let (lo, hi) = if lo <= hi { (lo, hi) } else { (-1.0, 1.0) };
+                let pad = ((hi - lo) * 0.05).max(0.5);
+                // A band above the data for the fault's label.
+                let (lo, hi) = (lo - pad, hi + 3.0 * pad);
+                let mut chart = ChartBuilder::on(&area)
+                    .caption(name, ("sans-serif", 18))
+                    .margin(8)
+                    .x_label_area_size(36)
+                    .y_label_area_size(70)
+                    .build_cartesian_2d(t_first..t_last, lo..hi)?;
+                // Stance under the grid and the data.
+                chart.draw_series(
+                    stance
+                        .iter()
+                        .map(|&(a, b)| Rectangle::new([(a, lo), (b, hi)], stance_fill.filled())),
+                )?;
+                chart
+                    .configure_mesh()
+                    .x_desc(x_desc)
+                    .y_desc(ylabel)
+                    .x_label_formatter(&|v| tick(*v, 0))
+                    .y_label_formatter(&|v| tick(*v, 1))
+                    .light_line_style(WHITE.mix(0.0))
+                    .draw()?;
+                // One line per run of finite values: a NaN breaks the line.
+                // One pixel wide: a thicker line grows spikes past the data
+                // at the sharp turns of noisy samples (plotters' miter joins).
+                let mut run: Vec<(f64, f64)> = Vec::new();
+                for r in &self.records {
+                    let v = get(r);
+                    if v.is_finite() {
+                        run.push((self.t_s(r) * 1e3, v));
+                    } else if !run.is_empty() {
+                        chart.draw_series(LineSeries::new(std::mem::take(&mut run), &BLUE))?;
+                    }
+                }
+                chart.draw_series(LineSeries::new(run, &BLUE))?;
+                if let Some(t) = fault_ms {
+                    chart.draw_series(DashedLineSeries::new(
+                        [(t, lo), (t, hi)],
+                        8,
+                        6,
+                        RED.stroke_width(2),
+                    ))?;
+                    chart.draw_series(std::iter::once(
+                        EmptyElement::at((t, hi))
+                            + Text::new(
+                                "fault",
+                                (5, 2),
+                                ("sans-serif", 15).into_font().color(&RED),
+                            ),
+                    ))?;
+                }
+                let mut entries = vec![(ylabel.to_string(), LegendKey::Line(BLUE))];
+                if fault_ms.is_some() {
+                    entries.push(("fault (t = 0)".into(), LegendKey::Dashed(RED)));
+                }
+                if !stance.is_empty() {
+                    entries.push(("stance".into(), LegendKey::Fill(stance_fill)));
+                }
+                side_legend(&key, &entries)?;
+            }
+            root.present()?;
+            Ok(())
+        })();
+        res.map_err(|e| anyhow::anyhow!("cannot draw {}: {e}", path.display()))
     }
 
     /// `hops.csv`: one hop ledger a row.
@@ -161,8 +341,20 @@ impl Recording {
                 spring_force_n: f64::from(r.spring_force_n),
                 torque_nm: f64::NAN,
                 energy_j: f64::from(r.energy_j),
+                // The telemetry record does not carry the thermal estimate
+                // (`status` reads it with its own request).
+                winding_c: None,
             })
             .collect()
+    }
+}
+
+/// An axis label: `v` with `decimals`, and no "-0".
+fn tick(v: f64, decimals: usize) -> String {
+    let s = format!("{v:.decimals$}");
+    match s.strip_prefix('-') {
+        Some(rest) if rest.chars().all(|c| c == '0' || c == '.') => rest.to_string(),
+        _ => s,
     }
 }
 
@@ -183,6 +375,107 @@ mod tests {
             energy_j: 50.0,
             command_a: 0.0,
         }
+    }
+
+    /// A capture as the robot freezes it: 1,024 records at 10 kHz, the
+    /// fault at record 767, stance from record 900 on.
+    fn capture() -> Recording {
+        let records = (0..1024u32)
+            .map(|i| Telemetry {
+                seq: i,
+                step: 5000 + i,
+                phase: u8::from(i >= 900),
+                armed: i < 767,
+                faults: if i >= 767 { 1 } else { 0 },
+                command_a: if i < 767 { 20.0 } else { 0.0 },
+                ..rec(i)
+            })
+            .collect();
+        Recording {
+            period_s: 1e-4,
+            records,
+            t0_step: Some(5767),
+            ..Recording::default()
+        }
+    }
+
+    #[test]
+    fn a_capture_is_timed_from_its_first_record_relative_to_the_fault() {
+        let c = capture();
+        let (a, b) = c.span_ms().unwrap_or_else(|| panic!("no span"));
+        assert!(
+            (a + 76.7).abs() < 1e-9 && (b - 25.6).abs() < 1e-9,
+            "{a} {b}"
+        );
+        let stance = c.stance_spans_ms();
+        assert_eq!(stance.len(), 1);
+        assert!((stance[0].0 - 13.3).abs() < 1e-9 && (stance[0].1 - 25.6).abs() < 1e-9);
+        // Without a fault: from the first record.
+        let free = Recording {
+            t0_step: None,
+            ..capture()
+        };
+        let (a, b) = free.span_ms().unwrap_or_else(|| panic!("no span"));
+        assert!(a.abs() < 1e-12 && (b - 102.3).abs() < 1e-9, "{a} {b}");
+        // One record spans nothing: no plot.
+        let one = Recording {
+            records: capture().records[..1].to_vec(),
+            ..capture()
+        };
+        assert_eq!(one.span_ms(), None);
+    }
+
+    #[test]
+    fn stance_to_the_end_and_flight_between() {
+        let r = Recording {
+            period_s: 1e-3,
+            records: [0u8, 1, 1, 0, 1]
+                .iter()
+                .enumerate()
+                .map(|(i, &phase)| Telemetry {
+                    step: i as u32,
+                    phase,
+                    ..rec(i as u32)
+                })
+                .collect(),
+            ..Recording::default()
+        };
+        assert_eq!(r.stance_spans_ms(), [(1.0, 3.0), (4.0, 4.0)]);
+    }
+
+    #[test]
+    fn the_capture_files_keep_their_columns_and_plot_even_with_nan() {
+        let dir = std::env::temp_dir().join(format!("hopper-link-capture-{}", std::process::id()));
+        let mut c = capture();
+        // A sensor-nonfinite fault's records: gaps, not a failure.
+        c.records[770].body_height_m = f32::NAN;
+        c.records[771].spring_force_n = f32::INFINITY;
+        let written = c
+            .write_capture(&dir, "capture around the fault")
+            .unwrap_or_else(|e| panic!("{e:#}"));
+        assert_eq!(written, [dir.join("capture.csv"), dir.join("capture.png")]);
+        let csv = std::fs::read_to_string(dir.join("capture.csv")).unwrap_or_default();
+        let mut lines = csv.lines();
+        assert_eq!(
+            lines.next(),
+            Some("t_s,seq,step,phase,armed,faults,body_height_m,toe_height_m,nut_position_m,spring_force_n,energy_j,command_a")
+        );
+        assert!(lines
+            .next()
+            .is_some_and(|l| l.starts_with("-0.076700,0,5000,flight,1,none,")));
+        assert_eq!(csv.lines().count(), 1025);
+        let png = std::fs::metadata(dir.join("capture.png"))
+            .map(|m| m.len())
+            .unwrap_or(0);
+        assert!(png > 10_000, "{png} bytes");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn axis_labels_have_no_negative_zero() {
+        assert_eq!(tick(-0.01, 1), "0.0");
+        assert_eq!(tick(-0.0, 0), "0");
+        assert_eq!(tick(-10.0, 0), "-10");
     }
 
     #[test]

@@ -119,3 +119,28 @@ fn a_robot_still_booting_gets_the_hello_again() {
     drop(c);
     assert_eq!(robot.join().unwrap_or(0), 1);
 }
+
+/// A wrong address (and only that) is marked, so that a caller can say how
+/// to give another; a robot that answers in another version is not.
+#[test]
+fn a_bad_address_is_marked_as_one() {
+    let bad = |t: &Target| match Client::connect(t) {
+        Ok(_) => panic!("connected to {t}"),
+        Err(e) => e.chain().any(|c| c.is::<hopper_link::BadAddress>()),
+    };
+    assert!(bad(&Target::Tcp("no-port-here".into())));
+    assert!(bad(&Target::Tcp("127.0.0.1:99999".into())));
+    assert!(bad(&Target::Serial("/dev/no-such-hopper".into(), 921_600)));
+    let l = TcpListener::bind("127.0.0.1:0").unwrap_or_else(|e| panic!("{e}"));
+    let addr = l.local_addr().unwrap_or_else(|e| panic!("{e}"));
+    let robot = std::thread::spawn(move || {
+        if let Ok((mut s, _)) = l.accept() {
+            let mut f = [0u8; MAX_FRAME];
+            let n = encode(&RobotMsg::Hello { version: 99 }, &mut f).unwrap_or(0);
+            let _ = s.write_all(&f[..n]);
+            std::thread::sleep(Duration::from_millis(500));
+        }
+    });
+    assert!(!bad(&Target::Tcp(addr.to_string())));
+    let _ = robot.join();
+}

@@ -1,0 +1,200 @@
+//! The `hopper-link` binary as an operator runs it: its address errors,
+//! and `params` against a small robot that answers like the firmware
+//! (a parameter of an unselected controller has no value: NaN, and
+//! reading or setting it is refused).
+
+use hopper_protocol::{
+    encode, Decoder, HostMsg, ParamInfo, Request, Response, RobotMsg, MAX_FRAME, PROTOCOL_VERSION,
+};
+use std::io::{Read, Write};
+use std::net::{TcpListener, TcpStream};
+use std::process::{Command, Output};
+use std::time::{Duration, Instant};
+
+fn hopper_link(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_hopper-link"))
+        .args(args)
+        .output()
+        .unwrap_or_else(|e| panic!("cannot run hopper-link: {e}"))
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+#[test]
+fn every_address_error_names_both_ways_to_give_one() {
+    let runs: [&[&str]; 5] = [
+        &["status"],
+        &[
+            "--tcp",
+            "127.0.0.1:7300",
+            "--serial",
+            "/dev/ttyUSB0",
+            "status",
+        ],
+        &["--tcp", "no-port-here", "status"],
+        &["--tcp", "127.0.0.1:99999", "status"],
+        &["--serial", "/dev/no-such-hopper", "status"],
+    ];
+    for args in runs {
+        let o = hopper_link(args);
+        let e = stderr(&o);
+        assert!(!o.status.success(), "{args:?} succeeded");
+        assert!(
+            e.contains("--tcp HOST:PORT") && e.contains("--serial PORT"),
+            "{args:?}: {e}"
+        );
+    }
+}
+
+/// The firmware's table entry `name` with `value` (NaN: not in the
+/// robot's configuration).
+fn entry(name: &str, value: f32) -> ParamInfo {
+    let p = hopper_control::params::find(name).unwrap_or_else(|| panic!("{name}"));
+    ParamInfo {
+        name: name.try_into().unwrap_or_else(|_| panic!("{name}")),
+        unit: p.unit.try_into().unwrap_or_else(|_| panic!("{name}")),
+        min: p.min,
+        max: p.max,
+        default: p.default,
+        value,
+        live: p.name == "target_apex_m",
+    }
+}
+
+/// A robot running `shaped` whose table is three entries; answers one
+/// connection until it closes or 10 s passed.
+fn robot() -> (String, std::thread::JoinHandle<()>) {
+    let l = TcpListener::bind("127.0.0.1:0").unwrap_or_else(|e| panic!("{e}"));
+    let addr = l.local_addr().unwrap_or_else(|e| panic!("{e}")).to_string();
+    let table = [
+        entry("controller", 8.0),
+        entry("target_apex_m", 0.1),
+        entry("energy.gain_nm_per_j", f32::NAN),
+    ];
+    let serve = std::thread::spawn(move || {
+        let Ok((mut s, _)) = l.accept() else { return };
+        let _ = s.set_read_timeout(Some(Duration::from_millis(20)));
+        let mut d = Decoder::new();
+        let mut buf = [0u8; 512];
+        let end = Instant::now() + Duration::from_secs(10);
+        while Instant::now() < end {
+            let n = match s.read(&mut buf) {
+                Ok(0) => return,
+                Ok(n) => n,
+                Err(_) => 0,
+            };
+            for &b in &buf[..n] {
+                let reply = match d.push::<HostMsg>(b) {
+                    Some(HostMsg::Hello { .. }) => RobotMsg::Hello {
+                        version: PROTOCOL_VERSION,
+                    },
+                    Some(HostMsg::Request { id, req }) => RobotMsg::Response {
+                        id,
+                        resp: answer(&table, &req),
+                    },
+                    _ => continue,
+                };
+                send(&mut s, &reply);
+            }
+        }
+    });
+    (addr, serve)
+}
+
+fn refused(why: &str) -> Response {
+    Response::Refused(why.try_into().unwrap_or_else(|_| panic!("{why}")))
+}
+
+/// What the firmware's endpoint answers (`hopper_control::link`).
+fn answer(table: &[ParamInfo], req: &Request) -> Response {
+    match req {
+        Request::ParamCount => Response::ParamCount(table.len() as u16),
+        Request::ParamInfo { index } => table.get(usize::from(*index)).map_or_else(
+            || refused("no-such-index"),
+            |p| Response::ParamInfo(p.clone()),
+        ),
+        Request::ParamGet { name } => match table.iter().find(|p| p.name == *name) {
+            Some(p) if !p.value.is_nan() => Response::Value(p.value),
+            _ => refused("unknown-parameter"),
+        },
+        Request::ParamSet { .. } => refused("controller-not-selected"),
+        _ => refused("not-in-this-test"),
+    }
+}
+
+fn send(s: &mut TcpStream, m: &RobotMsg) {
+    let mut f = [0u8; MAX_FRAME];
+    let n = encode(m, &mut f).unwrap_or(0);
+    let _ = s.write_all(&f[..n]);
+}
+
+#[test]
+fn params_list_shows_defaults_for_inactive_parameters_and_choices_by_name() {
+    let (addr, serve) = robot();
+    let o = hopper_link(&["--tcp", &addr, "params", "list"]);
+    let out = String::from_utf8_lossy(&o.stdout).into_owned();
+    assert!(o.status.success(), "{}", stderr(&o));
+    serve
+        .join()
+        .unwrap_or_else(|_| panic!("the robot thread panicked"));
+    assert!(!out.contains("NaN"), "{out}");
+    let row = |name: &str| -> Vec<String> {
+        out.lines()
+            .find(|l| l.starts_with(&format!("{name} ")))
+            .unwrap_or_else(|| panic!("no {name} row: {out}"))
+            .split_whitespace()
+            .map(str::to_string)
+            .collect()
+    };
+    // Value and default by name.
+    let controller = row("controller");
+    assert_eq!(controller[1], "shaped", "{out}");
+    assert!(controller.contains(&"energy-apex".to_string()), "{out}");
+    // The default, marked.
+    let energy = row("energy.gain_nm_per_j");
+    assert_eq!(energy[1], "0.2", "{out}");
+    assert!(
+        energy
+            .join(" ")
+            .ends_with("(inactive: controller energy not selected)"),
+        "{out}"
+    );
+    assert!(
+        !row("target_apex_m").join(" ").contains("inactive"),
+        "{out}"
+    );
+    assert!(
+        out.trim_end().ends_with(
+            "3 parameters; 1 inactive (not used by the selected controller, shaped: shown at their defaults)"
+        ),
+        "{out}"
+    );
+}
+
+#[test]
+fn reading_or_setting_an_inactive_parameter_says_how_to_activate_it() {
+    for (args, start) in [
+        (
+            &["params", "get", "energy.gain_nm_per_j"][..],
+            "get energy.gain_nm_per_j: ",
+        ),
+        (
+            &["params", "set", "energy.gain_nm_per_j", "0.3"],
+            "set energy.gain_nm_per_j = 0.3 refused: controller-not-selected (",
+        ),
+    ] {
+        let (addr, serve) = robot();
+        let o = hopper_link(&[&["--tcp", addr.as_str()][..], args].concat());
+        serve
+            .join()
+            .unwrap_or_else(|_| panic!("the robot thread panicked"));
+        let e = stderr(&o);
+        assert!(!o.status.success(), "{args:?}");
+        assert!(
+            e.starts_with(&format!("hopper-link: error: {start}inactive: controller energy not selected; default 0.2 N m/J; activate it with `params set controller energy`")),
+            "{args:?}: {e}"
+        );
+    }
+}
