@@ -580,8 +580,16 @@ mod app {
         if *cx.local.reset_in > 0 {
             *cx.local.reset_in -= 1;
             if *cx.local.reset_in == 0 {
-                crate::disable_amplifier();
-                cortex_m::peripheral::SCB::sys_reset();
+                if runner.arming().is_armed() {
+                    // Never reset a robot that may be hopping (the link
+                    // refuses an arm while a save waits, so this is the
+                    // last line): disarm, and reset a period later.
+                    runner.arming_mut().request_disarm();
+                    *cx.local.reset_in = 1;
+                } else {
+                    crate::disable_amplifier();
+                    cortex_m::peripheral::SCB::sys_reset();
+                }
             }
         }
         // The next conversion already finished: this period (with its link

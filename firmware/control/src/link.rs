@@ -138,6 +138,14 @@ pub fn wire_record(seq: u32, r: &StepRecord) -> Telemetry {
     }
 }
 
+/// Whether setting `name` to `value` would switch a protection off
+/// ([`params::PROTECTIONS`]); a NaN is not the safe value either.
+fn unsafe_value(name: &str, value: f32) -> bool {
+    params::PROTECTIONS
+        .iter()
+        .any(|(p, safe)| p.name == name && value != *safe)
+}
+
 /// Frames `msg` into `tx` if it has room for it (plus one more frame when
 /// `bulk`); whether it went.
 fn send<T: Tx>(tx: &mut T, msg: &RobotMsg, bulk: bool) -> bool {
@@ -273,6 +281,11 @@ impl Endpoint {
             Request::Arm | Request::Calibrate { .. } if self.save_state == SAVE_AT_RESTART => {
                 Response::Refused(text("restarting"))
             }
+            // A save queued but not yet taken becomes a reset on the
+            // board: nothing starts before it is done.
+            Request::Arm | Request::Calibrate { .. } if self.save_state == SAVE_PENDING => {
+                Response::Refused(text("saving"))
+            }
             Request::Arm => {
                 runner.arming_mut().request_arm();
                 self.pending_arm = Some(id);
@@ -317,6 +330,9 @@ impl Endpoint {
                 Ok(v) => Response::Value(v),
                 Err(_) => Response::Refused(text("unknown-parameter")),
             },
+            Request::ParamSet { name, value } if !self.simulated && unsafe_value(name, *value) => {
+                Response::Refused(text("protection-locked"))
+            }
             Request::ParamSet { name, value } => match runner.set_param(name, *value) {
                 Ok(()) => Response::Ok,
                 Err(e) => Response::Refused(text(e.reason())),
@@ -721,6 +737,81 @@ mod tests {
             );
             assert_eq!(r.ep.sim_estop(), sim);
         }
+    }
+
+    /// A real robot's link refuses to switch a protection off (and takes
+    /// its safe value); a simulated robot takes both.
+    #[test]
+    fn a_robot_link_refuses_to_switch_protections_off() {
+        for sim in [false, true] {
+            let mut r = Robot::new();
+            if sim {
+                r.ep = Endpoint::simulated();
+            }
+            for (id, name, value) in [
+                (1, "thermal.protect", 0.0),
+                (2, "arming.untethered", 1.0),
+                (3, "thermal.protect", f32::NAN),
+            ] {
+                let mut n = hopper_protocol::Name::new();
+                let _ = n.push_str(name);
+                r.request(id, Request::ParamSet { name: n, value });
+                r.periods(1);
+                let expect = match (sim, value.is_nan()) {
+                    (false, _) => Response::Refused(text("protection-locked")),
+                    (true, false) => Response::Ok,
+                    (true, true) => Response::Refused(text("out-of-range")),
+                };
+                assert_eq!(
+                    r.take(),
+                    [RobotMsg::Response { id, resp: expect }],
+                    "{name}={value} simulated={sim}"
+                );
+            }
+            let cfg = r.runner.hopper().config();
+            assert_eq!(cfg.supervisor.thermal.protect, !sim);
+            assert_eq!(cfg.arming.untethered, sim);
+        }
+        // The safe value is taken on a robot.
+        let mut r = Robot::new();
+        let mut n = hopper_protocol::Name::new();
+        let _ = n.push_str("thermal.protect");
+        r.request(
+            4,
+            Request::ParamSet {
+                name: n,
+                value: 1.0,
+            },
+        );
+        r.periods(1);
+        assert_eq!(
+            r.take(),
+            [RobotMsg::Response {
+                id: 4,
+                resp: Response::Ok
+            }]
+        );
+    }
+
+    /// An arm or a routine in the same batch as a save, before the
+    /// application took it (on the board, a reset follows), is refused.
+    #[test]
+    fn nothing_starts_while_a_save_is_queued() {
+        let mut r = Robot::new();
+        r.runner.arming_mut().note_tared();
+        r.request(1, Request::Save);
+        r.request(2, Request::Arm);
+        r.periods(1);
+        let msgs = r.take();
+        assert_eq!(
+            msgs.last(),
+            Some(&RobotMsg::Response {
+                id: 2,
+                resp: Response::Refused(text("saving"))
+            }),
+            "{msgs:?}"
+        );
+        assert!(!r.runner.arming().is_armed());
     }
 
     /// A save needs a calibration (placeholders are none); once tared it is

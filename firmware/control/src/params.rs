@@ -1331,6 +1331,12 @@ param!(
     "Amplifier current per DAC code (placeholder 40 A / 2048)."
 );
 
+/// Parameters that switch a protection off, each with its safe value: a
+/// real robot's link refuses any other value (a simulator keeps them, for
+/// control studies), so only a rebuilt image can run the board without
+/// them.
+pub const PROTECTIONS: [(&Param, f32); 2] = [(&THERMAL_PROTECT, 1.0), (&ARM_UNTETHERED, 0.0)];
+
 /// Every parameter, in the order the docs list them.
 pub const TABLE: &[&Param] = &[
     &CONTROLLER,
