@@ -118,7 +118,9 @@ unsafe fn HardFault(_frame: &cortex_m_rt::ExceptionFrame) -> ! {
 }
 
 /// The zero-current DAC code, for the exception handlers (they own no
-/// peripheral): set once by the board's init, mid-scale until then.
+/// peripheral): the configuration's, set by the board's init (then the
+/// saved calibration's) and kept current by the control task; mid-scale
+/// until init.
 #[cfg(target_os = "none")]
 static DAC_ZERO_CODE: core::sync::atomic::AtomicU16 = core::sync::atomic::AtomicU16::new(2048);
 
@@ -464,6 +466,11 @@ mod app {
             defmt::error!("calibration store: {=str}: the defaults run", e.name());
         }
         runner.load_calibration(board.stored.record());
+        // The fault handlers' zero code is the calibrated one from here on.
+        crate::DAC_ZERO_CODE.store(
+            runner.hopper().config().calibration.dac_zero_code,
+            core::sync::atomic::Ordering::Relaxed,
+        );
         defmt::info!("calibration at boot: {}", runner.calibration_at_boot());
         // Reported over the link; a clock that fell back to the HSI or a
         // brown-out reset left off refuses arming.
@@ -570,6 +577,12 @@ mod app {
                 cycles,
             );
         });
+        // A parameter set or a routine may have moved the zero code: the
+        // fault handlers write the one in use (one relaxed store).
+        crate::DAC_ZERO_CODE.store(
+            runner.hopper().config().calibration.dac_zero_code,
+            core::sync::atomic::Ordering::Relaxed,
+        );
         // A save (the link accepts it only disarmed): into the RAM slot,
         // and a reset in 0.2 s, once the answer is out; `init` writes it.
         if let Some(r) = link.take_save() {
