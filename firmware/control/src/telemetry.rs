@@ -98,7 +98,9 @@ impl<const N: usize> FaultCapture<N> {
     /// once frozen.
     #[inline]
     pub fn record(&mut self, r: &StepRecord, fault_latched: bool) {
-        if self.remaining == Some(0) || (self.held && self.remaining.is_none()) {
+        // Held for a reader, the records stand still, except that a fault
+        // is captured anyway: the fault matters more than the dump.
+        if self.remaining == Some(0) || (self.held && self.remaining.is_none() && !fault_latched) {
             return;
         }
         if let Some(slot) = self.buf.get_mut(self.next) {
@@ -323,6 +325,31 @@ mod tests {
         c.hold(false);
         c.record(&rec(102), false);
         assert_eq!(c.get(7).map(|r| r.step), Some(102));
+    }
+
+    /// A fault that latches while a reader holds the capture is captured:
+    /// its period and the ones after it go in, and the capture freezes.
+    #[test]
+    fn a_fault_during_a_dump_is_captured() {
+        let mut c: FaultCapture<8> = FaultCapture::new();
+        for i in 0..10 {
+            c.record(&rec(i), false);
+        }
+        c.hold(true);
+        c.record(&rec(10), false);
+        c.record(&rec(11), true);
+        assert_eq!(c.fault_step(), Some(11));
+        c.record(&rec(12), false);
+        c.record(&rec(13), false);
+        assert!(c.frozen());
+        let steps: heapless::Vec<u32, 8> = (0..c.len())
+            .filter_map(|i| c.get(i))
+            .map(|r| r.step)
+            .collect();
+        assert_eq!(steps.as_slice(), &[5, 6, 7, 8, 9, 11, 12, 13]);
+        c.hold(false);
+        c.record(&rec(14), false);
+        assert_eq!(c.get(7).map(|r| r.step), Some(13));
     }
 
     #[test]
