@@ -167,29 +167,31 @@ pub fn heat_line(t: &ThermalSummary) -> String {
         "stand-in" => "stand-in motor data (maxon RE 40; the thesis gives none)",
         _ => "configured thermal.* data",
     };
-    let at = |what: &str, v: Option<f64>| {
-        v.map_or(format!("no {what}"), |s| format!("{what} from {s:.2} s"))
+    let derating = |v: Option<f64>, verb: &str| {
+        v.map_or("no derating".to_string(), |s| format!("{verb} {s:.2} s"))
     };
     if t.protect {
-        format!(
-            "{data}: winding peak {:.0} C; {}, {}; limit at end {:.1} of {:.1} A",
-            t.peak_winding_c,
-            at("derating", t.first_derated_s),
-            at("trip", t.reached_trip_s),
-            t.final_current_limit_a,
-            t.amplifier_limit_a,
-        )
-    } else {
-        let would = |what: &str, v: Option<f64>| {
-            v.map_or(format!("no {what}"), |s| {
-                format!("would {what} at {s:.2} s")
-            })
+        let end = match t.reached_trip_s {
+            // The fault latched: the supervisor commands 0 A from then on.
+            Some(s) => format!("tripped at {s:.2} s (overtemperature: 0 A since)"),
+            None => format!(
+                "no trip; limit at end {:.1} of {:.1} A",
+                t.final_current_limit_a, t.amplifier_limit_a
+            ),
         };
         format!(
-            "{data}, protection OFF (thermal.protect=0: no thermal limit, as the thesis modelled): winding peak {:.0} C; {}, {}",
+            "{data}: winding peak {:.0} C; {}, {end}",
             t.peak_winding_c,
-            would("derate", t.reached_derate_s),
-            would("trip", t.reached_trip_s),
+            derating(t.first_derated_s, "derating from"),
+        )
+    } else {
+        let trip = t
+            .reached_trip_s
+            .map_or("no trip".to_string(), |s| format!("would trip at {s:.2} s"));
+        format!(
+            "{data}, protection OFF (thermal.protect=0: no thermal limit, as the thesis modelled): winding peak {:.0} C; {}, {trip}",
+            t.peak_winding_c,
+            derating(t.reached_derate_s, "would derate at"),
         )
     }
 }
