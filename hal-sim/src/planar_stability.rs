@@ -316,7 +316,14 @@ where
     let hi = all.clone().fold(1.0, f64::max) * 1.2;
     let lo = all.fold(1.0, f64::min).min(0.9) / 1.1;
     let (g_lo, g_hi) = crate::plot::extent(gains.iter().copied());
-    let mut c = ChartBuilder::on(&root)
+    // The legend goes in a column right of the chart, clear of the lines.
+    let (w, _) = root.dim_in_pixel();
+    let (chart_area, key) = root.split_horizontally(w.saturating_sub(190));
+    let mut entries = vec![(
+        "1 (attracts below)".to_string(),
+        crate::plot::LegendKey::Line(BLACK),
+    )];
+    let mut c = ChartBuilder::on(&chart_area)
         .caption(
             "Section 2.2 runner: growth of a deviation per hop at the fixed point",
             ("sans-serif", 18),
@@ -332,24 +339,23 @@ where
     c.draw_series(LineSeries::new(
         [(g_lo, 1.0), (g_hi, 1.0)],
         BLACK.stroke_width(1),
-    ))?
-    .label("1: below it the gait attracts")
-    .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK));
+    ))?;
     for (k, row) in rows.iter().enumerate() {
         let colour = Palette99::pick(k).to_rgba();
+        let (r, g, b) = colour.rgb();
+        entries.push((
+            format!("{} m/s", row.speed_mps),
+            crate::plot::LegendKey::Line(RGBColor(r, g, b)),
+        ));
         let pts: Vec<(f64, f64)> = gains
             .iter()
             .zip(&row.points)
             .filter_map(|(&g, f)| f.as_ref().map(|f| (g, f.growth)))
             .collect();
-        c.draw_series(LineSeries::new(pts.clone(), colour.stroke_width(2)))?
-            .label(format!("{} m/s", row.speed_mps))
-            .legend(move |(x, y)| {
-                PathElement::new(vec![(x, y), (x + 20, y)], colour.stroke_width(2))
-            });
+        c.draw_series(LineSeries::new(pts.clone(), colour.stroke_width(2)))?;
         c.draw_series(pts.iter().map(|&p| Circle::new(p, 3, colour.filled())))?;
     }
-    crate::plot::legend(&mut c, SeriesLabelPosition::UpperRight)?;
+    crate::plot::side_legend(&key, &entries)?;
     root.present()?;
     Ok(())
 }
