@@ -541,7 +541,7 @@ impl Settings {
                 // The gains as f32 (what the firmware runs) print as given.
                 Err(format!(
                     "--flight-kd / controller.flight_kd_a_s_per_rad = {} A s/rad makes the flight PD unstable ({why}) with kp = {} A/rad at {hz} Hz: stable for kd in {lo:.4} ..= {hi:.4} A s/rad (A = {:.1} rad/s^2/A, eq 4.1 filter G = {})",
-                    gains.kd, gains.kp, lp.plant_gain, self.filter_gain()
+                    gains.kd, gains.kp, lp.plant_gain, self.filter_gain() as f32
                 ))
             }
             None => Err(format!(
