@@ -107,6 +107,12 @@ fn inject(
     );
     let latency = latched_at.unwrap() - injected_at.unwrap();
     eprintln!("{name}: latched {latency} periods after injection");
+    // The loop checks only the periods before the latch: the latching
+    // period itself must be within the allowance too.
+    assert!(
+        latency <= max_latency_periods,
+        "{name}: latched {latency} periods after injection (allowed {max_latency_periods})"
+    );
     latency
 }
 
@@ -170,7 +176,9 @@ fn noise_burst() {
 
 #[test]
 fn estop() {
-    inject(InjectKind::Estop, "open-torque", MID_STANCE_S, 1, 0);
+    // A press counts after 0.2 ms pressed (`estop.press_s`): the second
+    // period at 10 kHz.
+    inject(InjectKind::Estop, "open-torque", MID_STANCE_S, 1, 1);
 }
 
 #[test]
