@@ -206,6 +206,8 @@ fn in_flight_too() {
         ) {
             continue;
         }
-        inject(kind, "energy-apex", 0.05, 1, 0);
+        // The e-stop's debounce: one period (see `estop`).
+        let allowed = usize::from(kind == InjectKind::Estop);
+        inject(kind, "energy-apex", 0.05, 1, allowed);
     }
 }
