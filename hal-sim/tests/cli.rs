@@ -94,7 +94,7 @@ fn out_dir_gets_csv_and_plot() {
     let mut lines = csv.lines();
     assert_eq!(
         lines.next().unwrap(),
-        "time_s,phase,z_m,zd_mps,p_m,pd_mps,toe_height_m,spring_force_n,torque_nm,energy_j"
+        "time_s,phase,z_m,zd_mps,p_m,pd_mps,toe_height_m,spring_force_n,torque_nm,energy_j,winding_c"
     );
     let rows: Vec<&str> = lines.collect();
     assert_eq!(rows.len(), 1001, "1 s at 1 kHz plus the start");
