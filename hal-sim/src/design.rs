@@ -697,16 +697,20 @@ pub fn feasibility_map(holder: Holder, protect: bool) -> Result<FeasibilityMap, 
     })
 }
 
+/// Width of the feasibility map's right column (colour bar, legend), px.
+const FEASIBILITY_SIDE_PX: u32 = 220;
+
 /// The maps side by side as `feasibility.png` and `.svg` in `dir`: steady
 /// apex as colour (grey: never steady), cells that hold 5 cm outlined, the
-/// identified machine marked.
+/// identified machine marked; the colour bar and the legend in a column
+/// right of the maps, clear of the data.
 pub fn write_feasibility_plot(
     maps: &[FeasibilityMap],
     dir: &std::path::Path,
 ) -> Result<Vec<std::path::PathBuf>, String> {
     use plotters::prelude::*;
     crate::plot::ensure_font()?;
-    const SIZE: (u32, u32) = (1300, 1150);
+    const SIZE: (u32, u32) = (1300 + FEASIBILITY_SIDE_PX, 1150);
     fn draw<DB: DrawingBackend>(
         root: DrawingArea<DB, plotters::coord::Shift>,
         maps: &[FeasibilityMap],
@@ -716,16 +720,20 @@ pub fn write_feasibility_plot(
     {
         root.fill(&WHITE)?;
         let root = root.titled(
-            "The identified machine: steady apex over friction and stance torque (outlined: holds 5 cm; X: as identified)",
+            "The identified machine: steady apex over friction and stance torque",
             ("sans-serif", 18),
         )?;
-        let panels = root.split_evenly((maps.len().div_ceil(2).max(1), 2));
+        let (maps_area, side) = root.split_horizontally(SIZE.0 - FEASIBILITY_SIDE_PX);
+        let panels = maps_area.split_evenly((maps.len().div_ceil(2).max(1), 2));
+        // The colour scale's top: the highest apex, at least a bit above
+        // the 5 cm the map asks about.
         let hi = maps
             .iter()
             .flat_map(|m| m.apex.iter().flatten().flatten())
             .copied()
             .fold(0.0, f64::max)
             .max(0.06);
+        feasibility_key(&side, hi)?;
         for (m, panel) in maps.iter().zip(panels.iter()) {
             let (df, dt) = (0.05, 0.05);
             let mut c = ChartBuilder::on(panel)
@@ -776,6 +784,73 @@ pub fn write_feasibility_plot(
         root.present()?;
         Ok(())
     }
+    /// The colour bar (steady apex, 0 to `hi` m, shown in cm) and the
+    /// legend of the maps' marks, in the column right of the maps.
+    fn feasibility_key<DB: DrawingBackend>(
+        side: &DrawingArea<DB, plotters::coord::Shift>,
+        hi: f64,
+    ) -> Result<(), Box<dyn std::error::Error>>
+    where
+        DB::ErrorType: 'static,
+    {
+        let (bar, key) = side.split_vertically(560);
+        let hi_cm = hi * 100.0;
+        let mut scale = ChartBuilder::on(&bar)
+            .margin_top(60)
+            .margin_bottom(10)
+            .margin_left(10)
+            .margin_right(90)
+            .y_label_area_size(70)
+            .build_cartesian_2d(0.0..1.0, 0.0..hi_cm)?;
+        scale
+            .configure_mesh()
+            .disable_x_axis()
+            .disable_mesh()
+            .y_desc("steady apex [cm]")
+            .y_label_style(("sans-serif", 14))
+            .axis_desc_style(("sans-serif", 15))
+            .draw()?;
+        const STEPS: usize = 100;
+        scale.draw_series((0..STEPS).map(|k| {
+            let (a, b) = (k as f64 / STEPS as f64, (k + 1) as f64 / STEPS as f64);
+            Rectangle::new(
+                [(0.0, a * hi_cm), (1.0, b * hi_cm)],
+                ViridisRGB::get_color(a).filled(),
+            )
+        }))?;
+        let style = ("sans-serif", 14).into_font().color(&BLACK);
+        /// What a legend entry shows left of its label.
+        enum Key {
+            Grey,
+            Outlined,
+            Cross,
+        }
+        let entries = [
+            (Key::Grey, "never steady"),
+            (Key::Outlined, "holds 5 cm"),
+            (Key::Cross, "as identified"),
+        ];
+        let mut y = 20;
+        for (k, label) in entries {
+            let (cx, cy) = (24, y + 8);
+            let cell = [(cx - 9, cy - 9), (cx + 9, cy + 9)];
+            match k {
+                Key::Grey => key.draw(&Rectangle::new(cell, RGBColor(200, 200, 200).filled()))?,
+                Key::Outlined => {
+                    key.draw(&Rectangle::new(cell, ViridisRGB::get_color(0.3).filled()))?;
+                    key.draw(&Rectangle::new(cell, BLACK.stroke_width(2)))?;
+                }
+                Key::Cross => key.draw(&Cross::new((cx, cy), 8, RED.stroke_width(3)))?,
+            }
+            key.draw(&Text::new(label, (cx + 20, y), style.clone()))?;
+            y += 30;
+        }
+        key.draw(&Rectangle::new(
+            [(6, 6), (FEASIBILITY_SIDE_PX as i32 - 16, y)],
+            BLACK.stroke_width(1),
+        ))?;
+        Ok(())
+    }
     crate::out_dir::write_whole(dir, |staging| {
         crate::plot::png_and_svg(
             staging,
@@ -795,6 +870,37 @@ mod tests {
     /// The design motor on its curve through 2, 5 and 10 mm leads: the
     /// motor's work falls with the lead (a small lead spins the rotor:
     /// 2700 kg reflected at 2 mm) while the first apex rises.
+    /// The feasibility plot has a colour bar with its quantity and unit,
+    /// and its legend, beside the maps.
+    #[test]
+    fn the_feasibility_plot_has_a_colour_bar_and_a_legend() {
+        use plotters::prelude::*;
+        let map = |protect| FeasibilityMap {
+            friction: vec![0.1, 0.2],
+            torque_nm: vec![0.5, 0.6],
+            apex: vec![vec![Some(0.08), None], vec![Some(0.02), None]],
+            holder: Holder::Shaped,
+            thermal_protection: protect,
+        };
+        let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
+        let out = dir.path().join("f");
+        write_feasibility_plot(&[map(true), map(false)], &out).unwrap_or_else(|e| panic!("{e}"));
+        let svg = std::fs::read_to_string(out.join("feasibility.svg")).unwrap_or_default();
+        for text in [
+            "steady apex [cm]",
+            "never steady",
+            "holds 5 cm",
+            "as identified",
+        ] {
+            assert!(svg.contains(text), "no `{text}`");
+        }
+        // The bar's ends: viridis from 0 to the highest apex.
+        let fill = |c: RGBColor| format!("fill=\"#{:02X}{:02X}{:02X}\"", c.0, c.1, c.2);
+        assert!(svg.contains(&fill(ViridisRGB::get_color(0.0))));
+        assert!(svg.contains(&fill(ViridisRGB::get_color(0.99))));
+        assert!(out.join("feasibility.png").exists());
+    }
+
     #[test]
     fn the_lead_study_on_the_torque_speed_curve() {
         let s: Vec<FirstStance> = [0.002, 0.005, 0.010]

@@ -1,6 +1,10 @@
 //! Parameter sweeps (`hopper-sim sweep`): a grid of runs around a base
 //! scenario, run in parallel on every core, summarised one CSV row per run
-//! and plotted (a line for one swept parameter, a heat map for two).
+//! and plotted (a line for one swept parameter, a heat map for two). The
+//! printed table, the CSV and the plot say of each point whether it
+//! converged, when the motor's thermal protection derated its current limit
+//! and which fault latched when: a point that stopped on a fault or hopped
+//! on less current is not a point of the controller as designed.
 //!
 //! A swept parameter is `NAME=START:END:N` (`N` evenly spaced values from
 //! `START` to `END`, both included). `NAME` is a plant parameter field
@@ -314,10 +318,25 @@ pub struct Metrics {
     /// stance did to the hop (the motor's work also spins the rotor, and
     /// that part does not lift the body).
     pub first_apex_m: Option<f64>,
+    /// When the motor's thermal protection first derated the current
+    /// limit, s (None: never, with the protection off, or no firmware): a
+    /// point that derated hopped on less current from then on.
+    pub first_derated_s: Option<f64>,
+    /// Hottest winding temperature the firmware estimated, C (None: no
+    /// firmware).
+    pub peak_winding_c: Option<f64>,
+    /// When the first fault latched, s (None: no fault).
+    pub first_fault_s: Option<f64>,
+    /// Which fault latched first (its kebab-case name, e.g.
+    /// `overtemperature`; None: no fault). Text, so not one of [`METRICS`]:
+    /// it is sweep.csv's [`FIRST_FAULT_COLUMN`].
+    pub first_fault: Option<&'static str>,
 }
 
-/// Metric columns, in CSV order, with the label plots use.
-pub const METRICS: [(&str, &str); 12] = [
+/// Metric columns, in CSV order, with the label plots use. sweep.csv has
+/// the swept columns, these, then [`FIRST_FAULT_COLUMN`]; columns are only
+/// ever appended, so a metric added later goes after that one.
+pub const METRICS: [(&str, &str); 15] = [
     ("steady_apex_m", "steady apex [m]"),
     ("hops_to_converge", "hops to converge"),
     ("last_apex_m", "last apex [m]"),
@@ -333,7 +352,40 @@ pub const METRICS: [(&str, &str); 12] = [
     ("max_stroke_m", "max stroke [m]"),
     ("fault_count", "faults"),
     ("first_apex_m", "first apex [m]"),
+    ("first_derated_s", "current limit derated from [s]"),
+    ("peak_winding_c", "peak winding temperature [C]"),
+    ("first_fault_s", "first fault at [s]"),
 ];
+
+/// sweep.csv's last column: the name of the fault that latched first
+/// (empty: none), beside [`METRICS`]' `first_fault_s`.
+pub const FIRST_FAULT_COLUMN: &str = "first_fault";
+
+/// The metrics that count something, printed as whole numbers.
+const COUNT_METRICS: [&str; 3] = ["hops_to_converge", "hops", "fault_count"];
+
+/// What a grey (valueless) cell means for a metric: why a run has no value
+/// of it.
+fn missing_meaning(metric: &str) -> &'static str {
+    match metric {
+        "hops_to_converge" => "did not converge",
+        "steady_apex_m" | "last_apex_m" | "first_apex_m" => "no hop",
+        "energy_per_stance_j" | "first_stance_motor_work_j" => "no stance",
+        "first_derated_s" => "never derated",
+        "first_fault_s" => "no fault",
+        "peak_winding_c" => "no winding estimate",
+        _ => "no value",
+    }
+}
+
+/// A fault's name as the firmware spells it, for a merged part's
+/// `first_fault` cell (None: no such fault).
+pub fn fault_name(text: &str) -> Option<&'static str> {
+    hopper_control::supervisor::Fault::ALL
+        .iter()
+        .map(|f| f.name())
+        .find(|n| *n == text)
+}
 
 /// The metric plotted when none is asked for.
 pub const DEFAULT_METRIC: &str = "steady_apex_m";
@@ -354,19 +406,35 @@ impl Metrics {
             max_stroke_m: s.max_stroke_m,
             fault_count: s.faults.len(),
             first_apex_m: s.apex_heights_m.first().copied(),
+            first_derated_s: s.thermal.and_then(|t| t.first_derated_s),
+            peak_winding_c: s.thermal.map(|t| t.peak_winding_c),
+            first_fault_s: s.faults.first().map(|f| f.time_s),
+            first_fault: s.faults.first().map(|f| f.name),
         }
     }
 
     /// From its values in [`METRICS`] order, as [`Metrics::values`] gives
-    /// them (a merged shard's CSV row); None when a count is not a whole
-    /// number or a value that is always defined is missing.
-    pub fn from_values(v: &[Option<f64>; METRICS.len()]) -> Option<Metrics> {
+    /// them (a merged shard's CSV row), and the first fault's name (the
+    /// [`FIRST_FAULT_COLUMN`]); None when a count is not a whole number, a
+    /// value that is always defined is missing, or the fault's name and its
+    /// time are not both there or both absent.
+    pub fn from_values(
+        v: &[Option<f64>; METRICS.len()],
+        first_fault: Option<&'static str>,
+    ) -> Option<Metrics> {
         let count = |x: Option<f64>| -> Option<usize> {
             let x = x?;
             (x >= 0.0 && x.fract() == 0.0 && x <= usize::MAX as f64).then_some(x as usize)
         };
-        let [steady, converge, last, hops, work, impact, per_stance, first_work, current, stroke, faults, first_apex] =
+        let [steady, converge, last, hops, work, impact, per_stance, first_work, current, stroke, faults, first_apex, derated, winding, fault_at] =
             *v;
+        // A fault's name, its time and the count come from one list of
+        // faults: a row where they disagree was not written by a run.
+        if first_fault.is_some() != fault_at.is_some()
+            || first_fault.is_some() != (count(faults)? > 0)
+        {
+            return None;
+        }
         Some(Metrics {
             steady_apex_m: steady,
             hops_to_converge: match converge {
@@ -383,6 +451,10 @@ impl Metrics {
             max_stroke_m: stroke?,
             fault_count: count(faults)?,
             first_apex_m: first_apex,
+            first_derated_s: derated,
+            peak_winding_c: winding,
+            first_fault_s: fault_at,
+            first_fault,
         })
     }
 
@@ -401,7 +473,32 @@ impl Metrics {
             Some(self.max_stroke_m),
             Some(self.fault_count as f64),
             self.first_apex_m,
+            self.first_derated_s,
+            self.peak_winding_c,
+            self.first_fault_s,
         ]
+    }
+
+    /// What became of the run, in words, for the printed table: converged
+    /// or not, and when the current limit derated and which fault latched,
+    /// e.g. `not converged; derated from 11.65 s; faulted: overtemperature
+    /// at 14.33 s`.
+    pub fn outcome(&self) -> String {
+        let mut parts = vec![match self.hops_to_converge {
+            Some(k) => format!("converged from hop {k}"),
+            None => "not converged".to_string(),
+        }];
+        if let Some(t) = self.first_derated_s {
+            parts.push(format!("derated from {t:.2} s"));
+        }
+        if let (Some(name), Some(t)) = (self.first_fault, self.first_fault_s) {
+            let more = match self.fault_count {
+                0 | 1 => String::new(),
+                n => format!(" (+{} more)", n - 1),
+            };
+            parts.push(format!("faulted: {name} at {t:.2} s{more}"));
+        }
+        parts.join("; ")
     }
 
     /// One metric by column name.
@@ -458,13 +555,17 @@ impl Shard {
 pub const PART_CSV: &str = "sweep-part.csv";
 /// A shard's manifest: which grid, which slice ([`PartManifest`]).
 pub const PART_MANIFEST: &str = "sweep-part.json";
+/// The parts' layout version: 2 since sweep.csv gained the derating and
+/// fault columns (a version-1 part lacks them, and its runs' derating was
+/// not kept, so it cannot be merged with a version-2 one).
+pub const PART_FORMAT: u32 = 2;
 
 /// What a shard's directory says about the grid it is a slice of: what
 /// `sweep merge` needs to check the parts belong together and to draw the
 /// plots of the whole.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct PartManifest {
-    /// Layout version (1).
+    /// Layout version ([`PART_FORMAT`]).
     pub format: u32,
     /// Fingerprint of the grid's settings, axes and metric (FNV-1a, hex):
     /// parts of different sweeps never merge.
@@ -502,18 +603,18 @@ pub fn merge(parts: &[PathBuf]) -> Result<(Sweep, Vec<Row>, String), String> {
         })?;
         let manifest: PartManifest =
             serde_json::from_str(&text).map_err(|e| format!("{}: {e}", m.display()))?;
+        if manifest.format != PART_FORMAT {
+            return Err(format!(
+                "{}: part format {}, this hopper-sim reads {PART_FORMAT} (written by another hopper-sim version: run that shard again)",
+                m.display(),
+                manifest.format
+            ));
+        }
         let c = dir.join(PART_CSV);
         let csv = std::fs::read_to_string(&c).map_err(|e| format!("{}: {e}", c.display()))?;
         Ok((manifest, csv))
     };
     let (first, _) = read(first_dir)?;
-    if first.format != 1 {
-        return Err(format!(
-            "{}: part format {}, this hopper-sim reads 1",
-            first_dir.display(),
-            first.format
-        ));
-    }
     let axes = first
         .axes
         .iter()
@@ -575,8 +676,23 @@ pub fn merge(parts: &[PathBuf]) -> Result<(Sweep, Vec<Row>, String), String> {
             .map(String::from)
             .collect();
         if got != header {
+            // Name the first difference only (a part's header is some twenty
+            // columns; the usual cause is a part from another version), and
+            // of a foreign file's cell only its start.
+            let k = got
+                .iter()
+                .zip(&header)
+                .position(|(a, b)| a != b)
+                .unwrap_or(got.len().min(header.len()));
+            let clip = |c: &String| c.chars().take(40).collect::<String>();
+            let what = match (got.get(k).map(clip), header.get(k)) {
+                (Some(g), Some(h)) => format!("column {} is `{g}`, not `{h}`", k + 1),
+                (None, Some(h)) => format!("no column {} (`{h}`)", k + 1),
+                (Some(g), None) => format!("an extra column {} (`{g}`)", k + 1),
+                (None, None) => "columns differ".to_string(),
+            };
             return Err(format!(
-                "{}: columns {got:?}, not {header:?}",
+                "{}: {what} (written by another hopper-sim version? run that shard again)",
                 path.display()
             ));
         }
@@ -621,8 +737,19 @@ pub fn merge(parts: &[PathBuf]) -> Result<(Sweep, Vec<Row>, String), String> {
             for (k, slot) in metrics.iter_mut().enumerate() {
                 *slot = cell(1 + n_axes + k)?;
             }
-            let metrics = Metrics::from_values(&metrics)
-                .ok_or_else(|| format!("{}: a metric is missing or not a count", at()))?;
+            let first_fault = match rec.get(1 + n_axes + METRICS.len()) {
+                None | Some("") => None,
+                Some(t) => Some(
+                    fault_name(t)
+                        .ok_or_else(|| format!("{}: `{t}` is not a fault's name", at()))?,
+                ),
+            };
+            let metrics = Metrics::from_values(&metrics, first_fault).ok_or_else(|| {
+                format!(
+                    "{}: a metric is missing or not a count, or the faults disagree",
+                    at()
+                )
+            })?;
             match rows.get_mut(point) {
                 Some(slot @ None) => *slot = Some(Row { values, metrics }),
                 Some(Some(_)) => return Err(format!("{}: point {point} twice", at())),
@@ -636,17 +763,14 @@ pub fn merge(parts: &[PathBuf]) -> Result<(Sweep, Vec<Row>, String), String> {
             }
         }
     }
-    let missing: Vec<String> = seen
+    let missing: Vec<usize> = seen
         .iter()
         .enumerate()
         .filter(|(_, s)| !**s)
-        .map(|(i, _)| format!("{}/{}", i + 1, first.of))
+        .map(|(i, _)| i + 1)
         .collect();
     if !missing.is_empty() {
-        return Err(format!(
-            "sweep merge: missing shards {}",
-            missing.join(", ")
-        ));
+        return Err(missing_shards(&missing, first.of));
     }
     let rows = rows
         .into_iter()
@@ -654,6 +778,30 @@ pub fn merge(parts: &[PathBuf]) -> Result<(Sweep, Vec<Row>, String), String> {
         .map(|(i, r)| r.ok_or_else(|| format!("sweep merge: grid point {i} is in no part")))
         .collect::<Result<Vec<Row>, String>>()?;
     Ok((sweep, rows, first.title))
+}
+
+/// Most missing shards a merge error names: a 1000-shard grid given one
+/// part would otherwise print a line of 999 numbers.
+const MISSING_SHOWN: usize = 5;
+
+/// The merge error for the `missing` shards (1-based) of `of`: how many,
+/// and the first few.
+fn missing_shards(missing: &[usize], of: usize) -> String {
+    let shown: Vec<String> = missing
+        .iter()
+        .take(MISSING_SHOWN)
+        .map(usize::to_string)
+        .collect();
+    let more = if missing.len() > MISSING_SHOWN {
+        ", ..."
+    } else {
+        ""
+    };
+    format!(
+        "sweep merge: {} of {of} shards missing: {}{more} (give every sweep-part directory of the grid)",
+        missing.len(),
+        shown.join(", ")
+    )
 }
 
 /// FNV-1a over `bytes`.
@@ -849,7 +997,7 @@ impl Sweep {
         title: &str,
     ) -> Result<Vec<PathBuf>, String> {
         let manifest = PartManifest {
-            format: 1,
+            format: PART_FORMAT,
             grid: self.fingerprint(),
             shard: shard.index,
             of: shard.count,
@@ -884,6 +1032,7 @@ impl Sweep {
             .into_iter()
             .chain(self.axes.iter().map(|a| a.knob.column()))
             .chain(METRICS.iter().map(|(n, _)| *n))
+            .chain(std::iter::once(FIRST_FAULT_COLUMN))
             .collect()
     }
 
@@ -900,14 +1049,15 @@ impl Sweep {
         let failed = |e: csv::Error| format!("cannot format sweep.csv: {e}");
         out.write_record(&header).map_err(failed)?;
         for (i, r) in rows {
-            let cells: Vec<Option<Shown>> = i
+            let numbers: Vec<Option<Shown>> = i
                 .map(|i| Shown(i as f64))
                 .into_iter()
                 .map(Some)
                 .chain(r.values.iter().map(|&v| Some(Shown(v))))
                 .chain(r.metrics.values().iter().map(|m| m.map(Shown)))
                 .collect();
-            out.serialize(cells).map_err(failed)?;
+            out.serialize((numbers, r.metrics.first_fault.unwrap_or("")))
+                .map_err(failed)?;
         }
         let bytes = out
             .into_inner()
@@ -918,12 +1068,46 @@ impl Sweep {
     /// The plotted value of a row: the metric, except that the default
     /// metric falls back to the last apex where the run never became steady.
     /// The flag says a fallback was used.
-    pub fn plotted(&self, m: &Metrics) -> Option<(f64, bool)> {
+    pub fn plotted(&self, m: &Metrics) -> Plotted {
         match m.get(&self.metric) {
             Some(v) => Some((v, false)),
             None if self.metric == DEFAULT_METRIC => m.last_apex_m.map(|v| (v, true)),
             None => None,
         }
+    }
+
+    /// A row's metric as the printed table shows it: counts whole, the
+    /// default metric's fallback said so, `-` for no value.
+    fn shown(&self, m: &Metrics) -> String {
+        match self.plotted(m) {
+            Some((v, false)) if COUNT_METRICS.contains(&self.metric.as_str()) => format!("{v:.0}"),
+            Some((v, false)) => format!("{v:.4}"),
+            Some((v, true)) => format!("{v:.4} (last apex, never steady)"),
+            None => "-".to_string(),
+        }
+    }
+
+    /// The printed table, a header line and one line a point: its swept
+    /// values, the metric and what became of the run ([`Metrics::outcome`]:
+    /// converged or not, derated from when, which fault latched when).
+    pub fn text_table(&self, rows: &[Row]) -> Vec<String> {
+        let swept: Vec<&str> = self.axes.iter().map(|a| a.knob.column()).collect();
+        let head = (swept.join(", "), self.metric.clone(), "outcome".to_string());
+        let cells: Vec<(String, String, String)> = rows
+            .iter()
+            .map(|r| {
+                let vals: Vec<String> = r.values.iter().map(|v| format!("{v:.6}")).collect();
+                (vals.join(", "), self.shown(&r.metrics), r.metrics.outcome())
+            })
+            .collect();
+        let width = |f: fn(&(String, String, String)) -> usize| {
+            cells.iter().chain([&head]).map(f).max().unwrap_or(0)
+        };
+        let (w0, w1) = (width(|c| c.0.len()), width(|c| c.1.len()));
+        std::iter::once(&head)
+            .chain(&cells)
+            .map(|(a, b, c)| format!("  {a:>w0$}  {b:>w1$}  {c}"))
+            .collect()
     }
 
     /// Write `sweep.csv`, `sweep.png` and `sweep.svg` into `dir` (created if
@@ -961,12 +1145,30 @@ impl Sweep {
     where
         DB::ErrorType: 'static,
     {
-        let res = match self.axes.len() {
-            1 => self.line_plot(&root, rows, title),
-            _ => self.heat_map(&root, rows, title),
-        };
+        // The title spans the figure, over the plot and its side column.
+        let res = (|| -> Result<(), Box<dyn std::error::Error>> {
+            root.fill(&WHITE)?;
+            let (head, body) = root.split_vertically(TITLE_PX);
+            head.titled(title, ("sans-serif", 20))?;
+            match self.axes.len() {
+                1 => self.line_plot(&body, rows),
+                _ => self.heat_map(&body, rows),
+            }
+        })();
         res.and_then(|()| root.present().map_err(Into::into))
             .map_err(|e| format!("cannot draw the sweep plot: {e}"))
+    }
+
+    /// Whether a plot marks this point's fault: when it faulted, unless
+    /// the plotted metric is the fault's time (its colour says so).
+    fn marks_fault(&self, m: &Metrics) -> bool {
+        m.fault_count > 0 && self.metric != "first_fault_s"
+    }
+
+    /// Whether a plot marks this point's derating: when it derated, unless
+    /// the plotted metric is the derating's time.
+    fn marks_derating(&self, m: &Metrics) -> bool {
+        m.first_derated_s.is_some() && self.metric != "first_derated_s"
     }
 
     fn metric_label(&self) -> &'static str {
@@ -980,56 +1182,74 @@ impl Sweep {
         &self,
         root: &DrawingArea<DB, Shift>,
         rows: &[Row],
-        title: &str,
     ) -> Result<(), Box<dyn std::error::Error>>
     where
         DB::ErrorType: 'static,
     {
-        root.fill(&WHITE)?;
-        let pts: Vec<(f64, f64, bool)> = rows
-            .iter()
-            .filter_map(|r| self.plotted(&r.metrics).map(|(v, fb)| (r.values[0], v, fb)))
-            .collect();
+        let (main, side) = root.split_horizontally(PLOT_SIZE.0 - SIDE_PX);
+        let vals: Vec<Plotted> = rows.iter().map(|r| self.plotted(&r.metrics)).collect();
         let (x_lo, x_hi) = padded(self.axes[0].values.iter().copied(), 0.03);
-        let (y_lo, y_hi) = padded(pts.iter().map(|p| p.1), 0.08);
-        let mut chart = ChartBuilder::on(root)
-            .caption(title, ("sans-serif", 20))
+        let (y_lo, y_hi) = padded(vals.iter().flatten().map(|p| p.0), 0.08);
+        // Points without a value sit on a line in the bottom margin, below
+        // every value (the range is padded by 8%).
+        let floor = y_lo + (y_hi - y_lo) * 0.025;
+        let mut chart = ChartBuilder::on(&main)
             .margin(16)
-            .margin_top(24)
             .x_label_area_size(48)
             .y_label_area_size(80)
             .build_cartesian_2d(x_lo..x_hi, y_lo..y_hi)?;
+        let count = COUNT_METRICS.contains(&self.metric.as_str());
+        let label = |v: &f64| whole_or_blank(*v, count);
         chart
             .configure_mesh()
             .x_desc(self.axes[0].knob.column())
             .y_desc(self.metric_label())
+            .y_label_formatter(&label)
             .label_style(("sans-serif", 14))
             .axis_desc_style(("sans-serif", 16))
             .light_line_style(WHITE.mix(0.0))
             .draw()?;
-        chart.draw_series(LineSeries::new(
-            pts.iter().map(|p| (p.0, p.1)),
-            BLUE.stroke_width(2),
-        ))?;
-        chart
-            .draw_series(
-                pts.iter()
-                    .filter(|p| !p.2)
-                    .map(|p| Circle::new((p.0, p.1), 5, BLUE.filled())),
-            )?
-            .label(self.metric_label())
-            .legend(|(x, y)| Circle::new((x + 10, y), 5, BLUE.filled()));
-        if pts.iter().any(|p| p.2) {
-            chart
-                .draw_series(
-                    pts.iter()
-                        .filter(|p| p.2)
-                        .map(|p| Cross::new((p.0, p.1), 6, RED.stroke_width(2))),
-                )?
-                .label("last apex (never steady)")
-                .legend(|(x, y)| Cross::new((x + 10, y), 6, RED.stroke_width(2)));
+        // A point without a value breaks the line rather than being bridged.
+        let mut segments: Vec<Vec<(f64, f64)>> = vec![Vec::new()];
+        for (r, v) in rows.iter().zip(&vals) {
+            match (v, segments.last_mut()) {
+                (Some((y, _)), Some(seg)) => seg.push((r.values[0], *y)),
+                (None, Some(seg)) if seg.is_empty() => {}
+                _ => segments.push(Vec::new()),
+            }
         }
-        crate::plot::legend(&mut chart, SeriesLabelPosition::UpperRight)?;
+        for seg in segments.into_iter().filter(|s| !s.is_empty()) {
+            chart.draw_series(LineSeries::new(seg, BLUE.stroke_width(2)))?;
+        }
+        // A fault's X goes through its point, under the point's own mark
+        // so that both show; the derating's triangle sits above.
+        let at = |r: &Row, v: &Plotted| (r.values[0], v.map_or(floor, |p| p.0));
+        let area = chart.plotting_area();
+        for (r, v) in rows.iter().zip(&vals) {
+            if self.marks_fault(&r.metrics) {
+                draw_mark(area, at(r, v), Mark::Fault, 9, (0, 0))?;
+            }
+            if self.marks_derating(&r.metrics) {
+                draw_mark(area, at(r, v), Mark::Derated, 6, (0, -16))?;
+            }
+        }
+        chart.draw_series(rows.iter().zip(&vals).filter_map(|(r, v)| match v {
+            Some((y, false)) => Some(Circle::new((r.values[0], *y), 5, BLUE.filled())),
+            _ => None,
+        }))?;
+        let area = chart.plotting_area();
+        for (r, v) in rows.iter().zip(&vals) {
+            match v {
+                Some((_, true)) => draw_mark(area, at(r, v), Mark::LastApex, 5, (0, 0))?,
+                None => draw_mark(area, at(r, v), Mark::NoValue, 5, (0, 0))?,
+                Some(_) => {}
+            }
+        }
+        let mut top = 16;
+        if vals.iter().all(Option::is_none) {
+            top = self.no_value_note(&side, top)?;
+        }
+        self.legend(&side, top, rows, &vals, true)?;
         Ok(())
     }
 
@@ -1037,13 +1257,11 @@ impl Sweep {
         &self,
         root: &DrawingArea<DB, Shift>,
         rows: &[Row],
-        title: &str,
     ) -> Result<(), Box<dyn std::error::Error>>
     where
         DB::ErrorType: 'static,
     {
-        root.fill(&WHITE)?;
-        let (main, bar) = root.split_horizontally(PLOT_SIZE.0 - 150);
+        let (main, side) = root.split_horizontally(PLOT_SIZE.0 - SIDE_PX);
         let xe = cell_edges(&self.axes[0].values);
         let ye = cell_edges(&self.axes[1].values);
         let range = |e: &[f64]| {
@@ -1051,25 +1269,10 @@ impl Sweep {
                 .fold((f64::MAX, f64::MIN), |(a, b), v| (a.min(*v), b.max(*v)))
         };
         let ((x_lo, x_hi), (y_lo, y_hi)) = (range(&xe), range(&ye));
-        let vals: Vec<Option<(f64, bool)>> =
-            rows.iter().map(|r| self.plotted(&r.metrics)).collect();
-        let (v_lo, v_hi) = vals
-            .iter()
-            .flatten()
-            .fold((f64::MAX, f64::MIN), |(a, b), (v, _)| {
-                (a.min(*v), b.max(*v))
-            });
-        let (v_lo, v_hi) = if v_lo > v_hi {
-            (0.0, 1.0)
-        } else if v_hi - v_lo < 1e-12 {
-            (v_lo - 0.5, v_hi + 0.5)
-        } else {
-            (v_lo, v_hi)
-        };
+        let vals: Vec<Plotted> = rows.iter().map(|r| self.plotted(&r.metrics)).collect();
+        let scale = value_range(vals.iter().flatten().map(|(v, _)| *v));
         let mut chart = ChartBuilder::on(&main)
-            .caption(title, ("sans-serif", 20))
             .margin(16)
-            .margin_top(24)
             .x_label_area_size(48)
             .y_label_area_size(80)
             .build_cartesian_2d(x_lo..x_hi, y_lo..y_hi)?;
@@ -1081,65 +1284,387 @@ impl Sweep {
             .axis_desc_style(("sans-serif", 16))
             .disable_mesh()
             .draw()?;
-        let n1 = self.axes[1].values.len();
-        chart.draw_series(rows.iter().zip(&vals).enumerate().map(|(k, (_, v))| {
+        let (n0, n1) = (self.axes[0].values.len(), self.axes[1].values.len());
+        chart.draw_series(vals.iter().enumerate().map(|(k, v)| {
             let (i, j) = (k / n1, k % n1);
-            let color = match v {
-                Some((v, _)) => viridis((v - v_lo) / (v_hi - v_lo)),
-                None => RGBColor(200, 200, 200),
+            let color = match (v, scale) {
+                (Some((v, _)), Some((lo, hi))) => viridis((v - lo) / (hi - lo)),
+                _ => NO_VALUE,
             };
             Rectangle::new([(xe[i], ye[j]), (xe[i + 1], ye[j + 1])], color.filled())
         }))?;
-        // Runs that never became steady, plotted with their last apex.
-        chart.draw_series(rows.iter().zip(&vals).filter_map(|(r, v)| match v {
-            Some((_, true)) => Some(Cross::new(
-                (r.values[0], r.values[1]),
-                5,
-                WHITE.stroke_width(2),
-            )),
-            _ => None,
-        }))?;
-        if vals.iter().flatten().any(|(_, fallback)| *fallback) {
-            chart
-                .draw_series(std::iter::once(Cross::new(
-                    (x_lo, y_lo),
-                    0,
-                    WHITE.stroke_width(2),
-                )))?
-                .label("x: never steady, last apex shown")
-                .legend(|(x, y)| Cross::new((x + 8, y), 5, BLACK.stroke_width(2)));
-            chart
-                .configure_series_labels()
-                .position(SeriesLabelPosition::UpperRight)
-                .label_font(("sans-serif", 14))
-                .background_style(WHITE.mix(0.85))
-                .border_style(BLACK)
-                .draw()?;
+        // Marks scale with the cells (a 1000 x 1000 grid's are under a
+        // pixel): the fault's in the middle, the derating's and the last
+        // apex's in opposite corners, so that all three can share a cell.
+        let (w, h) = chart.plotting_area().dim_in_pixel();
+        let cell_px = (f64::from(w) / n0.max(1) as f64).min(f64::from(h) / n1.max(1) as f64);
+        let size = (cell_px * 0.16).clamp(1.0, 8.0) as i32;
+        let off = (cell_px * 0.3) as i32;
+        let area = chart.plotting_area();
+        for (r, v) in rows.iter().zip(&vals) {
+            let at = (r.values[0], r.values[1]);
+            if let Some((_, true)) = v {
+                draw_mark(area, at, Mark::LastApex, size, (off, off))?;
+            }
+            if self.marks_derating(&r.metrics) {
+                draw_mark(area, at, Mark::Derated, size, (-off, -off))?;
+            }
+            if self.marks_fault(&r.metrics) {
+                draw_mark(area, at, Mark::Fault, size, (0, 0))?;
+            }
         }
-        let mut scale = ChartBuilder::on(&bar)
-            .margin_top(60)
-            .margin_bottom(64)
-            .margin_right(8)
-            .y_label_area_size(100)
-            .build_cartesian_2d(0.0..1.0, v_lo..v_hi)?;
-        scale
-            .configure_mesh()
-            .disable_x_axis()
-            .disable_mesh()
-            .y_desc(self.metric_label())
-            .y_label_style(("sans-serif", 14))
-            .axis_desc_style(("sans-serif", 15))
-            .draw()?;
-        const STEPS: usize = 100;
-        scale.draw_series((0..STEPS).map(|k| {
-            let a = v_lo + (v_hi - v_lo) * k as f64 / STEPS as f64;
-            let b = v_lo + (v_hi - v_lo) * (k + 1) as f64 / STEPS as f64;
-            Rectangle::new(
-                [(0.0, a), (1.0, b)],
-                viridis(k as f64 / STEPS as f64).filled(),
-            )
-        }))?;
+        let (bar, key) = side.split_vertically(440);
+        match scale {
+            Some((v_lo, v_hi)) => {
+                let mut scale = ChartBuilder::on(&bar)
+                    .margin_top(16)
+                    .margin_bottom(10)
+                    .margin_left(10)
+                    .margin_right(100)
+                    .y_label_area_size(100)
+                    .build_cartesian_2d(0.0..1.0, v_lo..v_hi)?;
+                // A count's scale is labelled at whole numbers only (a
+                // quarter hop means nothing), one label each when few.
+                let count = COUNT_METRICS.contains(&self.metric.as_str());
+                let label = |v: &f64| whole_or_blank(*v, count);
+                let labels = if count && v_hi - v_lo <= 10.0 {
+                    (v_hi - v_lo).round() as usize + 1
+                } else {
+                    10
+                };
+                scale
+                    .configure_mesh()
+                    .disable_x_axis()
+                    .disable_mesh()
+                    .y_desc(self.metric_label())
+                    .y_labels(labels)
+                    .y_label_formatter(&label)
+                    .y_label_style(("sans-serif", 14))
+                    .axis_desc_style(("sans-serif", 15))
+                    .draw()?;
+                const STEPS: usize = 100;
+                scale.draw_series((0..STEPS).map(|k| {
+                    let a = v_lo + (v_hi - v_lo) * k as f64 / STEPS as f64;
+                    let b = v_lo + (v_hi - v_lo) * (k + 1) as f64 / STEPS as f64;
+                    Rectangle::new(
+                        [(0.0, a), (1.0, b)],
+                        viridis(k as f64 / STEPS as f64).filled(),
+                    )
+                }))?;
+            }
+            None => {
+                self.no_value_note(&bar, 16)?;
+            }
+        }
+        self.legend(&key, 10, rows, &vals, false)?;
         Ok(())
+    }
+
+    /// Say in `area`, from `top` down, that no run has a value of the
+    /// metric (so there is no colour or value scale); returns the line
+    /// below the note.
+    fn no_value_note<DB: DrawingBackend>(
+        &self,
+        area: &DrawingArea<DB, Shift>,
+        top: i32,
+    ) -> Result<i32, DrawingAreaErrorKind<DB::ErrorType>> {
+        let note = if self.axes.len() == 1 {
+            format!(
+                "No value scale: no run has a value of {} (every point at the bottom).",
+                self.metric_label()
+            )
+        } else {
+            format!(
+                "No colour scale: no run has a value of {} (every cell grey).",
+                self.metric_label()
+            )
+        };
+        let style = ("sans-serif", 15).into_font().color(&BLACK);
+        let mut y = top;
+        for line in wrap(&note, 28) {
+            area.draw(&Text::new(line, (10, y), style.clone()))?;
+            y += 19;
+        }
+        Ok(y + 20)
+    }
+
+    /// The legend of a sweep plot in `area` (the column beside the data,
+    /// so it covers none), from `top` down: what a point without a value
+    /// means, and the marks for faulted, derated and (the default metric)
+    /// never-steady points, each with how many points it marks. `line`:
+    /// the 1-axis plot's entries (the line, points without a value on the
+    /// bottom) rather than the heat map's (grey cells).
+    fn legend<DB: DrawingBackend>(
+        &self,
+        area: &DrawingArea<DB, Shift>,
+        top: i32,
+        rows: &[Row],
+        vals: &[Plotted],
+        line: bool,
+    ) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
+        let count = |f: &dyn Fn(&Row, &Plotted) -> bool| {
+            rows.iter().zip(vals).filter(|(r, v)| f(r, v)).count()
+        };
+        let missing = missing_meaning(&self.metric);
+        let mut entries: Vec<(Key, String)> = Vec::new();
+        if line {
+            entries.push((Key::Line, self.metric_label().to_string()));
+        }
+        if self.metric == DEFAULT_METRIC {
+            let n = count(&|_, v| matches!(v, Some((_, true))));
+            entries.push((
+                Key::Mark(Mark::LastApex),
+                format!("never steady: last apex shown ({n})"),
+            ));
+        }
+        let n = count(&|_, v| v.is_none());
+        entries.push(if line {
+            (
+                Key::Mark(Mark::NoValue),
+                format!("no value ({missing}), drawn at the bottom ({n})"),
+            )
+        } else {
+            (Key::Grey, format!("{missing} ({n})"))
+        });
+        let kinds = fault_kinds(rows);
+        let faulted: usize = kinds.iter().map(|(_, n)| n).sum();
+        // A metric that is the fault's or the derating's time shows it as
+        // the colour: no mark, the entry says so.
+        let (fault_key, fault_what) = if self.metric == "first_fault_s" {
+            (Key::Plain, "coloured: faulted")
+        } else {
+            (Key::Mark(Mark::Fault), "faulted")
+        };
+        entries.push((
+            fault_key,
+            format!(
+                "{fault_what} ({faulted}){}",
+                if faulted > 0 { ", first fault:" } else { "" }
+            ),
+        ));
+        const KINDS_SHOWN: usize = 3;
+        for (name, n) in kinds.iter().take(KINDS_SHOWN) {
+            entries.push((Key::Detail, format!("{name} {n}")));
+        }
+        if kinds.len() > KINDS_SHOWN {
+            let rest: usize = kinds.iter().skip(KINDS_SHOWN).map(|(_, n)| n).sum();
+            entries.push((Key::Detail, format!("others {rest}")));
+        }
+        let n = count(&|r, _| r.metrics.first_derated_s.is_some());
+        entries.push(if self.metric == "first_derated_s" {
+            (Key::Plain, format!("coloured: current limit derated ({n})"))
+        } else {
+            (
+                Key::Mark(Mark::Derated),
+                format!("current limit derated ({n})"),
+            )
+        });
+
+        let style = ("sans-serif", 14).into_font().color(&BLACK);
+        let (x, mut y) = (10, top + 14);
+        let frame_top = top;
+        for (key, label) in entries {
+            let lines = wrap(&label, 28);
+            let (kx, ky) = (x + 12, y + 8);
+            match key {
+                Key::Grey => area.draw(&Rectangle::new(
+                    [(kx - 7, ky - 7), (kx + 7, ky + 7)],
+                    NO_VALUE.filled(),
+                ))?,
+                Key::Line => {
+                    area.draw(&PathElement::new(
+                        vec![(kx - 11, ky), (kx + 11, ky)],
+                        BLUE.stroke_width(2),
+                    ))?;
+                    area.draw(&Circle::new((kx, ky), 5, BLUE.filled()))?;
+                }
+                Key::Mark(m) => draw_mark(area, (kx, ky), m, 6, (0, 0))?,
+                Key::Plain | Key::Detail => {}
+            }
+            let indent = if matches!(key, Key::Detail) { 46 } else { 30 };
+            for l in lines {
+                area.draw(&Text::new(l, (x + indent, y), style.clone()))?;
+                y += 18;
+            }
+            y += 6;
+        }
+        let (w, _) = area.dim_in_pixel();
+        area.draw(&Rectangle::new(
+            [(x - 4, frame_top), (w as i32 - 10, y)],
+            BLACK.stroke_width(1),
+        ))?;
+        Ok(())
+    }
+}
+
+/// How many points faulted first with each fault, most first.
+fn fault_kinds(rows: &[Row]) -> Vec<(&'static str, usize)> {
+    let mut kinds: std::collections::BTreeMap<&'static str, usize> = Default::default();
+    for f in rows.iter().filter_map(|r| r.metrics.first_fault) {
+        *kinds.entry(f).or_default() += 1;
+    }
+    let mut kinds: Vec<(&'static str, usize)> = kinds.into_iter().collect();
+    kinds.sort_by(|a, b| b.1.cmp(&a.1).then(a.0.cmp(b.0)));
+    kinds
+}
+
+/// One line on a whole sweep, printed under its table: how many points
+/// converged, derated and faulted (by their first fault), e.g. `3 of 20
+/// points converged; 9 derated; 7 faulted (overtemperature 5,
+/// stroke-limit 2)`.
+pub fn tally(rows: &[Row]) -> String {
+    let converged = rows
+        .iter()
+        .filter(|r| r.metrics.hops_to_converge.is_some())
+        .count();
+    let derated = rows
+        .iter()
+        .filter(|r| r.metrics.first_derated_s.is_some())
+        .count();
+    let kinds = fault_kinds(rows);
+    let faulted: usize = kinds.iter().map(|(_, n)| n).sum();
+    let which = if kinds.is_empty() {
+        String::new()
+    } else {
+        let named: Vec<String> = kinds.iter().map(|(f, n)| format!("{f} {n}")).collect();
+        format!(" ({})", named.join(", "))
+    };
+    format!(
+        "{converged} of {} points converged; {derated} derated; {faulted} faulted{which}",
+        rows.len()
+    )
+}
+
+/// A point's plotted value ([`Sweep::plotted`]): the value, and whether it
+/// is the default metric's fallback (the last apex); None: no value.
+pub type Plotted = Option<(f64, bool)>;
+
+/// What a legend entry shows left of its label.
+#[derive(Clone, Copy)]
+enum Key {
+    /// A grey cell: the heat map's points without a value.
+    Grey,
+    /// The line plot's line and point.
+    Line,
+    /// A point's mark.
+    Mark(Mark),
+    /// Nothing: the label says it all.
+    Plain,
+    /// Nothing, the label indented: a detail of the entry above.
+    Detail,
+}
+
+/// The marks a sweep plot puts on a point.
+#[derive(Clone, Copy)]
+enum Mark {
+    /// A fault latched: a black X, in a white halo when big enough to be
+    /// seen on the dark end of viridis.
+    Fault,
+    /// The current limit derated: an orange triangle, edged in black.
+    Derated,
+    /// Never steady, the last apex plotted instead: a white dot edged in
+    /// black.
+    LastApex,
+    /// No value (the line plot, on its bottom margin): a grey dot.
+    NoValue,
+}
+
+/// Colour of a cell or point without a value.
+const NO_VALUE: RGBColor = RGBColor(200, 200, 200);
+/// Colour of the derating mark (the hop plot's derating level's).
+const DERATED: RGBColor = RGBColor(230, 140, 0);
+/// Width of the column right of a sweep plot (colour bar, legend), px.
+const SIDE_PX: u32 = 260;
+/// Height of a sweep plot's title, px.
+const TITLE_PX: u32 = 40;
+
+/// Draw `mark` at `at` (in `area`'s coordinates), `offset` pixels away,
+/// `size` pixels from its centre to its edge.
+fn draw_mark<DB, CT>(
+    area: &DrawingArea<DB, CT>,
+    at: CT::From,
+    mark: Mark,
+    size: i32,
+    offset: (i32, i32),
+) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>>
+where
+    DB: DrawingBackend,
+    CT: plotters::coord::CoordTranslate,
+    CT::From: Clone,
+{
+    let here = || EmptyElement::at(at.clone());
+    let edge = BLACK.stroke_width(1);
+    match mark {
+        Mark::Fault => {
+            if size >= 4 {
+                area.draw(&(here() + Cross::new(offset, size, WHITE.stroke_width(5))))?;
+            }
+            area.draw(&(here() + Cross::new(offset, size, BLACK.stroke_width(2))))
+        }
+        Mark::Derated => {
+            // plotters fills every TriangleMarker: the edge is a path.
+            let (dx, dy, r) = (offset.0, offset.1, f64::from(size + 1));
+            let corner = |deg: f64| {
+                let a = deg.to_radians();
+                (
+                    dx + (r * a.cos()).round() as i32,
+                    dy + (r * a.sin()).round() as i32,
+                )
+            };
+            let tri = vec![corner(-90.0), corner(30.0), corner(150.0), corner(-90.0)];
+            area.draw(&(here() + Polygon::new(tri.clone(), DERATED.filled())))?;
+            area.draw(&(here() + PathElement::new(tri, edge)))
+        }
+        Mark::LastApex => {
+            area.draw(&(here() + Circle::new(offset, size, WHITE.filled())))?;
+            area.draw(&(here() + Circle::new(offset, size, edge)))
+        }
+        Mark::NoValue => {
+            area.draw(&(here() + Circle::new(offset, size, NO_VALUE.filled())))?;
+            area.draw(&(here() + Circle::new(offset, size, RGBColor(120, 120, 120))))
+        }
+    }
+}
+
+/// An axis label: for a `count` metric whole numbers only (a quarter hop
+/// means nothing), blank between them; otherwise plotters' own format.
+fn whole_or_blank(v: f64, count: bool) -> String {
+    use plotters::coord::ranged1d::ValueFormatter;
+    if !count {
+        plotters::coord::types::RangedCoordf64::format(&v)
+    } else if (v - v.round()).abs() < 1e-9 {
+        format!("{v:.0}")
+    } else {
+        String::new()
+    }
+}
+
+/// `text` broken at spaces into lines of at most `width` characters (a
+/// longer word keeps its own line).
+fn wrap(text: &str, width: usize) -> Vec<String> {
+    let mut lines: Vec<String> = Vec::new();
+    for word in text.split_whitespace() {
+        match lines.last_mut() {
+            Some(l) if l.chars().count() + 1 + word.chars().count() <= width => {
+                l.push(' ');
+                l.push_str(word);
+            }
+            _ => lines.push(word.to_string()),
+        }
+    }
+    lines
+}
+
+/// The colour scale's range over `values`: None when there are none; a
+/// single value gets a unit-wide range around it.
+fn value_range(values: impl Iterator<Item = f64>) -> Option<(f64, f64)> {
+    let (lo, hi) = values.fold((f64::MAX, f64::MIN), |(a, b), v| (a.min(v), b.max(v)));
+    if lo > hi {
+        None
+    } else if hi - lo < 1e-12 {
+        Some((lo - 0.5, hi + 0.5))
+    } else {
+        Some((lo, hi))
     }
 }
 
@@ -1191,6 +1716,264 @@ mod tests {
         assert_eq!(viridis(f64::INFINITY), viridis(0.0));
         assert_eq!(viridis(7.0), viridis(1.0));
         assert_eq!(viridis(-7.0), viridis(0.0));
+    }
+
+    /// A grid over `specs` with `metric`, around the default settings.
+    fn grid(specs: &[&str], metric: &str) -> Sweep {
+        Sweep {
+            base: Settings::resolve(None, &crate::scenario::Overrides::default()),
+            axes: specs
+                .iter()
+                .map(|s| parse_axis(s).unwrap_or_else(|e| panic!("{e}")))
+                .collect(),
+            metric: metric.to_string(),
+        }
+    }
+
+    /// A run's metrics: converged at `converged` (a hop), derated at
+    /// `derated` s, faulted with overtemperature at `fault` s.
+    fn ran(converged: Option<usize>, derated: Option<f64>, fault: Option<f64>) -> Metrics {
+        Metrics {
+            hops_to_converge: converged,
+            steady_apex_m: converged.map(|_| 0.1),
+            last_apex_m: Some(0.09),
+            hops: 20,
+            fault_count: usize::from(fault.is_some()),
+            first_derated_s: derated,
+            peak_winding_c: Some(if fault.is_some() { 150.0 } else { 140.0 }),
+            first_fault_s: fault,
+            first_fault: fault.map(|_| "overtemperature"),
+            ..Metrics::default()
+        }
+    }
+
+    /// The words of an SVG, its text elements joined by spaces (a label
+    /// wrapped onto two lines reads as one).
+    fn words(svg: &str) -> String {
+        svg.split("<text")
+            .skip(1)
+            .filter_map(|t| t.split_once('>').and_then(|(_, r)| r.split_once("</text>")))
+            .map(|(w, _)| w.trim())
+            .collect::<Vec<_>>()
+            .join(" ")
+    }
+
+    /// The SVG text of `sw`'s plot of `rows`.
+    fn svg(sw: &Sweep, rows: &[Row]) -> String {
+        crate::plot::ensure_font().unwrap_or_else(|e| panic!("{e}"));
+        let mut text = String::new();
+        sw.draw(
+            SVGBackend::with_string(&mut text, PLOT_SIZE).into_drawing_area(),
+            rows,
+            "test",
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+        text
+    }
+
+    #[test]
+    fn the_table_marks_each_point_converged_derated_or_faulted() {
+        let sw = grid(&["target_apex=0.05:0.15:3"], "hops_to_converge");
+        let rows: Vec<Row> = [
+            ran(Some(4), None, None),
+            ran(None, Some(11.652), None),
+            ran(None, Some(7.97), Some(10.0612)),
+        ]
+        .into_iter()
+        .zip([0.05, 0.1, 0.15])
+        .map(|(metrics, v)| Row {
+            values: vec![v],
+            metrics,
+        })
+        .collect();
+        let table = sw.text_table(&rows);
+        assert_eq!(table.len(), 4, "{table:#?}");
+        assert!(table[0].contains("hops_to_converge") && table[0].contains("outcome"));
+        // A count prints whole; a point without a value prints `-`.
+        assert!(
+            table[1].ends_with("  4  converged from hop 4"),
+            "{}",
+            table[1]
+        );
+        assert!(
+            table[2].ends_with("  -  not converged; derated from 11.65 s"),
+            "{}",
+            table[2]
+        );
+        assert!(
+            table[3].ends_with(
+                "  -  not converged; derated from 7.97 s; faulted: overtemperature at 10.06 s"
+            ),
+            "{}",
+            table[3]
+        );
+        // The columns line up: every value ends at the same place.
+        let end = |l: &String| l.find("  converged").or_else(|| l.find("  not"));
+        assert_eq!(end(&table[1]), end(&table[2]));
+        assert_eq!(
+            tally(&rows),
+            "1 of 3 points converged; 2 derated; 1 faulted (overtemperature 1)"
+        );
+        let more = Metrics {
+            fault_count: 3,
+            ..ran(None, None, Some(2.0))
+        };
+        assert_eq!(
+            more.outcome(),
+            "not converged; faulted: overtemperature at 2.00 s (+2 more)"
+        );
+    }
+
+    #[test]
+    fn a_heat_map_without_values_says_so_and_keeps_its_legend() {
+        let sw = grid(
+            &["target_apex=0.05:0.15:3", "spin_up=0.4:1.0:2"],
+            "hops_to_converge",
+        );
+        let rows: Vec<Row> = (0..6)
+            .map(|i| Row {
+                values: sw.point(i).0,
+                metrics: ran(None, Some(9.0), (i % 2 == 1).then_some(12.0)),
+            })
+            .collect();
+        let plot = svg(&sw, &rows);
+        let text = words(&plot);
+        assert!(
+            text.contains(
+                "No colour scale: no run has a value of hops to converge (every cell grey)."
+            ),
+            "{text}"
+        );
+        assert!(text.contains("did not converge (6)"), "{text}");
+        assert!(
+            text.contains("faulted (3), first fault: overtemperature 3"),
+            "{text}"
+        );
+        assert!(text.contains("current limit derated (6)"), "{text}");
+        // No colour bar: none of its 100 steps, so no bogus 0-1 scale.
+        let fill = |c: RGBColor| format!("fill=\"#{:02X}{:02X}{:02X}\"", c.0, c.1, c.2);
+        assert!(
+            !plot.contains(&fill(viridis(0.5))),
+            "a colour bar was drawn"
+        );
+        assert!(plot.contains(&fill(NO_VALUE)));
+        // With values the colour bar is back, and the note is gone.
+        let mut rows = rows;
+        rows[0].metrics = ran(Some(3), None, None);
+        rows[2].metrics = ran(Some(9), None, None);
+        let plot = svg(&sw, &rows);
+        let text = words(&plot);
+        assert!(!text.contains("No colour scale"), "{text}");
+        assert!(plot.contains(&fill(viridis(0.5))), "no colour bar");
+        assert!(text.contains("did not converge (4)"), "{text}");
+        // A whole-number scale: 3 to 9 labelled 3, 4, ... 9, no halves.
+        assert!(text.contains(" 3 4 5 6 7 8 9 "), "{text}");
+        assert!(!text.contains("6.5"), "{text}");
+    }
+
+    #[test]
+    fn a_line_plot_marks_faulted_and_derated_points_in_a_side_legend() {
+        let sw = grid(&["target_apex=0.05:0.15:3"], DEFAULT_METRIC);
+        let rows: Vec<Row> = [
+            ran(Some(4), None, None),
+            ran(None, Some(11.0), None),
+            ran(None, Some(8.0), Some(10.0)),
+        ]
+        .into_iter()
+        .zip([0.05, 0.1, 0.15])
+        .map(|(metrics, v)| Row {
+            values: vec![v],
+            metrics,
+        })
+        .collect();
+        let text = words(&svg(&sw, &rows));
+        assert!(text.contains("never steady: last apex shown (2)"), "{text}");
+        assert!(
+            text.contains("faulted (1), first fault: overtemperature 1"),
+            "{text}"
+        );
+        assert!(text.contains("current limit derated (2)"), "{text}");
+        assert!(
+            text.contains("no value (no hop), drawn at the bottom (0)"),
+            "{text}"
+        );
+    }
+
+    #[test]
+    fn marks_that_repeat_the_plotted_metric_are_left_out() {
+        let sw = grid(
+            &["target_apex=0.05:0.15:3", "spin_up=0.4:1.0:2"],
+            "first_derated_s",
+        );
+        let m = ran(None, Some(9.0), Some(12.0));
+        assert!(!sw.marks_derating(&m) && sw.marks_fault(&m));
+        let sw = Sweep {
+            metric: "first_fault_s".into(),
+            ..sw
+        };
+        assert!(sw.marks_derating(&m) && !sw.marks_fault(&m));
+    }
+
+    #[test]
+    fn metrics_round_trip_through_their_values_with_the_fault() {
+        for m in [ran(Some(4), None, None), ran(None, Some(11.0), Some(13.5))] {
+            assert_eq!(Metrics::from_values(&m.values(), m.first_fault), Some(m));
+        }
+        let m = ran(None, Some(11.0), Some(13.5));
+        // A fault's time without its name, or a name without a count, is
+        // not a run's.
+        assert_eq!(Metrics::from_values(&m.values(), None), None);
+        let none = ran(None, None, None);
+        assert_eq!(
+            Metrics::from_values(&none.values(), Some("overtemperature")),
+            None
+        );
+        assert_eq!(fault_name("overtemperature"), Some("overtemperature"));
+        assert_eq!(fault_name("stroke-limit"), Some("stroke-limit"));
+        assert_eq!(fault_name("overheat"), None);
+    }
+
+    #[test]
+    fn merge_keeps_faults_and_names_missing_shards_briefly() {
+        let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
+        let sw = grid(&["target_apex=0.05:0.15:1000"], DEFAULT_METRIC);
+        let part = |k: usize, m: Metrics| {
+            let shard = Shard {
+                index: k,
+                count: 1000,
+            };
+            let i = k - 1;
+            let row = Row {
+                values: sw.point(i).0,
+                metrics: m,
+            };
+            let out = dir.path().join(format!("part{k}"));
+            sw.write_part(shard, &[(i, row)], &out, "t")
+                .unwrap_or_else(|e| panic!("{e}"));
+            out
+        };
+        let faulted = ran(None, Some(7.5), Some(9.25));
+        let parts = [part(1, ran(Some(3), None, None)), part(2, faulted)];
+        let err = merge(&parts).err().unwrap_or_default();
+        assert_eq!(
+            err,
+            "sweep merge: 998 of 1000 shards missing: 3, 4, 5, 6, 7, ... (give every sweep-part directory of the grid)"
+        );
+        assert!(err.len() < 300);
+        // Every shard: the fault's name and time come back as written.
+        let all: Vec<PathBuf> = parts
+            .into_iter()
+            .chain((3..=1000).map(|k| part(k, ran(Some(3), None, None))))
+            .collect();
+        let (_, rows, _) = merge(&all).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(rows.len(), 1000);
+        assert_eq!(rows[1].metrics, faulted);
+        assert_eq!(rows[0].metrics, ran(Some(3), None, None));
+        // A short list is given whole.
+        assert_eq!(
+            missing_shards(&[3], 3),
+            "sweep merge: 1 of 3 shards missing: 3 (give every sweep-part directory of the grid)"
+        );
     }
 
     #[test]

@@ -124,7 +124,10 @@ fn sharded_and_merged_is_the_unsharded_sweep() {
             vec![p("other"), p("part2"), p("part3")],
             "a slice of another sweep",
         ),
-        (vec![p("part1"), p("part2")], "missing shards 3/3"),
+        (
+            vec![p("part1"), p("part2")],
+            "1 of 3 shards missing: 3 (give every sweep-part directory",
+        ),
         (vec![p("part1"), p("part1"), p("part2")], "given twice"),
         (
             vec![p("part1"), p("whole")],

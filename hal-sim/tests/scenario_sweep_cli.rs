@@ -456,3 +456,82 @@ fn shaped_law_constants_are_sweepable_and_refused_elsewhere() {
         "used by the shaped controller only",
     );
 }
+
+/// A sweep whose runs overheat the motor: the table says per point when
+/// the current limit derated and which fault latched when, the tally
+/// counts them, and sweep.csv has the same in its last columns.
+#[test]
+fn an_overheating_sweep_marks_derated_and_faulted_points() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("hot");
+    let o = sim(&[
+        "sweep",
+        "--controller",
+        "shaped",
+        "--params",
+        "design",
+        "--noise",
+        "off",
+        "--start-apex",
+        "0.05",
+        "--target-apex",
+        "0.15",
+        "--duration",
+        "15",
+        "--param",
+        "spin_up=0.6:1.0:2",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let text = String::from_utf8_lossy(&o.stdout);
+    let lines: Vec<&str> = text.lines().collect();
+    assert!(lines[1].ends_with("outcome"), "{text}");
+    // Spin-up 0.6 derates late and hops on; 1.0 derates early and trips.
+    assert!(lines[2].contains("0.600000"), "{text}");
+    assert!(lines[2].contains("not converged; derated from "), "{text}");
+    assert!(!lines[2].contains("faulted"), "{text}");
+    assert!(lines[3].contains("1.000000"), "{text}");
+    assert!(
+        lines[3].contains("; faulted: overtemperature at "),
+        "{text}"
+    );
+    assert!(
+        text.contains("0 of 2 points converged; 2 derated; 1 faulted (overtemperature 1)"),
+        "{text}"
+    );
+
+    let csv = std::fs::read_to_string(out.join("sweep.csv")).unwrap();
+    let mut rows = csv.lines().map(|l| l.split(',').collect::<Vec<&str>>());
+    let header = rows.next().unwrap();
+    // The new columns come last, after every older one.
+    assert_eq!(
+        &header[header.len() - 5..],
+        &[
+            "first_apex_m",
+            "first_derated_s",
+            "peak_winding_c",
+            "first_fault_s",
+            "first_fault"
+        ]
+    );
+    let col = |name: &str| header.iter().position(|c| *c == name).unwrap();
+    let rows: Vec<Vec<&str>> = rows.collect();
+    let num = |r: &Vec<&str>, name: &str| -> Option<f64> { r[col(name)].parse().ok() };
+    let (cool, hot) = (&rows[0], &rows[1]);
+    assert_eq!(cool[col("first_fault")], "");
+    assert_eq!(num(cool, "first_fault_s"), None);
+    assert_eq!(num(cool, "fault_count"), Some(0.0));
+    assert_eq!(hot[col("first_fault")], "overtemperature");
+    assert_eq!(num(hot, "fault_count"), Some(1.0));
+    let derated = num(hot, "first_derated_s").unwrap();
+    let tripped = num(hot, "first_fault_s").unwrap();
+    assert!(
+        0.0 < derated && derated < tripped && tripped < 15.0,
+        "{csv}"
+    );
+    // It trips at the trip temperature (150 C); the cooler run stays under.
+    assert!(num(hot, "peak_winding_c").unwrap() >= 150.0, "{csv}");
+    assert!(num(cool, "peak_winding_c").unwrap() < 150.0, "{csv}");
+    assert!(num(cool, "first_derated_s").unwrap() > derated, "{csv}");
+}

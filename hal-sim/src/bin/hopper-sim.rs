@@ -1667,6 +1667,22 @@ fn cmd_run(a: RunArgs) -> Result<()> {
     Ok(())
 }
 
+/// Most points a sweep prints one line each for; a bigger grid gets the
+/// tally only (sweep.csv has every point).
+const TABLE_ROWS: usize = 40;
+
+/// A finished sweep's table (small grids) and its tally: each point's
+/// metric and whether it converged, derated or faulted.
+fn print_table(sw: &Sweep, rows: &[sweep::Row]) -> Result<()> {
+    if rows.len() <= TABLE_ROWS {
+        for line in sw.text_table(rows) {
+            say!("{line}");
+        }
+    }
+    say!("  {}", sweep::tally(rows));
+    Ok(())
+}
+
 fn cmd_sweep_merge(parts: &[PathBuf], out: &std::path::Path) -> Result<()> {
     let (sw, rows, title) = sweep::merge(parts).map_err(anyhow::Error::msg)?;
     let written = sw.write(&rows, out, &title).map_err(anyhow::Error::msg)?;
@@ -1675,6 +1691,7 @@ fn cmd_sweep_merge(parts: &[PathBuf], out: &std::path::Path) -> Result<()> {
         parts.len(),
         rows.len()
     );
+    print_table(&sw, &rows)?;
     for p in &written {
         say!("  wrote {}", p.display());
     }
@@ -1790,18 +1807,7 @@ fn cmd_sweep(a: SweepArgs) -> Result<()> {
         sw.base.params_name,
         rayon::current_num_threads()
     );
-    if rows.len() <= 40 {
-        say!("  {:>24} {}", swept.join(", "), sw.metric);
-        for r in &rows {
-            let vals: Vec<String> = r.values.iter().map(|v| format!("{v:.6}")).collect();
-            let m = match sw.plotted(&r.metrics) {
-                Some((v, false)) => format!("{v:.4}"),
-                Some((v, true)) => format!("{v:.4} (last apex, never steady)"),
-                None => "-".to_string(),
-            };
-            say!("  {:>24} {m}", vals.join(", "));
-        }
-    }
+    print_table(&sw, &rows)?;
     for p in &written {
         say!("  wrote {}", p.display());
     }
