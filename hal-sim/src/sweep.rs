@@ -483,11 +483,18 @@ impl Metrics {
     /// or not, and when the current limit derated and which fault latched,
     /// e.g. `not converged; derated from 11.65 s; faulted: overtemperature
     /// at 14.33 s`.
-    pub fn outcome(&self) -> String {
-        let mut parts = vec![match self.hops_to_converge {
-            Some(k) => format!("converged from hop {k}"),
-            None => "not converged".to_string(),
-        }];
+    ///
+    /// `convergence`: whether to say if the apex converged to the target
+    /// (a sweep of an apex metric); without it and with nothing to report,
+    /// `no derating, no fault`.
+    pub fn outcome(&self, convergence: bool) -> String {
+        let mut parts = Vec::new();
+        if convergence {
+            parts.push(match self.hops_to_converge {
+                Some(k) => format!("converged from hop {k}"),
+                None => "not converged".to_string(),
+            });
+        }
         if let Some(t) = self.first_derated_s {
             parts.push(format!("derated from {t:.2} s"));
         }
@@ -497,6 +504,9 @@ impl Metrics {
                 n => format!(" (+{} more)", n - 1),
             };
             parts.push(format!("faulted: {name} at {t:.2} s{more}"));
+        }
+        if parts.is_empty() {
+            return "no derating, no fault".to_string();
         }
         parts.join("; ")
     }
@@ -1087,6 +1097,16 @@ impl Sweep {
         }
     }
 
+    /// Whether the plotted metric is about the apex, so that whether each
+    /// run converged to its target belongs in the table and the tally (a
+    /// lead study's first-stance work says nothing of convergence).
+    pub fn about_the_apex(&self) -> bool {
+        matches!(
+            self.metric.as_str(),
+            "steady_apex_m" | "hops_to_converge" | "last_apex_m"
+        )
+    }
+
     /// The printed table, a header line and one line a point: its swept
     /// values, the metric and what became of the run ([`Metrics::outcome`]:
     /// converged or not, derated from when, which fault latched when).
@@ -1097,7 +1117,11 @@ impl Sweep {
             .iter()
             .map(|r| {
                 let vals: Vec<String> = r.values.iter().map(|v| format!("{v:.6}")).collect();
-                (vals.join(", "), self.shown(&r.metrics), r.metrics.outcome())
+                (
+                    vals.join(", "),
+                    self.shown(&r.metrics),
+                    r.metrics.outcome(self.about_the_apex()),
+                )
             })
             .collect();
         let width = |f: fn(&(String, String, String)) -> usize| {
@@ -1512,7 +1536,7 @@ fn fault_kinds(rows: &[Row]) -> Vec<(&'static str, usize)> {
 /// converged, derated and faulted (by their first fault), e.g. `3 of 20
 /// points converged; 9 derated; 7 faulted (overtemperature 5,
 /// stroke-limit 2)`.
-pub fn tally(rows: &[Row]) -> String {
+pub fn tally(rows: &[Row], convergence: bool) -> String {
     let converged = rows
         .iter()
         .filter(|r| r.metrics.hops_to_converge.is_some())
@@ -1529,10 +1553,13 @@ pub fn tally(rows: &[Row]) -> String {
         let named: Vec<String> = kinds.iter().map(|(f, n)| format!("{f} {n}")).collect();
         format!(" ({})", named.join(", "))
     };
-    format!(
-        "{converged} of {} points converged; {derated} derated; {faulted} faulted{which}",
-        rows.len()
-    )
+    let n = rows.len();
+    match convergence {
+        true => format!(
+            "{converged} of {n} points converged; {derated} derated; {faulted} faulted{which}"
+        ),
+        false => format!("{n} points; {derated} derated; {faulted} faulted{which}"),
+    }
 }
 
 /// A point's plotted value ([`Sweep::plotted`]): the value, and whether it
@@ -1811,16 +1838,28 @@ mod tests {
         let end = |l: &String| l.find("  converged").or_else(|| l.find("  not"));
         assert_eq!(end(&table[1]), end(&table[2]));
         assert_eq!(
-            tally(&rows),
+            tally(&rows, true),
             "1 of 3 points converged; 2 derated; 1 faulted (overtemperature 1)"
+        );
+        assert_eq!(
+            tally(&rows, false),
+            "3 points; 2 derated; 1 faulted (overtemperature 1)"
         );
         let more = Metrics {
             fault_count: 3,
             ..ran(None, None, Some(2.0))
         };
         assert_eq!(
-            more.outcome(),
+            more.outcome(true),
             "not converged; faulted: overtemperature at 2.00 s (+2 more)"
+        );
+        assert_eq!(
+            more.outcome(false),
+            "faulted: overtemperature at 2.00 s (+2 more)"
+        );
+        assert_eq!(
+            ran(None, None, None).outcome(false),
+            "no derating, no fault"
         );
     }
 

@@ -1679,7 +1679,7 @@ fn print_table(sw: &Sweep, rows: &[sweep::Row]) -> Result<()> {
             say!("{line}");
         }
     }
-    say!("  {}", sweep::tally(rows));
+    say!("  {}", sweep::tally(rows, sw.about_the_apex()));
     Ok(())
 }
 
