@@ -1775,11 +1775,24 @@ fn cmd_sweep(a: SweepArgs) -> Result<()> {
     let elapsed_s = started.elapsed().as_secs_f64();
 
     let swept: Vec<&str> = sw.axes.iter().map(|x| x.knob.column()).collect();
+    // A sweep run without the motor's thermal protection says so.
+    let protect_off = sw
+        .base
+        .firmware_params
+        .iter()
+        .rev()
+        .find(|(p, _)| p.name == hopper_control::params::THERMAL_PROTECT.name)
+        .is_some_and(|(_, v)| *v == 0.0);
     let title = format!(
-        "{} sweep: {} controller, {} parameters",
+        "{} sweep: {} controller, {} parameters{}",
         swept.join(" x "),
         sw.base.controller,
-        sw.base.params_name
+        sw.base.params_name,
+        if protect_off {
+            ", no motor thermal limit"
+        } else {
+            ""
+        }
     );
     if let Some(k) = shard {
         let written = sw
