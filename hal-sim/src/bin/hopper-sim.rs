@@ -601,8 +601,9 @@ struct SweepArgs {
     /// steady_apex_m, falling back to the last apex where not steady].
     #[arg(long)]
     metric: Option<String>,
-    /// Run only slice K of N of the grid (1 <= K <= N: the points whose
-    /// grid index is K-1 modulo N) and write its part (sweep-part.csv and
+    /// Run only slice K of N of the grid (1 <= K <= N: diagonal stripes,
+    /// the points whose row and last-axis indexes sum to K-1 modulo N, so
+    /// that every slice gets values of both axes) and write its part (sweep-part.csv and
     /// sweep-part.json) into --out; `sweep merge` combines the N parts into
     /// the sweep.csv and plots of the whole grid (docs/design.md, "Sweeps
     /// past one machine").
@@ -1253,7 +1254,7 @@ fn cmd_design(cmd: &DesignCmd) -> Result<()> {
                 return Ok(());
             }
             say!(
-                "the smallest single change that makes the identified machine hold a 5 cm hop (released from 0.05 m, 15 s; {:.1} s):",
+                "the smallest single change that makes the identified machine hold a 5 cm hop (released from 0.05 m, 15 s each; searched in {:.1} s):",
                 started.elapsed().as_secs_f64()
             );
             for s in &smallest {
@@ -1667,6 +1668,14 @@ fn cmd_run(a: RunArgs) -> Result<()> {
     Ok(())
 }
 
+/// `1 thread`, `2 threads`.
+fn threads(n: usize) -> String {
+    match n {
+        1 => "1 thread".to_string(),
+        n => format!("{n} threads"),
+    }
+}
+
 /// Most points a sweep prints one line each for; a bigger grid gets the
 /// tally only (sweep.csv has every point).
 const TABLE_ROWS: usize = 40;
@@ -1799,11 +1808,11 @@ fn cmd_sweep(a: SweepArgs) -> Result<()> {
             .write_part(k, &indexed, &out, &title)
             .map_err(anyhow::Error::msg)?;
         say!(
-            "hopper-sim sweep: shard {}/{}: {runs} of {grid_runs} runs of {} s in {elapsed_s:.1} s on {} threads",
+            "hopper-sim sweep: shard {}/{}: {runs} of {grid_runs} runs of {} s in {elapsed_s:.1} s on {}",
             k.index,
             k.count,
             sw.base.duration_s,
-            rayon::current_num_threads()
+            threads(rayon::current_num_threads())
         );
         for p in &written {
             say!("  wrote {}", p.display());
@@ -1814,11 +1823,11 @@ fn cmd_sweep(a: SweepArgs) -> Result<()> {
     let written = sw.write(&rows, &out, &title).map_err(anyhow::Error::msg)?;
 
     say!(
-        "hopper-sim sweep: {runs} runs of {} s ({} controller, {} parameters) in {elapsed_s:.1} s on {} threads",
+        "hopper-sim sweep: {runs} runs of {} s ({} controller, {} parameters) in {elapsed_s:.1} s on {}",
         sw.base.duration_s,
         sw.base.controller,
         sw.base.params_name,
-        rayon::current_num_threads()
+        threads(rayon::current_num_threads())
     );
     print_table(&sw, &rows)?;
     for p in &written {
