@@ -674,3 +674,59 @@ impl Controller for Passive {
         0.0
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn summary(protect: bool, derated: Option<f64>, trip: Option<f64>) -> ThermalSummary {
+        ThermalSummary {
+            peak_winding_c: 150.4,
+            final_winding_c: 149.0,
+            first_derated_s: derated.filter(|_| protect),
+            protect,
+            motor_data: "stand-in",
+            derate_winding_c: 135.0,
+            trip_winding_c: 150.0,
+            reached_derate_s: derated,
+            reached_trip_s: trip,
+            final_current_limit_a: 17.1,
+            amplifier_limit_a: 33.67,
+        }
+    }
+
+    /// The heat line names the motor's data and says when the limit
+    /// derated and the fault tripped, or with the protection off when they
+    /// would have; a trip shows no current limit (the supervisor drives 0 A).
+    #[test]
+    fn the_heat_line_says_what_the_protection_did_or_would_have_done() {
+        let on = heat_line(&summary(true, Some(11.71), None));
+        assert!(on.starts_with("stand-in motor data (maxon RE 40"), "{on}");
+        assert!(
+            on.ends_with(
+                "winding peak 150 C; derating from 11.71 s, no trip; limit at end 17.1 of 33.7 A"
+            ),
+            "{on}"
+        );
+        let tripped = heat_line(&summary(true, Some(11.26), Some(14.8)));
+        assert!(
+            tripped.ends_with(
+                "derating from 11.26 s, tripped at 14.80 s (overtemperature: 0 A since)"
+            ),
+            "{tripped}"
+        );
+        let off = heat_line(&summary(false, Some(11.71), Some(13.44)));
+        assert!(off.contains("protection OFF"), "{off}");
+        assert!(
+            off.ends_with("would derate at 11.71 s, would trip at 13.44 s"),
+            "{off}"
+        );
+        let cool = heat_line(&summary(false, None, None));
+        assert!(cool.ends_with("no derating, no trip"), "{cool}");
+        let mine = heat_line(&ThermalSummary {
+            motor_data: "configured",
+            ..summary(true, None, None)
+        });
+        assert!(mine.starts_with("configured thermal.* data"), "{mine}");
+    }
+}

@@ -867,9 +867,6 @@ pub fn write_feasibility_plot(
 mod tests {
     use super::*;
 
-    /// The design motor on its curve through 2, 5 and 10 mm leads: the
-    /// motor's work falls with the lead (a small lead spins the rotor:
-    /// 2700 kg reflected at 2 mm) while the first apex rises.
     /// The feasibility plot has a colour bar with its quantity and unit,
     /// and its legend, beside the maps.
     #[test]
@@ -901,6 +898,9 @@ mod tests {
         assert!(out.join("feasibility.png").exists());
     }
 
+    /// The design motor on its curve through 2, 5 and 10 mm leads: the
+    /// motor's work falls with the lead (a small lead spins the rotor:
+    /// 2700 kg reflected at 2 mm) while the first apex rises.
     #[test]
     fn the_lead_study_on_the_torque_speed_curve() {
         let s: Vec<FirstStance> = [0.002, 0.005, 0.010]

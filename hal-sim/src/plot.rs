@@ -171,18 +171,45 @@ pub fn hop_plot_with_heat(
         return Err("not enough samples to plot (is the sample rate 0?)".into());
     }
     ensure_font()?;
-    let mut panels: Vec<Series> = vec![
-        ("Hopping height", "toe height [cm]", |s| {
-            s.toe_height_m * 100.0
-        }),
-        ("Actuator position", "nut p [mm]", |s| s.p_m * 1000.0),
-        ("Total energy", "energy [J]", |s| s.energy_j),
+    // Each panel with its horizontal reference lines: (value, label, colour).
+    type Levels = Vec<(f64, String, RGBColor)>;
+    let target: Levels = target_apex_m
+        .map(|t| (t * 100.0, format!("target apex {:.1} cm", t * 100.0), RED))
+        .into_iter()
+        .collect();
+    let mut panels: Vec<(Series, Levels)> = vec![
+        (
+            ("Hopping height", "toe height [cm]", |s| {
+                s.toe_height_m * 100.0
+            }),
+            target,
+        ),
+        (
+            ("Actuator position", "nut p [mm]", |s| s.p_m * 1000.0),
+            Vec::new(),
+        ),
+        (("Total energy", "energy [J]", |s| s.energy_j), Vec::new()),
     ];
-    let with_heat = samples.iter().all(|s| s.winding_c.is_some());
-    if with_heat {
-        panels.push(("Motor winding (firmware estimate)", "winding [C]", |s| {
-            s.winding_c.unwrap_or(f64::NAN)
-        }));
+    if samples.iter().all(|s| s.winding_c.is_some()) {
+        let levels = heat
+            .map(|h| {
+                let would = if h.protect { "" } else { " (off)" };
+                vec![
+                    (
+                        h.derate_c,
+                        format!("derating {:.0} C{would}", h.derate_c),
+                        RGBColor(230, 140, 0),
+                    ),
+                    (h.trip_c, format!("trip {:.0} C{would}", h.trip_c), RED),
+                ]
+            })
+            .unwrap_or_default();
+        panels.push((
+            ("Motor winding (firmware estimate)", "winding [C]", |s| {
+                s.winding_c.unwrap_or(f64::NAN)
+            }),
+            levels,
+        ));
     }
     let height = 40 + 290 * panels.len() as u32;
     let root = BitMapBackend::new(path, (1100, height)).into_drawing_area();
@@ -192,25 +219,9 @@ pub fn hop_plot_with_heat(
         head.titled(title, ("sans-serif", 22))?;
         let t_end = samples.last().map(|s| s.t_s).unwrap_or(1.0);
         let n = panels.len();
-        for (k, (area, (name, ylabel, get))) in
-            body.split_evenly((n, 1)).iter().zip(panels).enumerate()
-        {
+        for (area, ((name, ylabel, get), levels)) in body.split_evenly((n, 1)).iter().zip(panels) {
             let (area, key) = area.split_horizontally(1100 - SIDE_LEGEND_PX);
             let mut entries = vec![(ylabel.to_string(), LegendKey::Line(BLUE))];
-            // Horizontal reference lines: (value, label, colour).
-            let mut levels: Vec<(f64, String, RGBColor)> = Vec::new();
-            if let Some(t) = target_apex_m.filter(|_| k == 0) {
-                levels.push((t * 100.0, format!("target apex {:.1} cm", t * 100.0), RED));
-            }
-            if let (Some(h), true) = (heat, k == 3) {
-                let would = if h.protect { "" } else { " (off)" };
-                levels.push((
-                    h.derate_c,
-                    format!("derating {:.0} C{would}", h.derate_c),
-                    RGBColor(230, 140, 0),
-                ));
-                levels.push((h.trip_c, format!("trip {:.0} C{would}", h.trip_c), RED));
-            }
             let (mut lo, mut hi) =
                 extent(samples.iter().map(get).chain(levels.iter().map(|l| l.0)));
             let pad = ((hi - lo) * 0.05).max(0.5);

@@ -16,17 +16,21 @@
 //! * `cargo run --release -p hal-sim --bin hopper-sim -- ARGS` and
 //!   `hopper-sim ARGS` run the release `hopper-sim` just built, from the
 //!   workspace root, and must exit 0 unless the block says otherwise: a
-//!   `$ ` line whose output starts with `? failed` expects a failure.
+//!   `$ ` line whose output starts with `? failed` expects a failure (never
+//!   a panic); the output compared is its stdout followed by its stderr;
+//!   an example running over two minutes is killed and stale.
 //!
 //! A block marked `text` or `sh` is not run: commands that need a robot,
 //! a board or minutes of time are shown that way. After the run the
 //! figures the examples regenerate in `docs/img/` must match the committed
-//! ones byte for byte (PNG drawing is deterministic for one font).
+//! ones byte for byte (PNG drawing is deterministic for one font); changes
+//! there from before the run are not the examples' and are not reported.
 //!
 //! The last line is `docs: N commands checked, M stale`.
 
+use std::io::Read;
 use std::path::{Path, PathBuf};
-use std::process::Command;
+use std::process::{Command, Stdio};
 
 /// One example: where it is, the command, the output it must print.
 #[derive(Debug, Clone, PartialEq)]
@@ -41,10 +45,14 @@ pub struct Example {
     pub fails: bool,
 }
 
-/// Every `console` example in `text` (the file `name`).
-pub fn examples(name: &str, text: &str) -> Vec<Example> {
+/// Every `console` example in `text` (the file `name`), or what is wrong
+/// with a block: a `console` block must start with a `$ ` line. A block
+/// indented (in a list item) has its fence's indentation taken off every
+/// line.
+pub fn examples(name: &str, text: &str) -> Result<Vec<Example>, String> {
     let mut out = Vec::new();
-    let mut in_console = false;
+    // The fence's indentation while in a `console` block.
+    let mut console: Option<usize> = None;
     let mut in_other = false;
     let mut current: Option<Example> = None;
     let mut continuing = false;
@@ -57,25 +65,27 @@ pub fn examples(name: &str, text: &str) -> Vec<Example> {
             out.push(e);
         }
     };
-    for (i, line) in text.lines().enumerate() {
-        let trimmed = line.trim_start();
+    for (i, raw) in text.lines().enumerate() {
+        let trimmed = raw.trim_start();
+        let indent = raw.len() - trimmed.len();
         if let Some(fence) = trimmed.strip_prefix("```") {
-            if in_console {
+            if console.is_some() {
                 finish(&mut current, &mut out);
-                in_console = false;
+                console = None;
             } else if in_other {
                 in_other = false;
             } else if fence.trim() == "console" {
-                in_console = true;
+                console = Some(indent);
             } else {
                 in_other = true;
             }
             continuing = false;
             continue;
         }
-        if !in_console {
+        let Some(fence_indent) = console else {
             continue;
-        }
+        };
+        let line = raw.get(fence_indent.min(indent)..).unwrap_or("");
         if continuing {
             if let Some(e) = current.as_mut() {
                 let part = line.trim();
@@ -97,9 +107,14 @@ pub fn examples(name: &str, text: &str) -> Vec<Example> {
         } else if let Some(e) = current.as_mut() {
             e.expected.push_str(line);
             e.expected.push('\n');
+        } else {
+            return Err(format!(
+                "{name}:{}: a `console` block must start with a `$ ` command line (show other text in a `text` block)",
+                i + 1
+            ));
         }
     }
-    out
+    Ok(out)
 }
 
 /// The arguments of `command` for the `hopper-sim` binary, or why it is
@@ -168,6 +183,80 @@ fn shell_words(s: &str) -> Result<Vec<String>, String> {
     Ok(words)
 }
 
+/// Longest an example may run before it is killed and counted stale, s
+/// (the docs' examples take under 5 s each; a hang must not hang CI).
+const EXAMPLE_TIMEOUT_S: u64 = 120;
+
+/// Runs `sim ARGS` from `root`: its exit status and its stdout followed by
+/// its stderr; killed after [`EXAMPLE_TIMEOUT_S`].
+fn run_example(
+    sim: &Path,
+    args: &[String],
+    root: &Path,
+) -> Result<(std::process::ExitStatus, String), String> {
+    let mut child = Command::new(sim)
+        .args(args)
+        .current_dir(root)
+        .env("NO_COLOR", "1")
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .map_err(|e| e.to_string())?;
+    // Drained on threads: a pipe that fills would block the child.
+    let drain = |r: Option<Box<dyn Read + Send>>| {
+        std::thread::spawn(move || {
+            let mut buf = Vec::new();
+            if let Some(mut r) = r {
+                let _ = r.read_to_end(&mut buf);
+            }
+            buf
+        })
+    };
+    let out = drain(
+        child
+            .stdout
+            .take()
+            .map(|r| Box::new(r) as Box<dyn Read + Send>),
+    );
+    let err = drain(
+        child
+            .stderr
+            .take()
+            .map(|r| Box::new(r) as Box<dyn Read + Send>),
+    );
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(EXAMPLE_TIMEOUT_S);
+    let status = loop {
+        if let Some(s) = child.try_wait().map_err(|e| e.to_string())? {
+            break s;
+        }
+        if std::time::Instant::now() > deadline {
+            let _ = child.kill();
+            let _ = child.wait();
+            return Err(format!("killed after {EXAMPLE_TIMEOUT_S} s"));
+        }
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    };
+    let mut text = String::from_utf8_lossy(&out.join().unwrap_or_default()).into_owned();
+    text.push_str(&String::from_utf8_lossy(&err.join().unwrap_or_default()));
+    Ok((status, text))
+}
+
+/// `git status --porcelain` of docs/img (the figures the examples write).
+fn img_status(root: &Path) -> Result<String, String> {
+    let out = Command::new("git")
+        .args(["status", "--porcelain", "--", "docs/img"])
+        .current_dir(root)
+        .output()
+        .map_err(|e| format!("git status: {e}"))?;
+    if !out.status.success() {
+        return Err(format!(
+            "git status of docs/img failed (the figure check needs a git checkout): {}",
+            String::from_utf8_lossy(&out.stderr).trim()
+        ));
+    }
+    Ok(String::from_utf8_lossy(&out.stdout).into_owned())
+}
+
 /// The markdown files whose examples are checked: README.md and docs/*.md.
 fn doc_files(root: &Path) -> Result<Vec<PathBuf>, String> {
     let mut files = vec![root.join("README.md")];
@@ -202,22 +291,28 @@ pub fn check(root: &Path, sim: &Path, only: &[String]) -> Result<(), String> {
             .unwrap_or(&file)
             .display()
             .to_string();
-        all.extend(examples(&name, &text));
+        all.extend(examples(&name, &text)?);
     }
+    // Every command is one this check runs, before any runs.
+    let runs: Vec<(&Example, Vec<String>)> = all
+        .iter()
+        .map(|e| {
+            hopper_sim_args(&e.command)
+                .map(|a| (e, a))
+                .map_err(|m| format!("{}: {m}", e.at))
+        })
+        .collect::<Result<_, _>>()?;
+    // Only what the examples change under docs/img is theirs to answer for.
+    let before = img_status(root)?;
     let assert = snapbox::Assert::new();
     let mut stale = Vec::new();
-    for e in &all {
-        let args = hopper_sim_args(&e.command)?;
+    for (e, args) in runs {
         let t0 = std::time::Instant::now();
-        let out = Command::new(sim)
-            .args(&args)
-            .current_dir(root)
-            .env("NO_COLOR", "1")
-            .output()
+        let (status, actual) = run_example(sim, &args, root)
             .map_err(|err| format!("{}: cannot run {}: {err}", e.at, sim.display()))?;
-        let mut actual = String::from_utf8_lossy(&out.stdout).into_owned();
-        actual.push_str(&String::from_utf8_lossy(&out.stderr));
-        let status_ok = out.status.success() != e.fails;
+        // A panic is never the expected failure: bad input is one error line.
+        let panicked = actual.contains("panicked at") || status.code() == Some(101);
+        let status_ok = status.success() != e.fails && !panicked;
         let matched = assert.try_eq(
             None,
             snapbox::Data::text(actual.clone()),
@@ -230,9 +325,12 @@ pub fn check(root: &Path, sim: &Path, only: &[String]) -> Result<(), String> {
                 eprintln!("docs: STALE {} {}", e.at, e.command);
                 if !ok {
                     eprintln!(
-                        "      exit status {} (the doc expects {})",
-                        out.status,
-                        if e.fails { "a failure" } else { "success" }
+                        "      exit status {status} (the doc expects {})",
+                        if e.fails {
+                            "a failure without a panic"
+                        } else {
+                            "success"
+                        }
                     );
                 }
                 if let Err(diff) = m {
@@ -245,15 +343,10 @@ pub fn check(root: &Path, sim: &Path, only: &[String]) -> Result<(), String> {
     }
     // Figures the examples regenerated into the docs must be the
     // committed ones.
-    let diff = Command::new("git")
-        .args(["status", "--porcelain", "--", "docs/img"])
-        .current_dir(root)
-        .output()
-        .map_err(|e| format!("git status: {e}"))?;
-    let changed = String::from_utf8_lossy(&diff.stdout).into_owned();
-    for line in changed.lines() {
+    let after = img_status(root)?;
+    for line in after.lines().filter(|l| !before.lines().any(|b| b == *l)) {
         eprintln!(
-            "docs: STALE figure {line} (an example regenerated it differently: commit the new one)"
+            "docs: STALE figure {line} (an example wrote it differently from the committed file: look at it and commit it; PNG text is drawn with the font hopper-sim found, HOPPER_SIM_FONT or DejaVu Sans)"
         );
         stale.push(line.to_string());
     }
@@ -281,7 +374,7 @@ mod tests {
     #[test]
     fn examples_are_console_blocks_with_continuations() {
         let md = "text\n```console\n$ hopper-sim run \\\n    --ledger\nline 1\n...\n$ hopper-sim bad\n? failed\nerror\n```\n```sh\n$ hopper-sim not-run\n```\n";
-        let ex = examples("X.md", md);
+        let ex = examples("X.md", md).unwrap_or_default();
         assert_eq!(ex.len(), 2);
         assert_eq!(ex[0].at, "X.md:3");
         assert_eq!(ex[0].command, "hopper-sim run --ledger");
@@ -290,6 +383,16 @@ mod tests {
         assert_eq!(ex[1].command, "hopper-sim bad");
         assert_eq!(ex[1].expected, "error\n");
         assert!(ex[1].fails);
+    }
+
+    #[test]
+    fn indented_blocks_are_read_and_stray_text_is_refused() {
+        let md = "1. item\n   ```console\n   $ hopper-sim a\n   out\n   ```\n";
+        let ex = examples("X.md", md).unwrap_or_default();
+        assert_eq!(ex.len(), 1);
+        assert_eq!(ex[0].expected, "out\n");
+        let bad = "```console\nsome text\n$ hopper-sim a\n```\n";
+        assert!(examples("X.md", bad).is_err_and(|e| e.contains("X.md:2")));
     }
 
     #[test]

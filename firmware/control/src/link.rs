@@ -63,6 +63,12 @@ pub struct Endpoint {
     last_apex_m: Option<f32>,
     /// A dump in progress: the next record and the count.
     dump: Option<(u16, u16)>,
+    /// Where the dump's oldest record was when it started
+    /// ([`FaultCapture::start`](crate::telemetry::FaultCapture::start)): a
+    /// fault that latches during the dump is captured, and the records the
+    /// dump reads stay the ones it announced, since it reads four a period
+    /// and the capture writes one.
+    dump_start: usize,
     /// The link's work per period, in the counter's ticks.
     cost: StepStats,
     /// A simulated robot ([`simulated`](Self::simulated)).
@@ -393,6 +399,11 @@ impl Endpoint {
             }
             Request::SimulateMount { .. } => Response::Refused(text("not-simulated")),
             Request::Save if runner.arming().is_armed() => Response::Refused(text("disarm-first")),
+            // An arm decided at the next period would arm a robot that the
+            // save then resets.
+            Request::Save if self.pending_arm.is_some() || runner.arming().arm_pending() => {
+                Response::Refused(text("arming"))
+            }
             Request::Save if runner.calibrating() => Response::Refused(text("calibrating")),
             // The placeholders are not a calibration: a tare (or a loaded
             // record) first, else the saved record would stand for one.
@@ -429,6 +440,7 @@ impl Endpoint {
             Request::Dump => {
                 let records = u16::try_from(capture.len()).unwrap_or(u16::MAX);
                 self.dump = Some((0, records));
+                self.dump_start = capture.start();
                 capture.hold(true);
                 Response::Dump(DumpInfo {
                     records,
@@ -511,7 +523,7 @@ impl Endpoint {
         if let Some((mut next, total)) = self.dump {
             let end = total.min(next.saturating_add(DUMP_PER_PERIOD));
             while next < end {
-                let Some(r) = capture.get(usize::from(next)) else {
+                let Some(r) = capture.get_from(self.dump_start, usize::from(next)) else {
                     break;
                 };
                 if !send(
@@ -523,8 +535,11 @@ impl Endpoint {
                 }
                 next += 1;
             }
-            self.dump =
-                (next < total && capture.get(usize::from(next)).is_some()).then_some((next, total));
+            self.dump = (next < total
+                && capture
+                    .get_from(self.dump_start, usize::from(next))
+                    .is_some())
+            .then_some((next, total));
             if self.dump.is_none() {
                 capture.hold(false);
             }
@@ -812,6 +827,26 @@ mod tests {
             "{msgs:?}"
         );
         assert!(!r.runner.arming().is_armed());
+    }
+
+    /// A save behind an arm in the same batch is refused: the arm is
+    /// decided at the next period, and the save's reset would follow it.
+    #[test]
+    fn no_save_while_an_arm_is_pending() {
+        let mut r = Robot::new();
+        r.runner.arming_mut().note_tared();
+        r.request(1, Request::Arm);
+        r.request(2, Request::Save);
+        r.periods(1);
+        let msgs = r.take();
+        assert!(
+            msgs.contains(&RobotMsg::Response {
+                id: 2,
+                resp: Response::Refused(text("arming"))
+            }),
+            "{msgs:?}"
+        );
+        assert!(r.ep.take_save().is_none());
     }
 
     /// A save needs a calibration (placeholders are none); once tared it is

@@ -1331,10 +1331,11 @@ param!(
     "Amplifier current per DAC code (placeholder 40 A / 2048)."
 );
 
-/// Parameters that switch a protection off, each with its safe value: a
-/// real robot's link refuses any other value (a simulator keeps them, for
-/// control studies), so only a rebuilt image can run the board without
-/// them.
+/// The master switches of protections, each with its safe value: a real
+/// robot's link refuses any other value (a simulator keeps them, for
+/// control studies). The protections' thresholds (`thermal.*`, the link
+/// timeout) stay settable within their ranges: they are the motor's and
+/// the bench's data, which a user must be able to enter.
 pub const PROTECTIONS: [(&Param, f32); 2] = [(&THERMAL_PROTECT, 1.0), (&ARM_UNTETHERED, 0.0)];
 
 /// Every parameter, in the order the docs list them.

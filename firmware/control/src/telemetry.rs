@@ -56,7 +56,8 @@ pub struct FaultCapture<const N: usize> {
     /// Records still to take after the fault (`Some(0)`: frozen).
     remaining: Option<usize>,
     fault_step: u32,
-    /// Held by a reader (a dump in progress): nothing is recorded.
+    /// Held by a reader (a dump in progress): nothing is recorded but a
+    /// fault and the records after it.
     held: bool,
 }
 
@@ -141,11 +142,28 @@ impl<const N: usize> FaultCapture<N> {
 
     /// Record `i`, oldest first.
     pub fn get(&self, i: usize) -> Option<&StepRecord> {
-        if i >= self.len {
+        self.get_from(self.start(), i)
+    }
+
+    /// Where the oldest record is now: the origin of [`get`](Self::get)'s
+    /// indexes, which a reader that takes several periods keeps
+    /// ([`get_from`](Self::get_from)).
+    pub fn start(&self) -> usize {
+        // The oldest is at `next` once the buffer wrapped, else at 0.
+        if self.len == N {
+            self.next
+        } else {
+            0
+        }
+    }
+
+    /// Record `i` counted from `start` (an earlier [`start`](Self::start)):
+    /// the records a reader began with, also when a fault has been
+    /// recorded since.
+    pub fn get_from(&self, start: usize, i: usize) -> Option<&StepRecord> {
+        if i >= self.len || start >= N {
             return None;
         }
-        // The oldest is at `next` once the buffer wrapped, else at 0.
-        let start = if self.len == N { self.next } else { 0 };
         let j = start + i;
         self.buf.get(if j >= N { j - N } else { j })
     }
@@ -350,6 +368,32 @@ mod tests {
         c.hold(false);
         c.record(&rec(14), false);
         assert_eq!(c.get(7).map(|r| r.step), Some(13));
+    }
+
+    /// A reader that kept its start reads the records it began with while
+    /// a fault is recorded behind it (it reads faster than one a period).
+    #[test]
+    fn a_reader_keeps_its_records_while_a_fault_is_captured() {
+        let mut c: FaultCapture<8> = FaultCapture::new();
+        for i in 0..10 {
+            c.record(&rec(i), false);
+        }
+        let start = c.start();
+        c.hold(true);
+        let mut read = heapless::Vec::<u32, 8>::new();
+        let mut next = 0;
+        for k in 0..4 {
+            // Two records a period, while the fault and its aftermath go in.
+            for _ in 0..2 {
+                if let Some(r) = c.get_from(start, next) {
+                    let _ = read.push(r.step);
+                }
+                next += 1;
+            }
+            c.record(&rec(20 + k), k == 0);
+        }
+        assert_eq!(read.as_slice(), &[2, 3, 4, 5, 6, 7, 8, 9]);
+        assert_eq!(c.fault_step(), Some(20));
     }
 
     #[test]
