@@ -776,7 +776,7 @@ impl ArmingParams {
         }
         needs.push("plausible sensors".to_string());
         needs.push(match self.home_tolerance_m {
-            Some(m) => format!("the nut within {} mm of its upper stop", m * 1000.0),
+            Some(m) => format!("the nut within {:.1} mm of its upper stop", m * 1000.0),
             None => "the nut at its upper stop".to_string(),
         });
         needs.push(match self.still_velocity_mps {
@@ -1383,7 +1383,7 @@ mod tests {
         };
         let line = a.requirements();
         assert!(
-            line.contains("the nut within 1 mm of its upper stop"),
+            line.contains("the nut within 1.0 mm of its upper stop"),
             "{line}"
         );
         assert!(
