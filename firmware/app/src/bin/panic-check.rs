@@ -2,7 +2,10 @@
 //!
 //! This image runs [`PeriodRunner::new`] and [`PeriodRunner::run_period`]
 //! on a configuration and sensor samples the optimiser cannot see through
-//! (`core::hint::black_box`), and its panic handler calls a function that
+//! (`core::hint::black_box`), then what runs with it at the control
+//! priority: the fault capture's record and the link endpoint's
+//! `service` (decoding arbitrary host bytes, every answer, dumps) on a
+//! transmit queue of unknown room. Its panic handler calls a function that
 //! exists nowhere. If any panic path (an out-of-bounds index, a failed
 //! `unwrap`, a division by zero, a `clamp` with bad bounds, ...) is still
 //! reachable after optimisation, the link fails with an undefined
@@ -25,7 +28,9 @@ mod check {
     use core::hint::black_box;
     use hopper_control::hal::{HopperIo, IoError, RawSample};
     use hopper_control::hopper::HopperConfig;
+    use hopper_control::link::{Endpoint, Tx};
     use hopper_control::runner::{NoCounter, PeriodRunner, Timing};
+    use hopper_control::telemetry::{FaultCapture, CAPTURE_LEN};
 
     // The link needs defmt's linker script (`.cargo/config.toml` passes it
     // to every MCU image) and nothing else of it.
@@ -51,14 +56,41 @@ mod check {
         }
     }
 
+    /// A transmit queue whose room the optimiser cannot see.
+    struct OpaqueTx;
+
+    impl Tx for OpaqueTx {
+        fn room(&self) -> usize {
+            black_box(256)
+        }
+        fn put(&mut self, frame: &[u8]) {
+            black_box(frame);
+        }
+    }
+
     #[cortex_m_rt::entry]
     fn main() -> ! {
         let cfg = black_box(HopperConfig::default());
         let timing = black_box(Timing::default());
+        // The capture and the link's endpoint run at the control priority
+        // too (the capture records, the endpoint answers the host in the
+        // same interrupt): every byte the host may send is unknown here.
+        let mut capture: FaultCapture<CAPTURE_LEN> = FaultCapture::new();
+        let mut link = Endpoint::new();
         if let Ok(mut runner) = PeriodRunner::new(cfg, timing) {
             loop {
                 let p = runner.run_period(&mut OpaqueIo, &mut NoCounter);
-                black_box(p);
+                capture.record(&p.out.record, !p.newly_latched.is_empty());
+                let mut rx = core::iter::from_fn(|| black_box(Some(0u8))).take(black_box(64));
+                link.service(
+                    &mut runner,
+                    &p,
+                    &mut rx,
+                    &mut capture,
+                    &mut OpaqueTx,
+                    &mut NoCounter,
+                );
+                black_box(&p);
                 runner.end_period(black_box(false));
             }
         }
