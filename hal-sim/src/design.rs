@@ -762,7 +762,7 @@ pub fn write_feasibility_plot(
                 for (ti, t) in m.torque_nm.iter().enumerate() {
                     let a = m.apex.get(fi).and_then(|r| r.get(ti)).copied().flatten();
                     let col = match a {
-                        Some(a) => ViridisRGB::get_color(a / hi),
+                        Some(a) => crate::plot::viridis(a / hi),
                         None => RGBColor(200, 200, 200),
                     };
                     let rect = [(t - dt, f - df), (t + dt, f + df)];
@@ -810,14 +810,7 @@ pub fn write_feasibility_plot(
             .y_label_style(("sans-serif", 14))
             .axis_desc_style(("sans-serif", 15))
             .draw()?;
-        const STEPS: usize = 100;
-        scale.draw_series((0..STEPS).map(|k| {
-            let (a, b) = (k as f64 / STEPS as f64, (k + 1) as f64 / STEPS as f64);
-            Rectangle::new(
-                [(0.0, a * hi_cm), (1.0, b * hi_cm)],
-                ViridisRGB::get_color(a).filled(),
-            )
-        }))?;
+        crate::plot::colour_strip(&mut scale, 0.0, hi_cm)?;
         let style = ("sans-serif", 14).into_font().color(&BLACK);
         /// What a legend entry shows left of its label.
         enum Key {
@@ -837,7 +830,7 @@ pub fn write_feasibility_plot(
             match k {
                 Key::Grey => key.draw(&Rectangle::new(cell, RGBColor(200, 200, 200).filled()))?,
                 Key::Outlined => {
-                    key.draw(&Rectangle::new(cell, ViridisRGB::get_color(0.3).filled()))?;
+                    key.draw(&Rectangle::new(cell, crate::plot::viridis(0.3).filled()))?;
                     key.draw(&Rectangle::new(cell, BLACK.stroke_width(2)))?;
                 }
                 Key::Cross => key.draw(&Cross::new((cx, cy), 8, RED.stroke_width(3)))?,

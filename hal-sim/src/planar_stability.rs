@@ -318,7 +318,7 @@ where
     let (g_lo, g_hi) = crate::plot::extent(gains.iter().copied());
     // The legend goes in a column right of the chart, clear of the lines.
     let (w, _) = root.dim_in_pixel();
-    let (chart_area, key) = root.split_horizontally(w.saturating_sub(190));
+    let (chart_area, key) = root.split_horizontally(w.saturating_sub(crate::plot::SIDE_LEGEND_PX));
     let mut entries = vec![(
         "1 (attracts below)".to_string(),
         crate::plot::LegendKey::Line(BLACK),

@@ -2,6 +2,7 @@
 //! hopping height, actuator position and total energy over time.
 
 use crate::run::Sample;
+use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 use std::path::Path;
 use std::sync::OnceLock;
@@ -16,7 +17,7 @@ const FONT_CANDIDATES: [&str; 4] = [
 ];
 
 /// The least and the greatest of `values` (`(inf, -inf)` when empty).
-pub(crate) fn extent(values: impl Iterator<Item = f64> + Clone) -> (f64, f64) {
+pub fn extent(values: impl Iterator<Item = f64> + Clone) -> (f64, f64) {
     (
         values.clone().fold(f64::INFINITY, f64::min),
         values.fold(f64::NEG_INFINITY, f64::max),
@@ -116,8 +117,35 @@ pub enum LegendKey {
     Fill(RGBColor),
 }
 
-/// Width of the legend column right of each hop plot panel, px.
-const SIDE_LEGEND_PX: u32 = 190;
+/// Width of a legend column beside a chart ([`side_legend`]), px.
+pub const SIDE_LEGEND_PX: u32 = 190;
+
+/// The viridis colour map at `t` in 0..=1 (plotters' `ViridisRGB`).
+pub fn viridis(t: f64) -> RGBColor {
+    // plotters clamps into 0..=1 but turns a NaN into an index and panics:
+    // a point whose value cannot be normalised gets the low end instead.
+    let t = if t.is_finite() { t } else { 0.0 };
+    ViridisRGB::get_color(t)
+}
+
+/// A colour bar's strip: the viridis scale from `lo` to `hi` in 100 bands
+/// across a chart whose x runs over 0..1 (its y axis is the scale's).
+pub fn colour_strip<DB: DrawingBackend>(
+    chart: &mut ChartContext<'_, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>,
+    lo: f64,
+    hi: f64,
+) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
+    const STEPS: usize = 100;
+    chart.draw_series((0..STEPS).map(|k| {
+        let a = lo + (hi - lo) * k as f64 / STEPS as f64;
+        let b = lo + (hi - lo) * (k + 1) as f64 / STEPS as f64;
+        Rectangle::new(
+            [(0.0, a), (1.0, b)],
+            viridis(k as f64 / STEPS as f64).filled(),
+        )
+    }))?;
+    Ok(())
+}
 
 /// Draws `entries` as a legend in `area`, a column beside a chart, so the
 /// legend never covers data.

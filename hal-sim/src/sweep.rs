@@ -14,6 +14,7 @@
 
 use crate::csv_out::Shown;
 use crate::params::{field, FieldSpec, FIELDS};
+use crate::plot::viridis;
 use crate::run::{self, Summary};
 use crate::scenario::{Dedicated, Settings};
 use hopper_control::hopper::HopperConfig;
@@ -1288,11 +1289,10 @@ impl Sweep {
         let (main, side) = root.split_horizontally(PLOT_SIZE.0 - SIDE_PX);
         let xe = cell_edges(&self.axes[0].values);
         let ye = cell_edges(&self.axes[1].values);
-        let range = |e: &[f64]| {
-            e.iter()
-                .fold((f64::MAX, f64::MIN), |(a, b), v| (a.min(*v), b.max(*v)))
-        };
-        let ((x_lo, x_hi), (y_lo, y_hi)) = (range(&xe), range(&ye));
+        let ((x_lo, x_hi), (y_lo, y_hi)) = (
+            crate::plot::extent(xe.iter().copied()),
+            crate::plot::extent(ye.iter().copied()),
+        );
         let vals: Vec<Plotted> = rows.iter().map(|r| self.plotted(&r.metrics)).collect();
         let scale = value_range(vals.iter().flatten().map(|(v, _)| *v));
         let mut chart = ChartBuilder::on(&main)
@@ -1366,15 +1366,7 @@ impl Sweep {
                     .y_label_style(("sans-serif", 14))
                     .axis_desc_style(("sans-serif", 15))
                     .draw()?;
-                const STEPS: usize = 100;
-                scale.draw_series((0..STEPS).map(|k| {
-                    let a = v_lo + (v_hi - v_lo) * k as f64 / STEPS as f64;
-                    let b = v_lo + (v_hi - v_lo) * (k + 1) as f64 / STEPS as f64;
-                    Rectangle::new(
-                        [(0.0, a), (1.0, b)],
-                        viridis(k as f64 / STEPS as f64).filled(),
-                    )
-                }))?;
+                crate::plot::colour_strip(&mut scale, v_lo, v_hi)?;
             }
             None => {
                 self.no_value_note(&bar, 16)?;
@@ -1684,8 +1676,8 @@ fn wrap(text: &str, width: usize) -> Vec<String> {
 
 /// The colour scale's range over `values`: None when there are none; a
 /// single value gets a unit-wide range around it.
-fn value_range(values: impl Iterator<Item = f64>) -> Option<(f64, f64)> {
-    let (lo, hi) = values.fold((f64::MAX, f64::MIN), |(a, b), v| (a.min(v), b.max(v)));
+fn value_range(values: impl Iterator<Item = f64> + Clone) -> Option<(f64, f64)> {
+    let (lo, hi) = crate::plot::extent(values);
     if lo > hi {
         None
     } else if hi - lo < 1e-12 {
@@ -1699,8 +1691,8 @@ fn value_range(values: impl Iterator<Item = f64>) -> Option<(f64, f64)> {
 const PLOT_SIZE: (u32, u32) = (1000, 700);
 
 /// Value range with `frac` of its span added on each side (never empty).
-fn padded(values: impl Iterator<Item = f64>, frac: f64) -> (f64, f64) {
-    let (lo, hi) = values.fold((f64::MAX, f64::MIN), |(a, b), v| (a.min(v), b.max(v)));
+fn padded(values: impl Iterator<Item = f64> + Clone, frac: f64) -> (f64, f64) {
+    let (lo, hi) = crate::plot::extent(values);
     if lo > hi {
         return (0.0, 1.0);
     }
@@ -1721,14 +1713,6 @@ fn cell_edges(values: &[f64]) -> Vec<f64> {
     let mut e: Vec<f64> = values.iter().map(|v| v - half).collect();
     e.push(values.last().map_or(half, |v| v + half));
     e
-}
-
-/// The viridis colour map at `t` in 0..=1 (plotters' `ViridisRGB`).
-fn viridis(t: f64) -> RGBColor {
-    // plotters clamps into 0..=1 but turns a NaN into an index and panics:
-    // a point whose metric cannot be normalised gets the low end instead.
-    let t = if t.is_finite() { t } else { 0.0 };
-    ViridisRGB::get_color(t)
 }
 
 #[cfg(test)]
@@ -1759,6 +1743,18 @@ mod tests {
 
     /// A run's metrics: converged at `converged` (a hop), derated at
     /// `derated` s, faulted with overtemperature at `fault` s.
+    /// Rows at the target apexes 0.05, 0.1 and 0.15 m of a 3-point grid.
+    fn on_targets(metrics: [Metrics; 3]) -> Vec<Row> {
+        metrics
+            .into_iter()
+            .zip([0.05, 0.1, 0.15])
+            .map(|(metrics, v)| Row {
+                values: vec![v],
+                metrics,
+            })
+            .collect()
+    }
+
     fn ran(converged: Option<usize>, derated: Option<f64>, fault: Option<f64>) -> Metrics {
         Metrics {
             hops_to_converge: converged,
@@ -1801,18 +1797,11 @@ mod tests {
     #[test]
     fn the_table_marks_each_point_converged_derated_or_faulted() {
         let sw = grid(&["target_apex=0.05:0.15:3"], "hops_to_converge");
-        let rows: Vec<Row> = [
+        let rows = on_targets([
             ran(Some(4), None, None),
             ran(None, Some(11.652), None),
             ran(None, Some(7.97), Some(10.0612)),
-        ]
-        .into_iter()
-        .zip([0.05, 0.1, 0.15])
-        .map(|(metrics, v)| Row {
-            values: vec![v],
-            metrics,
-        })
-        .collect();
+        ]);
         let table = sw.text_table(&rows);
         assert_eq!(table.len(), 4, "{table:#?}");
         assert!(table[0].contains("hops_to_converge") && table[0].contains("outcome"));
@@ -1913,18 +1902,11 @@ mod tests {
     #[test]
     fn a_line_plot_marks_faulted_and_derated_points_in_a_side_legend() {
         let sw = grid(&["target_apex=0.05:0.15:3"], DEFAULT_METRIC);
-        let rows: Vec<Row> = [
+        let rows = on_targets([
             ran(Some(4), None, None),
             ran(None, Some(11.0), None),
             ran(None, Some(8.0), Some(10.0)),
-        ]
-        .into_iter()
-        .zip([0.05, 0.1, 0.15])
-        .map(|(metrics, v)| Row {
-            values: vec![v],
-            metrics,
-        })
-        .collect();
+        ]);
         let text = words(&svg(&sw, &rows));
         assert!(text.contains("never steady: last apex shown (2)"), "{text}");
         assert!(

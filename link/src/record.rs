@@ -4,7 +4,7 @@
 //! (capture.png).
 
 use anyhow::{Context, Result};
-use hal_sim::plot::{side_legend, LegendKey};
+use hal_sim::plot::{extent, side_legend, LegendKey, SIDE_LEGEND_PX};
 use hopper_control::model::design::LEG_LENGTH_M;
 use hopper_plant::Mode;
 use hopper_protocol::{Hop, Telemetry};
@@ -204,7 +204,6 @@ impl Recording {
             "time from the first record [ms]"
         };
         const WIDTH: u32 = 1100;
-        const KEY_WIDTH: u32 = 190;
         let height = 40 + 250 * panels.len() as u32;
         let root = BitMapBackend::new(path, (WIDTH, height)).into_drawing_area();
         let stance_fill = RGBColor(225, 225, 225);
@@ -215,13 +214,8 @@ impl Recording {
             for (area, (name, ylabel, get)) in
                 body.split_evenly((panels.len(), 1)).iter().zip(panels)
             {
-                let (area, key) = area.split_horizontally(WIDTH - KEY_WIDTH);
-                let finite = self.records.iter().map(get).filter(|v| v.is_finite());
-                let (lo, hi) = finite
-                    .clone()
-                    .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
-                        (a.min(v), b.max(v))
-                    });
+                let (area, key) = area.split_horizontally(WIDTH - SIDE_LEGEND_PX);
+                let (lo, hi) = extent(self.records.iter().map(get).filter(|v| v.is_finite()));
                 let (lo, hi) = if lo <= hi { (lo, hi) } else { (-1.0, 1.0) };
                 let pad = ((hi - lo) * 0.05).max(0.5);
                 // A band above the data for the fault's label.
