@@ -3,14 +3,15 @@
 //! directions' messages. Asserts that it never panics, that every message
 //! it yields frames again and decodes to the same bytes, and that its
 //! counts add up (each delimiter ends at most one counted frame). Then the
-//! same bytes go to the robot's end ([`hopper_control::link::Endpoint`])
-//! on a period runner, a chunk per period, as a UART would deliver them:
+//! same bytes go to the robot's end (the link task,
+//! [`hopper_control::link::Endpoint`], and the control period's
+//! [`hopper_control::link::ControlPort`]) on a period runner, a chunk per period, as a UART would deliver them:
 //! whatever the requests (parameter sets, arm, dumps, ...), nothing
 //! panics and everything the robot sends is a well-formed frame.
 
 use hopper_control::hal::{HopperIo, IoError, RawSample};
 use hopper_control::hopper::HopperConfig;
-use hopper_control::link::{Endpoint, Tx};
+use hopper_control::link::{ControlPort, Endpoint, Queues, Tx};
 use hopper_control::runner::{NoCounter, PeriodRunner, Timing};
 use hopper_control::telemetry::FaultCapture;
 use hopper_protocol::{encode, Decoder, HostMsg, RobotMsg, MAX_FRAME};
@@ -54,7 +55,9 @@ fn endpoint(data: &[u8]) -> usize {
         loadcell_code: cal.loadcell_offset_code as u16,
         ..RawSample::default()
     });
-    let mut ep = Endpoint::simulated();
+    let mut port = ControlPort::new();
+    let mut ep = Endpoint::simulated(&runner);
+    let mut q = Box::<Queues>::default();
     let mut capture: FaultCapture<64> = FaultCapture::new();
     let mut tx = VecTx(Vec::new());
     let mut host = Decoder::new();
@@ -63,12 +66,22 @@ fn endpoint(data: &[u8]) -> usize {
     for chunk in data.chunks(32).chain(core::iter::repeat_n(&[][..], 8)) {
         let p = runner.run_period(&mut io, &mut NoCounter);
         runner.end_period(false);
-        capture.record(&p.out.record, !p.newly_latched.is_empty());
-        ep.service(
+        port.after_period(
             &mut runner,
             &p,
-            chunk.iter().copied(),
             &mut capture,
+            &mut q.commands,
+            &mut q.answers,
+            &mut q.notes,
+            &mut q.stats,
+        );
+        ep.service(
+            &mut q.notes,
+            &mut q.stats,
+            &mut q.answers,
+            &mut q.commands,
+            chunk.iter().copied(),
+            &mut &mut capture,
             &mut tx,
             &mut NoCounter,
         );
@@ -153,20 +166,30 @@ mod tests {
                     table[(next() as usize) % table.len()].name
                 });
                 let value = f32::from_bits(next() as u32);
-                let value = if next() % 2 == 0 { value } else { (next() % 10) as f32 * 0.1 };
+                let value = if next() % 2 == 0 {
+                    value
+                } else {
+                    (next() % 10) as f32 * 0.1
+                };
                 let reqs = [
                     Request::Status,
                     Request::Arm,
                     Request::Disarm,
                     Request::ResetFaults,
                     Request::ParamCount,
-                    Request::ParamInfo { index: next() as u16 % 120 },
+                    Request::ParamInfo {
+                        index: next() as u16 % 120,
+                    },
                     Request::ParamGet { name: name.clone() },
                     Request::ParamSet { name, value },
-                    Request::Telemetry { every: next() as u16 % 4 },
+                    Request::Telemetry {
+                        every: next() as u16 % 4,
+                    },
                     Request::Timing,
                     Request::Dump,
-                    Request::SimulateEstop { pressed: next() % 2 == 0 },
+                    Request::SimulateEstop {
+                        pressed: next() % 2 == 0,
+                    },
                 ];
                 for (id, req) in reqs.into_iter().enumerate() {
                     if next() % 3 == 0 {
@@ -177,7 +200,10 @@ mod tests {
                         .unwrap_or_else(|e| panic!("{e:?}"));
                     let at = (next() as usize) % (data.len() + 1);
                     // A delimiter first: the noise before it is one bad frame.
-                    data.splice(at..at, core::iter::once(0).chain(frame[..n].iter().copied()));
+                    data.splice(
+                        at..at,
+                        core::iter::once(0).chain(frame[..n].iter().copied()),
+                    );
                 }
             }
             answered += super::run(&data);

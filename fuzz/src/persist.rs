@@ -35,7 +35,10 @@ fn check(bytes: &[u8], base: &HopperConfig) -> bool {
     let Ok(cfg) = decode(bytes, base) else {
         return false;
     };
-    assert!(Hopper::new(cfg).is_ok(), "a loaded record must build a controller");
+    assert!(
+        Hopper::new(cfg).is_ok(),
+        "a loaded record must build a controller"
+    );
     let mut again = [0u8; MAX_RECORD];
     let n = encode(&cfg, &mut again);
     assert_eq!(decode(&again[..n], base), Ok(cfg));

@@ -128,6 +128,7 @@ pub fn serve(
     let mut tx = Queue::default();
     // The robot's capture, frozen around a fault (32 KiB: on the heap).
     let mut capture = Box::new(FaultCapture::<CAPTURE_LEN>::new());
+    let mut queues = Box::<hopper_control::link::Queues>::default();
     let mut inbox: Vec<u8> = Vec::new();
     let mut buf = [0u8; 4096];
     let start = Instant::now();
@@ -177,7 +178,13 @@ pub fn serve(
         let batch = due.saturating_sub(done).min(MAX_BATCH);
         for _ in 0..batch {
             let rx = std::mem::take(&mut inbox);
-            robot.control(rx.into_iter(), &mut tx, &mut capture, &mut NoCounter);
+            robot.control(
+                rx.into_iter(),
+                &mut tx,
+                &mut capture,
+                &mut queues,
+                &mut NoCounter,
+            );
             robot.runner.end_period(false);
             // A save: written between two periods, as the host's clock
             // allows (a board defers it to its next boot).

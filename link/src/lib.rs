@@ -86,7 +86,8 @@ pub struct Client {
     target: Target,
 }
 
-fn frame(msg: &HostMsg) -> Result<Vec<u8>> {
+/// `msg` framed for the line (COBS, CRC, the delimiter).
+pub fn frame(msg: &HostMsg) -> Result<Vec<u8>> {
     let mut f = [0u8; MAX_FRAME];
     let n = encode(msg, &mut f).map_err(|e| anyhow!("cannot frame {msg:?}: {e:?}"))?;
     Ok(f.get(..n).unwrap_or_default().to_vec())

@@ -9,7 +9,8 @@ use hopper_control::params::{self, Kind};
 use hopper_link::record::Recording;
 use hopper_link::{names, Client, Target};
 use hopper_protocol::{
-    ArmState, Name, Request, Response, RobotMsg, Telemetry, ThermalStatus, TimingStats,
+    ArmState, CostStats, HostMsg, Name, Request, Response, RobotMsg, Telemetry, ThermalStatus,
+    TimingStats,
 };
 use std::io::{BufRead, IsTerminal, Write};
 use std::path::PathBuf;
@@ -140,6 +141,16 @@ enum Cmd {
         /// Give up after this many wall seconds.
         #[arg(long, default_value_t = 10.0)]
         max: f64,
+    },
+    /// Load the link as hard as it takes for SECONDS of robot time (a
+    /// test of the robot's real-time split): bursts of parameter reads,
+    /// statuses, refused sets, dumps and garbage, each burst's answers
+    /// awaited. Then prints what the robot's control interrupt cost
+    /// meanwhile and whether it is still armed, fault-free and on time.
+    Flood {
+        /// Robot seconds.
+        #[arg(default_value_t = 3.0)]
+        seconds: f64,
     },
     /// Send N random bytes (a noisy line), then a frame delimiter.
     Garbage {
@@ -393,6 +404,7 @@ fn run(c: &mut Client, cmd: &Cmd) -> Result<()> {
             Ok(())
         }
         Cmd::Silence { max } => silence(c, *max),
+        Cmd::Flood { seconds } => flood(c, *seconds),
         Cmd::Garbage { bytes } => {
             let mut x: u64 = 0x9E37_79B9_7F4A_7C15;
             let junk: Vec<u8> = (0..*bytes)
@@ -933,6 +945,14 @@ fn status(c: &mut Client) -> Result<()> {
         "cost per period (robot counter ticks: board cycles, QEMU instructions, simulator 0): control step mean {} max {}, link mean {} max {}",
         t.step_mean, t.step_max, t.link_mean, t.link_max
     );
+    match cost_of(c)? {
+        Some(k) => {
+            for l in cost_lines(&k) {
+                println!("{l}");
+            }
+        }
+        None => println!("control interrupt: not reported by this firmware"),
+    }
     Ok(())
 }
 
@@ -1256,6 +1276,163 @@ fn dump(c: &mut Client, out: &std::path::Path) -> Result<()> {
         );
     }
     print_written(&written);
+    Ok(())
+}
+
+/// What the robot's real-time work cost, if its firmware reports it.
+fn cost_of(c: &mut Client) -> Result<Option<CostStats>> {
+    match c.request(Request::Cost) {
+        Ok(Response::Cost(k)) => Ok(Some(k)),
+        Ok(r) => bail!("unexpected answer {r:?}"),
+        // An older firmware does not know the request.
+        Err(_) => Ok(None),
+    }
+}
+
+/// The counter's unit for people.
+fn cost_unit(k: &CostStats) -> &'static str {
+    if k.counter_hz > 0 {
+        "cycles"
+    } else {
+        "instructions (QEMU; 0 on the host simulator)"
+    }
+}
+
+/// The `control interrupt:`, `serial interrupt:` and `link task:` lines
+/// of `status` and `flood`.
+fn cost_lines(k: &CostStats) -> [String; 3] {
+    let us = |n: u32| {
+        if k.counter_hz > 0 {
+            format!(" = {:.1} us", f64::from(n) * 1e6 / f64::from(k.counter_hz))
+        } else {
+            String::new()
+        }
+    };
+    [
+        format!(
+            "control interrupt: mean {} max {}{} {} (entry to exit: read, step, write, publish, at most one command); start jitter max {:.1} us",
+            k.isr_mean,
+            k.isr_max,
+            us(k.isr_max),
+            cost_unit(k),
+            f64::from(k.max_jitter_s) * 1e6
+        ),
+        format!(
+            "serial interrupt: max {}{} per byte, {} so far (preempts the control interrupt: about 18 bytes a period at 921,600 baud both ways)",
+            k.serial_max,
+            us(k.serial_max),
+            k.serial_count
+        ),
+        format!(
+            "link task: mean {} max {} per period, below the control interrupt (decode, answer, encode, build sets); {} period notes dropped",
+            k.link_mean, k.link_max, k.notes_dropped
+        ),
+    ]
+}
+
+fn flood(c: &mut Client, seconds: f64) -> Result<()> {
+    let n_params = match c.request(Request::ParamCount)? {
+        Response::ParamCount(n) => n,
+        r => bail!("unexpected answer {r:?}"),
+    };
+    // (Also starts the robot's window of `isr_max_recent`.)
+    let _ = cost_of(c)?;
+    let before = status_of(c)?;
+    let t = timing_of(c)?;
+    let missed_before = t.missed;
+    let periods = (seconds / f64::from(t.period_s)).round() as u32;
+    let mut now = before.periods;
+    let apex = wire_name("target_apex_m")?;
+    let start = Instant::now();
+    let (mut sent, mut answered, mut refused_sets, mut garbage) = (0u64, 0u64, 0u64, 0u64);
+    let mut index = 0u16;
+    let mut id = 40_000u16;
+    let mut x: u64 = 0x2545_F491_4F6C_DD1D;
+    while now.wrapping_sub(before.periods) < periods {
+        // One burst: 24 requests answered without a command to the control
+        // period, and 64 bytes of noise.
+        let mut bytes = Vec::new();
+        let mut ids = Vec::new();
+        for k in 0..24u16 {
+            let req = match k % 6 {
+                0 | 1 => {
+                    index = (index + 1) % n_params.max(1);
+                    Request::ParamInfo { index }
+                }
+                2 => Request::Status,
+                3 => Request::ParamGet { name: apex.clone() },
+                4 => Request::ParamSet {
+                    name: apex.clone(),
+                    value: 2.0,
+                },
+                _ if k == 23 => Request::Dump,
+                _ => Request::Timing,
+            };
+            id = id.wrapping_add(1).max(40_000);
+            ids.push(id);
+            bytes.extend(hopper_link::frame(&HostMsg::Request { id, req })?);
+        }
+        for _ in 0..64 {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            bytes.push((x >> 24) as u8);
+        }
+        bytes.push(0);
+        garbage += 64;
+        c.send_raw(&bytes)?;
+        sent += ids.len() as u64;
+        let deadline = Instant::now() + Duration::from_secs(3);
+        let mut left = ids.len();
+        while left > 0 {
+            match c.next_event(deadline.saturating_duration_since(Instant::now()))? {
+                Some(RobotMsg::Response { id: got, resp }) if ids.contains(&got) => {
+                    left -= 1;
+                    answered += 1;
+                    if let Response::Status(s) = &resp {
+                        now = s.periods;
+                    }
+                    if let (Some(4), Response::Refused(_)) =
+                        (ids.iter().position(|i| *i == got).map(|p| p % 6), &resp)
+                    {
+                        refused_sets += 1;
+                    }
+                }
+                Some(_) => {}
+                None => bail!(
+                    "{left} of a burst's {} requests unanswered within 3 s",
+                    ids.len()
+                ),
+            }
+        }
+        c.discard_events();
+    }
+    let wall = start.elapsed().as_secs_f64();
+    let after = status_of(c)?;
+    let missed = timing_of(c)?.missed.saturating_sub(missed_before);
+    println!(
+        "flood: {seconds} s of robot time ({} periods, {wall:.1} s wall), {sent} requests ({:.0} per robot s), {answered} answered, {refused_sets} out-of-range sets refused, {garbage} bytes of garbage",
+        after.periods.wrapping_sub(before.periods),
+        sent as f64 / seconds
+    );
+    println!(
+        "after the flood: {}, faults {}, missed deadlines {missed} during it",
+        names::arm_state(after.arm),
+        names::faults(after.faults)
+    );
+    match cost_of(c)? {
+        Some(k) => {
+            println!(
+                "during the flood: control interrupt max {} {}",
+                k.isr_max_recent,
+                cost_unit(&k)
+            );
+            for l in cost_lines(&k) {
+                println!("{l}");
+            }
+        }
+        None => println!("control interrupt: not reported by this firmware"),
+    }
     Ok(())
 }
 

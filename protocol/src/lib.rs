@@ -160,6 +160,9 @@ pub enum Request {
     Crystal,
     /// What the last weighing found ([`Response::Weighing`]).
     Weighing,
+    /// What the control interrupt and the link task cost
+    /// ([`Response::Cost`]).
+    Cost,
 }
 
 /// Robot to host.
@@ -241,6 +244,40 @@ pub enum Response {
     Crystal(CrystalInfo),
     /// What the last weighing found.
     Weighing(WeighingInfo),
+    /// What the control interrupt and the link task cost.
+    Cost(CostStats),
+}
+
+/// The cost of the robot's real-time work, in its counter's units: core
+/// cycles on the board, guest instructions in QEMU (`counter_hz` 0), 0 on
+/// the host simulator.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct CostStats {
+    /// The counter's rate, Hz (0: it counts instructions, not time).
+    pub counter_hz: u32,
+    /// The whole control interrupt, entry to exit (read, step, write,
+    /// publish, at most one command), mean.
+    pub isr_mean: u32,
+    /// The whole control interrupt, largest.
+    pub isr_max: u32,
+    /// The whole control interrupt, largest since the previous
+    /// [`Request::Cost`].
+    pub isr_max_recent: u32,
+    /// The link task's work per call (decode, answer, encode), mean.
+    pub link_mean: u32,
+    /// The link task's work per call, largest.
+    pub link_max: u32,
+    /// The serial interrupt (a byte in or out), largest: it preempts the
+    /// control interrupt, so a period's worst case is the control
+    /// interrupt plus this times the bytes a period brings.
+    pub serial_max: u32,
+    /// Serial interrupts so far.
+    pub serial_count: u32,
+    /// The largest deviation of a period's start from the period, s (0
+    /// where the counter does not count time).
+    pub max_jitter_s: f32,
+    /// Period notes the link task had no room for (telemetry gaps).
+    pub notes_dropped: u32,
 }
 
 /// What the weighing found (`hopper_control::bringup::Routine::Weight`): a
@@ -769,6 +806,7 @@ mod tests {
             Just(Request::Stored),
             Just(Request::Crystal),
             Just(Request::Weighing),
+            Just(Request::Cost),
             (any::<bool>(), any::<f32>())
                 .prop_map(|(hoisted, lift_m)| Request::SimulateMount { hoisted, lift_m }),
             (any::<u8>(), any::<f32>())

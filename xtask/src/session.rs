@@ -31,6 +31,9 @@ const LINK_TIMEOUT_S: f64 = 0.2;
 /// (measured by the robot: from the period that received the host's last
 /// frame to the first disarmed record): one period of rounding.
 const LINK_LOST_SLACK_S: f64 = 0.0015;
+/// The control interrupt's bound, counter ticks (QEMU: instructions; the
+/// host simulator counts 0): read, step, write, publish, one command.
+const ISR_BOUND: u64 = 2_000;
 /// Wall-clock limit for a session.
 const SESSION_TIMEOUT: Duration = Duration::from_secs(600);
 /// The virtual robot's speed for the session (robot s per wall s): fast,
@@ -243,6 +246,13 @@ struct Report {
     step_max: u64,
     link_mean: u64,
     link_max: u64,
+    /// The whole control interrupt, over the session (`status`).
+    isr_mean: u64,
+    isr_max: u64,
+    /// Requests the flood sent, and the control interrupt's largest cost
+    /// by its end.
+    flood_requests: u64,
+    flood_isr_max: u64,
 }
 
 impl Report {
@@ -258,6 +268,9 @@ impl Report {
             self.step_max,
             self.link_mean,
             self.link_max
+        ) + &format!(
+            " isr_{unit}_mean={} isr_{unit}_max={} flood_requests={} flood_isr_{unit}_max={}",
+            self.isr_mean, self.isr_max, self.flood_requests, self.flood_isr_max
         ) + &format!(
             " tare_loadcell_n={:+.3} tare_pot_mm={:+.4} home_mm={:+.4} spring_n_per_m={:.0} height_mm={:+.3} saved_after_restart={} loadcell_gain_error={:+.4}",
             self.tare_n,
@@ -577,6 +590,37 @@ fn run_session(link: &Path, addr: &str, out_dir: &Path, label: &str) -> Result<R
             v.first()
         )),
         None => problems.push("no motor temperature in the status".into()),
+    }
+    // The flood while hopping: still armed, no fault, on time, and the
+    // control interrupt within its bound.
+    match numbers_after(&lines, "flood: ") {
+        // "flood: S s of robot time (P periods, W s wall), N requests ..."
+        Some(v) if v.len() >= 4 => r.flood_requests = v[3] as u64,
+        _ => problems.push("no flood summary".into()),
+    }
+    match lines
+        .iter()
+        .find_map(|l| l.strip_prefix("after the flood: "))
+    {
+        Some(l) if l.starts_with("armed, faults none, missed deadlines 0 ") => {}
+        Some(l) => problems.push(format!("after the flood: {l}")),
+        None => problems.push("no state after the flood".into()),
+    }
+    match numbers_after(&lines, "during the flood: control interrupt max ") {
+        Some(v) if !v.is_empty() => {
+            r.flood_isr_max = v[0] as u64;
+            if r.flood_isr_max > ISR_BOUND {
+                problems.push(format!(
+                    "the control interrupt took up to {} counter ticks during the flood (bound {ISR_BOUND})",
+                    r.flood_isr_max
+                ));
+            }
+        }
+        _ => problems.push("no control interrupt cost after the flood".into()),
+    }
+    match numbers_after(&lines, "control interrupt: ") {
+        Some(v) if v.len() >= 2 => (r.isr_mean, r.isr_max) = (v[0] as u64, v[1] as u64),
+        _ => problems.push("no control interrupt cost in the status".into()),
     }
     match numbers_after(&lines, "cost per period ") {
         // "(robot counter ticks: board cycles, QEMU instructions, simulator

@@ -89,8 +89,9 @@ use hopper_control::hal::{HopperIo, IoError, RawSample};
 use stm32f4::stm32f405::{self as pac, Peripherals};
 
 /// The DWT cycle counter as the period runner's step timer (core cycles)
-/// and its clock for the period-start jitter check.
-#[derive(Debug)]
+/// and its clock for the period-start jitter check. A copy reads the same
+/// counter (the link task times itself with one).
+#[derive(Debug, Clone, Copy)]
 pub struct CycleCounter {
     /// The core clock the counter runs at, Hz (0 until [`Self::set_hz`]).
     hz: u32,
@@ -257,7 +258,7 @@ pub struct Board {
     /// The dump button (PC13).
     pub dump_button: DumpButton,
     /// The host link's USART1 (PA9/PA10), receiving.
-    pub serial: crate::serial::Serial,
+    pub serial: crate::serial::Serial<'static>,
     /// What init found: the reset causes, the brown-out reset, the clock.
     pub boot: hopper_control::boot::BootReport,
     /// The saved calibration: a pending save written, the record read.

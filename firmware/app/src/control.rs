@@ -1,7 +1,9 @@
 //! What the board and the QEMU applications share: the build-time control
-//! rate and overrun limit, the telemetry capture size and the log queue.
+//! rate and overrun limit, the telemetry capture size, the log queue and
+//! the controller bank.
 
-use hopper_control::runner::Timing;
+use hopper_control::hopper::{Hopper, HopperConfig};
+use hopper_control::runner::{PeriodRunner, RunnerError, Timing};
 use hopper_control::telemetry::{FaultCapture, CAPTURE_LEN};
 
 /// Parses a decimal `u32` at compile time; `default` when absent or malformed
@@ -71,3 +73,26 @@ pub const TIMING: Timing = Timing {
 /// Log items the control task can queue for the logger before one is
 /// dropped (and counted).
 pub const LOG_CAPACITY: usize = 16;
+
+/// A controller slot of the bank: a new controller built by the link task
+/// goes in by exchanging two of these at a period boundary, not by
+/// copying 1.2 KB in the control interrupt.
+pub type Slot = &'static mut Hopper;
+
+/// The bank: the running controller and the link task's spares
+/// (`hopper_control::link::SPARES`).
+pub type Bank = [Option<Hopper>; 1 + hopper_control::link::SPARES];
+
+/// A period runner on `cfg` in the bank's first slot, and the spare slots
+/// (copies of it until the link task fills them).
+pub fn runner_in_bank(
+    bank: &'static mut Bank,
+    cfg: HopperConfig,
+    timing: Timing,
+) -> Result<(PeriodRunner<Slot>, [Slot; 2]), RunnerError> {
+    let h = Hopper::new(cfg).map_err(RunnerError::Config)?;
+    let [a, b, c] = bank;
+    let spares = [b.insert(h.clone()), c.insert(h.clone())];
+    let runner = PeriodRunner::in_slot(cfg, timing, a.insert(h))?;
+    Ok((runner, spares))
+}

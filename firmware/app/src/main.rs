@@ -22,6 +22,7 @@
 //! |-----------|----------|---------|
 //! | `usart1`  | 4        | USART1 (the host link's bytes; board and QEMU link image) |
 //! | `control` | 3        | board: ADC injected end of conversion (TIM4 at `CONTROL_HZ`); QEMU: SysTick at `CONTROL_HZ` |
+//! | `link`    | 2        | SDIO (spare), pended by `control` every period: decode, answer, encode, build sets (board and QEMU link image) |
 //! | `logger`  | 1        | started in `init`; waits on the log channel (hop ledgers, faults) |
 //! | `dump`    | 1        | board: spawned when the dump button is pressed; drains the capture |
 //! | `idle`    | 0        | busy loop (no `wfi`: QEMU 7.2 loses SysTick ticks while sleeping) |
@@ -121,6 +122,68 @@ unsafe fn HardFault(_frame: &cortex_m_rt::ExceptionFrame) -> ! {
 /// peripheral): the configuration's, set by the board's init (then the
 /// saved calibration's) and kept current by the control task; mid-scale
 /// until init.
+/// What the serial interrupt cost, in the image's counter ticks (board:
+/// cycles; QEMU: instructions): it preempts the control interrupt, whose
+/// own cost leaves it out and whose budget counts it per byte.
+#[cfg(target_os = "none")]
+pub mod serial_cost {
+    use core::sync::atomic::{AtomicU32, Ordering::Relaxed};
+
+    static SPENT: AtomicU32 = AtomicU32::new(0);
+    static MAX: AtomicU32 = AtomicU32::new(0);
+    static COUNT: AtomicU32 = AtomicU32::new(0);
+
+    /// One interrupt of `ticks`.
+    pub fn record(ticks: u32) {
+        SPENT.fetch_add(ticks, Relaxed);
+        MAX.fetch_max(ticks, Relaxed);
+        COUNT.fetch_add(1, Relaxed);
+    }
+
+    /// Ticks spent in it so far (wrapping).
+    pub fn spent() -> u32 {
+        SPENT.load(Relaxed)
+    }
+
+    /// The largest and the count so far.
+    pub fn max_and_count() -> (u32, u32) {
+        (MAX.load(Relaxed), COUNT.load(Relaxed))
+    }
+
+    /// `counter()` and the ticks spent so far, read together: a serial
+    /// interrupt between the two reads is read again.
+    pub fn stamp(counter: impl Fn() -> u32) -> (u32, u32) {
+        loop {
+            let a = spent();
+            let t = counter();
+            if spent() == a {
+                return (t, a);
+            }
+        }
+    }
+
+    /// The control task's own ticks (the serial interrupt's left out): it
+    /// preempts the link task, whose cost leaves both out.
+    static CONTROL_SPENT: AtomicU32 = AtomicU32::new(0);
+
+    /// The control task ran `ticks` of its own.
+    pub fn record_control(ticks: u32) {
+        CONTROL_SPENT.fetch_add(ticks, Relaxed);
+    }
+
+    /// `counter()` less every tick spent in the serial interrupt and the
+    /// control task: the link task's own time.
+    pub fn below_control(counter: impl Fn() -> u32) -> u32 {
+        loop {
+            let (a, b) = (spent(), CONTROL_SPENT.load(Relaxed));
+            let t = counter();
+            if spent() == a && CONTROL_SPENT.load(Relaxed) == b {
+                return t.wrapping_sub(a).wrapping_sub(b);
+            }
+        }
+    }
+}
+
 #[cfg(target_os = "none")]
 static DAC_ZERO_CODE: core::sync::atomic::AtomicU16 = core::sync::atomic::AtomicU16::new(2048);
 
@@ -191,18 +254,50 @@ pub mod qemu {
     /// runs at 1 GHz of virtual time, so under `-icount shift=0` it counts
     /// guest instructions.
     pub struct Instructions {
-        tim5: pac::TIM5,
         overhead: u32,
+        /// The link task's: the control task's instructions left out too.
+        below_control: bool,
+    }
+
+    impl Instructions {
+        /// Another reader of the counter [`start`] started, for the link
+        /// task (the control task's and the serial interrupt's
+        /// instructions left out).
+        pub fn reader() -> Self {
+            let a = tim5_now();
+            let b = tim5_now();
+            Instructions {
+                overhead: b.wrapping_sub(a),
+                below_control: true,
+            }
+        }
     }
 
     impl CycleCounter for Instructions {
+        /// Instructions of the running context: the serial interrupt's
+        /// (which preempts it) left out, as QEMU delivers the host's bytes
+        /// with no baud rate (the board's budget counts them per byte).
         #[inline(always)]
         fn now(&mut self) -> u32 {
-            self.tim5.cnt().read().bits()
+            if self.below_control {
+                return crate::serial_cost::below_control(tim5_now);
+            }
+            let (t, spent) = crate::serial_cost::stamp(tim5_now);
+            t.wrapping_sub(spent)
         }
         fn overhead(&self) -> u32 {
             self.overhead
         }
+    }
+
+    /// TIM5's count now, from any task ([`start`] started it; the
+    /// serial interrupt times itself with it).
+    #[allow(unsafe_code)]
+    pub fn tim5_now() -> u32 {
+        // SAFETY: a read of a free-running counter register, which has no
+        // side effect; the only writes to TIM5 are `start`'s, before any
+        // task runs.
+        unsafe { (*pac::TIM5::ptr()).cnt().read().bits() }
     }
 
     /// SysTick every `ticks` (a control period: `SYSTICK_HZ / CONTROL_HZ`),
@@ -288,11 +383,10 @@ pub mod qemu {
         tim5.cr1().modify(|_, w| w.cen().enabled());
         // Cost of reading the counter twice back to back, subtracted from
         // every measurement.
-        let a = tim5.cnt().read().bits();
-        let b = tim5.cnt().read().bits();
+        let _ = tim5;
         Instructions {
-            tim5,
-            overhead: b.wrapping_sub(a),
+            below_control: false,
+            ..Instructions::reader()
         }
     }
 }
@@ -376,16 +470,44 @@ pub mod log {
 #[rtic::app(device = stm32f4::stm32f405, peripherals = true, dispatchers = [FSMC, FPU])]
 mod app {
     use crate::board::{self, BoardIo, CycleCounter, DumpButton, Watchdog};
-    use crate::control::{Capture, CONTROL_HZ, LOG_CAPACITY, TIMING};
+    use crate::control::{Bank, Capture, Slot, CONTROL_HZ, LOG_CAPACITY, TIMING};
     use crate::log::{self, Log};
     use crate::serial::{LinkTx, RxQueue, Serial, TxQueue};
     use cortex_m::peripheral::NVIC;
-    use heapless::spsc::Consumer;
+    use heapless::spsc::{Consumer, Producer};
     use hopper_control::hopper::HopperConfig;
-    use hopper_control::link::Endpoint;
+    use hopper_control::link::{
+        Answer, AnswerQueue, Command, CommandQueue, ControlPort, Endpoint, Note, NoteQueue, Stats,
+        StatsQueue,
+    };
     use hopper_control::runner::{LogItem, PeriodRunner};
+    use rtic::Mutex;
     use rtic_sync::make_channel;
     use stm32f4::stm32f405::Interrupt;
+
+    /// The link task's interrupt: a spare one (the SD card interface is
+    /// not used), pended by the control task every period.
+    const LINK_IRQ: Interrupt = Interrupt::SDIO;
+
+    /// The link task's own cycles (the control task's and the serial
+    /// interrupt's that preempt it left out).
+    struct LinkCycles;
+
+    impl hopper_control::runner::CycleCounter for LinkCycles {
+        fn now(&mut self) -> u32 {
+            crate::serial_cost::below_control(cortex_m::peripheral::DWT::cycle_count)
+        }
+    }
+
+    /// The capture through the RTIC lock: the link task copies a record or
+    /// flips a flag under it (a few dozen cycles of the control priority).
+    struct Locked<M>(M);
+
+    impl<M: Mutex<T = &'static mut Capture>> hopper_control::link::Shared<Capture> for Locked<M> {
+        fn with<R>(&mut self, f: impl FnOnce(&mut Capture) -> R) -> R {
+            self.0.lock(|c| f(c))
+        }
+    }
 
     #[shared]
     struct Shared {
@@ -400,16 +522,35 @@ mod app {
         io: BoardIo,
         watchdog: Watchdog,
         dump: DumpButton,
-        runner: PeriodRunner,
+        runner: PeriodRunner<Slot>,
         cycles: CycleCounter,
         log: Log,
-        link: Endpoint,
+        port: ControlPort,
+        commands_out: Consumer<'static, Command<Slot>>,
+        answers_in: Producer<'static, Answer<Slot>>,
+        notes_in: Producer<'static, Note>,
+        stats_in: Producer<'static, Stats>,
+        link: Endpoint<Slot>,
+        link_cycles: LinkCycles,
+        commands_in: Producer<'static, Command<Slot>>,
+        answers_out: Consumer<'static, Answer<Slot>>,
+        notes_out: Consumer<'static, Note>,
+        stats_out: Consumer<'static, Stats>,
         link_rx: Consumer<'static, u8>,
-        link_tx: LinkTx,
-        serial: Serial,
+        link_tx: LinkTx<'static>,
+        serial: Serial<'static>,
     }
 
-    #[init(local = [rxq: RxQueue = RxQueue::new(), txq: TxQueue = TxQueue::new(), capture: Capture = Capture::new()])]
+    #[init(local = [
+        rxq: RxQueue = RxQueue::new(),
+        txq: TxQueue = TxQueue::new(),
+        capture: Capture = Capture::new(),
+        commands: CommandQueue<Slot> = CommandQueue::new(),
+        answers: AnswerQueue<Slot> = AnswerQueue::new(),
+        notes: NoteQueue = NoteQueue::new(),
+        stats: StatsQueue = StatsQueue::new(),
+        bank: Bank = [None, None, None],
+    ])]
     fn init(cx: init::Context) -> (Shared, Local) {
         let mut cfg = HopperConfig::default();
         // TIM2 and TIM5 count the encoders over 32 bits.
@@ -423,7 +564,8 @@ mod app {
         // Validated before the board (and its watchdog) starts: a refused
         // configuration leaves the amplifier off (the pin is an input with
         // its external pull-down) and the MCU parked, not in a reset loop.
-        let mut runner = match PeriodRunner::new(cfg, TIMING) {
+        let (mut runner, spares) = match crate::control::runner_in_bank(cx.local.bank, cfg, TIMING)
+        {
             Ok(r) => r,
             Err(e) => {
                 crate::disable_amplifier();
@@ -452,8 +594,13 @@ mod app {
         );
         // Period starts are timed with the clock that runs.
         cycles.set_hz(board.io.sysclk_hz());
+        if let Some(e) = board.stored.error {
+            defmt::error!("calibration store: {=str}: the defaults run", e.name());
+        }
+        runner.load_calibration(board.stored.record());
+        // The link task's copy of the configuration is the loaded one.
+        let mut link = Endpoint::new(&runner).with_spares(spares);
         // The saved calibration (written by this init if a save waited).
-        let mut link = Endpoint::new();
         if let Some(ok) = board.stored.saved {
             link.save_done(ok, false);
             if ok {
@@ -462,10 +609,6 @@ mod app {
                 defmt::error!("calibration save to flash failed");
             }
         }
-        if let Some(e) = board.stored.error {
-            defmt::error!("calibration store: {=str}: the defaults run", e.name());
-        }
-        runner.load_calibration(board.stored.record());
         // The fault handlers' zero code is the calibrated one from here on.
         crate::DAC_ZERO_CODE.store(
             runner.hopper().config().calibration.dac_zero_code,
@@ -519,6 +662,10 @@ mod app {
             board.io.sysclk_hz(),
             crate::serial::LINK_BAUD
         );
+        let (commands_in, commands_out) = cx.local.commands.split();
+        let (answers_in, answers_out) = cx.local.answers.split();
+        let (notes_in, notes_out) = cx.local.notes.split();
+        let (stats_in, stats_out) = cx.local.stats.split();
         (
             Shared {
                 capture: cx.local.capture,
@@ -530,7 +677,17 @@ mod app {
                 runner,
                 cycles,
                 log: Log::new(tx),
+                port: ControlPort::new(),
+                commands_out,
+                answers_in,
+                notes_in,
+                stats_in,
                 link,
+                link_cycles: LinkCycles,
+                commands_in,
+                answers_out,
+                notes_out,
+                stats_out,
                 link_rx: rx_out,
                 link_tx: LinkTx::new(tx_in),
                 serial: board.serial,
@@ -546,12 +703,14 @@ mod app {
     }
 
     /// The control period: fresh ADC samples are in; the runner reads, steps
-    /// and writes; this task paces it, feeds the watchdog, records the
-    /// capture, services the link (the received bytes since the last
-    /// period, the period's messages queued) and queues the log. Nothing
-    /// here waits.
-    #[task(binds = ADC, priority = 3, local = [io, watchdog, dump, runner, cycles, log, link, link_rx, link_tx, polls: u32 = 0, reset_in: u32 = 0], shared = [capture])]
+    /// and writes; the port records the capture, publishes the period's
+    /// note and applies at most one command the link task prepared; this
+    /// task paces it, feeds the watchdog, queues the log, and pends the
+    /// link task. Nothing here waits, decodes, encodes or builds: its
+    /// work is bounded and alike every period (timed entry to exit).
+    #[task(binds = ADC, priority = 3, local = [io, watchdog, dump, runner, cycles, log, port, commands_out, answers_in, notes_in, stats_in, polls: u32 = 0], shared = [capture])]
     fn control(mut cx: control::Context) {
+        let (t0, serial0) = crate::serial_cost::stamp(cortex_m::peripheral::DWT::cycle_count);
         if !cx.local.io.ack_control_irq() {
             return;
         }
@@ -560,53 +719,29 @@ mod app {
         if p.feed_watchdog {
             cx.local.watchdog.feed();
         }
-        let (link, rx, tx, cycles) = (
-            &mut *cx.local.link,
-            &mut *cx.local.link_rx,
-            &mut *cx.local.link_tx,
-            &mut *cx.local.cycles,
+        let (port, commands, answers, notes, stats) = (
+            &mut *cx.local.port,
+            &mut *cx.local.commands_out,
+            &mut *cx.local.answers_in,
+            &mut *cx.local.notes_in,
+            &mut *cx.local.stats_in,
         );
-        cx.shared.capture.lock(|c| {
-            c.record(&p.out.record, !p.newly_latched.is_empty());
-            link.service(
-                runner,
-                &p,
-                core::iter::from_fn(|| rx.dequeue()),
-                c,
-                tx,
-                cycles,
-            );
-        });
-        // A parameter set or a routine may have moved the zero code: the
-        // fault handlers write the one in use (one relaxed store).
+        cx.shared
+            .capture
+            .lock(|c| port.after_period(runner, &p, c, commands, answers, notes, stats));
+        // A set or a routine may have moved the zero code: the fault
+        // handlers write the one in use (one relaxed store).
         crate::DAC_ZERO_CODE.store(
             runner.hopper().config().calibration.dac_zero_code,
             core::sync::atomic::Ordering::Relaxed,
         );
-        // A save (the link accepts it only disarmed): into the RAM slot,
-        // and a reset in 0.2 s, once the answer is out; `init` writes it.
-        if let Some(r) = link.take_save() {
-            crate::flash::queue_save(r);
-            link.save_done(true, true);
-            *cx.local.reset_in = CONTROL_HZ / 5;
+        // A save waits in the RAM slot: `init` writes it after the reset
+        // (never while armed: the port disarms first).
+        if port.restart_due(runner) {
+            crate::disable_amplifier();
+            cortex_m::peripheral::SCB::sys_reset();
         }
-        if *cx.local.reset_in > 0 {
-            *cx.local.reset_in -= 1;
-            if *cx.local.reset_in == 0 {
-                if runner.arming().is_armed() {
-                    // Never reset a robot that may be hopping (the link
-                    // refuses an arm while a save waits, so this is the
-                    // last line): disarm, and reset a period later.
-                    runner.arming_mut().request_disarm();
-                    *cx.local.reset_in = 1;
-                } else {
-                    crate::disable_amplifier();
-                    cortex_m::peripheral::SCB::sys_reset();
-                }
-            }
-        }
-        // The next conversion already finished: this period (with its link
-        // work) overran.
+        // The next conversion already finished: this period overran.
         runner.end_period(NVIC::is_pending(Interrupt::ADC));
         log::PERIODS.store(runner.periods(), core::sync::atomic::Ordering::Relaxed);
         if let Some(item) = p.log {
@@ -616,13 +751,52 @@ mod app {
         if cx.local.polls.is_multiple_of(100) && cx.local.dump.pressed() {
             let _ = dump::spawn(cx.local.log.dropped());
         }
+        rtic::pend(LINK_IRQ);
+        let (irq_max, irq_count) = crate::serial_cost::max_and_count();
+        port.set_serial_cost(irq_max, irq_count);
+        // Entry to exit, less the serial interrupts that preempted it
+        // (counted per byte in the budget, docs/link.md).
+        let (t1, serial1) = crate::serial_cost::stamp(cortex_m::peripheral::DWT::cycle_count);
+        let own = t1
+            .wrapping_sub(t0)
+            .wrapping_sub(serial1.wrapping_sub(serial0));
+        port.add_isr_cost(own);
+        crate::serial_cost::record_control(own);
+    }
+
+    /// The link task, below the control task, once a period: the notes and
+    /// answers the control task published, the bytes received, decoded
+    /// and answered, sets checked and their controllers built, frames
+    /// encoded into the transmit ring; a save into the RAM slot for
+    /// `init` to write after the reset the control task makes.
+    #[task(binds = SDIO, priority = 2, local = [link, link_cycles, commands_in, answers_out, notes_out, stats_out, link_rx, link_tx], shared = [capture])]
+    fn link(cx: link::Context) {
+        let link = &mut *cx.local.link;
+        let rx = &mut *cx.local.link_rx;
+        link.service(
+            cx.local.notes_out,
+            cx.local.stats_out,
+            cx.local.answers_out,
+            cx.local.commands_in,
+            core::iter::from_fn(|| rx.dequeue()),
+            &mut Locked(cx.shared.capture),
+            cx.local.link_tx,
+            cx.local.link_cycles,
+        );
+        if let Some(r) = link.take_save() {
+            crate::flash::queue_save(r);
+            link.save_done(true, true);
+        }
     }
 
     /// The link's bytes in and out, above the control task: the USART has
-    /// no receive FIFO (`serial`'s module docs).
+    /// no receive FIFO (`serial`'s module docs). It times itself in core
+    /// cycles.
     #[task(binds = USART1, priority = 4, local = [serial])]
     fn usart1(cx: usart1::Context) {
+        let t0 = cortex_m::peripheral::DWT::cycle_count();
         cx.local.serial.on_interrupt();
+        crate::serial_cost::record(cortex_m::peripheral::DWT::cycle_count().wrapping_sub(t0));
     }
 
     /// Logs hop ledgers and faults as the control task queues them.
@@ -1075,26 +1249,32 @@ mod app {
     }
 }
 
-/// The QEMU link image (`--features qemu-link`, issue 17): the virtual
-/// robot (`hopper_plant::robot::VirtualRobot`, which `hopper-sim serve`
-/// runs too) with the host link on USART1, which QEMU wires to its first
-/// `-serial` (the xtask gives it a TCP socket). Like the board it boots
-/// disarmed and tethered, so nothing moves until `hopper-link` arms it; the
-/// body is held 0.05 m up until then (`VirtualRobot::held`). It runs until
-/// QEMU is stopped, or `LINK_LIMIT_S` of robot time.
+/// The QEMU link image (`--features qemu-link`): the virtual robot
+/// (`hopper_plant::robot::VirtualRobot`, which `hopper-sim serve` runs too)
+/// with the host link on USART1, which QEMU wires to its first `-serial`
+/// (the xtask gives it a TCP socket). Its tasks are the board's: the
+/// control period with the link's port at priority 3, the link task at 2,
+/// the serial interrupt at 4. Like the board it boots disarmed and
+/// tethered, so nothing moves until `hopper-link` arms it; the body is held
+/// 0.05 m up until then (`VirtualRobot::held`). It runs until QEMU is
+/// stopped, or `LINK_LIMIT_S` of robot time.
 #[cfg(all(target_os = "none", feature = "qemu-link"))]
 #[rtic::app(device = stm32f4::stm32f405, peripherals = true, dispatchers = [FSMC])]
 mod app {
-    use crate::control::{Capture, CONTROL_HZ, CONTROL_PERIOD_S, TIMING};
+    use crate::control::{Bank, Capture, Slot, CONTROL_HZ, CONTROL_PERIOD_S, TIMING};
     use crate::serial::{LinkTx, RxQueue, Serial, TxQueue};
     use cortex_m::peripheral::{SCB, SYST};
     use cortex_m_semihosting::debug;
-    use heapless::spsc::Consumer;
+    use heapless::spsc::{Consumer, Producer};
     use hopper_control::hopper::Strategy;
-    use hopper_control::runner::PeriodRunner;
+    use hopper_control::link::{
+        Answer, AnswerQueue, Command, CommandQueue, Endpoint, Note, NoteQueue, Stats, StatsQueue,
+    };
     use hopper_plant::mock::{firmware_config, SensorConfig, SimHal};
     use hopper_plant::robot::{Miscalibration, VirtualRobot};
     use hopper_plant::Params;
+    use rtic::Mutex;
+    use stm32f4::stm32f405::Interrupt;
 
     /// Where the body is held until armed, m (toe height).
     const START_APEX_M: f64 = 0.05;
@@ -1103,9 +1283,25 @@ mod app {
     /// PCLK2 on the HSI, Hz (QEMU has no RCC model, and ignores the baud
     /// rate anyway).
     const PCLK2_HZ: u32 = 16_000_000;
+    /// The link task's interrupt, as on the board.
+    const LINK_IRQ: Interrupt = Interrupt::SDIO;
+
+    /// The capture, behind RTIC's lock for the link task.
+    struct Locked<M>(M);
+
+    impl<M: Mutex<T = &'static mut Capture>> hopper_control::link::Shared<Capture> for Locked<M> {
+        fn with<R>(&mut self, f: impl FnOnce(&mut Capture) -> R) -> R {
+            self.0.lock(|c| f(c))
+        }
+    }
 
     #[shared]
-    struct Shared {}
+    struct Shared {
+        /// The capture, frozen around a fault: a static built in place, as
+        /// the board's (32 KiB; inside the robot, built in `init` and moved,
+        /// it took `init`'s stack past the room flip-link leaves).
+        capture: &'static mut Capture,
+    }
 
     /// The link image's flash: RAM (QEMU models no flash writes), kept for
     /// the run only.
@@ -1113,20 +1309,35 @@ mod app {
 
     #[local]
     struct Local {
-        robot: VirtualRobot,
-        /// The capture, frozen around a fault: a static built in place, as
-        /// the board's (32 KiB; inside the robot, built in `init` and moved,
-        /// it took `init`'s stack past the room flip-link leaves).
-        capture: &'static mut Capture,
-        flash: Flash,
+        robot: VirtualRobot<Slot>,
+        commands_out: Consumer<'static, Command<Slot>>,
+        answers_in: Producer<'static, Answer<Slot>>,
+        notes_in: Producer<'static, Note>,
+        stats_in: Producer<'static, Stats>,
         counter: crate::qemu::Instructions,
         syst: SYST,
+        link: Endpoint<Slot>,
+        link_counter: crate::qemu::Instructions,
+        commands_in: Producer<'static, Command<Slot>>,
+        answers_out: Consumer<'static, Answer<Slot>>,
+        notes_out: Consumer<'static, Note>,
+        stats_out: Consumer<'static, Stats>,
+        flash: Flash,
         link_rx: Consumer<'static, u8>,
-        link_tx: LinkTx,
-        serial: Serial,
+        link_tx: LinkTx<'static>,
+        serial: Serial<'static>,
     }
 
-    #[init(local = [rxq: RxQueue = RxQueue::new(), txq: TxQueue = TxQueue::new(), capture_buf: Capture = Capture::new()])]
+    #[init(local = [
+        rxq: RxQueue = RxQueue::new(),
+        txq: TxQueue = TxQueue::new(),
+        capture_buf: Capture = Capture::new(),
+        commands: CommandQueue<Slot> = CommandQueue::new(),
+        answers: AnswerQueue<Slot> = AnswerQueue::new(),
+        notes: NoteQueue = NoteQueue::new(),
+        stats: StatsQueue = StatsQueue::new(),
+        bank: Bank = [None, None, None],
+    ])]
     fn init(cx: init::Context) -> (Shared, Local) {
         let dp = cx.device;
         let mut core = cx.core;
@@ -1147,12 +1358,12 @@ mod app {
             0.05,
             mis.believed_start_apex_m(START_APEX_M),
         );
-        // As the board: no arming before a tare and homing (issue 18).
+        // As the board: no arming before a tare and homing.
         cfg.arming.require_tare = true;
         cfg.arming.require_home = true;
-        let (Ok(plant), Ok(runner)) = (
+        let (Ok(plant), Ok((runner, spares))) = (
             mis.plant(params, START_APEX_M),
-            PeriodRunner::new(cfg, TIMING),
+            crate::control::runner_in_bank(cx.local.bank, cfg, TIMING),
         ) else {
             defmt::error!("link image set-up failed");
             debug::exit(debug::EXIT_FAILURE);
@@ -1172,10 +1383,17 @@ mod app {
             loop {}
         };
         robot.runner.load_calibration(None);
+        // The link task's own endpoint (the robot's in-line one is for the
+        // simulator's single thread).
+        let link = Endpoint::simulated(&robot.runner).with_spares(spares);
 
         let (rx_in, rx_out) = cx.local.rxq.split();
         let (tx_in, tx_out) = cx.local.txq.split();
         let serial = Serial::new(dp.USART1, &dp.RCC, &dp.GPIOA, PCLK2_HZ, rx_in, tx_out);
+        let (commands_in, commands_out) = cx.local.commands.split();
+        let (answers_in, answers_out) = cx.local.answers.split();
+        let (notes_in, notes_out) = cx.local.notes.split();
+        let (stats_in, stats_out) = cx.local.stats.split();
 
         crate::qemu::start_systick(&mut core.SYST, crate::qemu::PERIOD_TICKS);
         defmt::println!(
@@ -1184,13 +1402,24 @@ mod app {
             START_APEX_M
         );
         (
-            Shared {},
+            Shared {
+                capture: cx.local.capture_buf,
+            },
             Local {
                 robot,
-                capture: cx.local.capture_buf,
-                flash,
+                commands_out,
+                answers_in,
+                notes_in,
+                stats_in,
                 counter,
                 syst: core.SYST,
+                link,
+                link_counter: crate::qemu::Instructions::reader(),
+                commands_in,
+                answers_out,
+                notes_out,
+                stats_out,
+                flash,
                 link_rx: rx_out,
                 link_tx: LinkTx::new(tx_in),
                 serial,
@@ -1206,43 +1435,78 @@ mod app {
         }
     }
 
-    /// One control period and the link's work, then the plant to the next
-    /// tick with SysTick stopped (as in the scenario image).
-    #[task(binds = SysTick, priority = 3, local = [robot, capture, flash, counter, syst, link_rx, link_tx])]
-    fn control(cx: control::Context) {
+    /// One control period with the link's port (as the board's control
+    /// task), then the plant to the next tick with SysTick stopped (as in
+    /// the scenario image); the link task is pended.
+    #[task(binds = SysTick, priority = 3, local = [robot, commands_out, answers_in, notes_in, stats_in, counter, syst], shared = [capture])]
+    fn control(mut cx: control::Context) {
+        let (t0, serial0) = crate::serial_cost::stamp(crate::qemu::tim5_now);
         let robot = &mut *cx.local.robot;
-        let rx = &mut *cx.local.link_rx;
-        let _ = robot.control(
-            core::iter::from_fn(|| rx.dequeue()),
-            cx.local.link_tx,
-            cx.local.capture,
-            cx.local.counter,
+        let (commands, answers, notes, stats, counter) = (
+            &mut *cx.local.commands_out,
+            &mut *cx.local.answers_in,
+            &mut *cx.local.notes_in,
+            &mut *cx.local.stats_in,
+            &mut *cx.local.counter,
         );
+        let (irq_max, irq_count) = crate::serial_cost::max_and_count();
+        robot.port.set_serial_cost(irq_max, irq_count);
+        cx.shared
+            .capture
+            .lock(|c| robot.control_period(c, commands, answers, notes, stats, counter));
         cx.local.syst.disable_counter();
-        // A save, like the plant, outside the robot's time.
-        let mut record = [0u8; hopper_control::persist::MAX_RECORD];
-        if let Some(r) = robot.link.take_save() {
-            let n = r.len().min(record.len());
-            record[..n].copy_from_slice(&r[..n]);
-            let ok = hopper_store::block_on(cx.local.flash.save(&record[..n])).is_ok();
-            robot.link.save_done(ok, false);
-        }
         if robot.advance(&mut |_| {}).is_err() {
             defmt::error!("plant integration failed");
             debug::exit(debug::EXIT_FAILURE);
         }
         cx.local.syst.enable_counter();
         robot.runner.end_period(SCB::is_pendst_pending());
+        rtic::pend(LINK_IRQ);
+        // The whole handler (the plant too) preempts the link task.
+        let (t1, serial1) = crate::serial_cost::stamp(crate::qemu::tim5_now);
+        crate::serial_cost::record_control(
+            t1.wrapping_sub(t0)
+                .wrapping_sub(serial1.wrapping_sub(serial0)),
+        );
         if robot.runner.periods() >= LINK_LIMIT_S * CONTROL_HZ {
             defmt::println!("link image: {=u32} s limit reached", LINK_LIMIT_S);
             debug::exit(debug::EXIT_SUCCESS);
         }
     }
 
+    /// The link task, below the control period (as the board's): a save
+    /// goes to the RAM flash at once (the board defers it to its next
+    /// boot).
+    #[task(binds = SDIO, priority = 2, local = [link, link_counter, commands_in, answers_out, notes_out, stats_out, flash, link_rx, link_tx], shared = [capture])]
+    fn link(cx: link::Context) {
+        let link = &mut *cx.local.link;
+        let rx = &mut *cx.local.link_rx;
+        link.service(
+            cx.local.notes_out,
+            cx.local.stats_out,
+            cx.local.answers_out,
+            cx.local.commands_in,
+            core::iter::from_fn(|| rx.dequeue()),
+            &mut Locked(cx.shared.capture),
+            cx.local.link_tx,
+            cx.local.link_counter,
+        );
+        let mut record = [0u8; hopper_control::persist::MAX_RECORD];
+        if let Some(r) = link.take_save() {
+            let n = r.len().min(record.len());
+            record[..n].copy_from_slice(&r[..n]);
+            let ok = hopper_store::block_on(cx.local.flash.save(&record[..n])).is_ok();
+            link.save_done(ok, false);
+        }
+    }
+
     /// The link's bytes in and out, above the control task: the USART has
-    /// no receive FIFO (`serial`'s module docs).
+    /// no receive FIFO (`serial`'s module docs). It times itself: the
+    /// control period's cost leaves it out.
     #[task(binds = USART1, priority = 4, local = [serial])]
     fn usart1(cx: usart1::Context) {
+        let t0 = crate::qemu::tim5_now();
         cx.local.serial.on_interrupt();
+        crate::serial_cost::record(crate::qemu::tim5_now().wrapping_sub(t0));
     }
 }

@@ -7,13 +7,13 @@
 //! - receive: the `USART1` interrupt moves each received byte into
 //!   [`RxQueue`]. It runs at priority 4, *above* the control task: the USART
 //!   has no receive FIFO, and at 921,600 baud a byte must be read within
-//!   10.85 us, less than a control period's work (up to about 60 us when a
-//!   parameter set rebuilds the controller). Its handler is a few dozen
-//!   cycles and shares nothing but the lock-free queues. The control task
-//!   drains the queue
+//!   10.85 us, less than the control task's period. Its handler is a few
+//!   dozen cycles and shares nothing but the lock-free queues (its cost,
+//!   about 18 bytes a period at full duplex, is in the control interrupt's
+//!   budget in docs/link.md). The link task (priority 2) drains the queue
 //!   once per period into `hopper_control::link::Endpoint::service`. A full
 //!   queue drops the byte (the frame then fails its CRC and is counted).
-//! - transmit: the control task frames its messages into [`TxQueue`]
+//! - transmit: the link task frames its messages into [`TxQueue`]
 //!   through [`LinkTx`] (a frame goes in whole or not at all) and pends the
 //!   interrupt, which feeds the data register while it is empty and turns
 //!   its TXE interrupt off when the queue runs dry.
@@ -37,19 +37,19 @@ pub type RxQueue = Queue<u8, 512>;
 /// Bytes waiting for the line: 4 KiB, 44 ms at 921,600 baud.
 pub type TxQueue = Queue<u8, 4096>;
 
-/// The control task's end of the transmit queue.
-pub struct LinkTx {
-    tx: Producer<'static, u8>,
+/// The link task's end of the transmit queue.
+pub struct LinkTx<'a> {
+    tx: Producer<'a, u8>,
 }
 
-impl LinkTx {
+impl<'a> LinkTx<'a> {
     /// Wraps the producer.
-    pub fn new(tx: Producer<'static, u8>) -> Self {
+    pub fn new(tx: Producer<'a, u8>) -> Self {
         Self { tx }
     }
 }
 
-impl Tx for LinkTx {
+impl Tx for LinkTx<'_> {
     fn room(&self) -> usize {
         self.tx.capacity().saturating_sub(self.tx.len())
     }
@@ -66,10 +66,10 @@ impl Tx for LinkTx {
 }
 
 /// The interrupt's side: the USART and the queues' other ends.
-pub struct Serial {
+pub struct Serial<'a> {
     usart: pac::USART1,
-    rx: Producer<'static, u8>,
-    tx: Consumer<'static, u8>,
+    rx: Producer<'a, u8>,
+    tx: Consumer<'a, u8>,
     /// Received bytes dropped (receive queue full, or an overrun).
     lost: u32,
 }
@@ -80,7 +80,7 @@ pub const fn brr(pclk2_hz: u32, baud: u32) -> u32 {
     (pclk2_hz + baud / 2) / baud
 }
 
-impl Serial {
+impl<'a> Serial<'a> {
     /// Configures PA9/PA10 and USART1 at [`LINK_BAUD`] from `pclk2_hz`, the
     /// receive interrupt on. `gpioa` must be clocked.
     pub fn new(
@@ -88,8 +88,8 @@ impl Serial {
         rcc: &pac::RCC,
         gpioa: &pac::GPIOA,
         pclk2_hz: u32,
-        rx: Producer<'static, u8>,
-        tx: Consumer<'static, u8>,
+        rx: Producer<'a, u8>,
+        tx: Consumer<'a, u8>,
     ) -> Self {
         rcc.apb2enr().modify(|_, w| w.usart1en().enabled());
         let _ = rcc.apb2enr().read();

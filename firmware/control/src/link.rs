@@ -1,28 +1,49 @@
-//! The robot's end of the host link (issue 17): what each
-//! [`hopper_protocol`] message does to the [`PeriodRunner`], and what the
-//! robot sends back. The transports (a UART interrupt, QEMU's USART on a
-//! TCP socket, the simulator's TCP socket) only move bytes: each period
-//! the application hands [`Endpoint::service`] the bytes received since
-//! the last one and a transmit queue ([`Tx`]); the endpoint decodes them,
-//! answers, and queues the period's messages. One implementation, so the
-//! board, the QEMU image and the simulator's virtual robot answer alike.
+//! The robot's end of the host link: what each [`hopper_protocol`]
+//! message does, and what the robot sends back, split in two so that the
+//! control interrupt does only control.
 //!
-//! - Every valid message keeps the link alive ([`crate::arming::Arming::link_frame`]).
-//! - An arm request is decided at the next period; its response waits for
-//!   that period (`Ok`, or `Refused` with the reason).
-//! - Parameter sets go through [`PeriodRunner::set_param`].
-//! - Nothing waits: a frame that finds the queue without room is not sent.
-//!   Telemetry and dump records leave room for one more frame, so answers
-//!   and state changes still fit when the stream fills the line; a dropped
-//!   telemetry record is counted (its sequence number is used anyway, so
-//!   the host sees the gap).
+//! - [`ControlPort`] runs in the control period, right after
+//!   [`PeriodRunner::run_period`]: it records the period into the fault
+//!   capture, publishes a small [`Note`] of the period (the record, the
+//!   arming events, the log item, the counters the link answers from),
+//!   and applies **at most one** [`Command`] that the link task decoded,
+//!   checked and prepared: an arm, a disarm, a fault reset, a live target
+//!   change, a controller built outside the period and installed at the
+//!   period boundary, a routine's start, a query of a few words. Its work
+//!   is a few copies, bounded and alike every period.
+//! - [`Endpoint`] is the link task, at a lower priority: it decodes the
+//!   received bytes, answers from its copy of the configuration and the
+//!   last note (status, parameters, timing, a dump), validates parameter
+//!   sets and builds their controllers ([`PeriodRunner::prepare_at`]),
+//!   builds a routine's results the same way, encodes every message and
+//!   keeps the CRC work off the control priority.
+//!
+//! The two talk through three single-producer, single-consumer queues
+//! ([`Inbox`], [`Outbox`]: `heapless::spsc` halves on the board, whole
+//! queues where both run in one thread), so nothing is locked and nothing
+//! waits: the board, the QEMU link image and the simulator's virtual
+//! robot run this one mechanism, in two tasks or one after the other.
+//!
+//! - Every valid message keeps the link alive (a command carries it; with
+//!   nothing to ask the task sends [`Command::Alive`]).
+//! - An arm request is decided at the period after it is applied; its
+//!   response waits for that period (`Ok`, or `Refused` with the reason).
+//! - Nothing waits: a frame that finds the transmit queue without room is
+//!   not sent. Telemetry and dump records leave room for one more frame,
+//!   so answers and state changes still fit when the stream fills the
+//!   line; a dropped telemetry record is counted (its sequence number is
+//!   used anyway, so the host sees the gap). A command that finds the
+//!   command queue full is refused `busy`.
 
 use crate::arming::{ArmEvent, ArmState as RunnerArmState, DisarmReason};
+use crate::hopper::HopperConfig;
 use crate::params;
-use crate::runner::{CycleCounter, LogItem, Period, PeriodRunner, StepStats};
+use crate::runner::{
+    CycleCounter, HopperSlot, LogItem, Owned, Period, PeriodRunner, Prepared, StepStats, Then,
+};
 use crate::telemetry::{FaultCapture, StepRecord};
 use hopper_protocol::{
-    encode, ArmState, BootInfo, Decoder, DumpInfo, Hop, HostMsg, ParamInfo, Request, Response,
+    encode, ArmState, CostStats, Decoder, DumpInfo, Hop, HostMsg, ParamInfo, Request, Response,
     RobotMsg, Status, StoredInfo, Telemetry, ThermalStatus, TimingStats, MAX_FRAME,
     PROTOCOL_VERSION, TEXT_LEN,
 };
@@ -35,7 +56,309 @@ pub trait Tx {
     fn put(&mut self, frame: &[u8]);
 }
 
-/// Dump records queued per period at most (bounds the link's work in one
+/// The receiving end of a queue between the control period and the link
+/// task.
+pub trait Inbox<T> {
+    /// The oldest item, if any.
+    fn take(&mut self) -> Option<T>;
+}
+
+/// The sending end of a queue between the control period and the link
+/// task.
+pub trait Outbox<T> {
+    /// Items it can take now.
+    fn room(&self) -> usize;
+    /// Appends `item`, or gives it back when full.
+    fn put(&mut self, item: T) -> Result<(), T>;
+}
+
+impl<T> Inbox<T> for heapless::spsc::Consumer<'_, T> {
+    fn take(&mut self) -> Option<T> {
+        self.dequeue()
+    }
+}
+
+impl<T> Outbox<T> for heapless::spsc::Producer<'_, T> {
+    fn room(&self) -> usize {
+        self.capacity().saturating_sub(self.len())
+    }
+    fn put(&mut self, item: T) -> Result<(), T> {
+        self.enqueue(item)
+    }
+}
+
+impl<T, const N: usize> Inbox<T> for heapless::spsc::Queue<T, N> {
+    fn take(&mut self) -> Option<T> {
+        self.dequeue()
+    }
+}
+
+impl<T, const N: usize> Outbox<T> for heapless::spsc::Queue<T, N> {
+    fn room(&self) -> usize {
+        self.capacity().saturating_sub(self.len())
+    }
+    fn put(&mut self, item: T) -> Result<(), T> {
+        self.enqueue(item)
+    }
+}
+
+/// Something shared with a task of higher priority, reached for a short,
+/// bounded moment (the board: an RTIC resource lock; one thread: `&mut`).
+pub trait Shared<T> {
+    /// Runs `f` on it.
+    fn with<R>(&mut self, f: impl FnOnce(&mut T) -> R) -> R;
+}
+
+impl<T> Shared<T> for &mut T {
+    fn with<R>(&mut self, f: impl FnOnce(&mut T) -> R) -> R {
+        f(self)
+    }
+}
+
+/// Capacity of the command queue (link task to control period); a
+/// `heapless::spsc::Queue` of `N` holds `N - 1`.
+pub const COMMANDS: usize = 4;
+/// Capacity of the answer queue (control period to link task).
+pub const ANSWERS: usize = 8;
+/// Capacity of the note queue: periods the link task may fall behind
+/// before telemetry has gaps.
+pub const NOTES: usize = 16;
+
+/// Configuration changes the link task may have in flight.
+const PENDING: usize = COMMANDS + 1;
+
+/// Spare controller slots the link task holds (a bank's: the running one
+/// and these two make three).
+pub const SPARES: usize = 2;
+
+/// The command queue's storage.
+pub type CommandQueue<H = Owned> = heapless::spsc::Queue<Command<H>, COMMANDS>;
+/// The answer queue's storage.
+pub type AnswerQueue<H = Owned> = heapless::spsc::Queue<Answer<H>, ANSWERS>;
+/// The note queue's storage.
+pub type NoteQueue = heapless::spsc::Queue<Note, NOTES>;
+/// The stats queue's storage.
+pub type StatsQueue = heapless::spsc::Queue<Stats, 4>;
+
+/// The three queues, for a robot whose control period and link task run
+/// one after the other in one thread (the simulator, the QEMU link image).
+#[derive(Debug)]
+pub struct Queues<H = Owned> {
+    /// Link task to control period.
+    pub commands: CommandQueue<H>,
+    /// Control period to link task: answers.
+    pub answers: AnswerQueue<H>,
+    /// Control period to link task: one note a period.
+    pub notes: NoteQueue,
+    /// Control period to link task: the slow figures.
+    pub stats: StatsQueue,
+}
+
+impl<H> Default for Queues<H> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl<H> Queues<H> {
+    /// Empty queues (a `const` for a static built in place).
+    pub const fn new() -> Self {
+        Self {
+            commands: CommandQueue::new(),
+            answers: AnswerQueue::new(),
+            notes: NoteQueue::new(),
+            stats: StatsQueue::new(),
+        }
+    }
+}
+
+/// A query answered in the control period: a copy of a few words.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Query {
+    /// [`Request::Boot`].
+    Boot,
+    /// [`Request::Crystal`].
+    Crystal,
+    /// [`Request::Stored`].
+    Stored,
+    /// [`Request::CalibrationReport`].
+    CalibrationReport,
+    /// [`Request::BringupResults`].
+    BringupResults,
+    /// [`Request::Weighing`].
+    Weighing,
+}
+
+/// What the link task asks of the control period (at most one applied a
+/// period, each a bounded amount of work). Every command also counts as a
+/// frame received (the link timer).
+// No allocator to box the controller in: a queue slot holds the largest
+// variant, and the port copies one slot out in a period.
+#[allow(clippy::large_enum_variant)]
+#[derive(Debug, Clone)]
+pub enum Command<H = Owned> {
+    /// A valid frame arrived (nothing else asked).
+    Alive,
+    /// [`Request::Arm`]: decided at the next period, answered then.
+    Arm {
+        /// The request's id.
+        id: u16,
+    },
+    /// [`Request::Disarm`].
+    Disarm {
+        /// The request's id.
+        id: u16,
+    },
+    /// [`Request::ResetFaults`] (the capture rearms with it).
+    ResetFaults {
+        /// The request's id.
+        id: u16,
+    },
+    /// A parameter that changes in place ([`PeriodRunner::set_live`]).
+    SetLive {
+        /// The request's id.
+        id: u16,
+        /// The parameter.
+        param: &'static params::Param,
+        /// Its new value.
+        value: f32,
+    },
+    /// A controller built by the link task, installed at the period
+    /// boundary ([`PeriodRunner::install`]).
+    Install {
+        /// The request's id (`None`: a routine's results).
+        id: Option<u16>,
+        /// The controller, in its slot.
+        prepared: Prepared<H>,
+        /// What it completes.
+        then: Then,
+    },
+    /// A routine's results could not be built: the routine fails.
+    RebuildFailed,
+    /// [`Request::Calibrate`], its routine known.
+    Calibrate {
+        /// The request's id.
+        id: u16,
+        /// The routine.
+        routine: crate::bringup::Routine,
+        /// How long it measures, s.
+        seconds: f32,
+    },
+    /// A query answered from the runner's state.
+    Query {
+        /// The request's id.
+        id: u16,
+        /// What.
+        what: Query,
+    },
+    /// A save waits in the flash's RAM slot for the next boot: reset in
+    /// 0.2 s ([`ControlPort::restart_due`]), never while armed.
+    Restart,
+    /// [`Request::SimulateEstop`] on a simulated robot: the sensor models
+    /// read it from the port ([`ControlPort::sim_estop`]).
+    SimulateEstop {
+        /// The request's id.
+        id: u16,
+        /// Pressed.
+        pressed: bool,
+    },
+    /// [`Request::SimulateMount`] on a simulated robot (checked): the
+    /// plant takes it from the port ([`ControlPort::take_sim_mount`]).
+    SimulateMount {
+        /// The request's id.
+        id: u16,
+        /// Held by the hoist.
+        hoisted: bool,
+        /// The toe height to lift to, m.
+        lift_m: f32,
+    },
+}
+
+/// What the control period sends the link task besides its notes.
+// As [`Command`]: a slot holds the largest variant either way.
+#[allow(clippy::large_enum_variant)]
+#[derive(Debug, Clone)]
+pub enum Answer<H = Owned> {
+    /// A command's answer, for the host (`None`: a routine's install,
+    /// for the link task only).
+    Reply {
+        /// The request's id.
+        id: Option<u16>,
+        /// The answer.
+        resp: Response,
+        /// It answers a change of the configuration (an install or a live
+        /// change) that the link task counted in flight.
+        set: bool,
+    },
+    /// A slot an install freed, for the link task's next controller.
+    Spare(H),
+    /// A period's log item (a hop ended, faults latched), after that
+    /// period's note.
+    Log(LogItem),
+    /// A routine's results need a controller: the configuration with
+    /// `changes`.
+    Rebuild {
+        /// The generation it is built on.
+        generation: u32,
+        /// The parameters it changes.
+        changes: crate::runner::Changes,
+        /// What the install completes.
+        then: Then,
+    },
+}
+
+/// One period, as the link task sees it (a copy of 44 bytes: a log item,
+/// a few a second, goes as an [`Answer::Log`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Note {
+    /// The period's record (its step number, faults, measurements).
+    pub record: StepRecord,
+    /// What arming did.
+    pub arm_event: Option<ArmEvent>,
+    /// The arming state after the period.
+    pub arm: RunnerArmState,
+    /// An arm request waits for the next period.
+    pub arm_pending: bool,
+    /// A bring-up routine runs (or its results wait to be installed).
+    pub calibrating: bool,
+    /// A tare (or a loaded record) stands.
+    pub tared: bool,
+    /// The whole control interrupt's cost the period before.
+    pub isr_last: u32,
+}
+
+/// The slow figures, every [`STATS_EVERY`] periods.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Stats {
+    /// Periods run.
+    pub periods: u32,
+    /// Periods that missed their deadline.
+    pub missed: u32,
+    /// The control step's cost.
+    pub step: StepStats,
+    /// The whole control interrupt's cost.
+    pub isr: StepStats,
+    /// The largest period-start jitter so far, s.
+    pub max_jitter_s: f32,
+    /// Notes the queue had no room for so far.
+    pub notes_dropped: u32,
+    /// The serial interrupt's largest cost so far.
+    pub serial_max: u32,
+    /// Serial interrupts so far.
+    pub serial_count: u32,
+    /// The motor's estimated winding temperature, C.
+    pub winding_c: f32,
+    /// Its housing's, C.
+    pub housing_c: f32,
+    /// The thermal derating of the current limit (1: none).
+    pub limit_scale: f32,
+}
+
+/// Periods between two [`Stats`] (10 ms at 10 kHz).
+pub const STATS_EVERY: u32 = 100;
+
+/// Dump records queued per note at most (bounds the link task's work per
 /// period; the line is the real limit).
 const DUMP_PER_PERIOD: u16 = 4;
 
@@ -49,12 +372,329 @@ pub const DISARM_REASONS: [DisarmReason; 6] = [
     DisarmReason::LinkLost,
 ];
 
-/// The robot's link state.
+/// The control period's end of the link: see the [module
+/// documentation](self).
 #[derive(Debug, Clone, Default)]
-pub struct Endpoint {
-    rx: Decoder,
-    /// The id of an arm request waiting for the next period.
+pub struct ControlPort {
+    /// The id of an arm request applied, decided at the next period.
     pending_arm: Option<u16>,
+    /// An answer decided but not yet queued (no room).
+    held: Option<(u16, Response)>,
+    /// Periods until a queued restart (0: none).
+    restart_in: u32,
+    /// The whole interrupt's cost, as the application measured it.
+    isr: StepStats,
+    /// Its last sample.
+    isr_last: u32,
+    /// The serial interrupt's largest cost and count so far (it preempts
+    /// the control interrupt; the application measures it).
+    serial: (u32, u32),
+    notes_dropped: u32,
+    /// The simulated e-stop, as last asked.
+    sim_estop: bool,
+    /// A simulated mount change not yet taken by the plant.
+    sim_mount: Option<(bool, f32)>,
+}
+
+/// Answers the port keeps room for before it takes a command: the held
+/// one, a routine's rebuild, the command's own, the slot it frees.
+const ANSWER_ROOM: usize = 4;
+
+impl ControlPort {
+    /// No command applied yet; the configuration goes to the link task at
+    /// the first period.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// The whole control interrupt's cost this period, in the counter's
+    /// units (entry to exit, measured by the application).
+    pub fn add_isr_cost(&mut self, cost: u32) {
+        self.isr.add(cost);
+        self.isr_last = cost;
+    }
+
+    /// The whole control interrupt's cost so far.
+    pub fn isr_cost(&self) -> &StepStats {
+        &self.isr
+    }
+
+    /// The serial interrupt's largest cost and how many ran so far, in the
+    /// counter's units (published with the next note).
+    pub fn set_serial_cost(&mut self, max: u32, count: u32) {
+        self.serial = (max, count);
+    }
+
+    /// The simulated e-stop as the host last set it (never on a real
+    /// robot: its link refuses the request); the application applies it
+    /// to its sensor models.
+    pub fn sim_estop(&self) -> bool {
+        self.sim_estop
+    }
+
+    /// The simulated mount change the host asked for since the last call
+    /// (hoisted, toe height to lift to, m); the application moves its
+    /// plant.
+    pub fn take_sim_mount(&mut self) -> Option<(bool, f32)> {
+        self.sim_mount.take()
+    }
+
+    /// After [`PeriodRunner::run_period`]: the period into `capture`
+    /// (frozen around a fault), a decided arm answered, a routine's
+    /// rebuild or a changed configuration handed to the link task, at most
+    /// one command applied, and the period's note published.
+    #[allow(clippy::too_many_arguments)]
+    pub fn after_period<const N: usize, H: HopperSlot>(
+        &mut self,
+        runner: &mut PeriodRunner<H>,
+        p: &Period,
+        capture: &mut FaultCapture<N>,
+        commands: &mut impl Inbox<Command<H>>,
+        answers: &mut impl Outbox<Answer<H>>,
+        notes: &mut impl Outbox<Note>,
+        stats: &mut impl Outbox<Stats>,
+    ) {
+        capture.record(&p.out.record, !p.newly_latched.is_empty());
+        // A pending arm request was decided in this period. No Armed or
+        // Refused event means it changed nothing (already armed, or a
+        // disarm applied in between won).
+        if let Some(id) = self.pending_arm.take() {
+            let resp = match p.arm_event {
+                Some(ArmEvent::Refused(r)) => Response::Refused(text(r.name())),
+                _ if p.armed => Response::Ok,
+                _ => Response::Refused(text("disarm-requested")),
+            };
+            self.held = Some((id, resp));
+        }
+        // (Checked first: `take` copies the whole option.)
+        if let Some((id, resp)) = self.held.is_some().then(|| self.held.take()).flatten() {
+            let a = Answer::Reply {
+                id: Some(id),
+                resp,
+                set: false,
+            };
+            if let Err(Answer::Reply {
+                id: Some(id), resp, ..
+            }) = answers.put(a)
+            {
+                self.held = Some((id, resp));
+            }
+        }
+        if answers.room() >= ANSWER_ROOM {
+            if let Some((changes, then)) = runner.take_rebuild_request() {
+                let _ = answers.put(Answer::Rebuild {
+                    generation: runner.config_gen(),
+                    changes,
+                    then,
+                });
+            }
+        }
+        if self.held.is_none() && answers.room() >= ANSWER_ROOM {
+            if let Some(c) = commands.take() {
+                runner.arming_mut().link_frame();
+                let set = matches!(c, Command::SetLive { .. } | Command::Install { .. });
+                let (reply, spare) = self.apply(c, runner, capture);
+                if let Some((id, resp)) = reply {
+                    let _ = answers.put(Answer::Reply { id, resp, set });
+                }
+                if let Some(h) = spare {
+                    // Room was kept for it: a slot is never lost.
+                    let _ = answers.put(Answer::Spare(h));
+                }
+            }
+        }
+        let note = Note {
+            record: p.out.record,
+            arm_event: p.arm_event,
+            arm: runner.arming().state(),
+            arm_pending: runner.arming().arm_pending() || self.pending_arm.is_some(),
+            calibrating: runner.calibrating(),
+            tared: runner.arming().tared(),
+            isr_last: self.isr_last,
+        };
+        if notes.put(note).is_err() {
+            self.notes_dropped = self.notes_dropped.saturating_add(1);
+        }
+        if let Some(item) = p.log {
+            // After the note: the link task sends the state change first.
+            if answers.put(Answer::Log(item)).is_err() {
+                self.notes_dropped = self.notes_dropped.saturating_add(1);
+            }
+        }
+        if runner.periods().is_multiple_of(STATS_EVERY) {
+            let _ = stats.put(self.stats(runner));
+        }
+    }
+
+    /// A command applied: its answer, and a slot it freed.
+    #[allow(clippy::type_complexity)]
+    fn apply<const N: usize, H: HopperSlot>(
+        &mut self,
+        c: Command<H>,
+        runner: &mut PeriodRunner<H>,
+        capture: &mut FaultCapture<N>,
+    ) -> (Option<(Option<u16>, Response)>, Option<H>) {
+        let refused = |e: crate::runner::SetError| Response::Refused(text(e.reason()));
+        if let Command::Install { id, prepared, then } = c {
+            let (r, slot) = runner.install(prepared, then);
+            return (
+                Some((id, r.map_or_else(refused, |()| Response::Ok))),
+                H::RECYCLED.then_some(slot),
+            );
+        }
+        let reply = match c {
+            Command::Alive => None,
+            // A save waits for the reset: nothing arms before it.
+            Command::Arm { id } if self.restart_in > 0 => {
+                Some((id, Response::Refused(text("restarting"))))
+            }
+            Command::Arm { id } => {
+                runner.arming_mut().request_arm();
+                // Answered when the next period decides.
+                self.pending_arm = Some(id);
+                None
+            }
+            Command::Disarm { id } => {
+                runner.arming_mut().request_disarm();
+                Some((id, Response::Ok))
+            }
+            Command::ResetFaults { id } => {
+                let input = runner.hopper().last_input().copied();
+                let resp = match input.map(|i| runner.reset_faults(&i)) {
+                    Some(Ok(())) => {
+                        capture.rearm();
+                        Response::Ok
+                    }
+                    _ if runner.arming().is_armed() => Response::Refused(text("disarm-first")),
+                    None => Response::Refused(text("no-measurement-yet")),
+                    Some(Err(_)) => Response::Refused(text("faults-remain")),
+                };
+                Some((id, resp))
+            }
+            Command::SetLive { id, param, value } => Some((
+                id,
+                runner
+                    .set_live(param, value)
+                    .map_or_else(refused, |()| Response::Ok),
+            )),
+            Command::Install { .. } => None,
+            Command::RebuildFailed => {
+                runner.rebuild_failed();
+                None
+            }
+            Command::Calibrate {
+                id,
+                routine,
+                seconds,
+            } => Some((
+                id,
+                match runner.start_calibration(routine, seconds) {
+                    Ok(()) => Response::Ok,
+                    Err(e) => Response::Refused(text(e.name())),
+                },
+            )),
+            Command::Query { id, what } => Some((id, Self::query(runner, what))),
+            Command::Restart => {
+                // 0.2 s: the save's answer is out first.
+                self.restart_in = ((0.2 / runner.timing().period_s) as u32).max(1);
+                None
+            }
+            Command::SimulateEstop { id, pressed } => {
+                self.sim_estop = pressed;
+                Some((id, Response::Ok))
+            }
+            Command::SimulateMount {
+                id,
+                hoisted,
+                lift_m,
+            } => {
+                self.sim_mount = Some((hoisted, lift_m));
+                Some((id, Response::Ok))
+            }
+        };
+        (reply.map(|(id, r)| (Some(id), r)), None)
+    }
+
+    fn query<H: HopperSlot>(runner: &PeriodRunner<H>, what: Query) -> Response {
+        match what {
+            Query::Boot => {
+                let b = runner.arming().boot();
+                Response::Boot(hopper_protocol::BootInfo {
+                    resets: b.resets.0,
+                    brown_out_reset_on: b.brown_out_reset_on,
+                    clock_as_configured: b.clock_as_configured,
+                    sysclk_hz: b.sysclk_hz,
+                })
+            }
+            Query::Crystal => {
+                let b = runner.arming().boot();
+                Response::Crystal(hopper_protocol::CrystalInfo {
+                    expected_hz: b.hse_expected_hz,
+                    measured_hz: b.hse_measured_hz,
+                })
+            }
+            Query::Stored => {
+                let (boot, boot_error, entries) = runner.calibration_at_boot().wire();
+                // The save's state is the link task's: it fills it in.
+                Response::Stored(StoredInfo {
+                    boot,
+                    boot_error,
+                    entries,
+                    save: 0,
+                })
+            }
+            Query::CalibrationReport => Response::Calibration(runner.calibration()),
+            Query::BringupResults => Response::BringupResults(runner.bringup_results()),
+            Query::Weighing => Response::Weighing(runner.weighing()),
+        }
+    }
+
+    fn stats<H: HopperSlot>(&self, runner: &PeriodRunner<H>) -> Stats {
+        let m = runner.hopper().supervisor().thermal();
+        Stats {
+            periods: runner.periods(),
+            missed: runner.missed(),
+            step: *runner.step_cost(),
+            isr: self.isr,
+            max_jitter_s: runner.max_jitter_s(),
+            notes_dropped: self.notes_dropped,
+            serial_max: self.serial.0,
+            serial_count: self.serial.1,
+            winding_c: m.winding_c(),
+            housing_c: m.housing_c(),
+            limit_scale: m.limit_scale(),
+        }
+    }
+
+    /// Once a period, after [`after_period`](Self::after_period): whether
+    /// the application resets now for a save queued by
+    /// [`Command::Restart`]. Never while armed: an armed robot is asked to
+    /// disarm and the reset waits a period more.
+    pub fn restart_due<H: HopperSlot>(&mut self, runner: &mut PeriodRunner<H>) -> bool {
+        if self.restart_in == 0 {
+            return false;
+        }
+        self.restart_in -= 1;
+        if self.restart_in > 0 {
+            return false;
+        }
+        if runner.arming().is_armed() {
+            runner.arming_mut().request_disarm();
+            self.restart_in = 1;
+            return false;
+        }
+        true
+    }
+}
+
+/// The link task's state (see the [module documentation](self)).
+#[derive(Debug, Clone)]
+pub struct Endpoint<H = Owned> {
+    rx: Decoder,
+    /// The id of an arm request sent and not yet answered.
+    arm_outstanding: Option<u16>,
+    /// The cycle counter's rate, Hz (0: instructions).
+    counter_hz: u32,
     /// Telemetry every this many periods (0: off).
     every: u16,
     since: u16,
@@ -69,15 +709,10 @@ pub struct Endpoint {
     /// dump reads stay the ones it announced, since it reads four a period
     /// and the capture writes one.
     dump_start: usize,
-    /// The link's work per period, in the counter's ticks.
+    /// The link task's work per call, in the counter's units.
     cost: StepStats,
     /// A simulated robot ([`simulated`](Self::simulated)).
     simulated: bool,
-    /// The simulated e-stop, as last asked.
-    sim_estop: bool,
-    /// A simulated mount change not yet taken by the application:
-    /// (hoisted, lift to this toe height, m).
-    sim_mount: Option<(bool, f32)>,
     /// The calibration record of the last save request, its length, and
     /// whether the application has taken it.
     save_record: SaveRecord,
@@ -85,17 +720,31 @@ pub struct Endpoint {
     save_taken: bool,
     /// The last save's state (`StoredInfo::save`).
     save_state: u8,
+    /// The control period's configuration and its generation
+    /// ([`PeriodRunner::config_gen`]), as its answers confirmed them.
+    confirmed: (HopperConfig, u32),
+    /// The configurations of the changes queued and not yet answered, in
+    /// order: parameters are read, and sets checked and built, on the
+    /// last (what the control period's will be).
+    pending: heapless::Deque<HopperConfig, PENDING>,
+    /// The last slow figures.
+    stats: Option<Stats>,
+    /// The control interrupt's largest cost since the last
+    /// [`Request::Cost`].
+    isr_recent_max: u32,
+    period_s: f32,
+    /// The last period's note (`None` before the first).
+    last: Option<Note>,
+    /// A command that found the queue full and must not be lost (a
+    /// routine's rebuild, a restart): sent first next time.
+    stash: Option<Command<H>>,
+    /// Free controller slots (a bank's) for the next sets.
+    spares: heapless::Vec<H, SPARES>,
 }
 
 /// A calibration record's bytes (an array too long for a derived `Default`).
 #[derive(Debug, Clone)]
 struct SaveRecord([u8; crate::persist::MAX_RECORD]);
-
-impl Default for SaveRecord {
-    fn default() -> Self {
-        Self([0; crate::persist::MAX_RECORD])
-    }
-}
 
 const SAVE_PENDING: u8 = 1;
 const SAVE_SAVED: u8 = 2;
@@ -169,33 +818,56 @@ fn send<T: Tx>(tx: &mut T, msg: &RobotMsg, bulk: bool) -> bool {
     }
 }
 
-impl Endpoint {
-    /// No session yet, telemetry off.
-    pub fn new() -> Self {
-        Self::default()
-    }
-
-    /// The endpoint of a simulated robot (the QEMU image, the simulator's
-    /// virtual robot): it takes [`Request::SimulateEstop`], which a real
-    /// robot refuses.
-    pub fn simulated() -> Self {
+impl<H: HopperSlot> Endpoint<H> {
+    /// No session yet, telemetry off; `runner`'s configuration (later
+    /// changes arrive as [`Answer::Config`]).
+    pub fn new(runner: &PeriodRunner<H>) -> Self {
         Self {
-            simulated: true,
-            ..Self::default()
+            rx: Decoder::new(),
+            arm_outstanding: None,
+            counter_hz: 0,
+            every: 0,
+            since: 0,
+            seq: 0,
+            telemetry_dropped: 0,
+            last_apex_m: None,
+            dump: None,
+            dump_start: 0,
+            cost: StepStats::new(),
+            simulated: false,
+            save_record: SaveRecord([0; crate::persist::MAX_RECORD]),
+            save_len: 0,
+            save_taken: false,
+            save_state: 0,
+            confirmed: (*runner.hopper().config(), runner.config_gen()),
+            pending: heapless::Deque::new(),
+            stats: None,
+            isr_recent_max: 0,
+            period_s: runner.timing().period_s,
+            last: None,
+            stash: None,
+            spares: heapless::Vec::new(),
         }
     }
 
-    /// The simulated e-stop as the host last set it (always released on a
-    /// real robot); the application applies it to its sensor models.
-    pub fn sim_estop(&self) -> bool {
-        self.sim_estop
+    /// The spare slots of a bank (the control period's runner holds the
+    /// running one); those beyond [`SPARES`] are not used.
+    pub fn with_spares(mut self, spares: impl IntoIterator<Item = H>) -> Self {
+        for h in spares {
+            let _ = self.spares.push(h);
+        }
+        self
     }
 
-    /// The simulated mount change the host asked for since the last call
-    /// (hoisted, toe height to lift to, m); the application moves its
-    /// plant (never on a real robot).
-    pub fn take_sim_mount(&mut self) -> Option<(bool, f32)> {
-        self.sim_mount.take()
+    /// The endpoint of a simulated robot (the QEMU image, the simulator's
+    /// virtual robot): it takes [`Request::SimulateEstop`] and
+    /// [`Request::SimulateMount`], which a real robot refuses, and the
+    /// parameters that switch protections off.
+    pub fn simulated(runner: &PeriodRunner<H>) -> Self {
+        Self {
+            simulated: true,
+            ..Self::new(runner)
+        }
     }
 
     /// The calibration record a host asked to save, once (the
@@ -210,13 +882,17 @@ impl Endpoint {
     }
 
     /// How the save went: written, failed, or to be written at the next
-    /// boot (`deferred`: the board writes its flash in `init`).
+    /// boot (`deferred`: the board writes its flash in `init`, and the
+    /// control period resets it 0.2 s from now, [`Command::Restart`]).
     pub fn save_done(&mut self, ok: bool, deferred: bool) {
         self.save_state = match (ok, deferred) {
             (true, false) => SAVE_SAVED,
             (true, true) => SAVE_AT_RESTART,
             (false, _) => SAVE_FAILED,
         };
+        if ok && deferred {
+            self.stash = Some(Command::Restart);
+        }
     }
 
     /// Telemetry records the transmit queue could not take so far.
@@ -224,49 +900,167 @@ impl Endpoint {
         self.telemetry_dropped
     }
 
-    /// The link's work per period so far ([`service`](Self::service)).
+    /// The link task's work per call so far ([`service`](Self::service)).
     pub fn cost(&self) -> &StepStats {
         &self.cost
     }
 
-    /// The period's link work, right after [`PeriodRunner::run_period`]:
-    /// the period's messages (the deferred arm answer, a state change,
-    /// faults or a hop, a telemetry record when due, dump records), then
-    /// every byte received since the last call (`rx`), decoded and
-    /// answered. `capture` is the one the application records into (a
-    /// dump reads it; a fault reset rearms it). Its cost, measured with
-    /// `counter`, goes into [`cost`](Self::cost).
+    /// The last period's note (`None` before the first).
+    pub fn last_note(&self) -> Option<&Note> {
+        self.last.as_ref()
+    }
+
+    /// The link task's work, once a period (after the control period, at a
+    /// lower priority): the control period's answers and notes (state
+    /// changes, faults, hops, telemetry, dump records queued), then every
+    /// byte received since the last call (`rx`), decoded and answered or
+    /// turned into a [`Command`]. `capture` is the one the control period
+    /// records into (a dump reads it). Its cost, measured with `counter`,
+    /// goes into [`cost`](Self::cost).
+    #[allow(clippy::too_many_arguments)]
     pub fn service<const N: usize, T: Tx, C: CycleCounter>(
         &mut self,
-        runner: &mut PeriodRunner,
-        p: &Period,
+        notes: &mut impl Inbox<Note>,
+        stats: &mut impl Inbox<Stats>,
+        answers: &mut impl Inbox<Answer<H>>,
+        commands: &mut impl Outbox<Command<H>>,
         rx: impl Iterator<Item = u8>,
-        capture: &mut FaultCapture<N>,
+        capture: &mut impl Shared<FaultCapture<N>>,
         tx: &mut T,
         counter: &mut C,
     ) {
         let t0 = counter.now();
-        self.after_period(p, capture, tx);
+        self.counter_hz = counter.hz();
+        if let Some(c) = self.stash.take() {
+            if let Err(c) = commands.put(c) {
+                self.stash = Some(c);
+            }
+        }
+        // The period's log items go out after its note's state change.
+        let mut logs: heapless::Deque<LogItem, ANSWERS> = heapless::Deque::new();
+        while let Some(a) = answers.take() {
+            match a {
+                Answer::Log(item) => {
+                    let _ = logs.push_back(item);
+                }
+                a => self.on_answer(a, commands, tx),
+            }
+        }
+        while let Some(s) = stats.take() {
+            self.stats = Some(s);
+        }
+        while let Some(n) = notes.take() {
+            self.on_note(&n, capture, tx);
+            self.last = Some(n);
+        }
+        while let Some(item) = logs.pop_front() {
+            self.on_log(item, tx);
+        }
+        let mut alive = false;
+        let mut asked = false;
         for b in rx {
             if let Some(msg) = self.rx.push::<HostMsg>(b) {
-                self.on_message(&msg, runner, capture, tx);
+                alive = true;
+                asked |= self.on_message(&msg, commands, capture, tx);
             }
+        }
+        if alive && !asked {
+            // Nothing else carries the frame to the link timer; a full
+            // queue carries it already.
+            let _ = commands.put(Command::Alive);
         }
         let t1 = counter.now();
         self.cost
             .add(t1.wrapping_sub(t0).saturating_sub(counter.overhead()));
     }
 
-    /// A decoded message, between periods: queues its answer (an arm
-    /// request's comes after the next period).
-    pub fn on_message<const N: usize, T: Tx>(
+    fn on_answer<T: Tx>(
         &mut self,
-        msg: &HostMsg,
-        runner: &mut PeriodRunner,
-        capture: &mut FaultCapture<N>,
+        a: Answer<H>,
+        commands: &mut impl Outbox<Command<H>>,
         tx: &mut T,
     ) {
-        runner.arming_mut().link_frame();
+        match a {
+            Answer::Reply { id, mut resp, set } => {
+                if set {
+                    // Changes are applied in the order they were queued.
+                    if let Some(cfg) = self.pending.pop_front() {
+                        if resp == Response::Ok {
+                            self.confirmed = (cfg, self.confirmed.1.wrapping_add(1));
+                        }
+                    }
+                }
+                let Some(id) = id else {
+                    return;
+                };
+                if self.arm_outstanding == Some(id) {
+                    self.arm_outstanding = None;
+                }
+                if let Response::Stored(s) = &mut resp {
+                    s.save = self.save_state;
+                }
+                send(tx, &RobotMsg::Response { id, resp }, false);
+            }
+            Answer::Spare(h) => {
+                let _ = self.spares.push(h);
+            }
+            Answer::Log(item) => self.on_log(item, tx),
+            Answer::Rebuild {
+                generation,
+                changes,
+                then,
+            } => {
+                // On the control period's configuration (no host set is in
+                // flight: they are refused while a routine runs).
+                let cfg = PeriodRunner::apply_changes(&self.confirmed.0, &changes);
+                let prepared = cfg
+                    .and_then(|cfg| PeriodRunner::prepare_at(cfg, generation))
+                    .ok()
+                    .filter(|_| !self.pending.is_full())
+                    .and_then(|p| p.into_slot(self.spares.pop()));
+                let c = match prepared {
+                    Some(prepared) => {
+                        let _ = self.pending.push_back(*prepared.config());
+                        Command::Install {
+                            id: None,
+                            prepared,
+                            then,
+                        }
+                    }
+                    None => Command::RebuildFailed,
+                };
+                if let Err(c) = commands.put(c) {
+                    self.stash = Some(c);
+                }
+            }
+        }
+    }
+
+    /// The configuration the control period's will be once the changes in
+    /// flight are applied.
+    fn config(&self) -> &HopperConfig {
+        self.pending.back().unwrap_or(&self.confirmed.0)
+    }
+
+    /// Its generation.
+    fn generation(&self) -> u32 {
+        self.confirmed.1.wrapping_add(self.pending.len() as u32)
+    }
+
+    /// Whether the last note says armed.
+    fn armed(&self) -> bool {
+        matches!(self.last.map(|n| n.arm), Some(RunnerArmState::Armed))
+    }
+
+    /// A decoded message: answers it, or queues the command that will
+    /// (whether one was queued).
+    fn on_message<const N: usize, T: Tx>(
+        &mut self,
+        msg: &HostMsg,
+        commands: &mut impl Outbox<Command<H>>,
+        capture: &mut impl Shared<FaultCapture<N>>,
+        tx: &mut T,
+    ) -> bool {
         let (id, req) = match msg {
             HostMsg::Hello { .. } => {
                 send(
@@ -276,45 +1070,31 @@ impl Endpoint {
                     },
                     false,
                 );
-                return;
+                return false;
             }
-            HostMsg::Heartbeat => return,
+            HostMsg::Heartbeat => return false,
             HostMsg::Request { id, req } => (*id, req),
         };
-        let resp = match req {
-            Request::Status => Response::Status(self.status(runner)),
+        let note = self.last;
+        let calibrating = note.is_some_and(|n| n.calibrating);
+        let command = |c: Command<H>| -> Result<Command<H>, Response> { Ok(c) };
+        let mut predicted = None;
+        let out: Result<Command<H>, Response> = match req {
+            Request::Status => Err(Response::Status(self.status())),
             // The board resets shortly to write a save: nothing starts.
             Request::Arm | Request::Calibrate { .. } if self.save_state == SAVE_AT_RESTART => {
-                Response::Refused(text("restarting"))
+                Err(Response::Refused(text("restarting")))
             }
             // A save queued but not yet taken becomes a reset on the
             // board: nothing starts before it is done.
             Request::Arm | Request::Calibrate { .. } if self.save_state == SAVE_PENDING => {
-                Response::Refused(text("saving"))
+                Err(Response::Refused(text("saving")))
             }
-            Request::Arm => {
-                runner.arming_mut().request_arm();
-                self.pending_arm = Some(id);
-                return;
-            }
-            Request::Disarm => {
-                runner.arming_mut().request_disarm();
-                Response::Ok
-            }
-            Request::ResetFaults => {
-                let input = runner.hopper().last_input().copied();
-                match input.map(|i| runner.reset_faults(&i)) {
-                    Some(Ok(())) => {
-                        capture.rearm();
-                        Response::Ok
-                    }
-                    _ if runner.arming().is_armed() => Response::Refused(text("disarm-first")),
-                    None => Response::Refused(text("no-measurement-yet")),
-                    Some(Err(_)) => Response::Refused(text("faults-remain")),
-                }
-            }
-            Request::ParamCount => Response::ParamCount(params::TABLE.len() as u16),
-            Request::ParamInfo { index } => match params::TABLE.get(usize::from(*index)) {
+            Request::Arm => command(Command::Arm { id }),
+            Request::Disarm => command(Command::Disarm { id }),
+            Request::ResetFaults => command(Command::ResetFaults { id }),
+            Request::ParamCount => Err(Response::ParamCount(params::TABLE.len() as u16)),
+            Request::ParamInfo { index } => Err(match params::TABLE.get(usize::from(*index)) {
                 Some(p) => {
                     let mut name = hopper_protocol::Name::new();
                     let _ = name.push_str(p.name);
@@ -326,161 +1106,258 @@ impl Endpoint {
                         min: p.min,
                         max: p.max,
                         default: p.default,
-                        value: params::get(runner.hopper().config(), p.name).unwrap_or(f32::NAN),
+                        value: params::get(self.config(), p.name).unwrap_or(f32::NAN),
                         live: PeriodRunner::settable_while_armed(p),
                     })
                 }
                 None => Response::Refused(text("no-such-index")),
-            },
-            Request::ParamGet { name } => match params::get(runner.hopper().config(), name) {
+            }),
+            Request::ParamGet { name } => Err(match params::get(self.config(), name) {
                 Ok(v) => Response::Value(v),
                 Err(_) => Response::Refused(text("unknown-parameter")),
-            },
+            }),
             Request::ParamSet { name, value } if !self.simulated && unsafe_value(name, *value) => {
-                Response::Refused(text("protection-locked"))
+                Err(Response::Refused(text("protection-locked")))
             }
-            Request::ParamSet { name, value } => match runner.set_param(name, *value) {
-                Ok(()) => Response::Ok,
-                Err(e) => Response::Refused(text(e.reason())),
-            },
+            Request::ParamSet { name, value } => {
+                match self.plan_set(id, name, *value, calibrating) {
+                    Ok((c, cfg)) => {
+                        predicted = Some(cfg);
+                        Ok(c)
+                    }
+                    Err(r) => Err(r),
+                }
+            }
             Request::Telemetry { every } => {
                 self.every = *every;
                 self.since = 0;
-                Response::Ok
+                Err(Response::Ok)
             }
-            Request::Timing => Response::Timing(TimingStats {
-                period_s: runner.timing().period_s,
-                periods: runner.periods(),
-                missed: runner.missed(),
-                step_mean: runner.step_cost().mean(),
-                step_max: runner.step_cost().max,
-                link_mean: self.cost.mean(),
-                link_max: self.cost.max,
-            }),
+            Request::Timing => {
+                let st = self.stats;
+                let (periods, missed, step) =
+                    st.map_or((0, 0, StepStats::new()), |n| (n.periods, n.missed, n.step));
+                Err(Response::Timing(TimingStats {
+                    period_s: self.period_s,
+                    periods,
+                    missed,
+                    step_mean: step.mean(),
+                    step_max: step.max,
+                    link_mean: self.cost.mean(),
+                    link_max: self.cost.max,
+                }))
+            }
+            Request::Cost => {
+                let st = self.stats;
+                let isr = st.map_or(StepStats::new(), |n| n.isr);
+                let recent = core::mem::take(&mut self.isr_recent_max);
+                Err(Response::Cost(CostStats {
+                    counter_hz: self.counter_hz,
+                    isr_mean: isr.mean(),
+                    isr_max: isr.max,
+                    isr_max_recent: recent,
+                    link_mean: self.cost.mean(),
+                    link_max: self.cost.max,
+                    serial_max: st.map_or(0, |n| n.serial_max),
+                    serial_count: st.map_or(0, |n| n.serial_count),
+                    max_jitter_s: st.map_or(0.0, |n| n.max_jitter_s),
+                    notes_dropped: st.map_or(0, |n| n.notes_dropped),
+                }))
+            }
             Request::Thermal => {
-                let m = runner.hopper().supervisor().thermal();
-                let c = m.config();
-                Response::Thermal(ThermalStatus {
-                    winding_c: m.winding_c(),
-                    housing_c: m.housing_c(),
-                    limit_scale: m.limit_scale(),
+                let c = &self.confirmed.0.supervisor.thermal;
+                let st = self.stats;
+                Err(Response::Thermal(ThermalStatus {
+                    winding_c: st.map_or(f32::NAN, |n| n.winding_c),
+                    housing_c: st.map_or(f32::NAN, |n| n.housing_c),
+                    limit_scale: st.map_or(1.0, |n| n.limit_scale),
                     derate_c: c.derate_winding_c,
                     trip_c: c.trip_winding_c,
                     protect: c.protect,
-                })
+                }))
             }
-            Request::Boot => {
-                let b = runner.arming().boot();
-                Response::Boot(BootInfo {
-                    resets: b.resets.0,
-                    brown_out_reset_on: b.brown_out_reset_on,
-                    clock_as_configured: b.clock_as_configured,
-                    sysclk_hz: b.sysclk_hz,
-                })
-            }
+            Request::Boot => command(Command::Query {
+                id,
+                what: Query::Boot,
+            }),
             Request::Calibrate { routine, seconds } => {
                 match crate::bringup::Routine::from_code(*routine) {
-                    None => Response::Refused(text(crate::bringup::CalRefusal::Unknown.name())),
-                    Some(r) => match runner.start_calibration(r, *seconds) {
-                        Ok(()) => Response::Ok,
-                        Err(e) => Response::Refused(text(e.name())),
-                    },
+                    None => Err(Response::Refused(text(
+                        crate::bringup::CalRefusal::Unknown.name(),
+                    ))),
+                    Some(routine) => command(Command::Calibrate {
+                        id,
+                        routine,
+                        seconds: *seconds,
+                    }),
                 }
             }
-            Request::CalibrationReport => Response::Calibration(runner.calibration()),
-            Request::BringupResults => Response::BringupResults(runner.bringup_results()),
+            Request::CalibrationReport => command(Command::Query {
+                id,
+                what: Query::CalibrationReport,
+            }),
+            Request::BringupResults => command(Command::Query {
+                id,
+                what: Query::BringupResults,
+            }),
             Request::SimulateMount { hoisted, lift_m } if self.simulated => {
                 if (0.0..=0.5).contains(lift_m) {
-                    self.sim_mount = Some((*hoisted, *lift_m));
-                    Response::Ok
+                    command(Command::SimulateMount {
+                        id,
+                        hoisted: *hoisted,
+                        lift_m: *lift_m,
+                    })
                 } else {
-                    Response::Refused(text("lift-out-of-range"))
+                    Err(Response::Refused(text("lift-out-of-range")))
                 }
             }
-            Request::SimulateMount { .. } => Response::Refused(text("not-simulated")),
-            Request::Save if runner.arming().is_armed() => Response::Refused(text("disarm-first")),
-            // An arm decided at the next period would arm a robot that the
-            // save then resets.
-            Request::Save if self.pending_arm.is_some() || runner.arming().arm_pending() => {
-                Response::Refused(text("arming"))
-            }
-            Request::Save if runner.calibrating() => Response::Refused(text("calibrating")),
-            // The placeholders are not a calibration: a tare (or a loaded
-            // record) first, else the saved record would stand for one.
-            Request::Save if !runner.arming().tared() => Response::Refused(text("not-calibrated")),
-            Request::Save if self.save_state == SAVE_PENDING => Response::Refused(text("busy")),
-            Request::Save => {
-                self.save_len = runner.calibration_record(&mut self.save_record.0);
-                self.save_taken = false;
-                self.save_state = SAVE_PENDING;
-                Response::Ok
-            }
-            Request::Weighing => Response::Weighing(runner.weighing()),
-            Request::Crystal => {
-                let b = runner.arming().boot();
-                Response::Crystal(hopper_protocol::CrystalInfo {
-                    expected_hz: b.hse_expected_hz,
-                    measured_hz: b.hse_measured_hz,
-                })
-            }
-            Request::Stored => {
-                let (boot, boot_error, entries) = runner.calibration_at_boot().wire();
-                Response::Stored(StoredInfo {
-                    boot,
-                    boot_error,
-                    entries,
-                    save: self.save_state,
-                })
-            }
+            Request::SimulateMount { .. } => Err(Response::Refused(text("not-simulated"))),
+            Request::Save => Err(self.save(note)),
+            Request::Weighing => command(Command::Query {
+                id,
+                what: Query::Weighing,
+            }),
+            Request::Crystal => command(Command::Query {
+                id,
+                what: Query::Crystal,
+            }),
+            Request::Stored => command(Command::Query {
+                id,
+                what: Query::Stored,
+            }),
             Request::SimulateEstop { pressed } if self.simulated => {
-                self.sim_estop = *pressed;
-                Response::Ok
-            }
-            Request::SimulateEstop { .. } => Response::Refused(text("not-simulated")),
-            Request::Dump => {
-                let records = u16::try_from(capture.len()).unwrap_or(u16::MAX);
-                self.dump = Some((0, records));
-                self.dump_start = capture.start();
-                capture.hold(true);
-                Response::Dump(DumpInfo {
-                    records,
-                    frozen: capture.frozen(),
-                    fault_step: capture.fault_step().unwrap_or(0),
+                command(Command::SimulateEstop {
+                    id,
+                    pressed: *pressed,
                 })
             }
+            Request::SimulateEstop { .. } => Err(Response::Refused(text("not-simulated"))),
+            Request::Dump => Err(self.start_dump(capture)),
         };
-        send(tx, &RobotMsg::Response { id, resp }, false);
+        match out {
+            Ok(c) => {
+                let arm = matches!(c, Command::Arm { .. });
+                match commands.put(c) {
+                    Ok(()) => {
+                        if arm {
+                            self.arm_outstanding = Some(id);
+                        }
+                        if let Some(cfg) = predicted {
+                            // The next set builds on this one (its install
+                            // adds one to the generation).
+                            let _ = self.pending.push_back(cfg);
+                        }
+                        true
+                    }
+                    Err(c) => {
+                        // A slot it held is free again.
+                        if let Command::Install { prepared, .. } = c {
+                            if H::RECYCLED {
+                                let _ = self.spares.push(prepared.into_slot_handle());
+                            }
+                        }
+                        let resp = Response::Refused(text("busy"));
+                        send(tx, &RobotMsg::Response { id, resp }, false);
+                        false
+                    }
+                }
+            }
+            Err(resp) => {
+                send(tx, &RobotMsg::Response { id, resp }, false);
+                false
+            }
+        }
     }
 
-    /// After a period: queues the messages it produced.
-    pub fn after_period<const N: usize, T: Tx>(
+    /// A parameter set, checked and its controller built here: the command
+    /// that applies it, or the refusal.
+    fn plan_set(
         &mut self,
-        p: &Period,
-        capture: &mut FaultCapture<N>,
-        tx: &mut T,
-    ) {
-        // A pending arm request was decided in this period: answer it. No
-        // Armed or Refused event means it changed nothing (already armed,
-        // or a disarm asked for in the same batch won).
-        if let Some(id) = self.pending_arm.take() {
-            let resp = match p.arm_event {
-                Some(ArmEvent::Refused(r)) => Response::Refused(text(r.name())),
-                _ if p.armed => Response::Ok,
-                _ => Response::Refused(text("disarm-requested")),
-            };
-            send(tx, &RobotMsg::Response { id, resp }, false);
+        id: u16,
+        name: &str,
+        value: f32,
+        calibrating: bool,
+    ) -> Result<(Command<H>, HopperConfig), Response> {
+        let refused = |e: crate::runner::SetError| Response::Refused(text(e.reason()));
+        if params::find(name).is_some() && calibrating {
+            return Err(refused(crate::runner::SetError::Calibrating));
         }
-        if let Some(ev) = p.arm_event {
-            let state = match ev {
-                ArmEvent::Armed => Some(ArmState::Armed),
-                ArmEvent::Disarmed(r) => Some(arm_state(RunnerArmState::Disarmed(r))),
-                ArmEvent::Refused(_) => None,
-            };
-            if let Some(s) = state {
-                send(tx, &RobotMsg::State(s), false);
+        let (param, cfg) = PeriodRunner::plan_set(self.config(), name, value).map_err(refused)?;
+        if self.pending.is_full() {
+            return Err(Response::Refused(text("busy")));
+        }
+        if self.armed() {
+            if !PeriodRunner::settable_while_armed(param) {
+                return Err(refused(crate::runner::SetError::WhileArmed(param.name)));
             }
+            return Ok((Command::SetLive { id, param, value }, cfg));
         }
-        match p.log {
+        // The controller's constants and every cross-field rule, here: the
+        // control period only copies it in.
+        let prepared = PeriodRunner::prepare_at(cfg, self.generation())
+            .map_err(refused)?
+            .into_slot(self.spares.pop())
+            .ok_or_else(|| Response::Refused(text("busy")))?;
+        Ok((
+            Command::Install {
+                id: Some(id),
+                prepared,
+                then: Then::Param(param),
+            },
+            cfg,
+        ))
+    }
+
+    fn save(&mut self, note: Option<Note>) -> Response {
+        let Some(n) = note else {
+            return Response::Refused(text("busy"));
+        };
+        if self.armed() {
+            return Response::Refused(text("disarm-first"));
+        }
+        // An arm decided at a later period would arm a robot that the save
+        // then resets.
+        if self.arm_outstanding.is_some() || n.arm_pending {
+            return Response::Refused(text("arming"));
+        }
+        if n.calibrating {
+            return Response::Refused(text("calibrating"));
+        }
+        // The placeholders are not a calibration: a tare (or a loaded
+        // record) first, else the saved record would stand for one.
+        if !n.tared {
+            return Response::Refused(text("not-calibrated"));
+        }
+        if self.save_state == SAVE_PENDING {
+            return Response::Refused(text("busy"));
+        }
+        self.save_len = crate::persist::encode(&self.confirmed.0, &mut self.save_record.0);
+        self.save_taken = false;
+        self.save_state = SAVE_PENDING;
+        Response::Ok
+    }
+
+    fn start_dump<const N: usize>(
+        &mut self,
+        capture: &mut impl Shared<FaultCapture<N>>,
+    ) -> Response {
+        let (len, start, frozen, fault_step) = capture.with(|c| {
+            c.hold(true);
+            (c.len(), c.start(), c.frozen(), c.fault_step().unwrap_or(0))
+        });
+        let records = u16::try_from(len).unwrap_or(u16::MAX);
+        self.dump = Some((0, records));
+        self.dump_start = start;
+        Response::Dump(DumpInfo {
+            records,
+            frozen,
+            fault_step,
+        })
+    }
+
+    /// A period's log item: its message, after the period's note.
+    fn on_log<T: Tx>(&mut self, item: LogItem, tx: &mut T) {
+        match Some(item) {
             Some(LogItem::Faults { step, faults }) => {
                 send(
                     tx,
@@ -507,11 +1384,31 @@ impl Endpoint {
             }
             None => {}
         }
+    }
+
+    /// A period's note: the messages it produced.
+    fn on_note<const N: usize, T: Tx>(
+        &mut self,
+        n: &Note,
+        capture: &mut impl Shared<FaultCapture<N>>,
+        tx: &mut T,
+    ) {
+        self.isr_recent_max = self.isr_recent_max.max(n.isr_last);
+        if let Some(ev) = n.arm_event {
+            let state = match ev {
+                ArmEvent::Armed => Some(ArmState::Armed),
+                ArmEvent::Disarmed(r) => Some(arm_state(RunnerArmState::Disarmed(r))),
+                ArmEvent::Refused(_) => None,
+            };
+            if let Some(s) = state {
+                send(tx, &RobotMsg::State(s), false);
+            }
+        }
         if self.every > 0 {
             self.since = self.since.saturating_add(1);
             if self.since >= self.every {
                 self.since = 0;
-                let t = RobotMsg::Telemetry(wire_record(self.seq, &p.out.record));
+                let t = RobotMsg::Telemetry(wire_record(self.seq, &n.record));
                 // The sequence number advances for a dropped record too:
                 // the host sees the gap.
                 self.seq = self.seq.wrapping_add(1);
@@ -522,36 +1419,38 @@ impl Endpoint {
         }
         if let Some((mut next, total)) = self.dump {
             let end = total.min(next.saturating_add(DUMP_PER_PERIOD));
+            let start = self.dump_start;
             while next < end {
-                let Some(r) = capture.get_from(self.dump_start, usize::from(next)) else {
+                // One record copied out under the capture's lock at a time.
+                let Some(r) = capture.with(|c| c.get_from(start, usize::from(next)).copied())
+                else {
                     break;
                 };
                 if !send(
                     tx,
-                    &RobotMsg::Captured(wire_record(u32::from(next), r)),
+                    &RobotMsg::Captured(wire_record(u32::from(next), &r)),
                     true,
                 ) {
                     break;
                 }
                 next += 1;
             }
-            self.dump = (next < total
-                && capture
-                    .get_from(self.dump_start, usize::from(next))
-                    .is_some())
-            .then_some((next, total));
+            let more =
+                next < total && capture.with(|c| c.get_from(start, usize::from(next)).is_some());
+            self.dump = more.then_some((next, total));
             if self.dump.is_none() {
-                capture.hold(false);
+                capture.with(|c| c.hold(false));
             }
         }
     }
 
-    fn status(&self, runner: &PeriodRunner) -> Status {
+    fn status(&self) -> Status {
         let link = self.rx.stats();
+        let n = self.last;
         Status {
-            arm: arm_state(runner.arming().state()),
-            faults: runner.hopper().supervisor().faults().0,
-            periods: runner.periods(),
+            arm: arm_state(n.map_or(RunnerArmState::Disarmed(DisarmReason::Boot), |n| n.arm)),
+            faults: n.map_or(0, |n| n.record.faults),
+            periods: n.map_or(0, |n| n.record.step),
             frames_ok: link.ok,
             frames_bad: link.bad(),
             telemetry_dropped: self.telemetry_dropped,
@@ -565,7 +1464,7 @@ mod tests {
     extern crate std;
     use super::*;
     use crate::hal::{HopperIo, IoError, RawSample};
-    use crate::hopper::HopperConfig;
+    use crate::hopper::{Hopper, HopperConfig};
     use crate::runner::{NoCounter, Timing};
     use hopper_protocol::{encode, Decoder, MAX_FRAME};
     use std::vec::Vec;
@@ -599,11 +1498,14 @@ mod tests {
     }
 
     /// A robot at rest behind a byte link: host bytes in, robot messages
-    /// out, serviced after each period as the applications do.
+    /// out; the control period's port and the link task run one after the
+    /// other, as the simulator's do.
     struct Robot {
         runner: PeriodRunner,
         io: Io,
+        port: ControlPort,
         ep: Endpoint,
+        q: Queues,
         capture: FaultCapture<64>,
         inbox: Vec<u8>,
         tx: VecTx,
@@ -612,13 +1514,25 @@ mod tests {
 
     impl Robot {
         fn new() -> Self {
+            Self::with(false)
+        }
+
+        fn with(simulated: bool) -> Self {
             let cfg = HopperConfig::default();
             let raw = crate::proptest_support::rest_sample(&cfg.calibration);
+            let runner =
+                PeriodRunner::new(cfg, Timing::default()).unwrap_or_else(|e| panic!("{e:?}"));
+            let ep = if simulated {
+                Endpoint::simulated(&runner)
+            } else {
+                Endpoint::new(&runner)
+            };
             Robot {
-                runner: PeriodRunner::new(cfg, Timing::default())
-                    .unwrap_or_else(|e| panic!("{e:?}")),
+                runner,
                 io: Io(raw),
-                ep: Endpoint::new(),
+                port: ControlPort::new(),
+                ep,
+                q: Queues::default(),
                 capture: FaultCapture::new(),
                 inbox: Vec::new(),
                 tx: VecTx {
@@ -649,14 +1563,23 @@ mod tests {
             for _ in 0..n {
                 let p = self.runner.run_period(&mut self.io, &mut NoCounter);
                 self.runner.end_period(false);
-                self.capture
-                    .record(&p.out.record, !p.newly_latched.is_empty());
-                let inbox = core::mem::take(&mut self.inbox);
-                self.ep.service(
+                self.port.after_period(
                     &mut self.runner,
                     &p,
-                    inbox.into_iter(),
                     &mut self.capture,
+                    &mut self.q.commands,
+                    &mut self.q.answers,
+                    &mut self.q.notes,
+                    &mut self.q.stats,
+                );
+                let inbox = core::mem::take(&mut self.inbox);
+                self.ep.service(
+                    &mut self.q.notes,
+                    &mut self.q.stats,
+                    &mut self.q.answers,
+                    &mut self.q.commands,
+                    inbox.into_iter(),
+                    &mut &mut self.capture,
                     &mut self.tx,
                     &mut NoCounter,
                 );
@@ -686,27 +1609,35 @@ mod tests {
     #[test]
     fn every_arm_request_is_answered() {
         let mut r = Robot::new();
+        // Decoded after a period, applied after the next, decided after
+        // the third.
         r.request(1, Request::Arm);
-        r.periods(2);
+        r.periods(3);
         r.take();
         assert!(r.runner.arming().is_armed());
         r.request(2, Request::Arm);
-        r.periods(2);
+        r.periods(3);
         assert!(r.take().contains(&RobotMsg::Response {
             id: 2,
             resp: Response::Ok
         }));
+        // A disarm and an arm in one batch: applied in their order, a
+        // period apart, each answered.
         r.request(3, Request::Disarm);
         r.request(4, Request::Arm);
-        r.periods(2);
+        r.periods(4);
         let msgs = r.take();
-        assert!(
-            msgs.contains(&RobotMsg::Response {
-                id: 4,
-                resp: Response::Refused(text("disarm-requested"))
-            }),
-            "{msgs:?}"
-        );
+        for id in [3, 4] {
+            assert!(
+                msgs.contains(&RobotMsg::Response {
+                    id,
+                    resp: Response::Ok
+                }),
+                "{msgs:?}"
+            );
+        }
+        r.request(7, Request::Disarm);
+        r.periods(3);
         assert!(!r.runner.arming().is_armed());
         // A controller rebuilt by a set and an arm in the same batch: the
         // new velocity filters have measured nothing yet, so the arm waits.
@@ -718,7 +1649,7 @@ mod tests {
             },
         );
         r.request(6, Request::Arm);
-        r.periods(2);
+        r.periods(4);
         let msgs = r.take();
         assert!(
             msgs.contains(&RobotMsg::Response {
@@ -739,10 +1670,10 @@ mod tests {
         ] {
             let mut r = Robot::new();
             if sim {
-                r.ep = Endpoint::simulated();
+                r.ep = Endpoint::simulated(&r.runner);
             }
             r.request(1, Request::SimulateEstop { pressed: true });
-            r.periods(1);
+            r.periods(2);
             assert_eq!(
                 r.take(),
                 [RobotMsg::Response {
@@ -750,7 +1681,7 @@ mod tests {
                     resp: expect
                 }]
             );
-            assert_eq!(r.ep.sim_estop(), sim);
+            assert_eq!(r.port.sim_estop(), sim);
         }
     }
 
@@ -761,7 +1692,7 @@ mod tests {
         for sim in [false, true] {
             let mut r = Robot::new();
             if sim {
-                r.ep = Endpoint::simulated();
+                r.ep = Endpoint::simulated(&r.runner);
             }
             for (id, name, value) in [
                 (1, "thermal.protect", 0.0),
@@ -771,7 +1702,7 @@ mod tests {
                 let mut n = hopper_protocol::Name::new();
                 let _ = n.push_str(name);
                 r.request(id, Request::ParamSet { name: n, value });
-                r.periods(1);
+                r.periods(2);
                 let expect = match (sim, value.is_nan()) {
                     (false, _) => Response::Refused(text("protection-locked")),
                     (true, false) => Response::Ok,
@@ -798,7 +1729,7 @@ mod tests {
                 value: 1.0,
             },
         );
-        r.periods(1);
+        r.periods(2);
         assert_eq!(
             r.take(),
             [RobotMsg::Response {
@@ -925,7 +1856,8 @@ mod tests {
                 value: 8.0,
             },
         );
-        r.periods(1);
+        // Each built by the link task and installed a period apart.
+        r.periods(3);
         assert_eq!(
             r.take(),
             [
@@ -944,9 +1876,10 @@ mod tests {
         // periods (`every_arm_request_is_answered` shows an earlier arm
         // refused).
         r.periods(2);
-        // Arm: serviced after a period, decided and answered after the next.
+        // Arm: decoded after a period, applied after the next, decided
+        // and answered after the third.
         r.request(4, Request::Arm);
-        r.periods(1);
+        r.periods(2);
         assert!(r.take().is_empty());
         let p = r.periods(1);
         assert!(p.armed);
@@ -981,7 +1914,7 @@ mod tests {
         // Telemetry every period; disarm gives 0 A in the next record.
         r.request(6, Request::Telemetry { every: 1 });
         r.request(7, Request::Disarm);
-        r.periods(1);
+        r.periods(2);
         r.take();
         r.periods(1);
         let msgs = r.take();
@@ -1001,7 +1934,7 @@ mod tests {
         r.io.0.estop_pressed = true;
         r.periods(1);
         r.request(8, Request::Arm);
-        r.periods(2);
+        r.periods(3);
         let msgs = r.take();
         assert!(
             msgs.contains(&RobotMsg::Response {
@@ -1059,7 +1992,7 @@ mod tests {
         let _ = r.take();
         r.request(9, Request::ResetFaults);
         r.request(10, Request::Arm);
-        r.periods(2);
+        r.periods(4);
         let msgs = r.take();
         assert!(
             msgs.contains(&RobotMsg::Response {
@@ -1101,5 +2034,140 @@ mod tests {
         let s = status.unwrap_or_else(|| panic!("{msgs:?}"));
         assert!(s.frames_bad > 0, "{s:?}");
         assert_eq!(s.faults, 0, "{s:?}");
+    }
+
+    /// The control period applies at most one command a period, whatever
+    /// the link task queued, and publishes one note a period.
+    #[test]
+    fn the_port_applies_at_most_one_command_a_period() {
+        let mut r = Robot::new();
+        r.periods(1);
+        let _ = r.take();
+        for id in 1..=3 {
+            r.request(id, Request::Boot);
+        }
+        // Decoded after this period: three commands queued.
+        r.periods(1);
+        assert_eq!(r.q.commands.len(), 3);
+        for left in [2, 1, 0] {
+            let p = r.runner.run_period(&mut r.io, &mut NoCounter);
+            let notes = r.q.notes.len();
+            r.port.after_period(
+                &mut r.runner,
+                &p,
+                &mut r.capture,
+                &mut r.q.commands,
+                &mut r.q.answers,
+                &mut r.q.notes,
+                &mut r.q.stats,
+            );
+            assert_eq!(r.q.commands.len(), left);
+            assert_eq!(r.q.notes.len(), notes + 1);
+        }
+        r.periods(1);
+        let answered = r
+            .take()
+            .iter()
+            .filter(|m| {
+                matches!(
+                    m,
+                    RobotMsg::Response {
+                        resp: Response::Boot(_),
+                        ..
+                    }
+                )
+            })
+            .count();
+        assert_eq!(answered, 3);
+    }
+
+    /// A set's controller is built by the link task in a spare slot and
+    /// installed by exchanging slots: the running slot goes back to the
+    /// link task, the configuration changes once, and a set that finds no
+    /// spare is refused `busy` with nothing changed.
+    #[test]
+    fn a_set_is_installed_by_exchanging_slots() {
+        let cfg = HopperConfig::default();
+        let bank: &'static mut [Hopper; 2] = std::boxed::Box::leak(std::boxed::Box::new([
+            Hopper::new(cfg).unwrap_or_else(|e| panic!("{e:?}")),
+            Hopper::new(cfg).unwrap_or_else(|e| panic!("{e:?}")),
+        ]));
+        let [a, b] = bank;
+        let running: *const Hopper = a;
+        let spare: *const Hopper = b;
+        let mut runner =
+            PeriodRunner::in_slot(cfg, Timing::default(), a).unwrap_or_else(|e| panic!("{e:?}"));
+        let mut ep = Endpoint::new(&runner).with_spares([b]);
+        let mut port = ControlPort::new();
+        let mut q: Queues<&'static mut Hopper> = Queues::new();
+        let mut capture: FaultCapture<64> = FaultCapture::new();
+        let mut io = Io(crate::proptest_support::rest_sample(&cfg.calibration));
+        let mut tx = VecTx {
+            bytes: Vec::new(),
+            cap: 4096,
+        };
+        let mut frames = Vec::new();
+        for (id, value) in [(1, 0.11), (2, 0.12)] {
+            let mut f = [0u8; MAX_FRAME];
+            let msg = HostMsg::Request {
+                id,
+                req: Request::ParamSet {
+                    name: name("flight.kp_a_per_rad"),
+                    value,
+                },
+            };
+            let n = encode(&msg, &mut f).unwrap_or_else(|e| panic!("{e:?}"));
+            frames.extend_from_slice(&f[..n]);
+        }
+        let gen0 = runner.config_gen();
+        for k in 0..3 {
+            let p = runner.run_period(&mut io, &mut NoCounter);
+            port.after_period(
+                &mut runner,
+                &p,
+                &mut capture,
+                &mut q.commands,
+                &mut q.answers,
+                &mut q.notes,
+                &mut q.stats,
+            );
+            let rx = if k == 0 {
+                core::mem::take(&mut frames)
+            } else {
+                Vec::new()
+            };
+            ep.service(
+                &mut q.notes,
+                &mut q.stats,
+                &mut q.answers,
+                &mut q.commands,
+                rx.into_iter(),
+                &mut &mut capture,
+                &mut tx,
+                &mut NoCounter,
+            );
+        }
+        // The first set took the one spare; the second found none.
+        let mut host = Decoder::new();
+        let msgs: Vec<RobotMsg> = tx.bytes.iter().filter_map(|&x| host.push(x)).collect();
+        assert!(
+            msgs.contains(&RobotMsg::Response {
+                id: 1,
+                resp: Response::Ok
+            }),
+            "{msgs:?}"
+        );
+        assert!(msgs.contains(&RobotMsg::Response {
+            id: 2,
+            resp: Response::Refused(text("busy"))
+        }));
+        assert_eq!(runner.config_gen(), gen0.wrapping_add(1));
+        let kp = params::get(runner.hopper().config(), "flight.kp_a_per_rad");
+        assert_eq!(kp, Ok(0.11));
+        // The running controller is the spare's slot; the old one is the
+        // link task's spare now.
+        assert!(core::ptr::eq(runner.hopper(), spare));
+        assert_eq!(ep.spares.len(), 1);
+        assert!(core::ptr::eq(&*ep.spares[0], running));
     }
 }

@@ -192,6 +192,9 @@ pub enum SetError {
     Calibrating,
     /// The new configuration as a whole is refused (a cross-field rule).
     Config(RunnerError),
+    /// The configuration changed since the new one was built from it (it
+    /// would undo that change): nothing installed; ask again.
+    Stale,
 }
 
 impl SetError {
@@ -205,8 +208,157 @@ impl SetError {
             SetError::WhileArmed(_) => "disarm-first",
             SetError::Calibrating => "calibrating",
             SetError::Config(_) => "invalid-configuration",
+            SetError::Stale => "busy",
         }
     }
+}
+
+/// Where a period runner keeps its controller: owned ([`Owned`], the host
+/// and the tests) or a slot of a static bank (`&'static mut Hopper`, the
+/// board and the QEMU link image), where a new controller built by the
+/// link task goes in by exchanging two references at the period boundary
+/// instead of copying 1.2 KB in the control interrupt.
+pub trait HopperSlot: core::ops::DerefMut<Target = Hopper> + Sized {
+    /// Whether a slot an install gave back goes back to the link task for
+    /// the next one (the static bank's; an owned one is just dropped).
+    const RECYCLED: bool;
+
+    /// `h` in a slot of this kind: into `spare` for a bank's (`None`
+    /// without one), owned as it is otherwise.
+    fn fill(spare: Option<Self>, h: Hopper) -> Option<Self>;
+}
+
+/// A controller held by value.
+#[derive(Debug, Clone)]
+pub struct Owned(pub Hopper);
+
+impl core::ops::Deref for Owned {
+    type Target = Hopper;
+    fn deref(&self) -> &Hopper {
+        &self.0
+    }
+}
+
+impl core::ops::DerefMut for Owned {
+    fn deref_mut(&mut self) -> &mut Hopper {
+        &mut self.0
+    }
+}
+
+impl HopperSlot for Owned {
+    const RECYCLED: bool = false;
+    fn fill(_: Option<Self>, h: Hopper) -> Option<Self> {
+        Some(Owned(h))
+    }
+}
+
+impl HopperSlot for &'static mut Hopper {
+    const RECYCLED: bool = true;
+    fn fill(spare: Option<Self>, h: Hopper) -> Option<Self> {
+        spare.map(|s| {
+            *s = h;
+            s
+        })
+    }
+}
+
+/// A controller built and validated from a configuration outside the
+/// control period ([`PeriodRunner::prepare_at`], the expensive part of a
+/// parameter set: every field's check and the controller's constants),
+/// installed at a period boundary by [`PeriodRunner::install`] (the slots
+/// exchanged, the state carried over).
+#[derive(Debug, Clone)]
+pub struct Prepared<H = Owned> {
+    hopper: H,
+    arming: crate::arming::ArmingConfig,
+    feed: crate::watchdog::FeedConfig,
+    /// The configuration generation it was built from
+    /// ([`PeriodRunner::config_gen`]).
+    base_gen: u32,
+}
+
+impl<H: HopperSlot> Prepared<H> {
+    /// The configuration it holds.
+    pub fn config(&self) -> &HopperConfig {
+        self.hopper.config()
+    }
+}
+
+impl<H: HopperSlot> Prepared<H> {
+    /// Its slot (a set refused before it was installed gives it back).
+    pub fn into_slot_handle(self) -> H {
+        self.hopper
+    }
+}
+
+impl Prepared<Owned> {
+    /// Into a slot of another kind (`spare`, for a bank's; `None` when
+    /// a bank's has none).
+    pub fn into_slot<H: HopperSlot>(self, spare: Option<H>) -> Option<Prepared<H>> {
+        let Prepared {
+            hopper,
+            arming,
+            feed,
+            base_gen,
+        } = self;
+        H::fill(spare, hopper.0).map(|hopper| Prepared {
+            hopper,
+            arming,
+            feed,
+            base_gen,
+        })
+    }
+}
+
+/// A routine's results: up to two parameters and their new values.
+pub type Changes = [Option<(&'static crate::params::Param, f32)>; 2];
+
+/// What the bring-up verdicts rest on, to compare across an install (a
+/// few words, not the 408-byte configuration, in the control period).
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Verdicts {
+    /// The direction check and homing: the encoder's sign and count, the
+    /// screw's lead.
+    direction: (bool, u32, f32),
+    /// The tare: the load cell's and the potentiometer's gains and offsets.
+    tare: [f32; 4],
+}
+
+impl Verdicts {
+    fn of(cfg: &HopperConfig) -> Self {
+        let c = &cfg.calibration;
+        Verdicts {
+            direction: (
+                c.motor_counts_positive_down,
+                c.motor_counts_per_rev,
+                cfg.model.screw_lead_m,
+            ),
+            tare: [
+                c.loadcell_gain_n_per_code,
+                c.loadcell_offset_code,
+                c.pot_gain_m_per_code,
+                c.pot_offset_code,
+            ],
+        }
+    }
+}
+
+/// What an [`install`](PeriodRunner::install) completes.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Then {
+    /// A parameter set from the host: only disarmed and with no routine
+    /// running; the bring-up verdicts it invalidates are forgotten.
+    Param(&'static crate::params::Param),
+    /// A tare's new offsets: the tare counts for arming.
+    Tared,
+    /// The homing's new zero, the stop's position in the old one, m: the
+    /// nut counts as homed.
+    Homed(f32),
+    /// The height routine's correction of the body height, m.
+    Height(f32),
+    /// A fitted constant (the spring rate, the load cell's gain).
+    Fitted,
 }
 
 /// What one period did.
@@ -233,8 +385,8 @@ pub struct Period {
 /// The period runner: the controller, the watchdog feed decision, overrun
 /// and step-cost accounting. Not `Copy`: it holds the fault latch.
 #[derive(Debug, Clone)]
-pub struct PeriodRunner {
-    hopper: Hopper,
+pub struct PeriodRunner<H = Owned> {
+    hopper: H,
     arming: Arming,
     feed: FeedPolicy,
     timing: Timing,
@@ -258,11 +410,77 @@ pub struct PeriodRunner {
     max_jitter_s: f32,
     /// What was found in flash at boot.
     at_boot: crate::persist::AtBoot,
+    /// Bumped at every change of the controller's configuration (an
+    /// install, a live target change).
+    config_gen: u32,
+    /// A routine's results wait for their controller to be built outside
+    /// the period: the parameters it changes and what the install
+    /// completes.
+    rebuild_request: Option<(Changes, Then)>,
+    /// A rebuild was asked for and is not installed yet: the routine counts
+    /// as running (nothing arms, saves or sets in between).
+    rebuild_outstanding: bool,
 }
 
-impl PeriodRunner {
-    /// Validates `cfg` and `timing`.
+impl PeriodRunner<Owned> {
+    /// Validates `cfg` and `timing`; the controller held by value.
     pub fn new(cfg: HopperConfig, timing: Timing) -> Result<Self, RunnerError> {
+        let hopper = Hopper::new(cfg).map_err(RunnerError::Config)?;
+        Self::in_slot(cfg, timing, Owned(hopper))
+    }
+
+    /// Whether [`set_param`](PeriodRunner::set_param) takes `p` while
+    /// armed: only the target apex, which changes in place (anything else
+    /// rebuilds the controller).
+    pub fn settable_while_armed(p: &crate::params::Param) -> bool {
+        p.name == crate::params::TARGET_APEX_M.name
+    }
+
+    /// `cfg` with `name` set to `value` (no state: where the set is
+    /// checked, outside the control period), and the parameter.
+    pub fn plan_set(
+        cfg: &HopperConfig,
+        name: &str,
+        value: f32,
+    ) -> Result<(&'static crate::params::Param, HopperConfig), SetError> {
+        let p =
+            crate::params::find(name).ok_or(SetError::Param(crate::params::ParamError::Unknown))?;
+        let mut new = *cfg;
+        crate::params::set(&mut new, p.name, value).map_err(SetError::Param)?;
+        Ok((p, new))
+    }
+
+    /// `cfg` with a routine's changes.
+    pub fn apply_changes(cfg: &HopperConfig, changes: &Changes) -> Result<HopperConfig, SetError> {
+        let mut new = *cfg;
+        for (p, v) in changes.iter().flatten() {
+            crate::params::set(&mut new, p.name, *v).map_err(SetError::Param)?;
+        }
+        Ok(new)
+    }
+
+    /// Validates `cfg` and builds its controller, as of configuration
+    /// generation `base_gen` ([`PeriodRunner::config_gen`]): the costly half
+    /// of a set, for a lower-priority task (the link task's copy of the
+    /// configuration and its generation).
+    pub fn prepare_at(cfg: HopperConfig, base_gen: u32) -> Result<Prepared, SetError> {
+        let arming =
+            Arming::new(cfg.arming).map_err(|e| SetError::Config(RunnerError::Arming(e)))?;
+        let hopper = Hopper::new(cfg).map_err(|e| SetError::Config(RunnerError::Config(e)))?;
+        Ok(Prepared {
+            hopper: Owned(hopper),
+            arming: *arming.config(),
+            feed: crate::watchdog::FeedConfig::for_hopper(&cfg),
+            base_gen,
+        })
+    }
+}
+
+impl<H: HopperSlot> PeriodRunner<H> {
+    /// Validates `cfg` and `timing`; the controller is the one in `slot`
+    /// (built from `cfg`: a static bank's slot filled by
+    /// [`HopperSlot::fill`]).
+    pub fn in_slot(cfg: HopperConfig, timing: Timing, hopper: H) -> Result<Self, RunnerError> {
         if !(timing.period_s > 0.0 && timing.period_s.is_finite()) {
             return Err(RunnerError::Period);
         }
@@ -273,7 +491,6 @@ impl PeriodRunner {
             return Err(RunnerError::MaxJitter);
         }
         let arming = Arming::new(cfg.arming).map_err(RunnerError::Arming)?;
-        let hopper = Hopper::new(cfg).map_err(RunnerError::Config)?;
         Ok(Self {
             arming,
             feed: FeedPolicy::for_hopper(hopper.config()),
@@ -290,6 +507,9 @@ impl PeriodRunner {
             cal: crate::bringup::Calibrator::new(),
             max_jitter_s: 0.0,
             at_boot: crate::persist::AtBoot::NoStore,
+            config_gen: 0,
+            rebuild_request: None,
+            rebuild_outstanding: false,
         })
     }
 
@@ -352,13 +572,6 @@ impl PeriodRunner {
         Ok(())
     }
 
-    /// Whether [`set_param`](Self::set_param) takes `p` while armed: only
-    /// the target apex, which changes in place (anything else rebuilds the
-    /// controller).
-    pub fn settable_while_armed(p: &crate::params::Param) -> bool {
-        p.name == crate::params::TARGET_APEX_M.name
-    }
-
     /// Sets a runtime parameter by its table name ([`crate::params`]),
     /// between periods (the application calls it from the control task
     /// between two [`run_period`](Self::run_period)s, so it applies at a
@@ -369,59 +582,202 @@ impl PeriodRunner {
     /// state kept. The whole new configuration is checked before anything
     /// changes: a refused set changes nothing.
     pub fn set_param(&mut self, name: &str, value: f32) -> Result<(), SetError> {
-        let p =
-            crate::params::find(name).ok_or(SetError::Param(crate::params::ParamError::Unknown))?;
-        if self.cal.running() {
+        if crate::params::find(name).is_some() && self.calibrating() {
             // A routine's loop was built on the configuration it started
             // with (a flipped encoder sign would turn its PD around).
             return Err(SetError::Calibrating);
         }
-        let mut cfg = *self.hopper.config();
-        crate::params::set(&mut cfg, p.name, value).map_err(SetError::Param)?;
+        let (p, cfg) = PeriodRunner::plan_set(self.hopper.config(), name, value)?;
         if self.arming.is_armed() {
-            if !Self::settable_while_armed(p) {
+            if !PeriodRunner::settable_while_armed(p) {
                 return Err(SetError::WhileArmed(p.name));
             }
-            return self
-                .hopper
-                .set_target_apex(cfg.target_apex_m)
-                .map_err(|_| SetError::Param(crate::params::ParamError::OutOfRange(p.name)));
+            return self.set_live(p, value);
         }
-        let old = *self.hopper.config();
-        self.rebuild(cfg)?;
-        // What the bring-up verdicts were made on, changed by hand: they no
-        // longer hold (a flipped encoder sign, another lead or count).
-        if old.calibration.motor_counts_positive_down != cfg.calibration.motor_counts_positive_down
-            || old.calibration.motor_counts_per_rev != cfg.calibration.motor_counts_per_rev
-            || old.model.screw_lead_m != cfg.model.screw_lead_m
-        {
-            self.arming.forget_direction_and_home();
+        let prepared = PeriodRunner::prepare_at(cfg, self.config_gen)?;
+        self.install_value(prepared, Then::Param(p))
+    }
+
+    /// A parameter that changes in place ([`settable_while_armed`](Self::settable_while_armed)),
+    /// armed or not: a few operations, fit for the control period.
+    pub fn set_live(
+        &mut self,
+        p: &'static crate::params::Param,
+        value: f32,
+    ) -> Result<(), SetError> {
+        if !PeriodRunner::settable_while_armed(p) {
+            return Err(SetError::WhileArmed(p.name));
         }
-        let c = (&old.calibration, &cfg.calibration);
-        if c.0.loadcell_gain_n_per_code != c.1.loadcell_gain_n_per_code
-            || c.0.loadcell_offset_code != c.1.loadcell_offset_code
-            || c.0.pot_gain_m_per_code != c.1.pot_gain_m_per_code
-            || c.0.pot_offset_code != c.1.pot_offset_code
-        {
-            self.arming.forget_tare();
+        self.hopper
+            .set_target_apex(value)
+            .map_err(|_| SetError::Param(crate::params::ParamError::OutOfRange(p.name)))?;
+        self.config_gen = self.config_gen.wrapping_add(1);
+        Ok(())
+    }
+
+    /// The configuration's generation: bumped by every change
+    /// ([`install`](Self::install), [`set_live`](Self::set_live)).
+    pub fn config_gen(&self) -> u32 {
+        self.config_gen
+    }
+
+    /// Installs a prepared controller between periods by exchanging its
+    /// slot with the running one's (a few words for a bank's slots),
+    /// carrying the state that must survive over
+    /// ([`Hopper::continue_from`]): bounded and the same every time.
+    /// Refused (nothing changes) when the configuration changed since it
+    /// was prepared, and for a host's set while armed or while a routine
+    /// runs. Gives back the slot not in use: the old one, or the refused.
+    pub fn install(&mut self, mut new: Prepared<H>, then: Then) -> (Result<(), SetError>, H) {
+        let result = self.check_install(new.base_gen, then).map(|()| {
+            let old = Verdicts::of(self.hopper.config());
+            new.hopper.continue_from(&self.hopper);
+            Self::shift(&mut new.hopper, then);
+            core::mem::swap(&mut self.hopper, &mut new.hopper);
+            self.installed(&old, new.arming, new.feed, then);
+        });
+        self.routine_done(result, then);
+        (result, new.hopper)
+    }
+
+    /// [`install`](Self::install) of a controller held by value, copied
+    /// into the running slot (boot, and runs with no lower-priority task:
+    /// the host's tests, [`set_param`](Self::set_param)).
+    pub fn install_value(&mut self, new: Prepared, then: Then) -> Result<(), SetError> {
+        let result = self.check_install(new.base_gen, then).map(|()| {
+            let old = Verdicts::of(self.hopper.config());
+            let mut h = new.hopper.0;
+            h.continue_from(&self.hopper);
+            Self::shift(&mut h, then);
+            *self.hopper = h;
+            self.installed(&old, new.arming, new.feed, then);
+        });
+        self.routine_done(result, then);
+        result
+    }
+
+    fn check_install(&self, base_gen: u32, then: Then) -> Result<(), SetError> {
+        if base_gen != self.config_gen {
+            return Err(SetError::Stale);
+        }
+        if let Then::Param(p) = then {
+            if self.arming.is_armed() {
+                return Err(SetError::WhileArmed(p.name));
+            }
+            if self.calibrating() {
+                return Err(SetError::Calibrating);
+            }
         }
         Ok(())
     }
 
-    /// Rebuilds the controller from `cfg` (disarmed), carrying the state
-    /// that must survive over ([`Hopper::continue_from`]); nothing changes
-    /// if `cfg` is refused.
-    fn rebuild(&mut self, cfg: HopperConfig) -> Result<(), SetError> {
-        let arming =
-            Arming::new(cfg.arming).map_err(|e| SetError::Config(RunnerError::Arming(e)))?;
-        let mut hopper = Hopper::new(cfg).map_err(|e| SetError::Config(RunnerError::Config(e)))?;
-        hopper.continue_from(&self.hopper);
-        self.hopper = hopper;
+    /// A routine's new origin moves the measurements: on the new
+    /// controller, whose filters start from it (on the running one they
+    /// would see a jump).
+    fn shift(h: &mut Hopper, then: Then) {
+        match then {
+            Then::Homed(nut_m) => h.shift_origin(nut_m, 0.0),
+            Then::Height(m) => h.shift_origin(0.0, m),
+            _ => {}
+        }
+    }
+
+    fn installed(
+        &mut self,
+        old: &Verdicts,
+        arming: crate::arming::ArmingConfig,
+        feed: crate::watchdog::FeedConfig,
+        then: Then,
+    ) {
         self.unsettled = 2;
-        self.arming.reconfigure(*arming.config());
-        self.feed
-            .reconfigure(crate::watchdog::FeedConfig::for_hopper(&cfg));
-        Ok(())
+        self.arming.reconfigure(arming);
+        self.feed.reconfigure(feed);
+        self.config_gen = self.config_gen.wrapping_add(1);
+        if matches!(then, Then::Param(_)) {
+            let new = Verdicts::of(self.hopper.config());
+            // What the bring-up verdicts were made on, changed by hand: they
+            // no longer hold (a flipped encoder sign, another lead or count).
+            if new.direction != old.direction {
+                self.arming.forget_direction_and_home();
+            }
+            if new.tare != old.tare {
+                self.arming.forget_tare();
+            }
+        }
+    }
+
+    /// A routine's install completes it (or fails it).
+    fn routine_done(&mut self, result: Result<(), SetError>, then: Then) {
+        if matches!(then, Then::Param(_)) {
+            return;
+        }
+        self.rebuild_outstanding = false;
+        match (result, then) {
+            (Ok(()), Then::Tared) => self.arming.note_tared(),
+            (Ok(()), Then::Homed(_)) => self.arming.note_homed(),
+            (Ok(()), Then::Height(m)) => self.cal.set_height_offset(m),
+            (Ok(()), _) => {}
+            (Err(_), _) => self.cal.apply_failed(),
+        }
+    }
+
+    /// Rebuilds the controller from `cfg` at once (boot, before the first
+    /// period); nothing changes if `cfg` is refused.
+    fn rebuild(&mut self, cfg: HopperConfig) -> Result<(), SetError> {
+        let prepared = PeriodRunner::prepare_at(cfg, self.config_gen)?;
+        let result = self.check_install(prepared.base_gen, Then::Fitted);
+        result.map(|()| {
+            let old = Verdicts::of(self.hopper.config());
+            let mut h = prepared.hopper.0;
+            h.continue_from(&self.hopper);
+            *self.hopper = h;
+            self.installed(&old, prepared.arming, prepared.feed, Then::Fitted);
+        })
+    }
+
+    /// A routine's results, for a controller built outside the period: it
+    /// counts as running until [`install`](Self::install)ed.
+    fn request_rebuild(&mut self, changes: Changes, then: Then) {
+        self.rebuild_request = Some((changes, then));
+        self.rebuild_outstanding = true;
+    }
+
+    /// The rebuild a finished routine asks for, once: the lower-priority
+    /// task applies the changes to its copy of the configuration
+    /// ([`PeriodRunner::apply_changes`]) and prepares the controller
+    /// ([`PeriodRunner::prepare_at`]), and the control period
+    /// [`install`](Self::install)s it.
+    pub fn take_rebuild_request(&mut self) -> Option<(Changes, Then)> {
+        // (Checked first: `take` would copy the whole option every period.)
+        if self.rebuild_request.is_some() {
+            self.rebuild_request.take()
+        } else {
+            None
+        }
+    }
+
+    /// A routine's rebuild could not be built (its configuration is
+    /// refused): the routine fails, nothing changes.
+    pub fn rebuild_failed(&mut self) {
+        if self.rebuild_outstanding {
+            self.rebuild_outstanding = false;
+            self.cal.apply_failed();
+        }
+    }
+
+    /// Builds and installs a routine's rebuild at once, where nothing runs
+    /// at a lower priority (the host's tests and runs without a link).
+    pub fn serve_rebuild(&mut self) {
+        if let Some((changes, then)) = self.take_rebuild_request() {
+            let prepared = PeriodRunner::apply_changes(self.hopper.config(), &changes)
+                .and_then(|cfg| PeriodRunner::prepare_at(cfg, self.config_gen));
+            match prepared {
+                Ok(p) => {
+                    let _ = self.install_value(p, then);
+                }
+                Err(_) => self.rebuild_failed(),
+            }
+        }
     }
 
     /// At boot, before the first period: the saved calibration record read
@@ -461,7 +817,7 @@ impl PeriodRunner {
 
     /// Whether a bring-up routine is running.
     pub fn calibrating(&self) -> bool {
-        self.cal.running()
+        self.cal.running() || self.rebuild_outstanding
     }
 
     /// The MCU came out of a warm reset (no power-on or brown-out flag):
@@ -487,7 +843,7 @@ impl PeriodRunner {
         if self.hopper.estop_pressed() {
             return Err(CalRefusal::EstopPressed);
         }
-        if self.cal.running() {
+        if self.calibrating() {
             return Err(CalRefusal::Busy);
         }
         if !(0.01..=10.0).contains(&seconds) {
@@ -563,9 +919,16 @@ impl PeriodRunner {
         // linear: the mean force is that of the mean position).
         const STILL_COUNTS: u32 = 1;
         const NUT_SWING_M: f32 = 2.0e-3;
-        let cfg = *self.hopper.config();
-        let c = &cfg.calibration;
-        let s = &cfg.supervisor;
+        // Copies of the few constants used (the 408-byte configuration is
+        // not copied in the control period).
+        let cfg = self.hopper.config();
+        let c = cfg.calibration;
+        let s = cfg.supervisor;
+        let (body_mass_kg, gravity_mps2, leg_length_m) = (
+            cfg.model.body_mass_kg,
+            cfg.model.gravity_mps2,
+            cfg.model.leg_length_m,
+        );
         // (The count's size: negative with the encoder counting up.)
         let nut_swing_counts = ((NUT_SWING_M / c.nut_m_per_count()).abs() as u32).max(STILL_COUNTS);
         let last = self.hopper.last_input().copied();
@@ -587,22 +950,13 @@ impl PeriodRunner {
             return;
         }
         match self.cal.routine() {
-            Routine::Tare => {
-                let mut new = cfg;
-                let set = crate::params::set(
-                    &mut new,
-                    crate::params::CAL_LOADCELL_OFFSET.name,
-                    offsets.0,
-                )
-                .and_then(|()| {
-                    crate::params::set(&mut new, crate::params::CAL_POT_OFFSET.name, offsets.1)
-                });
-                if set.is_err() || self.rebuild(new).is_err() {
-                    self.cal.apply_failed();
-                } else {
-                    self.arming.note_tared();
-                }
-            }
+            Routine::Tare => self.request_rebuild(
+                [
+                    Some((&crate::params::CAL_LOADCELL_OFFSET, offsets.0)),
+                    Some((&crate::params::CAL_POT_OFFSET, offsets.1)),
+                ],
+                Then::Tared,
+            ),
             Routine::Height => {
                 // Toe on the ground: the load cell carries the robot beyond
                 // the flight force (half its weight at least: friction
@@ -610,7 +964,7 @@ impl PeriodRunner {
                 let force_n = (self.cal.loadcell_mean_code() - c.loadcell_offset_code)
                     * c.loadcell_gain_n_per_code;
                 let x_m = (self.cal.pot_mean_code() - c.pot_offset_code) * c.pot_gain_m_per_code;
-                let weight_n = cfg.model.body_mass_kg * cfg.model.gravity_mps2;
+                let weight_n = body_mass_kg * gravity_mps2;
                 let carried_n = force_n - s.flight_force_n(p_m);
                 let Some(z_m) = last.map(|i| i.body_height_m) else {
                     self.cal.fail(CalState::FailedSensors);
@@ -620,13 +974,8 @@ impl PeriodRunner {
                     self.cal.fail(CalState::FailedNotOnGround);
                     return;
                 }
-                let offset_m = cfg.model.leg_length_m - x_m - z_m;
-                self.hopper.shift_origin(0.0, offset_m);
-                if self.rebuild(cfg).is_err() {
-                    self.cal.apply_failed();
-                } else {
-                    self.cal.set_height_offset(offset_m);
-                }
+                let offset_m = leg_length_m - x_m - z_m;
+                self.request_rebuild([None, None], Then::Height(offset_m));
             }
             _ => {}
         }
@@ -647,47 +996,33 @@ impl PeriodRunner {
             },
             Routine::Home if state == CalState::Done => {
                 // The stop is the zero from now on.
-                self.hopper.shift_origin(self.cal.nut_offset_m(), 0.0);
-                if self.rebuild(*self.hopper.config()).is_ok() {
-                    self.arming.note_homed();
-                } else {
-                    self.cal.apply_failed();
-                }
+                self.request_rebuild([None, None], Then::Homed(self.cal.nut_offset_m()));
             }
-            Routine::Spring if state == CalState::Done => {
-                let mut new = *self.hopper.config();
-                let set = crate::params::set(
-                    &mut new,
-                    crate::params::SUP_SPRING_RATE.name,
-                    self.cal.fit().slope(),
-                );
-                if set.is_err() || self.rebuild(new).is_err() {
-                    self.cal.apply_failed();
-                }
-            }
+            Routine::Spring if state == CalState::Done => self.request_rebuild(
+                [
+                    Some((&crate::params::SUP_SPRING_RATE, self.cal.fit().slope())),
+                    None,
+                ],
+                Then::Fitted,
+            ),
             Routine::Weight if state == CalState::Done => {
                 // The load cell read the weight `gain` times too much: its
                 // gain, and the spring rate fitted through it, are that
                 // much too high. The tare's offset (in codes) stays: the
                 // flight force it was set to read scales with the rate.
                 let gain = self.cal.weight_gain();
-                let old = *self.hopper.config();
-                let mut new = old;
-                let set = crate::params::set(
-                    &mut new,
-                    crate::params::CAL_LOADCELL_GAIN.name,
-                    old.calibration.loadcell_gain_n_per_code / gain,
-                )
-                .and_then(|()| {
-                    crate::params::set(
-                        &mut new,
-                        crate::params::SUP_SPRING_RATE.name,
+                let old = self.hopper.config();
+                let changes = [
+                    Some((
+                        &crate::params::CAL_LOADCELL_GAIN,
+                        old.calibration.loadcell_gain_n_per_code / gain,
+                    )),
+                    Some((
+                        &crate::params::SUP_SPRING_RATE,
                         old.supervisor.spring_rate_n_per_m / gain,
-                    )
-                });
-                if set.is_err() || self.rebuild(new).is_err() {
-                    self.cal.apply_failed();
-                }
+                    )),
+                ];
+                self.request_rebuild(changes, Then::Fitted);
             }
             _ => {}
         }
@@ -777,7 +1112,7 @@ impl PeriodRunner {
             nut_position_m: out.record.nut_position_m,
             nut_velocity_mps,
             body_velocity_mps,
-            calibrating: self.cal.running(),
+            calibrating: self.calibrating(),
         };
         self.unsettled = self.unsettled.saturating_sub(1);
         let arm_event = self.arming.period(self.timing.period_s, &arm_input);
@@ -1290,6 +1625,22 @@ mod tests {
         let rep = r.calibration();
         assert_eq!(rep.state, CalState::Done as u8, "{rep:?}");
         assert_eq!(rep.samples, 500);
+        // Its results wait for a controller built outside the period:
+        // nothing arms or starts until it is installed.
+        assert!(r.calibrating());
+        assert_eq!(r.hopper().config().calibration, cal);
+        assert_eq!(
+            r.start_calibration(Routine::Tare, 0.05),
+            Err(CalRefusal::Busy)
+        );
+        r.serve_rebuild();
+        assert!(!r.calibrating());
+        // The rebuilt controller's velocity filters measure after two
+        // periods.
+        for _ in 0..2 {
+            r.arming_mut().link_frame();
+            r.run_period(&mut io, &mut NoCounter);
+        }
         let c = r.hopper().config().calibration;
         assert_eq!(c.loadcell_offset_code, cal.loadcell_offset_code + 24.0);
         assert_eq!(c.pot_offset_code, cal.pot_offset_code + 17.0);

@@ -322,6 +322,19 @@ impl SimHal {
         SimIo { hal: self, plant }
     }
 
+    /// The I/O with this period's sample taken now, before the control
+    /// period starts: as on the board, where the ADC and the timers have
+    /// the sample ready when the control interrupt enters, so the period's
+    /// timing counts the firmware's work, not the sensor models'.
+    pub fn sampled(&mut self, plant: &Plant) -> SampledIo<'_> {
+        let sample = if self.faults.read_error {
+            None
+        } else {
+            Some(self.sample(plant))
+        };
+        SampledIo { hal: self, sample }
+    }
+
     /// The load-cell and potentiometer ADC channels' largest code.
     pub fn adc_full_scale(&self) -> u16 {
         self.loadcell.full_scale()
@@ -358,6 +371,33 @@ impl SimHal {
 pub struct SimIo<'a> {
     hal: &'a mut SimHal,
     plant: &'a Plant,
+}
+
+/// [`SimHal::sampled`]: the sample taken, the outputs to the models.
+pub struct SampledIo<'a> {
+    hal: &'a mut SimHal,
+    sample: Option<RawSample>,
+}
+
+impl HopperIo for SampledIo<'_> {
+    type Error = NoPinError;
+
+    fn read(&mut self) -> Result<RawSample, IoError<NoPinError>> {
+        self.sample.ok_or(IoError::Sensor)
+    }
+
+    fn write_dac(&mut self, code: u16) -> Result<(), IoError<NoPinError>> {
+        if self.hal.faults.dac_error {
+            return Err(IoError::Dac);
+        }
+        self.hal.dac_code = code;
+        Ok(())
+    }
+
+    fn set_amp_enabled(&mut self, on: bool) -> Result<(), IoError<NoPinError>> {
+        self.hal.amp_enabled = on;
+        Ok(())
+    }
 }
 
 /// The mock HAL has no pins that can fail on their own.

@@ -16,24 +16,31 @@
 
 use crate::mock::SimHal;
 use crate::{Event, Plant, PlantError};
-use hopper_control::link::{Endpoint, Tx};
-use hopper_control::runner::{CycleCounter, Period, PeriodRunner};
+use hopper_control::link::{
+    Answer, Command, ControlPort, Endpoint, Inbox, Note, Outbox, Queues, Stats, Tx,
+};
+use hopper_control::runner::{CycleCounter, HopperSlot, Owned, Period, PeriodRunner};
 use hopper_control::telemetry::{FaultCapture, CAPTURE_LEN};
 
 /// How fast the hoist lifts or lowers the body, m/s (2 um a period at 10
 /// kHz: the height encoder sees a motion, not a jump).
 pub const LIFT_SPEED_MPS: f64 = 0.1;
 
-/// The firmware on the simulated hopper, behind a link.
-pub struct VirtualRobot {
+/// The firmware on the simulated hopper, behind a link; its controller
+/// held by value, or in a static bank's slot (`&'static mut Hopper`, the
+/// QEMU link image, as the board).
+pub struct VirtualRobot<H = Owned> {
     /// The plant.
     pub plant: Plant,
     /// The sensor, DAC and amplifier models.
     pub hal: SimHal,
     /// The firmware's period runner.
-    pub runner: PeriodRunner,
-    /// The link's robot end.
-    pub link: Endpoint,
+    pub runner: PeriodRunner<H>,
+    /// The link's end in the control period.
+    pub port: ControlPort,
+    /// The link task, for [`control`](Self::control) (an image that runs
+    /// it as a task of its own keeps its own).
+    pub link: Endpoint<H>,
     /// Held by the hoist (the body clamped, the nut free) until the first
     /// armed period.
     pub held: bool,
@@ -42,15 +49,16 @@ pub struct VirtualRobot {
     dt_s: f64,
 }
 
-impl VirtualRobot {
+impl<H: HopperSlot> VirtualRobot<H> {
     /// A robot of `runner` (built disarmed) on `plant` and `hal`, stepped
     /// every `dt_s`.
-    pub fn new(plant: Plant, hal: SimHal, runner: PeriodRunner, dt_s: f64) -> Self {
+    pub fn new(plant: Plant, hal: SimHal, runner: PeriodRunner<H>, dt_s: f64) -> Self {
         Self {
             plant,
             hal,
+            link: Endpoint::simulated(&runner),
+            port: ControlPort::new(),
             runner,
-            link: Endpoint::simulated(),
             held: false,
             lift_to_m: None,
             dt_s,
@@ -83,36 +91,83 @@ impl VirtualRobot {
         self.lift_to_m = None;
     }
 
-    /// One control period on the sensors' present state, then the link's
-    /// work: the period's messages into `tx`, and `rx` (the bytes that
-    /// arrived since the last period) decoded and answered; the period's
-    /// record into `capture`, frozen around a fault. The caller owns the
-    /// capture (32 KiB: the QEMU link image keeps it in a static of its
-    /// own, as the board does, instead of building it on `init`'s stack
-    /// inside the robot) and reports the period's lateness with
-    /// `runner.end_period`.
+    /// One control period on the sensors' present state and the control
+    /// period's end of the link ([`ControlPort::after_period`]: the
+    /// period's record into `capture`, frozen around a fault, its note
+    /// published, at most one command applied), timed with `counter` as
+    /// the board times its whole control interrupt (the sensor models'
+    /// work before it, as the board's ADC and timers do theirs). The
+    /// caller runs the link task ([`Endpoint::service`]) after it, at a
+    /// lower priority or in line ([`control`](Self::control)), and
+    /// reports the period's lateness with `runner.end_period`.
+    pub fn control_period<C: CycleCounter>(
+        &mut self,
+        capture: &mut FaultCapture<CAPTURE_LEN>,
+        commands: &mut impl Inbox<Command<H>>,
+        answers: &mut impl Outbox<Answer<H>>,
+        notes: &mut impl Outbox<Note>,
+        stats: &mut impl Outbox<Stats>,
+        counter: &mut C,
+    ) -> Period {
+        self.hal.faults.estop = self.port.sim_estop();
+        if let Some((hoisted, lift_m)) = self.port.take_sim_mount() {
+            self.mount(hoisted.then_some(f64::from(lift_m)));
+        }
+        // The sample first (the board's ADC and timers have it when the
+        // interrupt enters): the timing is the firmware's.
+        let mut io = self.hal.sampled(&self.plant);
+        let t0 = counter.now();
+        let p = self.runner.run_period(&mut io, counter);
+        self.port.after_period(
+            &mut self.runner,
+            &p,
+            capture,
+            commands,
+            answers,
+            notes,
+            stats,
+        );
+        let t1 = counter.now();
+        self.port
+            .add_isr_cost(t1.wrapping_sub(t0).saturating_sub(counter.overhead()));
+        if p.armed && self.held {
+            // Armed: the hoist lets go (the laws start from the release).
+            self.release();
+        }
+        p
+    }
+
+    /// [`control_period`](Self::control_period), then the link task in
+    /// line (`hopper-sim serve`, the tests): the period's messages into
+    /// `tx`, and `rx` (the bytes that arrived since the last period)
+    /// decoded and answered. The caller owns the capture and the queues
+    /// (32 KiB and 12 KiB).
     pub fn control<C: CycleCounter>(
         &mut self,
         rx: impl Iterator<Item = u8>,
         tx: &mut impl Tx,
         capture: &mut FaultCapture<CAPTURE_LEN>,
+        queues: &mut Queues<H>,
         counter: &mut C,
     ) -> Period {
-        self.hal.faults.estop = self.link.sim_estop();
-        if let Some((hoisted, lift_m)) = self.link.take_sim_mount() {
-            self.mount(hoisted.then_some(f64::from(lift_m)));
-        }
-        let p = {
-            let mut io = self.hal.io(&self.plant);
-            self.runner.run_period(&mut io, counter)
-        };
-        capture.record(&p.out.record, !p.newly_latched.is_empty());
-        self.link
-            .service(&mut self.runner, &p, rx, capture, tx, counter);
-        if p.armed && self.held {
-            // Armed: the hoist lets go (the laws start from the release).
-            self.release();
-        }
+        let p = self.control_period(
+            capture,
+            &mut queues.commands,
+            &mut queues.answers,
+            &mut queues.notes,
+            &mut queues.stats,
+            counter,
+        );
+        self.link.service(
+            &mut queues.notes,
+            &mut queues.stats,
+            &mut queues.answers,
+            &mut queues.commands,
+            rx,
+            &mut &mut *capture,
+            tx,
+            counter,
+        );
         p
     }
 

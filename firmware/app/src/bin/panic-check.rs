@@ -2,10 +2,14 @@
 //!
 //! This image runs [`PeriodRunner::new`] and [`PeriodRunner::run_period`]
 //! on a configuration and sensor samples the optimiser cannot see through
-//! (`core::hint::black_box`), then what runs with it at the control
-//! priority: the fault capture's record and the link endpoint's
-//! `service` (decoding arbitrary host bytes, every answer, dumps) on a
-//! transmit queue of unknown room. Its panic handler calls a function that
+//! (`core::hint::black_box`), then everything else that runs at the
+//! control priority or above: the control port (the capture's record, the
+//! period's note, a command applied) and the USART interrupt's handler;
+//! and, though it runs below, the link task that prepares the commands
+//! (decoding arbitrary host bytes, every answer, sets and their
+//! controllers, dumps) on a transmit queue of unknown room, so the
+//! commands the port applies are any the host can cause. Its panic
+//! handler calls a function that
 //! exists nowhere. If any panic path (an out-of-bounds index, a failed
 //! `unwrap`, a division by zero, a `clamp` with bad bounds, ...) is still
 //! reachable after optimisation, the link fails with an undefined
@@ -23,12 +27,18 @@ fn main() {
     );
 }
 
+/// The board's USART transport, as the image builds it.
+#[cfg(target_os = "none")]
+#[path = "../serial.rs"]
+#[allow(dead_code)]
+mod serial;
+
 #[cfg(target_os = "none")]
 mod check {
     use core::hint::black_box;
     use hopper_control::hal::{HopperIo, IoError, RawSample};
     use hopper_control::hopper::HopperConfig;
-    use hopper_control::link::{Endpoint, Tx};
+    use hopper_control::link::{ControlPort, Endpoint, Queues, Tx};
     use hopper_control::runner::{NoCounter, PeriodRunner, Timing};
     use hopper_control::telemetry::{FaultCapture, CAPTURE_LEN};
 
@@ -36,7 +46,9 @@ mod check {
     // to every MCU image) and nothing else of it.
     use defmt as _;
     // The interrupt vector table (cortex-m-rt's `device` feature wants one).
-    use stm32f4 as _;
+    use stm32f4::stm32f405 as pac;
+
+    use super::serial;
 
     /// Samples and write results the optimiser must treat as unknown.
     struct OpaqueIo;
@@ -72,30 +84,62 @@ mod check {
     fn main() -> ! {
         let cfg = black_box(HopperConfig::default());
         let timing = black_box(Timing::default());
-        // The capture and the link's endpoint run at the control priority
-        // too (the capture records, the endpoint answers the host in the
-        // same interrupt): every byte the host may send is unknown here.
+        // Every byte the host may send is unknown here.
         let mut capture: FaultCapture<CAPTURE_LEN> = FaultCapture::new();
-        let mut link = Endpoint::new();
-        if let Ok(mut runner) = PeriodRunner::new(cfg, timing) {
+        let mut queues = Queues::new();
+        let mut port = ControlPort::new();
+        let mut rxq = serial::RxQueue::new();
+        let mut txq = serial::TxQueue::new();
+        let (rx_in, mut rx_out) = rxq.split();
+        let (tx_in, tx_out) = txq.split();
+        let (Ok(mut runner), Some(dp)) = (PeriodRunner::new(cfg, timing), pac::Peripherals::take())
+        else {
             loop {
-                let p = runner.run_period(&mut OpaqueIo, &mut NoCounter);
-                capture.record(&p.out.record, !p.newly_latched.is_empty());
-                let mut rx = core::iter::from_fn(|| black_box(Some(0u8))).take(black_box(64));
-                link.service(
-                    &mut runner,
-                    &p,
-                    &mut rx,
-                    &mut capture,
-                    &mut OpaqueTx,
-                    &mut NoCounter,
-                );
-                black_box(&p);
-                runner.end_period(black_box(false));
+                cortex_m::asm::nop();
             }
-        }
+        };
+        let mut usart = serial::Serial::new(
+            dp.USART1,
+            &dp.RCC,
+            &dp.GPIOA,
+            black_box(16_000_000),
+            rx_in,
+            tx_out,
+        );
+        let mut link_tx = serial::LinkTx::new(tx_in);
+        let mut link = Endpoint::new(&runner);
         loop {
-            cortex_m::asm::nop();
+            // Priority 4: the USART's bytes in and out.
+            usart.on_interrupt();
+            // Priority 3: the control period and its port.
+            let p = runner.run_period(&mut OpaqueIo, &mut NoCounter);
+            port.after_period(
+                &mut runner,
+                &p,
+                &mut capture,
+                &mut queues.commands,
+                &mut queues.answers,
+                &mut queues.notes,
+                &mut queues.stats,
+            );
+            port.add_isr_cost(black_box(0));
+            black_box(port.restart_due(&mut runner));
+            black_box(&p);
+            runner.end_period(black_box(false));
+            // Priority 2: the link task, on arbitrary bytes and a transmit
+            // queue of unknown room.
+            let mut rx = core::iter::from_fn(|| black_box(rx_out.dequeue())).take(black_box(64));
+            link.service(
+                &mut queues.notes,
+                &mut queues.stats,
+                &mut queues.answers,
+                &mut queues.commands,
+                &mut rx,
+                &mut &mut capture,
+                &mut OpaqueTx,
+                &mut NoCounter,
+            );
+            black_box(&mut link_tx);
         }
     }
 
