@@ -931,6 +931,20 @@ fn status(c: &mut Client) -> Result<()> {
         stored_line(&stored_of(c)?, arming.require_tare)
     );
     println!("arming: {}", arming.requirements());
+    match c.request(Request::ThermalBoot) {
+        Ok(Response::ThermalBoot(b)) => println!(
+            "motor estimate at boot: winding {:.1} C ({})",
+            b.winding_c,
+            if b.assumed_hot {
+                "assumed hot, at the derating temperature: nothing of the motor's heat survives a reset or a power cycle on this robot"
+            } else {
+                "ambient: a simulated motor, cold at start"
+            }
+        ),
+        Ok(r) => bail!("unexpected answer {r:?}"),
+        // An older firmware does not know the request.
+        Err(_) => {}
+    }
     let m = thermal_of(c)?;
     println!(
         "motor (estimated): winding {:.1} C, housing {:.1} C; current limit {:.0}% (derates from {:.0} C, trips at {:.0} C{})",
@@ -1318,7 +1332,7 @@ fn cost_lines(k: &CostStats) -> [String; 3] {
             f64::from(k.max_jitter_s) * 1e6
         ),
         format!(
-            "serial interrupt: max {}{} per byte, {} so far (preempts the control interrupt: about 18 bytes a period at 921,600 baud both ways)",
+            "serial interrupt: max {}{} per interrupt, {} so far (preempts the control interrupt; on the board one byte each way an interrupt, about 18 a period at 921,600 baud; QEMU, with no baud rate, moves many in one)",
             k.serial_max,
             us(k.serial_max),
             k.serial_count

@@ -163,6 +163,9 @@ pub enum Request {
     /// What the control interrupt and the link task cost
     /// ([`Response::Cost`]).
     Cost,
+    /// Where the motor's temperature estimate started at boot
+    /// ([`Response::ThermalBoot`]).
+    ThermalBoot,
 }
 
 /// Robot to host.
@@ -246,6 +249,19 @@ pub enum Response {
     Weighing(WeighingInfo),
     /// What the control interrupt and the link task cost.
     Cost(CostStats),
+    /// Where the motor's temperature estimate started at boot.
+    ThermalBoot(ThermalBootInfo),
+}
+
+/// Where the motor's temperature estimate started at boot.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct ThermalBootInfo {
+    /// The winding's estimate at boot, C.
+    pub winding_c: f32,
+    /// Assumed hot (the derating temperature): nothing of the motor's
+    /// heat survives a reset or a power cycle on this robot. Otherwise the
+    /// estimate started at ambient (a simulated motor, cold at start).
+    pub assumed_hot: bool,
 }
 
 /// The cost of the robot's real-time work, in its counter's units: core
@@ -807,6 +823,7 @@ mod tests {
             Just(Request::Crystal),
             Just(Request::Weighing),
             Just(Request::Cost),
+            Just(Request::ThermalBoot),
             (any::<bool>(), any::<f32>())
                 .prop_map(|(hoisted, lift_m)| Request::SimulateMount { hoisted, lift_m }),
             (any::<u8>(), any::<f32>())

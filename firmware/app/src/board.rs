@@ -349,9 +349,16 @@ pub fn init(
     let clocks = configure_clocks(&dp.RCC, &dp.FLASH, &dp.PWR, &dp.TIM11);
 
     // 5. Encoders.
-    dp.RCC
-        .apb1enr()
-        .modify(|_, w| w.tim2en().enabled().tim4en().enabled().tim5en().enabled());
+    dp.RCC.apb1enr().modify(|_, w| {
+        w.tim2en()
+            .enabled()
+            .tim3en()
+            .enabled()
+            .tim4en()
+            .enabled()
+            .tim5en()
+            .enabled()
+    });
     dp.RCC.apb2enr().modify(|_, w| w.adc1en().enabled());
     let _ = dp.RCC.apb2enr().read();
     configure_encoder!(dp.TIM2);
@@ -360,6 +367,10 @@ pub fn init(
     // 6. TIM4 at the control rate, stopped; configured while the ADC's
     //    trigger input is still disabled, so loading it cannot trigger.
     let control_hz = configure_control_timer(&dp.TIM4, clocks.apb1_timer_hz, control_hz);
+
+    // 6b. The hardware deadman: AMP_EN becomes TIM3_CH3, forced low until
+    //     the first enabled period retriggers it.
+    configure_deadman(&dp.TIM3, &dp.GPIOB, clocks.apb1_timer_hz, control_hz);
 
     // 7. ADC1 injected group, triggered by TIM4 TRGO, interrupt at its end.
     configure_adc(&dp.ADC_COMMON, &dp.ADC1);
@@ -403,6 +414,8 @@ pub fn init(
     Board {
         stored,
         io: BoardIo {
+            tim3: dp.TIM3,
+            deadman_running: false,
             tim2: dp.TIM2,
             tim5: dp.TIM5,
             adc: dp.ADC1,
@@ -468,6 +481,35 @@ fn configure_analog_and_encoder_pins(gpioa: &pac::GPIOA, gpiob: &pac::GPIOB) {
     gpiob.pupdr().modify(|_, w| w.pupdr3().pull_up());
     gpiob.afrl().modify(|_, w| w.afrl3().af1());
     gpiob.moder().modify(|_, w| w.moder3().alternate());
+}
+
+/// The deadman on AMP_EN (`hopper_control::deadman`, docs/board.md):
+/// TIM3 ticking at 1 MHz, one-pulse, its window [`deadman::window_ticks`]
+/// of the control rate; CH3 forced low, then PB0 handed from its GPIO
+/// output (driven low since step 1) to TIM3_CH3 (AF2), the AF number
+/// before the mode, so the pin never drives high. The debugger's freeze of
+/// TIM3 (DBGMCU_APB1_FZ.DBG_TIM3_STOP) stays off: a halted core drops the
+/// enable too.
+///
+/// [`deadman::window_ticks`]: hopper_control::deadman::window_ticks
+fn configure_deadman(tim: &pac::TIM3, gpiob: &pac::GPIOB, timer_hz: u32, control_hz: u32) {
+    use hopper_control::deadman;
+    tim.cr1().write(|w| w.opm().enabled().cen().disabled());
+    tim.psc()
+        .write(|w| w.psc().set(deadman::prescaler(timer_hz)));
+    tim.arr()
+        .write(|w| w.arr().set(deadman::window_ticks(control_hz)));
+    tim.ccr3().write(|w| w.ccr().set(deadman::COMPARE));
+    // Output compare, no preload (a mode write takes effect at once).
+    tim.ccmr2_output()
+        .write(|w| w.cc3s().output().oc3pe().disabled().oc3m().force_inactive());
+    // Load the prescaler (an update event, with the counter stopped).
+    tim.egr().write(|w| w.ug().set_bit());
+    tim.sr().write(|w| w.uif().clear_bit());
+    tim.cnt().write(|w| w.cnt().set(0));
+    tim.ccer().write(|w| w.cc3p().clear_bit().cc3e().set_bit());
+    gpiob.afrl().modify(|_, w| w.afrl0().af2());
+    gpiob.moder().modify(|_, w| w.moder0().alternate());
 }
 
 /// Polls `ready` up to [`READY_POLLS`] times; whether it became true.
@@ -789,6 +831,10 @@ fn control_timer_setup(timer_hz: u32, control_hz: u32) -> (u16, u16, u32) {
 /// samples of this period and the next conversion is a full period away.
 #[derive(Debug)]
 pub struct BoardIo {
+    /// The deadman on AMP_EN (TIM3_CH3, `hopper_control::deadman`).
+    tim3: pac::TIM3,
+    /// Whether the deadman's output is in PWM mode 2 (not forced low).
+    deadman_running: bool,
     /// Motor encoder counter.
     tim2: pac::TIM2,
     /// Height encoder counter.
@@ -859,12 +905,30 @@ impl HopperIo for BoardIo {
         Ok(())
     }
 
-    /// Drives AMP_EN (PB0) with one atomic BSRR write.
+    /// AMP_EN (PB0, TIM3_CH3): enabled, the deadman retriggered (high for
+    /// `hopper_control::deadman::WINDOW_PERIODS` more periods unless
+    /// retriggered again); disabled, forced low at once.
     fn set_amp_enabled(&mut self, on: bool) -> Result<(), IoError<Infallible>> {
-        if on {
-            self.gpiob.bsrr().write(|w| w.bs0().set_bit());
-        } else {
-            self.gpiob.bsrr().write(|w| w.br0().set_bit());
+        match hopper_control::deadman::write_for(on) {
+            hopper_control::deadman::Write::Retrigger => {
+                if !self.deadman_running {
+                    self.tim3.ccmr2_output().modify(|_, w| w.oc3m().pwm_mode2());
+                    self.deadman_running = true;
+                }
+                self.tim3
+                    .cnt()
+                    .write(|w| w.cnt().set(hopper_control::deadman::COMPARE));
+                self.tim3.cr1().write(|w| w.opm().enabled().cen().enabled());
+            }
+            hopper_control::deadman::Write::ForceLow => {
+                self.tim3
+                    .ccmr2_output()
+                    .modify(|_, w| w.oc3m().force_inactive());
+                self.tim3
+                    .cr1()
+                    .write(|w| w.opm().enabled().cen().disabled());
+                self.deadman_running = false;
+            }
         }
         Ok(())
     }

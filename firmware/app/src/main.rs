@@ -79,12 +79,24 @@ use defmt_semihosting as _;
 /// the external pull-down keeps the amplifier off.
 #[cfg(target_os = "none")]
 fn disable_amplifier() {
-    // SAFETY: `GPIOB::ptr()` is the fixed address of the GPIOB register block.
-    // Writing BSRR only resets the pins whose BR bits are 1 (here PB0) and is a
-    // single store, so it cannot race with other users of GPIOB.
-    #[allow(unsafe_code)] // Needed to reach GPIOB without owning it (panic path).
-    let gpiob = unsafe { &*stm32f4::stm32f405::GPIOB::ptr() };
+    // SAFETY: `GPIOB::ptr()` and `TIM3::ptr()` are the fixed addresses of
+    // their register blocks. BSRR resets only PB0 (one store). Then PB0
+    // leaves the deadman timer's alternate function for a GPIO output,
+    // which drives the low just latched, whatever the timer does; and the
+    // timer's output is forced low too. The MODER read-modify-write can
+    // race with nothing: every other path that writes MODER runs in `init`
+    // or in a fault handler, which does not return.
+    #[allow(unsafe_code)] // Needed to reach GPIOB and TIM3 without owning them (panic path).
+    let (gpiob, tim3) = unsafe {
+        (
+            &*stm32f4::stm32f405::GPIOB::ptr(),
+            &*stm32f4::stm32f405::TIM3::ptr(),
+        )
+    };
     gpiob.bsrr().write(|w| w.br0().set_bit());
+    gpiob.moder().modify(|_, w| w.moder0().output());
+    tim3.ccmr2_output().modify(|_, w| w.oc3m().force_inactive());
+    tim3.cr1().write(|w| w.cen().disabled());
 }
 
 /// Panic: disable the amplifier before anything else, then stop (QEMU: exit
@@ -110,18 +122,56 @@ fn safe_and_parked() -> ! {
     }
 }
 
-/// HardFault: the same as a panic, without touching the (possibly corrupt) stack much.
+// HardFault (cortex-m-rt's trampoline branches here, no stack used):
+// before anything touches the stack, which may be the fault (flip-link puts
+// it below the statics, so an overflow faults), AMP_EN is driven low (PB0
+// reset through BSRR, then a GPIO output, off the deadman timer), TIM3 is
+// stopped, and the DAC takes the zero code; then a fresh stack at its top
+// (`_stack_start`) for the Rust handler, which parks (the watchdog resets
+// the MCU).
 #[cfg(target_os = "none")]
-#[cortex_m_rt::exception]
-#[allow(unsafe_code)] // cortex-m-rt requires the HardFault handler to be `unsafe fn`.
-unsafe fn HardFault(_frame: &cortex_m_rt::ExceptionFrame) -> ! {
+#[allow(unsafe_code)] // The handler's entry, in assembly: it must not use the stack.
+mod hard_fault {
+    core::arch::global_asm!(
+        ".section .HardFault.user, \"ax\"",
+        ".global HardFault",
+        ".type HardFault, %function",
+        ".thumb_func",
+        "HardFault:",
+        // GPIOB (0x4002_0400): BSRR = BR0, then MODER0 = 0b01 (output).
+        "ldr r0, =0x40020400",
+        "mov r1, #0x10000",
+        "str r1, [r0, #0x18]",
+        "ldr r1, [r0, #0x00]",
+        "bic r1, r1, #3",
+        "orr r1, r1, #1",
+        "str r1, [r0, #0x00]",
+        // TIM3 (0x4000_0400): CR1 = 0, the counter stopped.
+        "ldr r0, =0x40000400",
+        "mov r1, #0",
+        "str r1, [r0, #0x00]",
+        // DAC (0x4000_7400): DHR12R1 = the zero code.
+        "ldr r0, =HOPPER_DAC_ZERO_CODE",
+        "ldrh r1, [r0]",
+        "ubfx r1, r1, #0, #12",
+        "ldr r0, =0x40007400",
+        "str r1, [r0, #0x08]",
+        // A fresh main stack, then the Rust part (it does not return).
+        "ldr r0, =_stack_start",
+        "msr msp, r0",
+        "b hopper_hard_fault",
+        ".ltorg",
+    );
+}
+
+/// HardFault's Rust part, on a fresh stack: the same end as a panic.
+#[cfg(target_os = "none")]
+#[allow(unsafe_code)] // Unmangled: the assembly entry branches to it.
+#[no_mangle]
+extern "C" fn hopper_hard_fault() -> ! {
     safe_and_parked()
 }
 
-/// The zero-current DAC code, for the exception handlers (they own no
-/// peripheral): the configuration's, set by the board's init (then the
-/// saved calibration's) and kept current by the control task; mid-scale
-/// until init.
 /// What the serial interrupt cost, in the image's counter ticks (board:
 /// cycles; QEMU: instructions): it preempts the control interrupt, whose
 /// own cost leaves it out and whose budget counts it per byte.
@@ -184,8 +234,19 @@ pub mod serial_cost {
     }
 }
 
+/// The zero-current DAC code, for the exception handlers (they own no
+/// peripheral): the configuration's, set by the board's init (then the
+/// saved calibration's) and kept current by the control task; mid-scale
+/// until init. Unmangled: the HardFault entry reads it before it touches
+/// the stack.
 #[cfg(target_os = "none")]
-static DAC_ZERO_CODE: core::sync::atomic::AtomicU16 = core::sync::atomic::AtomicU16::new(2048);
+#[allow(unsafe_code)] // An unmangled static (read by `HardFault`'s assembly).
+#[no_mangle]
+static HOPPER_DAC_ZERO_CODE: core::sync::atomic::AtomicU16 =
+    core::sync::atomic::AtomicU16::new(2048);
+
+#[cfg(target_os = "none")]
+use HOPPER_DAC_ZERO_CODE as DAC_ZERO_CODE;
 
 /// The DAC's channel 1 at the zero-current code, from any context (one
 /// store to DHR12R1; ignored while the DAC is not clocked).
@@ -624,15 +685,13 @@ mod app {
         if let Some(r) = board.boot.refusal() {
             defmt::error!("boot check: {=str}: arming refused", r.name());
         }
-        {
-            use hopper_control::boot::ResetCause;
-            let r = board.boot.resets;
-            if !(r.contains(ResetCause::PowerOn) || r.contains(ResetCause::BrownOut)) {
-                // A warm reset: the motor may still be hot from before.
-                defmt::info!("warm reset: motor temperature estimate starts at the derating");
-                runner.assume_motor_warm();
-            }
-        }
+        // Nothing of the motor's heat survives a reset or a power cycle
+        // here (the backup domain is not used: no battery on VBAT), and a
+        // motor that just tripped at the trip temperature is still that
+        // hot a few seconds later: every boot starts the estimate at the
+        // derating temperature (`status` says so).
+        defmt::info!("motor temperature estimate starts at the derating temperature");
+        runner.assume_motor_warm();
         let watchdog = board.watchdog;
         if watchdog.caused_last_reset() {
             // The control loop stopped or misbehaved last time: start faulted,

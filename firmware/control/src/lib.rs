@@ -48,6 +48,7 @@ pub mod arming;
 pub mod boot;
 pub mod bringup;
 pub mod calibration;
+pub mod deadman;
 pub mod debounce;
 pub mod energy;
 pub mod estimator;

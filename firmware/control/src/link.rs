@@ -188,6 +188,8 @@ pub enum Query {
     BringupResults,
     /// [`Request::Weighing`].
     Weighing,
+    /// [`Request::ThermalBoot`].
+    ThermalBoot,
 }
 
 /// What the link task asks of the control period (at most one applied a
@@ -646,6 +648,13 @@ impl ControlPort {
             Query::CalibrationReport => Response::Calibration(runner.calibration()),
             Query::BringupResults => Response::BringupResults(runner.bringup_results()),
             Query::Weighing => Response::Weighing(runner.weighing()),
+            Query::ThermalBoot => {
+                let (winding_c, assumed_hot) = runner.thermal_at_boot();
+                Response::ThermalBoot(hopper_protocol::ThermalBootInfo {
+                    winding_c,
+                    assumed_hot,
+                })
+            }
         }
     }
 
@@ -1224,6 +1233,10 @@ impl<H: HopperSlot> Endpoint<H> {
             Request::Stored => command(Command::Query {
                 id,
                 what: Query::Stored,
+            }),
+            Request::ThermalBoot => command(Command::Query {
+                id,
+                what: Query::ThermalBoot,
             }),
             Request::SimulateEstop { pressed } if self.simulated => {
                 command(Command::SimulateEstop {
@@ -2169,5 +2182,41 @@ mod tests {
         assert!(core::ptr::eq(runner.hopper(), spare));
         assert_eq!(ep.spares.len(), 1);
         assert!(core::ptr::eq(&*ep.spares[0], running));
+    }
+
+    /// A board starts the motor's estimate hot at every boot, and says so:
+    /// the host reads where it started.
+    #[test]
+    fn the_link_says_where_the_motor_estimate_started() {
+        for hot in [false, true] {
+            let mut r = Robot::new();
+            if hot {
+                r.runner.assume_motor_warm();
+            }
+            let derate_c = r
+                .runner
+                .hopper()
+                .config()
+                .supervisor
+                .thermal
+                .derate_winding_c;
+            r.request(1, Request::ThermalBoot);
+            r.periods(2);
+            let msgs = r.take();
+            let b = msgs.iter().find_map(|m| match m {
+                RobotMsg::Response {
+                    id: 1,
+                    resp: Response::ThermalBoot(b),
+                } => Some(*b),
+                _ => None,
+            });
+            let b = b.unwrap_or_else(|| panic!("{msgs:?}"));
+            assert_eq!(b.assumed_hot, hot);
+            if hot {
+                assert_eq!(b.winding_c, derate_c);
+            } else {
+                assert!(b.winding_c < derate_c - 50.0, "{b:?}");
+            }
+        }
     }
 }

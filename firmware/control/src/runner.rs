@@ -420,6 +420,9 @@ pub struct PeriodRunner<H = Owned> {
     /// A rebuild was asked for and is not installed yet: the routine counts
     /// as running (nothing arms, saves or sets in between).
     rebuild_outstanding: bool,
+    /// The motor's winding estimate at boot, C, and whether it was
+    /// assumed warm.
+    thermal_boot: (f32, bool),
 }
 
 impl PeriodRunner<Owned> {
@@ -491,7 +494,9 @@ impl<H: HopperSlot> PeriodRunner<H> {
             return Err(RunnerError::MaxJitter);
         }
         let arming = Arming::new(cfg.arming).map_err(RunnerError::Arming)?;
+        let thermal_boot = (hopper.supervisor().thermal().winding_c(), false);
         Ok(Self {
+            thermal_boot,
             arming,
             feed: FeedPolicy::for_hopper(hopper.config()),
             hopper,
@@ -820,10 +825,18 @@ impl<H: HopperSlot> PeriodRunner<H> {
         self.cal.running() || self.rebuild_outstanding
     }
 
-    /// The MCU came out of a warm reset (no power-on or brown-out flag):
-    /// the motor estimate starts hot ([`crate::thermal`]).
+    /// Starts the motor's estimate hot, at the derating temperature
+    /// ([`crate::thermal`]): the board at every boot, since nothing of the
+    /// motor's heat survives a reset or a power cycle there.
     pub fn assume_motor_warm(&mut self) {
         self.hopper.supervisor_mut().assume_motor_warm();
+        self.thermal_boot = (self.hopper.supervisor().thermal().winding_c(), true);
+    }
+
+    /// Where the motor's estimate started: the winding, C, and whether it
+    /// was [assumed warm](Self::assume_motor_warm).
+    pub fn thermal_at_boot(&self) -> (f32, bool) {
+        self.thermal_boot
     }
 
     /// Starts a bring-up routine ([`crate::bringup`]) for `seconds` of
