@@ -74,10 +74,12 @@ fn endpoint(data: &[u8]) -> usize {
             &mut q.answers,
             &mut q.notes,
             &mut q.stats,
+            &mut q.logs,
         );
         ep.service(
             &mut q.notes,
             &mut q.stats,
+            &mut q.logs,
             &mut q.answers,
             &mut q.commands,
             chunk.iter().copied(),

@@ -278,8 +278,9 @@ fn run_scenario(root: &Path, scenario: &Scenario, sim: &Path) -> Result<(), Stri
     // The stack's depth after init, bytes from its top: idle's frame and
     // the deepest the tasks went (the firmware paints the free stack).
     let stack_peak = kv.get("stack_peak_b").copied().unwrap_or("-");
+    let log_frame = kv.get("log_frame_instr_max").copied().unwrap_or("-");
     let line = format!(
-        "{}: steady_apex_m={steady_txt} hops_to_converge={htc_txt} step_instr_min={imin} step_instr_mean={imean} step_instr_max={imax} missed={missed} stack_peak_b={stack_peak}",
+        "{}: steady_apex_m={steady_txt} hops_to_converge={htc_txt} step_instr_min={imin} step_instr_mean={imean} step_instr_max={imax} missed={missed} stack_peak_b={stack_peak} log_frame_instr_max={log_frame}",
         scenario.label
     );
     if problems.is_empty() {

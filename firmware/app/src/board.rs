@@ -28,7 +28,7 @@
 //! # Wiring
 //! | Pin  | Peripheral / AF           | Signal                              | Direction        | Safe state / reset |
 //! |------|---------------------------|-------------------------------------|------------------|--------------------|
-//! | PB0  | GPIO, push-pull           | `AMP_EN`, amplifier enable, active high | output       | low; external pull-down while the pin floats (reset to `init`) |
+//! | PB0  | TIM3_CH3 (AF2), push-pull | `AMP_EN`, amplifier enable, active high, through the deadman (`configure_deadman`) | output | low: a GPIO output driven low from `init`'s first step until the timer takes it, forced low; external pull-down while the pin floats (reset to `init`) |
 //! | PB1  | GPIO, pull-up             | e-stop, normally-closed switch to GND; high = pressed *or* wire broken | input | reads pressed when open |
 //! | PB4  | GPIO, pull-up             | amplifier fault, open-drain, active low | input        | no fault when open (see below) |
 //! | PC13 | GPIO, pull-up             | dump button to GND, active low      | input            | released when open |
@@ -81,8 +81,6 @@
 //! decision (host-tested): every completed control step does, faulted or not,
 //! unless its output contradicts itself. [`Watchdog::caused_last_reset`]
 //! tells the application that the IWDG caused the last reset.
-
-use core::convert::Infallible;
 
 use heapless::spsc::{Consumer, Producer};
 use hopper_control::hal::{HopperIo, IoError, RawSample};
@@ -878,11 +876,16 @@ impl BoardIo {
     }
 }
 
+/// The deadman's window lapsed between two enabled periods
+/// ([`BoardIo::set_amp_enabled`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct DeadmanLapsed;
+
 impl HopperIo for BoardIo {
-    type Error = Infallible;
+    type Error = DeadmanLapsed;
 
     /// Encoder counters, the injected ADC codes of this period, e-stop and fault pins.
-    fn read(&mut self) -> Result<RawSample, IoError<Infallible>> {
+    fn read(&mut self) -> Result<RawSample, IoError<DeadmanLapsed>> {
         let pins = self.gpiob.idr().read();
         Ok(RawSample {
             motor_counts: self.tim2.cnt().read().bits(),
@@ -897,7 +900,7 @@ impl HopperIo for BoardIo {
     }
 
     /// Writes DHR12R1; codes above 4095 are rejected, not truncated.
-    fn write_dac(&mut self, code: u16) -> Result<(), IoError<Infallible>> {
+    fn write_dac(&mut self, code: u16) -> Result<(), IoError<DeadmanLapsed>> {
         if code > DAC_MAX_CODE {
             return Err(IoError::Dac);
         }
@@ -908,9 +911,21 @@ impl HopperIo for BoardIo {
     /// AMP_EN (PB0, TIM3_CH3): enabled, the deadman retriggered (high for
     /// `hopper_control::deadman::WINDOW_PERIODS` more periods unless
     /// retriggered again); disabled, forced low at once.
-    fn set_amp_enabled(&mut self, on: bool) -> Result<(), IoError<Infallible>> {
+    fn set_amp_enabled(&mut self, on: bool) -> Result<(), IoError<DeadmanLapsed>> {
         match hopper_control::deadman::write_for(on) {
             hopper_control::deadman::Write::Retrigger => {
+                if self.deadman_running && self.tim3.cr1().read().cen().is_disabled() {
+                    // The window lapsed since the last enabled period (the
+                    // control interrupt stopped for 3 periods: a halt, a
+                    // stall): the amplifier went off by itself, and the
+                    // state it would resume on is stale. Off it stays: the
+                    // runner latches `amp-fault`.
+                    self.tim3
+                        .ccmr2_output()
+                        .modify(|_, w| w.oc3m().force_inactive());
+                    self.deadman_running = false;
+                    return Err(IoError::Pin(DeadmanLapsed));
+                }
                 if !self.deadman_running {
                     self.tim3.ccmr2_output().modify(|_, w| w.oc3m().pwm_mode2());
                     self.deadman_running = true;

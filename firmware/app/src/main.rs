@@ -20,7 +20,7 @@
 //! # Tasks
 //! | Task      | Priority | Trigger |
 //! |-----------|----------|---------|
-//! | `usart1`  | 4        | USART1 (the host link's bytes; board and QEMU link image) |
+//! | `usart1`  | 4        | USART1 (the host link's bytes; board; 3 in the QEMU link image, whose USART has no baud rate) |
 //! | `control` | 3        | board: ADC injected end of conversion (TIM4 at `CONTROL_HZ`); QEMU: SysTick at `CONTROL_HZ` |
 //! | `link`    | 2        | SDIO (spare), pended by `control` every period: decode, answer, encode, build sets (board and QEMU link image) |
 //! | `logger`  | 1        | started in `init`; waits on the log channel (hop ledgers, faults) |
@@ -538,8 +538,8 @@ mod app {
     use heapless::spsc::{Consumer, Producer};
     use hopper_control::hopper::HopperConfig;
     use hopper_control::link::{
-        Answer, AnswerQueue, Command, CommandQueue, ControlPort, Endpoint, Note, NoteQueue, Stats,
-        StatsQueue,
+        Answer, AnswerQueue, Command, CommandQueue, ControlPort, Endpoint, LogQueue, Note,
+        NoteQueue, Stats, StatsQueue,
     };
     use hopper_control::runner::{LogItem, PeriodRunner};
     use rtic::Mutex;
@@ -591,12 +591,14 @@ mod app {
         answers_in: Producer<'static, Answer<Slot>>,
         notes_in: Producer<'static, Note>,
         stats_in: Producer<'static, Stats>,
+        logs_in: Producer<'static, LogItem>,
         link: Endpoint<Slot>,
         link_cycles: LinkCycles,
         commands_in: Producer<'static, Command<Slot>>,
         answers_out: Consumer<'static, Answer<Slot>>,
         notes_out: Consumer<'static, Note>,
         stats_out: Consumer<'static, Stats>,
+        logs_out: Consumer<'static, LogItem>,
         link_rx: Consumer<'static, u8>,
         link_tx: LinkTx<'static>,
         serial: Serial<'static>,
@@ -610,6 +612,7 @@ mod app {
         answers: AnswerQueue<Slot> = AnswerQueue::new(),
         notes: NoteQueue = NoteQueue::new(),
         stats: StatsQueue = StatsQueue::new(),
+        logs: LogQueue = LogQueue::new(),
         bank: Bank = [None, None, None],
     ])]
     fn init(cx: init::Context) -> (Shared, Local) {
@@ -725,6 +728,7 @@ mod app {
         let (answers_in, answers_out) = cx.local.answers.split();
         let (notes_in, notes_out) = cx.local.notes.split();
         let (stats_in, stats_out) = cx.local.stats.split();
+        let (logs_in, logs_out) = cx.local.logs.split();
         (
             Shared {
                 capture: cx.local.capture,
@@ -741,12 +745,14 @@ mod app {
                 answers_in,
                 notes_in,
                 stats_in,
+                logs_in,
                 link,
                 link_cycles: LinkCycles,
                 commands_in,
                 answers_out,
                 notes_out,
                 stats_out,
+                logs_out,
                 link_rx: rx_out,
                 link_tx: LinkTx::new(tx_in),
                 serial: board.serial,
@@ -767,7 +773,7 @@ mod app {
     /// task paces it, feeds the watchdog, queues the log, and pends the
     /// link task. Nothing here waits, decodes, encodes or builds: its
     /// work is bounded and alike every period (timed entry to exit).
-    #[task(binds = ADC, priority = 3, local = [io, watchdog, dump, runner, cycles, log, port, commands_out, answers_in, notes_in, stats_in, polls: u32 = 0], shared = [capture])]
+    #[task(binds = ADC, priority = 3, local = [io, watchdog, dump, runner, cycles, log, port, commands_out, answers_in, notes_in, stats_in, logs_in, polls: u32 = 0], shared = [capture])]
     fn control(mut cx: control::Context) {
         let (t0, serial0) = crate::serial_cost::stamp(cortex_m::peripheral::DWT::cycle_count);
         if !cx.local.io.ack_control_irq() {
@@ -778,16 +784,17 @@ mod app {
         if p.feed_watchdog {
             cx.local.watchdog.feed();
         }
-        let (port, commands, answers, notes, stats) = (
+        let (port, commands, answers, notes, stats, logs) = (
             &mut *cx.local.port,
             &mut *cx.local.commands_out,
             &mut *cx.local.answers_in,
             &mut *cx.local.notes_in,
             &mut *cx.local.stats_in,
+            &mut *cx.local.logs_in,
         );
         cx.shared
             .capture
-            .lock(|c| port.after_period(runner, &p, c, commands, answers, notes, stats));
+            .lock(|c| port.after_period(runner, &p, c, commands, answers, notes, stats, logs));
         // A set or a routine may have moved the zero code: the fault
         // handlers write the one in use (one relaxed store).
         crate::DAC_ZERO_CODE.store(
@@ -828,13 +835,14 @@ mod app {
     /// and answered, sets checked and their controllers built, frames
     /// encoded into the transmit ring; a save into the RAM slot for
     /// `init` to write after the reset the control task makes.
-    #[task(binds = SDIO, priority = 2, local = [link, link_cycles, commands_in, answers_out, notes_out, stats_out, link_rx, link_tx], shared = [capture])]
+    #[task(binds = SDIO, priority = 2, local = [link, link_cycles, commands_in, answers_out, notes_out, stats_out, logs_out, link_rx, link_tx], shared = [capture])]
     fn link(cx: link::Context) {
         let link = &mut *cx.local.link;
         let rx = &mut *cx.local.link_rx;
         link.service(
             cx.local.notes_out,
             cx.local.stats_out,
+            cx.local.logs_out,
             cx.local.answers_out,
             cx.local.commands_in,
             core::iter::from_fn(|| rx.dequeue()),
@@ -1273,7 +1281,7 @@ mod app {
         let faults = runner.hopper().supervisor().faults();
         let cost = runner.step_cost();
         defmt::println!(
-            "summary steady_apex_m={=f64} hops_to_converge={=i32} step_instr_min={=u32} step_instr_mean={=u32} step_instr_max={=u32} missed={=u32} faults={=u16} periods={=u32} fault_period={=i64} amp_enabled={=bool} max_current_after_fault_a={=f32} log_dropped={=u32} stack_idle_b={=u32} stack_peak_b={=u32}",
+            "summary steady_apex_m={=f64} hops_to_converge={=i32} step_instr_min={=u32} step_instr_mean={=u32} step_instr_max={=u32} missed={=u32} faults={=u16} periods={=u32} fault_period={=i64} amp_enabled={=bool} max_current_after_fault_a={=f32} log_dropped={=u32} stack_idle_b={=u32} stack_peak_b={=u32} log_frame_instr_max={=u32}",
             steady.unwrap_or(-1.0),
             converged.map_or(-1, |k| i32::try_from(k).unwrap_or(i32::MAX)),
             cost.min,
@@ -1287,7 +1295,8 @@ mod app {
             sim.max_current_after_fault_a,
             log.dropped(),
             stack_idle_b,
-            stack_peak_b
+            stack_peak_b,
+            LOG_FRAME_MAX.load(core::sync::atomic::Ordering::Relaxed)
         );
         let ok = converged.is_some() && faults.is_empty() && runner.missed() == 0;
         debug::exit(if ok {
@@ -1303,9 +1312,21 @@ mod app {
     #[task(priority = 1)]
     async fn logger(_: logger::Context, mut rx: log::Receiver) {
         while let Ok(item) = rx.recv().await {
+            // Timed: a defmt frame holds its logger's critical section
+            // (interrupts masked) from start to end (docs/safety.md,
+            // "Logging").
+            let t0 = crate::qemu::tim5_now();
             log::print(&item);
+            LOG_FRAME_MAX.fetch_max(
+                crate::qemu::tim5_now().wrapping_sub(t0),
+                core::sync::atomic::Ordering::Relaxed,
+            );
         }
     }
+
+    /// The largest log item's print, instructions (its frames and the
+    /// interrupts masked meanwhile).
+    static LOG_FRAME_MAX: core::sync::atomic::AtomicU32 = core::sync::atomic::AtomicU32::new(0);
 }
 
 /// The QEMU link image (`--features qemu-link`): the virtual robot
@@ -1327,8 +1348,10 @@ mod app {
     use heapless::spsc::{Consumer, Producer};
     use hopper_control::hopper::Strategy;
     use hopper_control::link::{
-        Answer, AnswerQueue, Command, CommandQueue, Endpoint, Note, NoteQueue, Stats, StatsQueue,
+        Answer, AnswerQueue, Command, CommandQueue, Endpoint, LogQueue, Note, NoteQueue, Stats,
+        StatsQueue,
     };
+    use hopper_control::runner::LogItem;
     use hopper_plant::mock::{firmware_config, SensorConfig, SimHal};
     use hopper_plant::robot::{Miscalibration, VirtualRobot};
     use hopper_plant::Params;
@@ -1373,6 +1396,7 @@ mod app {
         answers_in: Producer<'static, Answer<Slot>>,
         notes_in: Producer<'static, Note>,
         stats_in: Producer<'static, Stats>,
+        logs_in: Producer<'static, LogItem>,
         counter: crate::qemu::Instructions,
         syst: SYST,
         link: Endpoint<Slot>,
@@ -1381,6 +1405,7 @@ mod app {
         answers_out: Consumer<'static, Answer<Slot>>,
         notes_out: Consumer<'static, Note>,
         stats_out: Consumer<'static, Stats>,
+        logs_out: Consumer<'static, LogItem>,
         flash: Flash,
         link_rx: Consumer<'static, u8>,
         link_tx: LinkTx<'static>,
@@ -1395,6 +1420,7 @@ mod app {
         answers: AnswerQueue<Slot> = AnswerQueue::new(),
         notes: NoteQueue = NoteQueue::new(),
         stats: StatsQueue = StatsQueue::new(),
+        logs: LogQueue = LogQueue::new(),
         bank: Bank = [None, None, None],
     ])]
     fn init(cx: init::Context) -> (Shared, Local) {
@@ -1453,6 +1479,7 @@ mod app {
         let (answers_in, answers_out) = cx.local.answers.split();
         let (notes_in, notes_out) = cx.local.notes.split();
         let (stats_in, stats_out) = cx.local.stats.split();
+        let (logs_in, logs_out) = cx.local.logs.split();
 
         crate::qemu::start_systick(&mut core.SYST, crate::qemu::PERIOD_TICKS);
         defmt::println!(
@@ -1470,6 +1497,7 @@ mod app {
                 answers_in,
                 notes_in,
                 stats_in,
+                logs_in,
                 counter,
                 syst: core.SYST,
                 link,
@@ -1478,6 +1506,7 @@ mod app {
                 answers_out,
                 notes_out,
                 stats_out,
+                logs_out,
                 flash,
                 link_rx: rx_out,
                 link_tx: LinkTx::new(tx_in),
@@ -1497,22 +1526,23 @@ mod app {
     /// One control period with the link's port (as the board's control
     /// task), then the plant to the next tick with SysTick stopped (as in
     /// the scenario image); the link task is pended.
-    #[task(binds = SysTick, priority = 3, local = [robot, commands_out, answers_in, notes_in, stats_in, counter, syst], shared = [capture])]
+    #[task(binds = SysTick, priority = 3, local = [robot, commands_out, answers_in, notes_in, stats_in, logs_in, counter, syst], shared = [capture])]
     fn control(mut cx: control::Context) {
         let (t0, serial0) = crate::serial_cost::stamp(crate::qemu::tim5_now);
         let robot = &mut *cx.local.robot;
-        let (commands, answers, notes, stats, counter) = (
+        let (commands, answers, notes, stats, logs, counter) = (
             &mut *cx.local.commands_out,
             &mut *cx.local.answers_in,
             &mut *cx.local.notes_in,
             &mut *cx.local.stats_in,
+            &mut *cx.local.logs_in,
             &mut *cx.local.counter,
         );
         let (irq_max, irq_count) = crate::serial_cost::max_and_count();
         robot.port.set_serial_cost(irq_max, irq_count);
         cx.shared
             .capture
-            .lock(|c| robot.control_period(c, commands, answers, notes, stats, counter));
+            .lock(|c| robot.control_period(c, commands, answers, notes, stats, logs, counter));
         cx.local.syst.disable_counter();
         if robot.advance(&mut |_| {}).is_err() {
             defmt::error!("plant integration failed");
@@ -1536,13 +1566,14 @@ mod app {
     /// The link task, below the control period (as the board's): a save
     /// goes to the RAM flash at once (the board defers it to its next
     /// boot).
-    #[task(binds = SDIO, priority = 2, local = [link, link_counter, commands_in, answers_out, notes_out, stats_out, flash, link_rx, link_tx], shared = [capture])]
+    #[task(binds = SDIO, priority = 2, local = [link, link_counter, commands_in, answers_out, notes_out, stats_out, logs_out, flash, link_rx, link_tx], shared = [capture])]
     fn link(cx: link::Context) {
         let link = &mut *cx.local.link;
         let rx = &mut *cx.local.link_rx;
         link.service(
             cx.local.notes_out,
             cx.local.stats_out,
+            cx.local.logs_out,
             cx.local.answers_out,
             cx.local.commands_in,
             core::iter::from_fn(|| rx.dequeue()),
@@ -1559,10 +1590,15 @@ mod app {
         }
     }
 
-    /// The link's bytes in and out, above the control task: the USART has
-    /// no receive FIFO (`serial`'s module docs). It times itself: the
-    /// control period's cost leaves it out.
-    #[task(binds = USART1, priority = 4, local = [serial])]
+    /// The link's bytes in and out, at the control task's priority, not
+    /// above it as on the board: QEMU's USART holds the next byte back
+    /// until the data register is read (no overrun to race) and has no
+    /// baud rate, so at priority 4 the host's bytes would preempt the
+    /// control period without the bound the board's 921,600 baud sets
+    /// (about 18 interrupts a period, budgeted in docs/link.md), and each
+    /// preemption's entry would count in the control period's cost. It
+    /// times itself all the same.
+    #[task(binds = USART1, priority = 3, local = [serial])]
     fn usart1(cx: usart1::Context) {
         let t0 = crate::qemu::tim5_now();
         cx.local.serial.on_interrupt();

@@ -115,6 +115,11 @@ impl<T> Shared<T> for &mut T {
     }
 }
 
+/// Periods between two [`Command::Alive`]s at most (2 ms at 10 kHz, a
+/// hundredth of the link timeout): a flood of frames costs the control
+/// period one command in twenty.
+const ALIVE_EVERY: u32 = 20;
+
 /// Capacity of the command queue (link task to control period); a
 /// `heapless::spsc::Queue` of `N` holds `N - 1`.
 pub const COMMANDS: usize = 4;
@@ -139,6 +144,9 @@ pub type AnswerQueue<H = Owned> = heapless::spsc::Queue<Answer<H>, ANSWERS>;
 pub type NoteQueue = heapless::spsc::Queue<Note, NOTES>;
 /// The stats queue's storage.
 pub type StatsQueue = heapless::spsc::Queue<Stats, 4>;
+/// The log queue's storage: a period's log item (a hop ended, faults
+/// latched), 36 bytes, a few a second.
+pub type LogQueue = heapless::spsc::Queue<LogItem, 8>;
 
 /// The three queues, for a robot whose control period and link task run
 /// one after the other in one thread (the simulator, the QEMU link image).
@@ -152,6 +160,8 @@ pub struct Queues<H = Owned> {
     pub notes: NoteQueue,
     /// Control period to link task: the slow figures.
     pub stats: StatsQueue,
+    /// Control period to link task: log items.
+    pub logs: LogQueue,
 }
 
 impl<H> Default for Queues<H> {
@@ -168,6 +178,7 @@ impl<H> Queues<H> {
             answers: AnswerQueue::new(),
             notes: NoteQueue::new(),
             stats: StatsQueue::new(),
+            logs: LogQueue::new(),
         }
     }
 }
@@ -295,9 +306,6 @@ pub enum Answer<H = Owned> {
     },
     /// A slot an install freed, for the link task's next controller.
     Spare(H),
-    /// A period's log item (a hop ended, faults latched), after that
-    /// period's note.
-    Log(LogItem),
     /// A routine's results need a controller: the configuration with
     /// `changes`.
     Rebuild {
@@ -311,7 +319,7 @@ pub enum Answer<H = Owned> {
 }
 
 /// One period, as the link task sees it (a copy of 44 bytes: a log item,
-/// a few a second, goes as an [`Answer::Log`]).
+/// a few a second, goes in a queue of its own).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Note {
     /// The period's record (its step number, faults, measurements).
@@ -455,6 +463,7 @@ impl ControlPort {
         answers: &mut impl Outbox<Answer<H>>,
         notes: &mut impl Outbox<Note>,
         stats: &mut impl Outbox<Stats>,
+        logs: &mut impl Outbox<LogItem>,
     ) {
         capture.record(&p.out.record, !p.newly_latched.is_empty());
         // A pending arm request was decided in this period. No Armed or
@@ -519,7 +528,7 @@ impl ControlPort {
         }
         if let Some(item) = p.log {
             // After the note: the link task sends the state change first.
-            if answers.put(Answer::Log(item)).is_err() {
+            if logs.put(item).is_err() {
                 self.notes_dropped = self.notes_dropped.saturating_add(1);
             }
         }
@@ -749,6 +758,9 @@ pub struct Endpoint<H = Owned> {
     stash: Option<Command<H>>,
     /// Free controller slots (a bank's) for the next sets.
     spares: heapless::Vec<H, SPARES>,
+    /// The period of the last command queued (each carries the frames
+    /// received to the link timer).
+    carried_at: u32,
 }
 
 /// A calibration record's bytes (an array too long for a derived `Default`).
@@ -856,6 +868,7 @@ impl<H: HopperSlot> Endpoint<H> {
             last: None,
             stash: None,
             spares: heapless::Vec::new(),
+            carried_at: 0,
         }
     }
 
@@ -931,6 +944,7 @@ impl<H: HopperSlot> Endpoint<H> {
         &mut self,
         notes: &mut impl Inbox<Note>,
         stats: &mut impl Inbox<Stats>,
+        logs: &mut impl Inbox<LogItem>,
         answers: &mut impl Inbox<Answer<H>>,
         commands: &mut impl Outbox<Command<H>>,
         rx: impl Iterator<Item = u8>,
@@ -945,15 +959,8 @@ impl<H: HopperSlot> Endpoint<H> {
                 self.stash = Some(c);
             }
         }
-        // The period's log items go out after its note's state change.
-        let mut logs: heapless::Deque<LogItem, ANSWERS> = heapless::Deque::new();
         while let Some(a) = answers.take() {
-            match a {
-                Answer::Log(item) => {
-                    let _ = logs.push_back(item);
-                }
-                a => self.on_answer(a, commands, tx),
-            }
+            self.on_answer(a, commands, tx);
         }
         while let Some(s) = stats.take() {
             self.stats = Some(s);
@@ -962,7 +969,8 @@ impl<H: HopperSlot> Endpoint<H> {
             self.on_note(&n, capture, tx);
             self.last = Some(n);
         }
-        while let Some(item) = logs.pop_front() {
+        // The period's log items go out after its note's state change.
+        while let Some(item) = logs.take() {
             self.on_log(item, tx);
         }
         let mut alive = false;
@@ -973,10 +981,15 @@ impl<H: HopperSlot> Endpoint<H> {
                 asked |= self.on_message(&msg, commands, capture, tx);
             }
         }
-        if alive && !asked {
-            // Nothing else carries the frame to the link timer; a full
-            // queue carries it already.
-            let _ = commands.put(Command::Alive);
+        let now = self.last.map_or(0, |n| n.record.step);
+        if asked {
+            self.carried_at = now;
+        } else if alive && now.wrapping_sub(self.carried_at) >= ALIVE_EVERY {
+            // Nothing else carries the frames to the link timer (a full
+            // queue carries them already).
+            if commands.put(Command::Alive).is_ok() {
+                self.carried_at = now;
+            }
         }
         let t1 = counter.now();
         self.cost
@@ -1013,7 +1026,6 @@ impl<H: HopperSlot> Endpoint<H> {
             Answer::Spare(h) => {
                 let _ = self.spares.push(h);
             }
-            Answer::Log(item) => self.on_log(item, tx),
             Answer::Rebuild {
                 generation,
                 changes,
@@ -1584,11 +1596,13 @@ mod tests {
                     &mut self.q.answers,
                     &mut self.q.notes,
                     &mut self.q.stats,
+                    &mut self.q.logs,
                 );
                 let inbox = core::mem::take(&mut self.inbox);
                 self.ep.service(
                     &mut self.q.notes,
                     &mut self.q.stats,
+                    &mut self.q.logs,
                     &mut self.q.answers,
                     &mut self.q.commands,
                     inbox.into_iter(),
@@ -2073,6 +2087,7 @@ mod tests {
                 &mut r.q.answers,
                 &mut r.q.notes,
                 &mut r.q.stats,
+                &mut r.q.logs,
             );
             assert_eq!(r.q.commands.len(), left);
             assert_eq!(r.q.notes.len(), notes + 1);
@@ -2143,6 +2158,7 @@ mod tests {
                 &mut q.answers,
                 &mut q.notes,
                 &mut q.stats,
+                &mut q.logs,
             );
             let rx = if k == 0 {
                 core::mem::take(&mut frames)
@@ -2152,6 +2168,7 @@ mod tests {
             ep.service(
                 &mut q.notes,
                 &mut q.stats,
+                &mut q.logs,
                 &mut q.answers,
                 &mut q.commands,
                 rx.into_iter(),
@@ -2218,5 +2235,65 @@ mod tests {
                 assert!(b.winding_c < derate_c - 50.0, "{b:?}");
             }
         }
+    }
+
+    /// A save's restart waits 0.2 s for the answer to go out, and never
+    /// resets an armed robot: it asks for a disarm and waits a period
+    /// more; and nothing arms once it is queued.
+    #[test]
+    fn a_restart_never_resets_an_armed_robot() {
+        let mut r = Robot::new();
+        r.request(1, Request::Arm);
+        r.periods(3);
+        assert!(r.runner.arming().is_armed());
+        let _ = r.take();
+        let mut c = CommandQueue::<Owned>::new();
+        let _ = c.enqueue(Command::Restart);
+        let p = r.runner.run_period(&mut r.io, &mut NoCounter);
+        r.port.after_period(
+            &mut r.runner,
+            &p,
+            &mut r.capture,
+            &mut c,
+            &mut r.q.answers,
+            &mut r.q.notes,
+            &mut r.q.stats,
+            &mut r.q.logs,
+        );
+        // 0.2 s at 10 kHz.
+        for _ in 0..1_999 {
+            assert!(!r.port.restart_due(&mut r.runner));
+        }
+        // Due, but armed: a disarm asked for instead.
+        assert!(!r.port.restart_due(&mut r.runner));
+        assert!(r.runner.arming().disarm_pending());
+        // An arm queued now is refused.
+        let _ = c.enqueue(Command::Arm { id: 9 });
+        let p = r.runner.run_period(&mut r.io, &mut NoCounter);
+        assert!(!p.armed);
+        r.port.after_period(
+            &mut r.runner,
+            &p,
+            &mut r.capture,
+            &mut c,
+            &mut r.q.answers,
+            &mut r.q.notes,
+            &mut r.q.stats,
+            &mut r.q.logs,
+        );
+        assert!(
+            r.port.restart_due(&mut r.runner),
+            "disarmed: the reset is due"
+        );
+        let mut refused = false;
+        while let Some(a) = r.q.answers.dequeue() {
+            if let Answer::Reply {
+                id: Some(9), resp, ..
+            } = a
+            {
+                refused = resp == Response::Refused(text("restarting"));
+            }
+        }
+        assert!(refused);
     }
 }

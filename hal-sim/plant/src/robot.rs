@@ -100,6 +100,7 @@ impl<H: HopperSlot> VirtualRobot<H> {
     /// caller runs the link task ([`Endpoint::service`]) after it, at a
     /// lower priority or in line ([`control`](Self::control)), and
     /// reports the period's lateness with `runner.end_period`.
+    #[allow(clippy::too_many_arguments)] // The port's five queue ends, as the board's task has them.
     pub fn control_period<C: CycleCounter>(
         &mut self,
         capture: &mut FaultCapture<CAPTURE_LEN>,
@@ -107,6 +108,7 @@ impl<H: HopperSlot> VirtualRobot<H> {
         answers: &mut impl Outbox<Answer<H>>,
         notes: &mut impl Outbox<Note>,
         stats: &mut impl Outbox<Stats>,
+        logs: &mut impl Outbox<hopper_control::runner::LogItem>,
         counter: &mut C,
     ) -> Period {
         self.hal.faults.estop = self.port.sim_estop();
@@ -126,6 +128,7 @@ impl<H: HopperSlot> VirtualRobot<H> {
             answers,
             notes,
             stats,
+            logs,
         );
         let t1 = counter.now();
         self.port
@@ -156,11 +159,13 @@ impl<H: HopperSlot> VirtualRobot<H> {
             &mut queues.answers,
             &mut queues.notes,
             &mut queues.stats,
+            &mut queues.logs,
             counter,
         );
         self.link.service(
             &mut queues.notes,
             &mut queues.stats,
+            &mut queues.logs,
             &mut queues.answers,
             &mut queues.commands,
             rx,

@@ -121,6 +121,7 @@ mod check {
                 &mut queues.answers,
                 &mut queues.notes,
                 &mut queues.stats,
+                &mut queues.logs,
             );
             port.add_isr_cost(black_box(0));
             black_box(port.restart_due(&mut runner));
@@ -132,6 +133,7 @@ mod check {
             link.service(
                 &mut queues.notes,
                 &mut queues.stats,
+                &mut queues.logs,
                 &mut queues.answers,
                 &mut queues.commands,
                 &mut rx,
