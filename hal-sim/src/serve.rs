@@ -100,6 +100,9 @@ impl Flash {
 /// Loads the calibration `flash` holds into `robot` (as a board does at boot).
 pub fn load_at_boot(robot: &mut VirtualRobot, record: Option<&[u8]>) {
     robot.runner.load_calibration(record);
+    // The link task's copy of the configuration is the loaded one (as the
+    // board builds its endpoint after loading).
+    robot.link = hopper_control::link::Endpoint::simulated(&robot.runner);
 }
 
 /// How the loop runs.

@@ -695,10 +695,18 @@ fn stored_line(s: &hopper_protocol::StoredInfo, require_tare: Option<bool>) -> S
 
 /// `save`: the calibration to flash, and how it went.
 fn save(c: &mut Client) -> Result<()> {
-    match c.request(Request::Save)? {
-        Response::Ok => {}
-        Response::Refused(why) => bail!("save refused: {why}"),
-        r => bail!("unexpected answer {r:?}"),
+    // `busy`: a change (a routine's results, a set) is still being
+    // installed, a few periods at most: asked again for up to 1 s.
+    let deadline = Instant::now() + Duration::from_secs(1);
+    loop {
+        match c.request(Request::Save)? {
+            Response::Ok => break,
+            Response::Refused(why) if why.as_str() == "busy" && Instant::now() < deadline => {
+                std::thread::sleep(Duration::from_millis(10));
+            }
+            Response::Refused(why) => bail!("save refused: {why}"),
+            r => bail!("unexpected answer {r:?}"),
+        }
     }
     let deadline = Instant::now() + Duration::from_secs(5);
     loop {

@@ -122,7 +122,8 @@ fn safe_and_parked() -> ! {
     }
 }
 
-// HardFault (cortex-m-rt's trampoline branches here, no stack used):
+// HardFault (entered from its vector, through cortex-m-rt's trampoline
+// where the version has one, which uses no stack):
 // before anything touches the stack, which may be the fault (flip-link puts
 // it below the statics, so an overflow faults), AMP_EN is driven low (PB0
 // reset through BSRR, then a GPIO output, off the deadman timer), TIM3 is

@@ -232,6 +232,9 @@ pub enum Command<H = Owned> {
     SetLive {
         /// The request's id.
         id: u16,
+        /// The configuration generation it was checked on (another, and
+        /// it is refused: the change it folds in may not have run).
+        base_gen: u32,
         /// The parameter.
         param: &'static params::Param,
         /// Its new value.
@@ -318,7 +321,7 @@ pub enum Answer<H = Owned> {
     },
 }
 
-/// One period, as the link task sees it (a copy of 44 bytes: a log item,
+/// One period, as the link task sees it (a copy of 48 bytes: a log item,
 /// a few a second, goes in a queue of its own).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Note {
@@ -336,6 +339,8 @@ pub struct Note {
     pub tared: bool,
     /// The whole control interrupt's cost the period before.
     pub isr_last: u32,
+    /// The configuration's generation ([`PeriodRunner::config_gen`]).
+    pub config_gen: u32,
 }
 
 /// The slow figures, every [`STATS_EVERY`] periods.
@@ -522,6 +527,7 @@ impl ControlPort {
             calibrating: runner.calibrating(),
             tared: runner.arming().tared(),
             isr_last: self.isr_last,
+            config_gen: runner.config_gen(),
         };
         if notes.put(note).is_err() {
             self.notes_dropped = self.notes_dropped.saturating_add(1);
@@ -582,11 +588,20 @@ impl ControlPort {
                 };
                 Some((id, resp))
             }
-            Command::SetLive { id, param, value } => Some((
+            Command::SetLive {
                 id,
-                runner
-                    .set_live(param, value)
-                    .map_or_else(refused, |()| Response::Ok),
+                base_gen,
+                param,
+                value,
+            } => Some((
+                id,
+                if base_gen == runner.config_gen() {
+                    runner
+                        .set_live(param, value)
+                        .map_or_else(refused, |()| Response::Ok)
+                } else {
+                    refused(crate::runner::SetError::Stale)
+                },
             )),
             Command::Install { .. } => None,
             Command::RebuildFailed => {
@@ -711,6 +726,8 @@ pub struct Endpoint<H = Owned> {
     rx: Decoder,
     /// The id of an arm request sent and not yet answered.
     arm_outstanding: Option<u16>,
+    /// The id of a routine's start sent and not yet answered.
+    calibrate_outstanding: Option<u16>,
     /// The cycle counter's rate, Hz (0: instructions).
     counter_hz: u32,
     /// Telemetry every this many periods (0: off).
@@ -755,7 +772,7 @@ pub struct Endpoint<H = Owned> {
     last: Option<Note>,
     /// A command that found the queue full and must not be lost (a
     /// routine's rebuild, a restart): sent first next time.
-    stash: Option<Command<H>>,
+    stash: heapless::Deque<Command<H>, 3>,
     /// Free controller slots (a bank's) for the next sets.
     spares: heapless::Vec<H, SPARES>,
     /// The period of the last command queued (each carries the frames
@@ -846,6 +863,7 @@ impl<H: HopperSlot> Endpoint<H> {
         Self {
             rx: Decoder::new(),
             arm_outstanding: None,
+            calibrate_outstanding: None,
             counter_hz: 0,
             every: 0,
             since: 0,
@@ -866,7 +884,7 @@ impl<H: HopperSlot> Endpoint<H> {
             isr_recent_max: 0,
             period_s: runner.timing().period_s,
             last: None,
-            stash: None,
+            stash: heapless::Deque::new(),
             spares: heapless::Vec::new(),
             carried_at: 0,
         }
@@ -913,7 +931,8 @@ impl<H: HopperSlot> Endpoint<H> {
             (false, _) => SAVE_FAILED,
         };
         if ok && deferred {
-            self.stash = Some(Command::Restart);
+            // (At most one restart and one routine's rebuild wait here.)
+            let _ = self.stash.push_back(Command::Restart);
         }
     }
 
@@ -954,9 +973,10 @@ impl<H: HopperSlot> Endpoint<H> {
     ) {
         let t0 = counter.now();
         self.counter_hz = counter.hz();
-        if let Some(c) = self.stash.take() {
+        while let Some(c) = self.stash.pop_front() {
             if let Err(c) = commands.put(c) {
-                self.stash = Some(c);
+                let _ = self.stash.push_front(c);
+                break;
             }
         }
         while let Some(a) = answers.take() {
@@ -1018,6 +1038,9 @@ impl<H: HopperSlot> Endpoint<H> {
                 if self.arm_outstanding == Some(id) {
                     self.arm_outstanding = None;
                 }
+                if self.calibrate_outstanding == Some(id) {
+                    self.calibrate_outstanding = None;
+                }
                 if let Response::Stored(s) = &mut resp {
                     s.save = self.save_state;
                 }
@@ -1050,8 +1073,11 @@ impl<H: HopperSlot> Endpoint<H> {
                     }
                     None => Command::RebuildFailed,
                 };
-                if let Err(c) = commands.put(c) {
-                    self.stash = Some(c);
+                if !self.stash.is_empty() {
+                    // Behind what waits already, in order.
+                    let _ = self.stash.push_back(c);
+                } else if let Err(c) = commands.put(c) {
+                    let _ = self.stash.push_back(c);
                 }
             }
         }
@@ -1262,10 +1288,14 @@ impl<H: HopperSlot> Endpoint<H> {
         match out {
             Ok(c) => {
                 let arm = matches!(c, Command::Arm { .. });
+                let calibrate = matches!(c, Command::Calibrate { .. });
                 match commands.put(c) {
                     Ok(()) => {
                         if arm {
                             self.arm_outstanding = Some(id);
+                        }
+                        if calibrate {
+                            self.calibrate_outstanding = Some(id);
                         }
                         if let Some(cfg) = predicted {
                             // The next set builds on this one (its install
@@ -1315,7 +1345,16 @@ impl<H: HopperSlot> Endpoint<H> {
             if !PeriodRunner::settable_while_armed(param) {
                 return Err(refused(crate::runner::SetError::WhileArmed(param.name)));
             }
-            return Ok((Command::SetLive { id, param, value }, cfg));
+            let base_gen = self.generation();
+            return Ok((
+                Command::SetLive {
+                    id,
+                    base_gen,
+                    param,
+                    value,
+                },
+                cfg,
+            ));
         }
         // The controller's constants and every cross-field rule, here: the
         // control period only copies it in.
@@ -1345,8 +1384,15 @@ impl<H: HopperSlot> Endpoint<H> {
         if self.arm_outstanding.is_some() || n.arm_pending {
             return Response::Refused(text("arming"));
         }
-        if n.calibrating {
+        if n.calibrating || self.calibrate_outstanding.is_some() {
             return Response::Refused(text("calibrating"));
+        }
+        // The record is the control period's configuration, as this task
+        // knows it: only when no change is in flight and the last period
+        // ran on it (a tare installed but not yet answered would be
+        // saved without its offsets).
+        if !self.pending.is_empty() || self.confirmed.1 != n.config_gen {
+            return Response::Refused(text("busy"));
         }
         // The placeholders are not a calibration: a tare (or a loaded
         // record) first, else the saved record would stand for one.
@@ -2295,5 +2341,44 @@ mod tests {
             }
         }
         assert!(refused);
+    }
+
+    /// A save is the control period's configuration as the link task
+    /// knows it: with a change in flight (a set, a tare's results) it is
+    /// refused `busy`, and a routine's start queued in the same batch
+    /// refuses it as a running one.
+    #[test]
+    fn a_save_waits_for_the_changes_in_flight() {
+        let mut r = Robot::new();
+        r.runner.arming_mut().note_tared();
+        r.periods(1);
+        r.request(
+            1,
+            Request::ParamSet {
+                name: name("target_apex_m"),
+                value: 0.1,
+            },
+        );
+        r.request(2, Request::Save);
+        r.request(
+            3,
+            Request::Calibrate {
+                routine: crate::bringup::Routine::SensorCheck as u8,
+                seconds: 0.05,
+            },
+        );
+        r.request(4, Request::Save);
+        r.periods(1);
+        let msgs = r.take();
+        for (id, why) in [(2, "busy"), (4, "calibrating")] {
+            assert!(
+                msgs.contains(&RobotMsg::Response {
+                    id,
+                    resp: Response::Refused(text(why))
+                }),
+                "{id}: {msgs:?}"
+            );
+        }
+        assert!(r.ep.take_save().is_none());
     }
 }
