@@ -341,13 +341,101 @@ pub fn run(root: &Path) -> Result<(), String> {
         "board-init: writes={writes} polled_registers={polls} longest_poll_reads={longest_poll} terminated={done} golden={}",
         if same { "same" } else { "DIFFERENT" }
     );
-    if problems.is_empty() {
-        Ok(())
-    } else {
+    if !problems.is_empty() {
         for p in &problems {
             eprintln!("xtask: board-init: {p}");
         }
-        Err(format!("board init failed: {}", problems.join("; ")))
+        return Err(format!("board init failed: {}", problems.join("; ")));
+    }
+    fault_test(root)
+}
+
+/// The HardFault entry on QEMU: the board image built with `fault-test`
+/// (a calibrated zero code of 2050) faults right after init with its main
+/// stack pointer off the SRAM, so the exception cannot stack. What it
+/// writes after init, in order, must be AMP_EN low (BSRR BR0, then PB0 a
+/// GPIO output) and the calibrated zero code, from the assembly entry
+/// that uses no stack, then the same again from the Rust handler on its
+/// fresh stack. Prints `fault-test: ...`.
+fn fault_test(root: &Path) -> Result<(), String> {
+    let target_dir = crate::target_dir(root)?.join("fault-test");
+    let elf = crate::build_executable(
+        root,
+        "firmware release build (fault test)",
+        "hopper-fw",
+        crate::cargo()
+            .args([
+                "build",
+                "-p",
+                "hopper-app",
+                "--release",
+                "--target",
+                crate::TARGET,
+            ])
+            .args(["--features", "fault-test", "--target-dir"])
+            .arg(&target_dir),
+    )?;
+    let dir = crate::target_dir(root)?.join("board-init");
+    let log_path = dir.join("fault-test.log");
+    let _ = std::fs::remove_file(&log_path);
+    let started = Instant::now();
+    let mut child = crate::qemu::qemu_command(&elf, 0, "null")
+        .args(["-d", "unimp"])
+        .arg("-D")
+        .arg(&log_path)
+        .stdout(Stdio::null())
+        .stderr(Stdio::inherit())
+        .spawn()
+        .map_err(|e| format!("cannot start qemu-system-arm: {e}"))?;
+    // Done when the Rust handler's zero code is written (the second after
+    // init), or after the timeout.
+    let after_init = |log: &str| -> Vec<String> {
+        let (lines, _) = trace(&parse(log));
+        let start = lines
+            .iter()
+            .position(|l| l == "IWDG.KR = 0x0000aaaa")
+            .map_or(lines.len(), |i| i + 1);
+        lines[start..]
+            .iter()
+            .filter(|l| !l.starts_with("poll ") && !l.starts_with("IWDG."))
+            .cloned()
+            .collect()
+    };
+    let mut writes = Vec::new();
+    while started.elapsed() < INIT_TIMEOUT {
+        std::thread::sleep(Duration::from_millis(200));
+        let log = std::fs::read_to_string(&log_path).unwrap_or_default();
+        writes = after_init(&log);
+        if writes
+            .iter()
+            .filter(|l| l.starts_with("DAC.DHR12R1"))
+            .count()
+            >= 2
+            || child.try_wait().ok().flatten().is_some()
+        {
+            break;
+        }
+    }
+    let _ = child.kill();
+    let _ = child.wait();
+    crate::took("fault test on QEMU", started);
+    let zero = "DAC.DHR12R1 = 0x00000802";
+    let entry = ["GPIOB.BSRR = 0x00010000", "GPIOB.MODER = 0x00000001", zero];
+    let entry_first =
+        writes.len() >= entry.len() && writes.iter().zip(entry.iter()).all(|(w, e)| w == e);
+    let handler = writes
+        .get(entry.len()..)
+        .is_some_and(|rest| rest.iter().any(|l| l == zero));
+    println!(
+        "fault-test: hardfault_off_the_stack amp_en_low_first={entry_first} calibrated_zero_first={entry_first} rust_handler_ran={handler} writes_after_init={}",
+        writes.len()
+    );
+    if entry_first && handler {
+        Ok(())
+    } else {
+        Err(format!(
+            "the HardFault entry's writes after init are {writes:?}, not {entry:?} then the Rust handler's {zero}"
+        ))
     }
 }
 

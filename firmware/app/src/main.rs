@@ -165,6 +165,22 @@ mod hard_fault {
     );
 }
 
+/// The fault test (`--features fault-test`, `cargo xtask board-init`).
+#[cfg(all(target_os = "none", feature = "fault-test"))]
+mod fault_test {
+    /// Moves the main stack pointer below the SRAM (where a stack that
+    /// flip-link put below the statics overflows to) and executes an
+    /// undefined instruction: the exception's entry cannot stack, and the
+    /// HardFault entry must drop AMP_EN and zero the DAC without the stack.
+    pub fn hard_fault_off_the_stack() -> ! {
+        #[allow(unsafe_code)] // The fault is the test.
+        // SAFETY: it does not return; the fault handler parks.
+        unsafe {
+            core::arch::asm!("msr msp, {0}", "udf #0", in(reg) 0x1FFF_FF00u32, options(noreturn));
+        }
+    }
+}
+
 /// HardFault's Rust part, on a fresh stack: the same end as a panic.
 #[cfg(target_os = "none")]
 #[allow(unsafe_code)] // Unmangled: the assembly entry branches to it.
@@ -626,6 +642,12 @@ mod app {
         // wherever the nut stands: no arming before both (issue 18).
         cfg.arming.require_tare = true;
         cfg.arming.require_home = true;
+        // The fault test's calibrated zero: the fault handlers must write
+        // this one, not the 2048 fixed before the calibration loads.
+        #[cfg(feature = "fault-test")]
+        {
+            cfg.calibration.dac_zero_code = 2050;
+        }
         // Validated before the board (and its watchdog) starts: a refused
         // configuration leaves the amplifier off (the pin is an input with
         // its external pull-down) and the MCU parked, not in a reset loop.
@@ -763,6 +785,9 @@ mod app {
 
     #[idle]
     fn idle(_: idle::Context) -> ! {
+        #[cfg(feature = "fault-test")]
+        crate::fault_test::hard_fault_off_the_stack();
+        #[cfg(not(feature = "fault-test"))]
         loop {
             cortex_m::asm::nop();
         }
