@@ -256,6 +256,19 @@ fn check(lines: &[String]) -> Vec<String> {
     problems
 }
 
+/// QEMU on `elf`, logging every access to an unmodelled register
+/// (`-d unimp`) to `log_path`.
+fn spawn_unimp(elf: &Path, log_path: &Path) -> Result<std::process::Child, String> {
+    crate::qemu::qemu_command(elf, 0, "null")
+        .args(["-d", "unimp"])
+        .arg("-D")
+        .arg(log_path)
+        .stdout(Stdio::null())
+        .stderr(Stdio::inherit())
+        .spawn()
+        .map_err(|e| format!("cannot start qemu-system-arm: {e}"))
+}
+
 /// Builds the board image, runs its init on QEMU and checks the trace;
 /// prints `board-init: ...`.
 pub fn run(root: &Path) -> Result<(), String> {
@@ -266,14 +279,7 @@ pub fn run(root: &Path) -> Result<(), String> {
     let _ = std::fs::remove_file(&log_path);
     eprintln!("xtask: running the board image's init on qemu-system-arm (netduinoplus2, -d unimp)");
     let started = Instant::now();
-    let mut child = crate::qemu::qemu_command(&elf, 0, "null")
-        .args(["-d", "unimp"])
-        .arg("-D")
-        .arg(&log_path)
-        .stdout(Stdio::null())
-        .stderr(Stdio::inherit())
-        .spawn()
-        .map_err(|e| format!("cannot start qemu-system-arm: {e}"))?;
+    let mut child = spawn_unimp(&elf, &log_path)?;
     // Init is done at the watchdog's first reload: nothing follows it in
     // QEMU (the control task waits for an ADC interrupt that never comes).
     let done = loop {
@@ -379,14 +385,7 @@ fn fault_test(root: &Path) -> Result<(), String> {
     let log_path = dir.join("fault-test.log");
     let _ = std::fs::remove_file(&log_path);
     let started = Instant::now();
-    let mut child = crate::qemu::qemu_command(&elf, 0, "null")
-        .args(["-d", "unimp"])
-        .arg("-D")
-        .arg(&log_path)
-        .stdout(Stdio::null())
-        .stderr(Stdio::inherit())
-        .spawn()
-        .map_err(|e| format!("cannot start qemu-system-arm: {e}"))?;
+    let mut child = spawn_unimp(&elf, &log_path)?;
     // Done when the Rust handler's zero code is written (the second after
     // init), or after the timeout.
     let after_init = |log: &str| -> Vec<String> {

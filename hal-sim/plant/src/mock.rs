@@ -322,6 +322,16 @@ impl SimHal {
         SimIo { hal: self, plant }
     }
 
+    /// The DAC's write, as both I/O views make it: refused under an
+    /// injected DAC fault.
+    fn write_dac(&mut self, code: u16) -> Result<(), IoError<NoPinError>> {
+        if self.faults.dac_error {
+            return Err(IoError::Dac);
+        }
+        self.dac_code = code;
+        Ok(())
+    }
+
     /// The I/O with this period's sample taken now, before the control
     /// period starts: as on the board, where the ADC and the timers have
     /// the sample ready when the control interrupt enters, so the period's
@@ -387,11 +397,7 @@ impl HopperIo for SampledIo<'_> {
     }
 
     fn write_dac(&mut self, code: u16) -> Result<(), IoError<NoPinError>> {
-        if self.hal.faults.dac_error {
-            return Err(IoError::Dac);
-        }
-        self.hal.dac_code = code;
-        Ok(())
+        self.hal.write_dac(code)
     }
 
     fn set_amp_enabled(&mut self, on: bool) -> Result<(), IoError<NoPinError>> {
@@ -415,11 +421,7 @@ impl HopperIo for SimIo<'_> {
     }
 
     fn write_dac(&mut self, code: u16) -> Result<(), IoError<NoPinError>> {
-        if self.hal.faults.dac_error {
-            return Err(IoError::Dac);
-        }
-        self.hal.dac_code = code;
-        Ok(())
+        self.hal.write_dac(code)
     }
 
     fn set_amp_enabled(&mut self, on: bool) -> Result<(), IoError<NoPinError>> {
