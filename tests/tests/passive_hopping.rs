@@ -54,9 +54,14 @@ fn identified_passive() -> &'static Summary {
 fn identified_passive_hopper_stops_within_a_few_seconds() {
     let s = identified_passive();
     assert_eq!(s.controller, "passive");
-    // Thesis Fig 4.7: stationary after about 1.5 s.
+    // Thesis Fig 4.7: stationary after about 1.5 s; this plant stops at
+    // 1.015 s from 0.15 m. Pinned within 5% so that friction or contact
+    // that moves the decay by more fails here, not only in the snapshot.
     let stopped = s.stopped_at_s.unwrap();
-    assert!((0.8..2.0).contains(&stopped), "stopped at {stopped} s");
+    assert!(
+        (1.015_f64 * 0.95..1.015 * 1.05).contains(&stopped),
+        "stopped at {stopped} s"
+    );
     assert!(s.apex_heights_m.windows(2).all(|w| w[1] < w[0]));
     // ~100 ms stance (section 4.4.2).
     let stance = s.stance_time_s.unwrap();
@@ -78,7 +83,9 @@ fn identified_passive_run_matches_its_snapshot() {
 #[test]
 fn identified_friction_costs_joules_per_phase_like_the_thesis() {
     // Thesis 4.4.1: about 4 J lost in the first stance and about 4 J in the
-    // first flight (its own drop height is not given; 0.15 m here).
+    // first flight (its own drop height is not given; 0.15 m here). The
+    // identified plant loses 3.48 J and 2.37 J from 0.15 m: pinned within
+    // 5%, so a change to the friction model that moves either fails.
     let ev = energy_at_events(Params::identified(), 0.15, 1.0);
     let td1 = ev.iter().find(|e| e.0 == "td").unwrap();
     let lo1 = ev.iter().find(|e| e.0 == "lo").unwrap();
@@ -86,11 +93,11 @@ fn identified_friction_costs_joules_per_phase_like_the_thesis() {
     let stance_loss = td1.2 - lo1.2;
     let flight_loss = lo1.2 - td2.2;
     assert!(
-        (1.5..6.0).contains(&stance_loss),
+        (3.48 * 0.95..3.48 * 1.05).contains(&stance_loss),
         "first stance lost {stance_loss} J"
     );
     assert!(
-        (1.5..6.0).contains(&flight_loss),
+        (2.365 * 0.95..2.365 * 1.05).contains(&flight_loss),
         "first flight lost {flight_loss} J"
     );
 }
