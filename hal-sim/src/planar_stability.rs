@@ -1,8 +1,8 @@
-//! The section 2.2 runner's apex-to-apex return map (issue 20, beyond the
-//! thesis): its fixed point by Newton iteration and the eigenvalues of its
-//! Jacobian there, so that "drifts" and "reentrant" (section 2.2.3-2.2.4)
-//! become numbers, and the range of the stabiliser's gain `K_c` (eq 2.79)
-//! that makes each speed's gait attracting.
+//! The section 2.2 runner's apex-to-apex return map (beyond the thesis):
+//! its fixed point by Newton iteration and the eigenvalues of its Jacobian
+//! there, so that "drifts" and "reentrant" (section 2.2.3-2.2.4) become
+//! numbers, and the range of the stabiliser's gain `K_c` (eq 2.79) that
+//! makes each speed's gait attracting.
 //!
 //! The map `P` takes the apex state `[z, x', phi, theta, phi', theta']`
 //! (the forward position drops out: nothing depends on it) to the next

@@ -221,8 +221,9 @@ pub struct Summary {
 }
 
 /// How far apart an estimator event and a plant event may be and still be
-/// the same event, s: far more than any detection delay (4.5 ms before
-/// issue 16's prediction), far less than a stance or flight (90 ms, 40 ms).
+/// the same event, s: far more than any detection delay (4.5 ms without
+/// the estimator's contact prediction), far less than a stance or flight
+/// (90 ms, 40 ms).
 pub const CONTACT_MATCH_WINDOW_S: f64 = 0.02;
 
 /// The phase estimator's touchdowns and liftoffs against the plant's.

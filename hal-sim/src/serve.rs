@@ -1,6 +1,6 @@
 //! `hopper-sim serve --tcp ADDR`: the virtual robot on a TCP socket, in
 //! real time (or `--speed N` times it), so `hopper-link` can be learned and
-//! tested without hardware (issue 17).
+//! tested without hardware.
 //!
 //! One client at a time. The loop runs the periods that are due by the
 //! wall clock, hands the bytes that arrived since the last batch to its

@@ -1,4 +1,4 @@
-//! Bad input at the edges (issue 6): each class of bad configuration,
+//! Bad input at the edges: each class of bad configuration,
 //! flag or parameter set gives exit status 2, exactly one
 //! `hopper-sim: error:` line naming the field, and no output directory.
 

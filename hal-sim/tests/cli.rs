@@ -1,4 +1,4 @@
-//! The `hopper-sim` command-line contract (issue 2): flags, JSON keys,
+//! The `hopper-sim` command-line contract: flags, JSON keys,
 //! output files, and clear errors for bad input.
 
 // Test helpers may panic on impossible setup errors: that is a failed test.

@@ -1,4 +1,4 @@
-//! The design tools of issue 19 on the command line: `hopper-sim spring`,
+//! The design tools on the command line: `hopper-sim spring`,
 //! `hopper-sim sweep --shard` and `sweep merge`, `hopper-sim design`.
 
 // Test helpers may panic on impossible setup errors: that is a failed test.
@@ -264,7 +264,7 @@ fn identify_recovers_the_frictions_and_the_stance_torque() {
     assert!(dir.path().join("plot").join("identify.png").is_file());
 }
 
-/// `planar run --json` (issue 20): 2 m/s passive for 5 s keeps its apexes
+/// `planar run --json`: 2 m/s passive for 5 s keeps its apexes
 /// within 2 cm of the design's; 4 m/s passive falls within 5 s.
 #[test]
 fn planar_run_json() {
@@ -285,7 +285,7 @@ fn planar_run_json() {
     assert_eq!(o.status.code(), Some(2));
 }
 
-/// `planar stability --json` (issue 20): the 4 m/s fixed points, passive
+/// `planar stability --json`: the 4 m/s fixed points, passive
 /// and with K_c = 1000, their growth per hop (5.51 and 1.230), and
 /// `planar run --start fixed-point` holding the stabilised gait for 30 s
 /// (the design's apex falls within 10 s) with the stabiliser's force at
@@ -362,7 +362,7 @@ fn planar_stability_json() {
     }
 }
 
-/// `planar run --model appendix-a` (issue 20): with no Appendix A terms it
+/// `planar run --model appendix-a`: with no Appendix A terms it
 /// gives the section 2.2 runner's apexes (1e-9 m); a 0.5 kg toe mass
 /// makes the touchdowns and the liftoffs' pick-up take energy; terms are
 /// refused by their flag out of range or without the model.

@@ -376,7 +376,7 @@ proptest! {
     }
 }
 
-/// The hoist's clamp (issue 18's bring-up mounts): the body stays put
+/// The hoist's clamp (the bring-up routines' mount): the body stays put
 /// whatever the motor does, the nut moves against the spring, the stops'
 /// impacts go into the clamp, and the books close.
 #[test]

@@ -1,4 +1,4 @@
-//! `hopper-sim run --scenario` and `hopper-sim sweep` (issue 5): scenario
+//! `hopper-sim run --scenario` and `hopper-sim sweep`: scenario
 //! files, flag precedence, sweep output and clean failures on bad input.
 
 // Test helpers may panic on impossible setup errors: that is a failed test.

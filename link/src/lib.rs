@@ -1,4 +1,4 @@
-//! The host end of the hopper's link (issue 17): a [`Client`] over a serial
+//! The host end of the hopper's link: a [`Client`] over a serial
 //! port or a TCP socket that speaks [`hopper_protocol`] to the board, the
 //! QEMU image or `hopper-sim serve`.
 //!

@@ -1,4 +1,4 @@
-//! `hopper-link`: operate the hopper from a host (issue 17). One client for
+//! `hopper-link`: operate the hopper from a host. One client for
 //! the board (`--serial PORT`), the QEMU image and the simulator's virtual
 //! robot (`--tcp ADDR`). See the README's "Operating the robot" and
 //! docs/link.md.
@@ -92,8 +92,8 @@ enum Cmd {
         #[arg(long)]
         out: PathBuf,
     },
-    /// Run a bring-up routine on the robot, disarmed (issue 18, in this
-    /// order on a new robot; docs/board.md): `sensors` (raw codes, noise,
+    /// Run a bring-up routine on the robot, disarmed (in this order on a
+    /// new robot; docs/board.md): `sensors` (raw codes, noise,
     /// still encoders), `height` (standing: the height encoder's zero),
     /// then on the hoist with the toe free `direction` (a current pulse:
     /// motor, encoder and load cell the right way round), `home` (the nut

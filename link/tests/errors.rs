@@ -1,5 +1,5 @@
-//! The client's one clear error for each way a connection can fail
-//! (issue 17): nobody listening, a robot that never answers, another
+//! The client's one clear error for each way a connection can fail:
+//! nobody listening, a robot that never answers, another
 //! protocol version.
 
 use hopper_link::{Client, Target};

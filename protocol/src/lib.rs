@@ -1,5 +1,5 @@
 //! The link protocol between a host (`hopper-link`, tests) and a robot (the
-//! board, the QEMU image, `hopper-sim serve`), issue 17.
+//! board, the QEMU image, `hopper-sim serve`).
 //!
 //! `no_std` and allocation-free, so the firmware and the host share one
 //! implementation:
@@ -757,7 +757,7 @@ mod tests {
             energy_j: 60.0,
             command_a: 33.7,
         });
-        // The budget of issue 17: 1 kHz of full records at 921,600 baud
+        // The link's budget: 1 kHz of full records at 921,600 baud
         // (92,160 bytes/s) needs frames of at most 92 bytes.
         let n = frame(&t).len();
         std::println!("telemetry frame: {n} bytes");

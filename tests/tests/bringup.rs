@@ -1,4 +1,4 @@
-//! Issue 18's bring-up routines on a mis-calibrated simulated robot, run
+//! The bring-up routines on a mis-calibrated simulated robot, run
 //! through the period runner as the link runs them: what they find against
 //! the truth, their refusals, and the amplifier when something goes wrong.
 

@@ -76,8 +76,8 @@ fn energy_apex_canonical_run_converges_and_matches_its_snapshot() {
     .unwrap();
     // The first hops overshoot the dip (the law sheds the drop's surplus
     // energy), then the apex climbs back, overshoots by 6 % and stays
-    // within 2 % of the target: from hop 15 of 33 today (26 before issue
-    // 16's zero preload and predicted contact; the issue asks for <= 15).
+    // within 2 % of the target: from hop 15 of 33 (the requirement is at
+    // most 15).
     let htc = s.hops_to_converge.unwrap();
     assert!(htc <= 15, "converged at hop {htc}");
     for h in last(&s, 5) {

@@ -1,4 +1,4 @@
-//! Issue 16: contact detection against the simulator's ground truth, and
+//! Contact detection against the simulator's ground truth, and
 //! supervisor limits that hold at every control rate.
 //!
 //! The phase estimator predicts touchdown and liftoff from the height
@@ -113,8 +113,9 @@ fn sensor_only_detection_is_milliseconds_late() {
 }
 
 /// The supervisor's per-period limits scale with the period: from 1 kHz to
-/// 100 kHz no run raises a fault (before issue 16: `encoder-jump` at 1 kHz,
-/// `encoder-frozen` at 40 and 100 kHz), and the laws still hop.
+/// 100 kHz no run raises a fault (limits fixed per period would raise
+/// `encoder-jump` at 1 kHz and `encoder-frozen` at 40 and 100 kHz), and
+/// the laws still hop.
 #[test]
 fn no_false_fault_from_1_to_100_khz() {
     for hz in [1e3, 2e3, 4e4, 1e5] {

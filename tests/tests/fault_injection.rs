@@ -1,4 +1,4 @@
-//! Fault injection (issue 6): every kind `hopper-sim run --inject KIND@TIME`
+//! Fault injection: every kind `hopper-sim run --inject KIND@TIME`
 //! accepts, through the same path (`ControllerSpec::injections`, applied by
 //! `FirmwareController` each period), in closed loop on the design plant.
 //!

@@ -1,4 +1,4 @@
-//! The `shaped` controller (issue 7) in the closed loop: the firmware's
+//! The `shaped` controller in the closed loop: the firmware's
 //! control crate on the mock HAL (quantisation, default noise, amplifier
 //! lag) against the plant. Convergence to the thesis's 0.15 m (70 J) apex,
 //! no stop impacts, robustness to a 20 % error between the controller's
@@ -61,9 +61,8 @@ fn shaped_reaches_and_holds_the_thesis_target_without_stop_impacts() {
     .unwrap();
     assert!(holds_target(&s, 10), "{:?}", s.apex_heights_m);
     let htc = s.hops_to_converge.unwrap();
-    // 9 with the design preset of issue 16 (no preload, predicted contact;
-    // the issue asks for <= 10); 14 before it, 19 before the outer loop's
-    // anti-windup and the first-descent spin-up.
+    // 9 with the design preset (no preload, predicted contact); the
+    // requirement is at most 10.
     assert!(htc <= 10, "converged at hop {htc}");
     assert!(s.faults.is_empty(), "{:?}", s.faults);
     // Within the actuator's limits: current limit, stroke.
@@ -151,7 +150,7 @@ fn shaped_is_robust_to_twenty_percent_model_error() {
     for (name, plant, model) in cases {
         let s = sim("shaped", plant, Some(model), 0.05, 15.0);
         assert!(holds_target(&s, 5), "{name}: {:?}", s.apex_heights_m);
-        // 9-18 hops (18: the model's M +20 %; 11-26 before issue 16).
+        // 9-18 hops (18: the model's M +20 %).
         let htc = s.hops_to_converge.unwrap_or(usize::MAX);
         assert!(htc <= 20, "{name}: converged at hop {htc}");
         assert!(s.faults.is_empty(), "{name}: {:?}", s.faults);

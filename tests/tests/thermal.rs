@@ -1,8 +1,9 @@
-//! The motor's thermal protection in closed loop (issue 18,
-//! `hopper_control::thermal`): the two overloads the issue names trip when
-//! the model says they must, derating first and with 0 A after the fault;
-//! hopping within the motor's thermal budget never derates; and a load
-//! the derated limit can carry settles instead of tripping.
+//! The motor's thermal protection in closed loop
+//! (`hopper_control::thermal`): the two overloads it guards against (a law
+//! driving current while standing on the ground, the nut held on its stop)
+//! trip when the model says they must, derating first and with 0 A after
+//! the fault; hopping within the motor's thermal budget never derates; and
+//! a load the derated limit can carry settles instead of tripping.
 
 // Test helpers may panic on impossible setup errors: that is a failed test.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
@@ -95,7 +96,7 @@ fn trips_as_the_model_says(r: &RunResult, kt: f64, derates: bool) -> (f64, f64) 
 
 #[test]
 fn standing_on_the_ground_trips_within_the_models_time() {
-    // The issue's case: energy-apex standing on the ground (toe 1 mm up at
+    // The first overload: energy-apex standing on the ground (toe 1 mm up at
     // the start) drives about 32 A RMS without hopping.
     let p = Params::design();
     let r = sim("energy-apex", p, 0.001, 0.05, 12.0, &[]);
@@ -106,7 +107,7 @@ fn standing_on_the_ground_trips_within_the_models_time() {
 
 #[test]
 fn nut_held_on_its_stop_derates_and_without_derating_trips_within_the_models_time() {
-    // The issue's other case: modified torque on the identified machine
+    // The second overload: modified torque on the identified machine
     // holds the nut on its stop at about 20.9 A from 2.25 s. The derating
     // brings it down to what the winding carries, just under the trip.
     let p = Params::identified();

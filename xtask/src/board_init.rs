@@ -1,4 +1,4 @@
-//! The board image's `init` executed in QEMU (issue 18): `board.rs` runs
+//! The board image's `init` executed in QEMU: `board.rs` runs
 //! on no test rig otherwise, since the QEMU images replace the board with
 //! simulated I/O.
 //!

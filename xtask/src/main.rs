@@ -49,24 +49,20 @@ mod session;
 
 const TARGET: &str = "thumbv7em-none-eabihf";
 
-/// Flash budget for the board image with defmt (text + data), bytes: 80 KiB
-/// of the STM32F405's 1 MiB. It was 32 KiB while the board could only run
-/// its compile-time default controller, and 40 KiB once every controller's
-/// constructor and validation was in the image, chosen at run time (33.8 KB
-/// after issue 15, 35.7 KB after issue 16). The host link of issue 17
-/// brought it to 68.4 KB: the postcard encoders and decoders of every
-/// message, the endpoint, the parameter table's names and units for
-/// `params list` (its docs stay on the host: 6 KB less), the USART driver,
-/// and `info`-level defmt logging. Issue 18's thermal protection (the
-/// model, its ten parameters, the link's thermal request), e-stop debounce
-/// and boot report brought it to 74.0 KB, and its bring-up routines (the
-/// tare, then the direction check, homing, the spring sweep and the height
-/// zero with their reports) to 82.9 KB, and saving the calibration to
-/// flash (sequential-storage's map, monomorphised for the internal flash,
-/// and the driver) to 107.1 KB, 105.3 KB once init built the capture in place (opt-level "z" for the store's crates saved
-/// only 1.6 KB: under fat LTO the generic code is the application's):
-/// 128 KiB, of the 768 KiB the image may take (the last two sectors are
-/// the store's).
+/// Flash budget for the board image with defmt (text + data), bytes:
+/// 128 KiB of the 768 KiB the image may take (the last two 128 KiB
+/// sectors of the STM32F405's 1 MiB hold the saved calibration,
+/// `memory.x`). The image holds every controller's constructor and
+/// validation (the controller is chosen at run time), the host link (the
+/// postcard encoders and decoders of every message, the endpoint, the
+/// parameter table's names and units for `params list`; its docs stay on
+/// the host), the USART driver, the thermal protection, the e-stop
+/// debounce, the boot report, the bring-up routines and the flash store
+/// (sequential-storage's map, monomorphised for the internal flash, and
+/// the driver), with `info`-level defmt logging; `cargo xtask size` prints
+/// what it takes. The store's crates are not built for size: `opt-level =
+/// "z"` for them saves only 1.6 KB, since under fat LTO their generic code
+/// is the application's. How the image grew: docs/history.md.
 const FLASH_BUDGET_BYTES: u64 = 128 * 1024;
 /// Static RAM budget (data + bss) without the telemetry capture buffer, bytes.
 const RAM_BUDGET_BYTES: u64 = 16 * 1024;
@@ -275,7 +271,7 @@ fn test(root: &Path) -> Result<(), String> {
             TARGET,
         ]),
     )?;
-    // The 12 MHz crystal profile (issue 18): its PLL constants pass the
+    // The 12 MHz crystal profile: its PLL constants pass the
     // same compile-time checks.
     mcu_clippy(
         root,
@@ -290,7 +286,7 @@ fn test(root: &Path) -> Result<(), String> {
         "clippy (MCU target, QEMU variant)",
         &["--no-default-features", "--features", "qemu-sim"],
     )?;
-    // The on-target self-test image (issue 18) links: built here, before
+    // The on-target self-test image links: built here, before
     // the board image's own build (the size check) overwrites `hopper-fw`.
     mcu_clippy(
         root,
@@ -396,7 +392,8 @@ fn size(root: &Path) -> Result<(), String> {
 }
 
 /// Size of the telemetry capture buffer, bytes: the board's `init` local
-/// `capture` (built in place since issue 18; a shared resource before).
+/// `capture` (built in place; a shared resource named `capture` matches
+/// too).
 fn capture_bytes(llvm_size: &Path, elf: &Path) -> Result<u64, String> {
     let nm = llvm_size.with_file_name("llvm-nm");
     let out = Command::new(&nm)

@@ -1,11 +1,11 @@
-//! The scripted link session of issue 17 (`tests/link-session.txt`), run by
+//! The scripted link session (`tests/link-session.txt`), run by
 //! the real `hopper-link` binary against a robot: the QEMU link image
 //! (`cargo xtask qemu`, the `qemu-link:` line) and `hopper-sim serve` (the
 //! `link-sim:` line, in `cargo xtask test`).
 //!
 //! The session's own `!` lines make refusals part of the script (the
 //! client exits with failure if one is accepted, or if any other command
-//! fails); on top of that this checks the figures the issue asks for:
+//! fails); on top of that this checks the session's figures:
 //! the recorded apexes converge to the target within 2%, the disarm's
 //! next record commands 0 A, the link-loss disarm comes within the
 //! timeout, garbage on the line is counted and latches no fault, and the
@@ -21,7 +21,7 @@ use crate::{build_executables, cargo};
 
 /// The session's target apex, m (`params set target_apex_m 0.12`).
 const TARGET_APEX_M: f64 = 0.12;
-/// Convergence tolerance of the recorded apexes (issue 17: within 2%).
+/// Convergence tolerance of the recorded apexes (within 2%).
 const APEX_TOLERANCE: f64 = 0.02;
 /// Apexes at the end of the recording that must all be within tolerance.
 const LAST_APEXES: usize = 5;

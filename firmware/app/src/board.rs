@@ -377,7 +377,7 @@ pub fn init(
     //    ADC powered and settled.
     dp.TIM4.cr1().modify(|_, w| w.cen().enabled());
 
-    // 9. The host link (issue 17): USART1 on PA9/PA10.
+    // 9. The host link: USART1 on PA9/PA10.
     let serial = crate::serial::Serial::new(
         dp.USART1,
         &dp.RCC,

@@ -1,4 +1,4 @@
-//! The board's saved calibration (issue 18): flash sectors 10 and 11
+//! The board's saved calibration: flash sectors 10 and 11
 //! (0x080C_0000..0x0810_0000, 128 KiB each, kept out of the image by
 //! `memory.x`) under [`hopper_store::Store`], written only in `init`.
 //!

@@ -1,19 +1,37 @@
 //! `hopper-fw`: the RTIC 2 controller firmware for the hopper, on an STM32F405.
 //!
-//! Two builds of the same control period
-//! ([`hopper_control::runner::PeriodRunner`], which the host simulator runs
-//! too); they differ only in their I/O and what paces them:
+//! One binary, four `#[rtic::app]`s, chosen by Cargo feature (see
+//! `Cargo.toml`); every image but the self-test runs the same control
+//! period ([`hopper_control::runner::PeriodRunner`], which the host
+//! simulator runs too), and they differ in their I/O and what paces them:
 //!
-//! * `--features board` (the default): the real board. A hardware timer
-//!   (TIM4) triggers the ADC's injected conversions at `CONTROL_HZ`; their
-//!   end-of-conversion interrupt runs the control task with fresh samples.
-//!   See [`board`] for clocks, pins and the watchdog.
-//! * `--features qemu-sim` (takes precedence): QEMU's `netduinoplus2`. The
-//!   `no_std` plant and sensor models of `hopper-plant` stand in for the
-//!   hardware behind the same [`hopper_control::hal::HopperIo`] trait;
-//!   SysTick paces the control task; the scripted scenario ends with a
-//!   semihosting exit.
+//! * the board image (`board`, the default feature): the real board. A
+//!   hardware timer (TIM4) triggers the ADC's injected conversions at
+//!   `CONTROL_HZ`; their end-of-conversion interrupt runs the control task
+//!   with fresh samples; the host link on USART1; the saved calibration in
+//!   flash ([`flash`]). See [`board`] for clocks, pins and the watchdog.
+//!   Two variants of it: `--features hse-12mhz` for boards with a 12 MHz
+//!   crystal (the same image, other PLL constants), and `--features
+//!   fault-test` for `cargo xtask board-init`, which moves the stack
+//!   pointer off the SRAM after init to exercise the HardFault entry
+//!   (never for a board).
+//! * the self-test image (`--features selftest`): the board's `init`, then
+//!   the loopback harness checks of [`hopper_control::selftest`] instead of
+//!   the controller (docs/board.md, "Self-test"). Never with the amplifier
+//!   connected.
+//! * the QEMU scenario image (`--no-default-features --features qemu-sim`;
+//!   `qemu-sim` takes precedence over `board`): QEMU's `netduinoplus2`.
+//!   The `no_std` plant and sensor models of `hopper-plant` stand in for
+//!   the hardware behind the same [`hopper_control::hal::HopperIo`] trait;
+//!   SysTick paces the control task; the scripted scenario
+//!   (`HOPPER_QEMU_SCENARIO` at build time: `energy-apex` or `shaped`)
+//!   ends with a semihosting exit. `cargo xtask qemu` runs it.
+//! * the QEMU link image (`--features qemu-link`, which turns on
+//!   `qemu-sim`): the virtual robot (`hopper_plant::robot::VirtualRobot`)
+//!   behind the host link on USART1, disarmed until `hopper-link` arms it.
+//!   `cargo xtask qemu` runs the scripted link session against it.
 //!
+//! The panic-never link check is another binary (`src/bin/panic-check.rs`).
 //! On the host this crate compiles to a stub `main` that says so, which keeps
 //! `cargo clippy --workspace --all-targets` working.
 //!
@@ -31,12 +49,14 @@
 //! At reset the amplifier-enable pin (PB0) floats and the external pull-down
 //! keeps the amplifier off; `init` drives it low before anything else. The
 //! panic handler and the HardFault handler drive it low first thing.
-//! The period runner starts disarmed (`hopper_control::arming`, issue 17):
-//! the board build writes 0 A with the amplifier off until an arm command
-//! is accepted, and nothing in this build sends one yet (the link of issue
-//! 17 will), so a flashed board watches its sensors and never moves the
-//! motor. The QEMU build's scenario arms once, untethered, at the first
-//! period.
+//! The period runner starts disarmed (`hopper_control::arming`): the board
+//! image writes 0 A with the amplifier off until the host link arms it
+//! (`hopper-link arm`; among its checks a live link, a tare or a saved
+//! calibration, and homing since boot), so a freshly flashed board moves
+//! the motor only when the host asks: an arm, or a motor-driving bring-up
+//! routine (`hopper-link calibrate`, disarmed, at up to
+//! `bringup.current_limit_a`). The QEMU scenario image's scenario arms
+//! once, untethered, at the first period.
 #![cfg_attr(target_os = "none", no_std, no_main)]
 #![deny(unsafe_code)]
 
@@ -315,14 +335,13 @@ pub mod qemu {
     /// Periods per 100 us of virtual time in both QEMU images: a period's
     /// deadline is 4,200 SysTick ticks, 25,000 instructions. Robot time is
     /// still 100 us a period (the runner's and the plant's `dt`; the plant
-    /// advances with SysTick stopped). Most of QEMU's wall time was the
-    /// busy idle between periods: at 1 (100,000 instructions a period) the
-    /// energy-apex scenario took 44 s. The period's work within the
-    /// deadline is the step (at most about 1,100 instructions), the link's
-    /// (at most about 10,800) and the simulated sensors' noise (soft `f64`,
-    /// the ADC's and the timers' work on the board); at 6 (16,667
-    /// instructions, a 168 MHz core's 100 us at one instruction per cycle)
-    /// the sensor model overran it in 2 of 120,000 periods.
+    /// advances with SysTick stopped). Not 1 (100,000 instructions a
+    /// period): then most of QEMU's wall time is the busy idle between
+    /// periods. The period's work within the deadline is the step (at most
+    /// about 1,100 instructions), the link's (at most about 10,800) and the
+    /// simulated sensors' noise (soft `f64`, the ADC's and the timers' work
+    /// on the board); not 6 (16,667 instructions, a 168 MHz core's 100 us
+    /// at one instruction per cycle): the sensor model can overrun that.
     pub const PACE: u32 = 4;
     /// SysTick ticks per control period.
     pub const PERIOD_TICKS: u32 = SYSTICK_HZ / crate::control::CONTROL_HZ / PACE;
@@ -590,8 +609,8 @@ mod app {
     #[shared]
     struct Shared {
         /// The capture, frozen around the first fault: a static built in
-        /// place (32 KiB: built in `init` and moved, it was most of `init`'s
-        /// 81 KB stack peak).
+        /// place (32 KiB: built in `init` and moved, it would be most of
+        /// `init`'s stack peak).
         capture: &'static mut Capture,
     }
 
@@ -639,7 +658,7 @@ mod app {
         cfg.calibration.height_counter_bits = board::ENCODER_COUNTER_BITS;
         // The calibration offsets are placeholders until a tare or a saved
         // calibration loads, and the incremental motor encoder boots
-        // wherever the nut stands: no arming before both (issue 18).
+        // wherever the nut stands: no arming before both.
         cfg.arming.require_tare = true;
         cfg.arming.require_home = true;
         // The fault test's calibrated zero: the fault handlers must write
@@ -1184,8 +1203,8 @@ mod app {
             START_APEX_M,
         );
         // The scenario is the operator: no link (untethered), and one arm
-        // request, decided at the first period like any other (issue 17:
-        // disarmed at boot).
+        // request, decided at the first period like any other (the runner
+        // boots disarmed).
         cfg.arming.untethered = true;
         let (Ok(plant), Ok(mut runner)) = (
             Plant::new(params, START_APEX_M),
@@ -1407,7 +1426,7 @@ mod app {
     struct Shared {
         /// The capture, frozen around a fault: a static built in place, as
         /// the board's (32 KiB; inside the robot, built in `init` and moved,
-        /// it took `init`'s stack past the room flip-link leaves).
+        /// it would take `init`'s stack past the room flip-link leaves).
         capture: &'static mut Capture,
     }
 

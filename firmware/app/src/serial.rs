@@ -1,4 +1,4 @@
-//! The host link's transport on USART1 (issue 17), for the board and the
+//! The host link's transport on USART1, for the board and the
 //! QEMU image alike: PA9 TX, PA10 RX (AF7), 8N1 at [`LINK_BAUD`].
 //!
 //! The bytes go through two lock-free single-producer queues, so neither

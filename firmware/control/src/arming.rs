@@ -1,4 +1,4 @@
-//! Arming: whether the amplifier may be enabled at all (issue 17).
+//! Arming: whether the amplifier may be enabled at all.
 //!
 //! The supervisor says whether the output is *safe*; arming says whether
 //! the operator *asked* for motion. The period runner
@@ -44,8 +44,9 @@ pub struct ArmingConfig {
     /// Default 0.05.
     pub still_velocity_mps: f32,
     /// Refuse to arm until a tare (`hopper-link calibrate tare`) has
-    /// succeeded since boot. Default false; the board sets it, since its
-    /// calibration offsets are not saved yet and boot at placeholders.
+    /// succeeded since boot or a saved calibration was loaded at boot.
+    /// Default false; the board sets it, since without either its offsets
+    /// are placeholders.
     pub require_tare: bool,
     /// Refuse to arm until the nut was homed since boot
     /// ([`crate::bringup::Routine::Home`], which needs a direction check

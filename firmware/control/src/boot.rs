@@ -1,4 +1,4 @@
-//! What the board found at boot (issue 18): why the MCU reset, whether the
+//! What the board found at boot: why the MCU reset, whether the
 //! brown-out reset is on, whether the core runs on the clock its profile
 //! names. The board fills a [`BootReport`] in `init`; the link reports it
 //! (`hopper-link status`), and arming refuses while the clock fell back or

@@ -1,5 +1,5 @@
-//! Bring-up routines the firmware runs on command while disarmed (issue
-//! 18), `hopper-link calibrate ...`: they measure with the amplifier off
+//! Bring-up routines the firmware runs on command while disarmed
+//! (`hopper-link calibrate ...`): they measure with the amplifier off
 //! and report what they measured.
 //!
 //! - [`Routine::SensorCheck`]: raw codes of the load cell and the
@@ -65,7 +65,7 @@
 //! nut moves at the set speed whatever the spring pushes.
 //!
 //! Saving the results is `crate::persist`'s. Not built: the stroke to the
-//! lower stop (optional in issue 18).
+//! lower stop.
 
 use crate::hal::RawSample;
 use crate::laws::InvalidField;

@@ -404,7 +404,7 @@ impl Converter {
         &self.cal
     }
 
-    /// Moves the encoders' origin (issue 18's homing and height zero): from
+    /// Moves the encoders' origin (the homing and height-zero routines): from
     /// the next sample on the nut position reads `nut_m` less and the body
     /// height `height_m` more than it would, to the nearest count.
     pub fn shift_origin(&mut self, nut_m: f32, height_m: f32) {

@@ -1,4 +1,4 @@
-//! The e-stop input, debounced (issue 18).
+//! The e-stop input, debounced.
 //!
 //! The e-stop is the firmware's second channel: the button also breaks the
 //! amplifier enable in hardware (docs/safety.md, "E-stop"). A press counts

@@ -667,7 +667,7 @@ mod tests {
             .collect()
     }
 
-    /// Issue 16: touchdown and liftoff come at the sample nearest the
+    /// Touchdown and liftoff come at the sample nearest the
     /// height's crossing of `l0` (prediction), at 1 kHz and 10 kHz; the
     /// sensors alone are many samples late at touchdown.
     #[test]
@@ -717,7 +717,7 @@ mod tests {
         Ok(())
     }
 
-    /// Issue 16: a height origin that puts the ground too high (the robot
+    /// A height origin that puts the ground too high (the robot
     /// held up, lowered by hand): the predicted touchdown is not confirmed
     /// and is withdrawn with a liftoff, prediction stops; a touchdown the
     /// sensors find with the height agreeing turns it back on.

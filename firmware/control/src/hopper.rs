@@ -60,11 +60,11 @@ pub struct HopperConfig {
     pub strategy: Strategy,
     /// Desired apex toe height `H_D`, m, in `0..=1`. Default 0.05.
     pub target_apex_m: f32,
-    /// Arming (issue 17): the period runner's gate on the output.
+    /// Arming: the period runner's gate on the output.
     pub arming: ArmingConfig,
-    /// The e-stop input's debouncing (issue 18).
+    /// The e-stop input's debouncing.
     pub estop: crate::debounce::DebounceConfig,
-    /// The motor-driving bring-up routines (issue 18).
+    /// The motor-driving bring-up routines.
     pub bringup: crate::bringup::BringupConfig,
 }
 
@@ -786,7 +786,7 @@ mod tests {
         }
     }
 
-    /// Issue 6 properties over random parameter sets, gains, targets and
+    /// Properties over random parameter sets, gains, targets and
     /// sensor streams: 10 000 cases each by default
     /// ([`crate::proptest_support::cases`]).
     mod properties {

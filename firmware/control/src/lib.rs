@@ -9,11 +9,12 @@
 //! Equation numbers refer to the thesis (`thesis.md`); where it is ambiguous
 //! or wrong, `MODEL.md` records the reading used here.
 //!
-//! Contents:
+//! Contents (every module this file declares):
 //! - [`hal`]: the I/O trait ([`hal::HopperIo`]) the board and the simulator implement;
 //! - [`calibration`]: raw counts and codes to SI, current to DAC code;
 //! - [`filter`]: the filtered derivative of thesis eq 4.1;
-//! - [`estimator`]: flight/stance phase, touchdown, liftoff, apex, bottom;
+//! - [`estimator`]: flight/stance phase, touchdown, liftoff, apex, bottom,
+//!   and the filtered velocities;
 //! - [`energy`]: the energy estimate of eqs 2.44-2.45;
 //! - [`model`]: the parameters the controller believes and `E_D` (eq 2.43);
 //! - [`params`]: every runtime parameter defined once (name, unit, range,
@@ -22,10 +23,30 @@
 //!   with the flight PD of eq 4.4, energy-apex, shaped) behind one enum;
 //! - [`pd_design`]: flight PD gain design (eqs 4.3-4.18);
 //! - [`supervisor`]: latched faults and the current clamp;
-//! - [`telemetry`]: the per-step record ring and the per-hop ledger;
+//! - [`thermal`]: the motor's winding temperature estimated from the
+//!   commanded current: derate, then fault;
+//! - [`debounce`]: the e-stop input, debounced;
+//! - [`arming`]: whether the operator asked for motion, the gate on every
+//!   period's output;
+//! - [`bringup`]: the routines run on command while disarmed (sensor check,
+//!   tare, height zero, direction check, homing, spring sweep, weight);
+//! - [`telemetry`]: the per-step record, the capture that keeps the last of
+//!   them (frozen around a fault) and the per-hop energy ledger;
 //! - [`hopper`]: the control step, [`hopper::Hopper::step`];
 //! - [`runner`]: the one period runner the board, QEMU and the host share;
-//! - [`watchdog`]: when the period may feed the hardware watchdog.
+//! - [`watchdog`]: when the period may feed the hardware watchdog;
+//! - [`deadman`]: the hardware deadman on the amplifier enable, its
+//!   retrigger logic;
+//! - [`link`]: the robot's end of the host link, split between the control
+//!   period and the lower-priority link task;
+//! - [`persist`]: the saved calibration as one self-checking record;
+//! - [`boot`]: what the board found at boot (reset cause, brown-out reset,
+//!   clock);
+//! - [`selftest`]: the on-target self-test on the loopback harness;
+//! - `num` (crate-private): `f32` clamp and max by plain comparison for
+//!   the Cortex-M4F;
+//! - `proptest_support` (crate-private, tests only): the property tests'
+//!   runner and case count.
 #![no_std]
 // Panic-free, enforced: no indexing that can go out of bounds, no explicit
 // panics, no unwrap/expect outside the tests. The `panic-never` check in
@@ -120,7 +141,8 @@ pub(crate) mod proptest_support {
         }
     }
 
-    /// Cases per property in the default run (issue 6 asks for at least 10 000).
+    /// Cases per property in the default run: the minimum the project sets
+    /// for every property (proptest's own default is 256).
     pub const MIN_CASES: u32 = 10_000;
 
     /// Cases per property: `HOPPER_PROPTEST_CASES` when set, else

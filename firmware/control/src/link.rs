@@ -1888,7 +1888,8 @@ mod tests {
         );
     }
 
-    /// The scripted session of issue 17 at the library level (no transport):
+    /// The scripted link session (`tests/link-session.txt`) at the library
+    /// level (no transport):
     /// handshake, parameters, arm, a refused set, disarm, the e-stop, link
     /// loss and garbage on the line.
     #[test]

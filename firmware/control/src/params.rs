@@ -2,11 +2,12 @@
 //! default, whether it may change while the motor is driven, and a one-line
 //! doc.
 //!
-//! The configuration types' `Default` impls and their `validate` checks read
+//! Each parameter is declared once, in the `params!` list below. The
+//! configuration types' `Default` impls and their `validate` checks read
 //! these entries, the host tools (`hopper-sim`'s scenario files and sweeps)
-//! look parameters up here by name, the link of issue #10 exposes exactly
-//! [`TABLE`], and `docs/parameters.md` is generated from it (a test fails
-//! when the page is stale).
+//! look parameters up here by name, the link exposes exactly [`TABLE`], and
+//! `docs/parameters.md` is generated from it (a test fails when the page is
+//! stale).
 //!
 //! Every value is an `f32`: a flag is 0 or 1, a choice is the index of one
 //! of its names, a count is a whole number. [`get`] and [`set`] read and

@@ -1,4 +1,4 @@
-//! The saved calibration (issue 18): what `hopper-link save` keeps in
+//! The saved calibration: what `hopper-link save` keeps in
 //! flash and the firmware loads at boot, as one self-checking record.
 //!
 //! What is saved is the machine's own constants, every parameter of

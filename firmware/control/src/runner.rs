@@ -8,7 +8,7 @@
 //! 2. [`Hopper::step`]: conversion, estimator and eq 4.1 filters, energy
 //!    (eqs 2.44-2.45), the selected controller, the supervisor, the DAC code,
 //!    the hop ledger and the telemetry record (timed with the counter);
-//! 3. arming ([`Arming`], issue 17): the link timer, the disarm causes (a
+//! 3. arming ([`Arming`]): the link timer, the disarm causes (a
 //!    fault, the e-stop, link loss, a request) or a pending arm request, on
 //!    this period's measurements; while disarmed the output is 0 A, the
 //!    zero-current code and the amplifier off (disarmed at every boot);

@@ -1,4 +1,4 @@
-//! The on-target self-test (issue 18): for a user with a bare F405 board
+//! The on-target self-test: for a user with a bare F405 board
 //! and the loopback harness of docs/board.md, every peripheral path the
 //! firmware uses, checked in the order a fault would show it. The harness
 //! ties each output to an input:

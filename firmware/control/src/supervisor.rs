@@ -477,10 +477,9 @@ impl SupervisorConfig {
 
 /// The control period the per-period limits are stated for, s (10 kHz).
 /// [`Supervisor::check`] scales them to the period it is given, so 1 kHz
-/// and 100 kHz runs see the same physical limits (issue 16: at 40 kHz and
-/// above a fixed "no count in one period" tripped `encoder-frozen` on a
-/// healthy encoder, and at 1 kHz 64 counts per period tripped `encoder-jump`
-/// at 200 rad/s).
+/// and 100 kHz runs see the same physical limits (a fixed "no count in one
+/// period" would trip `encoder-frozen` on a healthy encoder at 40 kHz and
+/// above, and 64 counts per period `encoder-jump` at 200 rad/s at 1 kHz).
 pub const REFERENCE_PERIOD_S: f32 = 1.0e-4;
 
 /// Distance from a mechanical stop within which the nut may halt in one
@@ -1101,7 +1100,7 @@ mod tests {
         );
     }
 
-    /// Issue 16: the per-100-us limits scale with the period. At 100 kHz a
+    /// The per-100-us limits scale with the period. At 100 kHz a
     /// silent encoder at speed needs ten periods (100 us) to trip and one
     /// count per period is normal; at 1 kHz 300 counts in a period (940
     /// rad/s) are plausible and 700 are not.

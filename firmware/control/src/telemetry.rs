@@ -38,8 +38,8 @@ pub struct StepRecord {
 pub const CAPTURE_LEN: usize = 1024;
 
 /// The capture: the last `N` [`StepRecord`]s, frozen around the first
-/// fault (issue 17: a dump shows what led to the fault, not what the ring
-/// holds by the time someone asks).
+/// fault, so that a dump shows what led to the fault, not what the ring
+/// holds by the time someone asks.
 ///
 /// While no fault is latched it overwrites its oldest record. The period
 /// a fault first latches in starts a countdown of `N / 4` more records;

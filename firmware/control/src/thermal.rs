@@ -1,5 +1,5 @@
 //! The motor's winding temperature, estimated from the current the
-//! amplifier is told to drive: derate, then fault (issue 18).
+//! amplifier is told to drive: derate, then fault.
 //!
 //! The thesis gives no thermal data for its 80 W motor, and its hopping
 //! drives far more than any such motor's continuous current: 17 to 29 A RMS

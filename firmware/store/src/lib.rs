@@ -1,4 +1,4 @@
-//! The saved calibration in flash (issue 18): one record
+//! The saved calibration in flash: one record
 //! (`hopper_control::persist`, versioned and CRC-checked) under one key of
 //! a [`sequential_storage`] map, over any [`NorFlash`]. The map appends a
 //! new copy on each save and erases a page only when its range is full, so

@@ -83,7 +83,7 @@ pub struct SensorConfig {
     pub amp_tau_s: f64,
     /// What the load cell reads beyond the true spring force, N: its offset
     /// against the firmware's calibration (a mis-calibrated sensor for the
-    /// bring-up routines of issue 18). Default 0.
+    /// bring-up routines to find). Default 0.
     pub loadcell_bias_n: f64,
     /// What the potentiometer reads beyond the true leg compression, m.
     /// Default 0.
@@ -177,7 +177,8 @@ pub struct SimHal {
 impl SimHal {
     /// The height encoder's true origin, m: where the body really was at
     /// the firmware's first sample (by default where the calibration says;
-    /// another value is a mis-calibrated height zero, issue 18).
+    /// another value is a mis-calibrated height zero for the bring-up
+    /// routines to find).
     pub fn with_height_origin(mut self, z_m: f64) -> Self {
         self.height_origin_m = z_m;
         self

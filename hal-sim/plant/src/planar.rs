@@ -2,7 +2,7 @@
 //! Raibert): body of mass `m_b` and pitch inertia `J_b` with its centre at
 //! the hip, a leg of mass `m_l` and inertia `J_l` (centre at the hip) on a
 //! torsional hip spring `k_h`, a massless leg spring `k_l` of rest length
-//! `r_0`, no losses (issue 20).
+//! `r_0`, no losses.
 //!
 //! This module holds Table 2.2's parameters and the passive-dynamics design
 //! of sections 2.2.2.4-2.2.2.5: from the step period `T_step`, the stance

@@ -1,4 +1,4 @@
-//! The general planar runner of thesis Appendix A (issue 20): a trunk whose
+//! The general planar runner of thesis Appendix A: a trunk whose
 //! centre of mass is offset from the hip, a leg whose sprung mass sits
 //! along it, an unsprung point mass at the toe, a leg spring with its
 //! damper, a hip spring with its damper, and dry friction on the

@@ -1,4 +1,4 @@
-//! The virtual robot (issue 17): the firmware's period runner and link
+//! The virtual robot: the firmware's period runner and link
 //! endpoint on the plant and sensor models, behind a byte link. The QEMU
 //! link image and `hopper-sim serve` both run this one type; only what
 //! carries the bytes (QEMU's USART, a TCP socket) and what paces the
@@ -193,7 +193,7 @@ impl<H: HopperSlot> VirtualRobot<H> {
 }
 
 /// A robot whose firmware is configured for the nominal machine while the
-/// machine differs (issue 18): what the bring-up routines must find.
+/// machine differs: what the bring-up routines must find.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Miscalibration {
     /// The load cell reads this much beyond the true spring force, N.

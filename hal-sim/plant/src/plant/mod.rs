@@ -396,8 +396,8 @@ impl Plant {
         self.clamped
     }
 
-    /// Clamps the body where it is (a hoist or a test stand holds it, issue
-    /// 18's bring-up mounts): `z` stays put whatever the forces, until
+    /// Clamps the body where it is (a hoist or a test stand holds it, as the
+    /// bring-up routines' mounts do): `z` stays put whatever the forces, until
     /// [`Self::release_body`]; the nut still moves under the motor and the
     /// spring, so a bring-up routine can drive it. In flight the toe hangs
     /// free (the spring compression is `delta0 + p`); on the ground the
