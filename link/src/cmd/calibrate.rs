@@ -1,0 +1,156 @@
+//! `calibrate ROUTINE`: a bring-up routine on the robot and what it found.
+
+use super::common::get;
+use anyhow::{bail, Result};
+use hopper_link::Client;
+use hopper_protocol::{Request, Response};
+use std::time::{Duration, Instant};
+
+pub(crate) fn calibrate(c: &mut Client, routine: &str, seconds: f32) -> Result<()> {
+    use hopper_control::bringup::{CalState, Routine};
+    let r = Routine::ALL
+        .into_iter()
+        .find(|r| r.name() == routine)
+        .unwrap_or(Routine::SensorCheck);
+    let code = r as u8;
+    let was = (
+        get(c, "calibration.loadcell_offset_code")?,
+        get(c, "calibration.pot_offset_code")?,
+    );
+    let lc_gain = get(c, "calibration.loadcell_gain_n_per_code")?;
+    let pot_gain = get(c, "calibration.pot_gain_m_per_code")?;
+    let rate = get(c, "supervisor.spring_rate_n_per_m")?;
+    match c.request(Request::Calibrate {
+        routine: code,
+        seconds,
+    })? {
+        Response::Ok => {}
+        Response::Refused(why) => bail!("calibrate {routine} refused: {why}"),
+        r => bail!("unexpected answer {r:?}"),
+    }
+    // The measuring routines take `seconds` of robot time; the driving ones
+    // as long as their moves (homing across the whole stroke: 12 s).
+    let limit_s = if r.drives_motor() {
+        60.0
+    } else {
+        seconds * 20.0 + 5.0
+    };
+    let deadline = Instant::now() + Duration::from_secs_f32(limit_s);
+    let r = loop {
+        std::thread::sleep(Duration::from_millis(100));
+        let r = match c.request(Request::CalibrationReport)? {
+            Response::Calibration(r) => r,
+            r => bail!("unexpected answer {r:?}"),
+        };
+        if r.state != CalState::Running as u8 {
+            break r;
+        }
+        if Instant::now() > deadline {
+            bail!("calibrate {routine}: still running after {limit_s:.0} s");
+        }
+    };
+    let state = CalState::ALL
+        .get(usize::from(r.state))
+        .map_or("unknown", |s| s.name());
+    println!(
+        "calibrate {routine}: {state}: {} samples; encoders moved by {} (motor) and {} (height) counts",
+        r.samples, r.motor_span_counts, r.height_span_counts
+    );
+    println!(
+        "load cell: mean {:.2} codes, noise {:.2} codes ({:.2} N)",
+        r.loadcell_mean_code,
+        r.loadcell_std_code,
+        r.loadcell_std_code * lc_gain
+    );
+    println!(
+        "potentiometer: mean {:.2} codes, noise {:.2} codes ({:.3} mm)",
+        r.pot_mean_code,
+        r.pot_std_code,
+        r.pot_std_code * pot_gain * 1000.0
+    );
+    let b = match c.request(Request::BringupResults)? {
+        Response::BringupResults(b) => b,
+        r => bail!("unexpected answer {r:?}"),
+    };
+    print_results(routine, &b, r.state == CalState::Done as u8);
+    if routine == Routine::Weight.name() {
+        let w = match c.request(Request::Weighing)? {
+            Response::Weighing(w) => w,
+            r => bail!("unexpected answer {r:?}"),
+        };
+        print_weighing(&w);
+    }
+    if r.state != CalState::Done as u8 {
+        bail!("calibrate {routine} {state}");
+    }
+    if routine == Routine::Weight.name() {
+        println!(
+            "weight: calibration.loadcell_gain_n_per_code {lc_gain:.5} -> {:.5} N/code, supervisor.spring_rate_n_per_m {rate:.0} -> {:.0} N/m (applied)",
+            get(c, "calibration.loadcell_gain_n_per_code")?,
+            get(c, "supervisor.spring_rate_n_per_m")?
+        );
+    }
+    if r.loadcell_offset_code.is_finite() {
+        println!(
+            "tare: calibration.loadcell_offset_code {:.2} -> {:.2} codes ({:+.2} N), calibration.pot_offset_code {:.2} -> {:.2} codes ({:+.3} mm) (applied)",
+            was.0,
+            r.loadcell_offset_code,
+            (r.loadcell_offset_code - was.0) * lc_gain,
+            was.1,
+            r.pot_offset_code,
+            (r.pot_offset_code - was.1) * pot_gain * 1000.0
+        );
+    }
+    Ok(())
+}
+
+/// What a motor-driving or height routine found, one line each.
+fn print_results(routine: &str, b: &hopper_protocol::BringupResults, done: bool) {
+    let applied = if done { "applied" } else { "not applied" };
+    if b.peak_current_a > 0.0 {
+        println!("current: up to {:.2} A", b.peak_current_a);
+    }
+    if b.nut_travel_m.is_finite() && routine == "direction" {
+        println!(
+            "direction: a pulse down moved the nut {:+.3} mm and the load cell {:+.2} N",
+            b.nut_travel_m * 1000.0,
+            b.force_change_n
+        );
+    }
+    if b.nut_offset_m.is_finite() && routine == "home" {
+        println!(
+            "home: the upper stop was at {:+.3} mm in the motor encoder's frame; zeroed there ({applied})",
+            b.nut_offset_m * 1000.0
+        );
+    }
+    if b.spring_rate_n_per_m.is_finite() {
+        println!(
+            "spring: rate {:.0} N/m, force at zero compression {:+.2} N, fit RMS {:.2} N over {} points spanning {:.2} mm (1 sigma); supervisor.spring_rate_n_per_m ({applied})",
+            b.spring_rate_n_per_m,
+            b.spring_intercept_n,
+            b.fit_rms_n,
+            b.fit_points,
+            b.fit_span_m * 1000.0
+        );
+    }
+    if b.height_offset_m.is_finite() {
+        println!(
+            "height: the body height corrected by {:+.3} mm ({applied})",
+            b.height_offset_m * 1000.0
+        );
+    }
+}
+
+/// What the weighing found, one line.
+fn print_weighing(w: &hopper_protocol::WeighingInfo) {
+    if w.weight_n.is_finite() {
+        println!(
+            "weight: the robot weighs {:.2} N as the load cell reads it, {:.2} N as configured: the load cell reads {:+.2}%; stance friction {:.2} N; the body rose {:.2} mm",
+            w.weight_n,
+            w.configured_weight_n,
+            (w.weight_n / w.configured_weight_n - 1.0) * 100.0,
+            w.friction_n,
+            w.body_rise_m * 1000.0
+        );
+    }
+}

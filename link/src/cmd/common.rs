@@ -1,0 +1,170 @@
+//! Helpers of several commands: parameter reads, the robot's status and
+//! timing, the saved calibration, the real-time cost, and the list of the
+//! files written.
+
+use anyhow::{anyhow, bail, Result};
+use hopper_link::Client;
+use hopper_protocol::{CostStats, Name, Request, Response, TimingStats};
+use std::path::PathBuf;
+
+pub(crate) fn wire_name(name: &str) -> Result<Name> {
+    let mut n = Name::new();
+    n.push_str(name)
+        .map_err(|_| anyhow!("parameter name `{name}` is too long"))?;
+    Ok(n)
+}
+
+pub(crate) fn get(c: &mut Client, name: &str) -> Result<f32> {
+    read_param(c, name)?.map_err(|why| anyhow!("get {name}: {why}"))
+}
+
+/// A parameter's value, or the robot's reason for refusing to read it (a
+/// name it does not know, or one its configuration lacks); `Err` only when
+/// the link failed.
+pub(crate) fn read_param(c: &mut Client, name: &str) -> Result<std::result::Result<f32, String>> {
+    match c.request(Request::ParamGet {
+        name: wire_name(name)?,
+    })? {
+        Response::Value(v) => Ok(Ok(v)),
+        Response::Refused(why) => Ok(Err(why.to_string())),
+        r => bail!("unexpected answer {r:?}"),
+    }
+}
+
+pub(crate) fn status_of(c: &mut Client) -> Result<hopper_protocol::Status> {
+    match c.request(Request::Status)? {
+        Response::Status(s) => Ok(s),
+        r => bail!("unexpected answer {r:?}"),
+    }
+}
+
+/// A flag parameter, if the robot has it.
+pub(crate) fn flag(c: &mut Client, name: &str) -> Option<bool> {
+    get(c, name).ok().map(|v| v != 0.0)
+}
+
+pub(crate) fn timing_of(c: &mut Client) -> Result<TimingStats> {
+    match c.request(Request::Timing)? {
+        Response::Timing(t) => Ok(t),
+        r => bail!("unexpected answer {r:?}"),
+    }
+}
+
+pub(crate) fn stored_of(c: &mut Client) -> Result<hopper_protocol::StoredInfo> {
+    match c.request(Request::Stored)? {
+        Response::Stored(s) => Ok(s),
+        r => bail!("unexpected answer {r:?}"),
+    }
+}
+
+/// The saved calibration's state in words; `require_tare`: whether the
+/// robot's arming waits for a tare (`arming.require_tare`; `None`: unknown).
+pub(crate) fn stored_line(s: &hopper_protocol::StoredInfo, require_tare: Option<bool>) -> String {
+    let defaults = match require_tare {
+        Some(true) => "the defaults (tare before arming: arming.require_tare is 1)",
+        Some(false) => "the defaults",
+        None => "the defaults (tare before arming if arming.require_tare is 1)",
+    };
+    let boot = match s.boot {
+        0 => "no flash store on this robot".to_string(),
+        1 => format!("nothing saved: {defaults}"),
+        2 => format!("loaded from flash at boot ({} parameters)", s.entries),
+        _ => format!(
+            "the saved record was refused at boot ({}): {defaults}",
+            hopper_control::persist::LoadError::name_of(s.boot_error).unwrap_or("unknown")
+        ),
+    };
+    let save = match s.save {
+        0 => "",
+        1 => "; a save is pending",
+        2 => "; saved since boot",
+        3 => "; the last save FAILED",
+        _ => "; saved: written to flash at the next restart",
+    };
+    format!("{boot}{save}")
+}
+
+/// What the robot's real-time work cost, if its firmware reports it.
+pub(crate) fn cost_of(c: &mut Client) -> Result<Option<CostStats>> {
+    match c.request(Request::Cost) {
+        Ok(Response::Cost(k)) => Ok(Some(k)),
+        Ok(r) => bail!("unexpected answer {r:?}"),
+        // An older firmware does not know the request.
+        Err(_) => Ok(None),
+    }
+}
+
+/// The counter's unit for people.
+pub(crate) fn cost_unit(k: &CostStats) -> &'static str {
+    if k.counter_hz > 0 {
+        "cycles"
+    } else {
+        "instructions (QEMU; 0 on the host simulator)"
+    }
+}
+
+/// The `control interrupt:`, `serial interrupt:` and `link task:` lines
+/// of `status` and `flood`.
+pub(crate) fn cost_lines(k: &CostStats) -> [String; 3] {
+    let us = |n: u32| {
+        if k.counter_hz > 0 {
+            format!(" = {:.1} us", f64::from(n) * 1e6 / f64::from(k.counter_hz))
+        } else {
+            String::new()
+        }
+    };
+    [
+        format!(
+            "control interrupt: mean {} max {}{} {} (entry to exit: read, step, write, publish, at most one command); start jitter max {:.1} us",
+            k.isr_mean,
+            k.isr_max,
+            us(k.isr_max),
+            cost_unit(k),
+            f64::from(k.max_jitter_s) * 1e6
+        ),
+        format!(
+            "serial interrupt: max {}{} per interrupt, {} so far (preempts the control interrupt; on the board one byte each way an interrupt, about 18 a period at 921,600 baud; QEMU, with no baud rate, moves many in one)",
+            k.serial_max,
+            us(k.serial_max),
+            k.serial_count
+        ),
+        format!(
+            "link task: mean {} max {} per period, below the control interrupt (decode, answer, encode, build sets); {} period notes dropped",
+            k.link_mean, k.link_max, k.notes_dropped
+        ),
+    ]
+}
+
+pub(crate) fn print_written(paths: &[PathBuf]) {
+    println!(
+        "wrote {}",
+        paths
+            .iter()
+            .map(|p| p.display().to_string())
+            .collect::<Vec<_>>()
+            .join(", ")
+    );
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_saved_calibration_line_says_tare_only_when_required() {
+        let nothing = hopper_protocol::StoredInfo {
+            boot: 1,
+            boot_error: 0,
+            entries: 0,
+            save: 0,
+        };
+        assert_eq!(
+            stored_line(&nothing, Some(false)),
+            "nothing saved: the defaults"
+        );
+        assert_eq!(
+            stored_line(&nothing, Some(true)),
+            "nothing saved: the defaults (tare before arming: arming.require_tare is 1)"
+        );
+    }
+}

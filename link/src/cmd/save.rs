@@ -1,0 +1,48 @@
+//! `save`: the calibration to the robot's flash.
+
+use super::common::{flag, stored_line, stored_of};
+use anyhow::{bail, Result};
+use hopper_link::Client;
+use hopper_protocol::{Request, Response};
+use std::time::{Duration, Instant};
+
+/// `save`: the calibration to flash, and how it went.
+pub(crate) fn save(c: &mut Client) -> Result<()> {
+    // `busy`: a change (a routine's results, a set) is still being
+    // installed, a few periods at most: asked again for up to 1 s.
+    let deadline = Instant::now() + Duration::from_secs(1);
+    loop {
+        match c.request(Request::Save)? {
+            Response::Ok => break,
+            Response::Refused(why) if why.as_str() == "busy" && Instant::now() < deadline => {
+                std::thread::sleep(Duration::from_millis(10));
+            }
+            Response::Refused(why) => bail!("save refused: {why}"),
+            r => bail!("unexpected answer {r:?}"),
+        }
+    }
+    let deadline = Instant::now() + Duration::from_secs(5);
+    loop {
+        std::thread::sleep(Duration::from_millis(50));
+        let s = stored_of(c)?;
+        match s.save {
+            1 if Instant::now() < deadline => continue,
+            1 => bail!("save: still pending after 5 s"),
+            2 => {
+                println!(
+                    "saved: {} calibration parameters to flash (they load at the next boot)",
+                    hopper_control::persist::saved_count()
+                );
+                return Ok(());
+            }
+            4 => {
+                println!("saved: the robot restarts to write its flash (home it again after)");
+                return Ok(());
+            }
+            _ => {
+                let require_tare = flag(c, "arming.require_tare");
+                bail!("save failed: {}", stored_line(&s, require_tare))
+            }
+        }
+    }
+}

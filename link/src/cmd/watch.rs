@@ -1,0 +1,60 @@
+//! `watch`: a live status line.
+
+use super::common::timing_of;
+use anyhow::Result;
+use hopper_link::{names, Client};
+use hopper_protocol::{Request, RobotMsg};
+use std::io::{IsTerminal, Write};
+use std::time::{Duration, Instant};
+
+pub(crate) fn watch(c: &mut Client, duration: Option<f64>) -> Result<()> {
+    let t = timing_of(c)?;
+    let every = ((0.1 / f64::from(t.period_s)).round() as u16).max(1);
+    c.discard_events();
+    c.expect_ok(Request::Telemetry { every })?;
+    c.discard_queued();
+    let tty = std::io::stdout().is_terminal();
+    let start = Instant::now();
+    let mut last_apex = f32::NAN;
+    let mut last_seq: Option<u32> = None;
+    let mut drops: u64 = 0;
+    let mut state = String::from("?");
+    while duration.is_none_or(|d| start.elapsed().as_secs_f64() < d) {
+        match c.next_event(Duration::from_millis(500))? {
+            Some(RobotMsg::Telemetry(r)) => {
+                if let Some(p) = last_seq {
+                    drops += u64::from(r.seq.wrapping_sub(p).saturating_sub(1));
+                }
+                last_seq = Some(r.seq);
+                let line = format!(
+                    "{:<22} faults {:<16} apex {:>7.4} m  z {:.4} m  nut {:>6.2} mm  F {:>6.1} N  I {:>6.2} A  drops {}",
+                    if r.armed { "armed".to_string() } else { state.clone() },
+                    names::faults(r.faults),
+                    last_apex,
+                    r.body_height_m,
+                    r.nut_position_m * 1000.0,
+                    r.spring_force_n,
+                    r.command_a,
+                    drops
+                );
+                if tty {
+                    print!("\r{line}");
+                } else if r.seq.is_multiple_of(10) {
+                    println!("{line}");
+                }
+                let _ = std::io::stdout().flush();
+            }
+            Some(RobotMsg::Hop(h)) => last_apex = h.apex_height_m,
+            Some(RobotMsg::State(s)) => state = names::arm_state(s),
+            Some(RobotMsg::Faults { step, bits }) => {
+                println!("\nfault at step {step}: {}", names::faults(bits));
+            }
+            _ => {}
+        }
+    }
+    c.expect_ok(Request::Telemetry { every: 0 })?;
+    if tty {
+        println!();
+    }
+    Ok(())
+}
