@@ -1,0 +1,409 @@
+//! `hopper-sim planar`: the planar one-legged runner of thesis section 2.2
+//! (`run`, `figures`, `stability`).
+
+use anyhow::{bail, Result};
+use clap::Subcommand;
+use std::path::PathBuf;
+
+/// Appendix A's terms on Table 2.2's runner (`--model appendix-a`).
+#[derive(clap::Args)]
+pub(crate) struct AppendixArgs {
+    /// Appendix A: the trunk's centre ahead of the hip (body frame), m.
+    #[arg(long, value_name = "M", allow_negative_numbers = true)]
+    trunk_offset_x: Option<f64>,
+    /// Appendix A: the trunk's centre above the hip (body frame), m.
+    #[arg(long, value_name = "M", allow_negative_numbers = true)]
+    trunk_offset_z: Option<f64>,
+    /// Appendix A: the leg's centre from the hip along the leg, m.
+    #[arg(long, value_name = "M")]
+    leg_com: Option<f64>,
+    /// Appendix A: the unsprung mass at the toe, kg.
+    #[arg(long, value_name = "KG")]
+    toe_mass: Option<f64>,
+    /// Appendix A: the leg spring's damper, N s/m.
+    #[arg(long, value_name = "NS_PER_M")]
+    leg_damping: Option<f64>,
+    /// Appendix A: the hip spring's damper, N m s/rad.
+    #[arg(long, value_name = "NMS_PER_RAD")]
+    hip_damping: Option<f64>,
+    /// Appendix A: planarizer dry friction on the hip's motion, N.
+    #[arg(long, value_name = "N")]
+    planarizer_friction: Option<f64>,
+    /// Appendix A: dry friction on the leg's sliding in stance, N.
+    #[arg(long, value_name = "N")]
+    leg_friction: Option<f64>,
+    /// Appendix A: dry friction torque at the hip, N m.
+    #[arg(long, value_name = "NM")]
+    hip_friction: Option<f64>,
+}
+
+impl AppendixArgs {
+    /// The runner `--model` names, with these terms; each term refused by
+    /// its flag when out of range or given without `--model appendix-a`.
+    fn model(&self, name: &str) -> Result<hal_sim::planar_sim::Model> {
+        use hopper_plant::planar::{PlanarError, PlanarParams};
+        use hopper_plant::planar_general::{GeneralParams, TERM_LIMITS};
+        type Set = fn(&mut GeneralParams, f64);
+        let terms: [(&str, &str, Option<f64>, Set); 9] = [
+            (
+                "--trunk-offset-x",
+                "trunk_offset_x_m",
+                self.trunk_offset_x,
+                |p, v| p.trunk_offset_x_m = v,
+            ),
+            (
+                "--trunk-offset-z",
+                "trunk_offset_z_m",
+                self.trunk_offset_z,
+                |p, v| p.trunk_offset_z_m = v,
+            ),
+            ("--leg-com", "leg_com_from_hip_m", self.leg_com, |p, v| {
+                p.leg_com_from_hip_m = v
+            }),
+            ("--toe-mass", "toe_mass_kg", self.toe_mass, |p, v| {
+                p.toe_mass_kg = v
+            }),
+            (
+                "--leg-damping",
+                "leg_damping_ns_per_m",
+                self.leg_damping,
+                |p, v| p.leg_damping_ns_per_m = v,
+            ),
+            (
+                "--hip-damping",
+                "hip_damping_nms_per_rad",
+                self.hip_damping,
+                |p, v| p.hip_damping_nms_per_rad = v,
+            ),
+            (
+                "--planarizer-friction",
+                "planarizer_friction_n",
+                self.planarizer_friction,
+                |p, v| p.planarizer_friction_n = v,
+            ),
+            (
+                "--leg-friction",
+                "leg_friction_n",
+                self.leg_friction,
+                |p, v| p.leg_friction_n = v,
+            ),
+            (
+                "--hip-friction",
+                "hip_friction_nm",
+                self.hip_friction,
+                |p, v| p.hip_friction_nm = v,
+            ),
+        ];
+        if name != "appendix-a" {
+            if let Some((flag, ..)) = terms.iter().find(|t| t.2.is_some()) {
+                bail!("{flag} is an Appendix A term: it needs --model appendix-a");
+            }
+            return Ok(hal_sim::planar_sim::Model::Section22);
+        }
+        let mut g = GeneralParams::from_section_2_2(&PlanarParams::table_2_2());
+        for (_, _, v, set) in &terms {
+            if let Some(v) = v {
+                set(&mut g, *v);
+            }
+        }
+        if let Err(PlanarError::NotPositive(f) | PlanarError::OutOfRange(f)) = g.validate() {
+            let flag = terms.iter().find(|t| t.1 == f).map_or(f, |t| t.0);
+            let value = terms
+                .iter()
+                .find(|t| t.1 == f)
+                .and_then(|t| t.2)
+                .map_or(String::new(), |v| format!(" {v}"));
+            let range = TERM_LIMITS.iter().find(|l| l.field == f).map_or(
+                String::from("out of range"),
+                |l| {
+                    // The leg's centre must also lie on the leg.
+                    let max = if f == "leg_com_from_hip_m" {
+                        l.max.min(g.leg_length_m)
+                    } else {
+                        l.max
+                    };
+                    format!("must be within {} ..= {} {}", l.min, max, l.unit)
+                },
+            );
+            bail!("{flag}{value} {range}");
+        }
+        Ok(hal_sim::planar_sim::Model::AppendixA(g))
+    }
+}
+
+#[derive(Subcommand)]
+pub(crate) enum PlanarCmd {
+    /// Run from the passive design's apex (T_step 0.5 s, rho 0.125): the
+    /// apexes, their drift from the design's, what the touchdowns took.
+    Run {
+        /// Running speed, m/s.
+        #[arg(long, default_value_t = 2.0)]
+        speed: f64,
+        /// The stabiliser's gain K_c (eq 2.79), N s/m; 0: passive.
+        #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+        kc: f64,
+        /// Simulated time, s.
+        #[arg(long, default_value_t = 10.0)]
+        duration: f64,
+        /// Start from the passive design's apex (eqs 2.76-2.78) or from the
+        /// gait's fixed point of the apex return map (`planar stability`).
+        #[arg(long, value_parser = ["design", "fixed-point"], default_value = "design")]
+        start: String,
+        /// The runner: section-2-2 (Table 2.2) or appendix-a (Table 2.2
+        /// with Appendix A's terms, set by the flags below; all zero by
+        /// default, which is the section 2.2 runner again).
+        #[arg(long, value_parser = ["section-2-2", "appendix-a"], default_value = "section-2-2")]
+        model: String,
+        #[command(flatten)]
+        appendix: AppendixArgs,
+        /// Directory for trajectory.csv (every millisecond) and
+        /// run.png/.svg (created if missing).
+        #[arg(long, value_name = "DIR")]
+        out: Option<PathBuf>,
+        /// Print JSON instead of text.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Figures 2.18-2.22 (fig-2-18.png/.svg ...) into DIR.
+    Figures {
+        /// Directory (created if missing).
+        #[arg(long)]
+        out: PathBuf,
+    },
+    /// The apex return map: each gait's fixed point by Newton iteration
+    /// and how much a deviation grows per hop (the largest |eigenvalue| of
+    /// the map's Jacobian off the energy family), over speeds x K_c.
+    Stability {
+        /// Speeds, m/s (comma-separated).
+        #[arg(long, value_delimiter = ',', default_values_t = [0.5, 1.0, 1.5, 2.0, 2.5, 3.0, 3.5, 4.0, 4.5, 5.0])]
+        speeds: Vec<f64>,
+        /// Stabiliser gains K_c, N s/m (comma-separated; 0 is passive).
+        #[arg(long, allow_hyphen_values = true, value_delimiter = ',', default_values_t = [-1000.0, -500.0, 0.0, 250.0, 500.0, 750.0, 1000.0, 1250.0, 1500.0, 2000.0, 2500.0, 3000.0])]
+        kc: Vec<f64>,
+        /// Directory for stability.csv and stability.png/.svg.
+        #[arg(long, value_name = "DIR")]
+        out: Option<PathBuf>,
+        /// Print JSON instead of text.
+        #[arg(long)]
+        json: bool,
+    },
+}
+
+fn planar_summary(r: &hal_sim::planar_sim::PlanarRun) -> String {
+    let n = r.apex_heights_m.len();
+    // A long run's apexes: the first 12 and the last 4.
+    let apexes: Vec<String> = r
+        .apex_heights_m
+        .iter()
+        .enumerate()
+        .filter(|(k, _)| *k < 12 || *k + 4 >= n)
+        .map(|(k, a)| {
+            if k + 4 == n && n > 16 {
+                format!("... {a:.4}")
+            } else {
+                format!("{a:.4}")
+            }
+        })
+        .collect();
+    let start = match r.start {
+        hal_sim::planar_sim::Start::Design => format!("design {:.4}", r.design_apex_m),
+        hal_sim::planar_sim::Start::FixedPoint => format!(
+            "fixed point {:.4}, design {:.4}",
+            r.start_apex_m, r.design_apex_m
+        ),
+    };
+    let (model, lifts) = if r.model == "appendix-a" {
+        (
+            " (Appendix A)",
+            format!(", {:.3} J by the liftoffs' pick-up", r.liftoff_loss_j),
+        )
+    } else {
+        ("", String::new())
+    };
+    format!(
+        "planar{model}: {} m/s, K_c {} N s/m: {} touchdowns ({:.3} J taken by their impacts{lifts}), {}; {n} apexes (m, {start}): {}; largest drift {:.4} m; largest leg force {:.0} N, stabiliser force {:.0} N",
+        r.speed_mps,
+        r.gain_ns_per_m,
+        r.touchdowns,
+        r.touchdown_loss_j,
+        if r.fell { "fell" } else { "still running" },
+        apexes.join(" "),
+        r.apex_drift_m,
+        r.max_leg_force_n,
+        r.max_stabiliser_force_n
+    )
+}
+
+fn cmd_planar_stability(
+    speeds: &[f64],
+    gains: &[f64],
+    out: Option<&std::path::Path>,
+    json: bool,
+) -> Result<()> {
+    use hal_sim::planar_stability::scan;
+    if speeds.is_empty() || speeds.len() > 40 {
+        bail!("--speeds takes 1 to 40 speeds");
+    }
+    if gains.is_empty() || gains.len() > 100 {
+        bail!("--kc takes 1 to 100 gains");
+    }
+    if speeds.len() * gains.len() > 400 {
+        bail!(
+            "--speeds x --kc is {} fixed points; at most 400 (each takes up to a few seconds)",
+            speeds.len() * gains.len()
+        );
+    }
+    for &v in speeds {
+        if !(v.is_finite() && v > 0.0 && v <= 10.0) {
+            bail!("--speeds {v} must be within 0 (excluded) ..= 10 m/s");
+        }
+    }
+    for &k in gains {
+        if !(k.is_finite() && k.abs() <= 10_000.0) {
+            bail!("--kc {k} must be within -10000 ..= 10000 N s/m");
+        }
+    }
+    let bar = indicatif::ProgressBar::new((speeds.len() * gains.len()) as u64)
+        .with_finish(indicatif::ProgressFinish::AndClear);
+    bar.set_style(
+        indicatif::ProgressStyle::with_template("fixed points {pos}/{len} {wide_bar} {eta}")
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+    );
+    let rows = scan(speeds, gains, &mut || bar.inc(1));
+    bar.finish_and_clear();
+    let written = match out {
+        Some(dir) => hal_sim::planar_stability::write_outputs(dir, &rows, gains)
+            .map_err(anyhow::Error::msg)?,
+        None => Vec::new(),
+    };
+    if json {
+        say!(
+            "{}",
+            serde_json::to_string_pretty(
+                &serde_json::json!({ "kc_ns_per_m": gains, "speeds": rows })
+            )?
+        );
+        return Ok(());
+    }
+    let opt = |x: Option<f64>| x.map_or("-".to_string(), |x| format!("{x:.3}"));
+    let range =
+        |r: Option<[f64; 2]>| r.map_or("none".to_string(), |r| format!("{} ..= {}", r[0], r[1]));
+    say!("growth = largest |eigenvalue| of the apex map's Jacobian off the energy family (below 1: attracting)");
+    say!(
+        "{:>6} {:>8} {:>8} {:>9} {:>8} {:>22} {:>14}",
+        "speed",
+        "apex",
+        "passive",
+        "best K_c",
+        "growth",
+        "K_c lowering growth",
+        "K_c attracting"
+    );
+    for row in &rows {
+        // The passive gait's apex, else the first found.
+        let apex = gains
+            .iter()
+            .position(|&g| g == 0.0)
+            .and_then(|k| row.points[k].as_ref())
+            .or_else(|| row.points.iter().flatten().next())
+            .map(|f| format!("{:.4}", f.apex[0]));
+        say!(
+            "{:>4.1} m/s {:>6} m {:>8} {:>9} {:>8} {:>22} {:>14}",
+            row.speed_mps,
+            apex.unwrap_or_else(|| "-".into()),
+            opt(row.passive_growth),
+            row.best_gain_ns_per_m
+                .map_or("-".into(), |g| format!("{g}")),
+            opt(row.best_growth),
+            range(row.helps_ns_per_m),
+            range(row.attracts_ns_per_m)
+        );
+    }
+    if speeds.len() * gains.len() <= 12 {
+        for row in &rows {
+            for (g, f) in gains.iter().zip(&row.points) {
+                match f {
+                    Some(f) => {
+                        let eig: Vec<String> = f
+                            .eigenvalues
+                            .iter()
+                            .map(|z| {
+                                if z[1].abs() < 1e-9 {
+                                    format!("{:.4}", z[0])
+                                } else {
+                                    format!("{:.4}{:+.4}i", z[0], z[1])
+                                }
+                            })
+                            .collect();
+                        say!(
+                            "{} m/s, K_c {g}: apex {:.4} m, |P(a)-a| {:.1e}, eigenvalues {}",
+                            row.speed_mps,
+                            f.apex[0],
+                            f.residual,
+                            eig.join(" ")
+                        );
+                    }
+                    None => say!("{} m/s, K_c {g}: no fixed point found", row.speed_mps),
+                }
+            }
+        }
+    }
+    for p in &written {
+        say!("  wrote {}", p.display());
+    }
+    Ok(())
+}
+
+pub(crate) fn cmd_planar(cmd: &PlanarCmd) -> Result<()> {
+    match cmd {
+        PlanarCmd::Run {
+            speed,
+            kc,
+            duration,
+            start,
+            model,
+            appendix,
+            out,
+            json,
+        } => {
+            use hal_sim::planar_sim::{simulate_model, Start};
+            let start = if start == "fixed-point" {
+                Start::FixedPoint
+            } else {
+                Start::Design
+            };
+            let model = appendix.model(model)?;
+            let r = simulate_model(*speed, *kc, *duration, start, &model)
+                .map_err(anyhow::Error::msg)?;
+            let written = match out {
+                Some(dir) => hal_sim::planar_sim::write_run(dir, &r).map_err(anyhow::Error::msg)?,
+                None => Vec::new(),
+            };
+            if *json {
+                say!("{}", serde_json::to_string_pretty(&r)?);
+            } else {
+                say!("{}", planar_summary(&r));
+                for p in &written {
+                    say!("  wrote {}", p.display());
+                }
+            }
+        }
+        PlanarCmd::Stability {
+            speeds,
+            kc,
+            out,
+            json,
+        } => cmd_planar_stability(speeds, kc, out.as_deref(), *json)?,
+        PlanarCmd::Figures { out } => {
+            let (written, runs) =
+                hal_sim::planar_sim::write_figures(out).map_err(anyhow::Error::msg)?;
+            for r in &runs {
+                say!("{}", planar_summary(r));
+            }
+            for p in &written {
+                say!("  wrote {}", p.display());
+            }
+        }
+    }
+    Ok(())
+}
