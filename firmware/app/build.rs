@@ -1,17 +1,148 @@
-//! Puts the workspace-root `memory.x` where `cortex-m-rt`'s `link.x` finds it.
+//! The app's build script:
 //!
-//! Only the ARM build links with `-Tlink.x` (see `.cargo/config.toml`); on the
-//! host the extra search path is unused and harmless.
+//! * puts the workspace-root `memory.x` where `cortex-m-rt`'s `link.x`
+//!   finds it (only the ARM build links with `-Tlink.x`, see
+//!   `.cargo/config.toml`; on the host the search path is unused);
+//! * turns the build-time settings into checked constants
+//!   (`$OUT_DIR/build_config.rs`): `HOPPER_CONTROL_HZ` (100..=20000, default
+//!   10000) and `HOPPER_OVERRUN_LIMIT` (1..=1000, default 3);
+//! * for the QEMU images (feature `qemu-sim`), reads the scenario the
+//!   scenario image runs from `scenarios/qemu/NAME.toml`
+//!   (`HOPPER_QEMU_SCENARIO`, default `energy-apex`; the file the xtask's
+//!   golden check runs on the host too) into `$OUT_DIR/qemu_scenario.rs`.
+//!
+//! A bad value stops the build with one error naming it.
 
-use std::{env, error::Error, fs, path::PathBuf};
+use std::fmt::Write as _;
+use std::{env, error::Error, fs, ops::RangeInclusive, path::PathBuf};
 
 fn main() -> Result<(), Box<dyn Error>> {
     let manifest_dir = PathBuf::from(env::var("CARGO_MANIFEST_DIR")?);
-    let memory_x = manifest_dir.join("../../memory.x");
+    let root = manifest_dir.join("../..");
+    let memory_x = root.join("memory.x");
     let out_dir = PathBuf::from(env::var("OUT_DIR")?);
     fs::copy(&memory_x, out_dir.join("memory.x"))?;
     println!("cargo:rustc-link-search={}", out_dir.display());
     println!("cargo:rerun-if-changed={}", memory_x.display());
     println!("cargo:rerun-if-changed=build.rs");
+
+    let control_hz = env_u32("HOPPER_CONTROL_HZ", 10_000, 100..=20_000)?;
+    let overrun_limit = env_u32("HOPPER_OVERRUN_LIMIT", 3, 1..=1000)?;
+    let mut config = String::new();
+    writeln!(
+        config,
+        "/// Control loop rate, Hz: 10 kHz unless the build sets `HOPPER_CONTROL_HZ`\n\
+         /// (e.g. `HOPPER_CONTROL_HZ=5000 cargo build ...`), in 100..=20_000.\n\
+         pub const CONTROL_HZ: u32 = {control_hz};\n\
+         /// Missed control deadlines in a row after which the firmware goes safe\n\
+         /// (latches `Fault::Overrun`): 3 unless the build sets `HOPPER_OVERRUN_LIMIT`\n\
+         /// (1..=1000). One late period is tolerated (the next one catches up); three\n\
+         /// in a row mean the loop cannot keep its rate.\n\
+         pub const OVERRUN_LIMIT: u32 = {overrun_limit};"
+    )?;
+    fs::write(out_dir.join("build_config.rs"), config)?;
+
+    if env::var_os("CARGO_FEATURE_QEMU_SIM").is_some() {
+        let scenario = qemu_scenario(&root)?;
+        fs::write(out_dir.join("qemu_scenario.rs"), scenario)?;
+    }
     Ok(())
+}
+
+/// `name` from the environment as a whole number in `range`; `default`
+/// when unset.
+fn env_u32(name: &str, default: u32, range: RangeInclusive<u32>) -> Result<u32, String> {
+    println!("cargo:rerun-if-env-changed={name}");
+    let Ok(s) = env::var(name) else {
+        return Ok(default);
+    };
+    match s.trim().parse::<u32>() {
+        Ok(v) if range.contains(&v) => Ok(v),
+        _ => Err(format!(
+            "{name}={s:?}: must be a whole number in {}..={}",
+            range.start(),
+            range.end()
+        )),
+    }
+}
+
+/// The QEMU scenario image's constants from `scenarios/qemu/NAME.toml`.
+fn qemu_scenario(root: &std::path::Path) -> Result<String, Box<dyn Error>> {
+    println!("cargo:rerun-if-env-changed=HOPPER_QEMU_SCENARIO");
+    let name = env::var("HOPPER_QEMU_SCENARIO").unwrap_or_else(|_| "energy-apex".into());
+    let path = root.join("scenarios/qemu").join(format!("{name}.toml"));
+    println!("cargo:rerun-if-changed={}", path.display());
+    let text = fs::read_to_string(&path).map_err(|e| {
+        format!(
+            "HOPPER_QEMU_SCENARIO={name}: cannot read {}: {e}",
+            path.display()
+        )
+    })?;
+    let t: toml::Table = text
+        .parse()
+        .map_err(|e| format!("{}: {e}", path.display()))?;
+    let at = |keys: &[&str]| -> Option<&toml::Value> {
+        let (last, parents) = keys.split_last()?;
+        let mut table = &t;
+        for k in parents {
+            table = table.get(*k)?.as_table()?;
+        }
+        table.get(*last)
+    };
+    let bad = |what: &str| format!("{}: {what}", path.display());
+    let number = |keys: &[&str]| -> Result<f64, String> {
+        match at(keys) {
+            Some(toml::Value::Float(v)) => Ok(*v),
+            Some(toml::Value::Integer(v)) => Ok(*v as f64),
+            _ => Err(bad(&format!("`{}` must be a number", keys.join(".")))),
+        }
+    };
+    // What the image can run: the design plant with its default sensors
+    // (noise on, seed 1), one of the two laws it is built for.
+    if at(&["plant"]).and_then(toml::Value::as_str) != Some("design") {
+        return Err(bad("the QEMU image runs `plant = \"design\"` only").into());
+    }
+    if at(&["sensors", "noise"]).and_then(toml::Value::as_bool) != Some(true)
+        || at(&["sensors", "seed"]).and_then(toml::Value::as_integer) != Some(1)
+    {
+        return Err(bad(
+            "the QEMU image runs its default sensors: `[sensors] noise = true, seed = 1`",
+        )
+        .into());
+    }
+    let controller = at(&["controller", "name"]).and_then(toml::Value::as_str);
+    let shaped = match controller {
+        Some("shaped") => true,
+        Some("energy-apex") => false,
+        other => {
+            return Err(bad(&format!(
+                "`controller.name` {other:?}: the QEMU image runs `shaped` or `energy-apex`"
+            ))
+            .into())
+        }
+    };
+    let start = number(&["start_apex_m"])?;
+    let target = number(&["controller", "target_apex_m"])?;
+    let duration = number(&["duration_s"])?;
+    if !(duration >= 1.0 && duration.fract() == 0.0 && duration <= 600.0) {
+        return Err(bad("`duration_s` must be whole seconds in 1..=600").into());
+    }
+    // Quick profiling runs shorten it.
+    let seconds = env_u32("HOPPER_QEMU_SECONDS", duration as u32, 1..=600)?;
+    let mut s = String::new();
+    writeln!(
+        s,
+        "/// The scenario's name, as printed (`scenarios/qemu/{name}.toml`).\n\
+         const SCENARIO: &str = {name:?};\n\
+         /// The shaped law (else energy-apex).\n\
+         const SHAPED: bool = {shaped};\n\
+         /// Start toe height, m.\n\
+         pub const START_APEX_M: f64 = {start:?};\n\
+         /// Apex target, m.\n\
+         pub const TARGET_APEX_M: f64 = {target:?};\n\
+         /// Simulated time, s (`HOPPER_QEMU_SECONDS` at build time overrides\n\
+         /// the file's for quick profiling runs).\n\
+         pub const DURATION_S: u32 = {seconds};"
+    )?;
+    Ok(s)
 }

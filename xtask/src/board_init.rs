@@ -374,6 +374,8 @@ fn fault_test(root: &Path) -> Result<(), String> {
                 "build",
                 "-p",
                 "hopper-app",
+                "--bin",
+                "hopper-fw",
                 "--release",
                 "--target",
                 crate::TARGET,

@@ -286,13 +286,8 @@ fn test(root: &Path) -> Result<(), String> {
         "clippy (MCU target, QEMU variant)",
         &["--no-default-features", "--features", "qemu-sim"],
     )?;
-    // The on-target self-test image links: built here, before
-    // the board image's own build (the size check) overwrites `hopper-fw`.
-    mcu_clippy(
-        root,
-        "clippy (MCU target, self-test image)",
-        &["--features", "selftest"],
-    )?;
+    // The on-target self-test image links (the default features' clippy
+    // above checked its source).
     run(
         root,
         "self-test image build (MCU target)",
@@ -300,11 +295,11 @@ fn test(root: &Path) -> Result<(), String> {
             "build",
             "-p",
             "hopper-app",
+            "--bin",
+            "hopper-selftest",
             "--release",
             "--target",
             TARGET,
-            "--features",
-            "selftest",
         ]),
     )?;
     size(root)?;
@@ -347,7 +342,16 @@ fn board_image(root: &Path) -> Result<PathBuf, String> {
         root,
         "firmware release build",
         "hopper-fw",
-        cargo().args(["build", "-p", "hopper-app", "--release", "--target", TARGET]),
+        cargo().args([
+            "build",
+            "-p",
+            "hopper-app",
+            "--bin",
+            "hopper-fw",
+            "--release",
+            "--target",
+            TARGET,
+        ]),
     )
 }
 

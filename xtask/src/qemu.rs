@@ -1,6 +1,6 @@
 //! `cargo xtask qemu`: the firmware's closed loop on QEMU's STM32F405.
 //!
-//! 1. builds `hopper-fw` with `--no-default-features --features qemu-sim`
+//! 1. builds `hopper-qemu` with `--no-default-features --features qemu-sim`
 //!    into its own target directory (so it never overwrites the board image);
 //! 2. runs it on `qemu-system-arm -machine netduinoplus2` with
 //!    `-icount shift=0,sleep=off` (one guest instruction per virtual ns, so
@@ -22,14 +22,21 @@ use crate::{cargo, run as run_cmd, TARGET};
 
 /// A scripted QEMU scenario (see `firmware/app/src/main.rs`).
 struct Scenario {
-    /// `HOPPER_QEMU_SCENARIO` at build time.
+    /// `HOPPER_QEMU_SCENARIO` at build time: the image's build script reads
+    /// `scenarios/qemu/NAME.toml`, and the golden check runs the same file
+    /// on the host (`hopper-sim run --scenario`).
     name: &'static str,
     /// Prefix of the summary line (`qemu:` for the first, a contract).
     label: &'static str,
-    /// The host run that must match it.
-    host: [&'static str; 12],
     /// Whether to run the slowed-down overrun check on this image too.
     overrun_check: bool,
+}
+
+impl Scenario {
+    /// The scenario file, from the repository root.
+    fn file(&self) -> String {
+        format!("scenarios/qemu/{}.toml", self.name)
+    }
 }
 
 /// The shaped law from 0.05 m to the thesis's 0.15 m (the `qemu-shaped:`
@@ -38,39 +45,11 @@ const SCENARIOS: [Scenario; 2] = [
     Scenario {
         name: "shaped",
         label: "qemu-shaped",
-        host: [
-            "--params",
-            "design",
-            "--controller",
-            "shaped",
-            "--start-apex",
-            "0.05",
-            "--target-apex",
-            "0.15",
-            "--duration",
-            "10",
-            "--seed",
-            "1",
-        ],
         overrun_check: false,
     },
     Scenario {
         name: "energy-apex",
         label: "qemu",
-        host: [
-            "--params",
-            "design",
-            "--controller",
-            "energy-apex",
-            "--start-apex",
-            "0.10",
-            "--target-apex",
-            "0.05",
-            "--duration",
-            "12",
-            "--seed",
-            "1",
-        ],
         overrun_check: true,
     },
 ];
@@ -140,12 +119,13 @@ pub fn run(root: &Path) -> Result<(), String> {
     }
 }
 
-/// Builds the QEMU image with `features` (`cmd` is cargo, with any
-/// environment the build needs) into `target_dir`; returns the ELF.
+/// Builds the QEMU binary `bin` (`hopper-qemu` or `hopper-qemu-link`;
+/// `cmd` is cargo, with any environment the build needs) into
+/// `target_dir`; returns the ELF.
 fn build_image(
     root: &Path,
     what: &str,
-    features: &str,
+    bin: &str,
     mut cmd: Command,
     target_dir: &Path,
 ) -> Result<PathBuf, String> {
@@ -161,15 +141,17 @@ fn build_image(
             TARGET,
             "--no-default-features",
             "--features",
-            features,
+            "qemu-sim",
+            "--bin",
+            bin,
             "--target-dir",
         ])
         .arg(target_dir),
     )?;
-    Ok(target_dir.join(TARGET).join("release").join("hopper-fw"))
+    Ok(target_dir.join(TARGET).join("release").join(bin))
 }
 
-/// The link image (`--features qemu-link`) and the scripted session
+/// The link image (`hopper-qemu-link`) and the scripted session
 /// against it (the `qemu-link:` line).
 fn link_session(root: &Path, link: &Path) -> Result<(), String> {
     // The scenario images' directory: the same dependencies, built once.
@@ -177,7 +159,7 @@ fn link_session(root: &Path, link: &Path) -> Result<(), String> {
     let elf = build_image(
         root,
         "firmware build (QEMU link image)",
-        "qemu-link",
+        "hopper-qemu-link",
         cargo(),
         &target_dir,
     )?;
@@ -194,7 +176,7 @@ fn run_scenario(root: &Path, scenario: &Scenario, sim: &Path) -> Result<(), Stri
     let elf = build_image(
         root,
         &format!("firmware build (QEMU variant, {} scenario)", scenario.name),
-        "qemu-sim",
+        "hopper-qemu",
         build,
         &target_dir,
     )?;
@@ -225,7 +207,7 @@ fn run_scenario(root: &Path, scenario: &Scenario, sim: &Path) -> Result<(), Stri
         .filter_map(|l| l.strip_prefix("apex "))
         .filter_map(|r| r.split_whitespace().nth(1)?.parse().ok())
         .collect();
-    let host_apexes = host_apexes(root, sim, &scenario.host)?;
+    let host_apexes = host_apexes(root, sim, &["--scenario", &scenario.file()])?;
     let golden = compare(&host_apexes, &qemu_apexes);
 
     let mut problems = Vec::new();

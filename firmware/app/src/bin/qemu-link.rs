@@ -1,0 +1,295 @@
+//! `hopper-qemu-link`: the QEMU link image: the virtual robot
+//! (`hopper_plant::robot::VirtualRobot`) behind the host link on USART1,
+//! disarmed until `hopper-link` arms it. `cargo xtask qemu` runs the
+//! scripted link session against it.
+#![cfg_attr(target_os = "none", no_std, no_main)]
+#![deny(unsafe_code)]
+
+/// Host stand-in: this binary only does something on the microcontroller.
+#[cfg(not(target_os = "none"))]
+fn main() {
+    println!("hopper-qemu-link is firmware: build it with --target thumbv7em-none-eabihf");
+}
+
+#[cfg(target_os = "none")]
+use defmt_semihosting as _;
+
+#[cfg(target_os = "none")]
+hopper_app::fault_handlers!(hopper_app::qemu::exit_failure);
+
+/// The QEMU link image (`hopper-qemu-link`): the virtual robot
+/// (`hopper_plant::robot::VirtualRobot`, which `hopper-sim serve` runs too)
+/// with the host link on USART1, which QEMU wires to its first `-serial`
+/// (the xtask gives it a TCP socket). Its tasks are the board's: the
+/// control period with the link's port at priority 3, the link task at 2,
+/// the serial interrupt at 4. Like the board it boots disarmed and
+/// tethered, so nothing moves until `hopper-link` arms it; the body is held
+/// 0.05 m up until then (`VirtualRobot::held`). It runs until QEMU is
+/// stopped, or `LINK_LIMIT_S` of robot time.
+#[cfg(target_os = "none")]
+#[rtic::app(device = stm32f4::stm32f405, peripherals = true, dispatchers = [FSMC])]
+mod app {
+    use cortex_m::peripheral::{SCB, SYST};
+    use cortex_m_semihosting::debug;
+    use heapless::spsc::{Consumer, Producer};
+    use hopper_app::control::{Bank, Capture, Slot, CONTROL_HZ, CONTROL_PERIOD_S, TIMING};
+    use hopper_app::serial::{LinkTx, RxQueue, Serial, TxQueue};
+    use hopper_control::hopper::Strategy;
+    use hopper_control::link::{
+        Answer, AnswerQueue, Command, CommandQueue, Endpoint, LogQueue, Note, NoteQueue, Stats,
+        StatsQueue,
+    };
+    use hopper_control::runner::LogItem;
+    use hopper_plant::mock::{firmware_config, SensorConfig, SimHal};
+    use hopper_plant::robot::{Miscalibration, VirtualRobot};
+    use hopper_plant::Params;
+    use rtic::Mutex;
+    use stm32f4::stm32f405::Interrupt;
+
+    /// Where the body is held until armed, m (toe height).
+    const START_APEX_M: f64 = 0.05;
+    /// The longest a session may run, s of robot time (then QEMU exits).
+    const LINK_LIMIT_S: u32 = 600;
+    /// PCLK2 on the HSI, Hz (QEMU has no RCC model, and ignores the baud
+    /// rate anyway).
+    const PCLK2_HZ: u32 = 16_000_000;
+    /// The link task's interrupt, as on the board.
+    const LINK_IRQ: Interrupt = Interrupt::SDIO;
+
+    /// The capture, behind RTIC's lock for the link task.
+    struct Locked<M>(M);
+
+    impl<M: Mutex<T = &'static mut Capture>> hopper_control::link::Shared<Capture> for Locked<M> {
+        fn with<R>(&mut self, f: impl FnOnce(&mut Capture) -> R) -> R {
+            self.0.lock(|c| f(c))
+        }
+    }
+
+    #[shared]
+    struct Shared {
+        /// The capture, frozen around a fault: a static built in place, as
+        /// the board's (32 KiB; inside the robot, built in `init` and moved,
+        /// it would take `init`'s stack past the room flip-link leaves).
+        capture: &'static mut Capture,
+    }
+
+    /// The link image's flash: RAM (QEMU models no flash writes), kept for
+    /// the run only.
+    type Flash = hopper_store::Store<hopper_store::RamFlash<2, 2048>>;
+
+    #[local]
+    struct Local {
+        robot: VirtualRobot<Slot>,
+        commands_out: Consumer<'static, Command<Slot>>,
+        answers_in: Producer<'static, Answer<Slot>>,
+        notes_in: Producer<'static, Note>,
+        stats_in: Producer<'static, Stats>,
+        logs_in: Producer<'static, LogItem>,
+        counter: hopper_app::qemu::Instructions,
+        syst: SYST,
+        link: Endpoint<Slot>,
+        link_counter: hopper_app::qemu::Instructions,
+        commands_in: Producer<'static, Command<Slot>>,
+        answers_out: Consumer<'static, Answer<Slot>>,
+        notes_out: Consumer<'static, Note>,
+        stats_out: Consumer<'static, Stats>,
+        logs_out: Consumer<'static, LogItem>,
+        flash: Flash,
+        link_rx: Consumer<'static, u8>,
+        link_tx: LinkTx<'static>,
+        serial: Serial<'static>,
+    }
+
+    #[init(local = [
+        rxq: RxQueue = RxQueue::new(),
+        txq: TxQueue = TxQueue::new(),
+        capture_buf: Capture = Capture::new(),
+        commands: CommandQueue<Slot> = CommandQueue::new(),
+        answers: AnswerQueue<Slot> = AnswerQueue::new(),
+        notes: NoteQueue = NoteQueue::new(),
+        stats: StatsQueue = StatsQueue::new(),
+        logs: LogQueue = LogQueue::new(),
+        bank: Bank = [None, None, None],
+    ])]
+    fn init(cx: init::Context) -> (Shared, Local) {
+        let dp = cx.device;
+        let mut core = cx.core;
+        let counter = hopper_app::qemu::start(&dp.RCC, &dp.GPIOB, dp.TIM5);
+
+        let params = Params::design();
+        // The CI session's mis-calibrated robot (as `hopper-sim serve`'s):
+        // the firmware configured for the nominal machine, the plant the
+        // real one; the session's bring-up routines must find the
+        // difference.
+        let mis = Miscalibration::SESSION;
+        // The board's defaults (energy-apex, 0.05 m, tethered); the host
+        // chooses the controller and target over the link.
+        let mut cfg = firmware_config(
+            &params,
+            &params,
+            Strategy::default(),
+            0.05,
+            mis.believed_start_apex_m(START_APEX_M),
+        );
+        // As the board: no arming before a tare and homing.
+        cfg.arming.require_tare = true;
+        cfg.arming.require_home = true;
+        let (Ok(plant), Ok((runner, spares))) = (
+            mis.plant(params, START_APEX_M),
+            hopper_app::control::runner_in_bank(cx.local.bank, cfg, TIMING),
+        ) else {
+            defmt::error!("link image set-up failed");
+            debug::exit(debug::EXIT_FAILURE);
+            #[allow(clippy::empty_loop)]
+            loop {}
+        };
+        let hal = mis.hal(
+            SimHal::new(&cfg.calibration, &mis.sensors(SensorConfig::DEFAULT)),
+            &plant,
+        );
+        let mut robot = VirtualRobot::new(plant, hal, runner, f64::from(CONTROL_PERIOD_S)).hold();
+        // Its flash is erased at every start: nothing saved.
+        let Ok(flash) = Flash::new(hopper_store::RamFlash::new(), 0..4096) else {
+            defmt::error!("link image flash set-up failed");
+            debug::exit(debug::EXIT_FAILURE);
+            #[allow(clippy::empty_loop)]
+            loop {}
+        };
+        robot.runner.load_calibration(None);
+        // The link task's own endpoint (the robot's in-line one is for the
+        // simulator's single thread).
+        let link = Endpoint::simulated(&robot.runner).with_spares(spares);
+
+        let (rx_in, rx_out) = cx.local.rxq.split();
+        let (tx_in, tx_out) = cx.local.txq.split();
+        let serial = Serial::new(dp.USART1, &dp.RCC, &dp.GPIOA, PCLK2_HZ, rx_in, tx_out);
+        let (commands_in, commands_out) = cx.local.commands.split();
+        let (answers_in, answers_out) = cx.local.answers.split();
+        let (notes_in, notes_out) = cx.local.notes.split();
+        let (stats_in, stats_out) = cx.local.stats.split();
+        let (logs_in, logs_out) = cx.local.logs.split();
+
+        hopper_app::qemu::start_systick(&mut core.SYST, hopper_app::qemu::PERIOD_TICKS);
+        defmt::println!(
+            "hopper-fw: QEMU link image, {=u32} Hz, link on USART1; disarmed, held {=f64} m up until armed",
+            CONTROL_HZ,
+            START_APEX_M
+        );
+        (
+            Shared {
+                capture: cx.local.capture_buf,
+            },
+            Local {
+                robot,
+                commands_out,
+                answers_in,
+                notes_in,
+                stats_in,
+                logs_in,
+                counter,
+                syst: core.SYST,
+                link,
+                link_counter: hopper_app::qemu::Instructions::reader(),
+                commands_in,
+                answers_out,
+                notes_out,
+                stats_out,
+                logs_out,
+                flash,
+                link_rx: rx_out,
+                link_tx: LinkTx::new(tx_in),
+                serial,
+            },
+        )
+    }
+
+    /// Busy idle: QEMU 7.2 loses SysTick ticks while the core sleeps in `wfi`.
+    #[idle]
+    fn idle(_: idle::Context) -> ! {
+        loop {
+            cortex_m::asm::nop();
+        }
+    }
+
+    /// One control period with the link's port (as the board's control
+    /// task), then the plant to the next tick with SysTick stopped (as in
+    /// the scenario image); the link task is pended.
+    #[task(binds = SysTick, priority = 3, local = [robot, commands_out, answers_in, notes_in, stats_in, logs_in, counter, syst], shared = [capture])]
+    fn control(mut cx: control::Context) {
+        let (t0, serial0) = hopper_app::serial_cost::stamp(hopper_app::qemu::tim5_now);
+        let robot = &mut *cx.local.robot;
+        let (commands, answers, notes, stats, logs, counter) = (
+            &mut *cx.local.commands_out,
+            &mut *cx.local.answers_in,
+            &mut *cx.local.notes_in,
+            &mut *cx.local.stats_in,
+            &mut *cx.local.logs_in,
+            &mut *cx.local.counter,
+        );
+        let (irq_max, irq_count) = hopper_app::serial_cost::max_and_count();
+        robot.port.set_serial_cost(irq_max, irq_count);
+        cx.shared
+            .capture
+            .lock(|c| robot.control_period(c, commands, answers, notes, stats, logs, counter));
+        cx.local.syst.disable_counter();
+        if robot.advance(&mut |_| {}).is_err() {
+            defmt::error!("plant integration failed");
+            debug::exit(debug::EXIT_FAILURE);
+        }
+        cx.local.syst.enable_counter();
+        robot.runner.end_period(SCB::is_pendst_pending());
+        rtic::pend(LINK_IRQ);
+        // The whole handler (the plant too) preempts the link task.
+        let (t1, serial1) = hopper_app::serial_cost::stamp(hopper_app::qemu::tim5_now);
+        hopper_app::serial_cost::record_control(
+            t1.wrapping_sub(t0)
+                .wrapping_sub(serial1.wrapping_sub(serial0)),
+        );
+        if robot.runner.periods() >= LINK_LIMIT_S * CONTROL_HZ {
+            defmt::println!("link image: {=u32} s limit reached", LINK_LIMIT_S);
+            debug::exit(debug::EXIT_SUCCESS);
+        }
+    }
+
+    /// The link task, below the control period (as the board's): a save
+    /// goes to the RAM flash at once (the board defers it to its next
+    /// boot).
+    #[task(binds = SDIO, priority = 2, local = [link, link_counter, commands_in, answers_out, notes_out, stats_out, logs_out, flash, link_rx, link_tx], shared = [capture])]
+    fn link(cx: link::Context) {
+        let link = &mut *cx.local.link;
+        let rx = &mut *cx.local.link_rx;
+        link.service(
+            cx.local.notes_out,
+            cx.local.stats_out,
+            cx.local.logs_out,
+            cx.local.answers_out,
+            cx.local.commands_in,
+            core::iter::from_fn(|| rx.dequeue()),
+            &mut Locked(cx.shared.capture),
+            cx.local.link_tx,
+            cx.local.link_counter,
+        );
+        let mut record = [0u8; hopper_control::persist::MAX_RECORD];
+        if let Some(r) = link.take_save() {
+            let n = r.len().min(record.len());
+            record[..n].copy_from_slice(&r[..n]);
+            let ok = hopper_store::block_on(cx.local.flash.save(&record[..n])).is_ok();
+            link.save_done(ok, false);
+        }
+    }
+
+    /// The link's bytes in and out, at the control task's priority, not
+    /// above it as on the board: QEMU's USART holds the next byte back
+    /// until the data register is read (no overrun to race) and has no
+    /// baud rate, so at priority 4 the host's bytes would preempt the
+    /// control period without the bound the board's 921,600 baud sets
+    /// (about 18 interrupts a period, budgeted in docs/link.md), and each
+    /// preemption's entry would count in the control period's cost. It
+    /// times itself all the same.
+    #[task(binds = USART1, priority = 3, local = [serial])]
+    fn usart1(cx: usart1::Context) {
+        let t0 = hopper_app::qemu::tim5_now();
+        cx.local.serial.on_interrupt();
+        hopper_app::serial_cost::record(hopper_app::qemu::tim5_now().wrapping_sub(t0));
+    }
+}

@@ -1,0 +1,504 @@
+//! `hopper-app`: what the firmware images share on the STM32F405 (the
+//! control task's constants and bank, the board's registers, pins and
+//! watchdog, the saved calibration's flash, the serial transport, the log,
+//! the QEMU images' counter and pacing, and the fault paths). Each image is
+//! a binary with its one `#[rtic::app]`:
+//!
+//! | Binary | Source | Image | Features |
+//! |--------|--------|-------|----------|
+//! | `hopper-fw` | `src/main.rs` | the board | `board` (default); `hse-12mhz`, `fault-test` |
+//! | `hopper-selftest` | `src/bin/selftest.rs` | the on-target self-test | `board` |
+//! | `hopper-qemu` | `src/bin/qemu.rs` | the QEMU scenario | `qemu-sim` |
+//! | `hopper-qemu-link` | `src/bin/qemu-link.rs` | the QEMU link image | `qemu-sim` |
+//! | `panic-check` | `src/bin/panic-check.rs` | the panic-never link check | |
+//!
+//! Features are additive: `board` brings the RTT logger, `qemu-sim` the
+//! plant models and semihosting, for the binaries that need them; only the
+//! QEMU binaries use the plant. On the host this library is empty, which
+//! keeps `cargo clippy --workspace --all-targets` working.
+#![cfg_attr(target_os = "none", no_std)]
+#![deny(unsafe_code)]
+
+#[cfg(target_os = "none")]
+pub mod control;
+
+#[cfg(target_os = "none")]
+pub mod serial;
+
+#[cfg(target_os = "none")]
+pub mod board;
+
+#[cfg(target_os = "none")]
+pub mod flash;
+
+/// Drives the amplifier-enable pin (PB0) low with one atomic BSRR write.
+///
+/// Usable from any context, including the panic and fault handlers: it needs
+/// no owned peripheral. If GPIOB is not clocked yet the write is ignored and
+/// the external pull-down keeps the amplifier off.
+#[cfg(target_os = "none")]
+pub fn disable_amplifier() {
+    // SAFETY: `GPIOB::ptr()` and `TIM3::ptr()` are the fixed addresses of
+    // their register blocks. BSRR resets only PB0 (one store). Then PB0
+    // leaves the deadman timer's alternate function for a GPIO output,
+    // which drives the low just latched, whatever the timer does; and the
+    // timer's output is forced low too. The MODER read-modify-write can
+    // race with nothing: every other path that writes MODER runs in `init`
+    // or in a fault handler, which does not return.
+    #[allow(unsafe_code)] // Needed to reach GPIOB and TIM3 without owning them (panic path).
+    let (gpiob, tim3) = unsafe {
+        (
+            &*stm32f4::stm32f405::GPIOB::ptr(),
+            &*stm32f4::stm32f405::TIM3::ptr(),
+        )
+    };
+    gpiob.bsrr().write(|w| w.br0().set_bit());
+    gpiob.moder().modify(|_, w| w.moder0().output());
+    tim3.ccmr2_output().modify(|_, w| w.oc3m().force_inactive());
+    tim3.cr1().write(|w| w.cen().disabled());
+}
+
+/// What every fault path of the board's images ends in: `AMP_EN` low, the
+/// DAC at its zero code, then nothing until the watchdog resets the MCU.
+/// (The QEMU images end in [`qemu::exit_failure`].)
+#[cfg(target_os = "none")]
+pub fn park() -> ! {
+    disable_amplifier();
+    zero_dac();
+    loop {
+        cortex_m::asm::nop();
+    }
+}
+
+/// What the serial interrupt cost, in the image's counter ticks (board:
+/// cycles; QEMU: instructions): it preempts the control interrupt, whose
+/// own cost leaves it out and whose budget counts it per byte.
+#[cfg(target_os = "none")]
+pub mod serial_cost {
+    use core::sync::atomic::{AtomicU32, Ordering::Relaxed};
+
+    static SPENT: AtomicU32 = AtomicU32::new(0);
+    static MAX: AtomicU32 = AtomicU32::new(0);
+    static COUNT: AtomicU32 = AtomicU32::new(0);
+
+    /// One interrupt of `ticks`.
+    pub fn record(ticks: u32) {
+        SPENT.fetch_add(ticks, Relaxed);
+        MAX.fetch_max(ticks, Relaxed);
+        COUNT.fetch_add(1, Relaxed);
+    }
+
+    /// Ticks spent in it so far (wrapping).
+    pub fn spent() -> u32 {
+        SPENT.load(Relaxed)
+    }
+
+    /// The largest and the count so far.
+    pub fn max_and_count() -> (u32, u32) {
+        (MAX.load(Relaxed), COUNT.load(Relaxed))
+    }
+
+    /// `counter()` and the ticks spent so far, read together: a serial
+    /// interrupt between the two reads is read again.
+    pub fn stamp(counter: impl Fn() -> u32) -> (u32, u32) {
+        loop {
+            let a = spent();
+            let t = counter();
+            if spent() == a {
+                return (t, a);
+            }
+        }
+    }
+
+    /// The control task's own ticks (the serial interrupt's left out): it
+    /// preempts the link task, whose cost leaves both out.
+    static CONTROL_SPENT: AtomicU32 = AtomicU32::new(0);
+
+    /// The control task ran `ticks` of its own.
+    pub fn record_control(ticks: u32) {
+        CONTROL_SPENT.fetch_add(ticks, Relaxed);
+    }
+
+    /// `counter()` less every tick spent in the serial interrupt and the
+    /// control task: the link task's own time.
+    pub fn below_control(counter: impl Fn() -> u32) -> u32 {
+        loop {
+            let (a, b) = (spent(), CONTROL_SPENT.load(Relaxed));
+            let t = counter();
+            if spent() == a && CONTROL_SPENT.load(Relaxed) == b {
+                return t.wrapping_sub(a).wrapping_sub(b);
+            }
+        }
+    }
+}
+
+/// The zero-current DAC code, for the exception handlers (they own no
+/// peripheral): the configuration's, set by the board's init (then the
+/// saved calibration's) and kept current by the control task; mid-scale
+/// until init. Unmangled: the HardFault entry reads it before it touches
+/// the stack.
+#[cfg(target_os = "none")]
+#[allow(unsafe_code)] // An unmangled static (read by `HardFault`'s assembly).
+#[no_mangle]
+pub static HOPPER_DAC_ZERO_CODE: core::sync::atomic::AtomicU16 =
+    core::sync::atomic::AtomicU16::new(2048);
+
+#[cfg(target_os = "none")]
+pub use HOPPER_DAC_ZERO_CODE as DAC_ZERO_CODE;
+
+/// The DAC's channel 1 at the zero-current code, from any context (one
+/// store to DHR12R1; ignored while the DAC is not clocked).
+#[cfg(target_os = "none")]
+pub fn zero_dac() {
+    let code = DAC_ZERO_CODE.load(core::sync::atomic::Ordering::Relaxed);
+    // SAFETY: `DAC::ptr()` is the fixed address of the DAC register block;
+    // DHR12R1 takes a single store, so it cannot race with the owner's
+    // writes in a way that matters (either value is a current command, and
+    // the enable is already low).
+    #[allow(unsafe_code)] // Needed to reach the DAC without owning it (fault path).
+    let dac = unsafe { &*stm32f4::stm32f405::DAC::ptr() };
+    dac.dhr12r1().write(|w| w.daccdhr().set(code & 0x0FFF));
+}
+
+/// What both QEMU images share: the amplifier pin and the instruction
+/// counter at start-up, SysTick's clock.
+#[cfg(all(target_os = "none", feature = "qemu-sim"))]
+pub mod qemu {
+    use hopper_control::runner::CycleCounter;
+    use stm32f4::stm32f405 as pac;
+
+    /// QEMU clocks SysTick (and counts guest time) at the netduinoplus2's
+    /// 168 MHz CPU clock, whatever the RCC says; with `-icount shift=0` one
+    /// tick is 1/168 us of virtual time.
+    pub const SYSTICK_HZ: u32 = 168_000_000;
+    const _: () = assert!(SYSTICK_HZ.is_multiple_of(crate::control::CONTROL_HZ));
+
+    /// Periods per 100 us of virtual time in both QEMU images: a period's
+    /// deadline is 4,200 SysTick ticks, 25,000 instructions. Robot time is
+    /// still 100 us a period (the runner's and the plant's `dt`; the plant
+    /// advances with SysTick stopped). Not 1 (100,000 instructions a
+    /// period): then most of QEMU's wall time is the busy idle between
+    /// periods. The period's work within the deadline is the step (at most
+    /// about 1,100 instructions), the link's (at most about 10,800) and the
+    /// simulated sensors' noise (soft `f64`, the ADC's and the timers' work
+    /// on the board); not 6 (16,667 instructions, a 168 MHz core's 100 us
+    /// at one instruction per cycle): the sensor model can overrun that.
+    pub const PACE: u32 = 4;
+    /// SysTick ticks per control period.
+    pub const PERIOD_TICKS: u32 = SYSTICK_HZ / crate::control::CONTROL_HZ / PACE;
+    const _: () = assert!((SYSTICK_HZ / crate::control::CONTROL_HZ).is_multiple_of(PACE));
+
+    /// TIM5 as the runner's counter: a free-running 32-bit counter that QEMU
+    /// runs at 1 GHz of virtual time, so under `-icount shift=0` it counts
+    /// guest instructions.
+    pub struct Instructions {
+        overhead: u32,
+        /// The link task's: the control task's instructions left out too.
+        below_control: bool,
+    }
+
+    impl Instructions {
+        /// Another reader of the counter [`start`] started, for the link
+        /// task (the control task's and the serial interrupt's
+        /// instructions left out).
+        pub fn reader() -> Self {
+            let a = tim5_now();
+            let b = tim5_now();
+            Instructions {
+                overhead: b.wrapping_sub(a),
+                below_control: true,
+            }
+        }
+    }
+
+    impl CycleCounter for Instructions {
+        /// Instructions of the running context: the serial interrupt's
+        /// (which preempts it) left out, as QEMU delivers the host's bytes
+        /// with no baud rate (the board's budget counts them per byte).
+        #[inline(always)]
+        fn now(&mut self) -> u32 {
+            if self.below_control {
+                return crate::serial_cost::below_control(tim5_now);
+            }
+            let (t, spent) = crate::serial_cost::stamp(tim5_now);
+            t.wrapping_sub(spent)
+        }
+        fn overhead(&self) -> u32 {
+            self.overhead
+        }
+    }
+
+    /// TIM5's count now, from any task ([`start`] started it; the
+    /// serial interrupt times itself with it).
+    #[allow(unsafe_code)]
+    pub fn tim5_now() -> u32 {
+        // SAFETY: a read of a free-running counter register, which has no
+        // side effect; the only writes to TIM5 are `start`'s, before any
+        // task runs.
+        unsafe { (*pac::TIM5::ptr()).cnt().read().bits() }
+    }
+
+    /// SysTick every `ticks` (a control period: `SYSTICK_HZ / CONTROL_HZ`),
+    /// its interrupt on (the control task).
+    pub fn start_systick(syst: &mut cortex_m::peripheral::SYST, ticks: u32) {
+        syst.set_clock_source(cortex_m::peripheral::syst::SystClkSource::Core);
+        syst.set_reload(ticks - 1);
+        syst.clear_current();
+        syst.enable_interrupt();
+        syst.enable_counter();
+    }
+
+    /// The stack's depth, measured: `idle` paints the free stack below
+    /// its own frame with a pattern ([`paint_stack`]); at the end the
+    /// lowest word no longer the pattern is how deep the tasks went
+    /// ([`stack_depths`]).
+    const PAINT: u32 = 0x5AA5_C33C;
+    static PAINTED_FROM: AtomicUsize = AtomicUsize::new(0);
+    static PAINTED_TO: AtomicUsize = AtomicUsize::new(0);
+    use core::sync::atomic::{AtomicUsize, Ordering};
+
+    extern "C" {
+        static _stack_start: u32;
+        static _stack_end: u32;
+    }
+
+    /// From `idle`, once: paints from 256 bytes below its stack pointer down
+    /// to the end of the statics (the linker's `_stack_end`). A task that
+    /// preempts it meanwhile runs below `idle`'s frame and is gone when
+    /// `idle` paints on: nothing live is overwritten.
+    #[allow(unsafe_code)] // Raw writes to the free stack below idle's frame.
+    #[inline(never)]
+    pub fn paint_stack() {
+        let here = cortex_m::register::msp::read() as usize;
+        let from = (here - 256) & !3;
+        let to = (core::ptr::addr_of!(_stack_end) as usize + 3) & !3;
+        let mut a = from;
+        while a > to {
+            a -= 4;
+            // SAFETY: between the end of the statics and below idle's
+            // frame: the free stack, used only by tasks that preempt idle,
+            // which have returned whenever this runs.
+            unsafe { core::ptr::write_volatile(a as *mut u32, PAINT) };
+        }
+        PAINTED_TO.store(to, Ordering::Relaxed);
+        PAINTED_FROM.store(from, Ordering::Relaxed);
+    }
+
+    /// (`idle`'s depth, the deepest the stack went), bytes from its top;
+    /// (0, 0) before [`paint_stack`] finished.
+    #[allow(unsafe_code)] // Raw reads of the painted stack.
+    pub fn stack_depths() -> (u32, u32) {
+        let (from, to) = (
+            PAINTED_FROM.load(Ordering::Relaxed),
+            PAINTED_TO.load(Ordering::Relaxed),
+        );
+        if from == 0 {
+            return (0, 0);
+        }
+        let top = core::ptr::addr_of!(_stack_start) as usize;
+        let mut a = to;
+        // SAFETY: the painted range, word-aligned, in RAM.
+        while a < from && unsafe { core::ptr::read_volatile(a as *const u32) } == PAINT {
+            a += 4;
+        }
+        ((top - from) as u32, (top - a) as u32)
+    }
+
+    /// What every fault path of the QEMU images ends in: `AMP_EN` low, the
+    /// DAC at its zero code (as on the board), then QEMU's exit with
+    /// failure through semihosting.
+    pub fn exit_failure() -> ! {
+        crate::disable_amplifier();
+        crate::zero_dac();
+        cortex_m_semihosting::debug::exit(cortex_m_semihosting::debug::EXIT_FAILURE);
+        loop {
+            cortex_m::asm::nop();
+        }
+    }
+
+    /// AMP_EN (PB0) low before anything else, as on the board; then TIM5
+    /// free-running as the instruction counter.
+    pub fn start(rcc: &pac::RCC, gpiob: &pac::GPIOB, tim5: pac::TIM5) -> Instructions {
+        rcc.ahb1enr()
+            .modify(|_, w| w.gpioaen().enabled().gpioben().enabled());
+        let _ = rcc.ahb1enr().read();
+        gpiob.bsrr().write(|w| w.br0().set_bit());
+        gpiob.moder().modify(|_, w| w.moder0().output());
+
+        rcc.apb1enr().modify(|_, w| w.tim5en().enabled());
+        let _ = rcc.apb1enr().read();
+        tim5.psc().write(|w| w.psc().set(0));
+        tim5.arr().write(|w| w.arr().set(u32::MAX));
+        tim5.egr().write(|w| w.ug().set_bit());
+        tim5.cr1().modify(|_, w| w.cen().enabled());
+        // Cost of reading the counter twice back to back, subtracted from
+        // every measurement.
+        let _ = tim5;
+        Instructions {
+            below_control: false,
+            ..Instructions::reader()
+        }
+    }
+}
+
+/// The log channel's ends and the count of items it had no room for.
+#[cfg(target_os = "none")]
+pub mod log {
+    use crate::control::LOG_CAPACITY;
+    use hopper_control::runner::LogItem;
+
+    /// The control task's end.
+    pub type Sender = rtic_sync::channel::Sender<'static, LogItem, LOG_CAPACITY>;
+    /// The logger's end.
+    pub type Receiver = rtic_sync::channel::Receiver<'static, LogItem, LOG_CAPACITY>;
+
+    /// The control task's side of the log: never blocks; an item that finds
+    /// the channel full is dropped and counted, and the count goes out with
+    /// the next item that fits.
+    pub struct Log {
+        tx: Sender,
+        dropped: u32,
+    }
+
+    impl Log {
+        /// Wraps the sending end.
+        pub fn new(tx: Sender) -> Self {
+            Self { tx, dropped: 0 }
+        }
+
+        /// Queues `item` if there is room.
+        pub fn push(&mut self, item: LogItem) {
+            if self.tx.try_send(item).is_err() {
+                self.dropped = self.dropped.saturating_add(1);
+            }
+        }
+
+        /// Items dropped so far.
+        pub fn dropped(&self) -> u32 {
+            self.dropped
+        }
+    }
+
+    /// Control periods run, for the log's timestamps (the control task
+    /// stores it once a period).
+    pub static PERIODS: core::sync::atomic::AtomicU32 = core::sync::atomic::AtomicU32::new(0);
+
+    /// Microseconds since boot in control periods (wraps after 71 min at
+    /// 10 kHz).
+    pub fn now_us() -> u32 {
+        PERIODS
+            .load(core::sync::atomic::Ordering::Relaxed)
+            .wrapping_mul(1_000_000 / crate::control::CONTROL_HZ)
+    }
+
+    /// Prints one item at info and warn level (the board).
+    pub fn print(item: &LogItem) {
+        match item {
+            LogItem::Hop(h) => defmt::info!("hop {}", h),
+            LogItem::Faults { step, faults } => {
+                defmt::warn!("faults latched at step {=u32}: {}", step, faults)
+            }
+        }
+    }
+
+    /// Prints one item whatever the log level (QEMU: its run's log is the
+    /// test's evidence, parsed by the xtask).
+    pub fn print_always(item: &LogItem) {
+        match item {
+            LogItem::Hop(h) => defmt::println!("hop {}", h),
+            LogItem::Faults { step, faults } => {
+                defmt::println!("faults latched at step {=u32}: {}", step, faults)
+            }
+        }
+    }
+}
+
+/// The fault paths every image defines the same way, ending in `$park`
+/// ([`park`] on the board, `qemu::exit_failure` in QEMU): the panic
+/// handler, the HardFault entry and its Rust part, NMI and the default
+/// handler. A macro, not functions here: each binary chooses its own end,
+/// and an exception handler must be linked into the binary that owns the
+/// vector table.
+///
+/// HardFault (entered from its vector, through cortex-m-rt's trampoline
+/// where the version has one, which uses no stack): before anything
+/// touches the stack, which may be the fault (flip-link puts it below the
+/// statics, so an overflow faults), AMP_EN is driven low (PB0 reset through
+/// BSRR, then a GPIO output, off the deadman timer), TIM3 is stopped, and
+/// the DAC takes the zero code ([`HOPPER_DAC_ZERO_CODE`]); then a fresh
+/// stack at its top (`_stack_start`) for the Rust handler, which ends in
+/// `$park`.
+#[cfg(target_os = "none")]
+#[macro_export]
+macro_rules! fault_handlers {
+    ($park:path) => {
+        /// Panic: disable the amplifier before anything else, then the
+        /// image's end.
+        #[panic_handler]
+        fn panic(_info: &core::panic::PanicInfo) -> ! {
+            $crate::disable_amplifier();
+            cortex_m::interrupt::disable();
+            $park()
+        }
+
+        #[allow(unsafe_code)] // The handler's entry, in assembly: it must not use the stack.
+        mod hard_fault_entry {
+            core::arch::global_asm!(
+                ".section .HardFault.user, \"ax\"",
+                ".global HardFault",
+                ".type HardFault, %function",
+                ".thumb_func",
+                "HardFault:",
+                // GPIOB (0x4002_0400): BSRR = BR0, then MODER0 = 0b01 (output).
+                "ldr r0, =0x40020400",
+                "mov r1, #0x10000",
+                "str r1, [r0, #0x18]",
+                "ldr r1, [r0, #0x00]",
+                "bic r1, r1, #3",
+                "orr r1, r1, #1",
+                "str r1, [r0, #0x00]",
+                // TIM3 (0x4000_0400): CR1 = 0, the counter stopped.
+                "ldr r0, =0x40000400",
+                "mov r1, #0",
+                "str r1, [r0, #0x00]",
+                // DAC (0x4000_7400): DHR12R1 = the zero code.
+                "ldr r0, =HOPPER_DAC_ZERO_CODE",
+                "ldrh r1, [r0]",
+                "ubfx r1, r1, #0, #12",
+                "ldr r0, =0x40007400",
+                "str r1, [r0, #0x08]",
+                // A fresh main stack, then the Rust part (it does not return).
+                "ldr r0, =_stack_start",
+                "msr msp, r0",
+                "b hopper_hard_fault",
+                ".ltorg",
+            );
+        }
+
+        /// HardFault's Rust part, on a fresh stack: the same end as a panic.
+        #[allow(unsafe_code)] // Unmangled: the assembly entry branches to it.
+        #[no_mangle]
+        extern "C" fn hopper_hard_fault() -> ! {
+            $park()
+        }
+
+        /// NMI: the clock security system found the crystal stopped (the
+        /// core now runs on the HSI, every rate derived from the crystal is
+        /// wrong). Drop AMP_EN, zero the DAC, and wait for the watchdog's
+        /// reset: the next boot runs on the HSI, reports `clock-fallback`
+        /// and refuses to arm.
+        #[cortex_m_rt::exception]
+        #[allow(unsafe_code)] // cortex-m-rt requires the NMI handler to be `unsafe fn`.
+        unsafe fn NonMaskableInt() {
+            $park()
+        }
+
+        /// Every exception and interrupt without a handler of its own:
+        /// outputs safe, then the image's end.
+        #[cortex_m_rt::exception]
+        #[allow(unsafe_code)] // cortex-m-rt requires the DefaultHandler to be `unsafe fn`.
+        unsafe fn DefaultHandler(_irqn: i16) {
+            $park()
+        }
+    };
+}
