@@ -12,8 +12,8 @@
 
 use criterion::{BenchmarkId, Criterion};
 use hal_sim::controller::{Controller, ControllerSpec, Passive};
-use hal_sim::mock::SensorConfig;
 use hal_sim::run::{run, RunConfig};
+use hal_sim::sim_io::SensorConfig;
 use hal_sim::Params;
 use std::hint::black_box;
 use std::time::{Duration, Instant};

@@ -14,8 +14,8 @@
 #![allow(missing_docs)]
 
 use hal_sim::controller::{Controller, ControllerSpec, FirmwareController};
-use hal_sim::mock::SensorConfig;
 use hal_sim::run::{run, RunConfig};
+use hal_sim::sim_io::SensorConfig;
 use hal_sim::{Params, Plant};
 use hopper_control::hal::RawSample;
 use std::hint::black_box;

@@ -5,8 +5,8 @@
 //! `cargo run --release -p hal-sim --example shaped_tune -- PLANT KI KP SPIN SWITCH BRAKE TARGET START SECONDS MARGIN TRACK_S CURRENT_LIMIT_A INITIAL_LEVEL INTEGRAL_START`
 //! with PLANT 0 (design) or 1 (identified); omitted values take the defaults.
 use hal_sim::controller::ControllerSpec;
-use hal_sim::mock::SensorConfig;
 use hal_sim::run::{run, RunConfig};
+use hal_sim::sim_io::SensorConfig;
 use hal_sim::Params;
 use hopper_control::hopper::Strategy;
 use hopper_control::laws::shaped;

@@ -1,17 +1,17 @@
 //! Controllers the simulator can run against the plant.
 //!
 //! Every named controller is the firmware's own control crate
-//! ([`hopper_control::hopper::Hopper`]) behind the mock HAL
-//! ([`crate::mock::SimHal`]): the plant is sampled through the sensor models,
+//! ([`hopper_control::hopper::Hopper`]) behind the simulated hardware
+//! ([`crate::sim_io::SimHal`]): the plant is sampled through the sensor models,
 //! the crate computes a DAC code and the amplifier enable, and the plant is
 //! driven with the amplifier's current over the period.
 
 use crate::inject::{
     InjectKind, Injection, ENCODER_JUMP_COUNTS, NOISE_BURST_DURATION_S, NOISE_BURST_SIGMA_CODES,
 };
-use crate::mock::{firmware_config, model_params, SensorConfig, SimHal};
 use crate::params::Params;
 use crate::plant::Plant;
+use crate::sim_io::{firmware_config, model_params, SensorConfig, SimHal};
 use hopper_control::arming::ArmEvent;
 use hopper_control::estimator::PhaseEvent;
 use hopper_control::hopper::{Hopper, MeasurementOverride, StepOutput, Strategy};
@@ -449,7 +449,7 @@ pub fn describe_param_error(p: &Param, value: f32, e: ParamError, controller: &s
     }
 }
 
-/// The control crate on the mock HAL.
+/// The control crate on the simulated hardware.
 pub struct FirmwareController {
     name: &'static str,
     /// The firmware's period runner (the same one the board and QEMU run).

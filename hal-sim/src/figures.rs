@@ -28,11 +28,11 @@
 //!   step there would measure the stop, not the loop.
 
 use crate::controller::ControllerSpec;
-use crate::mock::SensorConfig;
 use crate::params::Params;
 use crate::plant::{Mode, Plant};
 use crate::plot::ensure_font;
 use crate::run::{self, RunConfig, Sample, Summary};
+use crate::sim_io::SensorConfig;
 use hopper_control::laws::{flight_pd, Actuator};
 use hopper_control::pd_design::{self, PdGains};
 use plotters::coord::Shift;

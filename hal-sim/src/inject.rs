@@ -1,6 +1,6 @@
 //! Fault injection: `hopper-sim run --inject KIND@TIME`.
 //!
-//! Each [`InjectKind`] breaks one thing in the mock HAL (or, for `nan`, in
+//! Each [`InjectKind`] breaks one thing in the simulated hardware (or, for `nan`, in
 //! the converted measurements, through the control crate's
 //! `fault-injection` hook; for `overrun`, through the report the RTIC
 //! application makes) from the first control period that starts at `TIME`

@@ -5,10 +5,11 @@
 //! command line.
 //!
 //! The plant crate's modules are re-exported under their own names
-//! (`hal_sim::plant`, `hal_sim::mock`, ...), so the simulator's users reach
+//! (`hal_sim::plant`, `hal_sim::sim_io`, ...), so the simulator's users reach
 //! the whole model through one crate.
 
-pub use hopper_plant::{metrics, mock, params, plant, robot, sensors};
+pub use hopper_plant::{metrics, params, plant, sensors};
+pub use hopper_sil::{robot, sim_io};
 
 pub mod controller;
 pub mod csv_out;

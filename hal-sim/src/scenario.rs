@@ -40,10 +40,10 @@
 use crate::controller::{ControllerSpec, CONTROLLER_NAMES};
 use crate::flight_stability::{self, FlightLoop};
 use crate::inject::Injection;
-use crate::mock::SensorConfig;
 use crate::params::{Params, Range};
 use crate::params_toml::{self, ParamsFileError, PlantSet};
 use crate::run::RunConfig;
+use crate::sim_io::SensorConfig;
 use hopper_control::estimator::EstimatorConfig;
 use hopper_control::hopper::{ApexLoop, Strategy};
 use hopper_control::laws::ControllerKind;

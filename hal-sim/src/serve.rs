@@ -11,7 +11,7 @@
 use hopper_control::link::Tx;
 use hopper_control::runner::NoCounter;
 use hopper_control::telemetry::{FaultCapture, CAPTURE_LEN};
-use hopper_plant::robot::VirtualRobot;
+use hopper_sil::robot::VirtualRobot;
 use std::io::{ErrorKind, Read, Write};
 use std::net::{TcpListener, TcpStream};
 use std::time::{Duration, Instant};

@@ -2,8 +2,8 @@
 //! through the period runner as the link runs them: what they find against
 //! the truth, their refusals, and the amplifier when something goes wrong.
 
-use hal_sim::mock::{firmware_config, SensorConfig, SimHal};
 use hal_sim::robot::{Miscalibration, VirtualRobot};
+use hal_sim::sim_io::{firmware_config, SensorConfig, SimHal};
 use hal_sim::{Event, Params};
 use hopper_control::arming::ArmRefusal;
 use hopper_control::bringup::{CalRefusal, CalState, Routine};

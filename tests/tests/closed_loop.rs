@@ -1,4 +1,4 @@
-//! Closed loop: the firmware's control crate on the mock HAL (sensor
+//! Closed loop: the firmware's control crate on the simulated hardware (sensor
 //! quantisation, default Gaussian noise, DAC, amplifier lag) against the
 //! plant, through the runner `hopper-sim run` uses.
 //!
@@ -266,7 +266,7 @@ impl Rig {
         t: f64,
         fault: &str,
         latency: usize,
-        inject: impl Fn(&mut hal_sim::mock::IoFaults, usize),
+        inject: impl Fn(&mut hal_sim::sim_io::IoFaults, usize),
     ) {
         // Contact disagreement needs the leg well compressed (the load cell's
         // contact threshold is 150 N of excess force, 13.6 mm).

@@ -1,4 +1,4 @@
-//! Property tests of the closed loop (control crate + mock HAL + plant):
+//! Property tests of the closed loop (control crate + simulated hardware + plant):
 //! over random laws, gains, targets and start heights, the current command
 //! never leaves the configured range and the ball-screw stroke never leaves
 //! its stops.

@@ -11,8 +11,8 @@
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
 use hal_sim::controller::ControllerSpec;
-use hal_sim::mock::SensorConfig;
 use hal_sim::run::{run, RunConfig, Summary};
+use hal_sim::sim_io::SensorConfig;
 use hal_sim::Params;
 
 /// A run on the design preset (its Table 2.1 flight PD), default noise

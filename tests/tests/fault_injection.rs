@@ -13,7 +13,7 @@
 
 use hal_sim::controller::{Controller, ControllerSpec};
 use hal_sim::inject::{InjectKind, Injection};
-use hal_sim::mock::SensorConfig;
+use hal_sim::sim_io::SensorConfig;
 use hal_sim::{Params, Plant};
 use hopper_control::supervisor::Command;
 

@@ -1,5 +1,5 @@
 //! The `shaped` controller in the closed loop: the firmware's
-//! control crate on the mock HAL (quantisation, default noise, amplifier
+//! control crate on the simulated hardware (quantisation, default noise, amplifier
 //! lag) against the plant. Convergence to the thesis's 0.15 m (70 J) apex,
 //! no stop impacts, robustness to a 20 % error between the controller's
 //! model and the plant, and the per-hop energy ledger's bookkeeping.

@@ -286,7 +286,7 @@ impl Report {
 
 /// The session robot's mis-calibration (`hopper-sim serve`'s flags, the
 /// QEMU link image's constants), which its bring-up routines must recover.
-const MIS: hopper_plant::robot::Miscalibration = hopper_plant::robot::Miscalibration::SESSION;
+const MIS: hopper_sil::robot::Miscalibration = hopper_sil::robot::Miscalibration::SESSION;
 /// How close the tare must come, N and mm: 2% of the biases (the means of
 /// 5,000 samples with 2 N and 0.1 mm of noise are good to 0.03 N and
 /// 0.002 mm).

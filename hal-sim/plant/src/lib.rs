@@ -1,10 +1,11 @@
-//! # hopper-plant: the vertical hopper's plant, sensors and mock HAL
+//! # hopper-plant: the vertical hopper's plant and sensors
 //!
 //! The plant the firmware controls, modelled after thesis chapter 2.1 with the
 //! errata of `shared/MODEL.md` applied ([`plant`]), its parameter sets
-//! ([`params`]), the sensor, DAC and amplifier models ([`sensors`]), the mock
-//! HAL that runs the firmware's control crate on them ([`mock`]) and the hop
-//! metrics ([`metrics`]).
+//! ([`params`]), the sensor, DAC and amplifier models ([`sensors`]) and the
+//! hop metrics ([`metrics`]). It knows nothing of the firmware: the
+//! physical facts it shares with the controller come from `hopper-model`,
+//! and the firmware runs on it through `hopper-sil`.
 //!
 //! `no_std` (math through `libm`) and allocation-free, so the same plant
 //! links into the QEMU firmware image; the host simulator (`hal-sim`, the
@@ -12,12 +13,10 @@
 #![cfg_attr(not(test), no_std)]
 
 pub mod metrics;
-pub mod mock;
 pub mod params;
 pub mod planar;
 pub mod planar_general;
 pub mod plant;
-pub mod robot;
 pub mod sensors;
 
 pub use params::{ParamError, Params};

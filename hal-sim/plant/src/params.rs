@@ -6,7 +6,7 @@
 //! the TOML printer and the TOML reader all use it, so they cannot drift apart.
 
 use core::fmt;
-use hopper_control::model::ModelField;
+use hopper_model::ModelField;
 
 /// Parameters of the plant (thesis Table 2.1 and section 4.5, MODEL.md).
 ///
@@ -73,8 +73,8 @@ pub struct NutPdGains {
 /// Torque constant chosen so that the thesis's DC-motor plant gain
 /// `A = k_m / J_e = 110` (eq 4.3, eq 4.13's worked numbers) holds with
 /// Table 2.1's `J = 2.7e-4 kg m^2`: `k_m = 110 * 2.7e-4` (defined with the
-/// rest of the design machine in `hopper_control::model::design`).
-const KT_NM_PER_A: f64 = hopper_control::model::design::TORQUE_CONSTANT_NM_PER_A;
+/// rest of the design machine in `hopper_model::design`).
+const KT_NM_PER_A: f64 = hopper_model::design::TORQUE_CONSTANT_NM_PER_A;
 
 impl Params {
     /// The "design" set: thesis Table 2.1 (vertical hopper simulation).
@@ -83,9 +83,9 @@ impl Params {
     /// (Table 3.1) at 24 V sets the winding resistance
     /// (`R = k_t V / tau_stall`); the amplifier limit gives the 1.0 N m of
     /// Table 2.1. No preload: the thesis gives none
-    /// ([`hopper_control::model::design::SPRING_PRELOAD_M`] says why).
+    /// ([`hopper_model::design::SPRING_PRELOAD_M`] says why).
     pub const fn design() -> Self {
-        use hopper_control::model::design as d;
+        use hopper_model::design as d;
         Params {
             body_mass_kg: d::BODY_MASS_KG,
             unsprung_mass_kg: d::UNSPRUNG_MASS_KG,
@@ -146,7 +146,7 @@ impl Params {
     /// Chapter 4 machine, has `None`: the firmware's own default, eq 4.13's
     /// gains on the motor.
     pub fn preset_flight_gains(name: &str) -> Option<NutPdGains> {
-        use hopper_control::model::design as d;
+        use hopper_model::design as d;
         match name {
             "design" => Some(NutPdGains {
                 kp_n_per_m: d::FLIGHT_KPF_N_PER_M,
@@ -313,7 +313,7 @@ impl FieldSpec {
 
 macro_rules! field {
     // A field the controller's model has too: its range is the model's
-    // (`hopper_control::model::ModelField::range`, the one definition).
+    // (`hopper_model::ModelField::range`, the one definition).
     ($name:ident, $unit:expr, $doc:expr, model $field:ident) => {
         FieldSpec {
             name: stringify!($name),

@@ -1,5 +1,5 @@
 //! `hopper-qemu-link`: the QEMU link image: the virtual robot
-//! (`hopper_plant::robot::VirtualRobot`) behind the host link on USART1,
+//! (`hopper_sil::robot::VirtualRobot`) behind the host link on USART1,
 //! disarmed until `hopper-link` arms it. `cargo xtask qemu` runs the
 //! scripted link session against it.
 #![cfg_attr(target_os = "none", no_std, no_main)]
@@ -18,7 +18,7 @@ use defmt_semihosting as _;
 hopper_app::fault_handlers!(hopper_app::qemu::exit_failure);
 
 /// The QEMU link image (`hopper-qemu-link`): the virtual robot
-/// (`hopper_plant::robot::VirtualRobot`, which `hopper-sim serve` runs too)
+/// (`hopper_sil::robot::VirtualRobot`, which `hopper-sim serve` runs too)
 /// with the host link on USART1, which QEMU wires to its first `-serial`
 /// (the xtask gives it a TCP socket). Its tasks are the board's: the
 /// control period with the link's port at priority 3, the link task at 2,
@@ -40,9 +40,9 @@ mod app {
         StatsQueue,
     };
     use hopper_control::runner::LogItem;
-    use hopper_plant::mock::{firmware_config, SensorConfig, SimHal};
-    use hopper_plant::robot::{Miscalibration, VirtualRobot};
     use hopper_plant::Params;
+    use hopper_sil::robot::{Miscalibration, VirtualRobot};
+    use hopper_sil::sim_io::{firmware_config, SensorConfig, SimHal};
     use rtic::Mutex;
     use stm32f4::stm32f405::Interrupt;
 

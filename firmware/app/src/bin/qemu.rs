@@ -31,8 +31,8 @@ mod app {
     use hopper_control::laws::shaped;
     use hopper_control::runner::{LogItem, PeriodRunner};
     use hopper_plant::metrics::{hops_to_converge, steady_apex};
-    use hopper_plant::mock::{firmware_config, SensorConfig, SimHal};
     use hopper_plant::{Event, Params, Plant};
+    use hopper_sil::sim_io::{firmware_config, SensorConfig, SimHal};
     use rtic_sync::make_channel;
 
     // The scenario (`SCENARIO`, `SHAPED`, `START_APEX_M`, `TARGET_APEX_M`,

@@ -113,7 +113,7 @@ pub(crate) fn cmd_serve(a: ServeArgs) -> Result<()> {
     }
     // The firmware is configured for the nominal machine, started where it
     // believes; the plant is the real one.
-    let mis = hopper_plant::robot::Miscalibration {
+    let mis = hopper_sil::robot::Miscalibration {
         loadcell_bias_n: a.loadcell_bias_n,
         pot_bias_m: a.pot_bias_m,
         nut_start_m: a.nut_start_m,
@@ -137,7 +137,7 @@ pub(crate) fn cmd_serve(a: ServeArgs) -> Result<()> {
         .plant(cfg.params, start_apex_m)
         .map_err(|e| anyhow::anyhow!("plant: {e:?}"))?;
     let hal = mis.hal(hal, &plant);
-    let robot = hopper_plant::robot::VirtualRobot::new(plant, hal, runner, cfg.control_dt_s);
+    let robot = hopper_sil::robot::VirtualRobot::new(plant, hal, runner, cfg.control_dt_s);
     let mut robot = if held { robot.hold() } else { robot };
     let (flash, record) =
         hal_sim::serve::Flash::open(a.flash.as_deref()).map_err(anyhow::Error::msg)?;

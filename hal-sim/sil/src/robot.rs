@@ -14,13 +14,13 @@
 //! drive it. The host moves the robot with `Request::SimulateMount`: the
 //! hoist lifts the body at [`LIFT_SPEED_MPS`] to a toe height, or lets go.
 
-use crate::mock::SimHal;
-use crate::{Event, Plant, PlantError};
+use crate::sim_io::SimHal;
 use hopper_control::link::{
     Answer, Command, ControlPort, Endpoint, Inbox, Note, Outbox, Queues, Stats, Tx,
 };
 use hopper_control::runner::{CycleCounter, HopperSlot, Owned, Period, PeriodRunner};
 use hopper_control::telemetry::{FaultCapture, CAPTURE_LEN};
+use hopper_plant::{Event, Plant, PlantError};
 
 /// How fast the hoist lifts or lowers the body, m/s (2 um a period at 10
 /// kHz: the height encoder sees a motion, not a jump).
@@ -244,8 +244,8 @@ impl Miscalibration {
     }
 
     /// The sensor models with the offsets.
-    pub fn sensors(&self, s: crate::mock::SensorConfig) -> crate::mock::SensorConfig {
-        crate::mock::SensorConfig {
+    pub fn sensors(&self, s: crate::sim_io::SensorConfig) -> crate::sim_io::SensorConfig {
+        crate::sim_io::SensorConfig {
             loadcell_bias_n: self.loadcell_bias_n,
             pot_bias_m: self.pot_bias_m,
             loadcell_gain_error: self.loadcell_gain_error,
@@ -257,15 +257,15 @@ impl Miscalibration {
     /// `start_apex_m` up with the nut where it boots.
     pub fn plant(
         &self,
-        nominal: crate::Params,
+        nominal: hopper_plant::Params,
         start_apex_m: f64,
-    ) -> Result<Plant, crate::ParamError> {
+    ) -> Result<Plant, hopper_plant::ParamError> {
         let mut real = nominal;
         real.spring_stiffness_n_per_m *= 1.0 + self.spring_rate_error;
         Plant::with_state(
             real,
-            crate::Mode::Flight,
-            crate::State {
+            hopper_plant::Mode::Flight,
+            hopper_plant::State {
                 z_m: real.leg_length_m + start_apex_m,
                 zd_mps: 0.0,
                 p_m: self.nut_start_m,

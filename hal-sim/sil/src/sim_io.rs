@@ -1,4 +1,4 @@
-//! The mock HAL: the plant seen through the hopper's sensors and driven
+//! The simulated hardware: the plant seen through the hopper's sensors and driven
 //! through its DAC and amplifier, behind the firmware's own
 //! [`HopperIo`] trait.
 //!
@@ -12,13 +12,13 @@
 //!
 //! `no_std`: this also runs inside the QEMU image.
 
-use crate::params::Params;
-use crate::plant::{Mode, Plant};
-use crate::sensors::{AdcChannel, Amplifier, Encoder, LagFactor, Noise};
 use hopper_control::calibration::Calibration;
 use hopper_control::hal::{HopperIo, IoError, RawSample};
 use hopper_control::hopper::{HopperConfig, Strategy};
 use hopper_control::model::ModelParams;
+use hopper_plant::params::Params;
+use hopper_plant::plant::{Mode, Plant};
+use hopper_plant::sensors::{AdcChannel, Amplifier, Encoder, LagFactor, Noise};
 
 /// The plant parameters as the control crate's model (`f32`, what the
 /// controller believes when it knows the plant exactly).
@@ -68,7 +68,7 @@ pub fn firmware_config(
     cfg
 }
 
-/// Sensor noise and amplifier settings of the mock HAL.
+/// Sensor noise and amplifier settings of the simulated hardware.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SensorConfig {
     /// Draw Gaussian noise (`false`: quantisation only).
@@ -407,7 +407,7 @@ impl HopperIo for SampledIo<'_> {
     }
 }
 
-/// The mock HAL has no pins that can fail on their own.
+/// The simulated hardware has no pins that can fail on their own.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct NoPinError;
 
