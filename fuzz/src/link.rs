@@ -4,14 +4,14 @@
 //! it yields frames again and decodes to the same bytes, and that its
 //! counts add up (each delimiter ends at most one counted frame). Then the
 //! same bytes go to the robot's end (the link task,
-//! [`hopper_control::link::Endpoint`], and the control period's
-//! [`hopper_control::link::ControlPort`]) on a period runner, a chunk per period, as a UART would deliver them:
+//! [`hopper_robot_link::Endpoint`], and the control period's
+//! [`hopper_robot_link::ControlPort`]) on a period runner, a chunk per period, as a UART would deliver them:
 //! whatever the requests (parameter sets, arm, dumps, ...), nothing
 //! panics and everything the robot sends is a well-formed frame.
 
 use hopper_control::hal::{HopperIo, IoError, RawSample};
 use hopper_control::hopper::HopperConfig;
-use hopper_control::link::{ControlPort, Endpoint, Queues, Tx};
+use hopper_robot_link::{ControlPort, Endpoint, Queues, Tx};
 use hopper_control::runner::{NoCounter, PeriodRunner, Timing};
 use hopper_control::telemetry::FaultCapture;
 use hopper_protocol::{encode, Decoder, HostMsg, RobotMsg, MAX_FRAME};

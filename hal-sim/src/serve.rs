@@ -8,9 +8,9 @@
 //! bounded like a UART's ring ([`TX_QUEUE_BYTES`]): a client that does not
 //! read loses telemetry (counted by the robot), never blocks the robot.
 
-use hopper_control::link::Tx;
 use hopper_control::runner::NoCounter;
 use hopper_control::telemetry::{FaultCapture, CAPTURE_LEN};
+use hopper_robot_link::Tx;
 use hopper_sil::robot::VirtualRobot;
 use std::io::{ErrorKind, Read, Write};
 use std::net::{TcpListener, TcpStream};
@@ -102,7 +102,7 @@ pub fn load_at_boot(robot: &mut VirtualRobot, record: Option<&[u8]>) {
     robot.runner.load_calibration(record);
     // The link task's copy of the configuration is the loaded one (as the
     // board builds its endpoint after loading).
-    robot.link = hopper_control::link::Endpoint::simulated(&robot.runner);
+    robot.link = hopper_robot_link::Endpoint::simulated(&robot.runner);
 }
 
 /// How the loop runs.
@@ -131,7 +131,7 @@ pub fn serve(
     let mut tx = Queue::default();
     // The robot's capture, frozen around a fault (32 KiB: on the heap).
     let mut capture = Box::new(FaultCapture::<CAPTURE_LEN>::new());
-    let mut queues = Box::<hopper_control::link::Queues>::default();
+    let mut queues = Box::<hopper_robot_link::Queues>::default();
     let mut inbox: Vec<u8> = Vec::new();
     let mut buf = [0u8; 4096];
     let start = Instant::now();

@@ -1,10 +1,10 @@
 //! Names for the wire's codes, from the firmware's own definitions.
 
 use hopper_control::hopper::HopperConfig;
-use hopper_control::link::disarm_reason;
 use hopper_control::params::{self, Kind, Param, CONTROLLER, CONTROLLER_NAMES};
 use hopper_control::supervisor::Fault;
 use hopper_protocol::ArmState;
+use hopper_robot_link::disarm_reason;
 
 /// The latched faults by name (`none` when empty), comma-separated.
 pub fn faults(bits: u16) -> String {

@@ -107,7 +107,7 @@ fn refused(why: &str) -> Response {
     Response::Refused(why.try_into().unwrap_or_else(|_| panic!("{why}")))
 }
 
-/// What the firmware's endpoint answers (`hopper_control::link`).
+/// What the firmware's endpoint answers (`hopper_robot_link`).
 fn answer(table: &[ParamInfo], req: &Request) -> Response {
     match req {
         Request::ParamCount => Response::ParamCount(table.len() as u16),

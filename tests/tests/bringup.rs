@@ -6,12 +6,12 @@ use hal_sim::robot::{Miscalibration, VirtualRobot};
 use hal_sim::sim_io::{firmware_config, SensorConfig, SimHal};
 use hal_sim::{Event, Params};
 use hopper_control::arming::ArmRefusal;
+use hopper_control::bringup::BringupReport;
 use hopper_control::bringup::{CalRefusal, CalState, Routine};
 use hopper_control::hopper::Strategy;
-use hopper_control::link::Tx;
 use hopper_control::runner::{NoCounter, PeriodRunner, Timing};
 use hopper_control::telemetry::{FaultCapture, CAPTURE_LEN};
-use hopper_protocol::BringupResults;
+use hopper_robot_link::Tx;
 
 const DT_S: f64 = 1e-4;
 const START_APEX_M: f64 = 0.05;
@@ -31,7 +31,7 @@ impl Tx for NullTx {
 /// (a command the link task queued is applied at the next period).
 struct Robot {
     vr: VirtualRobot,
-    queues: Box<hopper_control::link::Queues>,
+    queues: Box<hopper_robot_link::Queues>,
 }
 
 impl std::ops::Deref for Robot {
@@ -104,24 +104,24 @@ fn run(r: &mut Robot, seconds: f64) -> Vec<f64> {
 }
 
 /// Runs `routine` to its end (20 s at most); its state and results.
-fn calibrate(r: &mut Robot, routine: Routine) -> (CalState, BringupResults) {
+fn calibrate(r: &mut Robot, routine: Routine) -> (CalState, BringupReport) {
     r.runner
         .start_calibration(routine, 0.5)
         .unwrap_or_else(|e| panic!("{routine:?} refused: {e:?}"));
     for _ in 0..200 {
         run(r, 0.1);
         let s = r.runner.calibration().state;
-        if s != CalState::Running as u8 {
+        if s != CalState::Running {
             // Its results are installed by the link task's controller a
             // period or two after it ends.
             run(r, 0.001);
-            return (CalState::ALL[usize::from(s)], r.runner.bringup_results());
+            return (s, r.runner.bringup_results());
         }
     }
     panic!("{routine:?} still running after 20 s");
 }
 
-fn done(r: &mut Robot, routine: Routine) -> BringupResults {
+fn done(r: &mut Robot, routine: Routine) -> BringupReport {
     let (s, b) = calibrate(r, routine);
     assert_eq!(s, CalState::Done, "{routine:?}: {b:?}");
     b
@@ -348,7 +348,7 @@ fn the_estop_stops_homing_with_the_amplifier_off() {
     assert!(driven > 4_000, "{driven}");
     // The press is debounced for 0.2 ms: two periods at most.
     assert!(after <= 2, "{after} periods enabled after the press");
-    assert_eq!(r.runner.calibration().state, CalState::FailedFault as u8);
+    assert_eq!(r.runner.calibration().state, CalState::FailedFault);
     assert!(!r.runner.arming().homed());
     assert!(r.runner.bringup_results().nut_offset_m.is_nan());
 }
@@ -419,7 +419,7 @@ fn disarm_stops_a_routine_and_hand_changes_undo_its_verdicts() {
     );
     r.runner.arming_mut().request_disarm();
     run(&mut r, 0.001);
-    assert_eq!(r.runner.calibration().state, CalState::FailedFault as u8);
+    assert_eq!(r.runner.calibration().state, CalState::FailedFault);
     run(&mut r, 0.01);
     assert!(r.hal.mean_current_a(DT_S).abs() < 1e-6);
     // Home properly, tare, then change things by hand.

@@ -252,7 +252,16 @@ fn test(root: &Path) -> Result<(), String> {
     mcu_clippy(
         root,
         "clippy (MCU target)",
-        &["-p", "hopper-control", "-p", "hopper-protocol"],
+        &[
+            "-p",
+            "hopper-model",
+            "-p",
+            "hopper-control",
+            "-p",
+            "hopper-robot-link",
+            "-p",
+            "hopper-protocol",
+        ],
     )?;
     // The control period linked with a panic handler that calls an undefined
     // function (`firmware/app/src/bin/panic-check.rs`): a panic path the

@@ -35,8 +35,8 @@ pub const LOG_CAPACITY: usize = 16;
 pub type Slot = &'static mut Hopper;
 
 /// The bank: the running controller and the link task's spares
-/// (`hopper_control::link::SPARES`).
-pub type Bank = [Option<Hopper>; 1 + hopper_control::link::SPARES];
+/// (`hopper_robot_link::SPARES`).
+pub type Bank = [Option<Hopper>; 1 + hopper_robot_link::SPARES];
 
 /// A period runner on `cfg` in the bank's first slot, and the spare slots
 /// (copies of it until the link task fills them).

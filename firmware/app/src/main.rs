@@ -81,11 +81,11 @@ mod app {
     use hopper_app::log::{self, Log};
     use hopper_app::serial::{LinkTx, RxQueue, Serial, TxQueue};
     use hopper_control::hopper::HopperConfig;
-    use hopper_control::link::{
+    use hopper_control::runner::{LogItem, PeriodRunner};
+    use hopper_robot_link::{
         Answer, AnswerQueue, Command, CommandQueue, ControlPort, Endpoint, LogQueue, Note,
         NoteQueue, Stats, StatsQueue,
     };
-    use hopper_control::runner::{LogItem, PeriodRunner};
     use rtic::Mutex;
     use rtic_sync::make_channel;
     use stm32f4::stm32f405::Interrupt;
@@ -108,7 +108,7 @@ mod app {
     /// flips a flag under it (a few dozen cycles of the control priority).
     struct Locked<M>(M);
 
-    impl<M: Mutex<T = &'static mut Capture>> hopper_control::link::Shared<Capture> for Locked<M> {
+    impl<M: Mutex<T = &'static mut Capture>> hopper_robot_link::Shared<Capture> for Locked<M> {
         fn with<R>(&mut self, f: impl FnOnce(&mut Capture) -> R) -> R {
             self.0.lock(|c| f(c))
         }

@@ -11,7 +11,7 @@
 //!   dozen cycles and shares nothing but the lock-free queues (its cost,
 //!   about 18 bytes a period at full duplex, is in the control interrupt's
 //!   budget in docs/link.md). The link task (priority 2) drains the queue
-//!   once per period into `hopper_control::link::Endpoint::service`. A full
+//!   once per period into `hopper_robot_link::Endpoint::service`. A full
 //!   queue drops the byte (the frame then fails its CRC and is counted).
 //! - transmit: the link task frames its messages into [`TxQueue`]
 //!   through [`LinkTx`] (a frame goes in whole or not at all) and pends the
@@ -23,7 +23,7 @@
 //! them.
 
 use heapless::spsc::{Consumer, Producer, Queue};
-use hopper_control::link::Tx;
+use hopper_robot_link::Tx;
 use stm32f4::stm32f405 as pac;
 
 /// The link's baud rate: 921,600 carries 92,160 bytes/s, 1 kHz of full

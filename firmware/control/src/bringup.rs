@@ -436,6 +436,80 @@ pub enum CalState {
     FailedWeight,
 }
 
+/// What a measuring routine measured (so far, while running): the link's
+/// calibration report.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CalibrationReport {
+    /// The routine.
+    pub routine: Routine,
+    /// Its state.
+    pub state: CalState,
+    /// Samples averaged.
+    pub samples: u32,
+    /// Load-cell mean, ADC code.
+    pub loadcell_mean_code: f32,
+    /// Load-cell standard deviation, ADC code.
+    pub loadcell_std_code: f32,
+    /// Potentiometer mean, ADC code.
+    pub pot_mean_code: f32,
+    /// Potentiometer standard deviation, ADC code.
+    pub pot_std_code: f32,
+    /// Motor-encoder span over the routine, counts.
+    pub motor_span_counts: u32,
+    /// Height-encoder span over the routine, counts.
+    pub height_span_counts: u32,
+    /// The tare's load-cell offset, code (NaN otherwise).
+    pub loadcell_offset_code: f32,
+    /// The tare's potentiometer offset, code (NaN otherwise).
+    pub pot_offset_code: f32,
+}
+
+/// What the motor-driving and height routines found (NaN where the
+/// routine does not measure a value).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BringupReport {
+    /// The routine.
+    pub routine: Routine,
+    /// Its state.
+    pub state: CalState,
+    /// Direction check: the nut's travel in the pulse, m (down positive).
+    pub nut_travel_m: f32,
+    /// Direction check: the load cell's change in the pulse, N.
+    pub force_change_n: f32,
+    /// Homing: where the upper stop was in the encoder's frame before it
+    /// was zeroed there, m.
+    pub nut_offset_m: f32,
+    /// Spring sweep: the fitted rate, N/m.
+    pub spring_rate_n_per_m: f32,
+    /// Spring sweep: the fit's force at zero compression, N.
+    pub spring_intercept_n: f32,
+    /// Spring sweep: RMS of the residuals, N.
+    pub fit_rms_n: f32,
+    /// Spring sweep: points fitted.
+    pub fit_points: u32,
+    /// Spring sweep: the compressions' standard deviation, m.
+    pub fit_span_m: f32,
+    /// Height zero: the correction applied to the body height, m.
+    pub height_offset_m: f32,
+    /// The largest current commanded, A.
+    pub peak_current_a: f32,
+}
+
+/// What the last weighing found (NaN where it did not measure).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct WeighingReport {
+    /// Its state (idle when the last routine was another).
+    pub state: CalState,
+    /// The weight measured, N.
+    pub weight_n: f32,
+    /// The weight configured, N.
+    pub configured_weight_n: f32,
+    /// The friction measured, N.
+    pub friction_n: f32,
+    /// How far the body rose, m.
+    pub body_rise_m: f32,
+}
+
 impl CalState {
     /// Every state, by wire code.
     pub const ALL: [CalState; 15] = [
@@ -948,14 +1022,14 @@ impl Calibrator {
         }
     }
 
-    /// What the last weighing found, as the link sends it (NaN where it did
-    /// not measure, state idle when the last routine was another).
-    pub fn weighing(&self) -> hopper_protocol::WeighingInfo {
+    /// What the last weighing found (NaN where it did not measure, state
+    /// idle when the last routine was another).
+    pub fn weighing(&self) -> WeighingReport {
         let weighed = self.routine == Routine::Weight;
         let nan_unless = |ok: bool, x: f32| if ok { x } else { f32::NAN };
         let halves = self.force_before.count() > 0 && self.force_after.count() > 0;
-        hopper_protocol::WeighingInfo {
-            state: if weighed { self.state } else { CalState::Idle } as u8,
+        WeighingReport {
+            state: if weighed { self.state } else { CalState::Idle },
             weight_n: nan_unless(weighed, self.measured_weight_n()),
             configured_weight_n: match self.drive {
                 Some(d) if weighed => d.weight_n,
@@ -1033,11 +1107,11 @@ impl Calibrator {
         &self.fit
     }
 
-    /// What it measured (so far, while running), as the link sends it.
-    pub fn report(&self) -> hopper_protocol::CalibrationInfo {
-        hopper_protocol::CalibrationInfo {
-            routine: self.routine as u8,
-            state: self.state as u8,
+    /// What it measured (so far, while running).
+    pub fn report(&self) -> CalibrationReport {
+        CalibrationReport {
+            routine: self.routine,
+            state: self.state,
             samples: self.loadcell.count(),
             loadcell_mean_code: self.loadcell.mean(),
             loadcell_std_code: self.loadcell.std(),
@@ -1050,14 +1124,14 @@ impl Calibrator {
         }
     }
 
-    /// What the motor-driving and height routines found, as the link sends
-    /// it (NaN where the routine does not measure a value).
-    pub fn results(&self) -> hopper_protocol::BringupResults {
+    /// What the motor-driving and height routines found (NaN where the
+    /// routine does not measure a value).
+    pub fn results(&self) -> BringupReport {
         let fitted = self.routine == Routine::Spring && self.fit.count() >= 2;
         let nan_unless = |ok: bool, x: f32| if ok { x } else { f32::NAN };
-        hopper_protocol::BringupResults {
-            routine: self.routine as u8,
-            state: self.state as u8,
+        BringupReport {
+            routine: self.routine,
+            state: self.state,
             nut_travel_m: self.travel_m,
             force_change_n: self.force_change_n,
             nut_offset_m: self.nut_offset_m,
@@ -1099,7 +1173,7 @@ mod tests {
         }
         assert!(c.finish((0, 0), (f32::NAN, f32::NAN)));
         let r = c.report();
-        assert_eq!(r.state, CalState::Done as u8);
+        assert_eq!(r.state, CalState::Done);
         assert_eq!(r.samples, 4);
         assert_eq!(r.loadcell_mean_code, 200.0);
         // Sample std of 0, 4, -4, 0: sqrt(32 / 3).
@@ -1117,7 +1191,7 @@ mod tests {
         c.sample(Some(&raw(200, 100, 1, 0)));
         assert!(!c.finish((2, 2), (1.0, 2.0)));
         let r = c.report();
-        assert_eq!(r.state, CalState::FailedMoving as u8);
+        assert_eq!(r.state, CalState::FailedMoving);
         assert_eq!(r.motor_span_counts, 4);
         assert!(r.loadcell_offset_code.is_nan());
     }
@@ -1223,7 +1297,7 @@ mod tests {
         weight_n: f32,
         friction_n: f32,
         held: bool,
-    ) -> (CalState, hopper_protocol::WeighingInfo) {
+    ) -> (CalState, WeighingReport) {
         let d = params();
         let r = d.screw_m_per_rad;
         let mut c = Calibrator::new();
@@ -1297,7 +1371,7 @@ mod tests {
         let mut c = Calibrator::new();
         c.start(Routine::Tare, 10, None);
         let w = c.weighing();
-        assert_eq!(w.state, CalState::Idle as u8);
+        assert_eq!(w.state, CalState::Idle);
         assert!(w.weight_n.is_nan() && c.weight_gain().is_nan());
     }
 

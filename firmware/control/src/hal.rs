@@ -25,6 +25,22 @@ pub struct RawSample {
     pub amp_fault: bool,
 }
 
+impl RawSample {
+    /// A hopper at rest in flight at the origin, as `cal` reads it: nut on
+    /// its stop, the spring at the default model's preload (the tests' and
+    /// the self-checks' quiet input).
+    pub fn at_rest(cal: &crate::calibration::Calibration) -> Self {
+        let m = crate::model::ModelParams::default();
+        let preload_n = m.spring_stiffness_n_per_m * m.preload_m;
+        RawSample {
+            loadcell_code: (cal.loadcell_offset_code + preload_n / cal.loadcell_gain_n_per_code)
+                as u16,
+            pot_code: cal.pot_offset_code as u16,
+            ..RawSample::default()
+        }
+    }
+}
+
 /// Why a [`HopperIo`] operation failed.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]

@@ -37,8 +37,6 @@
 //! - [`watchdog`]: when the period may feed the hardware watchdog;
 //! - [`deadman`]: the hardware deadman on the amplifier enable, its
 //!   retrigger logic;
-//! - [`link`]: the robot's end of the host link, split between the control
-//!   period and the lower-priority link task;
 //! - [`persist`]: the saved calibration as one self-checking record;
 //! - [`boot`]: what the board found at boot (reset cause, brown-out reset,
 //!   clock);
@@ -77,7 +75,6 @@ pub mod filter;
 pub mod hal;
 pub mod hopper;
 pub mod laws;
-pub mod link;
 pub mod model;
 pub mod params;
 pub mod pd_design;
@@ -131,14 +128,7 @@ pub(crate) mod proptest_support {
     /// A hopper at rest in flight at the origin, as `cal` reads it: nut on
     /// its stop, the spring at the default model's preload.
     pub fn rest_sample(cal: &crate::calibration::Calibration) -> crate::hal::RawSample {
-        let m = crate::model::ModelParams::default();
-        let preload_n = m.spring_stiffness_n_per_m * m.preload_m;
-        crate::hal::RawSample {
-            loadcell_code: (cal.loadcell_offset_code + preload_n / cal.loadcell_gain_n_per_code)
-                as u16,
-            pot_code: cal.pot_offset_code as u16,
-            ..crate::hal::RawSample::default()
-        }
+        crate::hal::RawSample::at_rest(cal)
     }
 
     /// Cases per property in the default run: the minimum the project sets

@@ -21,6 +21,13 @@
 use crate::hopper::HopperConfig;
 use crate::params::{self, Param};
 
+/// CRC-16/XMODEM of `bytes`: the record's check (the link's frames use the
+/// same check; the record is not a frame, so it computes its own).
+fn crc16(bytes: &[u8]) -> u16 {
+    const CRC: crc::Crc<u16> = crc::Crc::<u16>::new(&crc::CRC_16_XMODEM);
+    CRC.checksum(bytes)
+}
+
 /// The record's format version.
 pub const VERSION: u16 = 1;
 const MAGIC: [u8; 4] = *b"HCAL";
@@ -194,7 +201,7 @@ pub fn encode(cfg: &HopperConfig, out: &mut [u8; MAX_RECORD]) -> usize {
         n += 1;
     }
     put(out, 6, &[n]);
-    let crc = hopper_protocol::crc16(out.get(..at).unwrap_or_default());
+    let crc = crc16(out.get(..at).unwrap_or_default());
     put(out, at, &crc.to_le_bytes());
     at + 2
 }
@@ -236,7 +243,7 @@ pub fn decode(record: &[u8], cfg: &HopperConfig) -> Result<HopperConfig, LoadErr
     let (Some(body), Some(&[c0, c1])) = (record.get(..end), record.get(end..end + 2)) else {
         return Err(LoadError::NotARecord);
     };
-    if hopper_protocol::crc16(body) != u16::from_le_bytes([c0, c1]) {
+    if crc16(body) != u16::from_le_bytes([c0, c1]) {
         return Err(LoadError::Crc);
     }
     let mut new = *cfg;
@@ -285,7 +292,7 @@ mod tests {
         let mut empty = [0u8; MAX_RECORD];
         empty[..HEADER].copy_from_slice(&buf[..HEADER]);
         empty[6] = 0;
-        let crc = hopper_protocol::crc16(&empty[..HEADER]).to_le_bytes();
+        let crc = crc16(&empty[..HEADER]).to_le_bytes();
         empty[HEADER..HEADER + 2].copy_from_slice(&crc);
         assert_eq!(
             decode(&empty[..HEADER + 2], &HopperConfig::default()),
@@ -333,7 +340,7 @@ mod tests {
         let at = HEADER;
         let bad = f32::NAN.to_le_bytes();
         r[at + 4..at + 8].copy_from_slice(&bad);
-        let crc = hopper_protocol::crc16(&r[..n - 2]).to_le_bytes();
+        let crc = crc16(&r[..n - 2]).to_le_bytes();
         r[n - 2..n].copy_from_slice(&crc);
         assert!(matches!(decode(&r[..n], &d), Err(LoadError::Refused(_))));
     }

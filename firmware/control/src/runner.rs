@@ -908,17 +908,17 @@ impl<H: HopperSlot> PeriodRunner<H> {
     }
 
     /// The last bring-up routine's report.
-    pub fn calibration(&self) -> hopper_protocol::CalibrationInfo {
+    pub fn calibration(&self) -> crate::bringup::CalibrationReport {
         self.cal.report()
     }
 
     /// What the last bring-up routine found.
-    pub fn bringup_results(&self) -> hopper_protocol::BringupResults {
+    pub fn bringup_results(&self) -> crate::bringup::BringupReport {
         self.cal.results()
     }
 
     /// What the last weighing found.
-    pub fn weighing(&self) -> hopper_protocol::WeighingInfo {
+    pub fn weighing(&self) -> crate::bringup::WeighingReport {
         self.cal.weighing()
     }
 
@@ -1636,7 +1636,7 @@ mod tests {
             r.run_period(&mut io, &mut NoCounter);
         }
         let rep = r.calibration();
-        assert_eq!(rep.state, CalState::Done as u8, "{rep:?}");
+        assert_eq!(rep.state, CalState::Done, "{rep:?}");
         assert_eq!(rep.samples, 500);
         // Its results wait for a controller built outside the period:
         // nothing arms or starts until it is installed.

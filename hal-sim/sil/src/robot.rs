@@ -15,12 +15,12 @@
 //! hoist lifts the body at [`LIFT_SPEED_MPS`] to a toe height, or lets go.
 
 use crate::sim_io::SimHal;
-use hopper_control::link::{
-    Answer, Command, ControlPort, Endpoint, Inbox, Note, Outbox, Queues, Stats, Tx,
-};
 use hopper_control::runner::{CycleCounter, HopperSlot, Owned, Period, PeriodRunner};
 use hopper_control::telemetry::{FaultCapture, CAPTURE_LEN};
 use hopper_plant::{Event, Plant, PlantError};
+use hopper_robot_link::{
+    Answer, Command, ControlPort, Endpoint, Inbox, Note, Outbox, Queues, Stats, Tx,
+};
 
 /// How fast the hoist lifts or lowers the body, m/s (2 um a period at 10
 /// kHz: the height encoder sees a motion, not a jump).

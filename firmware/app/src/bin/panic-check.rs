@@ -38,9 +38,9 @@ mod check {
     use core::hint::black_box;
     use hopper_control::hal::{HopperIo, IoError, RawSample};
     use hopper_control::hopper::HopperConfig;
-    use hopper_control::link::{ControlPort, Endpoint, Queues, Tx};
     use hopper_control::runner::{NoCounter, PeriodRunner, Timing};
     use hopper_control::telemetry::{FaultCapture, CAPTURE_LEN};
+    use hopper_robot_link::{ControlPort, Endpoint, Queues, Tx};
 
     // The link needs defmt's linker script (`.cargo/config.toml` passes it
     // to every MCU image) and nothing else of it.

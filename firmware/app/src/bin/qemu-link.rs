@@ -35,12 +35,12 @@ mod app {
     use hopper_app::control::{Bank, Capture, Slot, CONTROL_HZ, CONTROL_PERIOD_S, TIMING};
     use hopper_app::serial::{LinkTx, RxQueue, Serial, TxQueue};
     use hopper_control::hopper::Strategy;
-    use hopper_control::link::{
+    use hopper_control::runner::LogItem;
+    use hopper_plant::Params;
+    use hopper_robot_link::{
         Answer, AnswerQueue, Command, CommandQueue, Endpoint, LogQueue, Note, NoteQueue, Stats,
         StatsQueue,
     };
-    use hopper_control::runner::LogItem;
-    use hopper_plant::Params;
     use hopper_sil::robot::{Miscalibration, VirtualRobot};
     use hopper_sil::sim_io::{firmware_config, SensorConfig, SimHal};
     use rtic::Mutex;
@@ -59,7 +59,7 @@ mod app {
     /// The capture, behind RTIC's lock for the link task.
     struct Locked<M>(M);
 
-    impl<M: Mutex<T = &'static mut Capture>> hopper_control::link::Shared<Capture> for Locked<M> {
+    impl<M: Mutex<T = &'static mut Capture>> hopper_robot_link::Shared<Capture> for Locked<M> {
         fn with<R>(&mut self, f: impl FnOnce(&mut Capture) -> R) -> R {
             self.0.lock(|c| f(c))
         }

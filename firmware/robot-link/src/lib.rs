@@ -35,13 +35,15 @@
 //!   used anyway, so the host sees the gap). A command that finds the
 //!   command queue full is refused `busy`.
 
-use crate::arming::{ArmEvent, ArmState as RunnerArmState, DisarmReason};
-use crate::hopper::HopperConfig;
-use crate::params;
-use crate::runner::{
+#![cfg_attr(not(test), no_std)]
+
+use hopper_control::arming::{ArmEvent, ArmState as RunnerArmState, DisarmReason};
+use hopper_control::hopper::HopperConfig;
+use hopper_control::params;
+use hopper_control::runner::{
     CycleCounter, HopperSlot, LogItem, Owned, Period, PeriodRunner, Prepared, StepStats, Then,
 };
-use crate::telemetry::{FaultCapture, StepRecord};
+use hopper_control::telemetry::{FaultCapture, StepRecord};
 use hopper_protocol::{
     encode, ArmState, CostStats, Decoder, DumpInfo, Hop, HostMsg, ParamInfo, Request, Response,
     RobotMsg, Status, StoredInfo, Telemetry, ThermalStatus, TimingStats, MAX_FRAME,
@@ -185,7 +187,6 @@ impl<H> Queues<H> {
 
 /// A query answered in the control period: a copy of a few words.
 #[derive(Debug, Clone, Copy, PartialEq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum Query {
     /// [`Request::Boot`].
     Boot,
@@ -257,7 +258,7 @@ pub enum Command<H = Owned> {
         /// The request's id.
         id: u16,
         /// The routine.
-        routine: crate::bringup::Routine,
+        routine: hopper_control::bringup::Routine,
         /// How long it measures, s.
         seconds: f32,
     },
@@ -315,7 +316,7 @@ pub enum Answer<H = Owned> {
         /// The generation it is built on.
         generation: u32,
         /// The parameters it changes.
-        changes: crate::runner::Changes,
+        changes: hopper_control::runner::Changes,
         /// What the install completes.
         then: Then,
     },
@@ -551,7 +552,7 @@ impl ControlPort {
         runner: &mut PeriodRunner<H>,
         capture: &mut FaultCapture<N>,
     ) -> (Option<(Option<u16>, Response)>, Option<H>) {
-        let refused = |e: crate::runner::SetError| Response::Refused(text(e.reason()));
+        let refused = |e: hopper_control::runner::SetError| Response::Refused(text(e.reason()));
         if let Command::Install { id, prepared, then } = c {
             let (r, slot) = runner.install(prepared, then);
             return (
@@ -600,7 +601,7 @@ impl ControlPort {
                         .set_live(param, value)
                         .map_or_else(refused, |()| Response::Ok)
                 } else {
-                    refused(crate::runner::SetError::Stale)
+                    refused(hopper_control::runner::SetError::Stale)
                 },
             )),
             Command::Install { .. } => None,
@@ -669,9 +670,13 @@ impl ControlPort {
                     save: 0,
                 })
             }
-            Query::CalibrationReport => Response::Calibration(runner.calibration()),
-            Query::BringupResults => Response::BringupResults(runner.bringup_results()),
-            Query::Weighing => Response::Weighing(runner.weighing()),
+            Query::CalibrationReport => {
+                Response::Calibration(calibration_info(&runner.calibration()))
+            }
+            Query::BringupResults => {
+                Response::BringupResults(bringup_info(&runner.bringup_results()))
+            }
+            Query::Weighing => Response::Weighing(weighing_info(&runner.weighing())),
             Query::ThermalBoot => {
                 let (winding_c, assumed_hot) = runner.thermal_at_boot();
                 Response::ThermalBoot(hopper_protocol::ThermalBootInfo {
@@ -739,7 +744,7 @@ pub struct Endpoint<H = Owned> {
     /// A dump in progress: the next record and the count.
     dump: Option<(u16, u16)>,
     /// Where the dump's oldest record was when it started
-    /// ([`FaultCapture::start`](crate::telemetry::FaultCapture::start)): a
+    /// ([`FaultCapture::start`](hopper_control::telemetry::FaultCapture::start)): a
     /// fault that latches during the dump is captured, and the records the
     /// dump reads stay the ones it announced, since it reads four a period
     /// and the capture writes one.
@@ -782,7 +787,7 @@ pub struct Endpoint<H = Owned> {
 
 /// A calibration record's bytes (an array too long for a derived `Default`).
 #[derive(Debug, Clone)]
-struct SaveRecord([u8; crate::persist::MAX_RECORD]);
+struct SaveRecord([u8; hopper_control::persist::MAX_RECORD]);
 
 const SAVE_PENDING: u8 = 1;
 const SAVE_SAVED: u8 = 2;
@@ -874,7 +879,7 @@ impl<H: HopperSlot> Endpoint<H> {
             dump_start: 0,
             cost: StepStats::new(),
             simulated: false,
-            save_record: SaveRecord([0; crate::persist::MAX_RECORD]),
+            save_record: SaveRecord([0; hopper_control::persist::MAX_RECORD]),
             save_len: 0,
             save_taken: false,
             save_state: 0,
@@ -1228,9 +1233,9 @@ impl<H: HopperSlot> Endpoint<H> {
                 what: Query::Boot,
             }),
             Request::Calibrate { routine, seconds } => {
-                match crate::bringup::Routine::from_code(*routine) {
+                match hopper_control::bringup::Routine::from_code(*routine) {
                     None => Err(Response::Refused(text(
-                        crate::bringup::CalRefusal::Unknown.name(),
+                        hopper_control::bringup::CalRefusal::Unknown.name(),
                     ))),
                     Some(routine) => command(Command::Calibrate {
                         id,
@@ -1333,9 +1338,9 @@ impl<H: HopperSlot> Endpoint<H> {
         value: f32,
         calibrating: bool,
     ) -> Result<(Command<H>, HopperConfig), Response> {
-        let refused = |e: crate::runner::SetError| Response::Refused(text(e.reason()));
+        let refused = |e: hopper_control::runner::SetError| Response::Refused(text(e.reason()));
         if params::find(name).is_some() && calibrating {
-            return Err(refused(crate::runner::SetError::Calibrating));
+            return Err(refused(hopper_control::runner::SetError::Calibrating));
         }
         let (param, cfg) = PeriodRunner::plan_set(self.config(), name, value).map_err(refused)?;
         if self.pending.is_full() {
@@ -1343,7 +1348,9 @@ impl<H: HopperSlot> Endpoint<H> {
         }
         if self.armed() {
             if !PeriodRunner::settable_while_armed(param) {
-                return Err(refused(crate::runner::SetError::WhileArmed(param.name)));
+                return Err(refused(hopper_control::runner::SetError::WhileArmed(
+                    param.name,
+                )));
             }
             let base_gen = self.generation();
             return Ok((
@@ -1402,7 +1409,7 @@ impl<H: HopperSlot> Endpoint<H> {
         if self.save_state == SAVE_PENDING {
             return Response::Refused(text("busy"));
         }
-        self.save_len = crate::persist::encode(&self.confirmed.0, &mut self.save_record.0);
+        self.save_len = hopper_control::persist::encode(&self.confirmed.0, &mut self.save_record.0);
         self.save_taken = false;
         self.save_state = SAVE_PENDING;
         Response::Ok
@@ -1530,13 +1537,61 @@ impl<H: HopperSlot> Endpoint<H> {
     }
 }
 
+/// A routine's report on the wire (codes for the routine and its state).
+fn calibration_info(
+    r: &hopper_control::bringup::CalibrationReport,
+) -> hopper_protocol::CalibrationInfo {
+    hopper_protocol::CalibrationInfo {
+        routine: r.routine as u8,
+        state: r.state as u8,
+        samples: r.samples,
+        loadcell_mean_code: r.loadcell_mean_code,
+        loadcell_std_code: r.loadcell_std_code,
+        pot_mean_code: r.pot_mean_code,
+        pot_std_code: r.pot_std_code,
+        motor_span_counts: r.motor_span_counts,
+        height_span_counts: r.height_span_counts,
+        loadcell_offset_code: r.loadcell_offset_code,
+        pot_offset_code: r.pot_offset_code,
+    }
+}
+
+/// The motor-driving and height routines' results on the wire.
+fn bringup_info(r: &hopper_control::bringup::BringupReport) -> hopper_protocol::BringupResults {
+    hopper_protocol::BringupResults {
+        routine: r.routine as u8,
+        state: r.state as u8,
+        nut_travel_m: r.nut_travel_m,
+        force_change_n: r.force_change_n,
+        nut_offset_m: r.nut_offset_m,
+        spring_rate_n_per_m: r.spring_rate_n_per_m,
+        spring_intercept_n: r.spring_intercept_n,
+        fit_rms_n: r.fit_rms_n,
+        fit_points: r.fit_points,
+        fit_span_m: r.fit_span_m,
+        height_offset_m: r.height_offset_m,
+        peak_current_a: r.peak_current_a,
+    }
+}
+
+/// The last weighing on the wire.
+fn weighing_info(r: &hopper_control::bringup::WeighingReport) -> hopper_protocol::WeighingInfo {
+    hopper_protocol::WeighingInfo {
+        state: r.state as u8,
+        weight_n: r.weight_n,
+        configured_weight_n: r.configured_weight_n,
+        friction_n: r.friction_n,
+        body_rise_m: r.body_rise_m,
+    }
+}
+
 #[cfg(test)]
 mod tests {
     extern crate std;
     use super::*;
-    use crate::hal::{HopperIo, IoError, RawSample};
-    use crate::hopper::{Hopper, HopperConfig};
-    use crate::runner::{NoCounter, Timing};
+    use hopper_control::hal::{HopperIo, IoError, RawSample};
+    use hopper_control::hopper::{Hopper, HopperConfig};
+    use hopper_control::runner::{NoCounter, Timing};
     use hopper_protocol::{encode, Decoder, MAX_FRAME};
     use std::vec::Vec;
 
@@ -1590,7 +1645,7 @@ mod tests {
 
         fn with(simulated: bool) -> Self {
             let cfg = HopperConfig::default();
-            let raw = crate::proptest_support::rest_sample(&cfg.calibration);
+            let raw = hopper_control::hal::RawSample::at_rest(&cfg.calibration);
             let runner =
                 PeriodRunner::new(cfg, Timing::default()).unwrap_or_else(|e| panic!("{e:?}"));
             let ep = if simulated {
@@ -2176,7 +2231,7 @@ mod tests {
         let mut port = ControlPort::new();
         let mut q: Queues<&'static mut Hopper> = Queues::new();
         let mut capture: FaultCapture<64> = FaultCapture::new();
-        let mut io = Io(crate::proptest_support::rest_sample(&cfg.calibration));
+        let mut io = Io(hopper_control::hal::RawSample::at_rest(&cfg.calibration));
         let mut tx = VecTx {
             bytes: Vec::new(),
             cap: 4096,
@@ -2364,7 +2419,7 @@ mod tests {
         r.request(
             3,
             Request::Calibrate {
-                routine: crate::bringup::Routine::SensorCheck as u8,
+                routine: hopper_control::bringup::Routine::SensorCheck as u8,
                 seconds: 0.05,
             },
         );
