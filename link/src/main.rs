@@ -102,7 +102,7 @@ enum Cmd {
     Calibrate {
         /// sensors | tare | direction | home | spring | height | weight
         #[arg(value_parser = clap::builder::PossibleValuesParser::new(
-            hopper_control::bringup::Routine::ALL.map(|r| r.name())
+            hopper_protocol::vocab::Routine::ALL.iter().map(|r| r.name())
         ))]
         routine: String,
         /// How long it measures, s of robot time.

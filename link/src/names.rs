@@ -1,26 +1,20 @@
-//! Names for the wire's codes, from the firmware's own definitions.
+//! Names for the wire's codes (the protocol's vocabulary) and the
+//! parameters' values and owners (the firmware's parameter table).
 
 use hopper_control::hopper::HopperConfig;
 use hopper_control::params::{self, Kind, Param, CONTROLLER, CONTROLLER_NAMES};
-use hopper_control::supervisor::Fault;
+use hopper_protocol::vocab::{DisarmReason, Fault};
 use hopper_protocol::ArmState;
-use hopper_robot_link::disarm_reason;
 
 /// The latched faults by name (`none` when empty), comma-separated.
 pub fn faults(bits: u16) -> String {
     if bits == 0 {
         return "none".into();
     }
-    let mut names: Vec<&str> = Fault::ALL
-        .iter()
-        .filter(|f| bits & f.bit() != 0)
-        .map(|f| f.name())
-        .collect();
-    let known = Fault::ALL.iter().fold(0u16, |a, f| a | f.bit());
-    let unknown = bits & !known;
-    let extra = format!("unknown bits {unknown:#06x}");
+    let (known, unknown) = Fault::names(bits);
+    let mut names: Vec<String> = known.map(str::to_string).collect();
     if unknown != 0 {
-        names.push(&extra);
+        names.push(format!("unknown bits {unknown:#06x}"));
     }
     names.join(",")
 }
@@ -29,7 +23,7 @@ pub fn faults(bits: u16) -> String {
 pub fn arm_state(s: ArmState) -> String {
     match s {
         ArmState::Armed => "armed".into(),
-        ArmState::Disarmed(code) => match disarm_reason(code) {
+        ArmState::Disarmed(code) => match DisarmReason::from_code(code) {
             Some(r) => format!("disarmed ({})", r.name()),
             None => format!("disarmed (reason {code})"),
         },
@@ -38,10 +32,10 @@ pub fn arm_state(s: ArmState) -> String {
 
 /// What a disarm reason means and what to do about it (the README's table).
 pub fn advice(s: ArmState) -> &'static str {
-    use hopper_control::arming::DisarmReason as R;
+    use DisarmReason as R;
     match s {
         ArmState::Armed => "the amplifier is enabled and the controller drives the motor",
-        ArmState::Disarmed(code) => match disarm_reason(code) {
+        ArmState::Disarmed(code) => match DisarmReason::from_code(code) {
             Some(R::Boot) => "powered up: check the sensors, then arm",
             Some(R::WatchdogReset) => {
                 "the watchdog reset the MCU (the loop stalled): read `dump`, then reset-faults"

@@ -24,6 +24,8 @@
 #![warn(missing_docs)]
 #![deny(unsafe_code)]
 
+pub mod vocab;
+
 use serde::{Deserialize, Serialize};
 
 /// The protocol version: a host and a robot talk only when theirs agree.

@@ -1586,6 +1586,56 @@ fn weighing_info(r: &hopper_control::bringup::WeighingReport) -> hopper_protocol
 }
 
 #[cfg(test)]
+mod vocabulary_tests {
+    //! The firmware's own types and the wire's vocabulary
+    //! (`hopper_protocol::vocab`) name every code alike: the host prints
+    //! the protocol's names for the codes the robot sends.
+    use super::{disarm_reason, DISARM_REASONS};
+    use hopper_control::{boot, bringup, persist, supervisor};
+    use hopper_protocol::vocab;
+
+    #[test]
+    fn every_code_has_the_same_name_on_both_ends() {
+        assert_eq!(supervisor::Fault::ALL.len(), vocab::Fault::ALL.len());
+        for f in supervisor::Fault::ALL {
+            let w = vocab::Fault::from_code(f as u8).expect("a wire fault for every fault");
+            assert_eq!((w.name(), w.bit()), (f.name(), f.bit()));
+        }
+        assert_eq!(DISARM_REASONS.len(), vocab::DisarmReason::ALL.len());
+        for (code, r) in DISARM_REASONS.iter().enumerate() {
+            let w = vocab::DisarmReason::from_code(code as u8).expect("a wire reason");
+            assert_eq!(w.name(), r.name());
+            assert_eq!(disarm_reason(code as u8), Some(*r));
+        }
+        assert_eq!(boot::ResetCause::ALL.len(), vocab::ResetCause::ALL.len());
+        for c in boot::ResetCause::ALL {
+            let w = vocab::ResetCause::from_code(c as u8).expect("a wire cause");
+            assert_eq!(w.name(), c.name());
+        }
+        assert_eq!(bringup::Routine::ALL.len(), vocab::Routine::ALL.len());
+        for r in bringup::Routine::ALL {
+            let w = vocab::Routine::from_code(r as u8).expect("a wire routine");
+            assert_eq!(w.name(), r.name());
+            assert_eq!(w.drives_motor(), r.drives_motor());
+        }
+        assert_eq!(bringup::CalState::ALL.len(), vocab::CalState::ALL.len());
+        for c in bringup::CalState::ALL {
+            assert!(vocab::CalState::from_code(c as u8).is_some(), "{c:?}");
+        }
+        for e in [
+            persist::LoadError::NotARecord,
+            persist::LoadError::Version(0),
+            persist::LoadError::Crc,
+            persist::LoadError::UnknownEntry(0),
+            persist::LoadError::Refused(""),
+        ] {
+            let w = vocab::LoadError::from_code(e.code()).expect("a wire load error");
+            assert_eq!(w.name(), e.name());
+        }
+    }
+}
+
+#[cfg(test)]
 mod tests {
     extern crate std;
     use super::*;

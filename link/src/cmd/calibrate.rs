@@ -7,12 +7,13 @@ use hopper_protocol::{Request, Response};
 use std::time::{Duration, Instant};
 
 pub(crate) fn calibrate(c: &mut Client, routine: &str, seconds: f32) -> Result<()> {
-    use hopper_control::bringup::{CalState, Routine};
+    use hopper_protocol::vocab::{CalState, Routine};
     let r = Routine::ALL
-        .into_iter()
+        .iter()
+        .copied()
         .find(|r| r.name() == routine)
         .unwrap_or(Routine::SensorCheck);
-    let code = r as u8;
+    let code = r.code();
     let was = (
         get(c, "calibration.loadcell_offset_code")?,
         get(c, "calibration.pot_offset_code")?,
@@ -42,16 +43,14 @@ pub(crate) fn calibrate(c: &mut Client, routine: &str, seconds: f32) -> Result<(
             Response::Calibration(r) => r,
             r => bail!("unexpected answer {r:?}"),
         };
-        if r.state != CalState::Running as u8 {
+        if r.state != CalState::Running.code() {
             break r;
         }
         if Instant::now() > deadline {
             bail!("calibrate {routine}: still running after {limit_s:.0} s");
         }
     };
-    let state = CalState::ALL
-        .get(usize::from(r.state))
-        .map_or("unknown", |s| s.name());
+    let state = CalState::from_code(r.state).map_or("unknown", CalState::name);
     println!(
         "calibrate {routine}: {state}: {} samples; encoders moved by {} (motor) and {} (height) counts",
         r.samples, r.motor_span_counts, r.height_span_counts

@@ -71,7 +71,8 @@ pub(crate) fn stored_line(s: &hopper_protocol::StoredInfo, require_tare: Option<
         2 => format!("loaded from flash at boot ({} parameters)", s.entries),
         _ => format!(
             "the saved record was refused at boot ({}): {defaults}",
-            hopper_control::persist::LoadError::name_of(s.boot_error).unwrap_or("unknown")
+            hopper_protocol::vocab::LoadError::from_code(s.boot_error)
+                .map_or("unknown", hopper_protocol::vocab::LoadError::name)
         ),
     };
     let save = match s.save {

@@ -51,9 +51,8 @@ pub(crate) fn status(c: &mut Client) -> Result<()> {
         Response::Boot(b) => b,
         r => bail!("unexpected answer {r:?}"),
     };
-    let resets: Vec<&str> = hopper_control::boot::ResetCauses(b.resets)
-        .iter()
-        .map(hopper_control::boot::ResetCause::name)
+    let resets: Vec<&str> = hopper_protocol::vocab::ResetCause::in_set(b.resets)
+        .map(hopper_protocol::vocab::ResetCause::name)
         .collect();
     println!(
         "boot: reset by {}; core clock {:.0} MHz{}; brown-out reset {}",
