@@ -529,27 +529,6 @@ impl CalState {
         CalState::FailedBodyHeld,
         CalState::FailedWeight,
     ];
-
-    /// Kebab-case name.
-    pub const fn name(self) -> &'static str {
-        match self {
-            CalState::Idle => "idle",
-            CalState::Running => "running",
-            CalState::Done => "done",
-            CalState::FailedMoving => "failed: an encoder moved (hold the robot still)",
-            CalState::FailedSensors => "failed: the sensors could not be read",
-            CalState::FailedApply => "failed: the new offsets are out of the parameters' ranges",
-            CalState::FailedFault => "failed: a fault, the e-stop or a lost link stopped it (amplifier off)",
-            CalState::FailedNoMotion => "failed: the nut did not move (amplifier not enabled or not wired?)",
-            CalState::FailedReversed => "failed: the nut moved up on a down command: the motor or its encoder is reversed",
-            CalState::FailedLoadcellReversed => "failed: the nut moved down but the load cell did not see the spring compress (reversed?)",
-            CalState::FailedNoStop => "failed: no stop within the stroke",
-            CalState::FailedFit => "failed: the spring fit is implausible",
-            CalState::FailedNotOnGround => "failed: the load cell does not carry the robot (put the toe on the ground)",
-            CalState::FailedBodyHeld => "failed: the body did not rise with the nut (let go of it)",
-            CalState::FailedWeight => "failed: the weight read is implausible (not within a factor of two of the configured one)",
-        }
-    }
 }
 
 /// A routine in progress, or the last one's report.
