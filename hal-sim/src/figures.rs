@@ -29,9 +29,9 @@
 
 use crate::controller::ControllerSpec;
 use crate::params::Params;
-use crate::plant::{Mode, Plant};
+use crate::plant::Plant;
 use crate::plot::ensure_font;
-use crate::run::{self, RunConfig, Sample, Summary};
+use crate::run::{self, Phase, RunConfig, Sample, Summary};
 use crate::sim_io::SensorConfig;
 use hopper_control::laws::{flight_pd, Actuator};
 use hopper_control::pd_design::{self, PdGains};
@@ -438,11 +438,11 @@ fn hop_note(s: &Summary) -> String {
 fn phase_energy_changes(samples: &[Sample]) -> (Points, Points) {
     let mut stance = Vec::new();
     let mut flight = Vec::new();
-    let mut flight_start: Option<&Sample> = samples.first().filter(|s| s.phase == Mode::Flight);
+    let mut flight_start: Option<&Sample> = samples.first().filter(|s| s.phase == Phase::Flight);
     let mut last_flight: Option<&Sample> = None;
     let mut stance_from: Option<&Sample> = None;
     for s in samples {
-        let airborne = s.phase == Mode::Flight;
+        let airborne = s.phase == Phase::Flight;
         match (airborne, stance_from) {
             (false, None) => {
                 // Touchdown: the flight that just ended is complete.
@@ -862,7 +862,7 @@ mod tests {
 
     #[test]
     fn phase_energy_changes_split_stance_and_flight() {
-        let mk = |t: f64, phase: Mode, e: f64| Sample {
+        let mk = |t: f64, phase: Phase, e: f64| Sample {
             t_s: t,
             phase,
             z_m: 0.0,
@@ -876,13 +876,13 @@ mod tests {
             winding_c: None,
         };
         let s = [
-            mk(0.0, Mode::Flight, 10.0),
-            mk(1.0, Mode::Flight, 9.0),
-            mk(2.0, Mode::Stance, 8.0),
-            mk(3.0, Mode::Stance, 7.5),
-            mk(4.0, Mode::Flight, 7.0),
-            mk(5.0, Mode::Flight, 6.0),
-            mk(6.0, Mode::Stance, 5.0),
+            mk(0.0, Phase::Flight, 10.0),
+            mk(1.0, Phase::Flight, 9.0),
+            mk(2.0, Phase::Stance, 8.0),
+            mk(3.0, Phase::Stance, 7.5),
+            mk(4.0, Phase::Flight, 7.0),
+            mk(5.0, Phase::Flight, 6.0),
+            mk(6.0, Phase::Stance, 5.0),
         ];
         let (stance, flight) = phase_energy_changes(&s);
         assert_eq!(stance, vec![(4.0, -2.0)]);

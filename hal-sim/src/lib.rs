@@ -22,7 +22,9 @@ pub mod out_dir;
 pub mod params_toml;
 pub mod planar_sim;
 pub mod planar_stability;
-pub mod plot;
+/// The trajectory plot and the plotting helpers: the `hopper-plot` crate,
+/// which `hopper-link` shares without the simulator.
+pub use hopper_plot as plot;
 pub mod run;
 pub mod scenario;
 pub mod serve;

@@ -80,55 +80,35 @@ impl RunConfig {
     }
 }
 
-/// One trajectory sample (a CSV row).
-#[derive(Clone, Copy, Debug, Serialize)]
-pub struct Sample {
-    /// Time, s.
-    pub t_s: f64,
-    /// Contact mode.
-    #[serde(serialize_with = "mode_name")]
-    pub phase: Mode,
-    /// Body coordinate `z`, m.
-    pub z_m: f64,
-    /// Body velocity, m/s.
-    pub zd_mps: f64,
-    /// Nut displacement `p`, m.
-    pub p_m: f64,
-    /// Nut velocity, m/s.
-    pub pd_mps: f64,
-    /// Toe height above ground, m.
-    pub toe_height_m: f64,
-    /// Spring force, N.
-    pub spring_force_n: f64,
-    /// Motor torque, N m.
-    pub torque_nm: f64,
-    /// Total mechanical energy, J.
-    pub energy_j: f64,
-    /// The firmware's estimate of the motor's winding temperature, C
-    /// (`None` without firmware).
-    pub winding_c: Option<f64>,
+/// The trajectory sample (a CSV row) and its contact phase, defined with
+/// the plot that draws them (`hopper-plot`); [`phase`] converts the plant's
+/// mode.
+pub use hopper_plot::{Phase, Sample};
+
+/// A sample's phase: the plant's contact mode.
+pub fn phase(mode: Mode) -> Phase {
+    match mode {
+        Mode::Flight => Phase::Flight,
+        Mode::Stance => Phase::Stance,
+        Mode::Standing => Phase::Standing,
+    }
 }
 
-fn mode_name<S: serde::Serializer>(m: &Mode, s: S) -> Result<S::Ok, S::Error> {
-    s.serialize_str(m.name())
-}
-
-impl Sample {
-    fn of(plant: &Plant, winding_c: Option<f64>) -> Self {
-        let s = plant.state();
-        Sample {
-            t_s: plant.time_s(),
-            phase: plant.mode(),
-            z_m: s.z_m,
-            zd_mps: s.zd_mps,
-            p_m: s.p_m,
-            pd_mps: s.pd_mps,
-            toe_height_m: plant.toe_height_m(),
-            spring_force_n: plant.spring_force_n(),
-            torque_nm: plant.motor_torque_nm(),
-            energy_j: plant.energy_j(),
-            winding_c,
-        }
+/// The plant's state now as a trajectory sample.
+fn sample_of(plant: &Plant, winding_c: Option<f64>) -> Sample {
+    let s = plant.state();
+    Sample {
+        t_s: plant.time_s(),
+        phase: phase(plant.mode()),
+        z_m: s.z_m,
+        zd_mps: s.zd_mps,
+        p_m: s.p_m,
+        pd_mps: s.pd_mps,
+        toe_height_m: plant.toe_height_m(),
+        spring_force_n: plant.spring_force_n(),
+        torque_nm: plant.motor_torque_nm(),
+        energy_j: plant.energy_j(),
+        winding_c,
     }
 }
 
@@ -447,7 +427,7 @@ pub fn run_with_progress(
     let mut peak_stroke: f64 = 0.0;
     let mut peak_current: f64 = 0.0;
     if sample_every > 0 {
-        samples.push(Sample::of(&plant, controller.winding_c()));
+        samples.push(sample_of(&plant, controller.winding_c()));
     }
     let report_every = ((0.1 / cfg.control_dt_s).round() as u64).max(1);
     // Motor work at the first touchdown, then over the first stance.
@@ -505,7 +485,7 @@ pub fn run_with_progress(
             to_sample -= 1;
             if to_sample == 0 {
                 to_sample = sample_every;
-                samples.push(Sample::of(&plant, controller.winding_c()));
+                samples.push(sample_of(&plant, controller.winding_c()));
             }
         }
     }
@@ -725,7 +705,7 @@ mod tests {
     fn trajectory_header_is_the_row_struct() {
         let s = Sample {
             t_s: 0.0,
-            phase: Mode::Flight,
+            phase: Phase::Flight,
             z_m: 0.0,
             zd_mps: 0.0,
             p_m: 0.0,

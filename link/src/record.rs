@@ -4,9 +4,8 @@
 //! (capture.png).
 
 use anyhow::{Context, Result};
-use hal_sim::plot::{extent, side_legend, LegendKey, SIDE_LEGEND_PX};
-use hopper_control::model::design::LEG_LENGTH_M;
-use hopper_plant::Mode;
+use hopper_model::design::LEG_LENGTH_M;
+use hopper_plot::{extent, side_legend, LegendKey, Phase, Sample, SIDE_LEGEND_PX};
 use hopper_protocol::{Hop, Telemetry};
 use plotters::prelude::*;
 use std::path::{Path, PathBuf};
@@ -72,7 +71,7 @@ impl Recording {
         }
         if self.records.len() >= 2 {
             let path = dir.join(files.1);
-            hal_sim::plot::hop_plot(&self.samples(), title, target_apex_m, &path)
+            hopper_plot::hop_plot(&self.samples(), title, target_apex_m, &path)
                 .map_err(anyhow::Error::msg)?;
             written.push(path);
         }
@@ -176,7 +175,7 @@ impl Recording {
         let (t_first, t_last) = self
             .span_ms()
             .ok_or_else(|| anyhow::anyhow!("not enough records to plot the capture"))?;
-        hal_sim::plot::ensure_font().map_err(anyhow::Error::msg)?;
+        hopper_plot::ensure_font().map_err(anyhow::Error::msg)?;
         type Get = fn(&Telemetry) -> f64;
         let panels: [(&str, &str, Get); 5] = [
             ("Toe height", "toe height [cm]", |r| {
@@ -317,15 +316,15 @@ impl Recording {
 
     /// The records as the simulator's trajectory samples (what the robot
     /// measured and estimated; velocities and torque are not on the wire).
-    fn samples(&self) -> Vec<hal_sim::run::Sample> {
+    fn samples(&self) -> Vec<Sample> {
         self.records
             .iter()
-            .map(|r| hal_sim::run::Sample {
+            .map(|r| Sample {
                 t_s: self.t_s(r),
                 phase: if r.phase == 1 {
-                    Mode::Stance
+                    Phase::Stance
                 } else {
-                    Mode::Flight
+                    Phase::Flight
                 },
                 z_m: f64::from(r.body_height_m),
                 zd_mps: f64::NAN,

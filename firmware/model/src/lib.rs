@@ -4,7 +4,13 @@
 //! `f32` model (`hopper_control::model::ModelParams`) and the simulator's
 //! `f64` plant (`hopper_plant::Params`) both take their defaults and their
 //! checks from here, so neither depends on the other.
+//!
+//! [`metrics`] holds the hop metrics (steady apex, hops to converge): the
+//! one definition of "converged" the QEMU images, the simulator and
+//! `hopper-link` share.
 #![no_std]
+
+pub mod metrics;
 
 /// Which the control model's `ModelParams` field failed validation.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -94,7 +94,7 @@ pub(crate) fn record(
             .collect::<Vec<_>>()
             .join(" ")
     );
-    if let (Some(s), Some(t)) = (hopper_plant::metrics::steady_apex(&apexes), target) {
+    if let (Some(s), Some(t)) = (hopper_model::metrics::steady_apex(&apexes), target) {
         println!(
             "steady apex: {s:.4} m (target {t:.4} m, {:+.1}%)",
             (s - t) / t * 100.0

@@ -1,4 +1,6 @@
-//! Hop metrics shared by the host runner and the QEMU image (`no_std`).
+//! Hop metrics: the project's one definition of a steady apex and of
+//! convergence, shared by the QEMU firmware images, the simulator (through
+//! `hopper_plant::metrics`) and `hopper-link` (`no_std`).
 
 /// Mean of the last 5 apexes if they agree within 2% (of the largest), m.
 pub fn steady_apex(apexes: &[f64]) -> Option<f64> {
@@ -19,7 +21,7 @@ pub fn hops_to_converge(apexes: &[f64], target: f64, tol: f64) -> Option<usize> 
     if target.is_nan() || target <= 0.0 {
         return None;
     }
-    let within = |h: &f64| libm::fabs(h - target) <= tol * target;
+    let within = |h: &f64| (h - target).abs() <= tol * target;
     let tail = apexes.iter().rev().take_while(|h| within(h)).count();
     (tail >= 3).then(|| apexes.len() - tail + 1)
 }

@@ -1,7 +1,21 @@
+//! # hopper-plot: the hopper's trajectory plots
+//!
 //! Trajectory plots (PNG), laid out like the thesis's Figure 4.7/4.8:
-//! hopping height, actuator position and total energy over time.
+//! hopping height, actuator position and total energy over time
+//! ([`hop_plot`]), of trajectory [`Sample`]s. `hopper-sim run` (the
+//! simulator, `hal-sim`, re-exports this crate as `hal_sim::plot`) and
+//! `hopper-link record` (the robot's telemetry) draw the same plot, so the
+//! host client needs no simulator for it.
+//!
+//! Also the project's plotting helpers the simulator's figures and the
+//! link's capture plot share: the font ([`ensure_font`]), legends
+//! ([`legend`], [`side_legend`]), the colour map ([`viridis`],
+//! [`colour_strip`]) and one figure as PNG + SVG ([`png_and_svg`]).
 
-use crate::run::Sample;
+mod sample;
+
+pub use sample::{Phase, Sample};
+
 use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 use std::path::Path;
@@ -26,7 +40,7 @@ pub fn extent(values: impl Iterator<Item = f64> + Clone) -> (f64, f64) {
 
 /// The project's legend: at `position`, on a white 80% background with a
 /// black border.
-pub(crate) fn legend<'a, DB, CT>(
+pub fn legend<'a, DB, CT>(
     c: &mut ChartContext<'a, DB, CT>,
     position: SeriesLabelPosition,
 ) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>>
@@ -66,13 +80,13 @@ pub fn ensure_font() -> Result<(), String> {
 }
 
 /// What a figure's drawing function returns.
-pub(crate) type DrawResult = Result<(), Box<dyn std::error::Error>>;
+pub type DrawResult = Result<(), Box<dyn std::error::Error>>;
 
-/// One figure as `NAME.png` and `NAME.svg` in `dir` (the staging directory
-/// of [`crate::out_dir::write_whole`]), `size` pixels: the same drawing,
+/// One figure as `NAME.png` and `NAME.svg` in `dir` (the simulator's
+/// staging directory, `hal_sim::out_dir::write_whole`), `size` pixels: the same drawing,
 /// given once per backend (`svg`, `png`); `what` names it in errors.
 /// Returns the two file names.
-pub(crate) fn png_and_svg(
+pub fn png_and_svg(
     dir: &Path,
     name: &str,
     size: (u32, u32),
