@@ -21,6 +21,12 @@ use hopper_control::laws::{
 use hopper_control::params::{self, Param, ParamError};
 use hopper_control::pd_design::{self, PdGains};
 use hopper_control::runner::{NoCounter, PeriodRunner, Timing};
+use hopper_control::telemetry::FaultCapture;
+use hopper_robot_link::{ControlLoop, Unlinked};
+
+/// Records in a run's firmware capture: the run's trajectory is the
+/// simulator's own, so the port's capture is a short one.
+const RUN_CAPTURE_LEN: usize = 16;
 use hopper_control::supervisor::Fault;
 use hopper_control::telemetry::HopLedger;
 use hopper_control::thermal::ThermalConfig;
@@ -387,7 +393,8 @@ impl ControllerSpec {
         let thermal = ThermalSummary::at_start(runner.hopper().supervisor());
         Ok(FirmwareController {
             name,
-            runner,
+            firmware: ControlLoop::new(runner),
+            capture: FaultCapture::new(),
             hal,
             dt_s,
             target_apex_m: (name != "passive").then_some(self.target_apex_m),
@@ -452,8 +459,12 @@ pub fn describe_param_error(p: &Param, value: f32, e: ParamError, controller: &s
 /// The control crate on the simulated hardware.
 pub struct FirmwareController {
     name: &'static str,
-    /// The firmware's period runner (the same one the board and QEMU run).
-    runner: PeriodRunner,
+    /// The firmware's control loop (the same one the board and QEMU run),
+    /// with no link.
+    firmware: ControlLoop,
+    /// The port's capture (a run's trajectory is the simulator's record:
+    /// the firmware's capture is kept short).
+    capture: FaultCapture<RUN_CAPTURE_LEN>,
     /// The sensor, DAC and amplifier models (public for fault injection).
     pub hal: SimHal,
     dt_s: f64,
@@ -483,12 +494,12 @@ enum InjectState {
 impl FirmwareController {
     /// The control crate's state.
     pub fn hopper(&self) -> &Hopper {
-        self.runner.hopper()
+        self.firmware.runner.hopper()
     }
 
     /// The control crate's state, mutably (reset, target changes).
     pub fn hopper_mut(&mut self) -> &mut Hopper {
-        self.runner.hopper_mut()
+        self.firmware.runner.hopper_mut()
     }
 
     /// The last period's output.
@@ -523,14 +534,12 @@ impl FirmwareController {
                 InjectKind::LoadcellStuck => self.hal.freeze_loadcell(plant),
                 InjectKind::LoadcellSaturated => f.loadcell_code = Some(full_scale),
                 InjectKind::PotOpen => f.pot_code = Some(0),
-                InjectKind::Nan => {
-                    self.runner
-                        .hopper_mut()
-                        .set_measurement_override(MeasurementOverride {
-                            spring_force_n: Some(f32::NAN),
-                            ..MeasurementOverride::default()
-                        })
-                }
+                InjectKind::Nan => self.firmware.runner.hopper_mut().set_measurement_override(
+                    MeasurementOverride {
+                        spring_force_n: Some(f32::NAN),
+                        ..MeasurementOverride::default()
+                    },
+                ),
                 InjectKind::NoiseBurst => {
                     f.adc_burst_sigma_codes = NOISE_BURST_SIGMA_CODES;
                     *state = InjectState::Active;
@@ -540,7 +549,7 @@ impl FirmwareController {
                 InjectKind::DacError => f.dac_error = true,
                 // The RTIC app finds the overrun at the start of the next
                 // period and reports it before stepping: do the same.
-                InjectKind::Overrun => self.runner.report_overrun(),
+                InjectKind::Overrun => self.firmware.runner.report_overrun(),
             }
         }
     }
@@ -554,21 +563,26 @@ impl Controller for FirmwareController {
     fn current_command_a(&mut self, plant: &Plant) -> f64 {
         // Before the injections: an overrun is reported into the supervisor
         // there, and must count as latched in this period.
-        let before = self.runner.hopper().supervisor().faults();
+        let before = self.firmware.runner.hopper().supervisor().faults();
         if !self.injections.is_empty() {
             self.apply_injections(plant);
         }
         let out = {
             let mut io = self.hal.io(plant);
-            let period = self.runner.run_period(&mut io, &mut NoCounter);
+            let period = self.firmware.period(
+                &mut io,
+                &mut NoCounter,
+                &mut &mut self.capture,
+                &mut Unlinked::default(),
+            );
             if let Some(ArmEvent::Refused(r)) = period.arm_event {
                 self.arm_refusal.get_or_insert(r.name());
             }
             period.out
         };
         // The host keeps every deadline: the plant takes no time.
-        self.runner.end_period(false);
-        let supervisor = self.runner.hopper().supervisor();
+        self.firmware.runner.end_period(false);
+        let supervisor = self.firmware.runner.hopper().supervisor();
         let motor = supervisor.thermal();
         let winding_c = f64::from(motor.winding_c());
         let th = &mut self.thermal;
@@ -637,7 +651,12 @@ impl Controller for FirmwareController {
 
     fn estimator_events(&self) -> Option<EstimatorEvents> {
         Some(EstimatorEvents {
-            withdrawn_touchdowns: self.runner.hopper().estimator().withdrawn_touchdowns(),
+            withdrawn_touchdowns: self
+                .firmware
+                .runner
+                .hopper()
+                .estimator()
+                .withdrawn_touchdowns(),
             ..self.events
         })
     }

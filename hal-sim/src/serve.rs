@@ -99,10 +99,10 @@ impl Flash {
 
 /// Loads the calibration `flash` holds into `robot` (as a board does at boot).
 pub fn load_at_boot(robot: &mut VirtualRobot, record: Option<&[u8]>) {
-    robot.runner.load_calibration(record);
+    robot.firmware.runner.load_calibration(record);
     // The link task's copy of the configuration is the loaded one (as the
     // board builds its endpoint after loading).
-    robot.link = hopper_robot_link::Endpoint::simulated(&robot.runner);
+    robot.link = hopper_robot_link::Endpoint::simulated(&robot.firmware.runner);
 }
 
 /// How the loop runs.
@@ -188,7 +188,7 @@ pub fn serve(
                 &mut queues,
                 &mut NoCounter,
             );
-            robot.runner.end_period(false);
+            robot.firmware.runner.end_period(false);
             // A save: written between two periods, as the host's clock
             // allows (a board defers it to its next boot).
             if let Some(record) = robot.link.take_save().map(<[u8]>::to_vec) {

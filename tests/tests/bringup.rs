@@ -92,7 +92,7 @@ fn run(r: &mut Robot, seconds: f64) -> Vec<f64> {
             &mut r.queues,
             &mut NoCounter,
         );
-        r.runner.end_period(false);
+        r.firmware.runner.end_period(false);
         r.advance(&mut |e| {
             if let Event::Apex { toe_height_m, .. } = e {
                 apexes.push(toe_height_m);
@@ -105,17 +105,18 @@ fn run(r: &mut Robot, seconds: f64) -> Vec<f64> {
 
 /// Runs `routine` to its end (20 s at most); its state and results.
 fn calibrate(r: &mut Robot, routine: Routine) -> (CalState, BringupReport) {
-    r.runner
+    r.firmware
+        .runner
         .start_calibration(routine, 0.5)
         .unwrap_or_else(|e| panic!("{routine:?} refused: {e:?}"));
     for _ in 0..200 {
         run(r, 0.1);
-        let s = r.runner.calibration().state;
+        let s = r.firmware.runner.calibration().state;
         if s != CalState::Running {
             // Its results are installed by the link task's controller a
             // period or two after it ends.
             run(r, 0.001);
-            return (s, r.runner.bringup_results());
+            return (s, r.firmware.runner.bringup_results());
         }
     }
     panic!("{routine:?} still running after 20 s");
@@ -128,9 +129,9 @@ fn done(r: &mut Robot, routine: Routine) -> BringupReport {
 }
 
 fn arm_refusal(r: &VirtualRobot) -> Option<ArmRefusal> {
-    let last = r.runner.hopper().last_input().copied();
+    let last = r.firmware.runner.hopper().last_input().copied();
     let i = hopper_control::arming::ArmInput {
-        faults: r.runner.hopper().supervisor().faults(),
+        faults: r.firmware.runner.hopper().supervisor().faults(),
         estop_pressed: false,
         sensors_ok: true,
         nut_position_m: last.map_or(0.0, |i| i.nut_position_m),
@@ -138,11 +139,11 @@ fn arm_refusal(r: &VirtualRobot) -> Option<ArmRefusal> {
         body_velocity_mps: 0.0,
         calibrating: false,
     };
-    r.runner.arming().refusal(&i)
+    r.firmware.runner.arming().refusal(&i)
 }
 
 fn offsets(r: &VirtualRobot) -> (f32, f32) {
-    let c = &r.runner.hopper().config().calibration;
+    let c = &r.firmware.runner.hopper().config().calibration;
     (
         c.loadcell_offset_code * c.loadcell_gain_n_per_code,
         c.pot_offset_code * c.pot_gain_m_per_code,
@@ -167,11 +168,11 @@ fn bring_up_recovers_the_machine_and_the_shaped_controller_then_converges() {
         run(&mut r, 0.05);
         assert_eq!(arm_refusal(&r), Some(ArmRefusal::NotHomed));
         assert_eq!(
-            r.runner.start_calibration(Routine::Home, 0.5),
+            r.firmware.runner.start_calibration(Routine::Home, 0.5),
             Err(CalRefusal::DirectionFirst)
         );
         assert_eq!(
-            r.runner.start_calibration(Routine::Spring, 0.5),
+            r.firmware.runner.start_calibration(Routine::Spring, 0.5),
             Err(CalRefusal::HomeFirst)
         );
         done(&mut r, Routine::SensorCheck);
@@ -187,7 +188,7 @@ fn bring_up_recovers_the_machine_and_the_shaped_controller_then_converges() {
         assert_eq!(arm_refusal(&r), Some(ArmRefusal::NotCalibrated));
         // The weighing reads forces through the tare's offset.
         assert_eq!(
-            r.runner.start_calibration(Routine::Weight, 0.5),
+            r.firmware.runner.start_calibration(Routine::Weight, 0.5),
             Err(CalRefusal::TareFirst)
         );
         let before = offsets(&r);
@@ -198,7 +199,12 @@ fn bring_up_recovers_the_machine_and_the_shaped_controller_then_converges() {
         let k_read = k_true * (1.0 + loadcell_gain_error);
         assert!((k / k_read - 1.0).abs() < 0.01, "{k} vs {k_read}: {s:?}");
         assert_eq!(
-            r.runner.hopper().config().supervisor.spring_rate_n_per_m,
+            r.firmware
+                .runner
+                .hopper()
+                .config()
+                .supervisor
+                .spring_rate_n_per_m,
             s.spring_rate_n_per_m
         );
         done(&mut r, Routine::Tare);
@@ -218,14 +224,15 @@ fn bring_up_recovers_the_machine_and_the_shaped_controller_then_converges() {
         let bounces = run(&mut r, 3.0);
         eprintln!("after the drop: {bounces:?}");
         let gain_before = r
+            .firmware
             .runner
             .hopper()
             .config()
             .calibration
             .loadcell_gain_n_per_code;
         done(&mut r, Routine::Weight);
-        let w = r.runner.weighing();
-        let c = r.runner.hopper().config();
+        let w = r.firmware.runner.weighing();
+        let c = r.firmware.runner.hopper().config();
         let found = f64::from(gain_before / c.calibration.loadcell_gain_n_per_code) - 1.0;
         eprintln!("weighing: {w:?}: gain error {found:+.4}");
         assert!(
@@ -258,12 +265,12 @@ fn bring_up_recovers_the_machine_and_the_shaped_controller_then_converges() {
         if spring_rate_error > 0.0 {
             saved_and_loaded_at_the_next_boot(&r, mis);
         }
-        r.runner.arming_mut().request_arm();
+        r.firmware.runner.arming_mut().request_arm();
         let apexes = run(&mut r, 8.0);
         assert!(
-            r.runner.arming().is_armed(),
+            r.firmware.runner.arming().is_armed(),
             "{:?}",
-            r.runner.hopper().supervisor().faults()
+            r.firmware.runner.hopper().supervisor().faults()
         );
         let tail = &apexes[apexes.len().saturating_sub(5)..];
         assert!(
@@ -285,27 +292,27 @@ fn a_reversed_encoder_fails_the_direction_check_and_blocks_arming() {
     let (s, d) = calibrate(&mut r, Routine::Direction);
     assert_eq!(s, CalState::FailedReversed, "{d:?}");
     assert!(d.nut_travel_m < -3e-4, "{d:?}");
-    assert!(!r.runner.arming().direction_ok());
+    assert!(!r.firmware.runner.arming().direction_ok());
     // The reversed count also trips the supervisor's spring cross-check
     // (the spring compresses while the nut reads up); once the nut is back
     // the fault clears, and the reversal is what refuses arming.
-    let faults = r.runner.hopper().supervisor().faults();
+    let faults = r.firmware.runner.hopper().supervisor().faults();
     run(&mut r, 1.0);
-    if let Some(input) = r.runner.hopper().last_input().copied() {
-        let _ = r.runner.reset_faults(&input);
+    if let Some(input) = r.firmware.runner.hopper().last_input().copied() {
+        let _ = r.firmware.runner.reset_faults(&input);
     }
     assert_eq!(
         arm_refusal(&r),
         Some(ArmRefusal::DirectionReversed),
         "latched after the check: {faults:?}, now {:?}",
-        r.runner.hopper().supervisor().faults()
+        r.firmware.runner.hopper().supervisor().faults()
     );
     assert_eq!(
         ArmRefusal::DirectionReversed.name(),
         "encoder-or-motor-direction-reversed"
     );
     assert_eq!(
-        r.runner.start_calibration(Routine::Home, 0.5),
+        r.firmware.runner.start_calibration(Routine::Home, 0.5),
         Err(CalRefusal::DirectionFirst)
     );
     // The amplifier is off again at once: no current after the verdict.
@@ -320,7 +327,8 @@ fn the_estop_stops_homing_with_the_amplifier_off() {
     let mut r = robot(Miscalibration::SESSION, &[("bringup.speed_mps", 0.001)]);
     run(&mut r, 0.05);
     done(&mut r, Routine::Direction);
-    r.runner
+    r.firmware
+        .runner
         .start_calibration(Routine::Home, 0.5)
         .unwrap_or_else(|e| panic!("{e:?}"));
     let mut driven = 0;
@@ -333,9 +341,9 @@ fn the_estop_stops_homing_with_the_amplifier_off() {
         let vr = &mut r.vr;
         let p = {
             let mut io = vr.hal.io(&vr.plant);
-            vr.runner.run_period(&mut io, &mut NoCounter)
+            vr.firmware.runner.run_period(&mut io, &mut NoCounter)
         };
-        vr.runner.end_period(false);
+        vr.firmware.runner.end_period(false);
         vr.advance(&mut |_| {}).unwrap_or_else(|e| panic!("{e:?}"));
         if p.out.command.amp_enable {
             if pressed {
@@ -348,16 +356,16 @@ fn the_estop_stops_homing_with_the_amplifier_off() {
     assert!(driven > 4_000, "{driven}");
     // The press is debounced for 0.2 ms: two periods at most.
     assert!(after <= 2, "{after} periods enabled after the press");
-    assert_eq!(r.runner.calibration().state, CalState::FailedFault);
-    assert!(!r.runner.arming().homed());
-    assert!(r.runner.bringup_results().nut_offset_m.is_nan());
+    assert_eq!(r.firmware.runner.calibration().state, CalState::FailedFault);
+    assert!(!r.firmware.runner.arming().homed());
+    assert!(r.firmware.runner.bringup_results().nut_offset_m.is_nan());
 }
 
 fn saved_and_loaded_at_the_next_boot(r: &VirtualRobot, mis: Miscalibration) {
     use hopper_control::persist::{AtBoot, LoadError, MAX_RECORD};
     use hopper_store::{block_on, RamFlash, Store};
     let mut record = [0u8; MAX_RECORD];
-    let n = r.runner.calibration_record(&mut record);
+    let n = r.firmware.runner.calibration_record(&mut record);
     let mut store =
         Store::new(RamFlash::<2, 2048>::new(), 0..4096).unwrap_or_else(|e| panic!("{e:?}"));
     block_on(store.save(&record[..n])).unwrap_or_else(|e| panic!("{e:?}"));
@@ -366,12 +374,15 @@ fn saved_and_loaded_at_the_next_boot(r: &VirtualRobot, mis: Miscalibration) {
         .unwrap_or_else(|e| panic!("{e:?}"))
         .unwrap_or(0);
     let mut next = robot(mis, &[]);
-    next.runner.load_calibration(back.get(..len));
+    next.firmware.runner.load_calibration(back.get(..len));
     assert_eq!(
-        next.runner.calibration_at_boot(),
+        next.firmware.runner.calibration_at_boot(),
         AtBoot::Loaded(hopper_control::persist::saved_count() as u8)
     );
-    let (a, b) = (r.runner.hopper().config(), next.runner.hopper().config());
+    let (a, b) = (
+        r.firmware.runner.hopper().config(),
+        next.firmware.runner.hopper().config(),
+    );
     assert_eq!(a.calibration, b.calibration);
     assert_eq!(
         a.supervisor.spring_rate_n_per_m,
@@ -384,17 +395,22 @@ fn saved_and_loaded_at_the_next_boot(r: &VirtualRobot, mis: Miscalibration) {
     let mut bad = back;
     bad[10] ^= 0x40;
     let mut next = robot(mis, &[]);
-    next.runner.load_calibration(bad.get(..len));
+    next.firmware.runner.load_calibration(bad.get(..len));
     assert_eq!(
-        next.runner.calibration_at_boot(),
+        next.firmware.runner.calibration_at_boot(),
         AtBoot::Refused(LoadError::Crc)
     );
     assert_eq!(
-        next.runner.hopper().config().calibration,
-        robot(mis, &[]).runner.hopper().config().calibration
+        next.firmware.runner.hopper().config().calibration,
+        robot(mis, &[])
+            .firmware
+            .runner
+            .hopper()
+            .config()
+            .calibration
     );
-    next.runner.arming_mut().note_direction(false);
-    next.runner.arming_mut().note_homed();
+    next.firmware.runner.arming_mut().note_direction(false);
+    next.firmware.runner.arming_mut().note_homed();
     run(&mut next, 0.05);
     assert_eq!(arm_refusal(&next), Some(ArmRefusal::NotCalibrated));
 }
@@ -408,30 +424,34 @@ fn disarm_stops_a_routine_and_hand_changes_undo_its_verdicts() {
     let mut r = robot(Miscalibration::SESSION, &[("bringup.speed_mps", 0.001)]);
     run(&mut r, 0.05);
     done(&mut r, Routine::Direction);
-    r.runner
+    r.firmware
+        .runner
         .start_calibration(Routine::Home, 0.5)
         .unwrap_or_else(|e| panic!("{e:?}"));
     run(&mut r, 0.2);
     assert_eq!(
-        r.runner
+        r.firmware
+            .runner
             .set_param("calibration.motor_counts_positive_down", 0.0),
         Err(hopper_control::runner::SetError::Calibrating)
     );
-    r.runner.arming_mut().request_disarm();
+    r.firmware.runner.arming_mut().request_disarm();
     run(&mut r, 0.001);
-    assert_eq!(r.runner.calibration().state, CalState::FailedFault);
+    assert_eq!(r.firmware.runner.calibration().state, CalState::FailedFault);
     run(&mut r, 0.01);
     assert!(r.hal.mean_current_a(DT_S).abs() < 1e-6);
     // Home properly, tare, then change things by hand.
     done(&mut r, Routine::Home);
     done(&mut r, Routine::Tare);
-    assert!(r.runner.arming().homed() && r.runner.arming().tared());
-    r.runner
+    assert!(r.firmware.runner.arming().homed() && r.firmware.runner.arming().tared());
+    r.firmware
+        .runner
         .set_param("calibration.loadcell_offset_code", 230.0)
         .unwrap_or_else(|e| panic!("{e:?}"));
-    assert!(!r.runner.arming().tared() && r.runner.arming().homed());
-    r.runner
+    assert!(!r.firmware.runner.arming().tared() && r.firmware.runner.arming().homed());
+    r.firmware
+        .runner
         .set_param("calibration.motor_counts_positive_down", 0.0)
         .unwrap_or_else(|e| panic!("{e:?}"));
-    assert!(!r.runner.arming().homed() && !r.runner.arming().direction_ok());
+    assert!(!r.firmware.runner.arming().homed() && !r.firmware.runner.arming().direction_ok());
 }

@@ -51,3 +51,14 @@ pub fn runner_in_bank(
     let runner = PeriodRunner::in_slot(cfg, timing, a.insert(h))?;
     Ok((runner, spares))
 }
+
+/// The capture through an RTIC lock, as the control loop and the link task
+/// reach it (`hopper_robot_link::Shared`): the link task copies a record or
+/// flips a flag under it, a few dozen cycles of the control priority.
+pub struct Locked<M>(pub M);
+
+impl<M: rtic::Mutex<T = &'static mut Capture>> hopper_robot_link::Shared<Capture> for Locked<M> {
+    fn with<R>(&mut self, f: impl FnOnce(&mut Capture) -> R) -> R {
+        self.0.lock(|c| f(c))
+    }
+}

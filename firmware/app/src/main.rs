@@ -75,18 +75,14 @@ mod fault_test {
 #[rtic::app(device = stm32f4::stm32f405, peripherals = true, dispatchers = [FSMC, FPU])]
 mod app {
     use cortex_m::peripheral::NVIC;
-    use heapless::spsc::{Consumer, Producer};
+    use heapless::spsc::Consumer;
     use hopper_app::board::{self, BoardIo, CycleCounter, DumpButton, Watchdog};
-    use hopper_app::control::{Bank, Capture, Slot, CONTROL_HZ, LOG_CAPACITY, TIMING};
+    use hopper_app::control::{Bank, Capture, Locked, Slot, CONTROL_HZ, LOG_CAPACITY, TIMING};
     use hopper_app::log::{self, Log};
     use hopper_app::serial::{LinkTx, RxQueue, Serial, TxQueue};
     use hopper_control::hopper::HopperConfig;
-    use hopper_control::runner::{LogItem, PeriodRunner};
-    use hopper_robot_link::{
-        Answer, AnswerQueue, Command, CommandQueue, ControlPort, Endpoint, LogQueue, Note,
-        NoteQueue, Stats, StatsQueue,
-    };
-    use rtic::Mutex;
+    use hopper_control::runner::LogItem;
+    use hopper_robot_link::{ControlLoop, Endpoint, LinkEnds, PortEnds, Queues};
     use rtic_sync::make_channel;
     use stm32f4::stm32f405::Interrupt;
 
@@ -104,16 +100,6 @@ mod app {
         }
     }
 
-    /// The capture through the RTIC lock: the link task copies a record or
-    /// flips a flag under it (a few dozen cycles of the control priority).
-    struct Locked<M>(M);
-
-    impl<M: Mutex<T = &'static mut Capture>> hopper_robot_link::Shared<Capture> for Locked<M> {
-        fn with<R>(&mut self, f: impl FnOnce(&mut Capture) -> R) -> R {
-            self.0.lock(|c| f(c))
-        }
-    }
-
     #[shared]
     struct Shared {
         /// The capture, frozen around the first fault: a static built in
@@ -127,22 +113,13 @@ mod app {
         io: BoardIo,
         watchdog: Watchdog,
         dump: DumpButton,
-        runner: PeriodRunner<Slot>,
+        firmware: ControlLoop<Slot>,
         cycles: CycleCounter,
         log: Log,
-        port: ControlPort,
-        commands_out: Consumer<'static, Command<Slot>>,
-        answers_in: Producer<'static, Answer<Slot>>,
-        notes_in: Producer<'static, Note>,
-        stats_in: Producer<'static, Stats>,
-        logs_in: Producer<'static, LogItem>,
+        port_queues: PortEnds<'static, Slot>,
         link: Endpoint<Slot>,
         link_cycles: LinkCycles,
-        commands_in: Producer<'static, Command<Slot>>,
-        answers_out: Consumer<'static, Answer<Slot>>,
-        notes_out: Consumer<'static, Note>,
-        stats_out: Consumer<'static, Stats>,
-        logs_out: Consumer<'static, LogItem>,
+        link_queues: LinkEnds<'static, Slot>,
         link_rx: Consumer<'static, u8>,
         link_tx: LinkTx<'static>,
         serial: Serial<'static>,
@@ -152,11 +129,7 @@ mod app {
         rxq: RxQueue = RxQueue::new(),
         txq: TxQueue = TxQueue::new(),
         capture: Capture = Capture::new(),
-        commands: CommandQueue<Slot> = CommandQueue::new(),
-        answers: AnswerQueue<Slot> = AnswerQueue::new(),
-        notes: NoteQueue = NoteQueue::new(),
-        stats: StatsQueue = StatsQueue::new(),
-        logs: LogQueue = LogQueue::new(),
+        queues: Queues<Slot> = Queues::new(),
         bank: Bank = [None, None, None],
     ])]
     fn init(cx: init::Context) -> (Shared, Local) {
@@ -274,11 +247,7 @@ mod app {
             board.io.sysclk_hz(),
             hopper_app::serial::LINK_BAUD
         );
-        let (commands_in, commands_out) = cx.local.commands.split();
-        let (answers_in, answers_out) = cx.local.answers.split();
-        let (notes_in, notes_out) = cx.local.notes.split();
-        let (stats_in, stats_out) = cx.local.stats.split();
-        let (logs_in, logs_out) = cx.local.logs.split();
+        let (port_queues, link_queues) = cx.local.queues.split();
         (
             Shared {
                 capture: cx.local.capture,
@@ -287,22 +256,13 @@ mod app {
                 io: board.io,
                 watchdog,
                 dump: board.dump_button,
-                runner,
+                firmware: ControlLoop::new(runner),
                 cycles,
                 log: Log::new(tx),
-                port: ControlPort::new(),
-                commands_out,
-                answers_in,
-                notes_in,
-                stats_in,
-                logs_in,
+                port_queues,
                 link,
                 link_cycles: LinkCycles,
-                commands_in,
-                answers_out,
-                notes_out,
-                stats_out,
-                logs_out,
+                link_queues,
                 link_rx: rx_out,
                 link_tx: LinkTx::new(tx_in),
                 serial: board.serial,
@@ -326,28 +286,23 @@ mod app {
     /// task paces it, feeds the watchdog, queues the log, and pends the
     /// link task. Nothing here waits, decodes, encodes or builds: its
     /// work is bounded and alike every period (timed entry to exit).
-    #[task(binds = ADC, priority = 3, local = [io, watchdog, dump, runner, cycles, log, port, commands_out, answers_in, notes_in, stats_in, logs_in, polls: u32 = 0], shared = [capture])]
-    fn control(mut cx: control::Context) {
+    #[task(binds = ADC, priority = 3, local = [io, watchdog, dump, firmware, cycles, log, port_queues, polls: u32 = 0], shared = [capture])]
+    fn control(cx: control::Context) {
         let (t0, serial0) = hopper_app::serial_cost::stamp(cortex_m::peripheral::DWT::cycle_count);
         if !cx.local.io.ack_control_irq() {
             return;
         }
-        let runner = &mut *cx.local.runner;
-        let p = runner.run_period(cx.local.io, cx.local.cycles);
+        let firmware = &mut *cx.local.firmware;
+        let p = firmware.period(
+            cx.local.io,
+            cx.local.cycles,
+            &mut Locked(cx.shared.capture),
+            cx.local.port_queues,
+        );
         if p.feed_watchdog {
             cx.local.watchdog.feed();
         }
-        let (port, commands, answers, notes, stats, logs) = (
-            &mut *cx.local.port,
-            &mut *cx.local.commands_out,
-            &mut *cx.local.answers_in,
-            &mut *cx.local.notes_in,
-            &mut *cx.local.stats_in,
-            &mut *cx.local.logs_in,
-        );
-        cx.shared
-            .capture
-            .lock(|c| port.after_period(runner, &p, c, commands, answers, notes, stats, logs));
+        let (runner, port) = (&mut firmware.runner, &mut firmware.port);
         // A set or a routine may have moved the zero code: the fault
         // handlers write the one in use (one relaxed store).
         hopper_app::DAC_ZERO_CODE.store(
@@ -388,16 +343,12 @@ mod app {
     /// and answered, sets checked and their controllers built, frames
     /// encoded into the transmit ring; a save into the RAM slot for
     /// `init` to write after the reset the control task makes.
-    #[task(binds = SDIO, priority = 2, local = [link, link_cycles, commands_in, answers_out, notes_out, stats_out, logs_out, link_rx, link_tx], shared = [capture])]
+    #[task(binds = SDIO, priority = 2, local = [link, link_cycles, link_queues, link_rx, link_tx], shared = [capture])]
     fn link(cx: link::Context) {
         let link = &mut *cx.local.link;
         let rx = &mut *cx.local.link_rx;
-        link.service(
-            cx.local.notes_out,
-            cx.local.stats_out,
-            cx.local.logs_out,
-            cx.local.answers_out,
-            cx.local.commands_in,
+        link.serve(
+            cx.local.link_queues,
             core::iter::from_fn(|| rx.dequeue()),
             &mut Locked(cx.shared.capture),
             cx.local.link_tx,

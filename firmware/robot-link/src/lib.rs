@@ -38,6 +38,7 @@
 #![cfg_attr(not(test), no_std)]
 
 use hopper_control::arming::{ArmEvent, ArmState as RunnerArmState, DisarmReason};
+use hopper_control::hal::HopperIo;
 use hopper_control::hopper::HopperConfig;
 use hopper_control::params;
 use hopper_control::runner::{
@@ -182,6 +183,290 @@ impl<H> Queues<H> {
             stats: StatsQueue::new(),
             logs: LogQueue::new(),
         }
+    }
+}
+
+/// The control period's ends of the five queues to the link task.
+pub trait PortQueues<H> {
+    /// Commands the link task prepared.
+    type Commands: Inbox<Command<H>>;
+    /// Answers to the link task.
+    type Answers: Outbox<Answer<H>>;
+    /// One note a period.
+    type Notes: Outbox<Note>;
+    /// The slow figures.
+    type Stats: Outbox<Stats>;
+    /// Log items.
+    type Logs: Outbox<LogItem>;
+    /// All five, for one period.
+    #[allow(clippy::type_complexity)] // The five ends, named by the trait.
+    fn ends(
+        &mut self,
+    ) -> (
+        &mut Self::Commands,
+        &mut Self::Answers,
+        &mut Self::Notes,
+        &mut Self::Stats,
+        &mut Self::Logs,
+    );
+}
+
+/// The link task's ends of the five queues.
+pub trait LinkQueues<H> {
+    /// Commands to the control period.
+    type Commands: Outbox<Command<H>>;
+    /// Answers from it.
+    type Answers: Inbox<Answer<H>>;
+    /// Its notes.
+    type Notes: Inbox<Note>;
+    /// Its slow figures.
+    type Stats: Inbox<Stats>;
+    /// Its log items.
+    type Logs: Inbox<LogItem>;
+    /// All five, for one service.
+    #[allow(clippy::type_complexity)] // The five ends, named by the trait.
+    fn ends(
+        &mut self,
+    ) -> (
+        &mut Self::Commands,
+        &mut Self::Answers,
+        &mut Self::Notes,
+        &mut Self::Stats,
+        &mut Self::Logs,
+    );
+}
+
+/// Whole queues serve both ends in turn (one thread: `hopper-sim serve`,
+/// the tests).
+impl<H> PortQueues<H> for Queues<H> {
+    type Commands = CommandQueue<H>;
+    type Answers = AnswerQueue<H>;
+    type Notes = NoteQueue;
+    type Stats = StatsQueue;
+    type Logs = LogQueue;
+    fn ends(
+        &mut self,
+    ) -> (
+        &mut CommandQueue<H>,
+        &mut AnswerQueue<H>,
+        &mut NoteQueue,
+        &mut StatsQueue,
+        &mut LogQueue,
+    ) {
+        (
+            &mut self.commands,
+            &mut self.answers,
+            &mut self.notes,
+            &mut self.stats,
+            &mut self.logs,
+        )
+    }
+}
+
+impl<H> LinkQueues<H> for Queues<H> {
+    type Commands = CommandQueue<H>;
+    type Answers = AnswerQueue<H>;
+    type Notes = NoteQueue;
+    type Stats = StatsQueue;
+    type Logs = LogQueue;
+    fn ends(
+        &mut self,
+    ) -> (
+        &mut CommandQueue<H>,
+        &mut AnswerQueue<H>,
+        &mut NoteQueue,
+        &mut StatsQueue,
+        &mut LogQueue,
+    ) {
+        (
+            &mut self.commands,
+            &mut self.answers,
+            &mut self.notes,
+            &mut self.stats,
+            &mut self.logs,
+        )
+    }
+}
+
+/// The control period's halves of split [`Queues`] (the board and the
+/// QEMU link image, where the two ends run in two tasks).
+pub struct PortEnds<'a, H> {
+    commands: heapless::spsc::Consumer<'a, Command<H>>,
+    answers: heapless::spsc::Producer<'a, Answer<H>>,
+    notes: heapless::spsc::Producer<'a, Note>,
+    stats: heapless::spsc::Producer<'a, Stats>,
+    logs: heapless::spsc::Producer<'a, LogItem>,
+}
+
+/// The link task's halves of split [`Queues`].
+pub struct LinkEnds<'a, H> {
+    commands: heapless::spsc::Producer<'a, Command<H>>,
+    answers: heapless::spsc::Consumer<'a, Answer<H>>,
+    notes: heapless::spsc::Consumer<'a, Note>,
+    stats: heapless::spsc::Consumer<'a, Stats>,
+    logs: heapless::spsc::Consumer<'a, LogItem>,
+}
+
+impl<H> Queues<H> {
+    /// The control period's and the link task's ends, for two tasks.
+    pub fn split(&mut self) -> (PortEnds<'_, H>, LinkEnds<'_, H>) {
+        let (commands_in, commands_out) = self.commands.split();
+        let (answers_in, answers_out) = self.answers.split();
+        let (notes_in, notes_out) = self.notes.split();
+        let (stats_in, stats_out) = self.stats.split();
+        let (logs_in, logs_out) = self.logs.split();
+        (
+            PortEnds {
+                commands: commands_out,
+                answers: answers_in,
+                notes: notes_in,
+                stats: stats_in,
+                logs: logs_in,
+            },
+            LinkEnds {
+                commands: commands_in,
+                answers: answers_out,
+                notes: notes_out,
+                stats: stats_out,
+                logs: logs_out,
+            },
+        )
+    }
+}
+
+impl<'a, H> PortQueues<H> for PortEnds<'a, H> {
+    type Commands = heapless::spsc::Consumer<'a, Command<H>>;
+    type Answers = heapless::spsc::Producer<'a, Answer<H>>;
+    type Notes = heapless::spsc::Producer<'a, Note>;
+    type Stats = heapless::spsc::Producer<'a, Stats>;
+    type Logs = heapless::spsc::Producer<'a, LogItem>;
+    fn ends(
+        &mut self,
+    ) -> (
+        &mut Self::Commands,
+        &mut Self::Answers,
+        &mut Self::Notes,
+        &mut Self::Stats,
+        &mut Self::Logs,
+    ) {
+        (
+            &mut self.commands,
+            &mut self.answers,
+            &mut self.notes,
+            &mut self.stats,
+            &mut self.logs,
+        )
+    }
+}
+
+impl<'a, H> LinkQueues<H> for LinkEnds<'a, H> {
+    type Commands = heapless::spsc::Producer<'a, Command<H>>;
+    type Answers = heapless::spsc::Consumer<'a, Answer<H>>;
+    type Notes = heapless::spsc::Consumer<'a, Note>;
+    type Stats = heapless::spsc::Consumer<'a, Stats>;
+    type Logs = heapless::spsc::Consumer<'a, LogItem>;
+    fn ends(
+        &mut self,
+    ) -> (
+        &mut Self::Commands,
+        &mut Self::Answers,
+        &mut Self::Notes,
+        &mut Self::Stats,
+        &mut Self::Logs,
+    ) {
+        (
+            &mut self.commands,
+            &mut self.answers,
+            &mut self.notes,
+            &mut self.stats,
+            &mut self.logs,
+        )
+    }
+}
+
+/// A queue end that leads nowhere: nothing arrives, and whatever is put
+/// is dropped.
+#[derive(Debug, Default)]
+pub struct Nowhere;
+
+impl<T> Inbox<T> for Nowhere {
+    fn take(&mut self) -> Option<T> {
+        None
+    }
+}
+
+impl<T> Outbox<T> for Nowhere {
+    fn room(&self) -> usize {
+        usize::MAX
+    }
+    fn put(&mut self, _: T) -> Result<(), T> {
+        Ok(())
+    }
+}
+
+/// No link (a run with no host: `hopper-sim run`, the QEMU scenario
+/// image): no command comes, and what the port publishes goes nowhere.
+#[derive(Debug, Default)]
+pub struct Unlinked([Nowhere; 5]);
+
+impl<H> PortQueues<H> for Unlinked {
+    type Commands = Nowhere;
+    type Answers = Nowhere;
+    type Notes = Nowhere;
+    type Stats = Nowhere;
+    type Logs = Nowhere;
+    fn ends(
+        &mut self,
+    ) -> (
+        &mut Nowhere,
+        &mut Nowhere,
+        &mut Nowhere,
+        &mut Nowhere,
+        &mut Nowhere,
+    ) {
+        let [c, a, n, s, l] = &mut self.0;
+        (c, a, n, s, l)
+    }
+}
+
+/// The one loop around the period runner: the board, both QEMU images,
+/// the virtual robot (`hopper-sim serve`, the link tests) and `hopper-sim
+/// run` run every control period as [`ControlLoop::period`]: read, step,
+/// write ([`PeriodRunner::run_period`]), then the port
+/// ([`ControlPort::after_period`]: the period into the capture, its note
+/// published, at most one command applied). What differs is around it:
+/// what paces the period, what the caller times, who services the link.
+pub struct ControlLoop<H = Owned> {
+    /// The period runner.
+    pub runner: PeriodRunner<H>,
+    /// The link's end in the control period.
+    pub port: ControlPort,
+}
+
+impl<H: HopperSlot> ControlLoop<H> {
+    /// The loop of `runner` (built disarmed), with a fresh port.
+    pub fn new(runner: PeriodRunner<H>) -> Self {
+        Self {
+            runner,
+            port: ControlPort::new(),
+        }
+    }
+
+    /// One control period on `io`, timed with `counter`; the capture is
+    /// reached through `capture` (the board: a lock of the control
+    /// priority), the link task through `queues`.
+    pub fn period<Io: HopperIo, C: CycleCounter, const N: usize>(
+        &mut self,
+        io: &mut Io,
+        counter: &mut C,
+        capture: &mut impl Shared<FaultCapture<N>>,
+        queues: &mut impl PortQueues<H>,
+    ) -> Period {
+        let p = self.runner.run_period(io, counter);
+        let (commands, answers, notes, stats, logs) = queues.ends();
+        let (runner, port) = (&mut self.runner, &mut self.port);
+        capture.with(|c| port.after_period(runner, &p, c, commands, answers, notes, stats, logs));
+        p
     }
 }
 
@@ -954,6 +1239,23 @@ impl<H: HopperSlot> Endpoint<H> {
     /// The last period's note (`None` before the first).
     pub fn last_note(&self) -> Option<&Note> {
         self.last.as_ref()
+    }
+
+    /// [`service`](Self::service) with the link task's ends of the queues
+    /// in one value (the board's and the QEMU link image's split halves, or
+    /// whole [`Queues`] in line).
+    pub fn serve<const N: usize, T: Tx, C: CycleCounter>(
+        &mut self,
+        queues: &mut impl LinkQueues<H>,
+        rx: impl Iterator<Item = u8>,
+        capture: &mut impl Shared<FaultCapture<N>>,
+        tx: &mut T,
+        counter: &mut C,
+    ) {
+        let (commands, answers, notes, stats, logs) = queues.ends();
+        self.service(
+            notes, stats, logs, answers, commands, rx, capture, tx, counter,
+        );
     }
 
     /// The link task's work, once a period (after the control period, at a

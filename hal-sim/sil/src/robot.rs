@@ -18,9 +18,7 @@ use crate::sim_io::SimHal;
 use hopper_control::runner::{CycleCounter, HopperSlot, Owned, Period, PeriodRunner};
 use hopper_control::telemetry::{FaultCapture, CAPTURE_LEN};
 use hopper_plant::{Event, Plant, PlantError};
-use hopper_robot_link::{
-    Answer, Command, ControlPort, Endpoint, Inbox, Note, Outbox, Queues, Stats, Tx,
-};
+use hopper_robot_link::{ControlLoop, Endpoint, PortQueues, Queues, Tx};
 
 /// How fast the hoist lifts or lowers the body, m/s (2 um a period at 10
 /// kHz: the height encoder sees a motion, not a jump).
@@ -34,10 +32,9 @@ pub struct VirtualRobot<H = Owned> {
     pub plant: Plant,
     /// The sensor, DAC and amplifier models.
     pub hal: SimHal,
-    /// The firmware's period runner.
-    pub runner: PeriodRunner<H>,
-    /// The link's end in the control period.
-    pub port: ControlPort,
+    /// The firmware's control loop (the period runner and the link's end
+    /// in the control period).
+    pub firmware: ControlLoop<H>,
     /// The link task, for [`control`](Self::control) (an image that runs
     /// it as a task of its own keeps its own).
     pub link: Endpoint<H>,
@@ -57,8 +54,7 @@ impl<H: HopperSlot> VirtualRobot<H> {
             plant,
             hal,
             link: Endpoint::simulated(&runner),
-            port: ControlPort::new(),
-            runner,
+            firmware: ControlLoop::new(runner),
             held: false,
             lift_to_m: None,
             dt_s,
@@ -91,47 +87,34 @@ impl<H: HopperSlot> VirtualRobot<H> {
         self.lift_to_m = None;
     }
 
-    /// One control period on the sensors' present state and the control
-    /// period's end of the link ([`ControlPort::after_period`]: the
-    /// period's record into `capture`, frozen around a fault, its note
-    /// published, at most one command applied), timed with `counter` as
-    /// the board times its whole control interrupt (the sensor models'
-    /// work before it, as the board's ADC and timers do theirs). The
-    /// caller runs the link task ([`Endpoint::service`]) after it, at a
-    /// lower priority or in line ([`control`](Self::control)), and
+    /// One control period on the sensors' present state
+    /// ([`ControlLoop::period`]: the period's record into `capture`, frozen
+    /// around a fault, its note published, at most one command applied),
+    /// timed with `counter` as the board times its whole control interrupt
+    /// (the sensor models' work before it, as the board's ADC and timers do
+    /// theirs). The caller runs the link task ([`Endpoint::serve`]) after
+    /// it, at a lower priority or in line ([`control`](Self::control)), and
     /// reports the period's lateness with `runner.end_period`.
-    #[allow(clippy::too_many_arguments)] // The port's five queue ends, as the board's task has them.
     pub fn control_period<C: CycleCounter>(
         &mut self,
         capture: &mut FaultCapture<CAPTURE_LEN>,
-        commands: &mut impl Inbox<Command<H>>,
-        answers: &mut impl Outbox<Answer<H>>,
-        notes: &mut impl Outbox<Note>,
-        stats: &mut impl Outbox<Stats>,
-        logs: &mut impl Outbox<hopper_control::runner::LogItem>,
+        queues: &mut impl PortQueues<H>,
         counter: &mut C,
     ) -> Period {
-        self.hal.faults.estop = self.port.sim_estop();
-        if let Some((hoisted, lift_m)) = self.port.take_sim_mount() {
+        self.hal.faults.estop = self.firmware.port.sim_estop();
+        if let Some((hoisted, lift_m)) = self.firmware.port.take_sim_mount() {
             self.mount(hoisted.then_some(f64::from(lift_m)));
         }
         // The sample first (the board's ADC and timers have it when the
         // interrupt enters): the timing is the firmware's.
         let mut io = self.hal.sampled(&self.plant);
         let t0 = counter.now();
-        let p = self.runner.run_period(&mut io, counter);
-        self.port.after_period(
-            &mut self.runner,
-            &p,
-            capture,
-            commands,
-            answers,
-            notes,
-            stats,
-            logs,
-        );
+        let p = self
+            .firmware
+            .period(&mut io, counter, &mut &mut *capture, queues);
         let t1 = counter.now();
-        self.port
+        self.firmware
+            .port
             .add_isr_cost(t1.wrapping_sub(t0).saturating_sub(counter.overhead()));
         if p.armed && self.held {
             // Armed: the hoist lets go (the laws start from the release).
@@ -153,26 +136,8 @@ impl<H: HopperSlot> VirtualRobot<H> {
         queues: &mut Queues<H>,
         counter: &mut C,
     ) -> Period {
-        let p = self.control_period(
-            capture,
-            &mut queues.commands,
-            &mut queues.answers,
-            &mut queues.notes,
-            &mut queues.stats,
-            &mut queues.logs,
-            counter,
-        );
-        self.link.service(
-            &mut queues.notes,
-            &mut queues.stats,
-            &mut queues.logs,
-            &mut queues.answers,
-            &mut queues.commands,
-            rx,
-            &mut &mut *capture,
-            tx,
-            counter,
-        );
+        let p = self.control_period(capture, queues, counter);
+        self.link.serve(queues, rx, &mut &mut *capture, tx, counter);
         p
     }
 

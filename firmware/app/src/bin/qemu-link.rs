@@ -31,19 +31,14 @@ hopper_app::fault_handlers!(hopper_app::qemu::exit_failure);
 mod app {
     use cortex_m::peripheral::{SCB, SYST};
     use cortex_m_semihosting::debug;
-    use heapless::spsc::{Consumer, Producer};
-    use hopper_app::control::{Bank, Capture, Slot, CONTROL_HZ, CONTROL_PERIOD_S, TIMING};
+    use heapless::spsc::Consumer;
+    use hopper_app::control::{Bank, Capture, Locked, Slot, CONTROL_HZ, CONTROL_PERIOD_S, TIMING};
     use hopper_app::serial::{LinkTx, RxQueue, Serial, TxQueue};
     use hopper_control::hopper::Strategy;
-    use hopper_control::runner::LogItem;
     use hopper_plant::Params;
-    use hopper_robot_link::{
-        Answer, AnswerQueue, Command, CommandQueue, Endpoint, LogQueue, Note, NoteQueue, Stats,
-        StatsQueue,
-    };
+    use hopper_robot_link::{Endpoint, LinkEnds, PortEnds, Queues};
     use hopper_sil::robot::{Miscalibration, VirtualRobot};
     use hopper_sil::sim_io::{firmware_config, SensorConfig, SimHal};
-    use rtic::Mutex;
     use stm32f4::stm32f405::Interrupt;
 
     /// Where the body is held until armed, m (toe height).
@@ -55,15 +50,6 @@ mod app {
     const PCLK2_HZ: u32 = 16_000_000;
     /// The link task's interrupt, as on the board.
     const LINK_IRQ: Interrupt = Interrupt::SDIO;
-
-    /// The capture, behind RTIC's lock for the link task.
-    struct Locked<M>(M);
-
-    impl<M: Mutex<T = &'static mut Capture>> hopper_robot_link::Shared<Capture> for Locked<M> {
-        fn with<R>(&mut self, f: impl FnOnce(&mut Capture) -> R) -> R {
-            self.0.lock(|c| f(c))
-        }
-    }
 
     #[shared]
     struct Shared {
@@ -80,20 +66,12 @@ mod app {
     #[local]
     struct Local {
         robot: VirtualRobot<Slot>,
-        commands_out: Consumer<'static, Command<Slot>>,
-        answers_in: Producer<'static, Answer<Slot>>,
-        notes_in: Producer<'static, Note>,
-        stats_in: Producer<'static, Stats>,
-        logs_in: Producer<'static, LogItem>,
+        port_queues: PortEnds<'static, Slot>,
         counter: hopper_app::qemu::Instructions,
         syst: SYST,
         link: Endpoint<Slot>,
         link_counter: hopper_app::qemu::Instructions,
-        commands_in: Producer<'static, Command<Slot>>,
-        answers_out: Consumer<'static, Answer<Slot>>,
-        notes_out: Consumer<'static, Note>,
-        stats_out: Consumer<'static, Stats>,
-        logs_out: Consumer<'static, LogItem>,
+        link_queues: LinkEnds<'static, Slot>,
         flash: Flash,
         link_rx: Consumer<'static, u8>,
         link_tx: LinkTx<'static>,
@@ -104,11 +82,7 @@ mod app {
         rxq: RxQueue = RxQueue::new(),
         txq: TxQueue = TxQueue::new(),
         capture_buf: Capture = Capture::new(),
-        commands: CommandQueue<Slot> = CommandQueue::new(),
-        answers: AnswerQueue<Slot> = AnswerQueue::new(),
-        notes: NoteQueue = NoteQueue::new(),
-        stats: StatsQueue = StatsQueue::new(),
-        logs: LogQueue = LogQueue::new(),
+        queues: Queues<Slot> = Queues::new(),
         bank: Bank = [None, None, None],
     ])]
     fn init(cx: init::Context) -> (Shared, Local) {
@@ -155,19 +129,15 @@ mod app {
             #[allow(clippy::empty_loop)]
             loop {}
         };
-        robot.runner.load_calibration(None);
+        robot.firmware.runner.load_calibration(None);
         // The link task's own endpoint (the robot's in-line one is for the
         // simulator's single thread).
-        let link = Endpoint::simulated(&robot.runner).with_spares(spares);
+        let link = Endpoint::simulated(&robot.firmware.runner).with_spares(spares);
 
         let (rx_in, rx_out) = cx.local.rxq.split();
         let (tx_in, tx_out) = cx.local.txq.split();
         let serial = Serial::new(dp.USART1, &dp.RCC, &dp.GPIOA, PCLK2_HZ, rx_in, tx_out);
-        let (commands_in, commands_out) = cx.local.commands.split();
-        let (answers_in, answers_out) = cx.local.answers.split();
-        let (notes_in, notes_out) = cx.local.notes.split();
-        let (stats_in, stats_out) = cx.local.stats.split();
-        let (logs_in, logs_out) = cx.local.logs.split();
+        let (port_queues, link_queues) = cx.local.queues.split();
 
         hopper_app::qemu::start_systick(&mut core.SYST, hopper_app::qemu::PERIOD_TICKS);
         defmt::println!(
@@ -181,20 +151,12 @@ mod app {
             },
             Local {
                 robot,
-                commands_out,
-                answers_in,
-                notes_in,
-                stats_in,
-                logs_in,
+                port_queues,
                 counter,
                 syst: core.SYST,
                 link,
                 link_counter: hopper_app::qemu::Instructions::reader(),
-                commands_in,
-                answers_out,
-                notes_out,
-                stats_out,
-                logs_out,
+                link_queues,
                 flash,
                 link_rx: rx_out,
                 link_tx: LinkTx::new(tx_in),
@@ -214,30 +176,23 @@ mod app {
     /// One control period with the link's port (as the board's control
     /// task), then the plant to the next tick with SysTick stopped (as in
     /// the scenario image); the link task is pended.
-    #[task(binds = SysTick, priority = 3, local = [robot, commands_out, answers_in, notes_in, stats_in, logs_in, counter, syst], shared = [capture])]
+    #[task(binds = SysTick, priority = 3, local = [robot, port_queues, counter, syst], shared = [capture])]
     fn control(mut cx: control::Context) {
         let (t0, serial0) = hopper_app::serial_cost::stamp(hopper_app::qemu::tim5_now);
         let robot = &mut *cx.local.robot;
-        let (commands, answers, notes, stats, logs, counter) = (
-            &mut *cx.local.commands_out,
-            &mut *cx.local.answers_in,
-            &mut *cx.local.notes_in,
-            &mut *cx.local.stats_in,
-            &mut *cx.local.logs_in,
-            &mut *cx.local.counter,
-        );
+        let (queues, counter) = (&mut *cx.local.port_queues, &mut *cx.local.counter);
         let (irq_max, irq_count) = hopper_app::serial_cost::max_and_count();
-        robot.port.set_serial_cost(irq_max, irq_count);
+        robot.firmware.port.set_serial_cost(irq_max, irq_count);
         cx.shared
             .capture
-            .lock(|c| robot.control_period(c, commands, answers, notes, stats, logs, counter));
+            .lock(|c| robot.control_period(c, queues, counter));
         cx.local.syst.disable_counter();
         if robot.advance(&mut |_| {}).is_err() {
             defmt::error!("plant integration failed");
             debug::exit(debug::EXIT_FAILURE);
         }
         cx.local.syst.enable_counter();
-        robot.runner.end_period(SCB::is_pendst_pending());
+        robot.firmware.runner.end_period(SCB::is_pendst_pending());
         rtic::pend(LINK_IRQ);
         // The whole handler (the plant too) preempts the link task.
         let (t1, serial1) = hopper_app::serial_cost::stamp(hopper_app::qemu::tim5_now);
@@ -245,7 +200,7 @@ mod app {
             t1.wrapping_sub(t0)
                 .wrapping_sub(serial1.wrapping_sub(serial0)),
         );
-        if robot.runner.periods() >= LINK_LIMIT_S * CONTROL_HZ {
+        if robot.firmware.runner.periods() >= LINK_LIMIT_S * CONTROL_HZ {
             defmt::println!("link image: {=u32} s limit reached", LINK_LIMIT_S);
             debug::exit(debug::EXIT_SUCCESS);
         }
@@ -254,16 +209,12 @@ mod app {
     /// The link task, below the control period (as the board's): a save
     /// goes to the RAM flash at once (the board defers it to its next
     /// boot).
-    #[task(binds = SDIO, priority = 2, local = [link, link_counter, commands_in, answers_out, notes_out, stats_out, logs_out, flash, link_rx, link_tx], shared = [capture])]
+    #[task(binds = SDIO, priority = 2, local = [link, link_counter, link_queues, flash, link_rx, link_tx], shared = [capture])]
     fn link(cx: link::Context) {
         let link = &mut *cx.local.link;
         let rx = &mut *cx.local.link_rx;
-        link.service(
-            cx.local.notes_out,
-            cx.local.stats_out,
-            cx.local.logs_out,
-            cx.local.answers_out,
-            cx.local.commands_in,
+        link.serve(
+            cx.local.link_queues,
             core::iter::from_fn(|| rx.dequeue()),
             &mut Locked(cx.shared.capture),
             cx.local.link_tx,

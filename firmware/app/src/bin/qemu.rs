@@ -25,13 +25,16 @@ hopper_app::fault_handlers!(hopper_app::qemu::exit_failure);
 mod app {
     use cortex_m::peripheral::{SCB, SYST};
     use cortex_m_semihosting::debug;
-    use hopper_app::control::{Capture, CONTROL_HZ, CONTROL_PERIOD_S, LOG_CAPACITY, TIMING};
+    use hopper_app::control::{
+        Capture, Locked, CONTROL_HZ, CONTROL_PERIOD_S, LOG_CAPACITY, TIMING,
+    };
     use hopper_app::log::{self, Log};
     use hopper_control::hopper::{ApexLoop, Strategy};
     use hopper_control::laws::shaped;
     use hopper_control::runner::{LogItem, PeriodRunner};
     use hopper_plant::metrics::{hops_to_converge, steady_apex};
     use hopper_plant::{Event, Params, Plant};
+    use hopper_robot_link::{ControlLoop, Unlinked};
     use hopper_sil::sim_io::{firmware_config, SensorConfig, SimHal};
     use rtic_sync::make_channel;
 
@@ -67,7 +70,7 @@ mod app {
 
     #[local]
     struct Local {
-        runner: PeriodRunner,
+        firmware: ControlLoop,
         sim: Sim,
         counter: hopper_app::qemu::Instructions,
         syst: SYST,
@@ -124,7 +127,7 @@ mod app {
                 capture: cx.local.capture,
             },
             Local {
-                runner,
+                firmware: ControlLoop::new(runner),
                 sim: Sim {
                     plant,
                     hal,
@@ -156,17 +159,21 @@ mod app {
     /// the next control period however long an event search takes (soft
     /// `f64` on the M4F). A missed deadline then means the firmware's own
     /// work (the period, logging) overran.
-    #[task(binds = SysTick, priority = 3, local = [runner, sim, counter, syst, log], shared = [capture])]
-    fn control(mut cx: control::Context) {
+    #[task(binds = SysTick, priority = 3, local = [firmware, sim, counter, syst, log], shared = [capture])]
+    fn control(cx: control::Context) {
         let sim = &mut *cx.local.sim;
-        let runner = &mut *cx.local.runner;
+        let firmware = &mut *cx.local.firmware;
+        // No link: the scenario is the operator.
         let p = {
             let mut io = sim.hal.io(&sim.plant);
-            runner.run_period(&mut io, cx.local.counter)
+            firmware.period(
+                &mut io,
+                cx.local.counter,
+                &mut Locked(cx.shared.capture),
+                &mut Unlinked::default(),
+            )
         };
-        cx.shared
-            .capture
-            .lock(|c| c.record(&p.out.record, !p.newly_latched.is_empty()));
+        let runner = &mut firmware.runner;
         if let Some(item) = p.log {
             cx.local.log.push(item);
         }
