@@ -81,8 +81,9 @@ impl ArmingConfig {
 }
 
 /// Why the amplifier is not armed.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, strum::IntoStaticStr)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[strum(serialize_all = "kebab-case")]
 pub enum DisarmReason {
     /// Power-on or a reset other than the watchdog's.
     Boot,
@@ -100,21 +101,15 @@ pub enum DisarmReason {
 
 impl DisarmReason {
     /// Kebab-case name, as the logs and the link print it.
-    pub const fn name(self) -> &'static str {
-        match self {
-            DisarmReason::Boot => "boot",
-            DisarmReason::WatchdogReset => "watchdog-reset",
-            DisarmReason::Command => "command",
-            DisarmReason::Estop => "estop",
-            DisarmReason::Fault => "fault",
-            DisarmReason::LinkLost => "link-lost",
-        }
+    pub fn name(self) -> &'static str {
+        self.into()
     }
 }
 
 /// Why an arm request was refused.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, strum::IntoStaticStr)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[strum(serialize_all = "kebab-case")]
 pub enum ArmRefusal {
     /// A fault is latched (reset it first, while disarmed).
     Faulted,
@@ -135,6 +130,7 @@ pub enum ArmRefusal {
     BrownOutResetOff,
     /// The crystal measured at boot is not the one the clock profile names
     /// (a build for another board: the board stays on the HSI).
+    #[strum(serialize = "crystal-not-the-profiles")]
     CrystalMismatch,
     /// `arming.require_tare` is on and no tare has succeeded since boot.
     NotCalibrated,
@@ -142,6 +138,7 @@ pub enum ArmRefusal {
     Calibrating,
     /// The direction check found the motor encoder or the load cell
     /// counting the wrong way (`calibrate direction`).
+    #[strum(serialize = "encoder-or-motor-direction-reversed")]
     DirectionReversed,
     /// `arming.require_home` is on and the nut was not homed since boot.
     NotHomed,
@@ -149,22 +146,8 @@ pub enum ArmRefusal {
 
 impl ArmRefusal {
     /// Kebab-case name, as the logs and the link print it.
-    pub const fn name(self) -> &'static str {
-        match self {
-            ArmRefusal::Faulted => "faulted",
-            ArmRefusal::EstopPressed => "estop-pressed",
-            ArmRefusal::LinkDown => "link-down",
-            ArmRefusal::SensorsImplausible => "sensors-implausible",
-            ArmRefusal::NutNotHome => "nut-not-home",
-            ArmRefusal::Moving => "moving",
-            ArmRefusal::ClockFallback => "clock-fallback",
-            ArmRefusal::BrownOutResetOff => "brown-out-reset-off",
-            ArmRefusal::CrystalMismatch => "crystal-not-the-profiles",
-            ArmRefusal::NotCalibrated => "not-calibrated",
-            ArmRefusal::Calibrating => "calibrating",
-            ArmRefusal::DirectionReversed => "encoder-or-motor-direction-reversed",
-            ArmRefusal::NotHomed => "not-homed",
-        }
+    pub fn name(self) -> &'static str {
+        self.into()
     }
 }
 
@@ -469,6 +452,33 @@ mod tests {
     use super::*;
     use crate::supervisor::Fault;
     use proptest::prelude::*;
+
+    /// The names the link sends as refusal text and the logs print: a
+    /// contract with the operator's tools.
+    #[test]
+    fn names_are_the_contract() {
+        use ArmRefusal as A;
+        let names = [
+            (A::Faulted, "faulted"),
+            (A::EstopPressed, "estop-pressed"),
+            (A::LinkDown, "link-down"),
+            (A::SensorsImplausible, "sensors-implausible"),
+            (A::NutNotHome, "nut-not-home"),
+            (A::Moving, "moving"),
+            (A::ClockFallback, "clock-fallback"),
+            (A::BrownOutResetOff, "brown-out-reset-off"),
+            (A::CrystalMismatch, "crystal-not-the-profiles"),
+            (A::NotCalibrated, "not-calibrated"),
+            (A::Calibrating, "calibrating"),
+            (A::DirectionReversed, "encoder-or-motor-direction-reversed"),
+            (A::NotHomed, "not-homed"),
+        ];
+        for (r, name) in names {
+            assert_eq!(r.name(), name);
+        }
+        assert_eq!(DisarmReason::WatchdogReset.name(), "watchdog-reset");
+        assert_eq!(DisarmReason::LinkLost.name(), "link-lost");
+    }
 
     const DT: f32 = 1e-4;
 

@@ -11,8 +11,9 @@ use crate::arming::ArmRefusal;
 
 /// One reset cause of RCC_CSR (RM0090 section 7.3.21), in its flag order
 /// from bit 25.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, strum::IntoStaticStr, strum::VariantArray)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[strum(serialize_all = "kebab-case")]
 #[repr(u8)]
 pub enum ResetCause {
     /// BORRSTF: the supply fell below the brown-out level.
@@ -24,6 +25,7 @@ pub enum ResetCause {
     /// SFTRSTF: software (`SCB::sys_reset`, a debugger's reset).
     Software = 3,
     /// IWDGRSTF: the independent watchdog (the control task stopped).
+    #[strum(serialize = "watchdog")]
     IndependentWatchdog = 4,
     /// WWDGRSTF: the window watchdog (unused here).
     WindowWatchdog = 5,
@@ -33,27 +35,11 @@ pub enum ResetCause {
 
 impl ResetCause {
     /// Every cause, in bit order.
-    pub const ALL: [ResetCause; 7] = [
-        ResetCause::BrownOut,
-        ResetCause::Pin,
-        ResetCause::PowerOn,
-        ResetCause::Software,
-        ResetCause::IndependentWatchdog,
-        ResetCause::WindowWatchdog,
-        ResetCause::LowPower,
-    ];
+    pub const ALL: &'static [ResetCause] = <ResetCause as strum::VariantArray>::VARIANTS;
 
     /// Kebab-case name, as the link prints it.
-    pub const fn name(self) -> &'static str {
-        match self {
-            ResetCause::BrownOut => "brown-out",
-            ResetCause::Pin => "pin",
-            ResetCause::PowerOn => "power-on",
-            ResetCause::Software => "software",
-            ResetCause::IndependentWatchdog => "watchdog",
-            ResetCause::WindowWatchdog => "window-watchdog",
-            ResetCause::LowPower => "low-power",
-        }
+    pub fn name(self) -> &'static str {
+        self.into()
     }
 }
 
@@ -77,7 +63,8 @@ impl ResetCauses {
     /// The causes, in bit order.
     pub fn iter(self) -> impl Iterator<Item = ResetCause> {
         ResetCause::ALL
-            .into_iter()
+            .iter()
+            .copied()
             .filter(move |c| self.contains(*c))
     }
 }

@@ -290,7 +290,7 @@ impl Hopper {
         // The debounce state, with the new configuration's times.
         self.estop.continue_from(&old.estop);
         let latched = old.supervisor.faults();
-        for f in Fault::ALL {
+        for &f in Fault::ALL {
             if latched.contains(f) {
                 self.supervisor.report(f);
             }

@@ -103,18 +103,22 @@ fn word(r: &[u8], at: usize) -> Option<[u8; 4]> {
 }
 
 /// Why a record was not loaded.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, strum::IntoStaticStr)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[strum(serialize_all = "kebab-case")]
 pub enum LoadError {
     /// Too short, or not a calibration record.
     NotARecord,
     /// Written by a firmware with another format version.
+    #[strum(serialize = "other-version")]
     Version(u16),
     /// The CRC does not match: a torn or corrupted write.
+    #[strum(serialize = "bad-crc")]
     Crc,
     /// An entry names no parameter of this firmware.
     UnknownEntry(u32),
     /// A value is refused by its parameter (named).
+    #[strum(serialize = "value-refused")]
     Refused(&'static str),
 }
 
@@ -130,27 +134,9 @@ impl LoadError {
         }
     }
 
-    /// The name of the error with wire code `code` (`None` for 0).
-    pub const fn name_of(code: u8) -> Option<&'static str> {
-        match code {
-            1 => Some(LoadError::NotARecord.name()),
-            2 => Some(LoadError::Version(0).name()),
-            3 => Some(LoadError::Crc.name()),
-            4 => Some(LoadError::UnknownEntry(0).name()),
-            5 => Some("value-refused"),
-            _ => None,
-        }
-    }
-
     /// Kebab-case name, as the link prints it.
-    pub const fn name(self) -> &'static str {
-        match self {
-            LoadError::NotARecord => "not-a-record",
-            LoadError::Version(_) => "other-version",
-            LoadError::Crc => "bad-crc",
-            LoadError::UnknownEntry(_) => "unknown-entry",
-            LoadError::Refused(_) => "value-refused",
-        }
+    pub fn name(self) -> &'static str {
+        self.into()
     }
 }
 

@@ -27,12 +27,17 @@
 
 use crate::laws::{require, InvalidField};
 
-/// One kind of fault the supervisor detects.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+/// One kind of fault the supervisor detects (its name: kebab-case, for logs
+/// and telemetry).
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, strum::IntoStaticStr, strum::VariantArray, strum::FromRepr,
+)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[strum(serialize_all = "kebab-case")]
 #[repr(u8)]
 pub enum Fault {
     /// A measurement is NaN or infinite.
+    #[strum(serialize = "sensor-nonfinite")]
     SensorNonFinite = 0,
     /// A measurement is outside its plausible range.
     SensorRange = 1,
@@ -53,6 +58,7 @@ pub enum Fault {
     /// Writing the DAC failed (reported by the application).
     DacError = 9,
     /// The requested current is NaN or infinite.
+    #[strum(serialize = "command-nonfinite")]
     CommandNonFinite = 10,
     /// Load cell, potentiometer and motor encoder disagree: the measured
     /// spring force is not `k (delta0 + p + x)` (a stuck, frozen or noisy sensor).
@@ -73,43 +79,11 @@ pub enum Fault {
 
 impl Fault {
     /// Every fault, in bit order.
-    pub const ALL: [Fault; 15] = [
-        Fault::SensorNonFinite,
-        Fault::SensorRange,
-        Fault::EncoderJump,
-        Fault::ContactDisagree,
-        Fault::StrokeLimit,
-        Fault::Overcurrent,
-        Fault::Estop,
-        Fault::AmpFault,
-        Fault::Overrun,
-        Fault::DacError,
-        Fault::CommandNonFinite,
-        Fault::SensorDisagree,
-        Fault::EncoderFrozen,
-        Fault::SelfCheck,
-        Fault::Overtemperature,
-    ];
+    pub const ALL: &'static [Fault] = <Fault as strum::VariantArray>::VARIANTS;
 
     /// Short kebab-case name for logs and telemetry.
-    pub const fn name(self) -> &'static str {
-        match self {
-            Fault::SensorNonFinite => "sensor-nonfinite",
-            Fault::SensorRange => "sensor-range",
-            Fault::EncoderJump => "encoder-jump",
-            Fault::ContactDisagree => "contact-disagree",
-            Fault::StrokeLimit => "stroke-limit",
-            Fault::Overcurrent => "overcurrent",
-            Fault::Estop => "estop",
-            Fault::AmpFault => "amp-fault",
-            Fault::Overrun => "overrun",
-            Fault::DacError => "dac-error",
-            Fault::CommandNonFinite => "command-nonfinite",
-            Fault::SensorDisagree => "sensor-disagree",
-            Fault::EncoderFrozen => "encoder-frozen",
-            Fault::SelfCheck => "self-check",
-            Fault::Overtemperature => "overtemperature",
-        }
+    pub fn name(self) -> &'static str {
+        self.into()
     }
 
     /// This fault's bit in [`Faults`].
@@ -119,6 +93,9 @@ impl Fault {
 }
 
 /// A set of [`Fault`]s, one bit each (bit `n` is `Fault::ALL[n]`).
+/// Written out rather than a `bitflags` type: that would declare every
+/// fault a second time, as a flag constant beside its enum variant, and
+/// the supervisor, the capture and the wire use a fault as a value.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct Faults(pub u16);
 
@@ -130,7 +107,7 @@ impl defmt::Format for Faults {
             defmt::write!(f, "none");
         }
         let mut first = true;
-        for fault in Fault::ALL {
+        for &fault in Fault::ALL {
             if self.contains(fault) {
                 if !first {
                     defmt::write!(f, " ");
@@ -168,7 +145,10 @@ impl Faults {
 
     /// Iterates over the set faults in bit order.
     pub fn iter(self) -> impl Iterator<Item = Fault> {
-        Fault::ALL.into_iter().filter(move |f| self.contains(*f))
+        Fault::ALL
+            .iter()
+            .copied()
+            .filter(move |f| self.contains(*f))
     }
 }
 
@@ -1271,7 +1251,7 @@ mod tests {
     #[test]
     fn names_unique_and_bits_distinct() {
         let mut all = Faults::NONE;
-        for f in Fault::ALL {
+        for &f in Fault::ALL {
             assert!(!all.contains(f));
             all.insert(f);
         }

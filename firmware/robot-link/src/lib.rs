@@ -1899,7 +1899,7 @@ mod vocabulary_tests {
     #[test]
     fn every_code_has_the_same_name_on_both_ends() {
         assert_eq!(supervisor::Fault::ALL.len(), vocab::Fault::ALL.len());
-        for f in supervisor::Fault::ALL {
+        for &f in supervisor::Fault::ALL {
             let w = vocab::Fault::from_code(f as u8).expect("a wire fault for every fault");
             assert_eq!((w.name(), w.bit()), (f.name(), f.bit()));
         }
@@ -1910,7 +1910,7 @@ mod vocabulary_tests {
             assert_eq!(disarm_reason(code as u8), Some(*r));
         }
         assert_eq!(boot::ResetCause::ALL.len(), vocab::ResetCause::ALL.len());
-        for c in boot::ResetCause::ALL {
+        for &c in boot::ResetCause::ALL {
             let w = vocab::ResetCause::from_code(c as u8).expect("a wire cause");
             assert_eq!(w.name(), c.name());
         }
