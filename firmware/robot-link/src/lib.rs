@@ -1915,13 +1915,13 @@ mod vocabulary_tests {
             assert_eq!(w.name(), c.name());
         }
         assert_eq!(bringup::Routine::ALL.len(), vocab::Routine::ALL.len());
-        for r in bringup::Routine::ALL {
+        for &r in bringup::Routine::ALL {
             let w = vocab::Routine::from_code(r as u8).expect("a wire routine");
             assert_eq!(w.name(), r.name());
             assert_eq!(w.drives_motor(), r.drives_motor());
         }
         assert_eq!(bringup::CalState::ALL.len(), vocab::CalState::ALL.len());
-        for c in bringup::CalState::ALL {
+        for &c in bringup::CalState::ALL {
             assert!(vocab::CalState::from_code(c as u8).is_some(), "{c:?}");
         }
         for e in [

@@ -27,6 +27,21 @@
 //!
 //! Fault resets ([`PeriodRunner::reset_faults`]) are allowed only while
 //! disarmed.
+//!
+//! This file holds the period; the runner's other concerns are `impl`
+//! blocks of [`PeriodRunner`] in files of their own: `calibrate` (the
+//! bring-up routines: [`PeriodRunner::start_calibration`], their
+//! completion, their results applied), `sets` (parameter sets:
+//! [`PeriodRunner::set_param`], [`PeriodRunner::install`] of a [`Prepared`]
+//! controller) and `saved` (the saved calibration record:
+//! [`PeriodRunner::load_calibration`]).
+
+mod calibrate;
+mod saved;
+mod sets;
+
+pub use calibrate::{Change, Changes};
+pub use sets::{Prepared, SetError, Then};
 
 use crate::arming::{ArmEvent, ArmInput, Arming};
 use crate::hal::HopperIo;
@@ -179,40 +194,6 @@ pub enum RunnerError {
     Arming(crate::laws::InvalidField),
 }
 
-/// Why [`PeriodRunner::set_param`] refused a set (nothing changed).
-#[derive(Debug, Clone, Copy, PartialEq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub enum SetError {
-    /// Unknown name, out of range or the wrong type, or a constant of a
-    /// controller that is not selected.
-    Param(crate::params::ParamError),
-    /// The parameter may be set only while disarmed.
-    WhileArmed(&'static str),
-    /// Nothing may be set while a bring-up routine runs.
-    Calibrating,
-    /// The new configuration as a whole is refused (a cross-field rule).
-    Config(RunnerError),
-    /// The configuration changed since the new one was built from it (it
-    /// would undo that change): nothing installed; ask again.
-    Stale,
-}
-
-impl SetError {
-    /// A short reason, for the link.
-    pub fn reason(&self) -> &'static str {
-        use crate::params::ParamError as P;
-        match self {
-            SetError::Param(P::Unknown) => "unknown-parameter",
-            SetError::Param(P::OutOfRange(_)) => "out-of-range",
-            SetError::Param(P::NotSelected(_)) => "controller-not-selected",
-            SetError::WhileArmed(_) => "disarm-first",
-            SetError::Calibrating => "calibrating",
-            SetError::Config(_) => "invalid-configuration",
-            SetError::Stale => "busy",
-        }
-    }
-}
-
 /// Where a period runner keeps its controller: owned ([`Owned`], the host
 /// and the tests) or a slot of a static bank (`&'static mut Hopper`, the
 /// board and the QEMU link image), where a new controller built by the
@@ -260,105 +241,6 @@ impl HopperSlot for &'static mut Hopper {
             s
         })
     }
-}
-
-/// A controller built and validated from a configuration outside the
-/// control period ([`PeriodRunner::prepare_at`], the expensive part of a
-/// parameter set: every field's check and the controller's constants),
-/// installed at a period boundary by [`PeriodRunner::install`] (the slots
-/// exchanged, the state carried over).
-#[derive(Debug, Clone)]
-pub struct Prepared<H = Owned> {
-    hopper: H,
-    arming: crate::arming::ArmingConfig,
-    feed: crate::watchdog::FeedConfig,
-    /// The configuration generation it was built from
-    /// ([`PeriodRunner::config_gen`]).
-    base_gen: u32,
-}
-
-impl<H: HopperSlot> Prepared<H> {
-    /// The configuration it holds.
-    pub fn config(&self) -> &HopperConfig {
-        self.hopper.config()
-    }
-}
-
-impl<H: HopperSlot> Prepared<H> {
-    /// Its slot (a set refused before it was installed gives it back).
-    pub fn into_slot_handle(self) -> H {
-        self.hopper
-    }
-}
-
-impl Prepared<Owned> {
-    /// Into a slot of another kind (`spare`, for a bank's; `None` when
-    /// a bank's has none).
-    pub fn into_slot<H: HopperSlot>(self, spare: Option<H>) -> Option<Prepared<H>> {
-        let Prepared {
-            hopper,
-            arming,
-            feed,
-            base_gen,
-        } = self;
-        H::fill(spare, hopper.0).map(|hopper| Prepared {
-            hopper,
-            arming,
-            feed,
-            base_gen,
-        })
-    }
-}
-
-/// A routine's results: up to two parameters and their new values.
-pub type Changes = [Option<(&'static crate::params::Param, f32)>; 2];
-
-/// What the bring-up verdicts rest on, to compare across an install (a
-/// few words, not the 408-byte configuration, in the control period).
-#[derive(Debug, Clone, Copy, PartialEq)]
-struct Verdicts {
-    /// The direction check and homing: the encoder's sign and count, the
-    /// screw's lead.
-    direction: (bool, u32, f32),
-    /// The tare: the load cell's and the potentiometer's gains and offsets.
-    tare: [f32; 4],
-}
-
-impl Verdicts {
-    fn of(cfg: &HopperConfig) -> Self {
-        let c = &cfg.calibration;
-        Verdicts {
-            direction: (
-                c.motor_counts_positive_down,
-                c.motor_counts_per_rev,
-                cfg.model.screw_lead_m,
-            ),
-            tare: [
-                c.loadcell_gain_n_per_code,
-                c.loadcell_offset_code,
-                c.pot_gain_m_per_code,
-                c.pot_offset_code,
-            ],
-        }
-    }
-}
-
-/// What an [`install`](PeriodRunner::install) completes.
-#[derive(Debug, Clone, Copy, PartialEq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub enum Then {
-    /// A parameter set from the host: only disarmed and with no routine
-    /// running; the bring-up verdicts it invalidates are forgotten.
-    Param(&'static crate::params::Param),
-    /// A tare's new offsets: the tare counts for arming.
-    Tared,
-    /// The homing's new zero, the stop's position in the old one, m: the
-    /// nut counts as homed.
-    Homed(f32),
-    /// The height routine's correction of the body height, m.
-    Height(f32),
-    /// A fitted constant (the spring rate, the load cell's gain).
-    Fitted,
 }
 
 /// What one period did.
@@ -430,52 +312,6 @@ impl PeriodRunner<Owned> {
     pub fn new(cfg: HopperConfig, timing: Timing) -> Result<Self, RunnerError> {
         let hopper = Hopper::new(cfg).map_err(RunnerError::Config)?;
         Self::in_slot(cfg, timing, Owned(hopper))
-    }
-
-    /// Whether [`set_param`](PeriodRunner::set_param) takes `p` while
-    /// armed: only the target apex, which changes in place (anything else
-    /// rebuilds the controller).
-    pub fn settable_while_armed(p: &crate::params::Param) -> bool {
-        p.name == crate::params::TARGET_APEX_M.name
-    }
-
-    /// `cfg` with `name` set to `value` (no state: where the set is
-    /// checked, outside the control period), and the parameter.
-    pub fn plan_set(
-        cfg: &HopperConfig,
-        name: &str,
-        value: f32,
-    ) -> Result<(&'static crate::params::Param, HopperConfig), SetError> {
-        let p =
-            crate::params::find(name).ok_or(SetError::Param(crate::params::ParamError::Unknown))?;
-        let mut new = *cfg;
-        crate::params::set(&mut new, p.name, value).map_err(SetError::Param)?;
-        Ok((p, new))
-    }
-
-    /// `cfg` with a routine's changes.
-    pub fn apply_changes(cfg: &HopperConfig, changes: &Changes) -> Result<HopperConfig, SetError> {
-        let mut new = *cfg;
-        for (p, v) in changes.iter().flatten() {
-            crate::params::set(&mut new, p.name, *v).map_err(SetError::Param)?;
-        }
-        Ok(new)
-    }
-
-    /// Validates `cfg` and builds its controller, as of configuration
-    /// generation `base_gen` ([`PeriodRunner::config_gen`]): the costly half
-    /// of a set, for a lower-priority task (the link task's copy of the
-    /// configuration and its generation).
-    pub fn prepare_at(cfg: HopperConfig, base_gen: u32) -> Result<Prepared, SetError> {
-        let arming =
-            Arming::new(cfg.arming).map_err(|e| SetError::Config(RunnerError::Arming(e)))?;
-        let hopper = Hopper::new(cfg).map_err(|e| SetError::Config(RunnerError::Config(e)))?;
-        Ok(Prepared {
-            hopper: Owned(hopper),
-            arming: *arming.config(),
-            feed: crate::watchdog::FeedConfig::for_hopper(&cfg),
-            base_gen,
-        })
     }
 }
 
@@ -577,254 +413,6 @@ impl<H: HopperSlot> PeriodRunner<H> {
         Ok(())
     }
 
-    /// Sets a runtime parameter by its table name ([`crate::params`]),
-    /// between periods (the application calls it from the control task
-    /// between two [`run_period`](Self::run_period)s, so it applies at a
-    /// period boundary). While armed only the target apex may change (in
-    /// place); everything else needs the runner disarmed, and then the
-    /// controller is rebuilt from the new configuration with the latched
-    /// faults carried over (a set never clears a latch) and the arming
-    /// state kept. The whole new configuration is checked before anything
-    /// changes: a refused set changes nothing.
-    pub fn set_param(&mut self, name: &str, value: f32) -> Result<(), SetError> {
-        if crate::params::find(name).is_some() && self.calibrating() {
-            // A routine's loop was built on the configuration it started
-            // with (a flipped encoder sign would turn its PD around).
-            return Err(SetError::Calibrating);
-        }
-        let (p, cfg) = PeriodRunner::plan_set(self.hopper.config(), name, value)?;
-        if self.arming.is_armed() {
-            if !PeriodRunner::settable_while_armed(p) {
-                return Err(SetError::WhileArmed(p.name));
-            }
-            return self.set_live(p, value);
-        }
-        let prepared = PeriodRunner::prepare_at(cfg, self.config_gen)?;
-        self.install_value(prepared, Then::Param(p))
-    }
-
-    /// A parameter that changes in place ([`settable_while_armed`](Self::settable_while_armed)),
-    /// armed or not: a few operations, fit for the control period.
-    pub fn set_live(
-        &mut self,
-        p: &'static crate::params::Param,
-        value: f32,
-    ) -> Result<(), SetError> {
-        if !PeriodRunner::settable_while_armed(p) {
-            return Err(SetError::WhileArmed(p.name));
-        }
-        self.hopper
-            .set_target_apex(value)
-            .map_err(|_| SetError::Param(crate::params::ParamError::OutOfRange(p.name)))?;
-        self.config_gen = self.config_gen.wrapping_add(1);
-        Ok(())
-    }
-
-    /// The configuration's generation: bumped by every change
-    /// ([`install`](Self::install), [`set_live`](Self::set_live)).
-    pub fn config_gen(&self) -> u32 {
-        self.config_gen
-    }
-
-    /// Installs a prepared controller between periods by exchanging its
-    /// slot with the running one's (a few words for a bank's slots),
-    /// carrying the state that must survive over
-    /// ([`Hopper::continue_from`]): bounded and the same every time.
-    /// Refused (nothing changes) when the configuration changed since it
-    /// was prepared, and for a host's set while armed or while a routine
-    /// runs. Gives back the slot not in use: the old one, or the refused.
-    pub fn install(&mut self, mut new: Prepared<H>, then: Then) -> (Result<(), SetError>, H) {
-        let result = self.check_install(new.base_gen, then).map(|()| {
-            let old = Verdicts::of(self.hopper.config());
-            new.hopper.continue_from(&self.hopper);
-            Self::shift(&mut new.hopper, then);
-            core::mem::swap(&mut self.hopper, &mut new.hopper);
-            self.installed(&old, new.arming, new.feed, then);
-        });
-        self.routine_done(result, then);
-        (result, new.hopper)
-    }
-
-    /// [`install`](Self::install) of a controller held by value, copied
-    /// into the running slot (boot, and runs with no lower-priority task:
-    /// the host's tests, [`set_param`](Self::set_param)).
-    pub fn install_value(&mut self, new: Prepared, then: Then) -> Result<(), SetError> {
-        let result = self.check_install(new.base_gen, then).map(|()| {
-            let old = Verdicts::of(self.hopper.config());
-            let mut h = new.hopper.0;
-            h.continue_from(&self.hopper);
-            Self::shift(&mut h, then);
-            *self.hopper = h;
-            self.installed(&old, new.arming, new.feed, then);
-        });
-        self.routine_done(result, then);
-        result
-    }
-
-    fn check_install(&self, base_gen: u32, then: Then) -> Result<(), SetError> {
-        if base_gen != self.config_gen {
-            return Err(SetError::Stale);
-        }
-        if let Then::Param(p) = then {
-            if self.arming.is_armed() {
-                return Err(SetError::WhileArmed(p.name));
-            }
-            if self.calibrating() {
-                return Err(SetError::Calibrating);
-            }
-        }
-        Ok(())
-    }
-
-    /// A routine's new origin moves the measurements: on the new
-    /// controller, whose filters start from it (on the running one they
-    /// would see a jump).
-    fn shift(h: &mut Hopper, then: Then) {
-        match then {
-            Then::Homed(nut_m) => h.shift_origin(nut_m, 0.0),
-            Then::Height(m) => h.shift_origin(0.0, m),
-            _ => {}
-        }
-    }
-
-    fn installed(
-        &mut self,
-        old: &Verdicts,
-        arming: crate::arming::ArmingConfig,
-        feed: crate::watchdog::FeedConfig,
-        then: Then,
-    ) {
-        self.unsettled = 2;
-        self.arming.reconfigure(arming);
-        self.feed.reconfigure(feed);
-        self.config_gen = self.config_gen.wrapping_add(1);
-        if matches!(then, Then::Param(_)) {
-            let new = Verdicts::of(self.hopper.config());
-            // What the bring-up verdicts were made on, changed by hand: they
-            // no longer hold (a flipped encoder sign, another lead or count).
-            if new.direction != old.direction {
-                self.arming.forget_direction_and_home();
-            }
-            if new.tare != old.tare {
-                self.arming.forget_tare();
-            }
-        }
-    }
-
-    /// A routine's install completes it (or fails it).
-    fn routine_done(&mut self, result: Result<(), SetError>, then: Then) {
-        if matches!(then, Then::Param(_)) {
-            return;
-        }
-        self.rebuild_outstanding = false;
-        match (result, then) {
-            (Ok(()), Then::Tared) => self.arming.note_tared(),
-            (Ok(()), Then::Homed(_)) => self.arming.note_homed(),
-            (Ok(()), Then::Height(m)) => self.cal.set_height_offset(m),
-            (Ok(()), _) => {}
-            (Err(_), _) => self.cal.apply_failed(),
-        }
-    }
-
-    /// Rebuilds the controller from `cfg` at once (boot, before the first
-    /// period); nothing changes if `cfg` is refused.
-    fn rebuild(&mut self, cfg: HopperConfig) -> Result<(), SetError> {
-        let prepared = PeriodRunner::prepare_at(cfg, self.config_gen)?;
-        let result = self.check_install(prepared.base_gen, Then::Fitted);
-        result.map(|()| {
-            let old = Verdicts::of(self.hopper.config());
-            let mut h = prepared.hopper.0;
-            h.continue_from(&self.hopper);
-            *self.hopper = h;
-            self.installed(&old, prepared.arming, prepared.feed, Then::Fitted);
-        })
-    }
-
-    /// A routine's results, for a controller built outside the period: it
-    /// counts as running until [`install`](Self::install)ed.
-    fn request_rebuild(&mut self, changes: Changes, then: Then) {
-        self.rebuild_request = Some((changes, then));
-        self.rebuild_outstanding = true;
-    }
-
-    /// The rebuild a finished routine asks for, once: the lower-priority
-    /// task applies the changes to its copy of the configuration
-    /// ([`PeriodRunner::apply_changes`]) and prepares the controller
-    /// ([`PeriodRunner::prepare_at`]), and the control period
-    /// [`install`](Self::install)s it.
-    pub fn take_rebuild_request(&mut self) -> Option<(Changes, Then)> {
-        // (Checked first: `take` would copy the whole option every period.)
-        if self.rebuild_request.is_some() {
-            self.rebuild_request.take()
-        } else {
-            None
-        }
-    }
-
-    /// A routine's rebuild could not be built (its configuration is
-    /// refused): the routine fails, nothing changes.
-    pub fn rebuild_failed(&mut self) {
-        if self.rebuild_outstanding {
-            self.rebuild_outstanding = false;
-            self.cal.apply_failed();
-        }
-    }
-
-    /// Builds and installs a routine's rebuild at once, where nothing runs
-    /// at a lower priority (the host's tests and runs without a link).
-    pub fn serve_rebuild(&mut self) {
-        if let Some((changes, then)) = self.take_rebuild_request() {
-            let prepared = PeriodRunner::apply_changes(self.hopper.config(), &changes)
-                .and_then(|cfg| PeriodRunner::prepare_at(cfg, self.config_gen));
-            match prepared {
-                Ok(p) => {
-                    let _ = self.install_value(p, then);
-                }
-                Err(_) => self.rebuild_failed(),
-            }
-        }
-    }
-
-    /// At boot, before the first period: the saved calibration record read
-    /// from flash (`None`: the store holds none). A record that checks
-    /// out is applied (every entry range-checked, the whole configuration
-    /// validated) and counts as the calibration `arming.require_tare`
-    /// asks for; a refused one changes nothing.
-    pub fn load_calibration(&mut self, record: Option<&[u8]>) {
-        use crate::persist::{decode, AtBoot, LoadError};
-        self.at_boot = match record {
-            None => AtBoot::NothingSaved,
-            Some(r) => match decode(r, self.hopper.config()) {
-                Ok(cfg) => match self.rebuild(cfg) {
-                    Ok(()) => {
-                        // Only a record with the tare's offsets stands for one.
-                        if crate::persist::has_offsets(r) {
-                            self.arming.note_tared();
-                        }
-                        AtBoot::Loaded(r.get(6).copied().unwrap_or(0))
-                    }
-                    Err(_) => AtBoot::Refused(LoadError::Refused("configuration")),
-                },
-                Err(e) => AtBoot::Refused(e),
-            },
-        };
-    }
-
-    /// What was found in flash at boot.
-    pub fn calibration_at_boot(&self) -> crate::persist::AtBoot {
-        self.at_boot
-    }
-
-    /// The record of the calibration in use, for saving; its length.
-    pub fn calibration_record(&self, out: &mut [u8; crate::persist::MAX_RECORD]) -> usize {
-        crate::persist::encode(self.hopper.config(), out)
-    }
-
-    /// Whether a bring-up routine is running.
-    pub fn calibrating(&self) -> bool {
-        self.cal.running() || self.rebuild_outstanding
-    }
-
     /// Starts the motor's estimate hot, at the derating temperature
     /// ([`crate::thermal`]): the board at every boot, since nothing of the
     /// motor's heat survives a reset or a power cycle there.
@@ -837,208 +425,6 @@ impl<H: HopperSlot> PeriodRunner<H> {
     /// was [assumed warm](Self::assume_motor_warm).
     pub fn thermal_at_boot(&self) -> (f32, bool) {
         self.thermal_boot
-    }
-
-    /// Starts a bring-up routine ([`crate::bringup`]) for `seconds` of
-    /// periods (a motor-driving one ends when its moves are done): only
-    /// disarmed, with the e-stop released, one at a time; one that drives
-    /// the motor also needs no latched fault and a live link, homing a
-    /// passed direction check and the spring sweep a homed nut.
-    pub fn start_calibration(
-        &mut self,
-        routine: crate::bringup::Routine,
-        seconds: f32,
-    ) -> Result<(), crate::bringup::CalRefusal> {
-        use crate::bringup::{CalRefusal, DriveParams, Routine};
-        if self.arming.is_armed() {
-            return Err(CalRefusal::Armed);
-        }
-        if self.hopper.estop_pressed() {
-            return Err(CalRefusal::EstopPressed);
-        }
-        if self.calibrating() {
-            return Err(CalRefusal::Busy);
-        }
-        if !(0.01..=10.0).contains(&seconds) {
-            return Err(CalRefusal::Duration);
-        }
-        let drive = if routine.drives_motor() {
-            if self.hopper.supervisor().is_faulted() {
-                return Err(CalRefusal::Faulted);
-            }
-            if !self.arming.link_alive() {
-                return Err(CalRefusal::LinkDown);
-            }
-            if routine == Routine::Home && !self.arming.direction_ok() {
-                return Err(CalRefusal::DirectionFirst);
-            }
-            if matches!(routine, Routine::Spring | Routine::Weight) && !self.arming.homed() {
-                return Err(CalRefusal::HomeFirst);
-            }
-            let cfg = self.hopper.config();
-            // The weighing reads forces through the offset: a tare's (or a
-            // saved one), unless the configuration says its offsets hold.
-            if routine == Routine::Weight && cfg.arming.require_tare && !self.arming.tared() {
-                return Err(CalRefusal::TareFirst);
-            }
-            let m = &cfg.model;
-            let r = m.screw_m_per_rad();
-            Some(DriveParams {
-                limits: cfg.bringup,
-                newtons_per_amp: m.efficiency * m.torque_constant_nm_per_a / r,
-                screw_m_per_rad: r,
-                nut_weight_n: m.nut_mass_kg * m.gravity_mps2,
-                kp_a_per_rad: cfg.flight.gains.kp,
-                kd_a_s_per_rad: cfg.flight.gains.kd,
-                spring_rate_n_per_m: cfg.supervisor.spring_rate_n_per_m,
-                stroke_m: m.stroke_m,
-                weight_n: (m.body_mass_kg + m.nut_mass_kg) * m.gravity_mps2,
-                park_m: crate::num::max(
-                    0.0,
-                    m.nut_mass_kg * m.gravity_mps2 / cfg.supervisor.spring_rate_n_per_m
-                        - cfg.supervisor.spring_preload_m,
-                ),
-            })
-        } else {
-            None
-        };
-        let samples = (seconds / self.timing.period_s) as u32;
-        self.cal.start(routine, samples, drive);
-        Ok(())
-    }
-
-    /// The last bring-up routine's report.
-    pub fn calibration(&self) -> crate::bringup::CalibrationReport {
-        self.cal.report()
-    }
-
-    /// What the last bring-up routine found.
-    pub fn bringup_results(&self) -> crate::bringup::BringupReport {
-        self.cal.results()
-    }
-
-    /// What the last weighing found.
-    pub fn weighing(&self) -> crate::bringup::WeighingReport {
-        self.cal.weighing()
-    }
-
-    /// A measuring routine's samples are complete: check, compute, apply.
-    fn finish_calibration(&mut self) {
-        use crate::bringup::{CalState, Routine};
-        // The body still: a count of quantisation flicker at most. The
-        // nut, unpowered, may swing on its spring (it has no brake; a
-        // frictionless simulated screw swings for ever): up to 2 mm, its
-        // mean position is what the averages were taken at (the spring is
-        // linear: the mean force is that of the mean position).
-        const STILL_COUNTS: u32 = 1;
-        const NUT_SWING_M: f32 = 2.0e-3;
-        // Copies of the few constants used (the 408-byte configuration is
-        // not copied in the control period).
-        let cfg = self.hopper.config();
-        let c = cfg.calibration;
-        let s = cfg.supervisor;
-        let (body_mass_kg, gravity_mps2, leg_length_m) = (
-            cfg.model.body_mass_kg,
-            cfg.model.gravity_mps2,
-            cfg.model.leg_length_m,
-        );
-        // (The count's size: negative with the encoder counting up.)
-        let nut_swing_counts = ((NUT_SWING_M / c.nut_m_per_count()).abs() as u32).max(STILL_COUNTS);
-        let last = self.hopper.last_input().copied();
-        let p_m = self.cal.nut_mean_m();
-        let p_m = if p_m.is_finite() { p_m } else { 0.0 };
-        let offsets = match self.cal.routine() {
-            Routine::Tare => {
-                // Unloaded leg: the load cell must read the flight force
-                // k (delta0 + p) at the nut's position, the pot 0.
-                let force_n = s.flight_force_n(p_m);
-                (
-                    self.cal.loadcell_mean_code() - force_n / c.loadcell_gain_n_per_code,
-                    self.cal.pot_mean_code(),
-                )
-            }
-            _ => (f32::NAN, f32::NAN),
-        };
-        if !self.cal.finish((nut_swing_counts, STILL_COUNTS), offsets) {
-            return;
-        }
-        match self.cal.routine() {
-            Routine::Tare => self.request_rebuild(
-                [
-                    Some((&crate::params::CAL_LOADCELL_OFFSET, offsets.0)),
-                    Some((&crate::params::CAL_POT_OFFSET, offsets.1)),
-                ],
-                Then::Tared,
-            ),
-            Routine::Height => {
-                // Toe on the ground: the load cell carries the robot beyond
-                // the flight force (half its weight at least: friction
-                // holds the rest at worst), and then `z = l0 - x`.
-                let force_n = (self.cal.loadcell_mean_code() - c.loadcell_offset_code)
-                    * c.loadcell_gain_n_per_code;
-                let x_m = (self.cal.pot_mean_code() - c.pot_offset_code) * c.pot_gain_m_per_code;
-                let weight_n = body_mass_kg * gravity_mps2;
-                let carried_n = force_n - s.flight_force_n(p_m);
-                let Some(z_m) = last.map(|i| i.body_height_m) else {
-                    self.cal.fail(CalState::FailedSensors);
-                    return;
-                };
-                if carried_n.is_nan() || carried_n <= 0.5 * weight_n {
-                    self.cal.fail(CalState::FailedNotOnGround);
-                    return;
-                }
-                let offset_m = leg_length_m - x_m - z_m;
-                self.request_rebuild([None, None], Then::Height(offset_m));
-            }
-            _ => {}
-        }
-    }
-
-    /// A motor-driving routine ended (the amplifier is off from this
-    /// period on): its verdict to arming, its results applied.
-    fn finish_drive(&mut self) {
-        use crate::bringup::{CalState, Routine};
-        let state = self.cal.state();
-        match self.cal.routine() {
-            Routine::Direction => match state {
-                CalState::Done => self.arming.note_direction(false),
-                CalState::FailedReversed | CalState::FailedLoadcellReversed => {
-                    self.arming.note_direction(true)
-                }
-                _ => {}
-            },
-            Routine::Home if state == CalState::Done => {
-                // The stop is the zero from now on.
-                self.request_rebuild([None, None], Then::Homed(self.cal.nut_offset_m()));
-            }
-            Routine::Spring if state == CalState::Done => self.request_rebuild(
-                [
-                    Some((&crate::params::SUP_SPRING_RATE, self.cal.fit().slope())),
-                    None,
-                ],
-                Then::Fitted,
-            ),
-            Routine::Weight if state == CalState::Done => {
-                // The load cell read the weight `gain` times too much: its
-                // gain, and the spring rate fitted through it, are that
-                // much too high. The tare's offset (in codes) stays: the
-                // flight force it was set to read scales with the rate.
-                let gain = self.cal.weight_gain();
-                let old = self.hopper.config();
-                let changes = [
-                    Some((
-                        &crate::params::CAL_LOADCELL_GAIN,
-                        old.calibration.loadcell_gain_n_per_code / gain,
-                    )),
-                    Some((
-                        &crate::params::SUP_SPRING_RATE,
-                        old.supervisor.spring_rate_n_per_m / gain,
-                    )),
-                ];
-                self.request_rebuild(changes, Then::Fitted);
-            }
-            _ => {}
-        }
     }
 
     /// Whether the feed policy has stopped feeding for good.
@@ -1257,18 +643,18 @@ mod tests {
     use crate::hopper::Strategy;
 
     /// I/O that records what was written and can fail on command.
-    struct Io {
-        raw: RawSample,
-        dac: Option<u16>,
-        enabled: Option<bool>,
+    pub(super) struct Io {
+        pub(super) raw: RawSample,
+        pub(super) dac: Option<u16>,
+        pub(super) enabled: Option<bool>,
         /// How many times the enable was written high.
-        enable_writes: u32,
-        fail_dac: bool,
-        fail_enable: bool,
+        pub(super) enable_writes: u32,
+        pub(super) fail_dac: bool,
+        pub(super) fail_enable: bool,
     }
 
     impl Io {
-        fn new(raw: RawSample) -> Self {
+        pub(super) fn new(raw: RawSample) -> Self {
             Io {
                 raw,
                 dac: None,
@@ -1304,7 +690,7 @@ mod tests {
 
     /// A runner armed (untethered) at its first period, as the simulator
     /// and the QEMU scenario run it.
-    fn runner(strategy: Strategy) -> PeriodRunner {
+    pub(super) fn runner(strategy: Strategy) -> PeriodRunner {
         let mut cfg = HopperConfig {
             strategy,
             ..HopperConfig::default()
@@ -1373,61 +759,6 @@ mod tests {
         r.arming_mut().link_frame();
         let p = r.run_period(&mut io, &mut NoCounter);
         assert!(!p.armed && p.out.faults.is_empty());
-    }
-
-    #[test]
-    fn parameter_sets_are_checked_and_applied_between_periods() {
-        use crate::params;
-        let mut r = runner(Strategy::default());
-        let mut io = Io::new(crate::proptest_support::rest_sample(
-            &HopperConfig::default().calibration,
-        ));
-        assert!(r.run_period(&mut io, &mut NoCounter).armed);
-        let before = *r.hopper().config();
-        // Armed: the target apex changes in place, nothing else may.
-        assert_eq!(r.set_param(params::TARGET_APEX_M.name, 0.12), Ok(()));
-        assert_eq!(r.hopper().config().target_apex_m, 0.12);
-        assert_eq!(
-            r.set_param(params::CONTROLLER.name, 8.0),
-            Err(SetError::WhileArmed(params::CONTROLLER.name))
-        );
-        // Refused sets change nothing, armed or not.
-        for (name, v) in [
-            (params::TARGET_APEX_M.name, 1.5),
-            (params::TARGET_APEX_M.name, f32::NAN),
-            ("no.such", 1.0),
-        ] {
-            let cfg = *r.hopper().config();
-            assert!(r.set_param(name, v).is_err(), "{name} = {v}");
-            assert_eq!(*r.hopper().config(), cfg);
-        }
-        assert_eq!(
-            r.set_param("no.such", 1.0).map_err(|e| e.reason()),
-            Err("unknown-parameter")
-        );
-        // Disarmed: a latched fault survives a controller change.
-        r.arming_mut().request_disarm();
-        r.report_overrun();
-        // The body moves 2 counts a period (a slow settle) for 20 periods.
-        let mut p = r.run_period(&mut io, &mut NoCounter);
-        for _ in 0..20 {
-            io.raw.height_counts += 2;
-            p = r.run_period(&mut io, &mut NoCounter);
-        }
-        assert!(!p.armed && p.out.faults.contains(Fault::Overrun));
-        let (height_m, step) = (p.out.record.body_height_m, p.out.record.step);
-        assert_eq!(r.set_param(params::CONTROLLER.name, 8.0), Ok(()));
-        assert_eq!(r.hopper().config().strategy.kind().name(), "shaped");
-        assert!(r.hopper().supervisor().faults().contains(Fault::Overrun));
-        let p = r.run_period(&mut io, &mut NoCounter);
-        assert!(p.feed_watchdog && p.newly_latched.is_empty());
-        // The rebuilt controller goes on from the old one: the encoders'
-        // origin (the same body height, not re-zeroed where it stands) and
-        // the step count.
-        assert_eq!(p.out.record.body_height_m, height_m);
-        assert_eq!(p.out.record.step, step + 1);
-        assert_eq!(io.enabled, Some(false));
-        assert_ne!(*r.hopper().config(), before);
     }
 
     #[test]
@@ -1602,71 +933,6 @@ mod tests {
                 assert!(r.max_jitter_s() <= 24.5e-6, "{}", r.max_jitter_s());
             }
         }
-    }
-
-    #[test]
-    fn a_tare_applies_the_offsets_it_measured_and_only_disarmed() {
-        use crate::bringup::{CalRefusal, CalState, Routine};
-        let cal = HopperConfig::default().calibration;
-        let mut rest = crate::proptest_support::rest_sample(&cal);
-        // The load cell reads 24 codes high, the pot 17.
-        rest.loadcell_code += 24;
-        rest.pot_code += 17;
-        let mut r = PeriodRunner::new(HopperConfig::default(), Timing::default())
-            .unwrap_or_else(|e| panic!("{e:?}"));
-        let mut io = Io::new(rest);
-        // Before the first sample the e-stop counts as pressed.
-        assert_eq!(
-            r.start_calibration(Routine::Tare, 0.05),
-            Err(CalRefusal::EstopPressed)
-        );
-        r.arming_mut().link_frame();
-        r.run_period(&mut io, &mut NoCounter);
-        assert_eq!(
-            r.start_calibration(Routine::Tare, 20.0),
-            Err(CalRefusal::Duration)
-        );
-        assert_eq!(r.start_calibration(Routine::Tare, 0.05), Ok(()));
-        assert_eq!(
-            r.start_calibration(Routine::Tare, 0.05),
-            Err(CalRefusal::Busy)
-        );
-        for _ in 0..501 {
-            r.arming_mut().link_frame();
-            r.run_period(&mut io, &mut NoCounter);
-        }
-        let rep = r.calibration();
-        assert_eq!(rep.state, CalState::Done, "{rep:?}");
-        assert_eq!(rep.samples, 500);
-        // Its results wait for a controller built outside the period:
-        // nothing arms or starts until it is installed.
-        assert!(r.calibrating());
-        assert_eq!(r.hopper().config().calibration, cal);
-        assert_eq!(
-            r.start_calibration(Routine::Tare, 0.05),
-            Err(CalRefusal::Busy)
-        );
-        r.serve_rebuild();
-        assert!(!r.calibrating());
-        // The rebuilt controller's velocity filters measure after two
-        // periods.
-        for _ in 0..2 {
-            r.arming_mut().link_frame();
-            r.run_period(&mut io, &mut NoCounter);
-        }
-        let c = r.hopper().config().calibration;
-        assert_eq!(c.loadcell_offset_code, cal.loadcell_offset_code + 24.0);
-        assert_eq!(c.pot_offset_code, cal.pot_offset_code + 17.0);
-        assert_eq!(rep.loadcell_offset_code, c.loadcell_offset_code);
-        // Armed: refused.
-        r.arming_mut().link_frame();
-        r.arming_mut().request_arm();
-        r.run_period(&mut io, &mut NoCounter);
-        assert!(r.arming().is_armed());
-        assert_eq!(
-            r.start_calibration(Routine::SensorCheck, 0.05),
-            Err(CalRefusal::Armed)
-        );
     }
 
     #[test]
