@@ -35,8 +35,7 @@ use arbitrary::{Arbitrary, Unstructured};
 use hopper_control::hal::{HopperIo, IoError, RawSample};
 use hopper_control::hopper::{ApexLoop, HopperConfig, Strategy};
 use hopper_control::laws::{
-    constant_torque, energy_torque, modified_torque, shaped, step_closed, step_open, velocity,
-    StanceLaw,
+    energy, modified_torque, open_torque, shaped, step_closed, step_open, velocity, StanceLaw,
 };
 use hopper_control::runner::{LogItem, NoCounter, Period, PeriodRunner, Timing};
 use hopper_control::supervisor::{Command, Fault, Faults};
@@ -72,9 +71,9 @@ pub enum StrategyChoice {
     /// Thesis eqs 2.50-2.51.
     StepClosed,
     /// Open-loop constant torque.
-    ConstantTorque,
+    OpenTorque,
     /// Thesis eq 2.52.
-    EnergyTorque,
+    Energy,
     /// Thesis eq 2.53.
     Velocity,
     /// Thesis section 4.4.3.
@@ -93,8 +92,8 @@ impl StrategyChoice {
         StrategyChoice::Passive,
         StrategyChoice::StepOpen,
         StrategyChoice::StepClosed,
-        StrategyChoice::ConstantTorque,
-        StrategyChoice::EnergyTorque,
+        StrategyChoice::OpenTorque,
+        StrategyChoice::Energy,
         StrategyChoice::Velocity,
         StrategyChoice::ModifiedTorque,
         StrategyChoice::EnergyApex,
@@ -112,11 +111,11 @@ impl StrategyChoice {
             StrategyChoice::StepClosed => {
                 Strategy::Thesis(StanceLaw::StepClosed(step_closed::Config::default()))
             }
-            StrategyChoice::ConstantTorque => {
-                Strategy::Thesis(StanceLaw::ConstantTorque(constant_torque::Config::default()))
+            StrategyChoice::OpenTorque => {
+                Strategy::Thesis(StanceLaw::OpenTorque(open_torque::Config::default()))
             }
-            StrategyChoice::EnergyTorque => {
-                Strategy::Thesis(StanceLaw::EnergyTorque(energy_torque::Config::default()))
+            StrategyChoice::Energy => {
+                Strategy::Thesis(StanceLaw::Energy(energy::Config::default()))
             }
             StrategyChoice::Velocity => {
                 Strategy::Thesis(StanceLaw::Velocity(velocity::Config::default()))

@@ -11,7 +11,7 @@
 #![allow(missing_docs)]
 
 use criterion::{BenchmarkId, Criterion};
-use hal_sim::controller::{Controller, ControllerSpec, Passive};
+use hal_sim::controller::{ControllerSpec, Passive, PlantDriver};
 use hal_sim::run::{run, RunConfig};
 use hal_sim::sim_io::SensorConfig;
 use hal_sim::Params;

@@ -13,7 +13,7 @@
 //! ```
 #![allow(missing_docs)]
 
-use hal_sim::controller::{Controller, ControllerSpec, FirmwareController};
+use hal_sim::controller::{ControllerSpec, FirmwareController, PlantDriver};
 use hal_sim::run::{run, RunConfig};
 use hal_sim::sim_io::SensorConfig;
 use hal_sim::{Params, Plant};

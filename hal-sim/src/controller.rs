@@ -15,9 +15,7 @@ use crate::sim_io::{firmware_config, model_params, SensorConfig, SimHal};
 use hopper_control::arming::ArmEvent;
 use hopper_control::estimator::PhaseEvent;
 use hopper_control::hopper::{Hopper, MeasurementOverride, StepOutput, Strategy};
-use hopper_control::laws::{
-    constant_torque, flight_pd, modified_torque, ControllerKind, StanceLaw,
-};
+use hopper_control::laws::{flight_pd, modified_torque, open_torque, ControllerKind, StanceLaw};
 use hopper_control::params::{self, Param, ParamError};
 use hopper_control::pd_design::{self, PdGains};
 use hopper_control::runner::{NoCounter, PeriodRunner, Timing};
@@ -32,8 +30,12 @@ use hopper_control::telemetry::HopLedger;
 use hopper_control::thermal::ThermalConfig;
 use serde::Serialize;
 
-/// Computes the amplifier current once per control period.
-pub trait Controller {
+/// What drives the simulated plant (the firmware behind the simulated
+/// hardware, [`FirmwareController`], or an ideal law such as [`Passive`]):
+/// computes the amplifier current once per control period. Not to be
+/// confused with [`hopper_control::laws::Controller`], the firmware's
+/// dispatch over its control laws.
+pub trait PlantDriver {
     /// Short name, as accepted by `hopper-sim run --controller`.
     fn name(&self) -> &'static str;
     /// Current the motor carries over the coming period, A.
@@ -272,8 +274,8 @@ impl ControllerSpec {
         let kind = self.kind()?;
         let torque = |default: f32| self.torque_nm.map_or(default, |t| t as f32);
         Ok(match kind.default_strategy() {
-            Strategy::Thesis(StanceLaw::ConstantTorque(c)) => {
-                Strategy::Thesis(StanceLaw::ConstantTorque(constant_torque::Config {
+            Strategy::Thesis(StanceLaw::OpenTorque(c)) => {
+                Strategy::Thesis(StanceLaw::OpenTorque(open_torque::Config {
                     torque_nm: torque(c.torque_nm),
                 }))
             }
@@ -555,7 +557,7 @@ impl FirmwareController {
     }
 }
 
-impl Controller for FirmwareController {
+impl PlantDriver for FirmwareController {
     fn name(&self) -> &'static str {
         self.name
     }
@@ -685,7 +687,7 @@ impl Controller for FirmwareController {
 #[derive(Clone, Copy, Debug, Default)]
 pub struct Passive;
 
-impl Controller for Passive {
+impl PlantDriver for Passive {
     fn name(&self) -> &'static str {
         "passive"
     }

@@ -1,7 +1,7 @@
 //! Scenario runner: a controller against the plant at a fixed control rate,
 //! with trajectory sampling and the per-run summary `hopper-sim` prints.
 
-use crate::controller::{Controller, EstimatorEvents, FaultRecord};
+use crate::controller::{EstimatorEvents, FaultRecord, PlantDriver};
 use crate::csv_out::Fixed;
 use crate::params::Params;
 use crate::plant::{Event, Ledger, Mode, Plant, PlantError};
@@ -397,7 +397,7 @@ fn raise(max: &mut f64, v: f64) {
 pub fn run(
     cfg: &RunConfig,
     params_name: &str,
-    controller: &mut dyn Controller,
+    controller: &mut dyn PlantDriver,
 ) -> Result<RunResult, String> {
     run_with_progress(cfg, params_name, controller, &mut |_, _| {})
 }
@@ -407,7 +407,7 @@ pub fn run(
 pub fn run_with_progress(
     cfg: &RunConfig,
     params_name: &str,
-    controller: &mut dyn Controller,
+    controller: &mut dyn PlantDriver,
     progress: &mut dyn FnMut(u64, u64),
 ) -> Result<RunResult, String> {
     cfg.validate()?;

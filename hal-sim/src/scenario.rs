@@ -47,7 +47,7 @@ use crate::sim_io::SensorConfig;
 use hopper_control::estimator::EstimatorConfig;
 use hopper_control::hopper::{ApexLoop, Strategy};
 use hopper_control::laws::ControllerKind;
-use hopper_control::laws::{energy_torque, flight_pd, StanceLaw};
+use hopper_control::laws::{energy, flight_pd, StanceLaw};
 use hopper_control::params::Param;
 use hopper_control::pd_design::PdGains;
 use serde::Deserialize;
@@ -385,14 +385,14 @@ impl Settings {
                 "N m/J",
             )?;
             spec.strategy_override = Some(match self.controller {
-                ControllerKind::Energy => Strategy::Thesis(StanceLaw::EnergyTorque(energy_torque::Config {
+                ControllerKind::Energy => Strategy::Thesis(StanceLaw::Energy(energy::Config {
                     gain_nm_per_j: ke as f32,
-                    ..energy_torque::Config::default()
+                    ..energy::Config::default()
                 })),
                 ControllerKind::EnergyApex => {
                     let d = ApexLoop::default();
                     Strategy::EnergyApex(ApexLoop {
-                        law: energy_torque::Config {
+                        law: energy::Config {
                             gain_nm_per_j: ke as f32,
                             ..d.law
                         },

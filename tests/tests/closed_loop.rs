@@ -10,7 +10,7 @@
 // Test helpers may panic on impossible setup errors: that is a failed test.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
-use hal_sim::controller::{Controller, ControllerSpec, FirmwareController};
+use hal_sim::controller::{ControllerSpec, FirmwareController, PlantDriver};
 use hal_sim::run::{run, RunConfig, Summary};
 use hal_sim::{Params, Plant};
 use hopper_control::laws::ControllerKind;

@@ -5,19 +5,19 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
-use hal_sim::controller::{Controller, ControllerSpec, CONTROLLER_NAMES};
+use hal_sim::controller::{ControllerSpec, PlantDriver, CONTROLLER_NAMES};
 use hal_sim::{Params, Plant};
 use hopper_control::hopper::{ApexLoop, Strategy};
-use hopper_control::laws::{constant_torque, energy_torque, flight_pd, velocity, StanceLaw};
+use hopper_control::laws::{energy, flight_pd, open_torque, velocity, StanceLaw};
 use hopper_control::pd_design::PdGains;
 use proptest::prelude::*;
 
 fn strategy_for(law: usize, gain: f32, torque: f32) -> Option<Strategy> {
     Some(match law {
-        0 => Strategy::Thesis(StanceLaw::ConstantTorque(constant_torque::Config {
+        0 => Strategy::Thesis(StanceLaw::OpenTorque(open_torque::Config {
             torque_nm: torque,
         })),
-        1 => Strategy::Thesis(StanceLaw::EnergyTorque(energy_torque::Config {
+        1 => Strategy::Thesis(StanceLaw::Energy(energy::Config {
             gain_nm_per_j: gain,
             allow_negative: true,
         })),
@@ -26,7 +26,7 @@ fn strategy_for(law: usize, gain: f32, torque: f32) -> Option<Strategy> {
             ..velocity::Config::default()
         })),
         3 => Strategy::EnergyApex(ApexLoop {
-            law: energy_torque::Config {
+            law: energy::Config {
                 gain_nm_per_j: gain,
                 allow_negative: gain > 2.0,
             },

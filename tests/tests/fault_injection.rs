@@ -11,7 +11,7 @@
 // Test helpers may panic on impossible setup errors: that is a failed test.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
-use hal_sim::controller::{Controller, ControllerSpec};
+use hal_sim::controller::{ControllerSpec, PlantDriver};
 use hal_sim::inject::{InjectKind, Injection};
 use hal_sim::sim_io::SensorConfig;
 use hal_sim::{Params, Plant};

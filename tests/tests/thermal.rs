@@ -136,7 +136,7 @@ fn hopping_within_the_thermal_budget_never_derates() {
     // Every law on the design machine, 8 s from a 5 cm drop toward the
     // thesis's 15 cm: the shortest time to derating is 8.4 s (energy-apex
     // and modified-torque; docs/safety.md has the table).
-    for kind in ControllerKind::ALL {
+    for &kind in ControllerKind::ALL {
         if kind == ControllerKind::Passive {
             continue;
         }

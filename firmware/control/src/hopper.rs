@@ -793,8 +793,8 @@ mod tests {
         use super::super::*;
         use crate::hal::{HopperIo, IoError};
         use crate::laws::{
-            constant_torque, energy_torque, modified_torque, step_closed, step_open, velocity,
-            InvalidField, NutPositionPd, StanceLaw,
+            energy, modified_torque, open_torque, step_closed, step_open, velocity, InvalidField,
+            NutPositionPd, StanceLaw,
         };
         use crate::pd_design::PdGains;
         use crate::runner::{NoCounter, PeriodRunner, Timing};
@@ -873,7 +873,7 @@ mod tests {
             )
                 .prop_map(|(ke, neg, body, (kp, ki, max, min, spin))| {
                     Strategy::EnergyApex(ApexLoop {
-                        law: energy_torque::Config {
+                        law: energy::Config {
                             gain_nm_per_j: ke,
                             allow_negative: neg,
                         },
@@ -909,11 +909,11 @@ mod tests {
                         pd,
                     })
                 )),
-                any_gain(1.0).prop_map(|torque_nm| Strategy::Thesis(StanceLaw::ConstantTorque(
-                    constant_torque::Config { torque_nm }
+                any_gain(1.0).prop_map(|torque_nm| Strategy::Thesis(StanceLaw::OpenTorque(
+                    open_torque::Config { torque_nm }
                 ))),
                 (any_gain(0.2), any::<bool>()).prop_map(|(g, neg)| Strategy::Thesis(
-                    StanceLaw::EnergyTorque(energy_torque::Config {
+                    StanceLaw::Energy(energy::Config {
                         gain_nm_per_j: g,
                         allow_negative: neg,
                     })

@@ -17,8 +17,8 @@
 
 use crate::hopper::HopperConfig;
 use crate::laws::{
-    constant_torque, energy_apex, energy_torque, modified_torque, shaped, step_closed, step_open,
-    velocity, ControllerKind, InvalidField, StanceLaw, Strategy,
+    energy, energy_apex, modified_torque, open_torque, shaped, step_closed, step_open, velocity,
+    ControllerKind, InvalidField, StanceLaw, Strategy,
 };
 
 /// What kind of value a parameter holds.
@@ -154,18 +154,7 @@ macro_rules! params {
 
 /// The controllers [`CONTROLLER`] chooses from, by name (the index is the
 /// value): [`ControllerKind::ALL`]'s names.
-pub const CONTROLLER_NAMES: [&str; 9] = controller_names();
-
-#[allow(clippy::indexing_slicing)] // const evaluation: a bad index fails the build.
-const fn controller_names() -> [&'static str; 9] {
-    let mut names = [""; 9];
-    let mut i = 0;
-    while i < names.len() {
-        names[i] = ControllerKind::ALL[i].name();
-        i += 1;
-    }
-    names
-}
+pub const CONTROLLER_NAMES: &[&str] = <ControllerKind as strum::VariantNames>::VARIANTS;
 
 /// Names of [`STEP_CLOSED_GAIN`]'s choices.
 const STEP_CLOSED_GAINS: [&str; 2] = ["fixed", "normalised"];
@@ -177,7 +166,7 @@ use Kind::{Count, Flag, Real};
 params! {
     // --- The controller and its target -----------------------------------------
     CONTROLLER {
-        "controller", "-", Kind::Choice(&CONTROLLER_NAMES), [0.0, 8.0], 5.0, DISARMED,
+        "controller", "-", Kind::Choice(CONTROLLER_NAMES), [0.0, 8.0], 5.0, DISARMED,
         "The controller that runs in stance and flight (selecting one starts it from its defaults).",
         |_cfg| Some(Slot::Controller)
     }
@@ -206,17 +195,20 @@ params! {
     ENERGY_GAIN {
         "energy.gain_nm_per_j", "N m/J", Real, [0.0, 100.0], 0.2, LIVE,
         "K_e of eq 2.52 (Table 2.1: 0.2).",
-        |c| energy_torque(c).map(|s| R(&mut s.gain_nm_per_j))
+        |c| energy(c).map(|s| R(&mut s.gain_nm_per_j))
     }
     ENERGY_ALLOW_NEGATIVE {
         "energy.allow_negative", "-", Flag, [0.0, 1.0], 1.0, LIVE,
         "Eq 2.52 may command negative torque on an energy surplus.",
-        |c| energy_torque(c).map(|s| B(&mut s.allow_negative))
+        |c| energy(c).map(|s| B(&mut s.allow_negative))
     }
+    // The open-torque law's parameter keeps its `constant_torque.` name:
+    // parameter names are a contract (scenario files, the link,
+    // docs/parameters.md) kept from before the law was renamed.
     CONSTANT_TORQUE_NM {
         "constant_torque.torque_nm", "N m", Real, [-10.0, 10.0], 1.0, LIVE,
         "Open-loop stance torque (section 2.1.3.4; Table 2.1: 1 N m).",
-        |c| constant_torque(c).map(|s| R(&mut s.torque_nm))
+        |c| open_torque(c).map(|s| R(&mut s.torque_nm))
     }
     MODIFIED_TORQUE_NM {
         "modified_torque.torque_nm", "N m", Real, [-10.0, 10.0], 1.0, LIVE,
@@ -811,8 +803,8 @@ macro_rules! selected {
 }
 
 selected! {
-    energy_torque => Strategy::Thesis(StanceLaw::EnergyTorque(s)) => s: energy_torque::Config;
-    constant_torque => Strategy::Thesis(StanceLaw::ConstantTorque(s)) => s: constant_torque::Config;
+    energy => Strategy::Thesis(StanceLaw::Energy(s)) => s: energy::Config;
+    open_torque => Strategy::Thesis(StanceLaw::OpenTorque(s)) => s: open_torque::Config;
     modified_torque => Strategy::Thesis(StanceLaw::ModifiedTorque(s)) => s: modified_torque::Config;
     step_open => Strategy::Thesis(StanceLaw::StepOpen(s)) => s: step_open::Config;
     step_closed => Strategy::Thesis(StanceLaw::StepClosed(s)) => s: step_closed::Config;

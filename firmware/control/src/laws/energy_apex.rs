@@ -3,8 +3,7 @@
 //! apex height; the flight PD in flight.
 
 use super::{
-    energy_torque, flight_pd::FlightPd, Actuator, ControlInput, ControlLaw, EventInput,
-    InvalidField,
+    energy, flight_pd::FlightPd, Actuator, ControlInput, ControlLaw, EventInput, InvalidField,
 };
 use crate::energy::{EnergyInput, EnergyModel};
 use crate::estimator::{Phase, PhaseEvent};
@@ -48,7 +47,7 @@ pub struct ApexLoop {
     /// with the eq 4.13 flight PD); passive decay brings a high hop down
     /// gently instead. Tuned in simulation (design parameters, targets
     /// 0.03-0.05 m, starts 0.02-0.25 m).
-    pub law: energy_torque::Config,
+    pub law: energy::Config,
     /// The energy fed back.
     pub measure: EnergyMeasure,
     /// Proportional gain `K_p`, dimensionless (J of correction per J of the
@@ -73,7 +72,7 @@ pub struct ApexLoop {
 impl Default for ApexLoop {
     fn default() -> Self {
         Self {
-            law: energy_torque::Config {
+            law: energy::Config {
                 gain_nm_per_j: params::ENERGY_APEX_GAIN.default,
                 allow_negative: params::ENERGY_APEX_ALLOW_NEGATIVE.default_flag(),
             },
@@ -110,7 +109,7 @@ impl ApexLoop {
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct EnergyApex {
     cfg: ApexLoop,
-    law: energy_torque::Law,
+    law: energy::Law,
     flight: FlightPd,
     /// The body energy's constants (for [`EnergyMeasure::Body`]).
     energy: EnergyModel,
@@ -131,7 +130,7 @@ impl EnergyApex {
         cfg.validate()?;
         Ok(Self {
             cfg: *cfg,
-            law: energy_torque::Law::new(&cfg.law, act, &params::ENERGY_APEX_GAIN)?,
+            law: energy::Law::new(&cfg.law, act, &params::ENERGY_APEX_GAIN)?,
             flight,
             energy: EnergyModel::new(model)
                 .map_err(|_| InvalidField("model.spring_stiffness_n_per_m"))?,

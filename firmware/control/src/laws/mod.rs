@@ -17,18 +17,18 @@
 //! Stance laws ([`StanceLaw`]):
 //! - [`step_open`]: open-loop position step (eq 2.49);
 //! - [`step_closed`]: closed-loop position step (eqs 2.50-2.51);
-//! - [`constant_torque`]: open-loop constant torque (section 2.1.3.4);
-//! - [`energy_torque`]: energy-feedback torque (eq 2.52);
+//! - [`open_torque`]: open-loop constant torque (section 2.1.3.4);
+//! - [`energy`]: energy-feedback torque (eq 2.52);
 //! - [`velocity`]: actuator velocity (eq 2.53);
 //! - [`modified_torque`]: full torque in stance and late in the descent (section 4.4.3).
 //!
 //! Flight law: [`flight_pd`] (section 4.3, eq 4.4).
 
-pub mod constant_torque;
+pub mod energy;
 pub mod energy_apex;
-pub mod energy_torque;
 pub mod flight_pd;
 pub mod modified_torque;
+pub mod open_torque;
 pub mod passive;
 pub mod shaped;
 pub mod step_closed;
@@ -254,9 +254,9 @@ pub enum StanceLaw {
     /// Closed-loop position step, eqs 2.50-2.51.
     StepClosed(step_closed::Config),
     /// Open-loop constant torque.
-    ConstantTorque(constant_torque::Config),
+    OpenTorque(open_torque::Config),
     /// Energy-feedback torque, eq 2.52.
-    EnergyTorque(energy_torque::Config),
+    Energy(energy::Config),
     /// Actuator velocity, eq 2.53.
     Velocity(velocity::Config),
     /// Modified torque (section 4.4.3); in flight see [`modified_torque::flight_active`].
@@ -265,7 +265,7 @@ pub enum StanceLaw {
 
 impl Default for StanceLaw {
     fn default() -> Self {
-        StanceLaw::EnergyTorque(energy_torque::Config::default())
+        StanceLaw::Energy(energy::Config::default())
     }
 }
 
@@ -287,7 +287,22 @@ pub enum Strategy {
 
 /// Which controller, without its settings. The index in [`ControllerKind::ALL`]
 /// is the value of the `controller` parameter ([`crate::params::CONTROLLER`]).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+///
+/// The declaration order is that index (strum's [`strum::VariantArray`] and
+/// [`strum::VariantNames`] list the variants in it), and each variant's name
+/// is its kebab-case spelling ([`ControllerKind::name`]).
+#[derive(
+    Debug,
+    Clone,
+    Copy,
+    PartialEq,
+    Eq,
+    Hash,
+    strum::VariantArray,
+    strum::VariantNames,
+    strum::IntoStaticStr,
+)]
+#[strum(serialize_all = "kebab-case")]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum ControllerKind {
     /// `passive`: the motor off.
@@ -329,36 +344,16 @@ impl ControllerKind {
     }
 
     /// Every controller, in the parameter table's order.
-    pub const ALL: [ControllerKind; 9] = [
-        ControllerKind::Passive,
-        ControllerKind::StepOpen,
-        ControllerKind::StepClosed,
-        ControllerKind::OpenTorque,
-        ControllerKind::Energy,
-        ControllerKind::EnergyApex,
-        ControllerKind::Velocity,
-        ControllerKind::ModifiedTorque,
-        ControllerKind::Shaped,
-    ];
+    pub const ALL: &'static [Self] = <Self as strum::VariantArray>::VARIANTS;
 
     /// The name the host tools and the link use (`energy-apex`).
-    pub const fn name(self) -> &'static str {
-        match self {
-            ControllerKind::Passive => "passive",
-            ControllerKind::StepOpen => "step-open",
-            ControllerKind::StepClosed => "step-closed",
-            ControllerKind::OpenTorque => "open-torque",
-            ControllerKind::Energy => "energy",
-            ControllerKind::EnergyApex => "energy-apex",
-            ControllerKind::Velocity => "velocity",
-            ControllerKind::ModifiedTorque => "modified-torque",
-            ControllerKind::Shaped => "shaped",
-        }
+    pub fn name(self) -> &'static str {
+        self.into()
     }
 
     /// The controller called `name`, if any.
     pub fn from_name(name: &str) -> Option<Self> {
-        Self::ALL.into_iter().find(|k| k.name() == name)
+        Self::ALL.iter().copied().find(|k| k.name() == name)
     }
 
     /// This controller with its default settings.
@@ -372,10 +367,10 @@ impl ControllerKind {
                 Strategy::Thesis(StanceLaw::StepClosed(step_closed::Config::default()))
             }
             ControllerKind::OpenTorque => {
-                Strategy::Thesis(StanceLaw::ConstantTorque(constant_torque::Config::default()))
+                Strategy::Thesis(StanceLaw::OpenTorque(open_torque::Config::default()))
             }
             ControllerKind::Energy => {
-                Strategy::Thesis(StanceLaw::EnergyTorque(energy_torque::Config::default()))
+                Strategy::Thesis(StanceLaw::Energy(energy::Config::default()))
             }
             ControllerKind::EnergyApex => Strategy::EnergyApex(energy_apex::ApexLoop::default()),
             ControllerKind::Velocity => {
@@ -402,8 +397,8 @@ impl Strategy {
             Strategy::Passive => ControllerKind::Passive,
             Strategy::Thesis(StanceLaw::StepOpen(_)) => ControllerKind::StepOpen,
             Strategy::Thesis(StanceLaw::StepClosed(_)) => ControllerKind::StepClosed,
-            Strategy::Thesis(StanceLaw::ConstantTorque(_)) => ControllerKind::OpenTorque,
-            Strategy::Thesis(StanceLaw::EnergyTorque(_)) => ControllerKind::Energy,
+            Strategy::Thesis(StanceLaw::OpenTorque(_)) => ControllerKind::OpenTorque,
+            Strategy::Thesis(StanceLaw::Energy(_)) => ControllerKind::Energy,
             Strategy::EnergyApex(_) => ControllerKind::EnergyApex,
             Strategy::Thesis(StanceLaw::Velocity(_)) => ControllerKind::Velocity,
             Strategy::Thesis(StanceLaw::ModifiedTorque(_)) => ControllerKind::ModifiedTorque,
@@ -513,10 +508,10 @@ pub enum Controller {
     StepOpen(step_open::StepOpen),
     /// [`step_closed::StepClosed`].
     StepClosed(step_closed::StepClosed),
-    /// [`constant_torque::ConstantTorque`].
-    ConstantTorque(constant_torque::ConstantTorque),
-    /// [`energy_torque::EnergyTorque`].
-    EnergyTorque(energy_torque::EnergyTorque),
+    /// [`open_torque::OpenTorque`].
+    OpenTorque(open_torque::OpenTorque),
+    /// [`energy::Energy`].
+    Energy(energy::Energy),
     /// [`velocity::Velocity`].
     Velocity(velocity::Velocity),
     /// [`modified_torque::ModifiedTorque`].
@@ -547,12 +542,10 @@ impl Controller {
                 StanceLaw::StepClosed(c) => {
                     Controller::StepClosed(step_closed::StepClosed::new(c, &act, pd()?)?)
                 }
-                StanceLaw::ConstantTorque(c) => Controller::ConstantTorque(
-                    constant_torque::ConstantTorque::new(c, &act, pd()?)?,
-                ),
-                StanceLaw::EnergyTorque(c) => {
-                    Controller::EnergyTorque(energy_torque::EnergyTorque::new(c, &act, pd()?)?)
+                StanceLaw::OpenTorque(c) => {
+                    Controller::OpenTorque(open_torque::OpenTorque::new(c, &act, pd()?)?)
                 }
+                StanceLaw::Energy(c) => Controller::Energy(energy::Energy::new(c, &act, pd()?)?),
                 StanceLaw::Velocity(c) => {
                     Controller::Velocity(velocity::Velocity::new(c, &act, pd()?)?)
                 }
@@ -592,8 +585,8 @@ impl ControlLaw for Controller {
             Controller::Passive(c) => c.on_event(event),
             Controller::StepOpen(c) => c.on_event(event),
             Controller::StepClosed(c) => c.on_event(event),
-            Controller::ConstantTorque(c) => c.on_event(event),
-            Controller::EnergyTorque(c) => c.on_event(event),
+            Controller::OpenTorque(c) => c.on_event(event),
+            Controller::Energy(c) => c.on_event(event),
             Controller::Velocity(c) => c.on_event(event),
             Controller::ModifiedTorque(c) => c.on_event(event),
             Controller::EnergyApex(c) => c.on_event(event),
@@ -607,8 +600,8 @@ impl ControlLaw for Controller {
             Controller::Passive(c) => c.current_a(x),
             Controller::StepOpen(c) => c.current_a(x),
             Controller::StepClosed(c) => c.current_a(x),
-            Controller::ConstantTorque(c) => c.current_a(x),
-            Controller::EnergyTorque(c) => c.current_a(x),
+            Controller::OpenTorque(c) => c.current_a(x),
+            Controller::Energy(c) => c.current_a(x),
             Controller::Velocity(c) => c.current_a(x),
             Controller::ModifiedTorque(c) => c.current_a(x),
             Controller::EnergyApex(c) => c.current_a(x),
@@ -674,5 +667,30 @@ mod tests {
         ));
         assert_eq!(or_zero(Err(LawError::NonFiniteInput)), 0.0);
         Ok(())
+    }
+
+    /// The derived names are the host tools' and the link's, in the
+    /// `controller` parameter's order.
+    #[test]
+    fn controller_names_and_order() {
+        let names = [
+            "passive",
+            "step-open",
+            "step-closed",
+            "open-torque",
+            "energy",
+            "energy-apex",
+            "velocity",
+            "modified-torque",
+            "shaped",
+        ];
+        assert_eq!(<ControllerKind as strum::VariantNames>::VARIANTS, names);
+        assert_eq!(ControllerKind::ALL.len(), names.len());
+        for (k, n) in ControllerKind::ALL.iter().zip(names) {
+            assert_eq!(k.name(), n);
+            assert_eq!(ControllerKind::from_name(n), Some(*k));
+            assert_eq!(k.default_strategy().kind(), *k);
+        }
+        assert_eq!(ControllerKind::from_name("constant-torque"), None);
     }
 }

@@ -65,8 +65,8 @@ pub fn descent_window(
 /// Current command while active (stance, or flight when
 /// [`flight_active`]), A: the constant-torque law's `tau / k_m`, clamped.
 pub fn command(c: &Config, act: &Actuator) -> Result<f32, LawError> {
-    super::constant_torque::command(
-        &super::constant_torque::Config {
+    super::open_torque::command(
+        &super::open_torque::Config {
             torque_nm: c.torque_nm,
         },
         act,

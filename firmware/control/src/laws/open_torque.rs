@@ -41,12 +41,12 @@ impl Config {
 /// stance, the flight PD in flight. No state of its own.
 #[derive(Debug, Clone, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct ConstantTorque {
+pub struct OpenTorque {
     stance_a: f32,
     flight: FlightPd,
 }
 
-impl ConstantTorque {
+impl OpenTorque {
     /// Checks `cfg`.
     pub fn new(cfg: &Config, act: &Actuator, flight: FlightPd) -> Result<Self, InvalidField> {
         cfg.validate()?;
@@ -57,7 +57,7 @@ impl ConstantTorque {
     }
 }
 
-impl ControlLaw for ConstantTorque {
+impl ControlLaw for OpenTorque {
     fn on_event(&mut self, _event: &EventInput) {}
 
     fn current_a(&mut self, x: &ControlInput) -> f32 {

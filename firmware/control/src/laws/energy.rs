@@ -4,7 +4,7 @@
 //! 1 N m. A surplus gives negative torque (the motor pulls the nut up and
 //! removes energy), as in the thesis; set `allow_negative = false` to only add.
 //!
-//! [`EnergyTorque`] is the thesis's controller (this law in stance, the
+//! [`Energy`] is the thesis's controller (this law in stance, the
 //! flight PD in flight); [`Law`] is the stance law itself, which
 //! [`super::energy_apex`] also runs.
 
@@ -94,12 +94,12 @@ impl Law {
 /// in flight. No state of its own.
 #[derive(Debug, Clone, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct EnergyTorque {
+pub struct Energy {
     law: Law,
     flight: FlightPd,
 }
 
-impl EnergyTorque {
+impl Energy {
     /// Checks `c`.
     pub fn new(c: &Config, act: &Actuator, flight: FlightPd) -> Result<Self, InvalidField> {
         Ok(Self {
@@ -109,7 +109,7 @@ impl EnergyTorque {
     }
 }
 
-impl ControlLaw for EnergyTorque {
+impl ControlLaw for Energy {
     fn on_event(&mut self, _event: &EventInput) {}
 
     #[inline]
