@@ -97,12 +97,10 @@ impl Flash {
     }
 }
 
-/// Loads the calibration `flash` holds into `robot` (as a board does at boot).
+/// Loads the calibration `flash` holds into `robot` (as a board does at boot,
+/// before [`serve`] builds the link task's end from it).
 pub fn load_at_boot(robot: &mut VirtualRobot, record: Option<&[u8]>) {
     robot.firmware.runner.load_calibration(record);
-    // The link task's copy of the configuration is the loaded one (as the
-    // board builds its endpoint after loading).
-    robot.link = hopper_robot_link::Endpoint::simulated(&robot.firmware.runner);
 }
 
 /// How the loop runs.
@@ -132,6 +130,9 @@ pub fn serve(
     // The robot's capture, frozen around a fault (32 KiB: on the heap).
     let mut capture = Box::new(FaultCapture::<CAPTURE_LEN>::new());
     let mut queues = Box::<hopper_robot_link::Queues>::default();
+    // The link task's end, built from the configuration as loaded (as the
+    // board builds its endpoint after loading the saved calibration).
+    let mut link = hopper_robot_link::Endpoint::simulated(&robot.firmware.runner);
     let mut inbox: Vec<u8> = Vec::new();
     let mut buf = [0u8; 4096];
     let start = Instant::now();
@@ -182,6 +183,7 @@ pub fn serve(
         for _ in 0..batch {
             let rx = std::mem::take(&mut inbox);
             robot.control(
+                &mut link,
                 rx.into_iter(),
                 &mut tx,
                 &mut capture,
@@ -191,12 +193,12 @@ pub fn serve(
             robot.firmware.runner.end_period(false);
             // A save: written between two periods, as the host's clock
             // allows (a board defers it to its next boot).
-            if let Some(record) = robot.link.take_save().map(<[u8]>::to_vec) {
+            if let Some(record) = link.take_save().map(<[u8]>::to_vec) {
                 let ok = flash.save(&record);
                 if let Err(e) = &ok {
                     eprintln!("hopper-sim: save failed: {e}");
                 }
-                robot.link.save_done(ok.is_ok(), false);
+                link.save_done(ok.is_ok(), false);
             }
             robot
                 .advance(&mut |_| {})

@@ -31,6 +31,7 @@ impl Tx for NullTx {
 /// (a command the link task queued is applied at the next period).
 struct Robot {
     vr: VirtualRobot,
+    link: hopper_robot_link::Endpoint,
     queues: Box<hopper_robot_link::Queues>,
 }
 
@@ -72,8 +73,10 @@ fn robot(mis: Miscalibration, set: &[(&str, f32)]) -> Robot {
         SimHal::new(&nominal.calibration, &mis.sensors(SensorConfig::DEFAULT)),
         &plant,
     );
+    let vr = VirtualRobot::new(plant, hal, runner, DT_S).hold();
     Robot {
-        vr: VirtualRobot::new(plant, hal, runner, DT_S).hold(),
+        link: hopper_robot_link::Endpoint::simulated(&vr.firmware.runner),
+        vr,
         queues: Box::default(),
     }
 }
@@ -86,6 +89,7 @@ fn run(r: &mut Robot, seconds: f64) -> Vec<f64> {
     let mut capture = Box::new(FaultCapture::<CAPTURE_LEN>::new());
     for _ in 0..(seconds / DT_S).round() as u64 {
         r.vr.control(
+            &mut r.link,
             core::iter::empty(),
             &mut NullTx,
             &mut capture,

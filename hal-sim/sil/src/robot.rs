@@ -35,9 +35,6 @@ pub struct VirtualRobot<H = Owned> {
     /// The firmware's control loop (the period runner and the link's end
     /// in the control period).
     pub firmware: ControlLoop<H>,
-    /// The link task, for [`control`](Self::control) (an image that runs
-    /// it as a task of its own keeps its own).
-    pub link: Endpoint<H>,
     /// Held by the hoist (the body clamped, the nut free) until the first
     /// armed period.
     pub held: bool,
@@ -53,7 +50,6 @@ impl<H: HopperSlot> VirtualRobot<H> {
         Self {
             plant,
             hal,
-            link: Endpoint::simulated(&runner),
             firmware: ControlLoop::new(runner),
             held: false,
             lift_to_m: None,
@@ -123,13 +119,15 @@ impl<H: HopperSlot> VirtualRobot<H> {
         p
     }
 
-    /// [`control_period`](Self::control_period), then the link task in
-    /// line (`hopper-sim serve`, the tests): the period's messages into
-    /// `tx`, and `rx` (the bytes that arrived since the last period)
-    /// decoded and answered. The caller owns the capture and the queues
-    /// (32 KiB and 12 KiB).
+    /// [`control_period`](Self::control_period), then the link task
+    /// `link` in line (`hopper-sim serve`, the tests): the period's
+    /// messages into `tx`, and `rx` (the bytes that arrived since the last
+    /// period) decoded and answered. The caller owns the link task (an
+    /// image that runs it as a task of its own keeps it there), the
+    /// capture and the queues (32 KiB and 12 KiB).
     pub fn control<C: CycleCounter>(
         &mut self,
+        link: &mut Endpoint<H>,
         rx: impl Iterator<Item = u8>,
         tx: &mut impl Tx,
         capture: &mut FaultCapture<CAPTURE_LEN>,
@@ -137,7 +135,7 @@ impl<H: HopperSlot> VirtualRobot<H> {
         counter: &mut C,
     ) -> Period {
         let p = self.control_period(capture, queues, counter);
-        self.link.serve(queues, rx, &mut &mut *capture, tx, counter);
+        link.serve(queues, rx, &mut &mut *capture, tx, counter);
         p
     }
 
