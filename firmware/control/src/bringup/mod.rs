@@ -325,3 +325,30 @@ impl CalState {
     /// Every state, by wire code.
     pub const ALL: &'static [CalState] = <CalState as strum::VariantArray>::VARIANTS;
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The names the link sends as a routine's refusal and `hopper-link`
+    /// prints: a contract with the operator's tools.
+    #[test]
+    fn refusal_names_are_the_contract() {
+        use CalRefusal as R;
+        let names = [
+            (R::Armed, "disarm-first"),
+            (R::EstopPressed, "estop-pressed"),
+            (R::Busy, "busy"),
+            (R::Unknown, "unknown-routine"),
+            (R::Duration, "bad-duration"),
+            (R::Faulted, "faulted"),
+            (R::LinkDown, "link-down"),
+            (R::DirectionFirst, "check-direction-first"),
+            (R::HomeFirst, "home-first"),
+            (R::TareFirst, "tare-first"),
+        ];
+        for (r, name) in names {
+            assert_eq!(r.name(), name);
+        }
+    }
+}
