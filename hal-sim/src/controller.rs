@@ -79,6 +79,16 @@ pub trait PlantDriver {
     fn winding_c(&self) -> Option<f64> {
         None
     }
+    /// Why the run cannot go on (a hardware-in-the-loop line that lost a
+    /// frame), if it cannot: the run stops with this error.
+    fn failure(&self) -> Option<String> {
+        None
+    }
+    /// What a hardware-in-the-loop run measured of its exchange, if this
+    /// is one.
+    fn hil(&mut self) -> Option<crate::hil::HilReport> {
+        None
+    }
 }
 
 /// Times of the phase estimator's touchdown and liftoff events, s.
@@ -141,8 +151,25 @@ pub struct ThermalSummary {
 }
 
 impl ThermalSummary {
+    /// One period's estimate at `t_s`: the winding at `winding_c`, the
+    /// current limit in force `limit_a`, `derated` below the amplifier's.
+    pub fn observe(&mut self, t_s: f64, winding_c: f64, limit_a: f64, derated: bool) {
+        self.peak_winding_c = self.peak_winding_c.max(winding_c);
+        self.final_winding_c = winding_c;
+        if derated && self.first_derated_s.is_none() {
+            self.first_derated_s = Some(t_s);
+        }
+        if winding_c >= self.derate_winding_c && self.reached_derate_s.is_none() {
+            self.reached_derate_s = Some(t_s);
+        }
+        if winding_c >= self.trip_winding_c && self.reached_trip_s.is_none() {
+            self.reached_trip_s = Some(t_s);
+        }
+        self.final_current_limit_a = limit_a;
+    }
+
     /// A motor at the ambient temperature under `supervisor`'s protection.
-    fn at_start(supervisor: &hopper_control::supervisor::Supervisor) -> Self {
+    pub fn at_start(supervisor: &hopper_control::supervisor::Supervisor) -> Self {
         let t = *supervisor.thermal().config();
         let limit_a = f64::from(supervisor.current_limit_a());
         // `protect` off runs the same motor's data.
@@ -417,6 +444,38 @@ impl ControllerSpec {
     }
 }
 
+impl ControllerSpec {
+    /// The host's end of a hardware-in-the-loop run on `connection` (a
+    /// robot image's link): this spec's firmware configuration is set on the
+    /// robot by the parameters' names and the robot armed, with the plant
+    /// held at its start (`plant_params`, `start_apex_m`). Faults cannot be
+    /// injected into a HIL run (the firmware is not in this process).
+    pub fn build_hil(
+        &self,
+        plant_params: &Params,
+        start_apex_m: f64,
+        dt_s: f64,
+        connection: crate::hil::Connection,
+    ) -> Result<crate::hil::HilDriver, String> {
+        if !self.injections.is_empty() {
+            return Err("--inject is for host runs: a HIL run's firmware is on the robot".into());
+        }
+        let (runner, hal) = self.runner(plant_params, start_apex_m, dt_s, true)?;
+        let cfg = *runner.hopper().config();
+        let name = cfg.strategy.kind().name();
+        let plant = Plant::new(*plant_params, start_apex_m).map_err(|e| e.to_string())?;
+        crate::hil::HilDriver::connect(
+            connection,
+            &cfg,
+            hal,
+            &plant,
+            dt_s,
+            (name != "passive").then_some(self.target_apex_m),
+            ThermalSummary::at_start(runner.hopper().supervisor()),
+        )
+    }
+}
+
 /// The controllers firmware parameter `p` applies to, for an error message.
 pub fn owner_of(p: &Param) -> &'static str {
     match p.name.split_once('.').map(|(head, _)| head) {
@@ -586,20 +645,12 @@ impl PlantDriver for FirmwareController {
         self.firmware.runner.end_period(false);
         let supervisor = self.firmware.runner.hopper().supervisor();
         let motor = supervisor.thermal();
-        let winding_c = f64::from(motor.winding_c());
-        let th = &mut self.thermal;
-        th.peak_winding_c = th.peak_winding_c.max(winding_c);
-        th.final_winding_c = winding_c;
-        if motor.limit_scale() < 1.0 && th.first_derated_s.is_none() {
-            th.first_derated_s = Some(plant.time_s());
-        }
-        if winding_c >= th.derate_winding_c && th.reached_derate_s.is_none() {
-            th.reached_derate_s = Some(plant.time_s());
-        }
-        if winding_c >= th.trip_winding_c && th.reached_trip_s.is_none() {
-            th.reached_trip_s = Some(plant.time_s());
-        }
-        th.final_current_limit_a = f64::from(supervisor.current_limit_a() * motor.limit_scale());
+        self.thermal.observe(
+            plant.time_s(),
+            f64::from(motor.winding_c()),
+            f64::from(supervisor.current_limit_a() * motor.limit_scale()),
+            motor.limit_scale() < 1.0,
+        );
         let new = out.faults.0 & !before.0;
         if new != 0 {
             for f in Fault::ALL {

@@ -198,6 +198,10 @@ pub struct Summary {
     /// apex is steady; null with fewer than 5 full hops (the entry from the
     /// release does not count).
     pub steady_hop: Option<HopEnergy>,
+    /// A hardware-in-the-loop run's exchange and the robot's control
+    /// interrupt cost (`hopper-sim run --hil`); absent from other runs.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub hil: Option<crate::hil::HilReport>,
 }
 
 /// How far apart an estimator event and a plant event may be and still be
@@ -447,6 +451,9 @@ pub fn run_with_progress(
             progress(k, steps);
         }
         let cmd = controller.current_command_a(&plant);
+        if let Some(e) = controller.failure() {
+            return Err(e);
+        }
         let (t0_s, w0_j, n_events) = (plant.time_s(), plant.ledger().motor_work_j, events.len());
         plant
             .advance(cfg.control_dt_s, cmd, &mut |e| events.push(e))
@@ -538,6 +545,7 @@ pub fn run_with_progress(
                 arm_refused: controller.arm_refusal(),
                 thermal: controller.thermal(),
                 firmware_hops: controller.hop_ledgers(),
+                hil: controller.hil(),
                 first_stance_motor_work_j: first_stance_work_j,
                 steady_hop: match tracker.hops.len() {
                     n if n >= 6 => HopEnergy::mean(&tracker.hops[n - 5..]),
@@ -623,6 +631,7 @@ fn summarize(
         first_stance_motor_work_j: None,
         hop_ledger: Vec::new(),
         steady_hop: None,
+        hil: None,
     }
 }
 

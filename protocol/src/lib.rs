@@ -74,6 +74,13 @@ pub enum HostMsg {
         /// What is asked.
         req: Request,
     },
+    /// Hardware in the loop: the sensors' raw reading for one control
+    /// period, from the host's plant and sensor models. A robot image
+    /// built for it (`hopper-hil`) runs one period on it and answers
+    /// [`RobotMsg::HilActuate`] with the same `seq`; every other robot
+    /// ignores it. The host owns the clock: the period starts when the
+    /// sample arrives.
+    HilSample(HilSample),
 }
 
 /// What a host can ask.
@@ -203,6 +210,63 @@ pub enum RobotMsg {
     /// One record of a dump ([`Request::Dump`]): `seq` is its index in the
     /// dump, oldest first.
     Captured(Telemetry),
+    /// Hardware in the loop: what one period did with a
+    /// [`HostMsg::HilSample`].
+    HilActuate(HilActuate),
+}
+
+/// One period's raw sensor reading (`hopper_control::hal::RawSample`), for
+/// hardware in the loop.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct HilSample {
+    /// Consecutive from 0: the robot answers each once, in order.
+    pub seq: u32,
+    /// Motor quadrature counter, raw.
+    pub motor_counts: u32,
+    /// Height quadrature counter, raw.
+    pub height_counts: u32,
+    /// Load-cell ADC code.
+    pub loadcell_code: u16,
+    /// Leg potentiometer ADC code.
+    pub pot_code: u16,
+    /// The simulated e-stop is pressed (the board's own e-stop input
+    /// counts too: either one presses it).
+    pub estop_pressed: bool,
+    /// The simulated amplifier reports a fault.
+    pub amp_fault: bool,
+}
+
+/// What one hardware-in-the-loop period did: the outputs for the host's
+/// amplifier model and what a host run reports of the firmware.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct HilActuate {
+    /// The sample's `seq`.
+    pub seq: u32,
+    /// The DAC code written.
+    pub dac_code: u16,
+    /// The amplifier enable written.
+    pub amp_enabled: bool,
+    /// The control interrupt's cost this period, in the robot's counter's
+    /// ticks (core cycles on a board; instructions in QEMU), the serial
+    /// interrupts that preempted it left out.
+    pub isr_ticks: u32,
+    /// The phase estimator's event this period
+    /// ([`vocab::PhaseEvent`] by code; 0: none).
+    pub event: u8,
+    /// Every latched fault, one bit each ([`vocab::Fault`]).
+    pub faults: u16,
+    /// Whether the period's output went out armed.
+    pub armed: bool,
+    /// The motor's estimated winding temperature, C.
+    pub winding_c: f32,
+    /// The current limit in force (the supervisor's, derated), A.
+    pub current_limit_a: f32,
+    /// The motor's heat derates the limit.
+    pub derated: bool,
+    /// Touchdowns withdrawn so far (predicted, not confirmed).
+    pub withdrawn_touchdowns: u32,
+    /// The hop that ended this period, if one did.
+    pub hop: Option<Hop>,
 }
 
 /// The arming state on the wire (`hopper_control::arming`'s names as codes).
@@ -840,7 +904,75 @@ mod tests {
             any::<u16>().prop_map(|version| HostMsg::Hello { version }),
             Just(HostMsg::Heartbeat),
             (any::<u16>(), req).prop_map(|(id, req)| HostMsg::Request { id, req }),
+            (any::<[u32; 3]>(), any::<[u16; 2]>(), any::<[bool; 2]>()).prop_map(
+                |(
+                    [seq, motor_counts, height_counts],
+                    [loadcell_code, pot_code],
+                    [estop_pressed, amp_fault],
+                )| {
+                    HostMsg::HilSample(HilSample {
+                        seq,
+                        motor_counts,
+                        height_counts,
+                        loadcell_code,
+                        pot_code,
+                        estop_pressed,
+                        amp_fault,
+                    })
+                }
+            ),
         ]
+    }
+
+    /// A hardware-in-the-loop period's frames at their largest (every
+    /// counter and code at its widest varint, a hop ending): what the
+    /// line carries per period, which bounds the periods per second a
+    /// baud rate allows (docs/board.md, "Hardware in the loop").
+    #[test]
+    fn hil_frames_fit_and_their_size_is_known() {
+        let sample = HostMsg::HilSample(HilSample {
+            seq: u32::MAX,
+            motor_counts: u32::MAX,
+            height_counts: u32::MAX,
+            loadcell_code: u16::MAX,
+            pot_code: u16::MAX,
+            estop_pressed: false,
+            amp_fault: false,
+        });
+        let hop = Hop {
+            hop: u32::MAX,
+            apex_height_m: 0.05,
+            energy_at_touchdown_j: 1.0,
+            energy_at_liftoff_j: 1.0,
+            stance_work_j: 1.0,
+            stance_duration_s: 0.1,
+            peak_current_a: 30.0,
+            peak_stroke_m: 0.01,
+        };
+        let actuate = |hop| {
+            RobotMsg::HilActuate(HilActuate {
+                seq: u32::MAX,
+                dac_code: 4095,
+                amp_enabled: true,
+                isr_ticks: u32::MAX,
+                event: 3,
+                faults: u16::MAX,
+                armed: true,
+                winding_c: 100.0,
+                current_limit_a: 33.0,
+                derated: true,
+                withdrawn_touchdowns: u32::MAX,
+                hop,
+            })
+        };
+        assert_eq!(frame(&sample).len(), 28);
+        assert_eq!(frame(&actuate(None)).len(), 38);
+        assert_eq!(frame(&actuate(Some(hop))).len(), 71);
+        for m in [actuate(None), actuate(Some(hop))] {
+            let mut d = Decoder::new();
+            let got: Vec<RobotMsg> = decode_all(&mut d, &frame(&m));
+            assert_eq!(got, [m]);
+        }
     }
 
     proptest! {

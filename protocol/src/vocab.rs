@@ -39,7 +39,8 @@ vocabulary!(
     ResetCause,
     Routine,
     CalState,
-    LoadError
+    LoadError,
+    PhaseEvent
 );
 
 /// One fault the robot's supervisor latches: its code is its bit in
@@ -270,6 +271,22 @@ pub enum LoadError {
     Refused = 5,
 }
 
+/// An event of the robot's phase estimator (`HilActuate::event`; 0 is
+/// none).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, IntoStaticStr, VariantArray, FromRepr)]
+#[strum(serialize_all = "kebab-case")]
+#[repr(u8)]
+pub enum PhaseEvent {
+    /// Flight to stance.
+    Touchdown = 1,
+    /// Stance to flight.
+    Liftoff = 2,
+    /// The top of a flight.
+    Apex = 3,
+    /// The deepest compression of a stance.
+    Bottom = 4,
+}
+
 #[cfg(test)]
 mod tests {
     extern crate std;
@@ -320,6 +337,12 @@ mod tests {
             LoadError::code,
             LoadError::from_code,
             LoadError::name,
+        );
+        check(
+            PhaseEvent::ALL,
+            PhaseEvent::code,
+            PhaseEvent::from_code,
+            PhaseEvent::name,
         );
         assert_eq!(Fault::from_code(15), None);
         assert_eq!(Routine::SensorCheck.name(), "sensors");

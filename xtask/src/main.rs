@@ -29,6 +29,12 @@
 //!   `board-init: writes=... polled_registers=... longest_poll_reads=...
 //!   terminated=... golden=...`.
 //! * `cargo xtask board-init`: the board image's init check alone.
+//! * `cargo xtask hil [--serial PORT]`: the hardware-in-the-loop image
+//!   (`hopper-hil`) on QEMU (or a board on PORT) against `hopper-sim run
+//!   --hil`, its apexes checked against the host run of the same scenario,
+//!   and on QEMU a run that loses a frame, which must stop with its error
+//!   and write nothing: `hil: apexes=N max_diff_m=X frames_per_s=Y
+//!   isr_max=Z`. Part of `cargo xtask test`, after `qemu`.
 //! * `cargo xtask docs`: every `console` example in README.md and docs/
 //!   run and compared with the output the doc shows, and the figures they
 //!   regenerate compared with the committed ones ([`docs`]): `docs: N
@@ -44,6 +50,7 @@ use std::process::{Command, ExitCode, Stdio};
 
 mod board_init;
 mod docs;
+mod hil;
 mod qemu;
 mod session;
 
@@ -76,9 +83,17 @@ fn main() -> ExitCode {
         Some("qemu") => setup(&root).and_then(|_| qemu::run(&root)),
         Some("link-session") => session::against_serve(&root),
         Some("board-init") => setup(&root).and_then(|_| board_init::run(&root)),
+        Some("hil") => {
+            let serial = match &args[1..] {
+                [] => Ok(None),
+                [flag, port] if flag == "--serial" => Ok(Some(port.as_str())),
+                _ => Err("usage: cargo xtask hil [--serial PORT]".to_string()),
+            };
+            serial.and_then(|s| setup(&root).and_then(|_| hil::run(&root, s)))
+        }
         Some("docs") => docs_check(&root, &args[1..]),
         _ => {
-            eprintln!("usage: cargo xtask <test|size|qemu|link-session|board-init|docs>");
+            eprintln!("usage: cargo xtask <test|size|qemu|hil|link-session|board-init|docs>");
             return ExitCode::from(2);
         }
     };
@@ -313,6 +328,7 @@ fn test(root: &Path) -> Result<(), String> {
     )?;
     size(root)?;
     qemu::run(root)?;
+    hil::run(root, None)?;
     session::against_serve(root)?;
     cargo_test(root)
 }

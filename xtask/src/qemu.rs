@@ -296,7 +296,7 @@ fn parse_summary(lines: &[String]) -> Option<(&str, BTreeMap<&str, &str>)> {
 }
 
 /// Installs `qemu-system-arm` with apt-get when it is missing.
-fn ensure_qemu() -> Result<(), String> {
+pub(crate) fn ensure_qemu() -> Result<(), String> {
     if Command::new("qemu-system-arm")
         .arg("--version")
         .stdout(Stdio::null())

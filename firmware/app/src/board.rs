@@ -435,6 +435,111 @@ pub fn init(
     }
 }
 
+/// The hardware-in-the-loop image's board (`hopper-hil`): the host sends
+/// each period's sensor sample over the link and takes the DAC code back,
+/// so of the board only the clocks, the link, the e-stop input and the
+/// amplifier-enable output are in use.
+pub struct HilBoard {
+    /// The e-stop input and AMP_EN, as a plain output.
+    pub pins: HilPins,
+    /// The host link's USART1 (PA9/PA10).
+    pub serial: crate::serial::Serial<'static>,
+    /// What init found (no watchdog runs: the reset causes are read).
+    pub boot: hopper_control::boot::BootReport,
+    /// Core clock, Hz.
+    pub sysclk_hz: u32,
+    /// TIM5, clocked and idle (no height encoder here): the control
+    /// interrupt's counter where the core has no cycle counter (QEMU).
+    pub tim5: pac::TIM5,
+}
+
+/// The board's e-stop input (PB1) and AMP_EN (PB0) in the loop.
+///
+/// AMP_EN is a plain output here, not the deadman timer's: the host paces
+/// the periods (hundreds to thousands a second, with pauses while it
+/// configures), slower than the deadman's three-period window at the
+/// control rate, and the motor is the host's model. The e-stop input is
+/// the board's, so a bench e-stop disarms the run as it would the robot.
+#[derive(Debug)]
+pub struct HilPins {
+    gpiob: pac::GPIOB,
+}
+
+impl hopper_robot_link::hil::HilPins for HilPins {
+    type Error = core::convert::Infallible;
+
+    fn estop_pressed(&mut self) -> bool {
+        // Normally-closed to GND with a pull-up: high = pressed or broken.
+        self.gpiob.idr().read().idr1().is_high()
+    }
+
+    fn set_amp_enabled(&mut self, on: bool) -> Result<(), Self::Error> {
+        // One atomic BSRR write.
+        if on {
+            self.gpiob.bsrr().write(|w| w.bs0().set_bit());
+        } else {
+            self.gpiob.bsrr().write(|w| w.br0().set_bit());
+        }
+        Ok(())
+    }
+}
+
+/// Brings up the HIL image's board: AMP_EN low first, the inputs, the
+/// clocks (the HSI on a failed crystal, and in QEMU), the link on USART1.
+/// No converters, encoders, control timer, deadman or watchdog: the
+/// periods come from the host.
+pub fn init_hil(dp: Peripherals, link: (Producer<'static, u8>, Consumer<'static, u8>)) -> HilBoard {
+    dp.RCC.ahb1enr().modify(|_, w| {
+        w.gpioaen()
+            .enabled()
+            .gpioben()
+            .enabled()
+            .gpiocen()
+            .enabled()
+    });
+    let _ = dp.RCC.ahb1enr().read();
+    dp.GPIOB.bsrr().write(|w| w.br0().set_bit());
+    dp.GPIOB.otyper().modify(|_, w| w.ot0().push_pull());
+    dp.GPIOB.ospeedr().modify(|_, w| w.ospeedr0().low_speed());
+    dp.GPIOB.pupdr().modify(|_, w| w.pupdr0().floating());
+    dp.GPIOB.moder().modify(|_, w| w.moder0().output());
+    configure_inputs(&dp.GPIOB, &dp.GPIOC);
+    let clocks = configure_clocks(&dp.RCC, &dp.FLASH, &dp.PWR, &dp.TIM11);
+    let serial = crate::serial::Serial::new(
+        dp.USART1,
+        &dp.RCC,
+        &dp.GPIOA,
+        clocks.pclk2_hz,
+        link.0,
+        link.1,
+    );
+    let brown_out_reset_on = hopper_control::boot::BootReport::brown_out_reset_on_from_optcr(
+        dp.FLASH.optcr().read().bits(),
+    );
+    let boot = hopper_control::boot::BootReport {
+        resets: {
+            // Read, then cleared so that the next reset reports only its own.
+            let r = hopper_control::boot::ResetCauses::from_rcc_csr(dp.RCC.csr().read().bits());
+            dp.RCC.csr().modify(|_, w| w.rmvf().clear());
+            r
+        },
+        brown_out_reset_on,
+        clock_as_configured: clocks.sysclk_hz == SYSCLK_HZ,
+        sysclk_hz: clocks.sysclk_hz,
+        hse_expected_hz: HSE_HZ,
+        hse_measured_hz: clocks.hse_measured_hz,
+    };
+    dp.RCC.apb1enr().modify(|_, w| w.tim5en().enabled());
+    let _ = dp.RCC.apb1enr().read();
+    HilBoard {
+        pins: HilPins { gpiob: dp.GPIOB },
+        serial,
+        boot,
+        sysclk_hz: clocks.sysclk_hz,
+        tim5: dp.TIM5,
+    }
+}
+
 /// E-stop (PB1), amplifier fault (PB4) and dump button (PC13): inputs with pull-ups.
 fn configure_inputs(gpiob: &pac::GPIOB, gpioc: &pac::GPIOC) {
     gpiob

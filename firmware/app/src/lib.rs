@@ -8,6 +8,7 @@
 //! |--------|--------|-------|----------|
 //! | `hopper-fw` | `src/main.rs` | the board | `board` (default); `hse-12mhz`, `fault-test` |
 //! | `hopper-selftest` | `src/bin/selftest.rs` | the on-target self-test | `board` |
+//! | `hopper-hil` | `src/bin/hil.rs` | hardware in the loop: the board's firmware, its sensors the host's models | `board` |
 //! | `hopper-qemu` | `src/bin/qemu.rs` | the QEMU scenario | `qemu-sim` |
 //! | `hopper-qemu-link` | `src/bin/qemu-link.rs` | the QEMU link image | `qemu-sim` |
 //! | `panic-check` | `src/bin/panic-check.rs` | the panic-never link check | |

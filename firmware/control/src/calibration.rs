@@ -105,7 +105,7 @@ impl Default for Calibration {
             height_counter_bits: 16,
             height_counts_positive_up: p::CAL_HEIGHT_POSITIVE_UP.default_flag(),
             height_pulley_radius_m: p::CAL_PULLEY_RADIUS.default,
-            height_at_origin_m: 0.61,
+            height_at_origin_m: p::CAL_HEIGHT_AT_ORIGIN_M.default,
             loadcell_gain_n_per_code: p::CAL_LOADCELL_GAIN.default,
             loadcell_offset_code: p::CAL_LOADCELL_OFFSET.default,
             pot_gain_m_per_code: p::CAL_POT_GAIN.default,

@@ -392,9 +392,10 @@ params! {
     // Estimator, supervisor and calibration entries are set with the
     // amplifier disabled only. Derived from the model and not listed: the
     // overcurrent trip (10x the current limit), the stroke soft limits with
-    // the braking deceleration they assume, the stops, the lead, torque
-    // constant and start height of the calibration, and the counter and
-    // converter widths (board facts).
+    // the braking deceleration they assume, the stops, the lead and torque
+    // constant of the calibration, and the counter and converter widths
+    // (board facts). The height encoder's origin is listed last (the
+    // table's order is the link's numbering).
     EST_TOUCHDOWN_FORCE_N {
         "estimator.touchdown_force_n", "N", Real, [0.0, 1.0e4], 40.0, DISARMED,
         "Load-cell force beyond k (delta0 + p) that counts as touchdown evidence (8 sigma of 5 N).",
@@ -735,6 +736,11 @@ params! {
         "calibration.dac_amps_per_code", "A/code", Real, [1.0e-6, 100.0], 0.01953125, DISARMED,
         "Amplifier current per DAC code (placeholder 40 A / 2048).",
         |c| Some(R(&mut c.calibration.dac_amps_per_code))
+    }
+    CAL_HEIGHT_AT_ORIGIN_M {
+        "calibration.height_at_origin_m", "m", Real, [0.0, 10.0], 0.61, DISARMED,
+        "Body height z where the height encoder counted from at boot (the leg length l0 with the toe on the ground; a simulated run's start height).",
+        |c| Some(R(&mut c.calibration.height_at_origin_m))
     }
 }
 

@@ -46,10 +46,12 @@ use hopper_control::runner::{
 };
 use hopper_control::telemetry::{FaultCapture, StepRecord};
 use hopper_protocol::{
-    encode, ArmState, CostStats, Decoder, DumpInfo, Hop, HostMsg, ParamInfo, Request, Response,
-    RobotMsg, Status, StoredInfo, Telemetry, ThermalStatus, TimingStats, MAX_FRAME,
-    PROTOCOL_VERSION, TEXT_LEN,
+    encode, ArmState, CostStats, Decoder, DumpInfo, HilActuate, HilSample, Hop, HostMsg, ParamInfo,
+    Request, Response, RobotMsg, Status, StoredInfo, Telemetry, ThermalStatus, TimingStats,
+    MAX_FRAME, PROTOCOL_VERSION, TEXT_LEN,
 };
+
+pub mod hil;
 
 /// A transmit queue of bytes (the board's UART ring, a socket buffer).
 pub trait Tx {
@@ -1068,6 +1070,9 @@ pub struct Endpoint<H = Owned> {
     /// The period of the last command queued (each carries the frames
     /// received to the link timer).
     carried_at: u32,
+    /// A hardware-in-the-loop sample received and not yet taken
+    /// ([`take_hil_sample`](Self::take_hil_sample)).
+    hil: Option<HilSample>,
 }
 
 /// A calibration record's bytes (an array too long for a derived `Default`).
@@ -1084,6 +1089,20 @@ fn text(s: &str) -> heapless::String<TEXT_LEN> {
     // Every reason is far shorter than the capacity.
     let _ = t.push_str(s);
     t
+}
+
+/// The wire form of a hop's ledger.
+pub fn wire_hop(h: &hopper_control::telemetry::HopLedger) -> Hop {
+    Hop {
+        hop: h.hop,
+        apex_height_m: h.apex_height_m,
+        energy_at_touchdown_j: h.energy_at_touchdown_j,
+        energy_at_liftoff_j: h.energy_at_liftoff_j,
+        stance_work_j: h.stance_work_j,
+        stance_duration_s: h.stance_duration_s,
+        peak_current_a: h.peak_current_a,
+        peak_stroke_m: h.peak_stroke_m,
+    }
 }
 
 /// The wire form of the arming state.
@@ -1177,6 +1196,7 @@ impl<H: HopperSlot> Endpoint<H> {
             stash: heapless::Deque::new(),
             spares: heapless::Vec::new(),
             carried_at: 0,
+            hil: None,
         }
     }
 
@@ -1224,6 +1244,21 @@ impl<H: HopperSlot> Endpoint<H> {
             // (At most one restart and one routine's rebuild wait here.)
             let _ = self.stash.push_back(Command::Restart);
         }
+    }
+
+    /// The hardware-in-the-loop sample received since the last call, if
+    /// one was (the HIL image runs a period on it). A host runs in
+    /// lockstep: it sends the next sample only after the answer to this
+    /// one, so a second sample before this one was taken replaces it, and
+    /// the host, missing an answer, stops.
+    pub fn take_hil_sample(&mut self) -> Option<HilSample> {
+        self.hil.take()
+    }
+
+    /// Sends a hardware-in-the-loop period's answer; `false` when the
+    /// transmit queue had no room (the host, missing it, stops).
+    pub fn send_hil<T: Tx>(&mut self, tx: &mut T, actuate: &HilActuate) -> bool {
+        send(tx, &RobotMsg::HilActuate(*actuate), false)
     }
 
     /// Telemetry records the transmit queue could not take so far.
@@ -1427,6 +1462,10 @@ impl<H: HopperSlot> Endpoint<H> {
                 return false;
             }
             HostMsg::Heartbeat => return false,
+            HostMsg::HilSample(sample) => {
+                self.hil = Some(*sample);
+                return false;
+            }
             HostMsg::Request { id, req } => (*id, req),
         };
         let note = self.last;
@@ -1750,16 +1789,7 @@ impl<H: HopperSlot> Endpoint<H> {
             }
             Some(LogItem::Hop(h)) => {
                 self.last_apex_m = Some(h.apex_height_m);
-                let hop = Hop {
-                    hop: h.hop,
-                    apex_height_m: h.apex_height_m,
-                    energy_at_touchdown_j: h.energy_at_touchdown_j,
-                    energy_at_liftoff_j: h.energy_at_liftoff_j,
-                    stance_work_j: h.stance_work_j,
-                    stance_duration_s: h.stance_duration_s,
-                    peak_current_a: h.peak_current_a,
-                    peak_stroke_m: h.peak_stroke_m,
-                };
+                let hop = wire_hop(&h);
                 send(tx, &RobotMsg::Hop(hop), false);
             }
             None => {}

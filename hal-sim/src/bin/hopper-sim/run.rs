@@ -25,6 +25,57 @@ pub(crate) struct RunArgs {
     /// a table. The JSON summary always has it (`hop_ledger`, `steady_hop`).
     #[arg(long)]
     ledger: bool,
+    /// Hardware in the loop: run the firmware on a robot image built for
+    /// it (`hopper-hil`, on a board or in QEMU) over its link, one frame
+    /// each way per control period; the plant, sensor and amplifier
+    /// models run here. Needs --tcp or --serial. Slower than real time.
+    #[arg(long, requires = "hil_line")]
+    hil: bool,
+    /// The HIL image's link on TCP (QEMU's `-serial tcp:...`), HOST:PORT.
+    #[arg(long, group = "hil_line", requires = "hil", value_name = "ADDR")]
+    tcp: Option<String>,
+    /// The HIL image's link on a serial port (a board's USB-UART), e.g.
+    /// /dev/ttyACM0.
+    #[arg(long, group = "hil_line", requires = "hil", value_name = "PORT")]
+    serial: Option<String>,
+    /// Baud rate of --serial.
+    #[arg(long, default_value_t = 921_600, requires = "serial")]
+    baud: u32,
+    /// How long the HIL image may take to answer a period before the run
+    /// stops (a lost frame), s.
+    #[arg(long, default_value_t = 5.0, requires = "hil")]
+    hil_timeout_s: f64,
+}
+
+/// The HIL image's line and the answer timeout.
+fn hil_line(a: &RunArgs) -> Result<hal_sim::hil::Connection> {
+    if !(a.hil_timeout_s.is_finite() && a.hil_timeout_s > 0.0) {
+        bail!(
+            "--hil-timeout-s {} must be a positive number of seconds",
+            a.hil_timeout_s
+        );
+    }
+    let timeout = std::time::Duration::from_secs_f64(a.hil_timeout_s);
+    if let Some(addr) = &a.tcp {
+        let s = std::net::TcpStream::connect(addr)
+            .map_err(|e| anyhow::anyhow!("--tcp {addr}: cannot connect: {e}"))?;
+        s.set_nodelay(true)?;
+        return Ok(hal_sim::hil::Connection {
+            line: Box::new(s),
+            timeout,
+        });
+    }
+    if let Some(port) = &a.serial {
+        let p = serialport::new(port, a.baud)
+            .timeout(timeout)
+            .open()
+            .map_err(|e| anyhow::anyhow!("--serial {port}: cannot open: {e}"))?;
+        return Ok(hal_sim::hil::Connection {
+            line: Box::new(p),
+            timeout,
+        });
+    }
+    bail!("--hil needs --tcp ADDR or --serial PORT")
 }
 
 pub(crate) fn cmd_run(a: RunArgs) -> Result<()> {
@@ -44,10 +95,19 @@ pub(crate) fn cmd_run(a: RunArgs) -> Result<()> {
     } else {
         0.0
     });
-    let mut ctl = settings
-        .controller_spec()
-        .and_then(|spec| spec.build(&cfg.params, cfg.start_apex_m, cfg.control_dt_s))
-        .map_err(anyhow::Error::msg)?;
+    let spec = settings.controller_spec().map_err(anyhow::Error::msg)?;
+    let mut ctl: Box<dyn hal_sim::controller::PlantDriver> = if a.hil {
+        let connection = hil_line(&a)?;
+        Box::new(
+            spec.build_hil(&cfg.params, cfg.start_apex_m, cfg.control_dt_s, connection)
+                .map_err(anyhow::Error::msg)?,
+        )
+    } else {
+        Box::new(
+            spec.build(&cfg.params, cfg.start_apex_m, cfg.control_dt_s)
+                .map_err(anyhow::Error::msg)?,
+        )
+    };
     // A progress bar on stderr for runs long enough to wait for; indicatif
     // draws nothing when stderr is not a terminal.
     let bar = indicatif::ProgressBar::new(1000);
@@ -58,11 +118,12 @@ pub(crate) fn cmd_run(a: RunArgs) -> Result<()> {
         .map_err(anyhow::Error::msg)?
         .progress_chars("=> "),
     );
-    if cfg.duration_s < 60.0 {
+    // (A HIL run is slower than real time: its bar always shows.)
+    if cfg.duration_s < 60.0 && !a.hil {
         bar.set_draw_target(indicatif::ProgressDrawTarget::hidden());
     }
     let duration_s = cfg.duration_s;
-    let result = run::run_with_progress(&cfg, &params_name, &mut ctl, &mut |done, total| {
+    let result = run::run_with_progress(&cfg, &params_name, &mut *ctl, &mut |done, total| {
         bar.set_position(done * 1000 / total.max(1));
         bar.set_message(format!(
             "{:.1} / {duration_s} s",
@@ -238,6 +299,21 @@ pub(crate) fn cmd_run(a: RunArgs) -> Result<()> {
                 h.actuator_spring_j
             );
         }
+    }
+    if let Some(h) = &s.hil {
+        say!(
+            "  hardware in loop   {} periods (+{} to configure and arm, {} parameters set); control interrupt mean {:.0}, max {} {}; {:.1} B/period out, {:.1} in; {:.0} periods/s ({:.3}x real time)",
+            h.periods,
+            h.setup_periods,
+            h.params_set,
+            h.isr_mean,
+            h.isr_max,
+            h.isr_unit,
+            h.bytes_out_per_period,
+            h.bytes_in_per_period,
+            h.frames_per_s,
+            h.realtime_factor
+        );
     }
     for p in &written {
         say!("  wrote {}", p.display());
