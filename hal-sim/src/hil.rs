@@ -66,6 +66,48 @@ pub struct Connection {
     pub timeout: Duration,
 }
 
+impl Connection {
+    /// A HIL image's link on TCP (QEMU's `-serial tcp:...`), `HOST:PORT`.
+    pub fn tcp(addr: &str, timeout: Duration) -> Result<Self, String> {
+        let s = std::net::TcpStream::connect(addr)
+            .map_err(|e| format!("HIL link at tcp {addr}: cannot connect: {e}"))?;
+        // One small frame each way per period, each waited for: with
+        // Nagle's algorithm against the robot's delayed ACK each would
+        // wait 40 ms.
+        s.set_nodelay(true)
+            .map_err(|e| format!("HIL link at tcp {addr}: {e}"))?;
+        Ok(Connection {
+            line: Box::new(s),
+            timeout,
+        })
+    }
+
+    /// A HIL image's link on a serial port (a board's USB-UART).
+    pub fn serial(port: &str, baud: u32, timeout: Duration) -> Result<Self, String> {
+        let p = serialport::new(port, baud)
+            .timeout(timeout)
+            .open()
+            .map_err(|e| format!("HIL link on serial {port}: cannot open: {e}"))?;
+        Ok(Connection {
+            line: Box::new(p),
+            timeout,
+        })
+    }
+
+    /// `tcp:HOST:PORT` or `serial:PORT` (at 921,600 baud), as the
+    /// `HOPPER_HIL` environment variable names a HIL target for the SIL
+    /// tests.
+    pub fn named(target: &str, timeout: Duration) -> Result<Self, String> {
+        match target.split_once(':') {
+            Some(("tcp", addr)) => Self::tcp(addr, timeout),
+            Some(("serial", port)) => Self::serial(port, 921_600, timeout),
+            _ => Err(format!(
+                "HIL target `{target}`: expected tcp:HOST:PORT or serial:PORT"
+            )),
+        }
+    }
+}
+
 /// How often the hello is repeated until the robot answers: a robot still
 /// booting (its USART not yet on) loses what arrives.
 const HELLO_EVERY: Duration = Duration::from_millis(300);
@@ -201,6 +243,11 @@ impl HilDriver {
         // Sampled on a copy of the models: the run's own samples (and
         // their noise) are then a host run's, period for period.
         let held = d.hal.clone().sample(plant);
+        // A target that ran before (the tests run one after another on
+        // one image) may be armed or faulted: disarmed, its faults cleared
+        // (refused while a cause remains: the arm below then says why).
+        d.request(Request::Disarm, &held)?;
+        d.request(Request::ResetFaults, &held)?;
         d.configure(desired, &held)?;
         // A new calibration moves what the sensors read (the height
         // encoder's origin, for one): the rate filters (eq 4.1) saw a jump.
@@ -378,7 +425,10 @@ impl HilDriver {
                 Response::Value(v) => Some(v),
                 _ => None,
             };
-            if have.map(f32::to_bits) != Some(want.to_bits()) {
+            // The controller is always selected: that starts it from its
+            // defaults, whatever a previous run left in it.
+            let controller = p.name == params::CONTROLLER.name;
+            if controller || have.map(f32::to_bits) != Some(want.to_bits()) {
                 match self.request(Request::ParamSet { name, value: want }, held)? {
                     Response::Ok => self.params_set += 1,
                     Response::Refused(r) => {

@@ -8,8 +8,10 @@
 //! `INSTA_UPDATE=always cargo test -p sil-tests`, then read the diff of the
 //! `.snap` files and list each change with its reason in the commit.
 
+use hal_sim::controller::{ControllerSpec, PlantDriver};
 use hal_sim::run::{run, Summary};
 use hal_sim::scenario::{Overrides, Settings};
+use hal_sim::Params;
 use hopper_control::laws::ControllerKind;
 
 /// The flags of one `hopper-sim run ... --json` that a test pins down. A
@@ -29,6 +31,37 @@ pub struct CliRun<'a> {
     pub duration_s: Option<f64>,
     /// `--set NAME=VALUE`s: firmware parameters.
     pub set: &'a [(&'static hopper_control::params::Param, f32)],
+}
+
+/// The environment variable that points the closed-loop tests at a HIL
+/// target: `tcp:HOST:PORT` (`hopper-hil` on QEMU) or `serial:PORT` (on a
+/// board), e.g. `HOPPER_HIL=serial:/dev/ttyUSB0 cargo test -p sil-tests
+/// --test closed_loop --test shaped -- --test-threads 1`.
+pub const HIL_TARGET_VAR: &str = "HOPPER_HIL";
+
+/// The firmware a closed-loop test runs against the plant: the control
+/// crate in this process, or, with [`HIL_TARGET_VAR`] set, the HIL image
+/// at that address, configured over its link for `spec` (one run at a
+/// time: run the tests with `--test-threads 1`).
+pub fn firmware(
+    spec: &ControllerSpec,
+    params: &Params,
+    start_apex_m: f64,
+    dt_s: f64,
+) -> Result<Box<dyn PlantDriver>, String> {
+    match std::env::var(HIL_TARGET_VAR) {
+        Ok(target) => {
+            let connection =
+                hal_sim::hil::Connection::named(&target, std::time::Duration::from_secs(5))?;
+            Ok(Box::new(spec.build_hil(
+                params,
+                start_apex_m,
+                dt_s,
+                connection,
+            )?))
+        }
+        Err(_) => Ok(Box::new(spec.build(params, start_apex_m, dt_s)?)),
+    }
 }
 
 /// `--set thermal.protect=0`: the motor's thermal protection off, for the

@@ -21,8 +21,8 @@ fn sim(spec: &ControllerSpec, params: Params, start: f64, duration: f64) -> Summ
     cfg.start_apex_m = start;
     cfg.duration_s = duration;
     cfg.sample_dt_s = 0.0;
-    let mut c = spec.build(&params, start, cfg.control_dt_s).unwrap();
-    run(&cfg, "test", &mut c).unwrap().summary
+    let mut c = sil_tests::firmware(spec, &params, start, cfg.control_dt_s).unwrap();
+    run(&cfg, "test", &mut *c).unwrap().summary
 }
 
 /// `name` aiming at `target`, with the motor's thermal protection off:

@@ -28,8 +28,8 @@ fn sim(name: &str, plant: Params, model: Option<Params>, start: f64, secs: f64) 
         params: NO_THERMAL_LIMIT.to_vec(),
         ..ControllerSpec::new(name)
     };
-    let mut c = spec.build(&plant, start, cfg.control_dt_s).unwrap();
-    run(&cfg, "test", &mut c).unwrap().summary
+    let mut c = sil_tests::firmware(&spec, &plant, start, cfg.control_dt_s).unwrap();
+    run(&cfg, "test", &mut *c).unwrap().summary
 }
 
 /// The last `n` apexes all within 2 % of the target.

@@ -56,26 +56,12 @@ fn hil_line(a: &RunArgs) -> Result<hal_sim::hil::Connection> {
         );
     }
     let timeout = std::time::Duration::from_secs_f64(a.hil_timeout_s);
-    if let Some(addr) = &a.tcp {
-        let s = std::net::TcpStream::connect(addr)
-            .map_err(|e| anyhow::anyhow!("--tcp {addr}: cannot connect: {e}"))?;
-        s.set_nodelay(true)?;
-        return Ok(hal_sim::hil::Connection {
-            line: Box::new(s),
-            timeout,
-        });
+    match (&a.tcp, &a.serial) {
+        (Some(addr), _) => hal_sim::hil::Connection::tcp(addr, timeout),
+        (None, Some(port)) => hal_sim::hil::Connection::serial(port, a.baud, timeout),
+        (None, None) => Err("--hil needs --tcp ADDR or --serial PORT".to_string()),
     }
-    if let Some(port) = &a.serial {
-        let p = serialport::new(port, a.baud)
-            .timeout(timeout)
-            .open()
-            .map_err(|e| anyhow::anyhow!("--serial {port}: cannot open: {e}"))?;
-        return Ok(hal_sim::hil::Connection {
-            line: Box::new(p),
-            timeout,
-        });
-    }
-    bail!("--hil needs --tcp ADDR or --serial PORT")
+    .map_err(anyhow::Error::msg)
 }
 
 pub(crate) fn cmd_run(a: RunArgs) -> Result<()> {
