@@ -310,6 +310,13 @@ fn test(root: &Path) -> Result<(), String> {
         "clippy (MCU target, QEMU variant)",
         &["--no-default-features", "--features", "qemu-sim"],
     )?;
+    // The simulated hopper on the chip (`hopper-sih`): the plant for the
+    // MCU with the board's logger.
+    mcu_clippy(
+        root,
+        "clippy (MCU target, the simulated hopper on the chip)",
+        &["--features", "sih"],
+    )?;
     // The on-target self-test image links (the default features' clippy
     // above checked its source).
     run(

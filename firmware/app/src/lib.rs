@@ -9,13 +9,14 @@
 //! | `hopper-fw` | `src/main.rs` | the board | `board` (default); `hse-12mhz`, `fault-test` |
 //! | `hopper-selftest` | `src/bin/selftest.rs` | the on-target self-test | `board` |
 //! | `hopper-hil` | `src/bin/hil.rs` | hardware in the loop: the board's firmware, its sensors the host's models | `board` |
+//! | `hopper-sih` | `src/bin/sih.rs` | the simulated hopper on a board (the plant on the chip, the link on its USART) | `sih` |
 //! | `hopper-qemu` | `src/bin/qemu.rs` | the QEMU scenario | `qemu-sim` |
 //! | `hopper-qemu-link` | `src/bin/qemu-link.rs` | the QEMU link image | `qemu-sim` |
 //! | `panic-check` | `src/bin/panic-check.rs` | the panic-never link check | |
 //!
 //! Features are additive: `board` brings the RTT logger, `qemu-sim` the
 //! plant models and semihosting, for the binaries that need them; only the
-//! QEMU binaries use the plant. On the host this library is empty, which
+//! QEMU binaries and `hopper-sih` use the plant. On the host this library is empty, which
 //! keeps `cargo clippy --workspace --all-targets` working.
 #![cfg_attr(target_os = "none", no_std)]
 #![deny(unsafe_code)]
@@ -338,6 +339,101 @@ pub mod qemu {
         Instructions {
             below_control: false,
             ..Instructions::reader()
+        }
+    }
+}
+
+/// The control interrupt's counter for the images whose periods are not
+/// the board's timer's (`hopper-hil`, `hopper-sih`): the core's cycle
+/// counter on a board; where it does not count (QEMU models no DWT), TIM5
+/// free-running, which counts guest instructions under `-icount shift=0`.
+#[cfg(target_os = "none")]
+pub mod ticks {
+    use stm32f4::stm32f405 as pac;
+
+    /// Which counter runs.
+    #[derive(Clone, Copy)]
+    pub struct Ticks {
+        dwt: bool,
+        hz: u32,
+    }
+
+    /// TIM5's count.
+    fn tim5_now() -> u32 {
+        #[allow(unsafe_code)] // A read of a free-running counter's register.
+        // SAFETY: `TIM5::ptr()` is its register block's fixed address; CNT
+        // is only read here (TIM5 is set up once, in `start`).
+        unsafe {
+            (*pac::TIM5::ptr()).cnt().read().bits()
+        }
+    }
+
+    impl Ticks {
+        /// Starts the cycle counter, or TIM5 (clocked) where that does not
+        /// count.
+        pub fn start(
+            dcb: &mut cortex_m::peripheral::DCB,
+            dwt: &mut cortex_m::peripheral::DWT,
+            tim5: pac::TIM5,
+            sysclk_hz: u32,
+        ) -> Self {
+            dcb.enable_trace();
+            dwt.enable_cycle_counter();
+            let a = cortex_m::peripheral::DWT::cycle_count();
+            for _ in 0..16 {
+                cortex_m::asm::nop();
+            }
+            if cortex_m::peripheral::DWT::cycle_count() != a {
+                return Ticks {
+                    dwt: true,
+                    hz: sysclk_hz,
+                };
+            }
+            tim5.psc().write(|w| w.psc().set(0));
+            tim5.arr().write(|w| w.arr().set(u32::MAX));
+            tim5.egr().write(|w| w.ug().set_bit());
+            tim5.cr1().modify(|_, w| w.cen().enabled());
+            Ticks { dwt: false, hz: 0 }
+        }
+
+        /// The count now.
+        #[inline(always)]
+        pub fn raw(self) -> u32 {
+            if self.dwt {
+                cortex_m::peripheral::DWT::cycle_count()
+            } else {
+                tim5_now()
+            }
+        }
+    }
+
+    /// The control interrupt's counter: its own time, the serial
+    /// interrupts that preempt it left out.
+    pub struct Control(pub Ticks);
+
+    impl hopper_control::runner::CycleCounter for Control {
+        #[inline(always)]
+        fn now(&mut self) -> u32 {
+            let t = self.0;
+            let (now, spent) = crate::serial_cost::stamp(move || t.raw());
+            now.wrapping_sub(spent)
+        }
+        fn hz(&self) -> u32 {
+            self.0.hz
+        }
+    }
+
+    /// The link task's counter: its own time, the control and serial
+    /// interrupts that preempt it left out.
+    pub struct Link(pub Ticks);
+
+    impl hopper_control::runner::CycleCounter for Link {
+        fn now(&mut self) -> u32 {
+            let t = self.0;
+            crate::serial_cost::below_control(move || t.raw())
+        }
+        fn hz(&self) -> u32 {
+            self.0.hz
         }
     }
 }

@@ -39,109 +39,15 @@ use defmt_rtt as _;
 #[cfg(target_os = "none")]
 hopper_app::fault_handlers!(hopper_app::park);
 
-/// The control interrupt's counter: the core's cycle counter on a board;
-/// where it does not count (QEMU models no DWT), TIM5 free-running, which
-/// counts guest instructions under `-icount shift=0`.
-#[cfg(target_os = "none")]
-mod counter {
-    use stm32f4::stm32f405 as pac;
-
-    /// Which counter runs.
-    #[derive(Clone, Copy)]
-    pub struct Ticks {
-        dwt: bool,
-        hz: u32,
-    }
-
-    /// TIM5's count.
-    fn tim5_now() -> u32 {
-        #[allow(unsafe_code)] // A read of a free-running counter's register.
-        // SAFETY: `TIM5::ptr()` is its register block's fixed address; CNT
-        // is only read here (TIM5 is set up once, in `start`).
-        unsafe {
-            (*pac::TIM5::ptr()).cnt().read().bits()
-        }
-    }
-
-    impl Ticks {
-        /// Starts the cycle counter, or TIM5 (clocked) where that does not
-        /// count.
-        pub fn start(
-            dcb: &mut cortex_m::peripheral::DCB,
-            dwt: &mut cortex_m::peripheral::DWT,
-            tim5: pac::TIM5,
-            sysclk_hz: u32,
-        ) -> Self {
-            dcb.enable_trace();
-            dwt.enable_cycle_counter();
-            let a = cortex_m::peripheral::DWT::cycle_count();
-            for _ in 0..16 {
-                cortex_m::asm::nop();
-            }
-            if cortex_m::peripheral::DWT::cycle_count() != a {
-                return Ticks {
-                    dwt: true,
-                    hz: sysclk_hz,
-                };
-            }
-            tim5.psc().write(|w| w.psc().set(0));
-            tim5.arr().write(|w| w.arr().set(u32::MAX));
-            tim5.egr().write(|w| w.ug().set_bit());
-            tim5.cr1().modify(|_, w| w.cen().enabled());
-            Ticks { dwt: false, hz: 0 }
-        }
-
-        /// The count now.
-        #[inline(always)]
-        pub fn raw(self) -> u32 {
-            if self.dwt {
-                cortex_m::peripheral::DWT::cycle_count()
-            } else {
-                tim5_now()
-            }
-        }
-    }
-
-    /// The control interrupt's counter: its own time, the serial
-    /// interrupts that preempt it left out.
-    pub struct Control(pub Ticks);
-
-    impl hopper_control::runner::CycleCounter for Control {
-        #[inline(always)]
-        fn now(&mut self) -> u32 {
-            let t = self.0;
-            let (now, spent) = hopper_app::serial_cost::stamp(move || t.raw());
-            now.wrapping_sub(spent)
-        }
-        fn hz(&self) -> u32 {
-            self.0.hz
-        }
-    }
-
-    /// The link task's counter: its own time, the control and serial
-    /// interrupts that preempt it left out.
-    pub struct Link(pub Ticks);
-
-    impl hopper_control::runner::CycleCounter for Link {
-        fn now(&mut self) -> u32 {
-            let t = self.0;
-            hopper_app::serial_cost::below_control(move || t.raw())
-        }
-        fn hz(&self) -> u32 {
-            self.0.hz
-        }
-    }
-}
-
 /// The HIL application.
 #[cfg(target_os = "none")]
 #[rtic::app(device = stm32f4::stm32f405, peripherals = true, dispatchers = [FSMC])]
 mod app {
-    use crate::counter::{Control, Link, Ticks};
     use heapless::spsc::{Consumer, Producer, Queue};
     use hopper_app::board::{self, HilPins};
     use hopper_app::control::{Bank, Capture, Locked, Slot, CONTROL_HZ, TIMING};
     use hopper_app::serial::{LinkTx, RxQueue, Serial, TxQueue};
+    use hopper_app::ticks::{Control, Link, Ticks};
     use hopper_protocol::{HilActuate, HilSample};
     use hopper_robot_link::hil::{boot_config, HilIo};
     use hopper_robot_link::{ControlLoop, Endpoint, LinkEnds, PortEnds, Queues};
