@@ -83,7 +83,9 @@
 //! tells the application that the IWDG caused the last reset.
 
 use heapless::spsc::{Consumer, Producer};
-use hopper_control::hal::{HopperIo, IoError, RawSample};
+use hopper_control::hal::{
+    AmpEnable, Converters, HopperIo, IoError, PinError, PinnedIo, PlainEnable, RawSample,
+};
 use stm32f4::stm32f405::{self as pac, Peripherals};
 
 /// The DWT cycle counter as the period runner's step timer (core cycles)
@@ -412,19 +414,26 @@ pub fn init(
     Board {
         stored,
         io: BoardIo {
-            tim3: dp.TIM3,
-            deadman_running: false,
-            tim2: dp.TIM2,
-            tim5: dp.TIM5,
-            adc: dp.ADC1,
-            dac: dp.DAC,
-            gpiob: dp.GPIOB,
+            io: PinnedIo::new(
+                BoardConverters {
+                    tim2: dp.TIM2,
+                    tim5: dp.TIM5,
+                    adc: dp.ADC1,
+                    dac: dp.DAC,
+                },
+                PortPin,
+                PortPin,
+                Deadman {
+                    tim3: dp.TIM3,
+                    running: false,
+                },
+            ),
             sysclk_hz: clocks.sysclk_hz,
             control_hz,
         },
         watchdog,
         dump_button: DumpButton {
-            gpioc: dp.GPIOC,
+            pin: PortPin,
             // Start as "held": a button held (or shorted) at boot must be
             // seen released before a press counts.
             pressed: true,
@@ -462,7 +471,8 @@ pub struct HilBoard {
 /// the board's, so a bench e-stop disarms the run as it would the robot.
 #[derive(Debug)]
 pub struct HilPins {
-    gpiob: pac::GPIOB,
+    estop: PortPin<'B', 1>,
+    enable: PlainEnable<PortPin<'B', 0>>,
 }
 
 impl hopper_robot_link::hil::HilPins for HilPins {
@@ -470,17 +480,11 @@ impl hopper_robot_link::hil::HilPins for HilPins {
 
     fn estop_pressed(&mut self) -> bool {
         // Normally-closed to GND with a pull-up: high = pressed or broken.
-        self.gpiob.idr().read().idr1().is_high()
+        embedded_hal::digital::InputPin::is_high(&mut self.estop).unwrap_or(true)
     }
 
     fn set_amp_enabled(&mut self, on: bool) -> Result<(), Self::Error> {
-        // One atomic BSRR write.
-        if on {
-            self.gpiob.bsrr().write(|w| w.bs0().set_bit());
-        } else {
-            self.gpiob.bsrr().write(|w| w.br0().set_bit());
-        }
-        Ok(())
+        self.enable.set(on)
     }
 }
 
@@ -532,7 +536,10 @@ pub fn init_hil(dp: Peripherals, link: (Producer<'static, u8>, Consumer<'static,
     dp.RCC.apb1enr().modify(|_, w| w.tim5en().enabled());
     let _ = dp.RCC.apb1enr().read();
     HilBoard {
-        pins: HilPins { gpiob: dp.GPIOB },
+        pins: HilPins {
+            estop: PortPin,
+            enable: PlainEnable(PortPin),
+        },
         serial,
         boot,
         sysclk_hz: clocks.sysclk_hz,
@@ -934,35 +941,172 @@ fn control_timer_setup(timer_hz: u32, control_hz: u32) -> (u16, u16, u32) {
 /// samples of this period and the next conversion is a full period away.
 #[derive(Debug)]
 pub struct BoardIo {
-    /// The deadman on AMP_EN (TIM3_CH3, `hopper_control::deadman`).
-    tim3: pac::TIM3,
-    /// Whether the deadman's output is in PWM mode 2 (not forced low).
-    deadman_running: bool,
-    /// Motor encoder counter.
-    tim2: pac::TIM2,
-    /// Height encoder counter.
-    tim5: pac::TIM5,
-    /// Injected conversions of the load cell and potentiometer.
-    adc: pac::ADC1,
-    /// Current command.
-    dac: pac::DAC,
-    /// AMP_EN (PB0), e-stop (PB1), amplifier fault (PB4).
-    gpiob: pac::GPIOB,
+    /// The board's parts as the hopper's I/O (`hopper_control::hal::PinnedIo`):
+    /// the converters and counters, the e-stop (PB1) and amplifier-fault
+    /// (PB4) inputs, the deadman on AMP_EN (PB0). Another board is another
+    /// set of these: a pin map.
+    io: PinnedIo<BoardConverters, PortPin<'B', 1>, PortPin<'B', 4>, Deadman>,
     /// Core clock that `init` achieved.
     sysclk_hz: u32,
     /// Control (TIM4 update) rate that `init` achieved.
     control_hz: u32,
 }
 
+/// One pin of GPIOB or GPIOC (`PORT`), number `N`, as an embedded-hal pin.
+/// Zero-sized: its reads are of IDR and its writes one atomic BSRR store,
+/// which no other owner of the port can race with.
+#[derive(Debug, Clone, Copy)]
+pub struct PortPin<const PORT: char, const N: u8>;
+
+impl<const PORT: char, const N: u8> PortPin<PORT, N> {
+    /// The port's input data register.
+    fn idr() -> u32 {
+        #[allow(unsafe_code)] // A read of a port's input register.
+        // SAFETY: the fixed addresses of GPIOB's and GPIOC's register
+        // blocks; IDR is read-only.
+        unsafe {
+            match PORT {
+                'C' => (*pac::GPIOC::ptr()).idr().read().bits(),
+                _ => (*pac::GPIOB::ptr()).idr().read().bits(),
+            }
+        }
+    }
+}
+
+impl<const PORT: char, const N: u8> embedded_hal::digital::ErrorType for PortPin<PORT, N> {
+    type Error = core::convert::Infallible;
+}
+
+impl<const PORT: char, const N: u8> embedded_hal::digital::InputPin for PortPin<PORT, N> {
+    fn is_high(&mut self) -> Result<bool, Self::Error> {
+        Ok(Self::idr() & (1 << N) != 0)
+    }
+    fn is_low(&mut self) -> Result<bool, Self::Error> {
+        Ok(Self::idr() & (1 << N) == 0)
+    }
+}
+
+impl<const N: u8> embedded_hal::digital::OutputPin for PortPin<'B', N> {
+    fn set_low(&mut self) -> Result<(), Self::Error> {
+        #[allow(unsafe_code)] // One atomic store to the port's set/reset register.
+        // SAFETY: GPIOB's fixed address; BSRR's write touches only pin N.
+        unsafe {
+            (*pac::GPIOB::ptr()).bsrr().write(|w| w.bits(1 << (N + 16)));
+        }
+        Ok(())
+    }
+    fn set_high(&mut self) -> Result<(), Self::Error> {
+        #[allow(unsafe_code)] // One atomic store to the port's set/reset register.
+        // SAFETY: GPIOB's fixed address; BSRR's write touches only pin N.
+        unsafe {
+            (*pac::GPIOB::ptr()).bsrr().write(|w| w.bits(1 << N));
+        }
+        Ok(())
+    }
+}
+
+/// The converters and counters (what embedded-hal has no traits for): the
+/// encoders on TIM2 (motor) and TIM5 (height), the load cell and the
+/// potentiometer on ADC1's injected group, the current command on DAC
+/// channel 1.
+#[derive(Debug)]
+pub struct BoardConverters {
+    tim2: pac::TIM2,
+    tim5: pac::TIM5,
+    adc: pac::ADC1,
+    dac: pac::DAC,
+}
+
+impl Converters for BoardConverters {
+    fn counters(&mut self) -> (u32, u32) {
+        (self.tim2.cnt().read().bits(), self.tim5.cnt().read().bits())
+    }
+
+    fn codes(&mut self) -> (u16, u16) {
+        (
+            self.adc.jdr1().read().jdata().bits(),
+            self.adc.jdr2().read().jdata().bits(),
+        )
+    }
+
+    /// Writes DHR12R1; codes above 4095 are refused, not truncated.
+    fn write_dac(&mut self, code: u16) -> bool {
+        if code > DAC_MAX_CODE {
+            return false;
+        }
+        self.dac.dhr12r1().write(|w| w.daccdhr().set(code));
+        true
+    }
+}
+
+/// The hardware deadman on AMP_EN (TIM3_CH3 on PB0,
+/// `hopper_control::deadman`) as the amplifier enable.
+#[derive(Debug)]
+pub struct Deadman {
+    tim3: pac::TIM3,
+    /// Whether the output is in PWM mode 2 (not forced low).
+    running: bool,
+}
+
+impl AmpEnable for Deadman {
+    type Error = DeadmanLapsed;
+
+    /// Enabled, the deadman retriggered (high for
+    /// `hopper_control::deadman::WINDOW_PERIODS` more periods unless
+    /// retriggered again); disabled, forced low at once.
+    fn set(&mut self, on: bool) -> Result<(), DeadmanLapsed> {
+        match hopper_control::deadman::write_for(on) {
+            hopper_control::deadman::Write::Retrigger => {
+                if self.running && self.tim3.cr1().read().cen().is_disabled() {
+                    // The window lapsed since the last enabled period (the
+                    // control interrupt stopped for 3 periods: a halt, a
+                    // stall): the amplifier went off by itself, and the
+                    // state it would resume on is stale. Off it stays: the
+                    // runner latches `amp-fault`.
+                    self.tim3
+                        .ccmr2_output()
+                        .modify(|_, w| w.oc3m().force_inactive());
+                    self.running = false;
+                    return Err(DeadmanLapsed);
+                }
+                if !self.running {
+                    self.tim3.ccmr2_output().modify(|_, w| w.oc3m().pwm_mode2());
+                    self.running = true;
+                }
+                self.tim3
+                    .cnt()
+                    .write(|w| w.cnt().set(hopper_control::deadman::COMPARE));
+                self.tim3.cr1().write(|w| w.opm().enabled().cen().enabled());
+            }
+            hopper_control::deadman::Write::ForceLow => {
+                self.tim3
+                    .ccmr2_output()
+                    .modify(|_, w| w.oc3m().force_inactive());
+                self.tim3
+                    .cr1()
+                    .write(|w| w.opm().enabled().cen().disabled());
+                self.running = false;
+            }
+        }
+        Ok(())
+    }
+
+    /// PB0's input register follows the pin in its alternate function too.
+    fn reads_off(&mut self) -> Option<bool> {
+        embedded_hal::digital::InputPin::is_low(&mut PortPin::<'B', 0>).ok()
+    }
+}
+
 impl BoardIo {
     /// Clears the control interrupt's flag (ADC injected end of conversion); returns whether it was set.
     pub fn ack_control_irq(&mut self) -> bool {
-        let set = self.adc.sr().read().jeoc().is_complete();
+        let adc = &self.io.converters.adc;
+        let set = adc.sr().read().jeoc().is_complete();
         if set {
             // rc_w0 register: the PAC writes 1 to the other flags (no effect)
             // and 0 to JEOC (and JSTRT, which is set with it), so nothing else
             // is cleared by accident.
-            self.adc.sr().write(|w| w.jeoc().clear().jstrt().clear());
+            adc.sr().write(|w| w.jeoc().clear().jstrt().clear());
         }
         set
     }
@@ -982,75 +1126,24 @@ impl BoardIo {
 }
 
 /// The deadman's window lapsed between two enabled periods
-/// ([`BoardIo::set_amp_enabled`]).
+/// ([`Deadman`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct DeadmanLapsed;
 
 impl HopperIo for BoardIo {
-    type Error = DeadmanLapsed;
+    type Error = PinError<DeadmanLapsed>;
 
     /// Encoder counters, the injected ADC codes of this period, e-stop and fault pins.
-    fn read(&mut self) -> Result<RawSample, IoError<DeadmanLapsed>> {
-        let pins = self.gpiob.idr().read();
-        Ok(RawSample {
-            motor_counts: self.tim2.cnt().read().bits(),
-            height_counts: self.tim5.cnt().read().bits(),
-            loadcell_code: self.adc.jdr1().read().jdata().bits(),
-            pot_code: self.adc.jdr2().read().jdata().bits(),
-            // Normally-closed to GND with a pull-up: high = pressed or broken.
-            estop_pressed: pins.idr1().is_high(),
-            // Open-drain, active low.
-            amp_fault: pins.idr4().is_low(),
-        })
+    fn read(&mut self) -> Result<RawSample, IoError<Self::Error>> {
+        self.io.read()
     }
 
-    /// Writes DHR12R1; codes above 4095 are rejected, not truncated.
-    fn write_dac(&mut self, code: u16) -> Result<(), IoError<DeadmanLapsed>> {
-        if code > DAC_MAX_CODE {
-            return Err(IoError::Dac);
-        }
-        self.dac.dhr12r1().write(|w| w.daccdhr().set(code));
-        Ok(())
+    fn write_dac(&mut self, code: u16) -> Result<(), IoError<Self::Error>> {
+        self.io.write_dac(code)
     }
 
-    /// AMP_EN (PB0, TIM3_CH3): enabled, the deadman retriggered (high for
-    /// `hopper_control::deadman::WINDOW_PERIODS` more periods unless
-    /// retriggered again); disabled, forced low at once.
-    fn set_amp_enabled(&mut self, on: bool) -> Result<(), IoError<DeadmanLapsed>> {
-        match hopper_control::deadman::write_for(on) {
-            hopper_control::deadman::Write::Retrigger => {
-                if self.deadman_running && self.tim3.cr1().read().cen().is_disabled() {
-                    // The window lapsed since the last enabled period (the
-                    // control interrupt stopped for 3 periods: a halt, a
-                    // stall): the amplifier went off by itself, and the
-                    // state it would resume on is stale. Off it stays: the
-                    // runner latches `amp-fault`.
-                    self.tim3
-                        .ccmr2_output()
-                        .modify(|_, w| w.oc3m().force_inactive());
-                    self.deadman_running = false;
-                    return Err(IoError::Pin(DeadmanLapsed));
-                }
-                if !self.deadman_running {
-                    self.tim3.ccmr2_output().modify(|_, w| w.oc3m().pwm_mode2());
-                    self.deadman_running = true;
-                }
-                self.tim3
-                    .cnt()
-                    .write(|w| w.cnt().set(hopper_control::deadman::COMPARE));
-                self.tim3.cr1().write(|w| w.opm().enabled().cen().enabled());
-            }
-            hopper_control::deadman::Write::ForceLow => {
-                self.tim3
-                    .ccmr2_output()
-                    .modify(|_, w| w.oc3m().force_inactive());
-                self.tim3
-                    .cr1()
-                    .write(|w| w.opm().enabled().cen().disabled());
-                self.deadman_running = false;
-            }
-        }
-        Ok(())
+    fn set_amp_enabled(&mut self, on: bool) -> Result<(), IoError<Self::Error>> {
+        self.io.set_amp_enabled(on)
     }
 }
 
@@ -1118,8 +1211,8 @@ impl Watchdog {
 /// The dump button (PC13 to GND, pull-up), debounced by slow polling.
 #[derive(Debug)]
 pub struct DumpButton {
-    /// PC13's port.
-    gpioc: pac::GPIOC,
+    /// PC13.
+    pin: PortPin<'C', 13>,
     /// Debounced state: pressed.
     pressed: bool,
     /// The previous raw sample: pressed.
@@ -1134,7 +1227,7 @@ impl DumpButton {
     /// noise) are ignored and a press must last two polls. A button held
     /// through `init` counts only after it has been released.
     pub fn pressed(&mut self) -> bool {
-        let sample = self.gpioc.idr().read().idr13().is_low();
+        let sample = embedded_hal::digital::InputPin::is_low(&mut self.pin).unwrap_or(false);
         let agreed = sample == self.last_sample;
         self.last_sample = sample;
         if agreed && sample != self.pressed {
