@@ -448,8 +448,10 @@ impl ControllerSpec {
     /// The host's end of a hardware-in-the-loop run on `connection` (a
     /// robot image's link): this spec's firmware configuration is set on the
     /// robot by the parameters' names and the robot armed, with the plant
-    /// held at its start (`plant_params`, `start_apex_m`). Faults cannot be
-    /// injected into a HIL run (the firmware is not in this process).
+    /// held at its start (`plant_params`, `start_apex_m`). The injections
+    /// that act on the sensor and amplifier models work as in a host run;
+    /// those inside the firmware or on its DAC
+    /// ([`FIRMWARE_SIDE_INJECTIONS`]) are refused.
     pub fn build_hil(
         &self,
         plant_params: &Params,
@@ -457,8 +459,15 @@ impl ControllerSpec {
         dt_s: f64,
         connection: crate::hil::Connection,
     ) -> Result<crate::hil::HilDriver, String> {
-        if !self.injections.is_empty() {
-            return Err("--inject is for host runs: a HIL run's firmware is on the robot".into());
+        if let Some(i) = self
+            .injections
+            .iter()
+            .find(|i| FIRMWARE_SIDE_INJECTIONS.contains(&i.kind))
+        {
+            return Err(format!(
+                "--inject {}: it acts inside the firmware or on its DAC, which are the robot's in a HIL run (the sensor-side kinds work)",
+                i.kind.name()
+            ));
         }
         let (runner, hal) = self.runner(plant_params, start_apex_m, dt_s, true)?;
         let cfg = *runner.hopper().config();
@@ -473,6 +482,14 @@ impl ControllerSpec {
             (name != "passive").then_some(self.target_apex_m),
             ThermalSummary::at_start(runner.hopper().supervisor()),
         )
+        .map(|d| {
+            d.with_injections(
+                self.injections
+                    .iter()
+                    .map(|&i| (i, InjectState::Pending))
+                    .collect(),
+            )
+        })
     }
 }
 
@@ -543,7 +560,7 @@ pub struct FirmwareController {
 
 /// Where an injection is in its life.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum InjectState {
+pub(crate) enum InjectState {
     /// Its time has not come.
     Pending,
     /// Applied, and ends later (a noise burst).
@@ -568,50 +585,83 @@ impl FirmwareController {
         self.last.as_ref()
     }
 
-    /// Applies the injections due in the period starting at `plant.time_s()`.
-    /// An injection at `t` is due in the first period that starts no
-    /// earlier than half a period before `t` (the plant's clock is a sum of
-    /// periods, so `t` itself may be missed by a rounding error).
+    /// Applies the injections due in the period starting at `plant.time_s()`
+    /// ([`apply_due_injections`]); the firmware-side ones to the runner.
     fn apply_injections(&mut self, plant: &Plant) {
-        let now_s = plant.time_s() + 0.5 * self.dt_s;
-        for (inj, state) in &mut self.injections {
-            match *state {
-                InjectState::Pending if now_s >= inj.time_s => {}
-                InjectState::Active if now_s >= inj.time_s + NOISE_BURST_DURATION_S => {
-                    self.hal.faults.adc_burst_sigma_codes = 0;
-                    *state = InjectState::Done;
-                    continue;
+        let firmware = &mut self.firmware;
+        apply_due_injections(
+            &mut self.injections,
+            &mut self.hal,
+            plant,
+            self.dt_s,
+            &mut |kind| match kind {
+                InjectKind::Nan => {
+                    firmware
+                        .runner
+                        .hopper_mut()
+                        .set_measurement_override(MeasurementOverride {
+                            spring_force_n: Some(f32::NAN),
+                            ..MeasurementOverride::default()
+                        })
                 }
-                _ => continue,
-            }
-            *state = InjectState::Done;
-            let full_scale = self.hal.adc_full_scale();
-            let f = &mut self.hal.faults;
-            match inj.kind {
-                InjectKind::EncoderJump => {
-                    f.motor_counts_offset = f.motor_counts_offset.wrapping_add(ENCODER_JUMP_COUNTS);
-                }
-                InjectKind::EncoderFrozen => self.hal.freeze_motor_encoder(plant),
-                InjectKind::LoadcellStuck => self.hal.freeze_loadcell(plant),
-                InjectKind::LoadcellSaturated => f.loadcell_code = Some(full_scale),
-                InjectKind::PotOpen => f.pot_code = Some(0),
-                InjectKind::Nan => self.firmware.runner.hopper_mut().set_measurement_override(
-                    MeasurementOverride {
-                        spring_force_n: Some(f32::NAN),
-                        ..MeasurementOverride::default()
-                    },
-                ),
-                InjectKind::NoiseBurst => {
-                    f.adc_burst_sigma_codes = NOISE_BURST_SIGMA_CODES;
-                    *state = InjectState::Active;
-                }
-                InjectKind::Estop => f.estop = true,
-                InjectKind::AmpFault => f.amp_fault = true,
-                InjectKind::DacError => f.dac_error = true,
                 // The RTIC app finds the overrun at the start of the next
                 // period and reports it before stepping: do the same.
-                InjectKind::Overrun => self.firmware.runner.report_overrun(),
+                InjectKind::Overrun => firmware.runner.report_overrun(),
+                _ => {}
+            },
+        );
+    }
+}
+
+/// The injections that act inside the firmware (`nan`, `overrun`) or on
+/// its DAC (`dac-error`), not on the sensor models: a hardware-in-the-loop
+/// run cannot take them (the firmware and the DAC are the robot's).
+pub const FIRMWARE_SIDE_INJECTIONS: [InjectKind; 3] =
+    [InjectKind::Nan, InjectKind::Overrun, InjectKind::DacError];
+
+/// Applies the injections due in the period starting at `plant.time_s()`
+/// to the sensor and amplifier models in `hal`, and hands the ones that act
+/// inside the firmware to `firmware`. An injection at `t` is due in the
+/// first period that starts no earlier than half a period before `t` (the
+/// plant's clock is a sum of periods, so `t` itself may be missed by a
+/// rounding error).
+pub(crate) fn apply_due_injections(
+    injections: &mut [(Injection, InjectState)],
+    hal: &mut SimHal,
+    plant: &Plant,
+    dt_s: f64,
+    firmware: &mut dyn FnMut(InjectKind),
+) {
+    let now_s = plant.time_s() + 0.5 * dt_s;
+    for (inj, state) in injections {
+        match *state {
+            InjectState::Pending if now_s >= inj.time_s => {}
+            InjectState::Active if now_s >= inj.time_s + NOISE_BURST_DURATION_S => {
+                hal.faults.adc_burst_sigma_codes = 0;
+                *state = InjectState::Done;
+                continue;
             }
+            _ => continue,
+        }
+        *state = InjectState::Done;
+        let full_scale = hal.adc_full_scale();
+        let f = &mut hal.faults;
+        match inj.kind {
+            InjectKind::EncoderJump => {
+                f.motor_counts_offset = f.motor_counts_offset.wrapping_add(ENCODER_JUMP_COUNTS);
+            }
+            InjectKind::EncoderFrozen => hal.freeze_motor_encoder(plant),
+            InjectKind::LoadcellStuck => hal.freeze_loadcell(plant),
+            InjectKind::LoadcellSaturated => f.loadcell_code = Some(full_scale),
+            InjectKind::PotOpen => f.pot_code = Some(0),
+            InjectKind::NoiseBurst => {
+                f.adc_burst_sigma_codes = NOISE_BURST_SIGMA_CODES;
+                *state = InjectState::Active;
+            }
+            InjectKind::Estop => f.estop = true,
+            InjectKind::AmpFault => f.amp_fault = true,
+            InjectKind::DacError => f.dac_error = true,
+            InjectKind::Nan | InjectKind::Overrun => firmware(inj.kind),
         }
     }
 }

@@ -187,6 +187,7 @@ pub struct HilDriver {
     params_set: usize,
     counter_hz: Option<u32>,
     started: Option<Instant>,
+    injections: Vec<(crate::inject::Injection, crate::controller::InjectState)>,
 }
 
 /// What a wire fault code is called (a newer robot's unknown code by
@@ -238,16 +239,15 @@ impl HilDriver {
             params_set: 0,
             counter_hz: None,
             started: None,
+            injections: Vec::new(),
         };
         d.hello(timeout)?;
         // Sampled on a copy of the models: the run's own samples (and
         // their noise) are then a host run's, period for period.
         let held = d.hal.clone().sample(plant);
         // A target that ran before (the tests run one after another on
-        // one image) may be armed or faulted: disarmed, its faults cleared
-        // (refused while a cause remains: the arm below then says why).
+        // one image) may be armed: disarmed first.
         d.request(Request::Disarm, &held)?;
-        d.request(Request::ResetFaults, &held)?;
         d.configure(desired, &held)?;
         // A new calibration moves what the sensors read (the height
         // encoder's origin, for one): the rate filters (eq 4.1) saw a jump.
@@ -258,6 +258,10 @@ impl HilDriver {
             d.exchange(&held)?;
             d.setup_periods += 1;
         }
+        // Faults latched before (a previous run's, or the jump from its
+        // last counts to this run's first) are cleared; a cause that
+        // remains refuses the reset, and the arm then says why.
+        d.request(Request::ResetFaults, &held)?;
         match d.request(Request::Arm, &held)? {
             Response::Ok => {}
             Response::Refused(r) => {
@@ -453,6 +457,15 @@ impl HilDriver {
         Ok(())
     }
 
+    /// With these sensor-side injections (`hopper-sim run --inject`).
+    pub(crate) fn with_injections(
+        mut self,
+        injections: Vec<(crate::inject::Injection, crate::controller::InjectState)>,
+    ) -> Self {
+        self.injections = injections;
+        self
+    }
+
     /// What the run measured of the exchange.
     pub fn report(&mut self) -> HilReport {
         let periods = self.isr.len() as u64;
@@ -551,6 +564,15 @@ impl PlantDriver for HilDriver {
             return 0.0;
         }
         self.started.get_or_insert_with(Instant::now);
+        if !self.injections.is_empty() {
+            crate::controller::apply_due_injections(
+                &mut self.injections,
+                &mut self.hal,
+                plant,
+                self.dt_s,
+                &mut |_| {},
+            );
+        }
         let Ok(sample) = self.hal.sampled(plant).read() else {
             self.failure = Some("HIL: the sensor models gave no sample".to_string());
             return 0.0;

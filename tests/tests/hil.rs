@@ -47,6 +47,16 @@ fn connection(target: HilTarget) -> Connection {
     }
 }
 
+/// The HIL target named by `HOPPER_HIL` (`sil_tests::HIL_TARGET_VAR`), or
+/// the in-process one.
+fn named_or_in_process() -> Connection {
+    match std::env::var(sil_tests::HIL_TARGET_VAR) {
+        Ok(t) => Connection::named(&t, std::time::Duration::from_secs(5))
+            .unwrap_or_else(|e| panic!("{e}")),
+        Err(_) => connection(target()),
+    }
+}
+
 fn target() -> HilTarget {
     HilTarget::new(DT_S).unwrap_or_else(|e| panic!("{e}"))
 }
@@ -113,4 +123,66 @@ fn a_machine_the_link_cannot_configure_is_refused() {
         Err(e) => e,
     };
     assert!(e.contains("what the link cannot set"), "{e}");
+}
+
+/// The sensor-side faults (`--inject`) in the loop: each latches the fault
+/// `docs/safety.md` names within the periods `tests/fault_injection.rs`
+/// allows a host run, and from then on the robot's DAC code and enable
+/// command no current; the firmware-side kinds are refused. With
+/// `HOPPER_HIL` set, against that target.
+#[test]
+fn sensor_faults_latch_and_stop_the_motor_in_the_loop() {
+    use hal_sim::inject::{InjectKind, Injection};
+    // Mid-stance of the first hop, open-torque pushing at full current.
+    let time_s = 0.2;
+    for (kind, latency) in [
+        (InjectKind::EncoderJump, 0),
+        (InjectKind::LoadcellSaturated, 0),
+        (InjectKind::PotOpen, 0),
+        (InjectKind::Estop, 1),
+        (InjectKind::AmpFault, 0),
+    ] {
+        let cfg = RunConfig {
+            duration_s: 0.3,
+            ..config()
+        };
+        let spec = ControllerSpec {
+            injections: vec![Injection { kind, time_s }],
+            ..ControllerSpec::new("open-torque")
+        };
+        let mut ctl = spec
+            .build_hil(&cfg.params, cfg.start_apex_m, DT_S, named_or_in_process())
+            .unwrap_or_else(|e| panic!("{e}"));
+        let s = run(&cfg, "design", &mut ctl)
+            .unwrap_or_else(|e| panic!("{e}"))
+            .summary;
+        let name = kind.name();
+        assert!(
+            s.faults.iter().all(|f| f.time_s + 0.5 * DT_S >= time_s),
+            "{name}: a fault before the injection: {:?}",
+            s.faults
+        );
+        let first = s
+            .faults
+            .iter()
+            .find(|f| kind.detected_as().contains(&f.name))
+            .unwrap_or_else(|| panic!("{name}: not latched: {:?}", s.faults));
+        let late = ((first.time_s - time_s) / DT_S).round().abs();
+        assert!(
+            (0.0..=f64::from(latency)).contains(&late),
+            "{name}: latched {late} periods after the injection"
+        );
+        assert_eq!(s.max_abs_current_after_fault_a, Some(0.0), "{name}");
+    }
+    for kind in [InjectKind::Nan, InjectKind::Overrun, InjectKind::DacError] {
+        let cfg = config();
+        let spec = ControllerSpec {
+            injections: vec![Injection { kind, time_s: 0.2 }],
+            ..ControllerSpec::new("open-torque")
+        };
+        match spec.build_hil(&cfg.params, cfg.start_apex_m, DT_S, connection(target())) {
+            Ok(_) => panic!("{}: a firmware-side injection was taken", kind.name()),
+            Err(e) => assert!(e.contains("inside the firmware"), "{e}"),
+        }
+    }
 }
