@@ -187,6 +187,9 @@ pub struct HilDriver {
     params_set: usize,
     counter_hz: Option<u32>,
     started: Option<Instant>,
+    /// Bad frames the decoder had counted when the session began (the
+    /// handshake may meet a previous session's leftovers).
+    bad_before: u32,
     injections: Vec<(crate::inject::Injection, crate::controller::InjectState)>,
 }
 
@@ -218,7 +221,11 @@ impl HilDriver {
             rx: Decoder::new(),
             pending: VecDeque::new(),
             responses: Vec::new(),
-            next_id: 1,
+            // Not 1 every session: an answer to a request a killed session
+            // left queued on the robot must not pass for one of this one's.
+            next_id: std::time::SystemTime::now()
+                .duration_since(std::time::UNIX_EPOCH)
+                .map_or(1, |d| d.subsec_nanos() as u16),
             seq: 0,
             hal,
             dt_s,
@@ -239,6 +246,7 @@ impl HilDriver {
             params_set: 0,
             counter_hz: None,
             started: None,
+            bad_before: 0,
             injections: Vec::new(),
         };
         d.hello(timeout)?;
@@ -298,7 +306,7 @@ impl HilDriver {
                     return Ok(m);
                 }
                 let bad = self.rx.stats().bad();
-                if bad > 0 {
+                if bad > self.bad_before {
                     return Err(format!(
                         "HIL: a corrupt frame from the robot while waiting for {waiting_for} ({:?}): the run stops",
                         self.rx.stats()
@@ -331,6 +339,10 @@ impl HilDriver {
         let started = Instant::now();
         self.line.set_timeout(HELLO_EVERY).map_err(failed)?;
         let answered = loop {
+            // Each attempt decodes afresh: what a previous session or a
+            // booting robot left on the line is no error of this one.
+            self.rx = Decoder::new();
+            self.pending.clear();
             // A delimiter first flushes whatever a previous session left
             // on the line.
             self.line.write_all(&[0]).map_err(failed)?;
@@ -345,6 +357,7 @@ impl HilDriver {
             }
         };
         self.line.set_timeout(timeout).map_err(failed)?;
+        self.bad_before = self.rx.stats().bad();
         if answered != PROTOCOL_VERSION {
             return Err(format!(
                 "HIL: the robot speaks protocol {answered}, this host {PROTOCOL_VERSION}"
@@ -394,6 +407,7 @@ impl HilDriver {
     ) -> Result<Response, String> {
         let id = self.next_id;
         self.next_id = self.next_id.wrapping_add(1);
+        self.responses.clear();
         self.send(&HostMsg::Request {
             id,
             req: req.clone(),
@@ -470,6 +484,9 @@ impl HilDriver {
     pub fn report(&mut self) -> HilReport {
         let periods = self.isr.len() as u64;
         let wall_s = self.started.map_or(0.0, |t| t.elapsed().as_secs_f64());
+        // The run's figures before the question below adds its own frames.
+        let (bytes_out, bytes_in) = (self.bytes_out, self.bytes_in);
+        let isr = self.isr.clone();
         if self.counter_hz.is_none() {
             let held = self.hal.last_sample().unwrap_or_default();
             self.counter_hz = match self.request(Request::Cost, &held) {
@@ -478,7 +495,6 @@ impl HilDriver {
             };
         }
         let counter_hz = self.counter_hz.unwrap_or(0);
-        let isr = &self.isr[..periods as usize];
         let max = isr.iter().copied().max().unwrap_or(0);
         let mean = if isr.is_empty() {
             0.0
@@ -497,9 +513,9 @@ impl HilDriver {
             counter_hz,
             isr_mean: mean,
             isr_max: max,
-            isr_histogram: histogram(isr, 10),
-            bytes_out_per_period: self.bytes_out as f64 / periods.max(1) as f64,
-            bytes_in_per_period: self.bytes_in as f64 / periods.max(1) as f64,
+            isr_histogram: histogram(&isr, 10),
+            bytes_out_per_period: bytes_out as f64 / periods.max(1) as f64,
+            bytes_in_per_period: bytes_in as f64 / periods.max(1) as f64,
             frames_per_s: if wall_s > 0.0 {
                 periods as f64 / wall_s
             } else {
@@ -511,6 +527,18 @@ impl HilDriver {
                 0.0
             },
         }
+    }
+}
+
+impl Drop for HilDriver {
+    /// The run is over (or failed): the robot is asked to disarm (its
+    /// deadman drops the enable anyway once the samples stop).
+    fn drop(&mut self) {
+        let id = self.next_id;
+        let _ = self.send(&HostMsg::Request {
+            id,
+            req: Request::Disarm,
+        });
     }
 }
 

@@ -84,7 +84,7 @@
 
 use heapless::spsc::{Consumer, Producer};
 use hopper_control::hal::{
-    AmpEnable, Converters, HopperIo, IoError, PinError, PinnedIo, PlainEnable, RawSample,
+    AmpEnable, Converters, HopperIo, IoError, PinError, PinnedIo, RawSample,
 };
 use stm32f4::stm32f405::{self as pac, Peripherals};
 
@@ -421,8 +421,8 @@ pub fn init(
                     adc: dp.ADC1,
                     dac: dp.DAC,
                 },
-                PortPin,
-                PortPin,
+                PortPin::new(),
+                PortPin::new(),
                 Deadman {
                     tim3: dp.TIM3,
                     running: false,
@@ -433,7 +433,7 @@ pub fn init(
         },
         watchdog,
         dump_button: DumpButton {
-            pin: PortPin,
+            pin: PortPin::new(),
             // Start as "held": a button held (or shorted) at boot must be
             // seen released before a press counts.
             pressed: true,
@@ -464,19 +464,26 @@ pub struct HilBoard {
 
 /// The board's e-stop input (PB1) and AMP_EN (PB0) in the loop.
 ///
-/// AMP_EN is a plain output here, not the deadman timer's: the host paces
-/// the periods (hundreds to thousands a second, with pauses while it
-/// configures), slower than the deadman's three-period window at the
-/// control rate, and the motor is the host's model. The e-stop input is
-/// the board's, so a bench e-stop disarms the run as it would the robot.
+/// AMP_EN is the hardware deadman (TIM3_CH3), as on the robot, with a
+/// window of [`HIL_DEADMAN_WINDOW_US`] of wall-clock time instead of three
+/// control periods: the host paces the periods (hundreds to thousands a
+/// second), and when it stops sending (a crash, an unplugged cable, the
+/// end of a run) the enable falls by itself within the window, whatever
+/// the firmware does. A period later than that latches `amp-fault`. The
+/// e-stop input is the board's, so a bench e-stop disarms the run as it
+/// would the robot.
 #[derive(Debug)]
 pub struct HilPins {
     estop: PortPin<'B', 1>,
-    enable: PlainEnable<PortPin<'B', 0>>,
+    enable: Deadman,
 }
 
+/// The HIL image's deadman window, us (the longest the 16-bit timer at
+/// 1 MHz holds is 65.5 ms).
+pub const HIL_DEADMAN_WINDOW_US: u32 = 50_000;
+
 impl hopper_robot_link::hil::HilPins for HilPins {
-    type Error = core::convert::Infallible;
+    type Error = DeadmanLapsed;
 
     fn estop_pressed(&mut self) -> bool {
         // Normally-closed to GND with a pull-up: high = pressed or broken.
@@ -509,6 +516,18 @@ pub fn init_hil(dp: Peripherals, link: (Producer<'static, u8>, Consumer<'static,
     dp.GPIOB.moder().modify(|_, w| w.moder0().output());
     configure_inputs(&dp.GPIOB, &dp.GPIOC);
     let clocks = configure_clocks(&dp.RCC, &dp.FLASH, &dp.PWR, &dp.TIM11);
+    // The deadman with a wall-clock window (`HilPins`): three "periods" of
+    // a third of the window each.
+    dp.RCC
+        .apb1enr()
+        .modify(|_, w| w.tim3en().enabled().tim5en().enabled());
+    let _ = dp.RCC.apb1enr().read();
+    configure_deadman(
+        &dp.TIM3,
+        &dp.GPIOB,
+        clocks.apb1_timer_hz,
+        hopper_control::deadman::WINDOW_PERIODS * 1_000_000 / HIL_DEADMAN_WINDOW_US,
+    );
     let serial = crate::serial::Serial::new(
         dp.USART1,
         &dp.RCC,
@@ -533,12 +552,13 @@ pub fn init_hil(dp: Peripherals, link: (Producer<'static, u8>, Consumer<'static,
         hse_expected_hz: HSE_HZ,
         hse_measured_hz: clocks.hse_measured_hz,
     };
-    dp.RCC.apb1enr().modify(|_, w| w.tim5en().enabled());
-    let _ = dp.RCC.apb1enr().read();
     HilBoard {
         pins: HilPins {
-            estop: PortPin,
-            enable: PlainEnable(PortPin),
+            estop: PortPin::new(),
+            enable: Deadman {
+                tim3: dp.TIM3,
+                running: false,
+            },
         },
         serial,
         boot,
@@ -955,10 +975,19 @@ pub struct BoardIo {
 /// One pin of GPIOB or GPIOC (`PORT`), number `N`, as an embedded-hal pin.
 /// Zero-sized: its reads are of IDR and its writes one atomic BSRR store,
 /// which no other owner of the port can race with.
-#[derive(Debug, Clone, Copy)]
-pub struct PortPin<const PORT: char, const N: u8>;
+/// Made only here (`new` is private), so no other code can drive AMP_EN.
+#[derive(Debug)]
+pub struct PortPin<const PORT: char, const N: u8>(());
 
 impl<const PORT: char, const N: u8> PortPin<PORT, N> {
+    /// The pin; `PORT` must be `'B'` or `'C'` and `N` below 16.
+    const fn new() -> Self {
+        const {
+            assert!(N < 16 && (PORT == 'B' || PORT == 'C'));
+        }
+        PortPin(())
+    }
+
     /// The port's input data register.
     fn idr() -> u32 {
         #[allow(unsafe_code)] // A read of a port's input register.
@@ -1093,7 +1122,7 @@ impl AmpEnable for Deadman {
 
     /// PB0's input register follows the pin in its alternate function too.
     fn reads_off(&mut self) -> Option<bool> {
-        embedded_hal::digital::InputPin::is_low(&mut PortPin::<'B', 0>).ok()
+        embedded_hal::digital::InputPin::is_low(&mut PortPin::<'B', 0>::new()).ok()
     }
 }
 

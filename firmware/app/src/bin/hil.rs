@@ -17,9 +17,11 @@
 //! | `idle`    | 0        | busy loop |
 //!
 //! # What differs from the board image
-//! No converters, encoders, control timer, deadman or watchdog: the host
-//! paces the periods, at the rate the line allows, with pauses while it
-//! configures. AMP_EN is a plain output that follows the period's enable.
+//! No converters, encoders, control timer or watchdog: the host paces the
+//! periods, at the rate the line allows, with pauses while it configures.
+//! AMP_EN is the deadman with a 50 ms wall-clock window
+//! (`board::HilPins`): it follows the periods' enable while samples come,
+//! and falls by itself when they stop.
 //! No flash: the host sets the configuration over the link (a save is
 //! refused). The boot check does not refuse arming for a clock on the HSI
 //! (the periods' length is the host's), and the motor's temperature

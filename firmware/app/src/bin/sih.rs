@@ -204,7 +204,7 @@ mod app {
         // Three late in a row (not one long period, an event's): lengthen.
         let late = cx.local.late;
         *late = if SCB::is_pendst_pending() {
-            *late + 1
+            late.saturating_add(1)
         } else {
             0
         };
