@@ -193,12 +193,6 @@ pub struct HilDriver {
     injections: Vec<(crate::inject::Injection, crate::controller::InjectState)>,
 }
 
-/// What a wire fault code is called (a newer robot's unknown code by
-/// number).
-fn fault_name(code: u8) -> &'static str {
-    vocab::Fault::from_code(code).map_or("unknown", vocab::Fault::name)
-}
-
 impl HilDriver {
     /// Connects to the robot image on `connection`, configures it for `desired`
     /// (the configuration a host run of the same scenario runs), and arms
@@ -626,25 +620,15 @@ impl PlantDriver for HilDriver {
         );
         let new = a.faults & !self.last_faults;
         self.last_faults = a.faults;
-        for bit in 0..16u8 {
-            if new & (1 << bit) != 0 {
-                self.faults.push(FaultRecord {
-                    name: fault_name(bit),
-                    time_s: t_s,
-                });
-            }
+        // By the wire's vocabulary; a newer robot's unknown bits as one
+        // "unknown".
+        let (names, unknown) = vocab::Fault::names(new);
+        let unknown = (unknown != 0).then_some("unknown");
+        for name in names.chain(unknown) {
+            self.faults.push(FaultRecord { name, time_s: t_s });
         }
-        if let Some(h) = a.hop {
-            self.hops.push(HopLedger {
-                hop: h.hop,
-                apex_height_m: h.apex_height_m,
-                energy_at_touchdown_j: h.energy_at_touchdown_j,
-                energy_at_liftoff_j: h.energy_at_liftoff_j,
-                stance_work_j: h.stance_work_j,
-                stance_duration_s: h.stance_duration_s,
-                peak_current_a: h.peak_current_a,
-                peak_stroke_m: h.peak_stroke_m,
-            });
+        if let Some(h) = &a.hop {
+            self.hops.push(hopper_robot_link::ledger_from_wire(h));
         }
         match vocab::PhaseEvent::from_code(a.event) {
             Some(vocab::PhaseEvent::Touchdown) => {

@@ -15,9 +15,10 @@
 use std::io::{Read, Write};
 use std::net::{Shutdown, TcpListener, TcpStream};
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
-use std::time::{Duration, Instant};
+use std::process::{Command, Stdio};
+use std::time::Instant;
 
+use crate::session::{free_addr, wait_listening, Reaped};
 use crate::{cargo, TARGET};
 
 /// The scenario both runs take (the QEMU scenario image's, declared once
@@ -37,16 +38,6 @@ const GOLDEN_TOLERANCE_M: f64 = 1e-4;
 /// The host frame the drop test loses (frame 0 is the hello): a sample
 /// of the run (configuring and arming take about 2,300 frames).
 const DROPPED_FRAME: u64 = 3_000;
-
-/// Kills the child when dropped.
-struct Reaped(Child);
-
-impl Drop for Reaped {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
-}
 
 /// The HIL image, built (board features, into the default target
 /// directory next to the board image).
@@ -69,15 +60,6 @@ fn hil_image(root: &Path) -> Result<PathBuf, String> {
     )
 }
 
-/// A free TCP port on the loopback.
-fn free_addr() -> Result<String, String> {
-    let port = TcpListener::bind("127.0.0.1:0")
-        .and_then(|l| l.local_addr())
-        .map_err(|e| format!("no free port: {e}"))?
-        .port();
-    Ok(format!("127.0.0.1:{port}"))
-}
-
 /// The HIL image on QEMU, USART1 on a TCP server at the returned address.
 fn start_qemu(elf: &Path) -> Result<(Reaped, String), String> {
     let addr = free_addr()?;
@@ -91,15 +73,7 @@ fn start_qemu(elf: &Path) -> Result<(Reaped, String), String> {
             .spawn()
             .map_err(|e| format!("cannot start qemu-system-arm: {e}"))?;
     let qemu = Reaped(child);
-    let started = Instant::now();
-    // A probe connection, closed at once: QEMU's server then waits for the
-    // next client.
-    while TcpStream::connect(&addr).is_err() {
-        if started.elapsed() > Duration::from_secs(20) {
-            return Err(format!("QEMU did not listen on {addr} within 20 s"));
-        }
-        std::thread::sleep(Duration::from_millis(100));
-    }
+    wait_listening(&addr)?;
     Ok((qemu, addr))
 }
 

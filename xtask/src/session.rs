@@ -40,14 +40,38 @@ const SESSION_TIMEOUT: Duration = Duration::from_secs(600);
 /// with the 20 ms heartbeats still well inside the 0.2 s timeout.
 const SERVE_SPEED: &str = "3";
 
-/// Kills the child when dropped (a failed check must not leave a server).
-struct Reaped(Child);
+/// Kills the child when dropped (a failed check must not leave a server
+/// or a QEMU behind).
+pub(crate) struct Reaped(pub(crate) Child);
 
 impl Drop for Reaped {
     fn drop(&mut self) {
         let _ = self.0.kill();
         let _ = self.0.wait();
     }
+}
+
+/// A free TCP port on the loopback (bound, read and let go: QEMU listens
+/// on it next).
+pub(crate) fn free_addr() -> Result<String, String> {
+    let port = TcpListener::bind("127.0.0.1:0")
+        .and_then(|l| l.local_addr())
+        .map_err(|e| format!("no free port: {e}"))?
+        .port();
+    Ok(format!("127.0.0.1:{port}"))
+}
+
+/// Waits up to 20 s for QEMU to listen on `addr` (a probe connection,
+/// closed at once: QEMU's server then waits for the next client).
+pub(crate) fn wait_listening(addr: &str) -> Result<(), String> {
+    let started = Instant::now();
+    while TcpStream::connect(addr).is_err() {
+        if started.elapsed() > Duration::from_secs(20) {
+            return Err(format!("QEMU did not listen on {addr} within 20 s"));
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    Ok(())
 }
 
 /// `hopper-link` and `hopper-sim` as the test suite builds them: `cargo
@@ -182,12 +206,7 @@ fn start_serve(sim: &Path, flash: &Path) -> Result<(Reaped, String), String> {
 
 /// `cargo xtask qemu`'s session against the QEMU link image `elf`.
 pub fn against_qemu(root: &Path, link: &Path, elf: &Path) -> Result<(), String> {
-    // A free port: bind, read it, let go (QEMU listens on it next).
-    let port = TcpListener::bind("127.0.0.1:0")
-        .and_then(|l| l.local_addr())
-        .map_err(|e| format!("no free port: {e}"))?
-        .port();
-    let addr = format!("127.0.0.1:{port}");
+    let addr = free_addr()?;
     eprintln!("xtask: running the link image on qemu-system-arm, USART1 on tcp {addr}");
     let mut child = crate::qemu::qemu_command(elf, 0, &format!("tcp:{addr},server=on,wait=off"))
         .stdout(Stdio::piped())
@@ -200,15 +219,7 @@ pub fn against_qemu(root: &Path, link: &Path, elf: &Path) -> Result<(), String> 
         let _ = stdout.read_to_end(&mut buf);
         buf
     });
-    // Wait for QEMU to listen (a probe connection, closed at once: QEMU's
-    // server then waits for the next client).
-    let started = Instant::now();
-    while TcpStream::connect(&addr).is_err() {
-        if started.elapsed() > Duration::from_secs(20) {
-            return Err(format!("QEMU did not listen on {addr} within 20 s"));
-        }
-        std::thread::sleep(Duration::from_millis(100));
-    }
+    wait_listening(&addr)?;
     let out_dir = crate::target_dir(root)?.join("link-session").join("qemu");
     let report = run_session(link, &addr, &out_dir, "qemu-link");
     drop(qemu);

@@ -302,21 +302,7 @@ pub fn init(
 
     // 1. AMP_EN (PB0): latch the output low *before* making the pin an output,
     //    so it never drives high, not even for one cycle.
-    dp.RCC.ahb1enr().modify(|_, w| {
-        w.gpioaen()
-            .enabled()
-            .gpioben()
-            .enabled()
-            .gpiocen()
-            .enabled()
-    });
-    // Read back: errata ES0182 "delay after an RCC peripheral clock enabling".
-    let _ = dp.RCC.ahb1enr().read();
-    dp.GPIOB.bsrr().write(|w| w.br0().set_bit());
-    dp.GPIOB.otyper().modify(|_, w| w.ot0().push_pull());
-    dp.GPIOB.ospeedr().modify(|_, w| w.ospeedr0().low_speed());
-    dp.GPIOB.pupdr().modify(|_, w| w.pupdr0().floating());
-    dp.GPIOB.moder().modify(|_, w| w.moder0().output());
+    amp_en_low(&dp.RCC, &dp.GPIOB);
 
     // 2. DAC channel 1 (PA4) at the zero-current code. PA4 goes analog first
     //    (RM0090: avoids the digital input's parasitic consumption); with no
@@ -500,20 +486,7 @@ impl hopper_robot_link::hil::HilPins for HilPins {
 /// No converters, encoders, control timer, deadman or watchdog: the
 /// periods come from the host.
 pub fn init_hil(dp: Peripherals, link: (Producer<'static, u8>, Consumer<'static, u8>)) -> HilBoard {
-    dp.RCC.ahb1enr().modify(|_, w| {
-        w.gpioaen()
-            .enabled()
-            .gpioben()
-            .enabled()
-            .gpiocen()
-            .enabled()
-    });
-    let _ = dp.RCC.ahb1enr().read();
-    dp.GPIOB.bsrr().write(|w| w.br0().set_bit());
-    dp.GPIOB.otyper().modify(|_, w| w.ot0().push_pull());
-    dp.GPIOB.ospeedr().modify(|_, w| w.ospeedr0().low_speed());
-    dp.GPIOB.pupdr().modify(|_, w| w.pupdr0().floating());
-    dp.GPIOB.moder().modify(|_, w| w.moder0().output());
+    amp_en_low(&dp.RCC, &dp.GPIOB);
     configure_inputs(&dp.GPIOB, &dp.GPIOC);
     let clocks = configure_clocks(&dp.RCC, &dp.FLASH, &dp.PWR, &dp.TIM11);
     // The deadman with a wall-clock window (`HilPins`): three "periods" of
@@ -540,12 +513,7 @@ pub fn init_hil(dp: Peripherals, link: (Producer<'static, u8>, Consumer<'static,
         dp.FLASH.optcr().read().bits(),
     );
     let boot = hopper_control::boot::BootReport {
-        resets: {
-            // Read, then cleared so that the next reset reports only its own.
-            let r = hopper_control::boot::ResetCauses::from_rcc_csr(dp.RCC.csr().read().bits());
-            dp.RCC.csr().modify(|_, w| w.rmvf().clear());
-            r
-        },
+        resets: take_reset_causes(&dp.RCC),
         brown_out_reset_on,
         clock_as_configured: clocks.sysclk_hz == SYSCLK_HZ,
         sysclk_hz: clocks.sysclk_hz,
@@ -565,6 +533,35 @@ pub fn init_hil(dp: Peripherals, link: (Producer<'static, u8>, Consumer<'static,
         sysclk_hz: clocks.sysclk_hz,
         tim5: dp.TIM5,
     }
+}
+
+/// AMP_EN (PB0) low and an output, the GPIO ports clocked: the output is
+/// latched low *before* the pin becomes an output, so it never drives
+/// high, not even for one cycle. Every image's `init` does this first.
+fn amp_en_low(rcc: &pac::RCC, gpiob: &pac::GPIOB) {
+    rcc.ahb1enr().modify(|_, w| {
+        w.gpioaen()
+            .enabled()
+            .gpioben()
+            .enabled()
+            .gpiocen()
+            .enabled()
+    });
+    // Read back: errata ES0182 "delay after an RCC peripheral clock enabling".
+    let _ = rcc.ahb1enr().read();
+    gpiob.bsrr().write(|w| w.br0().set_bit());
+    gpiob.otyper().modify(|_, w| w.ot0().push_pull());
+    gpiob.ospeedr().modify(|_, w| w.ospeedr0().low_speed());
+    gpiob.pupdr().modify(|_, w| w.pupdr0().floating());
+    gpiob.moder().modify(|_, w| w.moder0().output());
+}
+
+/// Every reset flag of RCC_CSR, then cleared (RMVF), so that the next
+/// reset reports only its own cause.
+fn take_reset_causes(rcc: &pac::RCC) -> hopper_control::boot::ResetCauses {
+    let causes = hopper_control::boot::ResetCauses::from_rcc_csr(rcc.csr().read().bits());
+    rcc.csr().modify(|_, w| w.rmvf().clear());
+    causes
 }
 
 /// E-stop (PB1), amplifier fault (PB4) and dump button (PC13): inputs with pull-ups.
@@ -1199,8 +1196,7 @@ impl Watchdog {
         // start key below forces it on anyway.
         // Why the MCU last reset: read every reset flag, then clear them
         // (RMVF) so that the next reset reports only its own cause.
-        let reset_causes = hopper_control::boot::ResetCauses::from_rcc_csr(rcc.csr().read().bits());
-        rcc.csr().modify(|_, w| w.rmvf().clear());
+        let reset_causes = take_reset_causes(rcc);
         rcc.csr().modify(|_, w| w.lsion().on());
         let _ = wait_for(|| rcc.csr().read().lsirdy().is_ready());
 

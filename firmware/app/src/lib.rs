@@ -232,13 +232,7 @@ pub mod qemu {
 
     /// TIM5's count now, from any task ([`start`] started it; the
     /// serial interrupt times itself with it).
-    #[allow(unsafe_code)]
-    pub fn tim5_now() -> u32 {
-        // SAFETY: a read of a free-running counter register, which has no
-        // side effect; the only writes to TIM5 are `start`'s, before any
-        // task runs.
-        unsafe { (*pac::TIM5::ptr()).cnt().read().bits() }
-    }
+    pub use crate::ticks::tim5_now;
 
     /// SysTick every `ticks` (a control period: `SYSTICK_HZ / CONTROL_HZ`),
     /// its interrupt on (the control task).
@@ -329,10 +323,7 @@ pub mod qemu {
 
         rcc.apb1enr().modify(|_, w| w.tim5en().enabled());
         let _ = rcc.apb1enr().read();
-        tim5.psc().write(|w| w.psc().set(0));
-        tim5.arr().write(|w| w.arr().set(u32::MAX));
-        tim5.egr().write(|w| w.ug().set_bit());
-        tim5.cr1().modify(|_, w| w.cen().enabled());
+        crate::ticks::run_tim5(&tim5);
         // Cost of reading the counter twice back to back, subtracted from
         // every measurement.
         let _ = tim5;
@@ -340,6 +331,58 @@ pub mod qemu {
             below_control: false,
             ..Instructions::reader()
         }
+    }
+}
+
+/// The virtual robot the QEMU link image and `hopper-sih` run: the CI
+/// session's mis-calibrated robot (as `hopper-sim serve`'s), its firmware
+/// configured for the nominal machine and booting as the board's does
+/// (disarmed, tethered, no arming before a tare and homing), the body held
+/// [`virtual_robot::START_APEX_M`] up until armed, and its flash in RAM.
+#[cfg(all(target_os = "none", any(feature = "qemu-sim", feature = "sih")))]
+pub mod virtual_robot {
+    use crate::control::{Bank, Slot, CONTROL_PERIOD_S, TIMING};
+    use hopper_control::hopper::Strategy;
+    use hopper_plant::Params;
+    use hopper_sil::robot::{Miscalibration, VirtualRobot};
+    use hopper_sil::sim_io::{firmware_config, SensorConfig, SimHal};
+
+    /// Where the body is held until armed, m (toe height).
+    pub const START_APEX_M: f64 = 0.05;
+
+    /// The image's flash: RAM, kept while it runs (erased at every start).
+    pub type Flash = hopper_store::Store<hopper_store::RamFlash<2, 2048>>;
+
+    /// The robot (its runner in the bank's first slot, no calibration
+    /// loaded), the bank's spare slots and the flash; `None` when a part
+    /// refuses its configuration.
+    pub fn session(bank: &'static mut Bank) -> Option<(VirtualRobot<Slot>, [Slot; 2], Flash)> {
+        let params = Params::design();
+        // The plant is the real machine, the firmware believes the
+        // nominal one: the session's bring-up routines must find the
+        // difference.
+        let mis = Miscalibration::SESSION;
+        // The board's defaults (energy-apex, 0.05 m, tethered); the host
+        // chooses the controller and target over the link.
+        let mut cfg = firmware_config(
+            &params,
+            &params,
+            Strategy::default(),
+            0.05,
+            mis.believed_start_apex_m(START_APEX_M),
+        );
+        cfg.arming.require_tare = true;
+        cfg.arming.require_home = true;
+        let plant = mis.plant(params, START_APEX_M).ok()?;
+        let (runner, spares) = crate::control::runner_in_bank(bank, cfg, TIMING).ok()?;
+        let flash = Flash::new(hopper_store::RamFlash::new(), 0..4096).ok()?;
+        let hal = mis.hal(
+            SimHal::new(&cfg.calibration, &mis.sensors(SensorConfig::DEFAULT)),
+            &plant,
+        );
+        let mut robot = VirtualRobot::new(plant, hal, runner, f64::from(CONTROL_PERIOD_S)).hold();
+        robot.firmware.runner.load_calibration(None);
+        Some((robot, spares, flash))
     }
 }
 
@@ -358,11 +401,22 @@ pub mod ticks {
         hz: u32,
     }
 
-    /// TIM5's count.
-    fn tim5_now() -> u32 {
+    /// Runs TIM5 (clocked) free from 0 to 2^32 - 1 at its input clock: under
+    /// QEMU's `-icount shift=0`, one count per guest instruction.
+    pub fn run_tim5(tim5: &pac::TIM5) {
+        tim5.psc().write(|w| w.psc().set(0));
+        tim5.arr().write(|w| w.arr().set(u32::MAX));
+        tim5.egr().write(|w| w.ug().set_bit());
+        tim5.cr1().modify(|_, w| w.cen().enabled());
+    }
+
+    /// TIM5's count now, from any task (free-running: the QEMU images'
+    /// counter, and this one's where the core has no cycle counter).
+    pub fn tim5_now() -> u32 {
         #[allow(unsafe_code)] // A read of a free-running counter's register.
         // SAFETY: `TIM5::ptr()` is its register block's fixed address; CNT
-        // is only read here (TIM5 is set up once, in `start`).
+        // has no read side effect, and TIM5 is only written while it is
+        // set up, before any task runs.
         unsafe {
             (*pac::TIM5::ptr()).cnt().read().bits()
         }
@@ -389,10 +443,7 @@ pub mod ticks {
                     hz: sysclk_hz,
                 };
             }
-            tim5.psc().write(|w| w.psc().set(0));
-            tim5.arr().write(|w| w.arr().set(u32::MAX));
-            tim5.egr().write(|w| w.ug().set_bit());
-            tim5.cr1().modify(|_, w| w.cen().enabled());
+            run_tim5(&tim5);
             Ticks { dwt: false, hz: 0 }
         }
 

@@ -1105,6 +1105,20 @@ pub fn wire_hop(h: &hopper_control::telemetry::HopLedger) -> Hop {
     }
 }
 
+/// A hop's ledger from the wire (the inverse of [`wire_hop`]).
+pub fn ledger_from_wire(h: &Hop) -> hopper_control::telemetry::HopLedger {
+    hopper_control::telemetry::HopLedger {
+        hop: h.hop,
+        apex_height_m: h.apex_height_m,
+        energy_at_touchdown_j: h.energy_at_touchdown_j,
+        energy_at_liftoff_j: h.energy_at_liftoff_j,
+        stance_work_j: h.stance_work_j,
+        stance_duration_s: h.stance_duration_s,
+        peak_current_a: h.peak_current_a,
+        peak_stroke_m: h.peak_stroke_m,
+    }
+}
+
 /// The wire form of the arming state.
 pub fn arm_state(s: RunnerArmState) -> ArmState {
     match s {

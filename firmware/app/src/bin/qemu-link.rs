@@ -32,17 +32,13 @@ mod app {
     use cortex_m::peripheral::{SCB, SYST};
     use cortex_m_semihosting::debug;
     use heapless::spsc::Consumer;
-    use hopper_app::control::{Bank, Capture, Locked, Slot, CONTROL_HZ, CONTROL_PERIOD_S, TIMING};
+    use hopper_app::control::{Bank, Capture, Locked, Slot, CONTROL_HZ};
     use hopper_app::serial::{LinkTx, RxQueue, Serial, TxQueue};
-    use hopper_control::hopper::Strategy;
-    use hopper_plant::Params;
+    use hopper_app::virtual_robot::{self, Flash, START_APEX_M};
     use hopper_robot_link::{Endpoint, LinkEnds, PortEnds, Queues};
-    use hopper_sil::robot::{Miscalibration, VirtualRobot};
-    use hopper_sil::sim_io::{firmware_config, SensorConfig, SimHal};
+    use hopper_sil::robot::VirtualRobot;
     use stm32f4::stm32f405::Interrupt;
 
-    /// Where the body is held until armed, m (toe height).
-    const START_APEX_M: f64 = 0.05;
     /// The longest a session may run, s of robot time (then QEMU exits).
     const LINK_LIMIT_S: u32 = 600;
     /// PCLK2 on the HSI, Hz (QEMU has no RCC model, and ignores the baud
@@ -58,10 +54,6 @@ mod app {
         /// it would take `init`'s stack past the room flip-link leaves).
         capture: &'static mut Capture,
     }
-
-    /// The link image's flash: RAM (QEMU models no flash writes), kept for
-    /// the run only.
-    type Flash = hopper_store::Store<hopper_store::RamFlash<2, 2048>>;
 
     #[local]
     struct Local {
@@ -90,46 +82,12 @@ mod app {
         let mut core = cx.core;
         let counter = hopper_app::qemu::start(&dp.RCC, &dp.GPIOB, dp.TIM5);
 
-        let params = Params::design();
-        // The CI session's mis-calibrated robot (as `hopper-sim serve`'s):
-        // the firmware configured for the nominal machine, the plant the
-        // real one; the session's bring-up routines must find the
-        // difference.
-        let mis = Miscalibration::SESSION;
-        // The board's defaults (energy-apex, 0.05 m, tethered); the host
-        // chooses the controller and target over the link.
-        let mut cfg = firmware_config(
-            &params,
-            &params,
-            Strategy::default(),
-            0.05,
-            mis.believed_start_apex_m(START_APEX_M),
-        );
-        // As the board: no arming before a tare and homing.
-        cfg.arming.require_tare = true;
-        cfg.arming.require_home = true;
-        let (Ok(plant), Ok((runner, spares))) = (
-            mis.plant(params, START_APEX_M),
-            hopper_app::control::runner_in_bank(cx.local.bank, cfg, TIMING),
-        ) else {
+        let Some((robot, spares, flash)) = virtual_robot::session(cx.local.bank) else {
             defmt::error!("link image set-up failed");
             debug::exit(debug::EXIT_FAILURE);
             #[allow(clippy::empty_loop)]
             loop {}
         };
-        let hal = mis.hal(
-            SimHal::new(&cfg.calibration, &mis.sensors(SensorConfig::DEFAULT)),
-            &plant,
-        );
-        let mut robot = VirtualRobot::new(plant, hal, runner, f64::from(CONTROL_PERIOD_S)).hold();
-        // Its flash is erased at every start: nothing saved.
-        let Ok(flash) = Flash::new(hopper_store::RamFlash::new(), 0..4096) else {
-            defmt::error!("link image flash set-up failed");
-            debug::exit(debug::EXIT_FAILURE);
-            #[allow(clippy::empty_loop)]
-            loop {}
-        };
-        robot.firmware.runner.load_calibration(None);
         // The link task's own endpoint (the robot's in-line one is for the
         // simulator's single thread).
         let link = Endpoint::simulated(&robot.firmware.runner).with_spares(spares);

@@ -39,18 +39,14 @@ mod app {
     use cortex_m::peripheral::{SCB, SYST};
     use heapless::spsc::Consumer;
     use hopper_app::board;
-    use hopper_app::control::{Bank, Capture, Locked, Slot, CONTROL_HZ, CONTROL_PERIOD_S, TIMING};
+    use hopper_app::control::{Bank, Capture, Locked, Slot, CONTROL_HZ};
     use hopper_app::serial::{LinkTx, RxQueue, Serial, TxQueue};
     use hopper_app::ticks::{Control, Link, Ticks};
-    use hopper_control::hopper::Strategy;
-    use hopper_plant::Params;
+    use hopper_app::virtual_robot::{self, Flash, START_APEX_M};
     use hopper_robot_link::{Endpoint, LinkEnds, PortEnds, Queues};
-    use hopper_sil::robot::{Miscalibration, VirtualRobot};
-    use hopper_sil::sim_io::{firmware_config, SensorConfig, SimHal};
+    use hopper_sil::robot::VirtualRobot;
     use stm32f4::stm32f405::Interrupt;
 
-    /// Where the body is held until armed, m (toe height).
-    const START_APEX_M: f64 = 0.05;
     /// The link task's interrupt, as on the board.
     const LINK_IRQ: Interrupt = Interrupt::SDIO;
     /// SysTick's longest reload (24 bits).
@@ -61,10 +57,6 @@ mod app {
         /// The capture, frozen around a fault (a static built in place).
         capture: &'static mut Capture,
     }
-
-    /// The image's flash: RAM, kept while it runs (the board's sectors
-    /// hold the robot image's calibration, which this one leaves alone).
-    type Flash = hopper_store::Store<hopper_store::RamFlash<2, 2048>>;
 
     #[local]
     struct Local {
@@ -97,35 +89,10 @@ mod app {
         let (tx_in, tx_out) = cx.local.txq.split();
         let board = board::init_hil(cx.device, (rx_in, tx_out));
         let ticks = Ticks::start(&mut core.DCB, &mut core.DWT, board.tim5, board.sysclk_hz);
-        let params = Params::design();
-        // The session's mis-calibrated robot (as the QEMU link image's):
-        // the firmware configured for the nominal machine, the plant the
-        // real one, for the bring-up routines to find the difference.
-        let mis = Miscalibration::SESSION;
-        let mut cfg = firmware_config(
-            &params,
-            &params,
-            Strategy::default(),
-            0.05,
-            mis.believed_start_apex_m(START_APEX_M),
-        );
-        // As the board: no arming before a tare and homing.
-        cfg.arming.require_tare = true;
-        cfg.arming.require_home = true;
-        let (Ok(plant), Ok((runner, spares)), Ok(flash)) = (
-            mis.plant(params, START_APEX_M),
-            hopper_app::control::runner_in_bank(cx.local.bank, cfg, TIMING),
-            Flash::new(hopper_store::RamFlash::new(), 0..4096),
-        ) else {
+        let Some((mut robot, spares, flash)) = virtual_robot::session(cx.local.bank) else {
             defmt::error!("simulated robot set-up failed");
             hopper_app::park();
         };
-        let hal = mis.hal(
-            SimHal::new(&cfg.calibration, &mis.sensors(SensorConfig::DEFAULT)),
-            &plant,
-        );
-        let mut robot = VirtualRobot::new(plant, hal, runner, f64::from(CONTROL_PERIOD_S)).hold();
-        robot.firmware.runner.load_calibration(None);
         // The periods' length is the pacing's, not the core clock's.
         robot
             .firmware
