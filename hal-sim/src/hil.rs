@@ -267,7 +267,11 @@ impl HilDriver {
         match d.request(Request::Arm, &held)? {
             Response::Ok => {}
             Response::Refused(r) => {
-                d.arm_refusal = Some(Box::leak(r.as_str().to_owned().into_boxed_str()));
+                // A code this host does not know (a newer robot) by number.
+                d.arm_refusal = Some(
+                    r.refusal()
+                        .map_or("refused (a reason this host does not know)", |r| r.name()),
+                );
             }
             other => return Err(format!("HIL target: arm answered {other:?}")),
         }
@@ -444,11 +448,7 @@ impl HilDriver {
                 match self.request(Request::ParamSet { name, value: want }, held)? {
                     Response::Ok => self.params_set += 1,
                     Response::Refused(r) => {
-                        return Err(format!(
-                            "HIL: the robot refused {}={want}: {}",
-                            p.name,
-                            r.as_str()
-                        ))
+                        return Err(format!("HIL: the robot refused {}={want}: {}", p.name, r))
                     }
                     other => return Err(format!("HIL: {} set answered {other:?}", p.name)),
                 }

@@ -1,10 +1,10 @@
 //! Names for the wire's codes (the protocol's vocabulary) and the
-//! parameters' values and owners (the firmware's parameter table).
+//! parameters' values and owners, as the robot describes them.
 
-use hopper_control::hopper::HopperConfig;
-use hopper_control::params::{self, Kind, Param, CONTROLLER, CONTROLLER_NAMES};
-use hopper_protocol::vocab::{DisarmReason, Fault};
-use hopper_protocol::ArmState;
+use crate::Client;
+use anyhow::{anyhow, bail, Result};
+use hopper_protocol::vocab::{DisarmReason, Fault, ParamKind, Refusal};
+use hopper_protocol::{ArmState, Name, ParamInfo, Request, Response};
 
 /// The latched faults by name (`none` when empty), comma-separated.
 pub fn faults(bits: u16) -> String {
@@ -53,138 +53,219 @@ pub fn advice(s: ArmState) -> &'static str {
     }
 }
 
-/// A parameter's value as the operator types it: a choice by its name
-/// (`shaped`), anything else as the number (a choice index the table does
-/// not name, from a newer firmware, stays a number).
-pub fn param_value(name: &str, v: f32) -> String {
-    match params::find(name).map(|p| p.kind) {
-        Some(Kind::Choice(names)) if v >= 0.0 && v == v.trunc() => names
-            .get(v as usize)
-            .map_or_else(|| format!("{v}"), |n| (*n).to_string()),
-        _ => format!("{v}"),
-    }
+/// A parameter as the robot describes it: its table entry
+/// (`Request::ParamInfo`) and what `Request::ParamMeta` adds. The host keeps
+/// no copy of the firmware's table: a newer firmware's parameters show
+/// with their own names, units, choices and owners.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Described {
+    /// The table entry (name, unit, range, default, value now: NaN when the
+    /// robot's configuration lacks it).
+    pub info: ParamInfo,
+    /// Its kind (`None`: a code this host does not know, shown as a number).
+    pub kind: Option<ParamKind>,
+    /// A choice's values by name, in order.
+    pub choices: Vec<String>,
+    /// What it needs to be part of the configuration (`None`: every
+    /// configuration has it).
+    pub owner: Option<Owner>,
 }
 
 /// What a parameter needs to be part of the configuration: a controller,
 /// and possibly a value of one of that controller's choices
 /// (`step_closed.min_compression_m` only exists with `step_closed.gain`
 /// normalised, `step_closed.kp_m_per_j` only with it fixed).
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct Owner {
-    /// The controller, an index of [`CONTROLLER_NAMES`].
-    pub controller: usize,
+    /// The controller, by name.
+    pub controller: String,
     /// The choice of that controller and the value it must have.
-    pub choice: Option<(&'static Param, usize)>,
+    pub choice: Option<Choice>,
 }
 
-/// The configuration of controller `index` at its defaults.
-fn with_controller(index: usize) -> Option<HopperConfig> {
-    let mut cfg = HopperConfig::default();
-    params::set(&mut cfg, CONTROLLER.name, index as f32).ok()?;
-    Some(cfg)
+/// A choice parameter set to one value.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Choice {
+    /// The choice's name (`step_closed.gain`).
+    pub param: String,
+    /// The value needed, by name (`normalised`).
+    pub value: String,
+    /// Whether that value is the choice's default (selecting the
+    /// controller starts it from its defaults).
+    pub is_default: bool,
 }
 
-/// The choices (other than the controller) that `cfg` has, with their
-/// number of values.
-fn choices_of(cfg: &HopperConfig) -> impl Iterator<Item = (&'static Param, usize)> + '_ {
-    params::TABLE.iter().copied().filter_map(|q| match q.kind {
-        Kind::Choice(values) if q.name != CONTROLLER.name && params::get(cfg, q.name).is_ok() => {
-            Some((q, values.len()))
-        }
-        _ => None,
-    })
+fn wire(name: &str) -> Result<Name> {
+    let mut n = Name::new();
+    n.push_str(name)
+        .map_err(|_| anyhow!("parameter name `{name}` is too long"))?;
+    Ok(n)
 }
 
-/// Whether `p` is in `cfg` with choice `q` set to `v` (from its defaults).
-fn readable_with(cfg: &HopperConfig, q: &Param, v: usize, p: &Param) -> bool {
-    let mut c = *cfg;
-    params::set(&mut c, q.name, v as f32).is_ok() && params::get(&c, p.name).is_ok()
+fn info_at(c: &mut Client, index: u16) -> Result<ParamInfo> {
+    match c.request(Request::ParamInfo { index })? {
+        Response::ParamInfo(p) => Ok(p),
+        r => bail!("parameter {index}: unexpected answer {r:?}"),
+    }
 }
 
-/// Which controller (and choice) parameter `name` belongs to; `None` for a
-/// parameter of every configuration (`target_apex_m`, `arming.*`) or one
-/// this hopper-link does not know. Found by trying the firmware's own
-/// configurations rather than from the names, so a new controller or
-/// choice needs no change here.
-pub fn owner(name: &str) -> Option<Owner> {
-    let p = params::find(name)?;
-    let configs: Vec<HopperConfig> = (0..CONTROLLER_NAMES.len())
-        .filter_map(with_controller)
-        .collect();
-    // Readable in some variant of a configuration: at its defaults, or
-    // with one of its choices switched.
-    let has = |cfg: &HopperConfig| {
-        params::get(cfg, p.name).is_ok()
-            || choices_of(cfg).any(|(q, n)| (0..n).any(|v| readable_with(cfg, q, v, p)))
+fn choice_name(c: &mut Client, name: &str, value: u8) -> Result<String> {
+    match c.request(Request::ParamChoice {
+        name: wire(name)?,
+        value,
+    })? {
+        Response::Name(n) => Ok(n.as_str().to_string()),
+        r => bail!("{name} value {value}: unexpected answer {r:?}"),
+    }
+}
+
+/// The choice names of the robot's `controller` parameter, in order.
+pub fn controller_names(c: &mut Client) -> Result<Vec<String>> {
+    Ok(describe(c, CONTROLLER)?.map_or_else(Vec::new, |d| d.choices))
+}
+
+/// The robot's name for the parameter that selects the controller.
+pub const CONTROLLER: &str = "controller";
+
+/// Parameter `name` as the robot describes it; `None` when the robot has
+/// no parameter of that name.
+pub fn describe(c: &mut Client, name: &str) -> Result<Option<Described>> {
+    let meta = match c.request(Request::ParamMeta { name: wire(name)? })? {
+        Response::ParamMeta(m) => m,
+        Response::Refused(why) if why == Refusal::UnknownParameter => return Ok(None),
+        r => bail!("describe {name}: unexpected answer {r:?}"),
     };
-    let owners: Vec<usize> = (0..configs.len()).filter(|&i| has(&configs[i])).collect();
-    if owners.len() == configs.len() {
-        return None;
-    }
-    let controller = *owners.first()?;
-    let cfg = configs.get(controller)?;
-    // A choice of the controller that some of its values leave `p` out of.
-    let choice = choices_of(cfg).find_map(|(q, n)| {
-        let with: Vec<usize> = (0..n).filter(|&v| readable_with(cfg, q, v, p)).collect();
-        (!with.is_empty() && with.len() < n).then(|| (q, with[0]))
-    });
-    Some(Owner { controller, choice })
-}
-
-/// Why parameter `name` is not in the robot's configuration (the robot
-/// reports no value for it), given the selected controller's index if
-/// known: `inactive: controller energy not selected`.
-pub fn inactive_reason(name: &str, selected: Option<usize>) -> String {
-    let controller = |i: usize| CONTROLLER_NAMES.get(i).copied().unwrap_or("?");
-    let choice = |(q, v): (&Param, usize)| format!("{} {}", q.name, param_value(q.name, v as f32));
-    match owner(name) {
-        Some(Owner {
-            controller: i,
-            choice: Some((q, v)),
-        }) if selected == Some(i) => format!(
-            "inactive: {} is not {}",
-            q.name,
-            param_value(q.name, v as f32)
-        ),
-        // Selecting the controller starts it from its defaults: name the
-        // choice only when its default is not the one needed.
-        Some(Owner {
-            controller: i,
-            choice: Some((q, v)),
-        }) if q.default != v as f32 => format!(
-            "inactive: controller {} with {} not selected",
-            controller(i),
-            choice((q, v))
-        ),
-        Some(Owner { controller: i, .. }) => {
-            format!("inactive: controller {} not selected", controller(i))
+    let info = info_at(c, meta.index)?;
+    let choices = (0..meta.choices)
+        .map(|v| choice_name(c, name, v))
+        .collect::<Result<Vec<_>>>()?;
+    let owner = match meta.controller {
+        None => None,
+        Some(i) => {
+            let controller = if name == CONTROLLER {
+                None
+            } else {
+                describe(c, CONTROLLER)?
+            }
+            .and_then(|d| d.choices.get(usize::from(i)).cloned())
+            .unwrap_or_else(|| format!("{i}"));
+            let choice = match meta.needs {
+                None => None,
+                Some((q, v)) => {
+                    let q = info_at(c, q)?;
+                    Some(Choice {
+                        value: choice_name(c, q.name.as_str(), v)?,
+                        is_default: q.default == f32::from(v),
+                        param: q.name.as_str().to_string(),
+                    })
+                }
+            };
+            Some(Owner { controller, choice })
         }
-        None => "inactive: not in the robot's configuration".into(),
-    }
-}
-
-/// The commands that make parameter `name` active, given the selected
-/// controller's index if known (empty when it has no owner).
-pub fn activation(name: &str, selected: Option<usize>) -> Vec<String> {
-    let Some(o) = owner(name) else {
-        return Vec::new();
     };
-    let mut steps = Vec::new();
-    let switch = selected != Some(o.controller);
-    if switch {
-        let c = CONTROLLER_NAMES.get(o.controller).copied().unwrap_or("?");
-        steps.push(format!("params set controller {c}"));
-    }
-    if let Some((q, v)) = o.choice {
-        if !switch || q.default != v as f32 {
-            steps.push(format!(
-                "params set {} {}",
-                q.name,
-                param_value(q.name, v as f32)
-            ));
+    Ok(Some(Described {
+        info,
+        kind: ParamKind::from_code(meta.kind),
+        choices,
+        owner,
+    }))
+}
+
+impl Described {
+    /// A value as the operator types it: a choice by its name (`shaped`),
+    /// anything else as the number (a choice index without a name stays
+    /// a number).
+    pub fn value(&self, v: f32) -> String {
+        match self.kind {
+            Some(ParamKind::Choice) if v >= 0.0 && v == v.trunc() => self
+                .choices
+                .get(v as usize)
+                .map_or_else(|| format!("{v}"), Clone::clone),
+            _ => format!("{v}"),
         }
     }
-    steps
+
+    /// A value as typed: a number, or a choice's name (`controller shaped`).
+    pub fn parse(&self, value: &str) -> Result<f32> {
+        if let Ok(v) = value.parse::<f32>() {
+            return Ok(v);
+        }
+        match self.kind {
+            Some(ParamKind::Choice) => self
+                .choices
+                .iter()
+                .position(|n| n == value)
+                .map(|i| i as f32)
+                .ok_or_else(|| {
+                    anyhow!(
+                        "`{}` is one of {:?}, not `{value}`",
+                        self.info.name,
+                        self.choices
+                    )
+                }),
+            _ => bail!("`{value}` is not a number"),
+        }
+    }
+
+    /// A value for display: a choice by name and number, else the number
+    /// and unit.
+    pub fn shown(&self, v: f32) -> String {
+        let unit = self.info.unit.as_str();
+        match self.kind {
+            Some(ParamKind::Choice) => self
+                .choices
+                .get(v as usize)
+                .map_or(format!("{v}"), |n| format!("{n} ({v})")),
+            _ if unit == "1" || unit == "-" => format!("{v}"),
+            _ => format!("{v} {unit}"),
+        }
+    }
+
+    /// Why it is not in the robot's configuration (the robot reports no
+    /// value for it), given the selected controller's name if known:
+    /// `inactive: controller energy not selected`.
+    pub fn inactive_reason(&self, selected: Option<&str>) -> String {
+        match &self.owner {
+            Some(Owner {
+                controller,
+                choice: Some(q),
+            }) if selected == Some(controller.as_str()) => {
+                format!("inactive: {} is not {}", q.param, q.value)
+            }
+            // Selecting the controller starts it from its defaults: name
+            // the choice only when its default is not the one needed.
+            Some(Owner {
+                controller,
+                choice: Some(q),
+            }) if !q.is_default => format!(
+                "inactive: controller {controller} with {} {} not selected",
+                q.param, q.value
+            ),
+            Some(Owner { controller, .. }) => {
+                format!("inactive: controller {controller} not selected")
+            }
+            None => "inactive: not in the robot's configuration".into(),
+        }
+    }
+
+    /// The commands that make it active, given the selected controller's
+    /// name if known (empty when every configuration has it).
+    pub fn activation(&self, selected: Option<&str>) -> Vec<String> {
+        let Some(o) = &self.owner else {
+            return Vec::new();
+        };
+        let mut steps = Vec::new();
+        let switch = selected != Some(o.controller.as_str());
+        if switch {
+            steps.push(format!("params set controller {}", o.controller));
+        }
+        if let Some(q) = &o.choice {
+            if !switch || !q.is_default {
+                steps.push(format!("params set {} {}", q.param, q.value));
+            }
+        }
+        steps
+    }
 }
 
 #[cfg(test)]
@@ -205,103 +286,115 @@ mod tests {
         assert_eq!(arm_state(ArmState::Disarmed(77)), "disarmed (reason 77)");
     }
 
-    #[test]
-    fn choices_are_shown_by_name() {
-        assert_eq!(param_value("controller", 8.0), "shaped");
-        assert_eq!(param_value("controller", 5.0), "energy-apex");
-        assert_eq!(param_value("step_closed.gain", 1.0), "normalised");
-        // Beyond the names (a newer firmware) or not whole: the number.
-        assert_eq!(param_value("controller", 42.0), "42");
-        assert_eq!(param_value("controller", 0.5), "0.5");
-        assert_eq!(param_value("target_apex_m", 0.12), "0.12");
-        assert_eq!(param_value("no.such", 3.0), "3");
+    fn described(name: &str, kind: ParamKind, choices: &[&str], owner: Option<Owner>) -> Described {
+        Described {
+            info: ParamInfo {
+                name: name.try_into().unwrap_or_default(),
+                unit: "-".try_into().unwrap_or_default(),
+                min: 0.0,
+                max: 1.0,
+                default: 0.0,
+                value: f32::NAN,
+                live: false,
+            },
+            kind: Some(kind),
+            choices: choices.iter().map(|c| c.to_string()).collect(),
+            owner,
+        }
+    }
+
+    fn owned(controller: &str, choice: Option<(&str, &str, bool)>) -> Option<Owner> {
+        Some(Owner {
+            controller: controller.into(),
+            choice: choice.map(|(param, value, is_default)| Choice {
+                param: param.into(),
+                value: value.into(),
+                is_default,
+            }),
+        })
     }
 
     #[test]
-    fn parameters_belong_to_their_controllers() {
-        let index = |n: &str| CONTROLLER_NAMES.iter().position(|c| *c == n);
-        let of = |name: &str| owner(name).map(|o| o.controller);
-        assert_eq!(of("energy.gain_nm_per_j"), index("energy"));
-        assert_eq!(of("constant_torque.torque_nm"), index("open-torque"));
-        assert_eq!(of("shaped.switch_fraction"), index("shaped"));
-        assert_eq!(of("energy_apex.measure"), index("energy-apex"));
-        // Every configuration has these, and an unknown name has no owner.
-        for general in [
-            "controller",
-            "target_apex_m",
-            "arming.require_tare",
-            "no.such",
-        ] {
-            assert_eq!(owner(general), None, "{general}");
-        }
-        // Only with the non-default choice.
-        let o = owner("step_closed.min_compression_m");
-        assert_eq!(o.map(|o| o.controller), index("step-closed"));
-        assert_eq!(
-            o.and_then(|o| o.choice).map(|(q, v)| (q.name, v)),
-            Some(("step_closed.gain", 1))
-        );
+    fn choices_are_shown_by_name() {
+        let c = described("controller", ParamKind::Choice, &["energy", "shaped"], None);
+        assert_eq!(c.value(1.0), "shaped");
+        assert_eq!(c.shown(1.0), "shaped (1)");
+        assert_eq!(c.parse("shaped").ok(), Some(1.0));
+        assert_eq!(c.parse("0").ok(), Some(0.0));
+        assert!(c.parse("nope").is_err());
+        // Beyond the names (a newer firmware) or not whole: the number.
+        assert_eq!(c.value(42.0), "42");
+        assert_eq!(c.value(0.5), "0.5");
+        let r = described("target_apex_m", ParamKind::Real, &[], None);
+        assert_eq!(r.value(0.12), "0.12");
+        assert!(r.parse("high").is_err());
     }
 
     #[test]
     fn inactive_parameters_say_what_would_activate_them() {
-        let shaped = CONTROLLER_NAMES.iter().position(|c| *c == "shaped");
-        let step_closed = CONTROLLER_NAMES.iter().position(|c| *c == "step-closed");
-        assert_eq!(
-            inactive_reason("energy.gain_nm_per_j", shaped),
-            "inactive: controller energy not selected"
+        let energy = described(
+            "energy.gain_nm_per_j",
+            ParamKind::Real,
+            &[],
+            owned("energy", None),
         );
         assert_eq!(
-            inactive_reason("step_closed.min_compression_m", step_closed),
+            energy.inactive_reason(Some("shaped")),
+            "inactive: controller energy not selected"
+        );
+        // Needs the non-default value of step-closed's gain choice.
+        let normalised = described(
+            "step_closed.min_compression_m",
+            ParamKind::Real,
+            &[],
+            owned(
+                "step-closed",
+                Some(("step_closed.gain", "normalised", false)),
+            ),
+        );
+        assert_eq!(
+            normalised.inactive_reason(Some("step-closed")),
             "inactive: step_closed.gain is not normalised"
         );
         assert_eq!(
-            inactive_reason("step_closed.min_compression_m", shaped),
+            normalised.inactive_reason(Some("shaped")),
             "inactive: controller step-closed with step_closed.gain normalised not selected"
         );
         assert_eq!(
-            inactive_reason("step_closed.kp_m_per_j", step_closed),
-            "inactive: step_closed.gain is not fixed"
-        );
-        // Selecting step-closed starts it with the fixed gain.
-        assert_eq!(
-            inactive_reason("step_closed.kp_m_per_j", shaped),
-            "inactive: controller step-closed not selected"
-        );
-        assert_eq!(
-            inactive_reason("no.such", shaped),
-            "inactive: not in the robot's configuration"
-        );
-        assert_eq!(
-            activation("step_closed.min_compression_m", shaped),
+            normalised.activation(Some("shaped")),
             [
                 "params set controller step-closed",
                 "params set step_closed.gain normalised"
             ]
         );
+        // Needs the default value: selecting the controller is enough.
+        let fixed = described(
+            "step_closed.kp_m_per_j",
+            ParamKind::Real,
+            &[],
+            owned("step-closed", Some(("step_closed.gain", "fixed", true))),
+        );
         assert_eq!(
-            activation("step_closed.kp_m_per_j", shaped),
+            fixed.inactive_reason(Some("step-closed")),
+            "inactive: step_closed.gain is not fixed"
+        );
+        assert_eq!(
+            fixed.inactive_reason(Some("shaped")),
+            "inactive: controller step-closed not selected"
+        );
+        assert_eq!(
+            fixed.activation(Some("shaped")),
             ["params set controller step-closed"]
         );
         assert_eq!(
-            activation("step_closed.kp_m_per_j", step_closed),
+            fixed.activation(Some("step-closed")),
             ["params set step_closed.gain fixed"]
         );
-        assert!(activation("target_apex_m", shaped).is_empty());
-    }
-
-    /// Every table parameter that some controller's configuration lacks
-    /// has an owner: none would be reported as "not in the robot's
-    /// configuration".
-    #[test]
-    fn every_controller_parameter_has_an_owner() {
-        for i in 0..CONTROLLER_NAMES.len() {
-            let cfg = with_controller(i).unwrap_or_else(|| panic!("controller {i}"));
-            for p in params::TABLE {
-                if params::get(&cfg, p.name).is_err() {
-                    assert!(owner(p.name).is_some(), "{}", p.name);
-                }
-            }
-        }
+        let general = described("target_apex_m", ParamKind::Real, &[], None);
+        assert_eq!(
+            general.inactive_reason(Some("shaped")),
+            "inactive: not in the robot's configuration"
+        );
+        assert!(general.activation(Some("shaped")).is_empty());
     }
 }

@@ -3,8 +3,10 @@
 //! (a parameter of an unselected controller has no value: NaN, and
 //! reading or setting it is refused).
 
+use hopper_protocol::vocab::{Refusal, RefusalCode};
 use hopper_protocol::{
-    encode, Decoder, HostMsg, ParamInfo, Request, Response, RobotMsg, MAX_FRAME, PROTOCOL_VERSION,
+    encode, Decoder, HostMsg, ParamInfo, ParamMeta, Request, Response, RobotMsg, MAX_FRAME,
+    PROTOCOL_VERSION,
 };
 use std::io::{Read, Write};
 use std::net::{TcpListener, TcpStream};
@@ -103,8 +105,8 @@ fn robot() -> (String, std::thread::JoinHandle<()>) {
     (addr, serve)
 }
 
-fn refused(why: &str) -> Response {
-    Response::Refused(why.try_into().unwrap_or_else(|_| panic!("{why}")))
+fn refused(why: Refusal) -> Response {
+    Response::Refused(why.into())
 }
 
 /// What the firmware's endpoint answers (`hopper_robot_link`).
@@ -112,15 +114,31 @@ fn answer(table: &[ParamInfo], req: &Request) -> Response {
     match req {
         Request::ParamCount => Response::ParamCount(table.len() as u16),
         Request::ParamInfo { index } => table.get(usize::from(*index)).map_or_else(
-            || refused("no-such-index"),
+            || refused(Refusal::NoSuchIndex),
             |p| Response::ParamInfo(p.clone()),
         ),
         Request::ParamGet { name } => match table.iter().find(|p| p.name == *name) {
             Some(p) if !p.value.is_nan() => Response::Value(p.value),
-            _ => refused("unknown-parameter"),
+            _ => refused(Refusal::UnknownParameter),
         },
-        Request::ParamSet { .. } => refused("controller-not-selected"),
-        _ => refused("not-in-this-test"),
+        Request::ParamSet { .. } => refused(Refusal::ControllerNotSelected),
+        // The firmware's description, with the index into this table.
+        Request::ParamMeta { name } => match (
+            hopper_robot_link::param_meta(name.as_str()),
+            table.iter().position(|p| p.name == *name),
+        ) {
+            (Response::ParamMeta(m), Some(i)) => Response::ParamMeta(ParamMeta {
+                index: i as u16,
+                needs: None,
+                ..m
+            }),
+            _ => refused(Refusal::UnknownParameter),
+        },
+        Request::ParamChoice { name, value } => {
+            hopper_robot_link::param_choice(name.as_str(), *value)
+        }
+        // A reason this host does not know (a newer robot's).
+        _ => Response::Refused(RefusalCode(250)),
     }
 }
 

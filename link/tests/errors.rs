@@ -3,7 +3,7 @@
 //! protocol version.
 
 use hopper_link::{Client, Target};
-use hopper_protocol::{encode, RobotMsg, MAX_FRAME};
+use hopper_protocol::{encode, RobotMsg, MAX_FRAME, PROTOCOL_VERSION};
 use std::io::Write;
 use std::net::TcpListener;
 use std::time::{Duration, Instant};
@@ -71,7 +71,9 @@ fn another_protocol_version() {
     });
     let e = error_of(&Target::Tcp(addr.to_string()));
     assert!(
-        e.contains("speaks protocol version 99, this hopper-link speaks 1"),
+        e.contains(&format!(
+            "speaks protocol version 99, this hopper-link speaks {PROTOCOL_VERSION}"
+        )),
         "{e}"
     );
     let _ = robot.join();
@@ -100,7 +102,13 @@ fn a_robot_still_booting_gets_the_hello_again() {
                 if let Some(hopper_protocol::HostMsg::Hello { .. }) = d.push(b) {
                     hellos += 1;
                     let mut f = [0u8; MAX_FRAME];
-                    let k = encode(&RobotMsg::Hello { version: 1 }, &mut f).unwrap_or(0);
+                    let k = encode(
+                        &RobotMsg::Hello {
+                            version: PROTOCOL_VERSION,
+                        },
+                        &mut f,
+                    )
+                    .unwrap_or(0);
                     let _ = s.write_all(&f[..k]);
                 }
             }

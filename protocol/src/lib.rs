@@ -29,7 +29,7 @@ pub mod vocab;
 use serde::{Deserialize, Serialize};
 
 /// The protocol version: a host and a robot talk only when theirs agree.
-pub const PROTOCOL_VERSION: u16 = 1;
+pub const PROTOCOL_VERSION: u16 = 2;
 
 /// Largest encoded message, bytes (postcard, before the CRC and COBS).
 pub const MAX_MESSAGE: usize = 120;
@@ -175,6 +175,19 @@ pub enum Request {
     /// Where the motor's temperature estimate started at boot
     /// ([`Response::ThermalBoot`]).
     ThermalBoot,
+    /// What a parameter is beyond its table entry: its kind, and which
+    /// controller's configuration holds it ([`Response::ParamMeta`]).
+    ParamMeta {
+        /// The table name.
+        name: Name,
+    },
+    /// The name of one value of a choice parameter ([`Response::Name`]).
+    ParamChoice {
+        /// The table name.
+        name: Name,
+        /// The value (the choice's index).
+        value: u8,
+    },
 }
 
 /// Robot to host.
@@ -284,9 +297,9 @@ pub enum ArmState {
 pub enum Response {
     /// Done.
     Ok,
-    /// Refused, with the reason (`hopper_control` names: an arm refusal, a
-    /// parameter error).
-    Refused(heapless::String<TEXT_LEN>),
+    /// Refused, with the reason ([`vocab::Refusal`]'s code: an arm
+    /// refusal, a parameter's, a routine's or the link's own).
+    Refused(vocab::RefusalCode),
     /// The state.
     Status(Status),
     /// The table's size.
@@ -317,6 +330,31 @@ pub enum Response {
     Cost(CostStats),
     /// Where the motor's temperature estimate started at boot.
     ThermalBoot(ThermalBootInfo),
+    /// What a parameter is beyond its table entry.
+    ParamMeta(ParamMeta),
+    /// A name (a choice's value).
+    Name(Name),
+}
+
+/// What a parameter is beyond its table entry ([`ParamInfo`]): everything a
+/// host needs to show and explain it without a copy of the firmware's
+/// table.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct ParamMeta {
+    /// Its index in the table ([`Request::ParamInfo`]).
+    pub index: u16,
+    /// Its kind ([`vocab::ParamKind`] by code).
+    pub kind: u8,
+    /// How many values a choice has (their names by
+    /// [`Request::ParamChoice`]); 0 for the other kinds.
+    pub choices: u8,
+    /// The controller (a value of the `controller` choice) whose
+    /// configuration holds it; `None` when every configuration has it.
+    pub controller: Option<u8>,
+    /// A choice of that controller it also needs: the choice's table index
+    /// and the value it must have (`step_closed.min_compression_m` needs
+    /// `step_closed.gain` normalised).
+    pub needs: Option<(u16, u8)>,
 }
 
 /// Where the motor's temperature estimate started at boot.
@@ -389,6 +427,9 @@ pub struct CrystalInfo {
     /// As measured against the internal oscillator at boot, Hz (0: not
     /// measured).
     pub measured_hz: u32,
+    /// The measured crystal is the profile's, within the firmware's
+    /// tolerance (otherwise arming is refused).
+    pub matches: bool,
 }
 
 /// The saved calibration's state (`hopper_control::persist`).
@@ -405,6 +446,8 @@ pub struct StoredInfo {
     /// The last save: 0 none since boot, 1 pending, 2 saved, 3 failed, 4
     /// pending until a restart (the board writes its flash in `init`).
     pub save: u8,
+    /// How many parameters a save writes (the calibration's).
+    pub saved_count: u8,
 }
 
 /// What the motor-driving and height routines found

@@ -40,7 +40,9 @@ vocabulary!(
     Routine,
     CalState,
     LoadError,
-    PhaseEvent
+    PhaseEvent,
+    Refusal,
+    ParamKind
 );
 
 /// One fault the robot's supervisor latches: its code is its bit in
@@ -287,6 +289,138 @@ pub enum PhaseEvent {
     Bottom = 4,
 }
 
+/// Why the robot refused a request (`Response::Refused`'s code): an arm
+/// refusal, a parameter's, a bring-up routine's, or the link's own. One
+/// name per meaning: where the arming check and a routine refuse for the
+/// same reason (a latched fault, the e-stop), it is one code.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, IntoStaticStr, VariantArray, FromRepr)]
+#[strum(serialize_all = "kebab-case")]
+#[repr(u8)]
+pub enum Refusal {
+    /// A fault is latched (reset it first, while disarmed).
+    Faulted = 0,
+    /// The e-stop is pressed.
+    EstopPressed = 1,
+    /// No valid link frame within the timeout (and not untethered).
+    LinkDown = 2,
+    /// The sensors could not be read, or a value is not finite.
+    SensorsImplausible = 3,
+    /// The nut is not within the home tolerance of its upper stop.
+    NutNotHome = 4,
+    /// Nut or body moves faster than the still velocity.
+    Moving = 5,
+    /// The core clock is not the one the board's clock profile names.
+    ClockFallback = 6,
+    /// The brown-out reset is off in the option bytes.
+    BrownOutResetOff = 7,
+    /// The crystal measured at boot is not the one the clock profile names.
+    #[strum(serialize = "crystal-not-the-profiles")]
+    CrystalMismatch = 8,
+    /// `arming.require_tare` is on and no tare has succeeded since boot.
+    NotCalibrated = 9,
+    /// A bring-up routine is running.
+    Calibrating = 10,
+    /// The direction check found the motor encoder or the load cell
+    /// counting the wrong way.
+    #[strum(serialize = "encoder-or-motor-direction-reversed")]
+    DirectionReversed = 11,
+    /// `arming.require_home` is on and the nut was not homed since boot.
+    NotHomed = 12,
+    /// A disarm was asked for in the same period as the arm.
+    DisarmRequested = 13,
+    /// No parameter has this name.
+    UnknownParameter = 14,
+    /// The value is outside the parameter's range, or not whole where it
+    /// must be.
+    OutOfRange = 15,
+    /// The parameter belongs to a controller that is not selected.
+    ControllerNotSelected = 16,
+    /// Only while disarmed.
+    DisarmFirst = 17,
+    /// The new configuration as a whole breaks a cross-field rule.
+    InvalidConfiguration = 18,
+    /// Another request of the kind is still being handled: ask again.
+    Busy = 19,
+    /// No bring-up routine has this code.
+    UnknownRoutine = 20,
+    /// The routine's duration is not within 0.01..=10 s.
+    BadDuration = 21,
+    /// Homing needs a passed direction check since boot.
+    CheckDirectionFirst = 22,
+    /// The spring sweep and the weighing need the nut homed since boot.
+    HomeFirst = 23,
+    /// The weighing needs the load cell tared (or a saved calibration).
+    TareFirst = 24,
+    /// The robot is restarting (to write its flash).
+    Restarting = 25,
+    /// Nothing measured yet since boot.
+    NoMeasurementYet = 26,
+    /// Some latched faults' causes are still present.
+    FaultsRemain = 27,
+    /// A save is in progress.
+    Saving = 28,
+    /// No table entry has this index.
+    NoSuchIndex = 29,
+    /// The thermal protection's parameters are locked on this robot.
+    ProtectionLocked = 30,
+    /// The hoist's lift is outside its range.
+    LiftOutOfRange = 31,
+    /// Only a simulated robot does this (a real one's e-stop is a button).
+    NotSimulated = 32,
+    /// An arm request is already being decided.
+    Arming = 33,
+}
+
+/// What kind of value a parameter holds (`ParamMeta::kind`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, IntoStaticStr, VariantArray, FromRepr)]
+#[strum(serialize_all = "kebab-case")]
+#[repr(u8)]
+pub enum ParamKind {
+    /// A real number in its unit.
+    Real = 0,
+    /// A whole number (counts, samples, codes).
+    Count = 1,
+    /// 0 (off) or 1 (on).
+    Flag = 2,
+    /// The index of one of its names.
+    Choice = 3,
+}
+
+/// A refusal's code as it travels (`Response::Refused`): a plain byte, so a
+/// newer robot's unknown reason still decodes; it prints as its name, or as
+/// the number when this end does not know it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(transparent)]
+pub struct RefusalCode(pub u8);
+
+impl RefusalCode {
+    /// The reason, if this end knows the code.
+    pub const fn refusal(self) -> Option<Refusal> {
+        Refusal::from_code(self.0)
+    }
+}
+
+impl From<Refusal> for RefusalCode {
+    fn from(r: Refusal) -> Self {
+        Self(r.code())
+    }
+}
+
+impl PartialEq<Refusal> for RefusalCode {
+    fn eq(&self, r: &Refusal) -> bool {
+        self.0 == r.code()
+    }
+}
+
+impl core::fmt::Display for RefusalCode {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self.refusal() {
+            Some(r) => f.write_str(r.name()),
+            None => write!(f, "refusal {}", self.0),
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     extern crate std;
@@ -344,6 +478,23 @@ mod tests {
             PhaseEvent::from_code,
             PhaseEvent::name,
         );
+        check(
+            ParamKind::ALL,
+            ParamKind::code,
+            ParamKind::from_code,
+            ParamKind::name,
+        );
+        check(
+            Refusal::ALL,
+            Refusal::code,
+            Refusal::from_code,
+            Refusal::name,
+        );
+        assert_eq!(
+            std::format!("{}", RefusalCode::from(Refusal::DisarmFirst)),
+            "disarm-first"
+        );
+        assert_eq!(std::format!("{}", RefusalCode(200)), "refusal 200");
         assert_eq!(Fault::from_code(15), None);
         assert_eq!(Routine::SensorCheck.name(), "sensors");
         assert_eq!(ResetCause::IndependentWatchdog.name(), "watchdog");

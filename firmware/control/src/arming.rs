@@ -107,7 +107,7 @@ impl DisarmReason {
 }
 
 /// Why an arm request was refused.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, strum::IntoStaticStr)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, strum::IntoStaticStr, strum::VariantArray)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 #[strum(serialize_all = "kebab-case")]
 pub enum ArmRefusal {

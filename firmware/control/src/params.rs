@@ -855,7 +855,11 @@ pub fn read(c: &mut HopperConfig, p: &Param) -> Result<f32, ParamError> {
 /// parameter's range. The whole configuration is validated again when a
 /// controller is built from it (`Hopper::new`).
 pub fn set(cfg: &mut HopperConfig, name: &str, value: f32) -> Result<(), ParamError> {
-    let p = find(name).ok_or(ParamError::Unknown)?;
+    write(cfg, find(name).ok_or(ParamError::Unknown)?, value)
+}
+
+/// [`set`] by table entry.
+pub fn write(cfg: &mut HopperConfig, p: &Param, value: f32) -> Result<(), ParamError> {
     let v = p.check(value).map_err(|f| ParamError::OutOfRange(f.0))?;
     match slot(cfg, p).ok_or(ParamError::NotSelected(p.name))? {
         Slot::Real(x) => *x = v,
@@ -894,10 +898,113 @@ pub fn set(cfg: &mut HopperConfig, name: &str, value: f32) -> Result<(), ParamEr
     Ok(())
 }
 
+/// Where a parameter lives: the controller whose configuration holds it,
+/// and a choice of that controller it needs (`step_closed.min_compression_m`
+/// exists only with `step_closed.gain` normalised).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Owner {
+    /// The controller, an index of [`CONTROLLER_NAMES`].
+    pub controller: usize,
+    /// The choice of that controller and the value it must have.
+    pub choice: Option<(&'static Param, usize)>,
+}
+
+/// The configuration of controller `index` at its defaults.
+fn with_controller(index: usize) -> Option<HopperConfig> {
+    let mut cfg = HopperConfig::default();
+    write(&mut cfg, &CONTROLLER, index as f32).ok()?;
+    Some(cfg)
+}
+
+/// Whether `p` is in `cfg` with choice `q` set to `v`.
+fn readable_with(cfg: &HopperConfig, q: &Param, v: usize, p: &Param) -> bool {
+    let mut c = *cfg;
+    write(&mut c, q, v as f32).is_ok() && read(&mut c, p).is_ok()
+}
+
+/// The choices (other than the controller) that `cfg` has, with their
+/// number of values.
+fn choices_of(cfg: &HopperConfig) -> impl Iterator<Item = (&'static Param, usize)> + '_ {
+    TABLE.iter().copied().filter_map(move |q| match q.kind {
+        Kind::Choice(values) if q.id != Id::CONTROLLER && read(&mut { *cfg }, q).is_ok() => {
+            Some((q, values.len()))
+        }
+        _ => None,
+    })
+}
+
+/// Which controller (and choice) `p` belongs to; `None` for a parameter of
+/// every configuration (`target_apex_m`, `arming.*`). Found by trying the
+/// configurations themselves rather than from the names, so a new
+/// controller or choice needs no change here. The link answers it
+/// (`ParamMeta`) so the host can say what would make a parameter active.
+pub fn owner(p: &Param) -> Option<Owner> {
+    let n = CONTROLLER_NAMES.len();
+    // Readable in some variant of a configuration: at its defaults, or
+    // with one of its choices switched.
+    let has = |i: usize| {
+        with_controller(i).is_some_and(|cfg| {
+            read(&mut { cfg }, p).is_ok()
+                || choices_of(&cfg).any(|(q, k)| (0..k).any(|v| readable_with(&cfg, q, v, p)))
+        })
+    };
+    if (0..n).all(has) {
+        return None;
+    }
+    let controller = (0..n).find(|&i| has(i))?;
+    let cfg = with_controller(controller)?;
+    // A choice of the controller that some of its values leave `p` out of.
+    let choice = choices_of(&cfg).find_map(|(q, k)| {
+        let first = (0..k).find(|&v| readable_with(&cfg, q, v, p))?;
+        (!(0..k).all(|v| readable_with(&cfg, q, v, p))).then_some((q, first))
+    });
+    Some(Owner { controller, choice })
+}
+
 #[cfg(test)]
 mod tests {
     extern crate std;
     use super::*;
+
+    #[test]
+    fn parameters_belong_to_their_controllers() {
+        let index = |n: &str| CONTROLLER_NAMES.iter().position(|c| *c == n);
+        let of = |name: &str| find(name).and_then(owner).map(|o| o.controller);
+        assert_eq!(of("energy.gain_nm_per_j"), index("energy"));
+        assert_eq!(of("constant_torque.torque_nm"), index("open-torque"));
+        assert_eq!(of("shaped.switch_fraction"), index("shaped"));
+        assert_eq!(of("energy_apex.measure"), index("energy-apex"));
+        // Every configuration has these.
+        for general in ["controller", "target_apex_m", "arming.require_tare"] {
+            assert_eq!(find(general).and_then(owner), None, "{general}");
+        }
+        // Only with the non-default choice, and with the default one.
+        let o = find("step_closed.min_compression_m").and_then(owner);
+        assert_eq!(o.map(|o| o.controller), index("step-closed"));
+        assert_eq!(
+            o.and_then(|o| o.choice).map(|(q, v)| (q.name, v)),
+            Some(("step_closed.gain", 1))
+        );
+        let o = find("step_closed.kp_m_per_j").and_then(owner);
+        assert_eq!(
+            o.and_then(|o| o.choice).map(|(q, v)| (q.name, v)),
+            Some(("step_closed.gain", 0))
+        );
+    }
+
+    /// Every parameter that some controller's configuration lacks has an
+    /// owner: none would be reported as "not in the robot's configuration".
+    #[test]
+    fn every_controller_parameter_has_an_owner() {
+        for i in 0..CONTROLLER_NAMES.len() {
+            let cfg = with_controller(i).unwrap_or_else(|| panic!("controller {i}"));
+            for p in TABLE {
+                if read(&mut { cfg }, p).is_err() {
+                    assert!(owner(p).is_some(), "{}", p.name);
+                }
+            }
+        }
+    }
     use crate::hopper::Hopper;
     use std::string::String;
     use std::vec::Vec;

@@ -37,18 +37,22 @@
 
 #![cfg_attr(not(test), no_std)]
 
+use hopper_control::arming::ArmRefusal;
 use hopper_control::arming::{ArmEvent, ArmState as RunnerArmState, DisarmReason};
+use hopper_control::bringup::CalRefusal;
 use hopper_control::hal::HopperIo;
 use hopper_control::hopper::HopperConfig;
 use hopper_control::params;
+use hopper_control::runner::SetError;
 use hopper_control::runner::{
     CycleCounter, HopperSlot, LogItem, Owned, Period, PeriodRunner, Prepared, StepStats, Then,
 };
 use hopper_control::telemetry::{FaultCapture, StepRecord};
+use hopper_protocol::vocab::Refusal;
 use hopper_protocol::{
     encode, ArmState, CostStats, Decoder, DumpInfo, HilActuate, HilSample, Hop, HostMsg, ParamInfo,
     Request, Response, RobotMsg, Status, StoredInfo, Telemetry, ThermalStatus, TimingStats,
-    MAX_FRAME, PROTOCOL_VERSION, TEXT_LEN,
+    MAX_FRAME, PROTOCOL_VERSION,
 };
 
 pub mod hil;
@@ -764,9 +768,9 @@ impl ControlPort {
         // disarm applied in between won).
         if let Some(id) = self.pending_arm.take() {
             let resp = match p.arm_event {
-                Some(ArmEvent::Refused(r)) => Response::Refused(text(r.name())),
+                Some(ArmEvent::Refused(r)) => refused(arm_refusal(r)),
                 _ if p.armed => Response::Ok,
-                _ => Response::Refused(text("disarm-requested")),
+                _ => refused(Refusal::DisarmRequested),
             };
             self.held = Some((id, resp));
         }
@@ -839,20 +843,18 @@ impl ControlPort {
         runner: &mut PeriodRunner<H>,
         capture: &mut FaultCapture<N>,
     ) -> (Option<(Option<u16>, Response)>, Option<H>) {
-        let refused = |e: hopper_control::runner::SetError| Response::Refused(text(e.reason()));
+        let set_refused = |e: SetError| refused(set_refusal(&e));
         if let Command::Install { id, prepared, then } = c {
             let (r, slot) = runner.install(prepared, then);
             return (
-                Some((id, r.map_or_else(refused, |()| Response::Ok))),
+                Some((id, r.map_or_else(set_refused, |()| Response::Ok))),
                 H::RECYCLED.then_some(slot),
             );
         }
         let reply = match c {
             Command::Alive => None,
             // A save waits for the reset: nothing arms before it.
-            Command::Arm { id } if self.restart_in > 0 => {
-                Some((id, Response::Refused(text("restarting"))))
-            }
+            Command::Arm { id } if self.restart_in > 0 => Some((id, refused(Refusal::Restarting))),
             Command::Arm { id } => {
                 runner.arming_mut().request_arm();
                 // Answered when the next period decides.
@@ -870,9 +872,9 @@ impl ControlPort {
                         capture.rearm();
                         Response::Ok
                     }
-                    _ if runner.arming().is_armed() => Response::Refused(text("disarm-first")),
-                    None => Response::Refused(text("no-measurement-yet")),
-                    Some(Err(_)) => Response::Refused(text("faults-remain")),
+                    _ if runner.arming().is_armed() => refused(Refusal::DisarmFirst),
+                    None => refused(Refusal::NoMeasurementYet),
+                    Some(Err(_)) => refused(Refusal::FaultsRemain),
                 };
                 Some((id, resp))
             }
@@ -886,9 +888,9 @@ impl ControlPort {
                 if base_gen == runner.config_gen() {
                     runner
                         .set_live(param, value)
-                        .map_or_else(refused, |()| Response::Ok)
+                        .map_or_else(set_refused, |()| Response::Ok)
                 } else {
-                    refused(hopper_control::runner::SetError::Stale)
+                    set_refused(SetError::Stale)
                 },
             )),
             Command::Install { .. } => None,
@@ -904,7 +906,7 @@ impl ControlPort {
                 id,
                 match runner.start_calibration(routine, seconds) {
                     Ok(()) => Response::Ok,
-                    Err(e) => Response::Refused(text(e.name())),
+                    Err(e) => refused(cal_refusal(e)),
                 },
             )),
             Command::Query { id, what } => Some((id, Self::query(runner, what))),
@@ -945,6 +947,10 @@ impl ControlPort {
                 Response::Crystal(hopper_protocol::CrystalInfo {
                     expected_hz: b.hse_expected_hz,
                     measured_hz: b.hse_measured_hz,
+                    matches: hopper_control::boot::Crystal::matches(
+                        b.hse_measured_hz,
+                        b.hse_expected_hz,
+                    ),
                 })
             }
             Query::Stored => {
@@ -955,6 +961,7 @@ impl ControlPort {
                     boot_error,
                     entries,
                     save: 0,
+                    saved_count: hopper_control::persist::saved_count() as u8,
                 })
             }
             Query::CalibrationReport => {
@@ -1084,11 +1091,109 @@ const SAVE_SAVED: u8 = 2;
 const SAVE_FAILED: u8 = 3;
 const SAVE_AT_RESTART: u8 = 4;
 
-fn text(s: &str) -> heapless::String<TEXT_LEN> {
-    let mut t = heapless::String::new();
-    // Every reason is far shorter than the capacity.
-    let _ = t.push_str(s);
-    t
+/// A parameter's kind and owner ([`Request::ParamMeta`]). Finding the
+/// owner tries the controllers' configurations: link-task work, answered
+/// here without the control period.
+pub fn param_meta(name: &str) -> Response {
+    use hopper_protocol::vocab::ParamKind;
+    let Some((index, p)) = params::TABLE
+        .iter()
+        .enumerate()
+        .find(|(_, p)| p.name == name)
+    else {
+        return refused(Refusal::UnknownParameter);
+    };
+    let (kind, choices) = match p.kind {
+        params::Kind::Real => (ParamKind::Real, 0),
+        params::Kind::Count => (ParamKind::Count, 0),
+        params::Kind::Flag => (ParamKind::Flag, 0),
+        params::Kind::Choice(names) => (ParamKind::Choice, names.len()),
+    };
+    let owner = params::owner(p);
+    let index_of = |q: &params::Param| params::TABLE.iter().position(|t| t.id == q.id);
+    Response::ParamMeta(hopper_protocol::ParamMeta {
+        index: index as u16,
+        kind: kind.code(),
+        choices: choices as u8,
+        controller: owner.map(|o| o.controller as u8),
+        needs: owner
+            .and_then(|o| o.choice)
+            .and_then(|(q, v)| Some((index_of(q)? as u16, v as u8))),
+    })
+}
+
+/// The name of value `value` of choice parameter `name`
+/// ([`Request::ParamChoice`]).
+pub fn param_choice(name: &str, value: u8) -> Response {
+    match params::find(name).map(|p| p.kind) {
+        None => refused(Refusal::UnknownParameter),
+        Some(params::Kind::Choice(names)) => match names.get(usize::from(value)) {
+            Some(n) => {
+                let mut out = hopper_protocol::Name::new();
+                // Every choice's name is far shorter than a parameter's.
+                let _ = out.push_str(n);
+                Response::Name(out)
+            }
+            None => refused(Refusal::OutOfRange),
+        },
+        Some(_) => refused(Refusal::OutOfRange),
+    }
+}
+
+/// A refusal's answer.
+fn refused(r: Refusal) -> Response {
+    Response::Refused(r.into())
+}
+
+/// An arm refusal's wire reason (the same name: a test checks).
+pub fn arm_refusal(r: ArmRefusal) -> Refusal {
+    use ArmRefusal as A;
+    match r {
+        A::Faulted => Refusal::Faulted,
+        A::EstopPressed => Refusal::EstopPressed,
+        A::LinkDown => Refusal::LinkDown,
+        A::SensorsImplausible => Refusal::SensorsImplausible,
+        A::NutNotHome => Refusal::NutNotHome,
+        A::Moving => Refusal::Moving,
+        A::ClockFallback => Refusal::ClockFallback,
+        A::BrownOutResetOff => Refusal::BrownOutResetOff,
+        A::CrystalMismatch => Refusal::CrystalMismatch,
+        A::NotCalibrated => Refusal::NotCalibrated,
+        A::Calibrating => Refusal::Calibrating,
+        A::DirectionReversed => Refusal::DirectionReversed,
+        A::NotHomed => Refusal::NotHomed,
+    }
+}
+
+/// A bring-up routine's refusal on the wire (the same name: a test checks).
+pub fn cal_refusal(r: CalRefusal) -> Refusal {
+    match r {
+        CalRefusal::Armed => Refusal::DisarmFirst,
+        CalRefusal::EstopPressed => Refusal::EstopPressed,
+        CalRefusal::Busy => Refusal::Busy,
+        CalRefusal::Unknown => Refusal::UnknownRoutine,
+        CalRefusal::Duration => Refusal::BadDuration,
+        CalRefusal::Faulted => Refusal::Faulted,
+        CalRefusal::LinkDown => Refusal::LinkDown,
+        CalRefusal::DirectionFirst => Refusal::CheckDirectionFirst,
+        CalRefusal::HomeFirst => Refusal::HomeFirst,
+        CalRefusal::TareFirst => Refusal::TareFirst,
+    }
+}
+
+/// Why a parameter set was refused, on the wire.
+pub fn set_refusal(e: &SetError) -> Refusal {
+    use hopper_control::params::ParamError as P;
+    match e {
+        SetError::Param(P::Unknown) => Refusal::UnknownParameter,
+        SetError::Param(P::OutOfRange(_)) => Refusal::OutOfRange,
+        SetError::Param(P::NotSelected(_)) => Refusal::ControllerNotSelected,
+        SetError::WhileArmed(_) => Refusal::DisarmFirst,
+        SetError::Calibrating => Refusal::Calibrating,
+        SetError::Config(_) => Refusal::InvalidConfiguration,
+        // The configuration moved under the change: asking again works.
+        SetError::Stale => Refusal::Busy,
+    }
 }
 
 /// The wire form of a hop's ledger.
@@ -1490,12 +1595,12 @@ impl<H: HopperSlot> Endpoint<H> {
             Request::Status => Err(Response::Status(self.status())),
             // The board resets shortly to write a save: nothing starts.
             Request::Arm | Request::Calibrate { .. } if self.save_state == SAVE_AT_RESTART => {
-                Err(Response::Refused(text("restarting")))
+                Err(refused(Refusal::Restarting))
             }
             // A save queued but not yet taken becomes a reset on the
             // board: nothing starts before it is done.
             Request::Arm | Request::Calibrate { .. } if self.save_state == SAVE_PENDING => {
-                Err(Response::Refused(text("saving")))
+                Err(refused(Refusal::Saving))
             }
             Request::Arm => command(Command::Arm { id }),
             Request::Disarm => command(Command::Disarm { id }),
@@ -1517,14 +1622,14 @@ impl<H: HopperSlot> Endpoint<H> {
                         live: PeriodRunner::settable_while_armed(p),
                     })
                 }
-                None => Response::Refused(text("no-such-index")),
+                None => refused(Refusal::NoSuchIndex),
             }),
             Request::ParamGet { name } => Err(match params::get(self.config(), name) {
                 Ok(v) => Response::Value(v),
-                Err(_) => Response::Refused(text("unknown-parameter")),
+                Err(_) => refused(Refusal::UnknownParameter),
             }),
             Request::ParamSet { name, value } if !self.simulated && unsafe_value(name, *value) => {
-                Err(Response::Refused(text("protection-locked")))
+                Err(refused(Refusal::ProtectionLocked))
             }
             Request::ParamSet { name, value } => {
                 match self.plan_set(id, name, *value, calibrating) {
@@ -1589,9 +1694,7 @@ impl<H: HopperSlot> Endpoint<H> {
             }),
             Request::Calibrate { routine, seconds } => {
                 match hopper_control::bringup::Routine::from_code(*routine) {
-                    None => Err(Response::Refused(text(
-                        hopper_control::bringup::CalRefusal::Unknown.name(),
-                    ))),
+                    None => Err(refused(Refusal::UnknownRoutine)),
                     Some(routine) => command(Command::Calibrate {
                         id,
                         routine,
@@ -1615,10 +1718,10 @@ impl<H: HopperSlot> Endpoint<H> {
                         lift_m: *lift_m,
                     })
                 } else {
-                    Err(Response::Refused(text("lift-out-of-range")))
+                    Err(refused(Refusal::LiftOutOfRange))
                 }
             }
-            Request::SimulateMount { .. } => Err(Response::Refused(text("not-simulated"))),
+            Request::SimulateMount { .. } => Err(refused(Refusal::NotSimulated)),
             Request::Save => Err(self.save(note)),
             Request::Weighing => command(Command::Query {
                 id,
@@ -1642,8 +1745,10 @@ impl<H: HopperSlot> Endpoint<H> {
                     pressed: *pressed,
                 })
             }
-            Request::SimulateEstop { .. } => Err(Response::Refused(text("not-simulated"))),
+            Request::SimulateEstop { .. } => Err(refused(Refusal::NotSimulated)),
             Request::Dump => Err(self.start_dump(capture)),
+            Request::ParamMeta { name } => Err(param_meta(name.as_str())),
+            Request::ParamChoice { name, value } => Err(param_choice(name.as_str(), *value)),
         };
         match out {
             Ok(c) => {
@@ -1671,7 +1776,7 @@ impl<H: HopperSlot> Endpoint<H> {
                                 let _ = self.spares.push(prepared.into_slot_handle());
                             }
                         }
-                        let resp = Response::Refused(text("busy"));
+                        let resp = refused(Refusal::Busy);
                         send(tx, &RobotMsg::Response { id, resp }, false);
                         false
                     }
@@ -1693,19 +1798,18 @@ impl<H: HopperSlot> Endpoint<H> {
         value: f32,
         calibrating: bool,
     ) -> Result<(Command<H>, HopperConfig), Response> {
-        let refused = |e: hopper_control::runner::SetError| Response::Refused(text(e.reason()));
+        let set_refused = |e: SetError| refused(set_refusal(&e));
         if params::find(name).is_some() && calibrating {
-            return Err(refused(hopper_control::runner::SetError::Calibrating));
+            return Err(set_refused(SetError::Calibrating));
         }
-        let (param, cfg) = PeriodRunner::plan_set(self.config(), name, value).map_err(refused)?;
+        let (param, cfg) =
+            PeriodRunner::plan_set(self.config(), name, value).map_err(set_refused)?;
         if self.pending.is_full() {
-            return Err(Response::Refused(text("busy")));
+            return Err(refused(Refusal::Busy));
         }
         if self.armed() {
             if !PeriodRunner::settable_while_armed(param) {
-                return Err(refused(hopper_control::runner::SetError::WhileArmed(
-                    param.name,
-                )));
+                return Err(set_refused(SetError::WhileArmed(param.name)));
             }
             let base_gen = self.generation();
             return Ok((
@@ -1721,9 +1825,9 @@ impl<H: HopperSlot> Endpoint<H> {
         // The controller's constants and every cross-field rule, here: the
         // control period only copies it in.
         let prepared = PeriodRunner::prepare_at(cfg, self.generation())
-            .map_err(refused)?
+            .map_err(set_refused)?
             .into_slot(self.spares.pop())
-            .ok_or_else(|| Response::Refused(text("busy")))?;
+            .ok_or_else(|| refused(Refusal::Busy))?;
         Ok((
             Command::Install {
                 id: Some(id),
@@ -1736,33 +1840,33 @@ impl<H: HopperSlot> Endpoint<H> {
 
     fn save(&mut self, note: Option<Note>) -> Response {
         let Some(n) = note else {
-            return Response::Refused(text("busy"));
+            return refused(Refusal::Busy);
         };
         if self.armed() {
-            return Response::Refused(text("disarm-first"));
+            return refused(Refusal::DisarmFirst);
         }
         // An arm decided at a later period would arm a robot that the save
         // then resets.
         if self.arm_outstanding.is_some() || n.arm_pending {
-            return Response::Refused(text("arming"));
+            return refused(Refusal::Arming);
         }
         if n.calibrating || self.calibrate_outstanding.is_some() {
-            return Response::Refused(text("calibrating"));
+            return refused(Refusal::Calibrating);
         }
         // The record is the control period's configuration, as this task
         // knows it: only when no change is in flight and the last period
         // ran on it (a tare installed but not yet answered would be
         // saved without its offsets).
         if !self.pending.is_empty() || self.confirmed.1 != n.config_gen {
-            return Response::Refused(text("busy"));
+            return refused(Refusal::Busy);
         }
         // The placeholders are not a calibration: a tare (or a loaded
         // record) first, else the saved record would stand for one.
         if !n.tared {
-            return Response::Refused(text("not-calibrated"));
+            return refused(Refusal::NotCalibrated);
         }
         if self.save_state == SAVE_PENDING {
-            return Response::Refused(text("busy"));
+            return refused(Refusal::Busy);
         }
         self.save_len = hopper_control::persist::encode(&self.confirmed.0, &mut self.save_record.0);
         self.save_taken = false;
@@ -1939,6 +2043,81 @@ mod vocabulary_tests {
     use super::{disarm_reason, DISARM_REASONS};
     use hopper_control::{boot, bringup, persist, supervisor};
     use hopper_protocol::vocab;
+
+    /// The robot describes its parameters: kind, choices and owner, with
+    /// the owner's choice by table index.
+    #[test]
+    fn parameters_are_described() {
+        use hopper_protocol::{vocab::ParamKind, ParamMeta, Response};
+        let index = |n: &str| {
+            hopper_control::params::TABLE
+                .iter()
+                .position(|p| p.name == n)
+        };
+        let controller = |n: &str| {
+            hopper_control::params::CONTROLLER_NAMES
+                .iter()
+                .position(|c| *c == n)
+                .map(|i| i as u8)
+        };
+        let Response::ParamMeta(m) = super::param_meta("step_closed.min_compression_m") else {
+            panic!("no description")
+        };
+        assert_eq!(
+            m,
+            ParamMeta {
+                index: index("step_closed.min_compression_m").unwrap_or(9999) as u16,
+                kind: ParamKind::Real.code(),
+                choices: 0,
+                controller: controller("step-closed"),
+                needs: index("step_closed.gain").map(|i| (i as u16, 1)),
+            }
+        );
+        let Response::ParamMeta(m) = super::param_meta("controller") else {
+            panic!("no description")
+        };
+        assert_eq!((m.kind, m.controller), (ParamKind::Choice.code(), None));
+        assert_eq!(
+            usize::from(m.choices),
+            hopper_control::params::CONTROLLER_NAMES.len()
+        );
+        let Response::Name(n) = super::param_choice("controller", 8) else {
+            panic!("no name")
+        };
+        assert_eq!(n.as_str(), "shaped");
+        for refused in [
+            super::param_meta("no.such"),
+            super::param_choice("controller", 200),
+            super::param_choice("target_apex_m", 0),
+        ] {
+            assert!(matches!(refused, Response::Refused(_)), "{refused:?}");
+        }
+    }
+
+    /// Every refusal the firmware names goes on the wire under that name;
+    /// a parameter's refusals under the names the docs list.
+    #[test]
+    fn refusals_keep_their_names() {
+        use strum::VariantArray;
+        for &r in hopper_control::arming::ArmRefusal::VARIANTS {
+            assert_eq!(super::arm_refusal(r).name(), r.name());
+        }
+        for &r in bringup::CalRefusal::VARIANTS {
+            assert_eq!(super::cal_refusal(r).name(), r.name());
+        }
+        use hopper_control::params::ParamError as P;
+        use hopper_control::runner::SetError as S;
+        for (e, name) in [
+            (S::Param(P::Unknown), "unknown-parameter"),
+            (S::Param(P::OutOfRange("x")), "out-of-range"),
+            (S::Param(P::NotSelected("x")), "controller-not-selected"),
+            (S::WhileArmed("x"), "disarm-first"),
+            (S::Calibrating, "calibrating"),
+            (S::Stale, "busy"),
+        ] {
+            assert_eq!(super::set_refusal(&e).name(), name);
+        }
+    }
 
     #[test]
     fn every_code_has_the_same_name_on_both_ends() {
@@ -2178,7 +2357,7 @@ mod tests {
         assert!(
             msgs.contains(&RobotMsg::Response {
                 id: 6,
-                resp: Response::Refused(text("sensors-implausible"))
+                resp: refused(Refusal::SensorsImplausible)
             }),
             "{msgs:?}"
         );
@@ -2189,7 +2368,7 @@ mod tests {
     #[test]
     fn only_a_simulated_robot_takes_the_simulated_estop() {
         for (sim, expect) in [
-            (false, Response::Refused(text("not-simulated"))),
+            (false, refused(Refusal::NotSimulated)),
             (true, Response::Ok),
         ] {
             let mut r = Robot::new();
@@ -2228,9 +2407,9 @@ mod tests {
                 r.request(id, Request::ParamSet { name: n, value });
                 r.periods(2);
                 let expect = match (sim, value.is_nan()) {
-                    (false, _) => Response::Refused(text("protection-locked")),
+                    (false, _) => refused(Refusal::ProtectionLocked),
                     (true, false) => Response::Ok,
-                    (true, true) => Response::Refused(text("out-of-range")),
+                    (true, true) => refused(Refusal::OutOfRange),
                 };
                 assert_eq!(
                     r.take(),
@@ -2277,7 +2456,7 @@ mod tests {
             msgs.last(),
             Some(&RobotMsg::Response {
                 id: 2,
-                resp: Response::Refused(text("saving"))
+                resp: refused(Refusal::Saving)
             }),
             "{msgs:?}"
         );
@@ -2297,7 +2476,7 @@ mod tests {
         assert!(
             msgs.contains(&RobotMsg::Response {
                 id: 2,
-                resp: Response::Refused(text("arming"))
+                resp: refused(Refusal::Arming)
             }),
             "{msgs:?}"
         );
@@ -2316,7 +2495,7 @@ mod tests {
             r.take(),
             [RobotMsg::Response {
                 id: 1,
-                resp: Response::Refused(text("not-calibrated"))
+                resp: refused(Refusal::NotCalibrated)
             }]
         );
         assert!(r.ep.take_save().is_none());
@@ -2334,7 +2513,7 @@ mod tests {
             r.take(),
             [RobotMsg::Response {
                 id: 3,
-                resp: Response::Refused(text("restarting"))
+                resp: refused(Refusal::Restarting)
             }]
         );
     }
@@ -2432,7 +2611,7 @@ mod tests {
             r.take(),
             [RobotMsg::Response {
                 id: 5,
-                resp: Response::Refused(text("out-of-range"))
+                resp: refused(Refusal::OutOfRange)
             }]
         );
         assert_eq!(*r.runner.hopper().config(), cfg);
@@ -2464,7 +2643,7 @@ mod tests {
         assert!(
             msgs.contains(&RobotMsg::Response {
                 id: 8,
-                resp: Response::Refused(text("estop-pressed"))
+                resp: refused(Refusal::EstopPressed)
             }),
             "{msgs:?}"
         );
@@ -2687,7 +2866,7 @@ mod tests {
         );
         assert!(msgs.contains(&RobotMsg::Response {
             id: 2,
-            resp: Response::Refused(text("busy"))
+            resp: refused(Refusal::Busy)
         }));
         assert_eq!(runner.config_gen(), gen0.wrapping_add(1));
         let kp = params::get(runner.hopper().config(), "flight.kp_a_per_rad");
@@ -2783,16 +2962,16 @@ mod tests {
             r.port.restart_due(&mut r.runner),
             "disarmed: the reset is due"
         );
-        let mut refused = false;
+        let mut was_refused = false;
         while let Some(a) = r.q.answers.dequeue() {
             if let Answer::Reply {
                 id: Some(9), resp, ..
             } = a
             {
-                refused = resp == Response::Refused(text("restarting"));
+                was_refused = resp == refused(Refusal::Restarting);
             }
         }
-        assert!(refused);
+        assert!(was_refused);
     }
 
     /// A save is the control period's configuration as the link task
@@ -2822,11 +3001,11 @@ mod tests {
         r.request(4, Request::Save);
         r.periods(1);
         let msgs = r.take();
-        for (id, why) in [(2, "busy"), (4, "calibrating")] {
+        for (id, why) in [(2, Refusal::Busy), (4, Refusal::Calibrating)] {
             assert!(
                 msgs.contains(&RobotMsg::Response {
                     id,
-                    resp: Response::Refused(text(why))
+                    resp: refused(why)
                 }),
                 "{id}: {msgs:?}"
             );

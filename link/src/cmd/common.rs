@@ -158,6 +158,7 @@ mod tests {
             boot_error: 0,
             entries: 0,
             save: 0,
+            saved_count: 9,
         };
         assert_eq!(
             stored_line(&nothing, Some(false)),

@@ -1,10 +1,10 @@
 //! `params list`, `params get` and `params set`: the parameter table on
-//! the robot.
+//! the robot, described by the robot itself.
 
 use super::common::{get, read_param, wire_name};
-use anyhow::{anyhow, bail, Result};
-use hopper_control::params::{self, Kind};
-use hopper_link::{names, Client};
+use anyhow::{bail, Result};
+use hopper_link::names::{self, Described};
+use hopper_link::Client;
 use hopper_protocol::{Request, Response};
 
 pub(crate) fn params_list(c: &mut Client) -> Result<()> {
@@ -12,28 +12,28 @@ pub(crate) fn params_list(c: &mut Client) -> Result<()> {
         Response::ParamCount(n) => n,
         r => bail!("unexpected answer {r:?}"),
     };
-    let selected = selected_controller(c);
+    let selected = selected_controller(c)?;
     println!(
         "{:<42} {:>14} {:<8} {:>25} {:>12}  armed",
         "name", "value", "unit", "range", "default"
     );
     let mut inactive = 0;
     for index in 0..n {
-        match c.request(Request::ParamInfo { index })? {
-            Response::ParamInfo(p) => {
-                inactive += usize::from(p.value.is_nan());
-                println!("{}", param_row(&p, selected));
-            }
+        let name = match c.request(Request::ParamInfo { index })? {
+            Response::ParamInfo(p) => p.name,
             Response::Refused(why) => bail!("parameter {index}: {why}"),
             r => bail!("unexpected answer {r:?}"),
-        }
+        };
+        let Some(d) = names::describe(c, name.as_str())? else {
+            bail!("parameter {index} ({name}): the robot does not describe it")
+        };
+        inactive += usize::from(d.info.value.is_nan());
+        println!("{}", param_row(&d, selected.as_deref()));
     }
     if inactive > 0 {
         println!(
             "{n} parameters; {inactive} inactive (not used by the selected controller{}: shown at their defaults)",
-            selected
-                .and_then(|i| params::CONTROLLER_NAMES.get(i))
-                .map_or(String::new(), |c| format!(", {c}"))
+            selected.map_or(String::new(), |c| format!(", {c}"))
         );
     } else {
         println!("{n} parameters");
@@ -43,35 +43,41 @@ pub(crate) fn params_list(c: &mut Client) -> Result<()> {
 
 /// `params get NAME`: one parameter's value.
 pub(crate) fn params_get(c: &mut Client, name: &str) -> Result<()> {
+    let d = names::describe(c, name)?;
     let v = match read_param(c, name)? {
         Ok(v) => v,
-        Err(why) => match inactive_hint(c, name) {
+        Err(why) => match inactive_hint(c, d.as_ref())? {
             Some(hint) => bail!("get {name}: {hint}"),
             None => bail!("get {name}: {why}"),
         },
     };
-    println!("{name} = {}", shown(name, v));
+    println!("{name} = {}", shown(d.as_ref(), v));
     Ok(())
 }
 
 /// `params set NAME VALUE`: set a parameter, checked on the robot.
 pub(crate) fn params_set(c: &mut Client, name: &str, value: &str) -> Result<()> {
-    let v = parse_value(name, value)?;
+    let d = names::describe(c, name)?;
+    let v = match (&d, value.parse::<f32>()) {
+        (_, Ok(v)) => v,
+        (Some(d), Err(_)) => d.parse(value)?,
+        (None, Err(_)) => bail!("`{value}` is not a number"),
+    };
     match c.request(Request::ParamSet {
         name: wire_name(name)?,
         value: v,
     })? {
         Response::Ok => {
             let now = get(c, name)?;
-            println!("{name} = {} (set)", shown(name, now));
+            println!("{name} = {} (set)", shown(d.as_ref(), now));
             Ok(())
         }
         Response::Refused(why) => match read_param(c, name)? {
             Ok(now) => bail!(
                 "set {name} = {value} refused: {why} (unchanged: {})",
-                shown(name, now)
+                shown(d.as_ref(), now)
             ),
-            Err(_) => match inactive_hint(c, name) {
+            Err(_) => match inactive_hint(c, d.as_ref())? {
                 Some(hint) => bail!("set {name} = {value} refused: {why} ({hint})"),
                 None => bail!("set {name} = {value} refused: {why}"),
             },
@@ -80,86 +86,62 @@ pub(crate) fn params_set(c: &mut Client, name: &str, value: &str) -> Result<()> 
     }
 }
 
-/// A value as typed: a number, or a choice's name (`controller shaped`).
-fn parse_value(name: &str, value: &str) -> Result<f32> {
-    if let Ok(v) = value.parse::<f32>() {
-        return Ok(v);
-    }
-    match params::find(name).map(|p| p.kind) {
-        Some(Kind::Choice(names)) => names
-            .iter()
-            .position(|n| *n == value)
-            .map(|i| i as f32)
-            .ok_or_else(|| anyhow!("`{name}` is one of {names:?}, not `{value}`")),
-        _ => bail!("`{value}` is not a number"),
-    }
-}
-
 /// A value for display: a choice by name, else the number and unit.
-fn shown(name: &str, v: f32) -> String {
-    match params::find(name) {
-        Some(p) => match p.kind {
-            Kind::Choice(names) => names
-                .get(v as usize)
-                .map_or(format!("{v}"), |n| format!("{n} ({v})")),
-            _ if p.unit == "1" || p.unit == "-" => format!("{v}"),
-            _ => format!("{v} {}", p.unit),
-        },
-        None => format!("{v}"),
-    }
+fn shown(d: Option<&Described>, v: f32) -> String {
+    d.map_or_else(|| format!("{v}"), |d| d.shown(v))
 }
 
-/// For a parameter of the table that the robot's configuration lacks
-/// (another controller's, which the robot refuses to read or set): why,
-/// its default, and the command(s) that make it active.
-fn inactive_hint(c: &mut Client, name: &str) -> Option<String> {
-    let p = params::find(name)?;
-    names::owner(name)?;
-    let selected = selected_controller(c);
-    let steps: Vec<String> = names::activation(name, selected)
+/// For a parameter that the robot's configuration lacks (another
+/// controller's, which the robot refuses to read or set): why, its
+/// default, and the command(s) that make it active.
+fn inactive_hint(c: &mut Client, d: Option<&Described>) -> Result<Option<String>> {
+    let Some(d) = d.filter(|d| d.owner.is_some()) else {
+        return Ok(None);
+    };
+    let selected = selected_controller(c)?;
+    let steps: Vec<String> = d
+        .activation(selected.as_deref())
         .iter()
         .map(|s| format!("`{s}`"))
         .collect();
     let mut hint = format!(
         "{}; default {}",
-        names::inactive_reason(name, selected),
-        shown(name, p.default)
+        d.inactive_reason(selected.as_deref()),
+        d.shown(d.info.default)
     );
     if !steps.is_empty() {
         hint += &format!("; activate it with {}", steps.join(" then "));
     }
-    Some(hint)
+    Ok(Some(hint))
 }
 
-/// The selected controller's index, if the robot says.
-fn selected_controller(c: &mut Client) -> Option<usize> {
-    get(c, params::CONTROLLER.name)
+/// The selected controller's name, if the robot says.
+fn selected_controller(c: &mut Client) -> Result<Option<String>> {
+    let names = names::controller_names(c)?;
+    Ok(get(c, names::CONTROLLER)
         .ok()
         .filter(|v| *v >= 0.0)
-        .map(|v| v as usize)
+        .and_then(|v| names.get(v as usize).cloned()))
 }
 
 /// One row of `params list`. The robot reports no value (NaN) for a
 /// parameter its configuration lacks (another controller's): the row shows
 /// the default, which selecting that controller starts it from, and says
 /// what would make it active.
-fn param_row(p: &hopper_protocol::ParamInfo, selected: Option<usize>) -> String {
-    let name = p.name.as_str();
+fn param_row(d: &Described, selected: Option<&str>) -> String {
+    let p = &d.info;
     let (value, note) = if p.value.is_nan() {
-        (
-            p.default,
-            format!("  ({})", names::inactive_reason(name, selected)),
-        )
+        (p.default, format!("  ({})", d.inactive_reason(selected)))
     } else {
         (p.value, String::new())
     };
     format!(
         "{:<42} {:>14} {:<8} {:>25} {:>12}  {:<8}{note}",
-        name,
-        names::param_value(name, value),
+        p.name.as_str(),
+        d.value(value),
         p.unit.as_str(),
         format!("{} ..= {}", p.min, p.max),
-        names::param_value(name, p.default),
+        d.value(p.default),
         if p.live { "settable" } else { "-" }
     )
     .trim_end()
@@ -169,35 +151,49 @@ fn param_row(p: &hopper_protocol::ParamInfo, selected: Option<usize>) -> String 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use hopper_protocol::{Name, ParamInfo};
+    use hopper_link::names::Owner;
+    use hopper_protocol::vocab::ParamKind;
+    use hopper_protocol::ParamInfo;
 
-    fn info(name: &str, value: f32, default: f32) -> ParamInfo {
-        let p = params::find(name).unwrap_or_else(|| panic!("{name}"));
-        let mut n = Name::new();
-        n.push_str(name).unwrap();
-        ParamInfo {
-            name: n,
-            unit: p.unit.try_into().unwrap(),
-            min: p.min,
-            max: p.max,
-            default,
-            value,
-            live: false,
+    /// A parameter as the robot would describe it.
+    fn described(
+        name: &str,
+        value: f32,
+        default: f32,
+        kind: ParamKind,
+        choices: &[&str],
+        owner: Option<&str>,
+    ) -> Described {
+        Described {
+            info: ParamInfo {
+                name: name.try_into().unwrap_or_default(),
+                unit: "-".try_into().unwrap_or_default(),
+                min: 0.0,
+                max: 100.0,
+                default,
+                value,
+                live: false,
+            },
+            kind: Some(kind),
+            choices: choices.iter().map(|c| c.to_string()).collect(),
+            owner: owner.map(|c| Owner {
+                controller: c.into(),
+                choice: None,
+            }),
         }
-    }
-
-    fn index(controller: &str) -> Option<usize> {
-        params::CONTROLLER_NAMES
-            .iter()
-            .position(|c| *c == controller)
     }
 
     #[test]
     fn an_inactive_parameter_shows_its_default_and_why() {
-        let row = param_row(
-            &info("energy.gain_nm_per_j", f32::NAN, 0.2),
-            index("shaped"),
+        let d = described(
+            "energy.gain_nm_per_j",
+            f32::NAN,
+            0.2,
+            ParamKind::Real,
+            &[],
+            Some("energy"),
         );
+        let row = param_row(&d, Some("shaped"));
         assert!(!row.contains("NaN"), "{row}");
         let cells: Vec<&str> = row.split_whitespace().collect();
         assert_eq!(cells[..2], ["energy.gain_nm_per_j", "0.2"], "{row}");
@@ -212,16 +208,33 @@ mod tests {
     #[test]
     fn an_inactive_choice_is_not_shown_as_its_first_name() {
         // NaN cast to an index is 0: it used to read `fixed`.
-        let row = param_row(&info("step_closed.gain", f32::NAN, 0.0), index("shaped"));
+        let d = described(
+            "step_closed.gain",
+            f32::NAN,
+            0.0,
+            ParamKind::Choice,
+            &["fixed", "normalised"],
+            Some("step-closed"),
+        );
+        let row = param_row(&d, Some("shaped"));
         assert!(
             row.ends_with("(inactive: controller step-closed not selected)"),
             "{row}"
         );
+        assert_eq!(row.split_whitespace().nth(1), Some("fixed"), "the default");
     }
 
     #[test]
     fn choices_show_by_name_value_and_default() {
-        let row = param_row(&info("controller", 8.0, 5.0), index("shaped"));
+        let d = described(
+            "controller",
+            2.0,
+            1.0,
+            ParamKind::Choice,
+            &["energy", "energy-apex", "shaped"],
+            None,
+        );
+        let row = param_row(&d, Some("shaped"));
         let cells: Vec<&str> = row.split_whitespace().collect();
         assert_eq!(cells[1], "shaped", "{row}");
         assert!(row.contains(" energy-apex "), "{row}");

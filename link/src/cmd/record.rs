@@ -2,7 +2,6 @@
 
 use super::common::{get, print_written, timing_of};
 use anyhow::{bail, Result};
-use hopper_control::params;
 use hopper_link::record::Recording;
 use hopper_link::{names, Client};
 use hopper_protocol::{Request, RobotMsg};
@@ -28,9 +27,10 @@ pub(crate) fn record(
     }
     let every = (1.0 / (rate_hz * period)).round().clamp(1.0, 65535.0) as u16;
     let target = get(c, "target_apex_m").ok().map(f64::from);
-    let controller = get(c, "controller")
+    let controllers = names::controller_names(c)?;
+    let controller = get(c, names::CONTROLLER)
         .ok()
-        .and_then(|v| params::CONTROLLER_NAMES.get(v as usize).copied())
+        .and_then(|v| controllers.get(v as usize).map(String::as_str))
         .unwrap_or("the controller");
     let mut rec = Recording {
         period_s: period,

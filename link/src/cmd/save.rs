@@ -3,7 +3,7 @@
 use super::common::{flag, stored_line, stored_of};
 use anyhow::{bail, Result};
 use hopper_link::Client;
-use hopper_protocol::{Request, Response};
+use hopper_protocol::{vocab::Refusal, Request, Response};
 use std::time::{Duration, Instant};
 
 /// `save`: the calibration to flash, and how it went.
@@ -14,7 +14,7 @@ pub(crate) fn save(c: &mut Client) -> Result<()> {
     loop {
         match c.request(Request::Save)? {
             Response::Ok => break,
-            Response::Refused(why) if why.as_str() == "busy" && Instant::now() < deadline => {
+            Response::Refused(why) if why == Refusal::Busy && Instant::now() < deadline => {
                 std::thread::sleep(Duration::from_millis(10));
             }
             Response::Refused(why) => bail!("save refused: {why}"),
@@ -31,7 +31,7 @@ pub(crate) fn save(c: &mut Client) -> Result<()> {
             2 => {
                 println!(
                     "saved: {} calibration parameters to flash (they load at the next boot)",
-                    hopper_control::persist::saved_count()
+                    s.saved_count
                 );
                 return Ok(());
             }

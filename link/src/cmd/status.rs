@@ -86,9 +86,7 @@ pub(crate) fn status(c: &mut Client) -> Result<()> {
                 )
             },
             f64::from(x.expected_hz) / 1e6,
-            if x.measured_hz != 0
-                && !hopper_control::boot::Crystal::matches(x.measured_hz, x.expected_hz)
-            {
+            if x.measured_hz != 0 && !x.matches {
                 " (arming refused: crystal-not-the-profiles: build for this board's crystal, docs/board.md)"
             } else {
                 ""

@@ -163,7 +163,7 @@ impl Routine {
 }
 
 /// Why a routine did not start (the name, kebab-case, is the link's).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, strum::IntoStaticStr)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, strum::IntoStaticStr, strum::VariantArray)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 #[strum(serialize_all = "kebab-case")]
 pub enum CalRefusal {
