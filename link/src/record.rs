@@ -10,6 +10,149 @@ use hopper_protocol::{Hop, Telemetry};
 use plotters::prelude::*;
 use std::path::{Path, PathBuf};
 
+/// The telemetry CSV's columns, units in the names.
+const RECORD_HEADER: [&str; 12] = [
+    "t_s",
+    "seq",
+    "step",
+    "phase",
+    "armed",
+    "faults",
+    "body_height_m",
+    "toe_height_m",
+    "nut_position_m",
+    "spring_force_n",
+    "energy_j",
+    "command_a",
+];
+
+/// One telemetry record as a CSV row, `t_s` after the recording's start.
+fn record_row(t_s: f64, r: &Telemetry) -> [String; 12] {
+    [
+        format!("{t_s:.6}"),
+        r.seq.to_string(),
+        r.step.to_string(),
+        if r.phase == 1 { "stance" } else { "flight" }.to_string(),
+        u8::from(r.armed).to_string(),
+        crate::names::faults(r.faults),
+        format!("{:.6}", r.body_height_m),
+        format!("{:.6}", f64::from(r.body_height_m) - LEG_LENGTH_M),
+        format!("{:.6}", r.nut_position_m),
+        format!("{:.3}", r.spring_force_n),
+        format!("{:.4}", r.energy_j),
+        format!("{:.4}", r.command_a),
+    ]
+}
+
+/// The hop ledger CSV's columns.
+const HOP_HEADER: [&str; 8] = [
+    "hop",
+    "apex_height_m",
+    "energy_at_touchdown_j",
+    "energy_at_liftoff_j",
+    "stance_work_j",
+    "stance_duration_s",
+    "peak_current_a",
+    "peak_stroke_m",
+];
+
+fn hop_row(h: &Hop) -> [String; 8] {
+    [
+        h.hop.to_string(),
+        format!("{:.5}", h.apex_height_m),
+        format!("{:.4}", h.energy_at_touchdown_j),
+        format!("{:.4}", h.energy_at_liftoff_j),
+        format!("{:.4}", h.stance_work_j),
+        format!("{:.5}", h.stance_duration_s),
+        format!("{:.3}", h.peak_current_a),
+        format!("{:.5}", h.peak_stroke_m),
+    ]
+}
+
+/// A recording written to disk as it arrives (`telemetry.csv`, `hops.csv`),
+/// so whatever ends it (the duration, Ctrl-C, the link closing, the robot
+/// stopping) leaves every record received in valid files; [`finish`]
+/// draws the plot from what was saved.
+///
+/// [`finish`]: Streamed::finish
+pub struct Streamed {
+    /// What was received, for the plot and the summary.
+    pub rec: Recording,
+    dir: PathBuf,
+    telemetry: csv::Writer<std::fs::File>,
+    hops: csv::Writer<std::fs::File>,
+}
+
+impl Streamed {
+    /// Creates `dir` (if missing) and the two CSV files with their headers.
+    pub fn create(dir: &Path, period_s: f64) -> Result<Self> {
+        std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+        let open = |name: &str| -> Result<csv::Writer<std::fs::File>> {
+            let path = dir.join(name);
+            csv::Writer::from_path(&path)
+                .with_context(|| format!("cannot write {}", path.display()))
+        };
+        let mut telemetry = open("telemetry.csv")?;
+        telemetry.write_record(RECORD_HEADER)?;
+        let mut hops = open("hops.csv")?;
+        hops.write_record(HOP_HEADER)?;
+        let mut s = Self {
+            rec: Recording {
+                period_s,
+                ..Recording::default()
+            },
+            dir: dir.to_path_buf(),
+            telemetry,
+            hops,
+        };
+        s.flush()?;
+        Ok(s)
+    }
+
+    /// One telemetry record, appended to `telemetry.csv`.
+    pub fn record(&mut self, t: Telemetry) -> Result<()> {
+        self.rec.records.push(t);
+        self.telemetry
+            .write_record(record_row(self.rec.t_s(&t), &t))?;
+        Ok(())
+    }
+
+    /// One hop's ledger, appended to `hops.csv`.
+    pub fn hop(&mut self, h: Hop) -> Result<()> {
+        self.telemetry.flush()?;
+        self.hops.write_record(hop_row(&h))?;
+        self.hops.flush()?;
+        self.rec.hops.push(h);
+        Ok(())
+    }
+
+    /// Pushes what is buffered to the files.
+    pub fn flush(&mut self) -> Result<()> {
+        self.telemetry.flush()?;
+        self.hops.flush()?;
+        Ok(())
+    }
+
+    /// Flushes the files and draws `plot` (PNG) from what was saved (with
+    /// at least two records); returns the paths written.
+    pub fn finish(
+        mut self,
+        plot: &str,
+        title: &str,
+        target_apex_m: Option<f64>,
+    ) -> Result<(Recording, Vec<PathBuf>)> {
+        self.flush()?;
+        let mut written = vec![self.dir.join("telemetry.csv"), self.dir.join("hops.csv")];
+        if self.rec.records.len() >= 2 {
+            let path = self.dir.join(plot);
+            hopper_plot::hop_plot(&self.rec.samples(), title, target_apex_m, &path)
+                .map_err(anyhow::Error::msg)?;
+            written.push(path);
+        }
+        Ok((self.rec, written))
+    }
+}
+
 /// What a recording holds.
 #[derive(Debug, Default, Clone)]
 pub struct Recording {
@@ -52,32 +195,6 @@ impl Recording {
         f64::from(r.step.wrapping_sub(first) as i32) * self.period_s
     }
 
-    /// Writes the records as `files.0` (CSV) and their plot as `files.1`
-    /// (PNG) into `dir` (created if missing), and the hop ledgers as
-    /// `hops.csv` when `hops` is set; returns the paths written. `title`
-    /// heads the plot; `target_apex_m` draws the target.
-    pub fn write(
-        &self,
-        dir: &Path,
-        files: (&str, &str),
-        hops: bool,
-        title: &str,
-        target_apex_m: Option<f64>,
-    ) -> Result<Vec<PathBuf>> {
-        std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
-        let mut written = vec![self.write_records(&dir.join(files.0))?];
-        if hops {
-            written.push(self.write_hops(dir)?);
-        }
-        if self.records.len() >= 2 {
-            let path = dir.join(files.1);
-            hopper_plot::hop_plot(&self.samples(), title, target_apex_m, &path)
-                .map_err(anyhow::Error::msg)?;
-            written.push(path);
-        }
-        Ok(written)
-    }
-
     /// Writes a capture (`dump`) into `dir` (created if missing):
     /// `capture.csv`, the records as [`write`](Self::write) writes them,
     /// and `capture.png`, [`capture_plot`](Self::capture_plot); returns
@@ -97,35 +214,9 @@ impl Recording {
     fn write_records(&self, path: &Path) -> Result<PathBuf> {
         let mut w = csv::Writer::from_path(path)
             .with_context(|| format!("cannot write {}", path.display()))?;
-        w.write_record([
-            "t_s",
-            "seq",
-            "step",
-            "phase",
-            "armed",
-            "faults",
-            "body_height_m",
-            "toe_height_m",
-            "nut_position_m",
-            "spring_force_n",
-            "energy_j",
-            "command_a",
-        ])?;
+        w.write_record(RECORD_HEADER)?;
         for r in &self.records {
-            w.write_record([
-                format!("{:.6}", self.t_s(r)),
-                r.seq.to_string(),
-                r.step.to_string(),
-                if r.phase == 1 { "stance" } else { "flight" }.to_string(),
-                u8::from(r.armed).to_string(),
-                crate::names::faults(r.faults),
-                format!("{:.6}", r.body_height_m),
-                format!("{:.6}", f64::from(r.body_height_m) - LEG_LENGTH_M),
-                format!("{:.6}", r.nut_position_m),
-                format!("{:.3}", r.spring_force_n),
-                format!("{:.4}", r.energy_j),
-                format!("{:.4}", r.command_a),
-            ])?;
+            w.write_record(record_row(self.t_s(r), r))?;
         }
         w.flush()?;
         Ok(path.to_path_buf())
@@ -281,37 +372,6 @@ impl Recording {
             Ok(())
         })();
         res.map_err(|e| anyhow::anyhow!("cannot draw {}: {e}", path.display()))
-    }
-
-    /// `hops.csv`: one hop ledger a row.
-    fn write_hops(&self, dir: &Path) -> Result<PathBuf> {
-        let path = dir.join("hops.csv");
-        let mut w = csv::Writer::from_path(&path)
-            .with_context(|| format!("cannot write {}", path.display()))?;
-        w.write_record([
-            "hop",
-            "apex_height_m",
-            "energy_at_touchdown_j",
-            "energy_at_liftoff_j",
-            "stance_work_j",
-            "stance_duration_s",
-            "peak_current_a",
-            "peak_stroke_m",
-        ])?;
-        for h in &self.hops {
-            w.write_record([
-                h.hop.to_string(),
-                format!("{:.5}", h.apex_height_m),
-                format!("{:.4}", h.energy_at_touchdown_j),
-                format!("{:.4}", h.energy_at_liftoff_j),
-                format!("{:.4}", h.stance_work_j),
-                format!("{:.5}", h.stance_duration_s),
-                format!("{:.3}", h.peak_current_a),
-                format!("{:.5}", h.peak_stroke_m),
-            ])?;
-        }
-        w.flush()?;
-        Ok(path)
     }
 
     /// The records as the simulator's trajectory samples (what the robot

@@ -1,11 +1,14 @@
-//! `record`: telemetry and hop ledgers to CSV files and a plot.
+//! `record`: telemetry and hop ledgers to CSV files as they arrive, and
+//! a plot of what was saved.
 
 use super::common::{get, print_written, timing_of};
 use anyhow::{bail, Result};
-use hopper_link::record::Recording;
+use hopper_link::record::Streamed;
 use hopper_link::{names, Client};
 use hopper_protocol::{Request, RobotMsg};
 use std::io::IsTerminal;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, OnceLock};
 use std::time::{Duration, Instant};
 
 pub(crate) fn record(
@@ -19,7 +22,7 @@ pub(crate) fn record(
     }
     let t = timing_of(c)?;
     let period = f64::from(t.period_s);
-    if !(rate_hz.is_finite() && rate_hz > 0.0 && rate_hz <= 1.0 / period + 1e-6) {
+    if !(rate_hz.is_finite() && rate_hz > 0.0 && rate_hz <= (1.0 + 1e-6) / period) {
         bail!(
             "--rate {rate_hz} must be in (0, {:.0}] Hz (the control rate)",
             1.0 / period
@@ -32,51 +35,83 @@ pub(crate) fn record(
         .ok()
         .and_then(|v| controllers.get(v as usize).map(String::as_str))
         .unwrap_or("the controller");
-    let mut rec = Recording {
-        period_s: period,
-        ..Recording::default()
-    };
+    let mut out_files = Streamed::create(out, period)?;
     let span = (duration_s / period).round() as u64;
     let bar = indicatif::ProgressBar::new(span);
     if !std::io::stderr().is_terminal() {
         bar.set_draw_target(indicatif::ProgressDrawTarget::hidden());
     }
+    let interrupted = interrupt_flag();
     c.discard_events();
     c.expect_ok(Request::Telemetry { every })?;
     // Records before the answer may be from an earlier stream.
     c.discard_queued();
     let mut quiet = Instant::now();
+    // Why the recording ended before its duration, and whether that is a
+    // failure (the link or the robot) or the operator's choice (Ctrl-C).
+    let mut ended: Option<(String, bool)> = None;
     loop {
-        match c.next_event(Duration::from_millis(200))? {
+        if interrupted.swap(false, Ordering::Relaxed) {
+            ended = Some(("interrupted (Ctrl-C)".into(), false));
+            break;
+        }
+        let event = match c.next_event(Duration::from_millis(200)) {
+            Ok(e) => e,
+            Err(e) => {
+                ended = Some((format!("{e:#}"), true));
+                break;
+            }
+        };
+        match event {
             Some(RobotMsg::Telemetry(t)) => {
                 quiet = Instant::now();
+                let rec = &out_files.rec;
                 let first = rec.records.first().map_or(t.step, |f| f.step);
                 let spanned = u64::from(t.step.wrapping_sub(first));
-                rec.records.push(t);
+                if rec.records.last().is_some_and(|l| t.step < l.step) {
+                    ended = Some((
+                        format!(
+                            "the robot restarted (its period count went back from {} to {})",
+                            rec.records.last().map_or(0, |l| l.step),
+                            t.step
+                        ),
+                        true,
+                    ));
+                    break;
+                }
+                out_files.record(t)?;
                 bar.set_position(spanned.min(span));
                 if spanned + u64::from(every) > span {
                     break;
                 }
             }
-            Some(RobotMsg::Hop(h)) => rec.hops.push(h),
+            Some(RobotMsg::Hop(h)) => out_files.hop(h)?,
             Some(RobotMsg::Faults { step, bits }) => {
                 bar.suspend(|| {
                     println!("fault at step {step}: {}", names::faults(bits));
                 });
-                rec.faults.push((step, bits));
+                out_files.rec.faults.push((step, bits));
             }
             Some(RobotMsg::State(s)) => bar.suspend(|| println!("state: {}", names::arm_state(s))),
             Some(_) => {}
             None if quiet.elapsed() > Duration::from_secs(3) => {
-                bail!("no telemetry for 3 s: the robot stopped streaming")
+                ended = Some((
+                    "no telemetry for 3 s: the robot stopped streaming (a reset, or its link timed out)".into(),
+                    true,
+                ));
+                break;
             }
-            None => {}
+            // Idle: what came so far is on disk.
+            None => out_files.flush()?,
         }
     }
-    c.expect_ok(Request::Telemetry { every: 0 })?;
+    // Stop the stream, unless the link is what ended the recording.
+    if !ended.as_ref().is_some_and(|(_, failed)| *failed) {
+        c.expect_ok(Request::Telemetry { every: 0 })?;
+    }
     bar.finish_and_clear();
     let title = format!("{controller} on the robot ({})", c.target());
-    let written = rec.write(out, ("telemetry.csv", "hop.png"), true, &title, target)?;
+    let (rec, written) = out_files.finish("hop.png", &title, target)?;
     let apexes = rec.apexes_m();
     println!(
         "recorded {:.3} s: {} records at {:.0} Hz, {} dropped; {} hops",
@@ -88,11 +123,15 @@ pub(crate) fn record(
     );
     println!(
         "apexes (m): {}",
-        apexes
-            .iter()
-            .map(|a| format!("{a:.4}"))
-            .collect::<Vec<_>>()
-            .join(" ")
+        if apexes.is_empty() {
+            "none".to_string()
+        } else {
+            apexes
+                .iter()
+                .map(|a| format!("{a:.4}"))
+                .collect::<Vec<_>>()
+                .join(" ")
+        }
     );
     if let (Some(s), Some(t)) = (hopper_model::metrics::steady_apex(&apexes), target) {
         println!(
@@ -101,5 +140,35 @@ pub(crate) fn record(
         );
     }
     print_written(&written);
-    Ok(())
+    match ended {
+        Some((why, failed)) => {
+            let saved = format!(
+                "{:.3} s of {duration_s} s saved in {}",
+                rec.records.len() as f64 * f64::from(every) * period,
+                out.display()
+            );
+            if failed {
+                bail!("the recording ended early: {why} ({saved})")
+            }
+            println!("the recording ended early: {why} ({saved})");
+            Ok(())
+        }
+        None => Ok(()),
+    }
+}
+
+/// A flag Ctrl-C sets while a recording runs (one handler for the
+/// process: a shell's later recordings share it; each clears it first).
+fn interrupt_flag() -> Arc<AtomicBool> {
+    static FLAG: OnceLock<Arc<AtomicBool>> = OnceLock::new();
+    let flag = FLAG.get_or_init(|| {
+        let f = Arc::new(AtomicBool::new(false));
+        let g = f.clone();
+        // Without a handler (another library took the signal), Ctrl-C
+        // kills the process as before: the files hold what was flushed.
+        let _ = ctrlc::set_handler(move || g.store(true, Ordering::Relaxed));
+        f
+    });
+    flag.store(false, Ordering::Relaxed);
+    flag.clone()
 }

@@ -1,0 +1,234 @@
+//! `hopper-link record` loses nothing: whatever ends a recording early (the
+//! link closing, Ctrl-C), every record received is in valid files, the
+//! plot is drawn from them, and a line says why it ended.
+
+use hopper_protocol::vocab::Refusal;
+use hopper_protocol::{
+    encode, Decoder, Hop, HostMsg, Request, Response, RobotMsg, Telemetry, TimingStats, MAX_FRAME,
+    PROTOCOL_VERSION,
+};
+use std::io::{Read, Write};
+use std::net::{TcpListener, TcpStream};
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+fn send(s: &mut TcpStream, m: &RobotMsg) -> bool {
+    let mut f = [0u8; MAX_FRAME];
+    let n = encode(m, &mut f).unwrap_or(0);
+    s.write_all(&f[..n]).is_ok()
+}
+
+fn answer(req: &Request) -> Response {
+    match req {
+        Request::Timing => Response::Timing(TimingStats {
+            period_s: 0.001,
+            periods: 0,
+            missed: 0,
+            step_mean: 0,
+            step_max: 0,
+            link_mean: 0,
+            link_max: 0,
+        }),
+        Request::ParamGet { name } if name.as_str() == "target_apex_m" => Response::Value(0.1),
+        Request::ParamGet { .. } | Request::ParamMeta { .. } => {
+            Response::Refused(Refusal::UnknownParameter.into())
+        }
+        _ => Response::Ok,
+    }
+}
+
+/// One telemetry record of period `step` (a 1 kHz robot hopping 0.1 m
+/// above its leg).
+fn record(step: u32) -> Telemetry {
+    let t = f64::from(step) * 1e-3;
+    Telemetry {
+        seq: step,
+        step,
+        phase: 0,
+        armed: true,
+        faults: 0,
+        body_height_m: (0.7 + 0.05 * (t * 6.0).sin()) as f32,
+        nut_position_m: 0.0,
+        spring_force_n: 0.0,
+        energy_j: 60.0,
+        command_a: 0.0,
+    }
+}
+
+/// A robot that, once asked to stream, sends `records` telemetry records
+/// (one a millisecond when `paced`, else at once) and a hop ledger after
+/// the first 500, then closes the link (or, with `hold`, keeps it open
+/// for 10 s).
+fn robot(records: u32, paced: bool, hold: bool) -> (String, std::thread::JoinHandle<()>) {
+    let l = TcpListener::bind("127.0.0.1:0").unwrap_or_else(|e| panic!("{e}"));
+    let addr = l.local_addr().unwrap_or_else(|e| panic!("{e}")).to_string();
+    let serve = std::thread::spawn(move || {
+        let Ok((mut s, _)) = l.accept() else { return };
+        let _ = s.set_read_timeout(Some(Duration::from_millis(5)));
+        let mut d = Decoder::new();
+        let mut buf = [0u8; 512];
+        let mut streaming = false;
+        let mut next = 0u32;
+        let end = Instant::now() + Duration::from_secs(15);
+        while Instant::now() < end {
+            let n = match s.read(&mut buf) {
+                Ok(0) => return,
+                Ok(n) => n,
+                Err(_) => 0,
+            };
+            for &b in &buf[..n] {
+                let reply = match d.push::<HostMsg>(b) {
+                    Some(HostMsg::Hello { .. }) => RobotMsg::Hello {
+                        version: PROTOCOL_VERSION,
+                    },
+                    Some(HostMsg::Request { id, req }) => {
+                        if let Request::Telemetry { every } = req {
+                            streaming = every > 0;
+                        }
+                        RobotMsg::Response {
+                            id,
+                            resp: answer(&req),
+                        }
+                    }
+                    _ => continue,
+                };
+                send(&mut s, &reply);
+            }
+            while streaming && next < records {
+                if !send(&mut s, &RobotMsg::Telemetry(record(next))) {
+                    return;
+                }
+                next += 1;
+                if next == 500 {
+                    send(
+                        &mut s,
+                        &RobotMsg::Hop(Hop {
+                            hop: 1,
+                            apex_height_m: 0.1,
+                            energy_at_touchdown_j: 60.0,
+                            energy_at_liftoff_j: 61.0,
+                            stance_work_j: 1.0,
+                            stance_duration_s: 0.2,
+                            peak_current_a: 20.0,
+                            peak_stroke_m: 0.02,
+                        }),
+                    );
+                }
+                if paced {
+                    break;
+                }
+            }
+            if next == records && !hold {
+                // The robot goes away mid-recording.
+                return;
+            }
+        }
+    });
+    (addr, serve)
+}
+
+fn out_dir(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("hopper-link-record-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    d
+}
+
+fn lines(p: &Path) -> usize {
+    std::fs::read_to_string(p)
+        .unwrap_or_else(|e| panic!("{}: {e}", p.display()))
+        .lines()
+        .count()
+}
+
+#[test]
+fn a_link_closed_mid_recording_keeps_what_came() {
+    let (addr, serve) = robot(1500, false, false);
+    let dir = out_dir("closed");
+    let o = Command::new(env!("CARGO_BIN_EXE_hopper-link"))
+        .args(["--tcp", &addr, "record", "--duration", "5", "--out"])
+        .arg(&dir)
+        .output()
+        .unwrap_or_else(|e| panic!("cannot run hopper-link: {e}"));
+    let _ = serve.join();
+    let (out, err) = (
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr),
+    );
+    println!("{out}{err}");
+    // A failure (exit 1), said once, after the files.
+    assert_eq!(o.status.code(), Some(1), "{out}\n{err}");
+    assert!(
+        err.contains("the recording ended early: ") && err.contains("(1.500 s of 5 s saved in"),
+        "{err}"
+    );
+    assert!(
+        out.contains("recorded 1.500 s: 1500 records at 1000 Hz, 0 dropped; 1 hops"),
+        "{out}"
+    );
+    // Every record and the hop, in valid files, and the plot of them.
+    assert_eq!(lines(&dir.join("telemetry.csv")), 1 + 1500);
+    assert_eq!(lines(&dir.join("hops.csv")), 1 + 1);
+    let last = std::fs::read_to_string(dir.join("telemetry.csv")).unwrap_or_default();
+    assert!(
+        last.lines()
+            .last()
+            .is_some_and(|l| l.starts_with("1.499000,1499,1499,")),
+        "{last}"
+    );
+    assert!(dir.join("hop.png").metadata().is_ok_and(|m| m.len() > 1000));
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn ctrl_c_ends_a_recording_with_everything_saved() {
+    let (addr, serve) = robot(100_000, true, true);
+    let dir = out_dir("interrupted");
+    let child = Command::new(env!("CARGO_BIN_EXE_hopper-link"))
+        .args(["--tcp", &addr, "record", "--duration", "30", "--out"])
+        .arg(&dir)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap_or_else(|e| panic!("cannot run hopper-link: {e}"));
+    // Until a few hundred records are on disk.
+    let csv = dir.join("telemetry.csv");
+    let t0 = Instant::now();
+    while !(csv.exists() && lines(&csv) > 300) && t0.elapsed() < Duration::from_secs(10) {
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let interrupted = Instant::now();
+    let kill = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status();
+    assert!(kill.is_ok_and(|s| s.success()));
+    let o = child
+        .wait_with_output()
+        .unwrap_or_else(|e| panic!("hopper-link: {e}"));
+    let took = interrupted.elapsed();
+    drop(serve);
+    let (out, err) = (
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr),
+    );
+    println!("{out}{err}");
+    // The operator's choice: a success, within a moment.
+    assert!(o.status.success(), "{out}\n{err}");
+    assert!(took < Duration::from_secs(2), "{took:?}");
+    assert!(
+        out.contains("the recording ended early: interrupted (Ctrl-C) (")
+            && out.contains(" s of 30 s saved in"),
+        "{out}"
+    );
+    let rows = lines(&csv) - 1;
+    assert!(rows > 300, "{rows}");
+    assert!(
+        out.contains(&format!(
+            "recorded {:.3} s: {rows} records",
+            rows as f64 * 1e-3
+        )),
+        "{out}"
+    );
+    assert!(dir.join("hop.png").exists());
+    let _ = std::fs::remove_dir_all(&dir);
+}
