@@ -369,6 +369,11 @@ pub enum Refusal {
     NotSimulated = 32,
     /// An arm request is already being decided.
     Arming = 33,
+    /// The leg carries the robot for a routine that needs the toe free:
+    /// hang the robot on the hoist.
+    LegLoaded = 34,
+    /// The toe is not on the ground for a routine that needs it there.
+    NotOnGround = 35,
 }
 
 /// What kind of value a parameter holds (`ParamMeta::kind`).

@@ -217,11 +217,15 @@ fn bring_up_recovers_the_machine_and_the_shaped_controller_then_converges() {
         let pot = f64::from(after.1 - before.1);
         assert!((lc - mis.loadcell_bias_n).abs() < 0.24, "load cell {lc}");
         assert!((pot - mis.pot_bias_m).abs() < 1e-5, "pot {pot}");
-        // On the hoist the leg carries nothing: no weighing.
-        assert_eq!(
-            calibrate(&mut r, Routine::Weight).0,
-            CalState::FailedNotOnGround
-        );
+        // On the hoist the leg carries nothing: no weighing, no height
+        // zero (refused before they start).
+        for routine in [Routine::Weight, Routine::Height] {
+            assert_eq!(
+                r.firmware.runner.start_calibration(routine, 0.5),
+                Err(CalRefusal::NotOnGround),
+                "{routine:?}"
+            );
+        }
         // Off the hoist onto the ground: the weighing, the height zero, up
         // again.
         r.mount(None);
@@ -234,6 +238,25 @@ fn bring_up_recovers_the_machine_and_the_shaped_controller_then_converges() {
             .config()
             .calibration
             .loadcell_gain_n_per_code;
+        // Standing, the leg carries the robot: a tare would take its
+        // weight for the zero, a sweep would lift it, the direction pulse
+        // and the homing move would push against it. Each is refused and
+        // nothing changes.
+        let cfg_before = *r.firmware.runner.hopper().config();
+        for routine in [
+            Routine::Tare,
+            Routine::Spring,
+            Routine::Direction,
+            Routine::Home,
+        ] {
+            assert_eq!(
+                r.firmware.runner.start_calibration(routine, 0.5),
+                Err(CalRefusal::LegLoaded),
+                "{routine:?}"
+            );
+        }
+        run(&mut r, 0.01);
+        assert_eq!(*r.firmware.runner.hopper().config(), cfg_before);
         done(&mut r, Routine::Weight);
         let w = r.firmware.runner.weighing();
         let c = r.firmware.runner.hopper().config();

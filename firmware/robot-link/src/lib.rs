@@ -1178,6 +1178,9 @@ pub fn cal_refusal(r: CalRefusal) -> Refusal {
         CalRefusal::DirectionFirst => Refusal::CheckDirectionFirst,
         CalRefusal::HomeFirst => Refusal::HomeFirst,
         CalRefusal::TareFirst => Refusal::TareFirst,
+        CalRefusal::LegLoaded => Refusal::LegLoaded,
+        CalRefusal::NotOnGround => Refusal::NotOnGround,
+        CalRefusal::NoMeasurementYet => Refusal::NoMeasurementYet,
     }
 }
 

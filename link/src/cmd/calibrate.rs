@@ -6,6 +6,23 @@ use hopper_link::Client;
 use hopper_protocol::{Request, Response};
 use std::time::{Duration, Instant};
 
+/// What to do about a routine's refusal, where the reason alone does not
+/// say (the bring-up order of docs/board.md).
+fn next_step(r: hopper_protocol::vocab::Refusal) -> Option<&'static str> {
+    use hopper_protocol::vocab::Refusal as R;
+    Some(match r {
+        R::LegLoaded => {
+            "the leg carries the robot; hang it on the hoist with the toe free (`mount hoist` on a simulated robot), then run it again"
+        }
+        R::NotOnGround => {
+            "the toe is off the ground; stand the robot on its toe with the hoist slack (`mount release` on a simulated robot), then run it again"
+        }
+        R::EstopPressed => "release the e-stop, then `reset-faults`",
+        R::Faulted => "read `status`, fix the cause, then `reset-faults`",
+        _ => return None,
+    })
+}
+
 pub(crate) fn calibrate(c: &mut Client, routine: &str, seconds: f32) -> Result<()> {
     use hopper_protocol::vocab::{CalState, Routine};
     let r = Routine::ALL
@@ -26,7 +43,10 @@ pub(crate) fn calibrate(c: &mut Client, routine: &str, seconds: f32) -> Result<(
         seconds,
     })? {
         Response::Ok => {}
-        Response::Refused(why) => bail!("calibrate {routine} refused: {why}"),
+        Response::Refused(why) => match why.refusal().and_then(next_step) {
+            Some(step) => bail!("calibrate {routine} refused: {why}: {step}"),
+            None => bail!("calibrate {routine} refused: {why}"),
+        },
         r => bail!("unexpected answer {r:?}"),
     }
     // The measuring routines take `seconds` of robot time; the driving ones

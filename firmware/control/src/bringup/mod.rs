@@ -60,6 +60,12 @@
 //!   compressed by half the weight's spring deflection (the toe is not on
 //!   the ground), and it fails when the body did not rise (held).
 //!
+//! Each routine that needs the toe somewhere ([`Routine::stance`]) is
+//! refused where the sensors say it is not: `LegLoaded` for the hoisted
+//! ones when both the load cell and the potentiometer say the leg
+//! carries the robot, `NotOnGround` for the standing ones when the load
+//! cell does not (the period runner's `check_stance`).
+//!
 //! The moves track a reference at `bringup.speed_mps` with the flight PD's
 //! gains (eq 4.4) plus the spring's measured force as feed-forward, so the
 //! nut moves at the set speed whatever the spring pushes.
@@ -153,6 +159,17 @@ impl Routine {
     /// Every routine, by wire code.
     pub const ALL: &'static [Routine] = <Routine as strum::VariantArray>::VARIANTS;
 
+    /// Where the toe must be (`None`: anywhere).
+    pub const fn stance(self) -> Option<Stance> {
+        match self {
+            Routine::SensorCheck => None,
+            Routine::Tare | Routine::Direction | Routine::Home | Routine::Spring => {
+                Some(Stance::Free)
+            }
+            Routine::Height | Routine::Weight => Some(Stance::OnGround),
+        }
+    }
+
     /// Whether it drives the motor (the amplifier is on while it runs).
     pub const fn drives_motor(self) -> bool {
         matches!(
@@ -192,6 +209,27 @@ pub enum CalRefusal {
     HomeFirst,
     /// The weighing needs the load cell tared (or a saved calibration).
     TareFirst,
+    /// The leg carries the robot (the load cell beyond the flight force by
+    /// half the body's weight, and the potentiometer compressed by half
+    /// its deflection) for a routine that needs the toe free: hang the
+    /// robot on the hoist.
+    LegLoaded,
+    /// The load cell does not carry half the body's weight beyond the
+    /// flight force, for a routine that needs the toe on the ground.
+    NotOnGround,
+    /// No period has read the sensors yet.
+    NoMeasurementYet,
+}
+
+/// Where the toe must be for a routine: what its measurement assumes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Stance {
+    /// The toe hangs free (the robot on the hoist): a tare zeroes the
+    /// unloaded leg, the direction pulse and the homing move the nut
+    /// against the spring alone, the sweep fits the spring alone.
+    Free,
+    /// The toe on the ground, the robot's weight on the leg.
+    OnGround,
 }
 
 impl CalRefusal {

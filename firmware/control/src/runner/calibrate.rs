@@ -135,9 +135,45 @@ impl<H: HopperSlot> PeriodRunner<H> {
         } else {
             None
         };
+        // After the order's prerequisites (direction, home, tare first):
+        // where the toe is, is the last thing to fix before it runs.
+        if let Some(stance) = routine.stance() {
+            self.check_stance(stance)?;
+        }
         let samples = (seconds / self.timing.period_s) as u32;
         self.cal.start(routine, samples, drive);
         Ok(())
+    }
+
+    /// Refuses a routine whose measurement assumes the toe where the
+    /// sensors say it is not, read through the calibration as it stands:
+    /// the load cell's force beyond the flight force `k (delta0 + p)` at
+    /// the nut's position (what the leg carries), and the potentiometer's
+    /// compression. A tare on a standing robot would take its weight for
+    /// the zero (and the firmware would then see flight while it stands);
+    /// so the toe counts as loaded only when both sensors say so, by half
+    /// the body's weight and half its spring deflection (an offset a tare
+    /// has yet to correct is far smaller), and as on the ground when the
+    /// load cell carries half the weight (the height zero's own check).
+    fn check_stance(
+        &self,
+        stance: crate::bringup::Stance,
+    ) -> Result<(), crate::bringup::CalRefusal> {
+        use crate::bringup::{CalRefusal, Stance};
+        let Some(i) = self.hopper.last_input() else {
+            return Err(CalRefusal::NoMeasurementYet);
+        };
+        let cfg = self.hopper.config();
+        let s = &cfg.supervisor;
+        let weight_n = cfg.model.body_mass_kg * cfg.model.gravity_mps2;
+        let carried_n = i.spring_force_n - s.flight_force_n(i.nut_position_m);
+        let carries = carried_n > 0.5 * weight_n;
+        let compressed = i.leg_compression_m > 0.5 * weight_n / s.spring_rate_n_per_m;
+        match stance {
+            Stance::Free if carries && compressed => Err(CalRefusal::LegLoaded),
+            Stance::OnGround if !carries => Err(CalRefusal::NotOnGround),
+            _ => Ok(()),
+        }
     }
 
     /// The last bring-up routine's report.
