@@ -89,6 +89,11 @@ pub trait PlantDriver {
     fn hil(&mut self) -> Option<crate::hil::HilReport> {
         None
     }
+    /// The firmware's parameters by name (NaN: not in its configuration),
+    /// for a recording; empty without firmware on this host.
+    fn parameters(&self) -> Vec<(&'static str, f32)> {
+        Vec::new()
+    }
 }
 
 /// Times of the phase estimator's touchdown and liftoff events, s.
@@ -750,6 +755,19 @@ impl PlantDriver for FirmwareController {
 
     fn hop_ledgers(&self) -> Vec<HopLedger> {
         self.hops.clone()
+    }
+
+    fn parameters(&self) -> Vec<(&'static str, f32)> {
+        let mut cfg = *self.firmware.runner.hopper().config();
+        hopper_control::params::TABLE
+            .iter()
+            .map(|p| {
+                (
+                    p.name,
+                    hopper_control::params::read(&mut cfg, p).unwrap_or(f32::NAN),
+                )
+            })
+            .collect()
     }
 
     fn estimator_events(&self) -> Option<EstimatorEvents> {

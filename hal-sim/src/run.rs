@@ -687,6 +687,84 @@ impl From<&Sample> for TrajectoryRow {
     }
 }
 
+/// A trajectory sample's fields ([`Sample`] as JSON), the schema of the
+/// `/telemetry` channel of a run's `telemetry.mcap`.
+pub const SAMPLE_FIELDS: [hopper_mcap::Field; 11] = {
+    use hopper_mcap::field as f;
+    [
+        f("t_s", "number", "simulated time, s"),
+        f(
+            "phase",
+            "string",
+            "contact mode: flight, stance or standing",
+        ),
+        f("z_m", "number", "body coordinate z, m"),
+        f("zd_mps", "number", "body velocity, m/s"),
+        f("p_m", "number", "nut displacement p, m"),
+        f("pd_mps", "number", "nut velocity, m/s"),
+        f("toe_height_m", "number", "toe height above the ground, m"),
+        f("spring_force_n", "number", "spring force, N"),
+        f("torque_nm", "number", "motor torque, N m"),
+        f("energy_j", "number", "total mechanical energy, J"),
+        f(
+            "winding_c",
+            "number",
+            "the firmware's winding temperature estimate, C (null without firmware)",
+        ),
+    ]
+};
+
+/// Writes a run as MCAP at `path` (Foxglove, PlotJuggler): `/telemetry`
+/// (every trajectory sample at its time), `/hop` (the firmware's ledger of
+/// each hop, at the apex that ends it), `/fault` (each latched fault at
+/// the period that latched it) and `/parameters` (the firmware's, at 0 s).
+pub fn write_mcap(
+    path: &std::path::Path,
+    result: &RunResult,
+    parameters: &[(&str, f32)],
+) -> Result<(), String> {
+    use hopper_mcap::{Mcap, FAULT_FIELDS, HOP_FIELDS};
+    let mut m = Mcap::create(path)?;
+    let telemetry = m.channel("/telemetry", "hopper.SimSample", &SAMPLE_FIELDS)?;
+    let hop = m.channel("/hop", "hopper.Hop", &HOP_FIELDS)?;
+    let fault = m.channel("/fault", "hopper.Fault", &FAULT_FIELDS)?;
+    let params = m.map_channel("/parameters", "hopper.Parameters")?;
+    let values: std::collections::BTreeMap<&str, Option<f32>> = parameters
+        .iter()
+        .map(|(n, v)| (*n, v.is_finite().then_some(*v)))
+        .collect();
+    m.log(params, 0.0, &values)?;
+    // Each hop's ledger closes at the apex after its stance.
+    let mut stances = 0usize;
+    let mut ends = Vec::new();
+    for e in &result.events {
+        match e {
+            Event::Touchdown { .. } => stances += 1,
+            Event::Apex { t_s, .. } if stances > ends.len() => ends.push(*t_s),
+            _ => {}
+        }
+    }
+    let last_s = result.samples.last().map_or(0.0, |s| s.t_s);
+    let mut hops = result.summary.firmware_hops.iter().enumerate().peekable();
+    let mut faults = result.summary.faults.iter().peekable();
+    for s in &result.samples {
+        while let Some((i, h)) = hops.next_if(|(i, _)| ends.get(*i).is_some_and(|t| *t <= s.t_s)) {
+            m.log(hop, ends.get(i).copied().unwrap_or(last_s), h)?;
+        }
+        while let Some(f) = faults.next_if(|f| f.time_s <= s.t_s) {
+            m.log(fault, f.time_s, &serde_json::json!({ "faults": f.name }))?;
+        }
+        m.log(telemetry, s.t_s, s)?;
+    }
+    for (i, h) in hops {
+        m.log(hop, ends.get(i).copied().unwrap_or(last_s).max(last_s), h)?;
+    }
+    for f in faults {
+        m.log(fault, f.time_s, &serde_json::json!({ "faults": f.name }))?;
+    }
+    m.finish()
+}
+
 /// Write the trajectory as CSV ([`TRAJECTORY_COLUMNS`]).
 pub fn write_csv(samples: &[Sample], w: &mut impl std::io::Write) -> std::io::Result<()> {
     let mut out = csv::WriterBuilder::new().has_headers(false).from_writer(w);

@@ -104,6 +104,62 @@ fn out_dir_gets_csv_and_plot() {
     assert!(png.len() > 10_000);
 }
 
+/// `telemetry.mcap`, read by a reader written from the MCAP specification:
+/// every trajectory sample at its time with the CSV's values, the
+/// firmware's hop ledgers and its parameters.
+#[test]
+fn out_dir_gets_an_mcap_recording_that_matches_the_csv() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("run");
+    let o = sim(&[
+        "run",
+        "--duration",
+        "3",
+        "--json",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let v = json(&o);
+    let bytes = std::fs::read(out.join("telemetry.mcap")).unwrap();
+    let msgs = hopper_mcap::read::messages(&bytes).unwrap_or_else(|e| panic!("{e}"));
+    let on = |topic: &str| msgs.iter().filter(|m| m.topic == topic).collect::<Vec<_>>();
+    let (telemetry, hops, params) = (on("/telemetry"), on("/hop"), on("/parameters"));
+    let csv = std::fs::read_to_string(out.join("trajectory.csv")).unwrap();
+    let rows: Vec<&str> = csv.lines().skip(1).collect();
+    eprintln!(
+        "telemetry.mcap: {} bytes, /telemetry {} (CSV rows {}), /hop {}, /parameters {}",
+        bytes.len(),
+        telemetry.len(),
+        rows.len(),
+        hops.len(),
+        params.len()
+    );
+    assert_eq!(telemetry.len(), rows.len());
+    let ledgers = v["firmware_hops"].as_array().unwrap();
+    assert!(ledgers.len() >= 3, "{ledgers:?}");
+    assert_eq!(hops.len(), ledgers.len());
+    for (m, l) in hops.iter().zip(ledgers) {
+        assert_eq!(m.json, *l);
+    }
+    assert_eq!(params.len(), 1);
+    // The firmware's table, every parameter (another controller's: null).
+    let p = params[0].json.as_object().unwrap();
+    assert_eq!(p.len(), hopper_control::params::TABLE.len());
+    assert!(p["target_apex_m"].is_number() && p["controller"].is_number());
+    for (row, m) in rows.iter().zip(&telemetry) {
+        let cells: Vec<&str> = row.split(',').collect();
+        let num = |i: usize| cells[i].parse::<f64>().unwrap();
+        let j = |k: &str| m.json[k].as_f64().unwrap();
+        // (The CSV's decimals: 6 for the time, 9 for the states.)
+        assert!((m.log_time_ns as f64 * 1e-9 - num(0)).abs() < 1e-6, "{row}");
+        assert_eq!(m.json["phase"], cells[1], "{row}");
+        assert!((j("z_m") - num(2)).abs() < 1e-9, "{row}");
+        assert!((j("toe_height_m") - num(6)).abs() < 1e-9, "{row}");
+        assert!((j("energy_j") - num(9)).abs() < 1e-9, "{row}");
+    }
+}
+
 #[test]
 fn params_show_prints_toml_that_run_accepts() {
     let o = sim(&["params", "show", "identified"]);
@@ -364,7 +420,7 @@ fn a_failed_plot_leaves_no_partial_output() {
         .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
         .collect();
     names.sort();
-    assert_eq!(names, ["hop.png", "trajectory.csv"]);
+    assert_eq!(names, ["hop.png", "telemetry.mcap", "trajectory.csv"]);
     assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
 }
 

@@ -4,57 +4,112 @@
 //! (capture.png).
 
 use anyhow::{Context, Result};
+use hopper_mcap::{field, Channel, Field, Mcap, FAULT_FIELDS, HOP_FIELDS};
 use hopper_model::design::LEG_LENGTH_M;
 use hopper_plot::{extent, side_legend, LegendKey, Phase, Sample, SIDE_LEGEND_PX};
 use hopper_protocol::{Hop, Telemetry};
 use plotters::prelude::*;
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-/// The telemetry CSV's columns, units in the names.
-const RECORD_HEADER: [&str; 12] = [
-    "t_s",
-    "seq",
-    "step",
-    "phase",
-    "armed",
-    "faults",
-    "body_height_m",
-    "toe_height_m",
-    "nut_position_m",
-    "spring_force_n",
-    "energy_j",
-    "command_a",
+/// A telemetry record's fields, in the CSV's column order and the MCAP
+/// channel's schema: the one list both read.
+const TELEMETRY_FIELDS: [Field; 12] = [
+    field(
+        "t_s",
+        "number",
+        "time since the recording's first record, s",
+    ),
+    field(
+        "seq",
+        "integer",
+        "telemetry sequence number (a gap is a drop)",
+    ),
+    field("step", "integer", "control period number"),
+    field("phase", "string", "the estimator's phase: flight or stance"),
+    field("armed", "boolean", "the amplifier enabled"),
+    field("faults", "string", "latched faults by name (none)"),
+    field("body_height_m", "number", "body height, m"),
+    field(
+        "toe_height_m",
+        "number",
+        "toe height (body height less the leg length), m",
+    ),
+    field(
+        "nut_position_m",
+        "number",
+        "nut position p, m, down from the upper stop",
+    ),
+    field(
+        "spring_force_n",
+        "number",
+        "spring force from the load cell, N",
+    ),
+    field(
+        "energy_j",
+        "number",
+        "the firmware's total energy estimate, J",
+    ),
+    field("command_a", "number", "the commanded motor current, A"),
 ];
 
-/// One telemetry record as a CSV row, `t_s` after the recording's start.
-fn record_row(t_s: f64, r: &Telemetry) -> [String; 12] {
-    [
-        format!("{t_s:.6}"),
-        r.seq.to_string(),
-        r.step.to_string(),
-        if r.phase == 1 { "stance" } else { "flight" }.to_string(),
-        u8::from(r.armed).to_string(),
-        crate::names::faults(r.faults),
-        format!("{:.6}", r.body_height_m),
-        format!("{:.6}", f64::from(r.body_height_m) - LEG_LENGTH_M),
-        format!("{:.6}", r.nut_position_m),
-        format!("{:.3}", r.spring_force_n),
-        format!("{:.4}", r.energy_j),
-        format!("{:.4}", r.command_a),
-    ]
+/// One telemetry record as the recording keeps it.
+#[derive(Debug, Clone, serde::Serialize)]
+struct TelemetryRow {
+    t_s: f64,
+    seq: u32,
+    step: u32,
+    phase: &'static str,
+    armed: bool,
+    faults: String,
+    body_height_m: f32,
+    toe_height_m: f64,
+    nut_position_m: f32,
+    spring_force_n: f32,
+    energy_j: f32,
+    command_a: f32,
 }
 
-/// The hop ledger CSV's columns.
-const HOP_HEADER: [&str; 8] = [
-    "hop",
-    "apex_height_m",
-    "energy_at_touchdown_j",
-    "energy_at_liftoff_j",
-    "stance_work_j",
-    "stance_duration_s",
-    "peak_current_a",
-    "peak_stroke_m",
-];
+impl TelemetryRow {
+    fn new(t_s: f64, r: &Telemetry) -> Self {
+        Self {
+            t_s,
+            seq: r.seq,
+            step: r.step,
+            phase: if r.phase == 1 { "stance" } else { "flight" },
+            armed: r.armed,
+            faults: crate::names::faults(r.faults),
+            body_height_m: r.body_height_m,
+            toe_height_m: f64::from(r.body_height_m) - LEG_LENGTH_M,
+            nut_position_m: r.nut_position_m,
+            spring_force_n: r.spring_force_n,
+            energy_j: r.energy_j,
+            command_a: r.command_a,
+        }
+    }
+
+    /// As a CSV row (each column's decimals).
+    fn csv(&self) -> [String; 12] {
+        [
+            format!("{:.6}", self.t_s),
+            self.seq.to_string(),
+            self.step.to_string(),
+            self.phase.to_string(),
+            u8::from(self.armed).to_string(),
+            self.faults.clone(),
+            format!("{:.6}", self.body_height_m),
+            format!("{:.6}", self.toe_height_m),
+            format!("{:.6}", self.nut_position_m),
+            format!("{:.3}", self.spring_force_n),
+            format!("{:.4}", self.energy_j),
+            format!("{:.4}", self.command_a),
+        ]
+    }
+}
+
+fn record_header() -> [&'static str; 12] {
+    TELEMETRY_FIELDS.map(|f| f.name)
+}
 
 fn hop_row(h: &Hop) -> [String; 8] {
     [
@@ -69,10 +124,25 @@ fn hop_row(h: &Hop) -> [String; 8] {
     ]
 }
 
-/// A recording written to disk as it arrives (`telemetry.csv`, `hops.csv`),
-/// so whatever ends it (the duration, Ctrl-C, the link closing, the robot
-/// stopping) leaves every record received in valid files; [`finish`]
-/// draws the plot from what was saved.
+/// The MCAP recording's channels.
+struct McapOut {
+    file: Mcap,
+    telemetry: Channel,
+    hop: Channel,
+    fault: Channel,
+    parameters: Channel,
+}
+
+/// A recording written to disk as it arrives (`telemetry.csv`, `hops.csv`
+/// and `telemetry.mcap`), so whatever ends it (the duration, Ctrl-C, the
+/// link closing, the robot stopping) leaves every record received in
+/// valid files; [`finish`] draws the plot from what was saved.
+///
+/// The MCAP file (Foxglove, PlotJuggler) has the channels `/telemetry`,
+/// `/hop`, `/fault` and `/parameters` (every parameter's value when the
+/// recording started, `null` for one the configuration lacks), JSON with
+/// JSON schemas, stamped with robot time (the period count times the
+/// period).
 ///
 /// [`finish`]: Streamed::finish
 pub struct Streamed {
@@ -81,11 +151,16 @@ pub struct Streamed {
     dir: PathBuf,
     telemetry: csv::Writer<std::fs::File>,
     hops: csv::Writer<std::fs::File>,
+    mcap: McapOut,
+    /// The parameters, logged with the first record's time.
+    parameters: Option<BTreeMap<String, Option<f32>>>,
 }
 
 impl Streamed {
-    /// Creates `dir` (if missing) and the two CSV files with their headers.
-    pub fn create(dir: &Path, period_s: f64) -> Result<Self> {
+    /// Creates `dir` (if missing), the two CSV files with their headers and
+    /// the MCAP file with its channels; `parameters` are the robot's at the
+    /// start (NaN: not in its configuration).
+    pub fn create(dir: &Path, period_s: f64, parameters: &[(String, f32)]) -> Result<Self> {
         std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
         let open = |name: &str| -> Result<csv::Writer<std::fs::File>> {
             let path = dir.join(name);
@@ -93,9 +168,20 @@ impl Streamed {
                 .with_context(|| format!("cannot write {}", path.display()))
         };
         let mut telemetry = open("telemetry.csv")?;
-        telemetry.write_record(RECORD_HEADER)?;
+        telemetry.write_record(record_header())?;
         let mut hops = open("hops.csv")?;
-        hops.write_record(HOP_HEADER)?;
+        hops.write_record(HOP_FIELDS.map(|f| f.name))?;
+        let mut file = Mcap::create(&dir.join("telemetry.mcap")).map_err(anyhow::Error::msg)?;
+        let mcap = (|| -> std::result::Result<McapOut, String> {
+            Ok(McapOut {
+                telemetry: file.channel("/telemetry", "hopper.Telemetry", &TELEMETRY_FIELDS)?,
+                hop: file.channel("/hop", "hopper.Hop", &HOP_FIELDS)?,
+                fault: file.channel("/fault", "hopper.Fault", &FAULT_FIELDS)?,
+                parameters: file.map_channel("/parameters", "hopper.Parameters")?,
+                file,
+            })
+        })()
+        .map_err(anyhow::Error::msg)?;
         let mut s = Self {
             rec: Recording {
                 period_s,
@@ -104,37 +190,88 @@ impl Streamed {
             dir: dir.to_path_buf(),
             telemetry,
             hops,
+            mcap,
+            parameters: Some(
+                parameters
+                    .iter()
+                    .map(|(n, v)| (n.clone(), v.is_finite().then_some(*v)))
+                    .collect(),
+            ),
         };
         s.flush()?;
         Ok(s)
     }
 
-    /// One telemetry record, appended to `telemetry.csv`.
+    /// Robot time of period `step`, s: the period rounded to a whole
+    /// nanosecond first (it travels as an `f32`: 1 ms is 1.00000005 ms),
+    /// so the MCAP file's timestamps are whole multiples of it.
+    fn robot_time_s(&self, step: u32) -> f64 {
+        f64::from(step) * (self.rec.period_s * 1e9).round() * 1e-9
+    }
+
+    /// One telemetry record, appended to `telemetry.csv` and the MCAP file.
     pub fn record(&mut self, t: Telemetry) -> Result<()> {
         self.rec.records.push(t);
-        self.telemetry
-            .write_record(record_row(self.rec.t_s(&t), &t))?;
+        let row = TelemetryRow::new(self.rec.t_s(&t), &t);
+        self.telemetry.write_record(row.csv())?;
+        let time_s = self.robot_time_s(t.step);
+        let m = &mut self.mcap;
+        if let Some(p) = self.parameters.take() {
+            m.file
+                .log(m.parameters, time_s, &p)
+                .map_err(anyhow::Error::msg)?;
+        }
+        m.file
+            .log(m.telemetry, time_s, &row)
+            .map_err(anyhow::Error::msg)?;
         Ok(())
     }
 
-    /// One hop's ledger, appended to `hops.csv`.
+    /// One hop's ledger, appended to `hops.csv` and the MCAP file (at the
+    /// last record's time: the ledger comes as the hop ends).
     pub fn hop(&mut self, h: Hop) -> Result<()> {
         self.telemetry.flush()?;
         self.hops.write_record(hop_row(&h))?;
         self.hops.flush()?;
+        let time_s = self
+            .rec
+            .records
+            .last()
+            .map_or(0.0, |r| self.robot_time_s(r.step));
+        self.mcap
+            .file
+            .log(self.mcap.hop, time_s, &h)
+            .map_err(anyhow::Error::msg)?;
         self.rec.hops.push(h);
         Ok(())
     }
 
-    /// Pushes what is buffered to the files.
+    /// Faults latched at period `step`.
+    pub fn fault(&mut self, step: u32, bits: u16) -> Result<()> {
+        self.rec.faults.push((step, bits));
+        let msg = serde_json::json!({
+            "step": step,
+            "bits": bits,
+            "faults": crate::names::faults(bits),
+        });
+        self.mcap
+            .file
+            .log(self.mcap.fault, self.robot_time_s(step), &msg)
+            .map_err(anyhow::Error::msg)
+    }
+
+    /// Pushes what is buffered to the files (the MCAP file's open chunk
+    /// closed: readable up to here).
     pub fn flush(&mut self) -> Result<()> {
         self.telemetry.flush()?;
         self.hops.flush()?;
+        self.mcap.file.flush().map_err(anyhow::Error::msg)?;
         Ok(())
     }
 
-    /// Flushes the files and draws `plot` (PNG) from what was saved (with
-    /// at least two records); returns the paths written.
+    /// Flushes the files, completes the MCAP file and draws `plot` (PNG)
+    /// from what was saved (with at least two records); returns the paths
+    /// written.
     pub fn finish(
         mut self,
         plot: &str,
@@ -142,7 +279,12 @@ impl Streamed {
         target_apex_m: Option<f64>,
     ) -> Result<(Recording, Vec<PathBuf>)> {
         self.flush()?;
-        let mut written = vec![self.dir.join("telemetry.csv"), self.dir.join("hops.csv")];
+        self.mcap.file.finish().map_err(anyhow::Error::msg)?;
+        let mut written = vec![
+            self.dir.join("telemetry.csv"),
+            self.dir.join("hops.csv"),
+            self.dir.join("telemetry.mcap"),
+        ];
         if self.rec.records.len() >= 2 {
             let path = self.dir.join(plot);
             hopper_plot::hop_plot(&self.rec.samples(), title, target_apex_m, &path)
@@ -214,9 +356,9 @@ impl Recording {
     fn write_records(&self, path: &Path) -> Result<PathBuf> {
         let mut w = csv::Writer::from_path(path)
             .with_context(|| format!("cannot write {}", path.display()))?;
-        w.write_record(RECORD_HEADER)?;
+        w.write_record(record_header())?;
         for r in &self.records {
-            w.write_record(record_row(self.t_s(r), r))?;
+            w.write_record(TelemetryRow::new(self.t_s(r), r).csv())?;
         }
         w.flush()?;
         Ok(path.to_path_buf())

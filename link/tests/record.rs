@@ -4,8 +4,8 @@
 
 use hopper_protocol::vocab::Refusal;
 use hopper_protocol::{
-    encode, Decoder, Hop, HostMsg, Request, Response, RobotMsg, Telemetry, TimingStats, MAX_FRAME,
-    PROTOCOL_VERSION,
+    encode, Decoder, Hop, HostMsg, ParamInfo, Request, Response, RobotMsg, Telemetry, TimingStats,
+    MAX_FRAME, PROTOCOL_VERSION,
 };
 use std::io::{Read, Write};
 use std::net::{TcpListener, TcpStream};
@@ -31,6 +31,19 @@ fn answer(req: &Request) -> Response {
             link_max: 0,
         }),
         Request::ParamGet { name } if name.as_str() == "target_apex_m" => Response::Value(0.1),
+        Request::ParamCount => Response::ParamCount(2),
+        Request::ParamInfo { index } => Response::ParamInfo(ParamInfo {
+            name: ["target_apex_m", "energy.gain_nm_per_j"][usize::from(*index).min(1)]
+                .try_into()
+                .unwrap_or_default(),
+            unit: "m".try_into().unwrap_or_default(),
+            min: 0.0,
+            max: 1.0,
+            default: 0.05,
+            // The second: another controller's (no value).
+            value: if *index == 0 { 0.1 } else { f32::NAN },
+            live: true,
+        }),
         Request::ParamGet { .. } | Request::ParamMeta { .. } => {
             Response::Refused(Refusal::UnknownParameter.into())
         }
@@ -177,6 +190,42 @@ fn a_link_closed_mid_recording_keeps_what_came() {
         "{last}"
     );
     assert!(dir.join("hop.png").metadata().is_ok_and(|m| m.len() > 1000));
+    // The MCAP file, read by a reader written from the format's
+    // specification: complete (footer, magic) although the link closed,
+    // and the same records as the CSV.
+    let bytes = std::fs::read(dir.join("telemetry.mcap")).unwrap_or_default();
+    let msgs = hopper_mcap::read::messages(&bytes).unwrap_or_else(|e| panic!("{e}"));
+    let on = |topic: &str| msgs.iter().filter(|m| m.topic == topic).collect::<Vec<_>>();
+    let (telemetry, hops, params) = (on("/telemetry"), on("/hop"), on("/parameters"));
+    println!(
+        "telemetry.mcap: {} messages: /telemetry {}, /hop {}, /parameters {}, /fault {}",
+        msgs.len(),
+        telemetry.len(),
+        hops.len(),
+        params.len(),
+        on("/fault").len()
+    );
+    assert_eq!((telemetry.len(), hops.len(), params.len()), (1500, 1, 1));
+    let near = |v: &serde_json::Value, x: f64| v.as_f64().is_some_and(|v| (v - x).abs() < 1e-6);
+    assert!(near(&params[0].json["target_apex_m"], 0.1), "{params:?}");
+    assert_eq!(
+        params[0].json["energy.gain_nm_per_j"],
+        serde_json::Value::Null
+    );
+    assert!(near(&hops[0].json["apex_height_m"], 0.1), "{hops:?}");
+    let csv = std::fs::read_to_string(dir.join("telemetry.csv")).unwrap_or_default();
+    for (row, m) in csv.lines().skip(1).zip(&telemetry) {
+        let cells: Vec<&str> = row.split(',').collect();
+        let num = |i: usize| cells[i].parse::<f64>().unwrap_or(f64::NAN);
+        let j = |k: &str| m.json[k].as_f64().unwrap_or(f64::NAN);
+        // Robot time: the period count times 1 ms.
+        assert_eq!(m.log_time_ns, num(2) as u64 * 1_000_000, "{row}");
+        assert_eq!(j("step"), num(2), "{row}");
+        assert!((j("t_s") - num(0)).abs() < 1e-6, "{row}");
+        assert!((j("body_height_m") - num(6)).abs() < 1e-6, "{row}");
+        assert!((j("toe_height_m") - num(7)).abs() < 1e-6, "{row}");
+        assert_eq!(m.json["phase"], cells[3], "{row}");
+    }
     let _ = std::fs::remove_dir_all(&dir);
 }
 

@@ -1,11 +1,11 @@
-//! `record`: telemetry and hop ledgers to CSV files as they arrive, and
-//! a plot of what was saved.
+//! `record`: telemetry, hop ledgers and faults to CSV and MCAP files as
+//! they arrive, and a plot of what was saved.
 
 use super::common::{get, print_written, timing_of};
 use anyhow::{bail, Result};
 use hopper_link::record::Streamed;
 use hopper_link::{names, Client};
-use hopper_protocol::{Request, RobotMsg};
+use hopper_protocol::{Request, Response, RobotMsg};
 use std::io::IsTerminal;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, OnceLock};
@@ -35,7 +35,8 @@ pub(crate) fn record(
         .ok()
         .and_then(|v| controllers.get(v as usize).map(String::as_str))
         .unwrap_or("the controller");
-    let mut out_files = Streamed::create(out, period)?;
+    let parameters = all_parameters(c)?;
+    let mut out_files = Streamed::create(out, period, &parameters)?;
     let span = (duration_s / period).round() as u64;
     let bar = indicatif::ProgressBar::new(span);
     if !std::io::stderr().is_terminal() {
@@ -90,7 +91,7 @@ pub(crate) fn record(
                 bar.suspend(|| {
                     println!("fault at step {step}: {}", names::faults(bits));
                 });
-                out_files.rec.faults.push((step, bits));
+                out_files.fault(step, bits)?;
             }
             Some(RobotMsg::State(s)) => bar.suspend(|| println!("state: {}", names::arm_state(s))),
             Some(_) => {}
@@ -155,6 +156,21 @@ pub(crate) fn record(
         }
         None => Ok(()),
     }
+}
+
+/// Every parameter's name and value (NaN: not in the robot's
+/// configuration), for the recording's `/parameters`.
+fn all_parameters(c: &mut Client) -> Result<Vec<(String, f32)>> {
+    let n = match c.request(Request::ParamCount)? {
+        Response::ParamCount(n) => n,
+        r => bail!("unexpected answer {r:?}"),
+    };
+    (0..n)
+        .map(|index| match c.request(Request::ParamInfo { index })? {
+            Response::ParamInfo(p) => Ok((p.name.as_str().to_string(), p.value)),
+            r => bail!("parameter {index}: unexpected answer {r:?}"),
+        })
+        .collect()
 }
 
 /// A flag Ctrl-C sets while a recording runs (one handler for the

@@ -14,7 +14,8 @@ pub(crate) struct RunArgs {
     /// Trajectory sample rate for the CSV and plot, Hz.
     #[arg(long, default_value_t = 1000.0)]
     sample_hz: f64,
-    /// Directory for trajectory.csv and hop.png (created if missing).
+    /// Directory for trajectory.csv, hop.png and telemetry.mcap (Foxglove,
+    /// PlotJuggler), created if missing.
     #[arg(long)]
     out: Option<PathBuf>,
     /// Print exactly one JSON object (the summary) on stdout.
@@ -145,7 +146,12 @@ pub(crate) fn cmd_run(a: RunArgs) -> Result<()> {
                 }),
                 &staging.join("hop.png"),
             )?;
-            Ok(vec!["trajectory.csv".into(), "hop.png".into()])
+            hal_sim::run::write_mcap(&staging.join("telemetry.mcap"), &result, &ctl.parameters())?;
+            Ok(vec![
+                "trajectory.csv".into(),
+                "hop.png".into(),
+                "telemetry.mcap".into(),
+            ])
         })
         .map_err(anyhow::Error::msg)?;
     }
