@@ -7,7 +7,9 @@ mod cmd;
 
 use anyhow::{anyhow, bail, Context, Result};
 use clap::{Parser, Subcommand};
-use cmd::{arm, calibrate, dump, flood, params, record, save, silence, sim, status, wait, watch};
+use cmd::{
+    arm, calibrate, dump, flood, params, record, save, silence, sim, status, ui, wait, watch,
+};
 use hopper_link::{Client, Target};
 use std::io::{BufRead, Write};
 use std::path::PathBuf;
@@ -158,6 +160,19 @@ enum Cmd {
     Wait {
         /// Wall seconds.
         seconds: f64,
+    },
+    /// The cockpit: a web page with live plots, the state, Arm and an
+    /// always-visible Disarm (also Space or Escape), and the parameter
+    /// table edited in place. Prints its address with a random token that
+    /// every request needs; serves until Ctrl-C.
+    Ui {
+        /// Where to serve it (port 0: a free one, printed).
+        #[arg(long, default_value = "127.0.0.1:8080", value_name = "HOST:PORT")]
+        http: String,
+        /// Serve on an address that is not loopback (anyone on that
+        /// network with the token can drive the motor).
+        #[arg(long)]
+        allow_remote: bool,
     },
     /// Commands from standard input, one per line, on one connection (the
     /// link and the arming survive between them). `#` starts a comment; a
@@ -318,6 +333,7 @@ fn run(c: &mut Client, cmd: &Cmd) -> Result<()> {
         Cmd::Flood { seconds } => flood::flood(c, *seconds),
         Cmd::Garbage { bytes } => flood::garbage(c, *bytes),
         Cmd::Wait { seconds } => wait::wait(*seconds),
+        Cmd::Ui { http, allow_remote } => ui::ui(c, http, *allow_remote),
         Cmd::Shell => bail!("shell is a top-level command"),
     }
 }

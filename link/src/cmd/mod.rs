@@ -12,5 +12,6 @@ pub(crate) mod save;
 pub(crate) mod silence;
 pub(crate) mod sim;
 pub(crate) mod status;
+pub(crate) mod ui;
 pub(crate) mod wait;
 pub(crate) mod watch;

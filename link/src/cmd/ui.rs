@@ -1,0 +1,500 @@
+//! `ui`: the operator's cockpit, a web page served by this client (assets
+//! in the binary, no internet needed): live plots, the state with an
+//! always-visible Disarm, Arm with its refusal, and the parameter table
+//! edited in place.
+//!
+//! The page can drive a real motor, so it lets in only its operator: it
+//! listens on loopback unless `--allow-remote` says otherwise; every
+//! request and the websocket need the random token printed in the URL at
+//! start; the HTTP server checks `Host` (a DNS-rebinding site names its
+//! own) and the websocket checks `Origin` (another page open in the same
+//! browser is not this one). Nothing of a refused request reaches the
+//! robot. The robot still disarms by its link timeout when this client
+//! goes away.
+//!
+//! One thread owns the link (the [`Client`]): it streams telemetry, polls
+//! the state, and runs the commands the pages send, one at a time; each
+//! connection has a thread of its own.
+
+use super::common::wire_name;
+use anyhow::{bail, Context, Result};
+use hopper_link::{names, Client};
+use hopper_protocol::{ArmState, Request, Response, RobotMsg};
+use std::io::{Read, Write};
+use std::net::{SocketAddr, TcpListener, TcpStream};
+use std::sync::mpsc::{channel, Receiver, Sender};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+use tungstenite::protocol::Role;
+use tungstenite::{Message, WebSocket};
+
+/// The page (HTML, CSS and script in one file).
+const PAGE: &str = include_str!("ui.html");
+
+/// Telemetry records a second the page is sent (the robot streams at this
+/// rate; the page draws at its frame rate).
+const TELEMETRY_HZ: f64 = 200.0;
+
+/// A command from a page, with where its answer goes.
+struct Command {
+    /// The page's JSON command.
+    json: serde_json::Value,
+    /// The answer's way back to that page.
+    reply: Sender<String>,
+}
+
+/// The pages connected: each one's queue of messages.
+type Pages = Arc<Mutex<Vec<Sender<String>>>>;
+
+/// `hopper-link ui --http ADDR [--allow-remote]`: serves the cockpit until
+/// the link closes or the process is stopped.
+pub(crate) fn ui(c: &mut Client, http: &str, allow_remote: bool) -> Result<()> {
+    let addr: SocketAddr = http.parse().with_context(|| {
+        format!("--http {http}: not an address HOST:PORT (e.g. 127.0.0.1:8080)")
+    })?;
+    if !addr.ip().is_loopback() {
+        if !allow_remote {
+            bail!("--http {addr} is not a loopback address: anyone who can reach it could arm the robot; add --allow-remote to serve it anyway");
+        }
+        eprintln!("hopper-link: warning: serving the cockpit on {addr}, beyond this machine: anyone on that network who has the token can drive the motor");
+    }
+    let listener = TcpListener::bind(addr).with_context(|| format!("cannot listen on {addr}"))?;
+    let bound = listener.local_addr()?;
+    let token = token()?;
+    // The names a browser may use for this server (its `Host`).
+    let mut hosts = vec![bound.to_string()];
+    if bound.ip().is_loopback() {
+        hosts.push(format!("localhost:{}", bound.port()));
+    }
+    println!("cockpit: http://{bound}/?token={token}");
+    println!("(open it in a browser; Ctrl-C stops; the robot disarms by its link timeout then)");
+    std::io::stdout().flush()?;
+    let pages: Pages = Arc::default();
+    let (commands, inbox) = channel::<Command>();
+    {
+        let pages = pages.clone();
+        let token = token.clone();
+        std::thread::spawn(move || {
+            for stream in listener.incoming().flatten() {
+                let (pages, commands, token, hosts) = (
+                    pages.clone(),
+                    commands.clone(),
+                    token.clone(),
+                    hosts.clone(),
+                );
+                std::thread::spawn(move || {
+                    let _ = connection(stream, &token, &hosts, &pages, &commands);
+                });
+            }
+        });
+    }
+    robot(c, &pages, &inbox)
+}
+
+/// A random token: 128 bits as hex.
+fn token() -> Result<String> {
+    let mut b = [0u8; 16];
+    getrandom::fill(&mut b).map_err(|e| anyhow::anyhow!("no random token: {e}"))?;
+    Ok(b.iter().map(|x| format!("{x:02x}")).collect())
+}
+
+/// Sends `msg` to every page (dropping those gone).
+fn broadcast(pages: &Pages, msg: &serde_json::Value) {
+    let text = msg.to_string();
+    if let Ok(mut p) = pages.lock() {
+        p.retain(|tx| tx.send(text.clone()).is_ok());
+    }
+}
+
+/// The link's thread: telemetry, the state, and the pages' commands.
+fn robot(c: &mut Client, pages: &Pages, inbox: &Receiver<Command>) -> Result<()> {
+    let t = match c.request(Request::Timing)? {
+        Response::Timing(t) => t,
+        r => bail!("unexpected answer {r:?}"),
+    };
+    let period = f64::from(t.period_s);
+    let every = (1.0 / (TELEMETRY_HZ * period)).round().clamp(1.0, 65535.0) as u16;
+    c.expect_ok(Request::Telemetry { every })?;
+    let mut batch: Vec<serde_json::Value> = Vec::new();
+    let mut last_send = Instant::now();
+    let mut last_state = Instant::now() - Duration::from_secs(1);
+    let mut last_thermal = last_state;
+    loop {
+        while let Ok(cmd) = inbox.try_recv() {
+            let answer = run(c, &cmd.json, pages);
+            let _ = cmd.reply.send(answer.to_string());
+        }
+        if last_state.elapsed() >= Duration::from_millis(100) {
+            last_state = Instant::now();
+            broadcast(pages, &state(c)?);
+        }
+        if last_thermal.elapsed() >= Duration::from_millis(500) {
+            last_thermal = Instant::now();
+            if let Response::Thermal(th) = c.request(Request::Thermal)? {
+                broadcast(
+                    pages,
+                    &serde_json::json!({
+                        "type": "thermal",
+                        "winding_c": th.winding_c,
+                        "housing_c": th.housing_c,
+                        "limit_scale": th.limit_scale,
+                        "derate_c": th.derate_c,
+                        "trip_c": th.trip_c,
+                    }),
+                );
+            }
+        }
+        match c.next_event(Duration::from_millis(10))? {
+            Some(RobotMsg::Telemetry(r)) => batch.push(serde_json::json!([
+                f64::from(r.step) * period,
+                r.body_height_m,
+                f64::from(r.body_height_m) - hopper_model::design::LEG_LENGTH_M,
+                r.nut_position_m,
+                r.spring_force_n,
+                r.command_a,
+                r.energy_j,
+            ])),
+            Some(RobotMsg::Hop(h)) => {
+                broadcast(pages, &serde_json::json!({ "type": "hop", "hop": h }))
+            }
+            Some(RobotMsg::Faults { step, bits }) => broadcast(
+                pages,
+                &serde_json::json!({ "type": "fault", "step": step, "faults": names::faults(bits) }),
+            ),
+            _ => {}
+        }
+        // About 30 frames a second to the pages.
+        if last_send.elapsed() >= Duration::from_millis(33) && !batch.is_empty() {
+            last_send = Instant::now();
+            broadcast(
+                pages,
+                &serde_json::json!({ "type": "telemetry", "records": std::mem::take(&mut batch) }),
+            );
+        }
+    }
+}
+
+/// The robot's state for the page.
+fn state(c: &mut Client) -> Result<serde_json::Value> {
+    let s = match c.request(Request::Status)? {
+        Response::Status(s) => s,
+        r => bail!("unexpected answer {r:?}"),
+    };
+    let cost = match c.request(Request::Cost)? {
+        Response::Cost(x) => Some(x),
+        _ => None,
+    };
+    let host = c.stats();
+    Ok(serde_json::json!({
+        "type": "state",
+        "armed": s.arm == ArmState::Armed,
+        "arm": names::arm_state(s.arm),
+        "advice": names::advice(s.arm),
+        "faults": names::faults(s.faults),
+        "periods": s.periods,
+        "frames_ok": s.frames_ok,
+        "frames_bad": s.frames_bad,
+        "host_frames_ok": host.ok,
+        "host_frames_bad": host.too_long + host.bad_cobs + host.bad_crc + host.bad_message,
+        "telemetry_dropped": s.telemetry_dropped,
+        "last_apex_m": s.last_apex_m,
+        "isr_mean": cost.map(|x| x.isr_mean),
+        "isr_max": cost.map(|x| x.isr_max),
+        "counter_hz": cost.map(|x| x.counter_hz),
+    }))
+}
+
+/// Every parameter, for the page's table.
+fn parameters(c: &mut Client) -> Result<serde_json::Value> {
+    let n = match c.request(Request::ParamCount)? {
+        Response::ParamCount(n) => n,
+        r => bail!("unexpected answer {r:?}"),
+    };
+    let controllers = names::controller_names(c)?;
+    let selected = super::common::get(c, names::CONTROLLER)
+        .ok()
+        .and_then(|v| controllers.get(v as usize).cloned());
+    let mut rows = Vec::new();
+    for index in 0..n {
+        let name = match c.request(Request::ParamInfo { index })? {
+            Response::ParamInfo(p) => p.name,
+            r => bail!("parameter {index}: unexpected answer {r:?}"),
+        };
+        let Some(d) = names::describe(c, name.as_str())? else {
+            continue;
+        };
+        let p = &d.info;
+        let active = !p.value.is_nan();
+        rows.push(serde_json::json!({
+            "name": p.name.as_str(),
+            "value": if active { d.value(p.value) } else { d.value(p.default) },
+            "unit": p.unit.as_str(),
+            "min": p.min,
+            "max": p.max,
+            "default": d.value(p.default),
+            "live": p.live,
+            "choices": d.choices,
+            "inactive": (!active).then(|| d.inactive_reason(selected.as_deref())),
+        }));
+    }
+    Ok(serde_json::json!({ "type": "params", "rows": rows }))
+}
+
+/// Runs one of the page's commands on the robot; the answer for the page.
+fn run(c: &mut Client, cmd: &serde_json::Value, pages: &Pages) -> serde_json::Value {
+    let id = cmd["id"].clone();
+    let what = cmd["cmd"].as_str().unwrap_or("");
+    let result: Result<String> = (|| match what {
+        "arm" => match c.request(Request::Arm)? {
+            Response::Ok => Ok("armed".into()),
+            Response::Refused(why) => bail!("arm refused: {why}"),
+            r => bail!("unexpected answer {r:?}"),
+        },
+        "disarm" => {
+            c.expect_ok(Request::Disarm)?;
+            Ok("disarmed".into())
+        }
+        "reset-faults" => match c.request(Request::ResetFaults)? {
+            Response::Ok => Ok("faults reset".into()),
+            Response::Refused(why) => bail!("reset-faults refused: {why}"),
+            r => bail!("unexpected answer {r:?}"),
+        },
+        "params" => {
+            let p = parameters(c)?;
+            broadcast(pages, &p);
+            Ok(String::new())
+        }
+        "set" => {
+            let name = cmd["name"].as_str().unwrap_or("");
+            let text = cmd["value"].as_str().unwrap_or("");
+            let d =
+                names::describe(c, name)?.ok_or_else(|| anyhow::anyhow!("no parameter {name}"))?;
+            let value = d.parse(text)?;
+            match c.request(Request::ParamSet {
+                name: wire_name(name)?,
+                value,
+            })? {
+                Response::Ok => {
+                    let p = parameters(c)?;
+                    broadcast(pages, &p);
+                    Ok(format!("{name} = {text}"))
+                }
+                Response::Refused(why) => {
+                    let old = super::common::read_param(c, name)?
+                        .map_or_else(|_| "inactive".to_string(), |v| d.shown(v));
+                    bail!("set {name} = {text} refused: {why} (unchanged: {old})")
+                }
+                r => bail!("unexpected answer {r:?}"),
+            }
+        }
+        _ => bail!("unknown command `{what}`"),
+    })();
+    match result {
+        Ok(text) => serde_json::json!({ "type": "result", "id": id, "ok": true, "text": text }),
+        Err(e) => {
+            serde_json::json!({ "type": "result", "id": id, "ok": false, "text": format!("{e:#}") })
+        }
+    }
+}
+
+/// The value of query parameter `key` in `target` (`/ws?token=...`).
+fn query<'a>(target: &'a str, key: &str) -> Option<&'a str> {
+    target
+        .split_once('?')?
+        .1
+        .split('&')
+        .find_map(|kv| kv.strip_prefix(key)?.strip_prefix('='))
+}
+
+fn respond(s: &mut TcpStream, status: &str, kind: &str, body: &str) -> std::io::Result<()> {
+    write!(
+        s,
+        "HTTP/1.1 {status}\r\nContent-Type: {kind}\r\nContent-Length: {}\r\nCache-Control: no-store\r\nConnection: close\r\n\r\n{body}",
+        body.len()
+    )
+}
+
+/// Why a request is refused, if it is: the `Host` is not this server's,
+/// the token is missing or wrong, or (a websocket) the `Origin` is not this
+/// page's.
+pub(crate) fn refusal(
+    host: Option<&str>,
+    origin: Option<&str>,
+    target: &str,
+    token: &str,
+    hosts: &[String],
+    websocket: bool,
+) -> Option<&'static str> {
+    let Some(host) = host.filter(|h| hosts.iter().any(|x| x == h)) else {
+        return Some("wrong Host");
+    };
+    if query(target, "token") != Some(token) {
+        return Some("no valid token");
+    }
+    if websocket && origin != Some(&format!("http://{host}")) {
+        return Some("wrong Origin");
+    }
+    None
+}
+
+/// One connection: the page, or its websocket.
+fn connection(
+    mut s: TcpStream,
+    token: &str,
+    hosts: &[String],
+    pages: &Pages,
+    commands: &Sender<Command>,
+) -> Result<()> {
+    s.set_read_timeout(Some(Duration::from_secs(5)))?;
+    // The request's head (a browser's fits in 8 KiB).
+    let mut buf = vec![0u8; 8192];
+    let mut n = 0;
+    let head_len = loop {
+        let k = s.read(&mut buf[n..])?;
+        if k == 0 {
+            return Ok(());
+        }
+        n += k;
+        let mut headers = [httparse::EMPTY_HEADER; 32];
+        let mut req = httparse::Request::new(&mut headers);
+        match req.parse(&buf[..n]) {
+            Ok(httparse::Status::Complete(len)) => break len,
+            Ok(httparse::Status::Partial) if n < buf.len() => continue,
+            _ => {
+                return respond(&mut s, "400 Bad Request", "text/plain", "bad request\n")
+                    .map_err(Into::into)
+            }
+        }
+    };
+    let mut headers = [httparse::EMPTY_HEADER; 32];
+    let mut req = httparse::Request::new(&mut headers);
+    req.parse(&buf[..head_len])?;
+    let header = |name: &str| {
+        req.headers
+            .iter()
+            .find(|h| h.name.eq_ignore_ascii_case(name))
+            .and_then(|h| std::str::from_utf8(h.value).ok())
+    };
+    let target = req.path.unwrap_or("/");
+    let path = target.split('?').next().unwrap_or("/");
+    let websocket = header("Upgrade").is_some_and(|u| u.eq_ignore_ascii_case("websocket"));
+    if let Some(why) = refusal(
+        header("Host"),
+        header("Origin"),
+        target,
+        token,
+        hosts,
+        websocket,
+    ) {
+        return respond(
+            &mut s,
+            "403 Forbidden",
+            "text/plain",
+            &format!("refused: {why}\n"),
+        )
+        .map_err(Into::into);
+    }
+    match (req.method, path, websocket) {
+        (Some("GET"), "/", false) => {
+            respond(&mut s, "200 OK", "text/html; charset=utf-8", PAGE)?;
+            Ok(())
+        }
+        (Some("GET"), "/ws", true) => {
+            let key = header("Sec-WebSocket-Key").unwrap_or("");
+            write!(
+                s,
+                "HTTP/1.1 101 Switching Protocols\r\nUpgrade: websocket\r\nConnection: Upgrade\r\nSec-WebSocket-Accept: {}\r\n\r\n",
+                tungstenite::handshake::derive_accept_key(key.as_bytes())
+            )?;
+            page(s, pages, commands)
+        }
+        _ => respond(&mut s, "404 Not Found", "text/plain", "not found\n").map_err(Into::into),
+    }
+}
+
+/// A page's websocket: the broadcasts out, its commands in.
+fn page(s: TcpStream, pages: &Pages, commands: &Sender<Command>) -> Result<()> {
+    s.set_read_timeout(Some(Duration::from_millis(10)))?;
+    let mut ws = WebSocket::from_raw_socket(s, Role::Server, None);
+    let (tx, rx) = channel::<String>();
+    if let Ok(mut p) = pages.lock() {
+        p.push(tx.clone());
+    }
+    // The table first.
+    let _ = commands.send(Command {
+        json: serde_json::json!({ "cmd": "params" }),
+        reply: tx.clone(),
+    });
+    loop {
+        match ws.read() {
+            Ok(Message::Text(t)) => {
+                if let Ok(json) = serde_json::from_str::<serde_json::Value>(t.as_str()) {
+                    let _ = commands.send(Command {
+                        json,
+                        reply: tx.clone(),
+                    });
+                }
+            }
+            Ok(Message::Close(_)) => return Ok(()),
+            Ok(_) => {}
+            Err(tungstenite::Error::Io(e))
+                if matches!(
+                    e.kind(),
+                    std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
+                ) => {}
+            Err(_) => return Ok(()),
+        }
+        while let Ok(text) = rx.try_recv() {
+            ws.send(Message::text(text))?;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn only_this_pages_requests_with_the_token_pass() {
+        let hosts = vec!["127.0.0.1:8080".to_string(), "localhost:8080".to_string()];
+        let ok = |host, origin, target, ws| refusal(host, origin, target, "abc", &hosts, ws);
+        assert_eq!(ok(Some("127.0.0.1:8080"), None, "/?token=abc", false), None);
+        assert_eq!(
+            ok(
+                Some("localhost:8080"),
+                Some("http://localhost:8080"),
+                "/ws?token=abc",
+                true
+            ),
+            None
+        );
+        // DNS rebinding: the attacker's name in Host.
+        assert_eq!(
+            ok(Some("evil.example:8080"), None, "/?token=abc", false),
+            Some("wrong Host")
+        );
+        assert_eq!(ok(None, None, "/?token=abc", false), Some("wrong Host"));
+        assert_eq!(
+            ok(Some("127.0.0.1:8080"), None, "/", false),
+            Some("no valid token")
+        );
+        assert_eq!(
+            ok(Some("127.0.0.1:8080"), None, "/?token=abd", false),
+            Some("no valid token")
+        );
+        // Another page in the same browser (it knows the token, say).
+        assert_eq!(
+            ok(
+                Some("127.0.0.1:8080"),
+                Some("http://evil.example"),
+                "/ws?token=abc",
+                true
+            ),
+            Some("wrong Origin")
+        );
+        assert_eq!(
+            ok(Some("127.0.0.1:8080"), None, "/ws?token=abc", true),
+            Some("wrong Origin")
+        );
+    }
+}
