@@ -43,12 +43,18 @@
 //! * `cargo xtask link-session`: the same session against `hopper-sim
 //!   serve` (the virtual robot), `link-sim: ...` (`cargo xtask test` runs
 //!   it after the QEMU runs).
+//! * `cargo xtask cockpit`: `hopper-link ui` in headless chromium
+//!   (installed when missing) against `hopper-sim serve`, driven through
+//!   the DevTools protocol: `cockpit: loaded=... moved=... arm=...
+//!   refused=... disarm=...` (`cargo xtask test` runs it after the
+//!   session).
 
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
 use std::process::{Command, ExitCode, Stdio};
 
 mod board_init;
+mod cockpit;
 mod docs;
 mod hil;
 mod qemu;
@@ -82,6 +88,7 @@ fn main() -> ExitCode {
         Some("size") => setup(&root).and_then(|_| size(&root)),
         Some("qemu") => setup(&root).and_then(|_| qemu::run(&root)),
         Some("link-session") => session::against_serve(&root),
+        Some("cockpit") => setup(&root).and_then(|_| cockpit::run(&root)),
         Some("board-init") => setup(&root).and_then(|_| board_init::run(&root)),
         Some("hil") => {
             let serial = match &args[1..] {
@@ -93,7 +100,9 @@ fn main() -> ExitCode {
         }
         Some("docs") => docs_check(&root, &args[1..]),
         _ => {
-            eprintln!("usage: cargo xtask <test|size|qemu|hil|link-session|board-init|docs>");
+            eprintln!(
+                "usage: cargo xtask <test|size|qemu|hil|link-session|cockpit|board-init|docs>"
+            );
             return ExitCode::from(2);
         }
     };
@@ -337,6 +346,7 @@ fn test(root: &Path) -> Result<(), String> {
     qemu::run(root)?;
     hil::run(root, None)?;
     session::against_serve(root)?;
+    cockpit::run(root)?;
     cargo_test(root)
 }
 

@@ -297,15 +297,22 @@ fn parse_summary(lines: &[String]) -> Option<(&str, BTreeMap<&str, &str>)> {
 
 /// Installs `qemu-system-arm` with apt-get when it is missing.
 pub(crate) fn ensure_qemu() -> Result<(), String> {
-    if Command::new("qemu-system-arm")
+    ensure_package("qemu-system-arm", "qemu-system-arm", false)
+}
+
+/// Installs Debian's `package` with apt-get (without its recommended
+/// packages when `lean`) when `program --version` does not run.
+pub(crate) fn ensure_package(program: &str, package: &str, lean: bool) -> Result<(), String> {
+    if Command::new(program)
         .arg("--version")
         .stdout(Stdio::null())
+        .stderr(Stdio::null())
         .status()
         .is_ok_and(|s| s.success())
     {
         return Ok(());
     }
-    eprintln!("xtask: qemu-system-arm not found; installing it with apt-get");
+    eprintln!("xtask: {program} not found; installing {package} with apt-get");
     let sudo = !matches!(
         Command::new("id").arg("-u").output().map(|o| o.stdout),
         Ok(ref out) if out.starts_with(b"0")
@@ -323,12 +330,16 @@ pub(crate) fn ensure_qemu() -> Result<(), String> {
             .status()
             .is_ok_and(|s| s.success())
     };
-    let installed = apt(&["install", "-y", "qemu-system-arm"])
-        || (apt(&["update"]) && apt(&["install", "-y", "qemu-system-arm"]));
+    let install: &[&str] = if lean {
+        &["install", "-y", "--no-install-recommends", package]
+    } else {
+        &["install", "-y", package]
+    };
+    let installed = apt(install) || (apt(&["update"]) && apt(install));
     if !installed {
-        return Err(
-            "cannot install qemu-system-arm: run `apt-get install -y qemu-system-arm`".into(),
-        );
+        return Err(format!(
+            "cannot install {package}: run `apt-get install -y {package}`"
+        ));
     }
     Ok(())
 }

@@ -1,0 +1,267 @@
+//! `cargo xtask cockpit` (part of `cargo xtask test`): the operator's web
+//! cockpit (`hopper-link ui`) in a real browser, Debian's chromium
+//! headless (installed when missing), against `hopper-sim serve`. Driven
+//! through the Chrome DevTools protocol as an operator would: the page
+//! loads and shows the robot disarmed, the plotted values move between two
+//! reads, Arm shows armed, an out-of-range set shows the refusal, the
+//! Escape key disarms. Prints one line
+//! `cockpit: loaded=... moved=... arm=... refused=... disarm=...` and
+//! leaves a screenshot in `target/cockpit/cockpit.png`.
+
+use std::io::{BufRead, BufReader, Read};
+use std::net::TcpStream;
+use std::path::Path;
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+use crate::session::{free_addr, host_binaries, Reaped};
+
+/// How long each step may take to show on the page.
+const STEP_TIMEOUT: Duration = Duration::from_secs(20);
+
+type Socket = tungstenite::WebSocket<TcpStream>;
+
+/// The DevTools protocol on one page.
+struct Page {
+    ws: Socket,
+    next_id: u64,
+}
+
+impl Page {
+    /// Calls `method`; its result.
+    fn call(
+        &mut self,
+        method: &str,
+        params: serde_json::Value,
+    ) -> Result<serde_json::Value, String> {
+        self.next_id += 1;
+        let id = self.next_id;
+        let msg = serde_json::json!({ "id": id, "method": method, "params": params });
+        self.ws
+            .send(tungstenite::Message::text(msg.to_string()))
+            .map_err(|e| format!("DevTools: {e}"))?;
+        let end = Instant::now() + STEP_TIMEOUT;
+        while Instant::now() < end {
+            match self.ws.read() {
+                Ok(tungstenite::Message::Text(t)) => {
+                    let v: serde_json::Value = serde_json::from_str(t.as_str()).unwrap_or_default();
+                    if v["id"] == id {
+                        return Ok(v["result"].clone());
+                    }
+                }
+                Ok(_) => {}
+                Err(tungstenite::Error::Io(e))
+                    if matches!(
+                        e.kind(),
+                        std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
+                    ) => {}
+                Err(e) => return Err(format!("DevTools: {e}")),
+            }
+        }
+        Err(format!("DevTools: no answer to {method}"))
+    }
+
+    /// The value of the page's JavaScript `expr`.
+    fn eval(&mut self, expr: &str) -> Result<serde_json::Value, String> {
+        let r = self.call(
+            "Runtime.evaluate",
+            serde_json::json!({ "expression": expr, "returnByValue": true }),
+        )?;
+        Ok(r["result"]["value"].clone())
+    }
+
+    /// Waits until `expr` (a string) satisfies `ok`; its last value.
+    fn until(&mut self, expr: &str, ok: impl Fn(&str) -> bool) -> Result<String, String> {
+        let end = Instant::now() + STEP_TIMEOUT;
+        loop {
+            let v = self.eval(expr)?;
+            let s = v.as_str().unwrap_or_default().to_string();
+            if ok(&s) {
+                return Ok(s);
+            }
+            if Instant::now() > end {
+                return Err(format!("the page never showed it: `{expr}` is `{s}`"));
+            }
+            std::thread::sleep(Duration::from_millis(100));
+        }
+    }
+}
+
+/// The page's DevTools socket address, from chromium's `/json` list.
+fn debugger_url(port: u16) -> Result<String, String> {
+    let end = Instant::now() + STEP_TIMEOUT;
+    while Instant::now() < end {
+        if let Ok(mut s) = TcpStream::connect(("127.0.0.1", port)) {
+            use std::io::Write;
+            // (It may keep the connection open: read what came in a second.)
+            let _ = s.set_read_timeout(Some(Duration::from_secs(1)));
+            let _ = s.write_all(
+                format!("GET /json HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\n\r\n").as_bytes(),
+            );
+            let mut bytes = Vec::new();
+            let mut buf = [0u8; 4096];
+            while let Ok(n) = s.read(&mut buf) {
+                if n == 0 {
+                    break;
+                }
+                bytes.extend_from_slice(&buf[..n]);
+                if bytes.ends_with(b"]\n") || bytes.ends_with(b"]") {
+                    break;
+                }
+            }
+            let body = String::from_utf8_lossy(&bytes);
+            if let Some(json) = body.split("\r\n\r\n").nth(1) {
+                let v: serde_json::Value = serde_json::from_str(json).unwrap_or_default();
+                if let Some(url) = v
+                    .as_array()
+                    .and_then(|a| a.iter().find(|p| p["type"] == "page"))
+                    .and_then(|p| p["webSocketDebuggerUrl"].as_str())
+                {
+                    return Ok(url.to_string());
+                }
+            }
+        }
+        std::thread::sleep(Duration::from_millis(200));
+    }
+    Err("chromium did not open its DevTools port".into())
+}
+
+/// `cargo xtask cockpit`.
+pub fn run(root: &Path) -> Result<(), String> {
+    crate::qemu::ensure_package("chromium", "chromium", true)?;
+    let (link, sim) = host_binaries(root)?;
+    let started = Instant::now();
+    let out_dir = crate::target_dir(root)?.join("cockpit");
+    std::fs::create_dir_all(&out_dir).map_err(|e| format!("{}: {e}", out_dir.display()))?;
+    // The robot: the default virtual robot (no homing or tare needed), the
+    // shaped controller.
+    let robot = free_addr()?;
+    let _serve = Reaped(
+        Command::new(&sim)
+            .args(["serve", "--tcp", &robot, "--start-apex", "0.05"])
+            .args(["--controller", "shaped", "--target-apex", "0.10"])
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .map_err(|e| format!("cannot start hopper-sim serve: {e}"))?,
+    );
+    crate::session::wait_listening(&robot)?;
+    let mut ui = Command::new(&link)
+        .args(["--tcp", &robot, "ui", "--http", "127.0.0.1:0"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::inherit())
+        .spawn()
+        .map_err(|e| format!("cannot start hopper-link ui: {e}"))?;
+    let mut stdout = BufReader::new(ui.stdout.take().ok_or("no stdout")?);
+    let _ui = Reaped(ui);
+    let mut line = String::new();
+    stdout
+        .read_line(&mut line)
+        .map_err(|e| format!("hopper-link ui: {e}"))?;
+    let url = line
+        .trim()
+        .strip_prefix("cockpit: ")
+        .ok_or_else(|| format!("hopper-link ui printed `{}`", line.trim()))?
+        .to_string();
+    // (Read on, so the pipe stays open.)
+    std::thread::spawn(move || {
+        let mut sink = String::new();
+        while stdout.read_line(&mut sink).is_ok_and(|n| n > 0) {
+            sink.clear();
+        }
+    });
+    let port = free_addr()?
+        .rsplit(':')
+        .next()
+        .and_then(|p| p.parse::<u16>().ok())
+        .ok_or("no free port")?;
+    let profile = out_dir.join("profile");
+    let _browser = Reaped(
+        Command::new("chromium")
+            .args([
+                "--headless",
+                "--no-sandbox",
+                "--disable-gpu",
+                "--hide-scrollbars",
+                "--no-first-run",
+                "--window-size=1400,860",
+            ])
+            .arg(format!("--remote-debugging-port={port}"))
+            .arg(format!("--user-data-dir={}", profile.display()))
+            .arg(&url)
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .map_err(|e| format!("cannot start chromium: {e}"))?,
+    );
+    eprintln!("xtask: cockpit: {url} in chromium (DevTools on port {port})");
+    let ws_url = debugger_url(port)?;
+    eprintln!("xtask: cockpit: DevTools {ws_url}");
+    let addr = ws_url
+        .trim_start_matches("ws://")
+        .split('/')
+        .next()
+        .unwrap_or_default()
+        .to_string();
+    let stream = TcpStream::connect(&addr).map_err(|e| format!("DevTools {addr}: {e}"))?;
+    let (ws, _) =
+        tungstenite::client(ws_url.as_str(), stream).map_err(|e| format!("DevTools: {e}"))?;
+    let _ = ws
+        .get_ref()
+        .set_read_timeout(Some(Duration::from_millis(200)));
+    let mut page = Page { ws, next_id: 0 };
+    let state = "document.getElementById('armstate').textContent";
+    let message = "document.getElementById('message').textContent";
+    // Loaded: the state from the robot, the parameter table.
+    let loaded = page.until(state, |s| s.starts_with("disarmed"))?;
+    page.until(
+        "String(document.querySelectorAll('#rows tr').length)",
+        |s| s.parse::<u32>().is_ok_and(|n| n > 50),
+    )?;
+    // The plotted values move between two reads.
+    let read = "String(series.t.length) + ' ' + String(series.body[series.body.length - 1])";
+    let first = page.until(read, |s| !s.starts_with("0 "))?;
+    std::thread::sleep(Duration::from_millis(500));
+    let second = page.eval(read)?.as_str().unwrap_or_default().to_string();
+    let moved = first != second;
+    // Arm, as the operator clicks it.
+    page.eval("document.getElementById('arm').click(), ''")?;
+    let armed = page.until(state, |s| s == "armed")?;
+    // Hopping a moment, for the screenshot.
+    std::thread::sleep(Duration::from_secs(3));
+    // An out-of-range set, typed into the table.
+    page.eval(
+        "(() => { const i = document.querySelector('input[data-name=\"target_apex_m\"]'); \
+         i.value = '2.0'; i.dispatchEvent(new KeyboardEvent('keydown', { key: 'Enter' })); return ''; })()",
+    )?;
+    let refused = page.until(message, |s| s.contains("refused"))?;
+    let shot = page.call(
+        "Page.captureScreenshot",
+        serde_json::json!({ "format": "png" }),
+    )?;
+    let png = data_encoding::BASE64
+        .decode(shot["data"].as_str().unwrap_or_default().as_bytes())
+        .map_err(|e| format!("the screenshot: {e}"))?;
+    std::fs::write(out_dir.join("cockpit.png"), png).map_err(|e| e.to_string())?;
+    // Disarm by its key.
+    page.eval("document.dispatchEvent(new KeyboardEvent('keydown', { key: 'Escape' })), ''")?;
+    let disarmed = page.until(state, |s| s.starts_with("disarmed"))?;
+    eprintln!(
+        "xtask: cockpit: {:.1} s in chromium; the screenshot: {}",
+        started.elapsed().as_secs_f64(),
+        out_dir.join("cockpit.png").display()
+    );
+    let ok = loaded == "disarmed (boot)"
+        && moved
+        && armed == "armed"
+        && refused.contains("refused: out-of-range")
+        && disarmed == "disarmed (command)";
+    println!(
+        "cockpit: loaded=\"{loaded}\" moved={moved} arm=\"{armed}\" refused=\"{refused}\" disarm=\"{disarmed}\""
+    );
+    if ok {
+        Ok(())
+    } else {
+        Err("the cockpit did not show what it should (the line above)".into())
+    }
+}
