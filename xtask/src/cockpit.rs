@@ -227,8 +227,12 @@ pub fn run(root: &Path) -> Result<(), String> {
     // Arm, as the operator clicks it.
     page.eval("document.getElementById('arm').click(), ''")?;
     let armed = page.until(state, |s| s == "armed")?;
-    // Hopping a moment, for the screenshot.
-    std::thread::sleep(Duration::from_secs(3));
+    // Hopping: the hop ledger fills its table.
+    let ledger = page.until(
+        "String(document.querySelectorAll('#ledger tr').length)",
+        |s| s.parse::<u32>().is_ok_and(|n| n >= 3),
+    )?;
+    std::thread::sleep(Duration::from_secs(1));
     // An out-of-range set, typed into the table.
     page.eval(
         "(() => { const i = document.querySelector('input[data-name=\"target_apex_m\"]'); \
@@ -253,11 +257,12 @@ pub fn run(root: &Path) -> Result<(), String> {
     );
     let ok = loaded == "disarmed (boot)"
         && moved
+        && ledger.parse::<u32>().is_ok_and(|n| n >= 3)
         && armed == "armed"
         && refused.contains("refused: out-of-range")
         && disarmed == "disarmed (command)";
     println!(
-        "cockpit: loaded=\"{loaded}\" moved={moved} arm=\"{armed}\" refused=\"{refused}\" disarm=\"{disarmed}\""
+        "cockpit: loaded=\"{loaded}\" moved={moved} arm=\"{armed}\" ledger_rows={ledger} refused=\"{refused}\" disarm=\"{disarmed}\""
     );
     if ok {
         Ok(())
