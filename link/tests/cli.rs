@@ -3,15 +3,12 @@
 //! (a parameter of an unselected controller has no value: NaN, and
 //! reading or setting it is refused).
 
+mod common;
+
 use hopper_protocol::vocab::{Refusal, RefusalCode};
-use hopper_protocol::{
-    encode, Decoder, HostMsg, ParamInfo, ParamMeta, Request, Response, RobotMsg, MAX_FRAME,
-    PROTOCOL_VERSION,
-};
-use std::io::{Read, Write};
-use std::net::{TcpListener, TcpStream};
+use hopper_protocol::{ParamInfo, ParamMeta, Request, Response};
 use std::process::{Command, Output};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 fn hopper_link(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_hopper-link"))
@@ -68,41 +65,17 @@ fn entry(name: &str, value: f32) -> ParamInfo {
 /// A robot running `shaped` whose table is three entries; answers one
 /// connection until it closes or 10 s passed.
 fn robot() -> (String, std::thread::JoinHandle<()>) {
-    let l = TcpListener::bind("127.0.0.1:0").unwrap_or_else(|e| panic!("{e}"));
-    let addr = l.local_addr().unwrap_or_else(|e| panic!("{e}")).to_string();
     let table = [
         entry("controller", 8.0),
         entry("target_apex_m", 0.1),
         entry("energy.gain_nm_per_j", f32::NAN),
     ];
-    let serve = std::thread::spawn(move || {
-        let Ok((mut s, _)) = l.accept() else { return };
-        let _ = s.set_read_timeout(Some(Duration::from_millis(20)));
-        let mut d = Decoder::new();
-        let mut buf = [0u8; 512];
-        let end = Instant::now() + Duration::from_secs(10);
-        while Instant::now() < end {
-            let n = match s.read(&mut buf) {
-                Ok(0) => return,
-                Ok(n) => n,
-                Err(_) => 0,
-            };
-            for &b in &buf[..n] {
-                let reply = match d.push::<HostMsg>(b) {
-                    Some(HostMsg::Hello { .. }) => RobotMsg::Hello {
-                        version: PROTOCOL_VERSION,
-                    },
-                    Some(HostMsg::Request { id, req }) => RobotMsg::Response {
-                        id,
-                        resp: answer(&table, &req),
-                    },
-                    _ => continue,
-                };
-                send(&mut s, &reply);
-            }
-        }
-    });
-    (addr, serve)
+    common::robot(
+        10,
+        Duration::from_millis(20),
+        move |req| answer(&table, req),
+        |_| true,
+    )
 }
 
 fn refused(why: Refusal) -> Response {
@@ -140,12 +113,6 @@ fn answer(table: &[ParamInfo], req: &Request) -> Response {
         // A reason this host does not know (a newer robot's).
         _ => Response::Refused(RefusalCode(250)),
     }
-}
-
-fn send(s: &mut TcpStream, m: &RobotMsg) {
-    let mut f = [0u8; MAX_FRAME];
-    let n = encode(m, &mut f).unwrap_or(0);
-    let _ = s.write_all(&f[..n]);
 }
 
 #[test]

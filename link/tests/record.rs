@@ -2,22 +2,13 @@
 //! link closing, Ctrl-C), every record received is in valid files, the
 //! plot is drawn from them, and a line says why it ended.
 
+mod common;
+
 use hopper_protocol::vocab::Refusal;
-use hopper_protocol::{
-    encode, Decoder, Hop, HostMsg, ParamInfo, Request, Response, RobotMsg, Telemetry, TimingStats,
-    MAX_FRAME, PROTOCOL_VERSION,
-};
-use std::io::{Read, Write};
-use std::net::{TcpListener, TcpStream};
+use hopper_protocol::{Hop, ParamInfo, Request, Response, RobotMsg, Telemetry, TimingStats};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
-
-fn send(s: &mut TcpStream, m: &RobotMsg) -> bool {
-    let mut f = [0u8; MAX_FRAME];
-    let n = encode(m, &mut f).unwrap_or(0);
-    s.write_all(&f[..n]).is_ok()
-}
 
 fn answer(req: &Request) -> Response {
     match req {
@@ -74,71 +65,35 @@ fn record(step: u32) -> Telemetry {
 /// the first 500, then closes the link (or, with `hold`, keeps it open
 /// for 10 s).
 fn robot(records: u32, paced: bool, hold: bool) -> (String, std::thread::JoinHandle<()>) {
-    let l = TcpListener::bind("127.0.0.1:0").unwrap_or_else(|e| panic!("{e}"));
-    let addr = l.local_addr().unwrap_or_else(|e| panic!("{e}")).to_string();
-    let serve = std::thread::spawn(move || {
-        let Ok((mut s, _)) = l.accept() else { return };
-        let _ = s.set_read_timeout(Some(Duration::from_millis(5)));
-        let mut d = Decoder::new();
-        let mut buf = [0u8; 512];
-        let mut streaming = false;
-        let mut next = 0u32;
-        let end = Instant::now() + Duration::from_secs(15);
-        while Instant::now() < end {
-            let n = match s.read(&mut buf) {
-                Ok(0) => return,
-                Ok(n) => n,
-                Err(_) => 0,
-            };
-            for &b in &buf[..n] {
-                let reply = match d.push::<HostMsg>(b) {
-                    Some(HostMsg::Hello { .. }) => RobotMsg::Hello {
-                        version: PROTOCOL_VERSION,
-                    },
-                    Some(HostMsg::Request { id, req }) => {
-                        if let Request::Telemetry { every } = req {
-                            streaming = every > 0;
-                        }
-                        RobotMsg::Response {
-                            id,
-                            resp: answer(&req),
-                        }
-                    }
-                    _ => continue,
-                };
-                send(&mut s, &reply);
+    let mut next = 0u32;
+    common::robot(15, Duration::from_millis(5), answer, move |s| {
+        while next < records {
+            if !common::send(s, &RobotMsg::Telemetry(record(next))) {
+                return false;
             }
-            while streaming && next < records {
-                if !send(&mut s, &RobotMsg::Telemetry(record(next))) {
-                    return;
-                }
-                next += 1;
-                if next == 500 {
-                    send(
-                        &mut s,
-                        &RobotMsg::Hop(Hop {
-                            hop: 1,
-                            apex_height_m: 0.1,
-                            energy_at_touchdown_j: 60.0,
-                            energy_at_liftoff_j: 61.0,
-                            stance_work_j: 1.0,
-                            stance_duration_s: 0.2,
-                            peak_current_a: 20.0,
-                            peak_stroke_m: 0.02,
-                        }),
-                    );
-                }
-                if paced {
-                    break;
-                }
+            next += 1;
+            if next == 500 {
+                common::send(
+                    s,
+                    &RobotMsg::Hop(Hop {
+                        hop: 1,
+                        apex_height_m: 0.1,
+                        energy_at_touchdown_j: 60.0,
+                        energy_at_liftoff_j: 61.0,
+                        stance_work_j: 1.0,
+                        stance_duration_s: 0.2,
+                        peak_current_a: 20.0,
+                        peak_stroke_m: 0.02,
+                    }),
+                );
             }
-            if next == records && !hold {
-                // The robot goes away mid-recording.
-                return;
+            if paced {
+                break;
             }
         }
-    });
-    (addr, serve)
+        // All sent: the robot goes away mid-recording, unless held.
+        next < records || hold
+    })
 }
 
 fn out_dir(name: &str) -> PathBuf {

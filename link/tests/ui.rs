@@ -4,15 +4,17 @@
 //! values, and Arm, an out-of-range set and Disarm are answered as the
 //! robot answers them.
 
+mod common;
+
 use hopper_protocol::vocab::Refusal;
 use hopper_protocol::{
-    encode, ArmState, CostStats, Decoder, HostMsg, ParamInfo, ParamMeta, Request, Response,
-    RobotMsg, Status, Telemetry, ThermalStatus, TimingStats, MAX_FRAME, PROTOCOL_VERSION,
+    ArmState, CostStats, ParamInfo, ParamMeta, Request, Response, RobotMsg, Status, Telemetry,
+    ThermalStatus, TimingStats,
 };
 use std::io::{BufRead, BufReader, Read, Write};
-use std::net::{TcpListener, TcpStream};
+use std::net::TcpStream;
 use std::process::{Child, Command, Stdio};
-use std::sync::atomic::{AtomicU32, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
@@ -24,7 +26,7 @@ struct Seen {
     sets: AtomicU32,
 }
 
-fn answer(req: &Request, armed: &mut bool, seen: &Seen) -> Response {
+fn answer(req: &Request, armed: &AtomicBool, seen: &Seen) -> Response {
     match req {
         Request::Timing => Response::Timing(TimingStats {
             period_s: 0.001,
@@ -36,7 +38,7 @@ fn answer(req: &Request, armed: &mut bool, seen: &Seen) -> Response {
             link_max: 0,
         }),
         Request::Status => Response::Status(Status {
-            arm: if *armed {
+            arm: if armed.load(Ordering::Relaxed) {
                 ArmState::Armed
             } else {
                 ArmState::Disarmed(0)
@@ -100,12 +102,12 @@ fn answer(req: &Request, armed: &mut bool, seen: &Seen) -> Response {
         }
         Request::Arm => {
             seen.arms.fetch_add(1, Ordering::Relaxed);
-            *armed = true;
+            armed.store(true, Ordering::Relaxed);
             Response::Ok
         }
         Request::Disarm => {
             seen.disarms.fetch_add(1, Ordering::Relaxed);
-            *armed = false;
+            armed.store(false, Ordering::Relaxed);
             Response::Ok
         }
         _ => Response::Ok,
@@ -115,64 +117,31 @@ fn answer(req: &Request, armed: &mut bool, seen: &Seen) -> Response {
 /// A robot streaming a hop (one record a millisecond of wall time) once
 /// asked; 30 s at most.
 fn robot(seen: Arc<Seen>) -> String {
-    let l = TcpListener::bind("127.0.0.1:0").unwrap_or_else(|e| panic!("{e}"));
-    let addr = l.local_addr().unwrap_or_else(|e| panic!("{e}")).to_string();
-    std::thread::spawn(move || {
-        let Ok((mut s, _)) = l.accept() else { return };
-        let _ = s.set_read_timeout(Some(Duration::from_millis(1)));
-        let (mut d, mut buf) = (Decoder::new(), [0u8; 512]);
-        let (mut armed, mut streaming, mut step) = (false, false, 0u32);
-        let end = Instant::now() + Duration::from_secs(30);
-        let send = |s: &mut TcpStream, m: &RobotMsg| {
-            let mut f = [0u8; MAX_FRAME];
-            let n = encode(m, &mut f).unwrap_or(0);
-            s.write_all(&f[..n]).is_ok()
-        };
-        while Instant::now() < end {
-            let n = match s.read(&mut buf) {
-                Ok(0) => return,
-                Ok(n) => n,
-                Err(_) => 0,
+    let armed = Arc::new(AtomicBool::new(false));
+    let on = armed.clone();
+    let mut step = 0u32;
+    let (addr, _) = common::robot(
+        30,
+        Duration::from_millis(1),
+        move |req| answer(req, &armed, &seen),
+        move |s| {
+            step += 5;
+            let t = f64::from(step) * 1e-3;
+            let r = Telemetry {
+                seq: step,
+                step,
+                phase: 0,
+                armed: on.load(Ordering::Relaxed),
+                faults: 0,
+                body_height_m: (0.7 + 0.05 * (t * 6.0).sin()) as f32,
+                nut_position_m: 0.0,
+                spring_force_n: 10.0,
+                energy_j: 60.0,
+                command_a: 0.0,
             };
-            for &b in &buf[..n] {
-                let reply = match d.push::<HostMsg>(b) {
-                    Some(HostMsg::Hello { .. }) => RobotMsg::Hello {
-                        version: PROTOCOL_VERSION,
-                    },
-                    Some(HostMsg::Request { id, req }) => {
-                        if let Request::Telemetry { every } = req {
-                            streaming = every > 0;
-                        }
-                        RobotMsg::Response {
-                            id,
-                            resp: answer(&req, &mut armed, &seen),
-                        }
-                    }
-                    _ => continue,
-                };
-                send(&mut s, &reply);
-            }
-            if streaming {
-                step += 5;
-                let t = f64::from(step) * 1e-3;
-                let r = Telemetry {
-                    seq: step,
-                    step,
-                    phase: 0,
-                    armed,
-                    faults: 0,
-                    body_height_m: (0.7 + 0.05 * (t * 6.0).sin()) as f32,
-                    nut_position_m: 0.0,
-                    spring_force_n: 10.0,
-                    energy_j: 60.0,
-                    command_a: 0.0,
-                };
-                if !send(&mut s, &RobotMsg::Telemetry(r)) {
-                    return;
-                }
-            }
-        }
-    });
+            common::send(s, &RobotMsg::Telemetry(r))
+        },
+    );
     addr
 }
 
