@@ -29,6 +29,7 @@ pub use hopper_plot as plot;
 pub mod run;
 pub mod scenario;
 pub mod serve;
+pub mod slurm;
 pub mod spring;
 pub mod sweep;
 

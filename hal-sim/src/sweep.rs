@@ -852,6 +852,28 @@ impl Sweep {
             .collect())
     }
 
+    /// How many points each of `count` slices holds (slice 1 first), every
+    /// point of the grid checked once: what `--slurm` writes is known to
+    /// run, without building a slice's points `count` times over.
+    pub fn slice_sizes(&self, count: usize) -> Result<Vec<usize>, String> {
+        let runs = self.grid_runs()?;
+        let last_len = self.axes.last().map_or(1, |a| a.values.len()).max(1);
+        let slices = count.max(1);
+        let mut sizes = vec![0; slices];
+        for i in 0..runs {
+            sizes[(i / last_len + i % last_len) % slices] += 1;
+            let (vals, s) = self.point(i);
+            s.check()
+                .map_err(|e| format!("sweep point {}: {e}", self.describe(&vals)))?;
+        }
+        if let Some(most) = sizes.iter().copied().filter(|&n| n > MAX_RUNS).max() {
+            return Err(format!(
+                "{most} runs is too many for one task (at most {MAX_RUNS}; give more tasks)"
+            ));
+        }
+        Ok(sizes)
+    }
+
     /// The points of `shard` with their grid indices, each checked (a
     /// shard builds its own points only: a 10^6-point grid in 100 shards
     /// holds 10^4 settings at a time). At most [`MAX_RUNS`] a shard.
@@ -1952,6 +1974,33 @@ mod tests {
         assert_eq!(fault_name("overtemperature"), Some("overtemperature"));
         assert_eq!(fault_name("stroke-limit"), Some("stroke-limit"));
         assert_eq!(fault_name("overheat"), None);
+    }
+
+    #[test]
+    fn slice_sizes_count_what_each_shard_runs() {
+        let sw = grid(
+            &["k=8000:14000:7", "start_apex=0.05:0.15:5"],
+            DEFAULT_METRIC,
+        );
+        for count in [1, 2, 3, 4, 35] {
+            let sizes = sw.slice_sizes(count).unwrap_or_else(|e| panic!("{e}"));
+            let each: Vec<usize> = (1..=count)
+                .map(|index| {
+                    sw.shard_points(Shard { index, count })
+                        .unwrap_or_else(|e| panic!("{e}"))
+                        .len()
+                })
+                .collect();
+            assert_eq!(sizes, each, "{count} slices");
+            assert_eq!(sizes.iter().sum::<usize>(), 35);
+        }
+        // A point that cannot run is refused by name.
+        let bad = grid(&["start_apex=-0.05:0.15:3"], DEFAULT_METRIC);
+        let e = bad.slice_sizes(2).err().unwrap_or_default();
+        assert!(
+            e.starts_with("sweep point start_apex_m=-0.05: start apex"),
+            "{e}"
+        );
     }
 
     #[test]

@@ -48,6 +48,14 @@
 //!   the DevTools protocol: `cockpit: loaded=... moved=... arm=...
 //!   refused=... disarm=...` (`cargo xtask test` runs it after the
 //!   session).
+//! * `cargo xtask slurm`: a sharded sweep on a one-node Slurm cluster
+//!   (Debian's slurmctld, slurmd and MUNGE, installed when missing and
+//!   started by hand): the job array `hopper-sim sweep --slurm` writes,
+//!   its merge byte for byte the unsharded sweep, and a failed task
+//!   reported with its shard and log while the merge refuses the
+//!   incomplete set: `slurm: tasks=N runs=M merged=identical
+//!   failed_task=K merge_refused=yes` (`cargo xtask test` runs it after
+//!   the cockpit).
 
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
@@ -59,6 +67,7 @@ mod docs;
 mod hil;
 mod qemu;
 mod session;
+mod slurm;
 
 const TARGET: &str = "thumbv7em-none-eabihf";
 
@@ -89,6 +98,7 @@ fn main() -> ExitCode {
         Some("qemu") => setup(&root).and_then(|_| qemu::run(&root)),
         Some("link-session") => session::against_serve(&root),
         Some("cockpit") => setup(&root).and_then(|_| cockpit::run(&root)),
+        Some("slurm") => slurm::run(&root),
         Some("board-init") => setup(&root).and_then(|_| board_init::run(&root)),
         Some("hil") => {
             let serial = match &args[1..] {
@@ -101,7 +111,7 @@ fn main() -> ExitCode {
         Some("docs") => docs_check(&root, &args[1..]),
         _ => {
             eprintln!(
-                "usage: cargo xtask <test|size|qemu|hil|link-session|cockpit|board-init|docs>"
+                "usage: cargo xtask <test|size|qemu|hil|link-session|cockpit|slurm|board-init|docs>"
             );
             return ExitCode::from(2);
         }
@@ -347,6 +357,7 @@ fn test(root: &Path) -> Result<(), String> {
     hil::run(root, None)?;
     session::against_serve(root)?;
     cockpit::run(root)?;
+    slurm::run(root)?;
     cargo_test(root)
 }
 

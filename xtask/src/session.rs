@@ -596,12 +596,15 @@ fn run_session(link: &Path, addr: &str, out_dir: &Path, label: &str) -> Result<R
     }) {
         problems.push("no boot report in the status".into());
     }
-    // The motor heated while it hopped (8 s of it), and cools between:
+    // The motor heated while it hopped (8 s recorded, 2 s flooded, and
+    // as long as the host's commands between take: at 0.12 m the winding
+    // reaches the 135 C derating after about 11 s of hopping, so it may
+    // have begun to derate) and never tripped (150 C):
     // "motor (estimated): winding W C, housing H C; ..."
     match numbers_after(&lines, "motor (estimated): winding ") {
-        Some(v) if v.first().is_some_and(|w| (30.0..135.0).contains(w)) => {}
+        Some(v) if v.first().is_some_and(|w| (30.0..150.0).contains(w)) => {}
         Some(v) => problems.push(format!(
-            "the motor's winding estimate after hopping is {:?} C, not warm and below the derating",
+            "the motor's winding estimate after hopping is {:?} C, not warm and below the trip",
             v.first()
         )),
         None => problems.push("no motor temperature in the status".into()),

@@ -41,6 +41,13 @@ pub(crate) struct SweepArgs {
     /// past one machine").
     #[arg(long, value_name = "K/N")]
     shard: Option<String>,
+    /// Write the grid as a Slurm job array of N tasks instead of running
+    /// it: --out gets sweep.sbatch (task K runs --shard K/N into
+    /// parts/K, its log in logs/shard-K.log) and merge.sbatch (the parts
+    /// into --out once every task succeeded); submit with `sbatch`
+    /// (docs/design.md, "Sweeps past one machine").
+    #[arg(long, value_name = "N", conflicts_with = "shard")]
+    slurm: Option<usize>,
     /// Directory for sweep.csv, sweep.png and sweep.svg (created if missing).
     #[arg(long, required = true)]
     out: Option<PathBuf>,
@@ -101,6 +108,49 @@ fn cmd_sweep_merge(parts: &[PathBuf], out: &std::path::Path) -> Result<()> {
     Ok(())
 }
 
+/// `--slurm N`: the grid's job scripts, every shard's points checked first
+/// (a grid that cannot run writes nothing).
+fn write_slurm_job(sw: &Sweep, tasks: usize, out: &std::path::Path) -> Result<()> {
+    let grid_runs: usize = sw.axes.iter().map(|x| x.values.len()).product();
+    if tasks == 0 || tasks > grid_runs {
+        bail!("--slurm {tasks}: the grid has {grid_runs} runs; give 1 to {grid_runs} tasks");
+    }
+    let sizes = sw.slice_sizes(tasks).map_err(anyhow::Error::msg)?;
+    let most = sizes.iter().copied().max().unwrap_or(0);
+    let here = std::env::current_dir()?;
+    let argv: Vec<String> = std::env::args().collect();
+    let after = argv
+        .iter()
+        .position(|a| a == "sweep")
+        .map_or(&argv[..0], |i| &argv[i + 1..]);
+    let job = hal_sim::slurm::Job {
+        tasks,
+        grid_args: hal_sim::slurm::grid_args(after),
+        exe: std::env::current_exe()?,
+        workdir: here.clone(),
+        out: here.join(out),
+    };
+    job.write().map_err(anyhow::Error::msg)?;
+    // The files as the user named the directory (the scripts hold it
+    // absolute).
+    let (array, merge) = (
+        out.join(hal_sim::slurm::ARRAY_SCRIPT),
+        out.join(hal_sim::slurm::MERGE_SCRIPT),
+    );
+    say!(
+        "hopper-sim sweep: a Slurm job array of {tasks} tasks for {grid_runs} runs of {} s (at most {most} a task)",
+        sw.base.duration_s
+    );
+    say!("  wrote {}", array.display());
+    say!("  wrote {}", merge.display());
+    say!("  submit: job=$(sbatch --parsable {})", array.display());
+    say!(
+        "          sbatch --dependency=afterok:$job {}",
+        merge.display()
+    );
+    Ok(())
+}
+
 pub(crate) fn cmd_sweep(a: SweepArgs) -> Result<()> {
     if let Some(SweepCmd::Merge { parts, out }) = &a.cmd {
         return cmd_sweep_merge(parts, out);
@@ -153,6 +203,9 @@ pub(crate) fn cmd_sweep(a: SweepArgs) -> Result<()> {
         .or_else(|| file.as_ref().and_then(|f| f.sweep.metric.clone()))
         .unwrap_or_else(|| sweep::DEFAULT_METRIC.to_string());
     let sw = Sweep { base, axes, metric };
+    if let Some(tasks) = a.slurm {
+        return write_slurm_job(&sw, tasks, &out);
+    }
     let slice = shard.unwrap_or(sweep::Shard::WHOLE);
     let runs = sw.shard_points(slice).map_err(anyhow::Error::msg)?.len();
     let grid_runs: usize = sw.axes.iter().map(|x| x.values.len()).product();
