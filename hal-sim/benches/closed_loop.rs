@@ -7,7 +7,7 @@
 //! ```
 //!
 //! Besides criterion's time per run it prints the speed in simulated seconds
-//! per wall second (one core). See `docs/performance.md`.
+//! per wall second (one core), hopping and at rest side by side. See `docs/performance.md`.
 #![allow(missing_docs)]
 
 use criterion::{BenchmarkId, Criterion};
@@ -33,8 +33,19 @@ fn config() -> RunConfig {
 }
 
 fn energy_apex_run(seed: u64) -> f64 {
+    closed_loop(seed, None)
+}
+
+/// The same run with the e-stop pressed at 1 s: the amplifier disabled, the
+/// hopper at rest from about 2.5 s (the case that ran at a quarter of the
+/// speed while its states decayed through subnormal floats).
+fn resting_run() -> f64 {
+    closed_loop(1, Some("estop@1"))
+}
+
+fn closed_loop(seed: u64, inject: Option<&str>) -> f64 {
     let cfg = config();
-    let spec = ControllerSpec {
+    let mut spec = ControllerSpec {
         target_apex_m: 0.05,
         sensors: SensorConfig {
             seed,
@@ -42,6 +53,12 @@ fn energy_apex_run(seed: u64) -> f64 {
         },
         ..ControllerSpec::new("energy-apex")
     };
+    if let Some(i) = inject {
+        match hal_sim::inject::Injection::parse(i) {
+            Ok(i) => spec.injections.push(i),
+            Err(e) => panic!("{e}"),
+        }
+    }
     let Ok(mut ctl) = spec.build(&cfg.params, cfg.start_apex_m, cfg.control_dt_s) else {
         panic!("controller build failed");
     };
@@ -93,6 +110,10 @@ fn main() {
             b.iter(|| black_box(energy_apex_run(black_box(1))))
         });
         g.bench_function(
+            BenchmarkId::new("energy-apex-at-rest", "design/0.10m/estop@1"),
+            |b| b.iter(|| black_box(resting_run())),
+        );
+        g.bench_function(
             BenchmarkId::new("plant-only-passive", "design/0.10m"),
             |b| b.iter(|| black_box(plant_only_run())),
         );
@@ -102,6 +123,7 @@ fn main() {
     // `cargo test --benches` runs this binary without `--bench`: skip the speed lines.
     if std::env::args().any(|a| a == "--bench") {
         report("energy-apex closed loop", &|| energy_apex_run(1));
+        report("the same, at rest from 2.5 s (e-stop at 1 s)", &resting_run);
         report("plant only (passive, 0 A)", &plant_only_run);
     }
 }

@@ -10,6 +10,17 @@
 //! `G = 0` is the plain finite difference; `G` towards 1 smooths more and lags
 //! more. `G = 1` would freeze the output, so it is rejected.
 //!
+//! At rest the difference is 0 and the output decays geometrically (by `G`
+//! a period) toward 0; below [`REST_RATE_PER_S`] it is set to exactly 0.
+//! Without that it would pass through the subnormal floats (below 1.2e-38)
+//! within a tenth of a second at 10 kHz, and every product with it (the
+//! estimator's look-ahead, the kinetic energies) would run about a hundred
+//! times slower on an x86 host's FPU (the Cortex-M4F takes them at full
+//! speed): the simulator at rest ran at a quarter of its hopping speed.
+//! The threshold is many orders below anything the sensors resolve (one
+//! encoder count in one period is above 1 unit/s), so no result the
+//! sensors can tell apart changes, and host and target compute the same.
+//!
 //! The sample period is passed to every update, so the filter is exact for
 //! jittery or variable-rate sampling. Bad input (non-finite sample, `dt <= 0`,
 //! a difference that overflows) returns an error and leaves the state as it
@@ -28,6 +39,13 @@ pub enum FilterError {
     /// The finite difference or the filtered value overflowed to infinity.
     Overflow,
 }
+
+/// A filtered rate smaller than this (in the input's unit per second) is
+/// exactly 0: the filter has come to rest (see the module's note on
+/// subnormal floats). Its square, 1e-24, stays far above the smallest
+/// normal `f32` too, so the kinetic energies of a resting body are 0, not
+/// subnormal.
+pub const REST_RATE_PER_S: f32 = 1.0e-12;
 
 /// Filtered derivative, thesis eq 4.1: `v_n = G v_(n-1) + (1-G)(x_n - x_(n-1))/dt`.
 ///
@@ -117,6 +135,13 @@ impl FilteredDerivative {
         // +-inf (never NaN); the weighted sum is checked before it is stored.
         let difference_rate = (sample - last) / dt_s;
         let rate = self.gain * self.rate_per_s + (1.0 - self.gain) * difference_rate;
+        // At rest: exactly 0 rather than a decay into subnormal floats (NaN
+        // fails the test and is refused below).
+        let rate = if rate.abs() < REST_RATE_PER_S {
+            0.0
+        } else {
+            rate
+        };
         rate.is_finite().then_some(rate)
     }
 
@@ -134,6 +159,28 @@ mod tests {
 
     fn close(a: f32, b: f32, tol: f32) -> bool {
         (a - b).abs() <= tol
+    }
+
+    #[test]
+    fn at_rest_the_rate_reaches_exactly_zero_without_subnormals() -> Result<(), FilterError> {
+        for gain in [0.0, 0.5, 0.9, 0.99, 0.999] {
+            let mut f = FilteredDerivative::new(gain)?;
+            f.update(0.0, 1e-4)?;
+            // A fast move, then the sample held: the rate decays by `G` a
+            // period and must land on 0, never on a subnormal on the way
+            // (0.9 x the smallest subnormal rounds back to it: without the
+            // rest threshold it would stay there for ever).
+            f.update(1.0, 1e-4)?;
+            let mut periods = 0;
+            while f.value() != 0.0 {
+                let v = f.update(1.0, 1e-4)?;
+                assert!(v == 0.0 || v.is_normal(), "G {gain}: {v:e}");
+                periods += 1;
+                assert!(periods < 100_000, "G {gain}: still {v:e}");
+            }
+            assert_eq!(f.value().to_bits(), 0, "G {gain}: -0 or not 0");
+        }
+        Ok(())
     }
 
     #[test]

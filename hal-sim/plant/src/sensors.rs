@@ -128,6 +128,10 @@ impl AdcChannel {
     }
 }
 
+/// A lag within this of its command has settled, A
+/// ([`Amplifier::follow_cached`]).
+pub const SETTLED_A: f64 = 1.0e-12;
+
 /// A servo amplifier in current mode: the DAC code sets a current command,
 /// a first-order current loop with time constant `tau_s` follows it.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -182,6 +186,16 @@ impl Amplifier {
         }
         let (mean_factor, decay) = (lag.mean_factor, lag.decay);
         let i0 = self.current_a;
+        // Settled: the current is the command. Without this a current
+        // decaying to a zero command passes through the subnormal doubles
+        // (below 2.2e-308) some 1,100 periods after the amplifier is
+        // disabled, and the plant's every product with it then runs about
+        // a hundred times slower on an x86 host (the resting simulator
+        // did). A picoampere is far below anything the motor feels.
+        if (i0 - command_a).abs() < SETTLED_A {
+            self.current_a = command_a;
+            return command_a;
+        }
         // Mean of `command + (i0 - command) exp(-t/tau)` over the step.
         let mean = command_a + (i0 - command_a) * mean_factor;
         self.current_a = command_a + (i0 - command_a) * decay;
@@ -278,6 +292,30 @@ mod tests {
             };
             assert_eq!(round_clamped_u16(x, 4095), want, "round {x}");
         }
+    }
+
+    #[test]
+    fn a_disabled_amplifier_settles_to_exactly_zero_without_subnormals() {
+        let mut a = Amplifier {
+            dac_bits: 12,
+            zero_code: 2048,
+            amps_per_code: 0.02,
+            tau_s: 1.5e-4,
+            current_a: 33.67,
+        };
+        let mut lag = LagFactor::default();
+        let mut periods = 0;
+        while a.current_a != 0.0 {
+            let mean = a.follow_cached(0.0, 1e-4, &mut lag);
+            for v in [mean, a.current_a] {
+                assert!(v == 0.0 || v.is_normal(), "{v:e} after {periods} periods");
+            }
+            periods += 1;
+            assert!(periods < 10_000, "still {:e}", a.current_a);
+        }
+        // ln(33.67 A / 1e-12 A) = 31 time constants of 1.5 periods: 47
+        // periods, not the 1,100 to the subnormals (below 2.2e-308 A).
+        assert!((46..50).contains(&periods), "{periods} periods");
     }
 
     #[test]
