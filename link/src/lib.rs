@@ -307,6 +307,12 @@ impl Client {
         self.queued.clear();
     }
 
+    /// The unsolicited messages that came while waiting for the last
+    /// response (not those after it), taken from the queue.
+    pub fn take_queued(&mut self) -> Vec<RobotMsg> {
+        self.queued.drain(..).collect()
+    }
+
     /// Drops every unsolicited message received so far.
     pub fn discard_events(&mut self) {
         self.queued.clear();

@@ -173,6 +173,10 @@ enum Cmd {
         /// network with the token can drive the motor).
         #[arg(long)]
         allow_remote: bool,
+        /// Where Record and Capture save, each in a numbered folder
+        /// (recording-N, capture-N).
+        #[arg(long, default_value = "recordings", value_name = "DIR")]
+        record_dir: std::path::PathBuf,
     },
     /// Commands from standard input, one per line, on one connection (the
     /// link and the arming survive between them). `#` starts a comment; a
@@ -333,7 +337,11 @@ fn run(c: &mut Client, cmd: &Cmd) -> Result<()> {
         Cmd::Flood { seconds } => flood::flood(c, *seconds),
         Cmd::Garbage { bytes } => flood::garbage(c, *bytes),
         Cmd::Wait { seconds } => wait::wait(*seconds),
-        Cmd::Ui { http, allow_remote } => ui::ui(c, http, *allow_remote),
+        Cmd::Ui {
+            http,
+            allow_remote,
+            record_dir,
+        } => ui::ui(c, http, *allow_remote, record_dir),
         Cmd::Shell => bail!("shell is a top-level command"),
     }
 }

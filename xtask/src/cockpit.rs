@@ -136,6 +136,8 @@ pub fn run(root: &Path) -> Result<(), String> {
     // The robot: the default virtual robot (no homing or tare needed), the
     // shaped controller.
     let robot = free_addr()?;
+    let recordings = out_dir.join("recordings");
+    let _ = std::fs::remove_dir_all(&recordings);
     let _serve = Reaped(
         Command::new(&sim)
             .args(["serve", "--tcp", &robot, "--start-apex", "0.05"])
@@ -147,7 +149,15 @@ pub fn run(root: &Path) -> Result<(), String> {
     );
     crate::session::wait_listening(&robot)?;
     let mut ui = Command::new(&link)
-        .args(["--tcp", &robot, "ui", "--http", "127.0.0.1:0"])
+        .args([
+            "--tcp",
+            &robot,
+            "ui",
+            "--http",
+            "127.0.0.1:0",
+            "--record-dir",
+        ])
+        .arg(&recordings)
         .stdout(Stdio::piped())
         .stderr(Stdio::inherit())
         .spawn()
@@ -224,6 +234,12 @@ pub fn run(root: &Path) -> Result<(), String> {
     std::thread::sleep(Duration::from_millis(500));
     let second = page.eval(read)?.as_str().unwrap_or_default().to_string();
     let moved = first != second;
+    // The first bring-up step, as the guide offers it: its result shown.
+    page.eval("document.querySelector('#steps button[data-step=\"0\"]').click(), ''")?;
+    let bringup = page.until(message, |s| s.starts_with("calibrate sensors"))?;
+    page.until("document.querySelector('#steps pre').textContent", |s| {
+        s.contains("samples")
+    })?;
     // Arm, as the operator clicks it.
     page.eval("document.getElementById('arm').click(), ''")?;
     let armed = page.until(state, |s| s == "armed")?;
@@ -232,7 +248,19 @@ pub fn run(root: &Path) -> Result<(), String> {
         "String(document.querySelectorAll('#ledger tr').length)",
         |s| s.parse::<u32>().is_ok_and(|n| n >= 3),
     )?;
+    // Record a second of it into a folder.
+    page.eval("document.getElementById('record').click(), ''")?;
+    page.until("document.getElementById('recording').textContent", |s| {
+        s.contains("recording-1")
+    })?;
     std::thread::sleep(Duration::from_secs(1));
+    page.eval("document.getElementById('record').click(), ''")?;
+    let recorded = page.until(message, |s| s.starts_with("recorded"))?;
+    let folder = recordings.join("recording-1");
+    let files = ["telemetry.csv", "hops.csv", "telemetry.mcap", "hop.png"]
+        .iter()
+        .filter(|f| folder.join(f).is_file())
+        .count();
     // An out-of-range set, typed into the table.
     page.eval(
         "(() => { const i = document.querySelector('input[data-name=\"target_apex_m\"]'); \
@@ -250,6 +278,25 @@ pub fn run(root: &Path) -> Result<(), String> {
     // Disarm by its key.
     page.eval("document.dispatchEvent(new KeyboardEvent('keydown', { key: 'Escape' })), ''")?;
     let disarmed = page.until(state, |s| s.starts_with("disarmed"))?;
+    // The capture of the latest periods, plotted on demand.
+    page.eval("document.getElementById('capture-button').click(), ''")?;
+    let captured = page.until(message, |s| s.starts_with("capture:"))?;
+    let plotted = page
+        .until(
+            "String(document.getElementById('capture-png').src.length)",
+            |s| s.parse::<usize>().is_ok_and(|n| n > 1000),
+        )
+        .is_ok()
+        && recordings.join("capture-1").join("capture.png").is_file();
+    // The page with the capture, for a look.
+    let shot = page.call(
+        "Page.captureScreenshot",
+        serde_json::json!({ "format": "png" }),
+    )?;
+    let png = data_encoding::BASE64
+        .decode(shot["data"].as_str().unwrap_or_default().as_bytes())
+        .map_err(|e| format!("the screenshot: {e}"))?;
+    std::fs::write(out_dir.join("cockpit-capture.png"), png).map_err(|e| e.to_string())?;
     eprintln!(
         "xtask: cockpit: {:.1} s in chromium; the screenshot: {}",
         started.elapsed().as_secs_f64(),
@@ -260,10 +307,15 @@ pub fn run(root: &Path) -> Result<(), String> {
         && ledger.parse::<u32>().is_ok_and(|n| n >= 3)
         && armed == "armed"
         && refused.contains("refused: out-of-range")
-        && disarmed == "disarmed (command)";
+        && disarmed == "disarmed (command)"
+        && bringup == "calibrate sensors: done"
+        && files == 4
+        && plotted;
     println!(
-        "cockpit: loaded=\"{loaded}\" moved={moved} arm=\"{armed}\" ledger_rows={ledger} refused=\"{refused}\" disarm=\"{disarmed}\""
+        "cockpit: loaded=\"{loaded}\" moved={moved} arm=\"{armed}\" ledger_rows={ledger} refused=\"{refused}\" disarm=\"{disarmed}\" bringup=\"{bringup}\" recorded_files={files} capture_plotted={plotted}"
     );
+    eprintln!("xtask: cockpit: {recorded}");
+    eprintln!("xtask: cockpit: {captured}");
     if ok {
         Ok(())
     } else {

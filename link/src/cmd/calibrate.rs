@@ -4,6 +4,7 @@ use super::common::get;
 use anyhow::{bail, Result};
 use hopper_link::Client;
 use hopper_protocol::{Request, Response};
+use std::fmt::Write as _;
 use std::time::{Duration, Instant};
 
 /// What to do about a routine's refusal, where the reason alone does not
@@ -24,7 +25,40 @@ fn next_step(r: hopper_protocol::vocab::Refusal) -> Option<&'static str> {
 }
 
 pub(crate) fn calibrate(c: &mut Client, routine: &str, seconds: f32) -> Result<()> {
-    use hopper_protocol::vocab::{CalState, Routine};
+    let mut out = String::new();
+    let result = run(c, routine, seconds, &mut out);
+    print!("{out}");
+    result
+}
+
+/// `calibrate ROUTINE`, what it found written to `out` (also when it
+/// fails: the results say why).
+pub(crate) fn run(c: &mut Client, routine: &str, seconds: f32, out: &mut String) -> Result<()> {
+    let s = start(c, routine, seconds)?;
+    loop {
+        std::thread::sleep(Duration::from_millis(100));
+        if poll(c, &s, out)?.is_some() {
+            return Ok(());
+        }
+    }
+}
+
+/// A routine the robot accepted: what [`poll`] reports it against.
+pub(crate) struct Started {
+    routine: String,
+    /// The load cell's and potentiometer's offsets before, codes.
+    was: (f32, f32),
+    lc_gain: f32,
+    pot_gain: f32,
+    rate: f32,
+    limit_s: f32,
+    deadline: Instant,
+}
+
+/// Starts `routine` on the robot (refused with the reason and the step to
+/// take).
+pub(crate) fn start(c: &mut Client, routine: &str, seconds: f32) -> Result<Started> {
+    use hopper_protocol::vocab::Routine;
     let r = Routine::ALL
         .iter()
         .copied()
@@ -56,32 +90,57 @@ pub(crate) fn calibrate(c: &mut Client, routine: &str, seconds: f32) -> Result<(
     } else {
         seconds * 20.0 + 5.0
     };
-    let deadline = Instant::now() + Duration::from_secs_f32(limit_s);
-    let r = loop {
-        std::thread::sleep(Duration::from_millis(100));
-        let r = match c.request(Request::CalibrationReport)? {
-            Response::Calibration(r) => r,
-            r => bail!("unexpected answer {r:?}"),
-        };
-        if r.state != CalState::Running.code() {
-            break r;
-        }
-        if Instant::now() > deadline {
+    Ok(Started {
+        routine: routine.to_string(),
+        was,
+        lc_gain,
+        pot_gain,
+        rate,
+        limit_s,
+        deadline: Instant::now() + Duration::from_secs_f32(limit_s),
+    })
+}
+
+/// `None` while the routine runs; once it ended, what it found written to
+/// `out` (an error if it did not pass).
+pub(crate) fn poll(c: &mut Client, s: &Started, out: &mut String) -> Result<Option<()>> {
+    use hopper_protocol::vocab::{CalState, Routine};
+    let Started {
+        routine,
+        was,
+        lc_gain,
+        pot_gain,
+        rate,
+        limit_s,
+        deadline,
+    } = s;
+    let (routine, was, lc_gain, pot_gain, rate) =
+        (routine.as_str(), *was, *lc_gain, *pot_gain, *rate);
+    let r = match c.request(Request::CalibrationReport)? {
+        Response::Calibration(r) => r,
+        r => bail!("unexpected answer {r:?}"),
+    };
+    if r.state == CalState::Running.code() {
+        if Instant::now() > *deadline {
             bail!("calibrate {routine}: still running after {limit_s:.0} s");
         }
-    };
+        return Ok(None);
+    }
     let state = CalState::from_code(r.state).map_or("unknown", CalState::name);
-    println!(
+    let _ = writeln!(
+        out,
         "calibrate {routine}: {state}: {} samples; encoders moved by {} (motor) and {} (height) counts",
         r.samples, r.motor_span_counts, r.height_span_counts
     );
-    println!(
+    let _ = writeln!(
+        out,
         "load cell: mean {:.2} codes, noise {:.2} codes ({:.2} N)",
         r.loadcell_mean_code,
         r.loadcell_std_code,
         r.loadcell_std_code * lc_gain
     );
-    println!(
+    let _ = writeln!(
+        out,
         "potentiometer: mean {:.2} codes, noise {:.2} codes ({:.3} mm)",
         r.pot_mean_code,
         r.pot_std_code,
@@ -91,26 +150,28 @@ pub(crate) fn calibrate(c: &mut Client, routine: &str, seconds: f32) -> Result<(
         Response::BringupResults(b) => b,
         r => bail!("unexpected answer {r:?}"),
     };
-    print_results(routine, &b, r.state == CalState::Done as u8);
+    print_results(out, routine, &b, r.state == CalState::Done as u8);
     if routine == Routine::Weight.name() {
         let w = match c.request(Request::Weighing)? {
             Response::Weighing(w) => w,
             r => bail!("unexpected answer {r:?}"),
         };
-        print_weighing(&w);
+        print_weighing(out, &w);
     }
     if r.state != CalState::Done as u8 {
         bail!("calibrate {routine} {state}");
     }
     if routine == Routine::Weight.name() {
-        println!(
+        let _ = writeln!(
+        out,
             "weight: calibration.loadcell_gain_n_per_code {lc_gain:.5} -> {:.5} N/code, supervisor.spring_rate_n_per_m {rate:.0} -> {:.0} N/m (applied)",
             get(c, "calibration.loadcell_gain_n_per_code")?,
             get(c, "supervisor.spring_rate_n_per_m")?
         );
     }
     if r.loadcell_offset_code.is_finite() {
-        println!(
+        let _ = writeln!(
+        out,
             "tare: calibration.loadcell_offset_code {:.2} -> {:.2} codes ({:+.2} N), calibration.pot_offset_code {:.2} -> {:.2} codes ({:+.3} mm) (applied)",
             was.0,
             r.loadcell_offset_code,
@@ -120,30 +181,33 @@ pub(crate) fn calibrate(c: &mut Client, routine: &str, seconds: f32) -> Result<(
             (r.pot_offset_code - was.1) * pot_gain * 1000.0
         );
     }
-    Ok(())
+    Ok(Some(()))
 }
 
 /// What a motor-driving or height routine found, one line each.
-fn print_results(routine: &str, b: &hopper_protocol::BringupResults, done: bool) {
+fn print_results(out: &mut String, routine: &str, b: &hopper_protocol::BringupResults, done: bool) {
     let applied = if done { "applied" } else { "not applied" };
     if b.peak_current_a > 0.0 {
-        println!("current: up to {:.2} A", b.peak_current_a);
+        let _ = writeln!(out, "current: up to {:.2} A", b.peak_current_a);
     }
     if b.nut_travel_m.is_finite() && routine == "direction" {
-        println!(
+        let _ = writeln!(
+            out,
             "direction: a pulse down moved the nut {:+.3} mm and the load cell {:+.2} N",
             b.nut_travel_m * 1000.0,
             b.force_change_n
         );
     }
     if b.nut_offset_m.is_finite() && routine == "home" {
-        println!(
+        let _ = writeln!(
+        out,
             "home: the upper stop was at {:+.3} mm in the motor encoder's frame; zeroed there ({applied})",
             b.nut_offset_m * 1000.0
         );
     }
     if b.spring_rate_n_per_m.is_finite() {
-        println!(
+        let _ = writeln!(
+        out,
             "spring: rate {:.0} N/m, force at zero compression {:+.2} N, fit RMS {:.2} N over {} points spanning {:.2} mm (1 sigma); supervisor.spring_rate_n_per_m ({applied})",
             b.spring_rate_n_per_m,
             b.spring_intercept_n,
@@ -153,7 +217,8 @@ fn print_results(routine: &str, b: &hopper_protocol::BringupResults, done: bool)
         );
     }
     if b.height_offset_m.is_finite() {
-        println!(
+        let _ = writeln!(
+            out,
             "height: the body height corrected by {:+.3} mm ({applied})",
             b.height_offset_m * 1000.0
         );
@@ -161,9 +226,10 @@ fn print_results(routine: &str, b: &hopper_protocol::BringupResults, done: bool)
 }
 
 /// What the weighing found, one line.
-fn print_weighing(w: &hopper_protocol::WeighingInfo) {
+fn print_weighing(out: &mut String, w: &hopper_protocol::WeighingInfo) {
     if w.weight_n.is_finite() {
-        println!(
+        let _ = writeln!(
+        out,
             "weight: the robot weighs {:.2} N as the load cell reads it, {:.2} N as configured: the load cell reads {:+.2}%; stance friction {:.2} N; the body rose {:.2} mm",
             w.weight_n,
             w.configured_weight_n,

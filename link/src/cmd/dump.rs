@@ -4,25 +4,38 @@ use super::common::{print_written, status_of, timing_of};
 use anyhow::{bail, Result};
 use hopper_link::record::Recording;
 use hopper_link::{names, Client};
-use hopper_protocol::{Request, Response, RobotMsg};
+use hopper_protocol::{DumpInfo, Request, Response, RobotMsg};
 use std::time::{Duration, Instant};
 
 pub(crate) fn dump(c: &mut Client, out: &std::path::Path) -> Result<()> {
-    let t = timing_of(c)?;
     let st = status_of(c)?;
+    // Nothing else is listening: what came before the capture is dropped.
+    c.discard_events();
+    let (rec, info) = fetch(c, &mut |_| Ok(()))?;
+    let written = rec.write_capture(out, &title(&rec, &info))?;
+    println!("{}", summary(&rec, &info, st.faults));
+    print_written(&written);
+    Ok(())
+}
+
+/// The capture around the last fault (or of the latest periods), read
+/// from the robot; every other message that comes meanwhile goes to
+/// `other` (a recording in progress loses nothing).
+pub(crate) fn fetch(
+    c: &mut Client,
+    other: &mut dyn FnMut(RobotMsg) -> Result<()>,
+) -> Result<(Recording, DumpInfo)> {
+    let t = timing_of(c)?;
     // A fault latched less than a quarter capture ago is still being
     // captured: ask again until the capture froze (a fresh dump restarts).
     let asked = Instant::now();
     let info = loop {
-        c.discard_events();
         let info = match c.request(Request::Dump)? {
             Response::Dump(i) => i,
             r => bail!("unexpected answer {r:?}"),
         };
+        sort(c, other)?;
         if info.frozen || info.fault_step == 0 || asked.elapsed() > Duration::from_secs(5) {
-            // Records that came before this answer belong to an earlier
-            // dump still draining from the robot's queue.
-            c.discard_queued();
             break info;
         }
         std::thread::sleep(Duration::from_millis(100));
@@ -39,7 +52,8 @@ pub(crate) fn dump(c: &mut Client, out: &std::path::Path) -> Result<()> {
                 quiet = Instant::now();
                 rec.records.push(r);
             }
-            Some(_) => {}
+            Some(RobotMsg::Captured(_)) => {}
+            Some(m) => other(m)?,
             None if quiet.elapsed() > Duration::from_secs(5) => bail!(
                 "the dump stopped after {} of {} records",
                 rec.records.len(),
@@ -51,7 +65,23 @@ pub(crate) fn dump(c: &mut Client, out: &std::path::Path) -> Result<()> {
     if info.frozen {
         rec.t0_step = Some(info.fault_step);
     }
-    let title = if info.frozen {
+    Ok((rec, info))
+}
+
+/// Records that came before an answer belong to an earlier dump still
+/// draining from the robot's queue: dropped; the rest to `other`.
+fn sort(c: &mut Client, other: &mut dyn FnMut(RobotMsg) -> Result<()>) -> Result<()> {
+    for m in c.take_queued() {
+        if !matches!(m, RobotMsg::Captured(_)) {
+            other(m)?;
+        }
+    }
+    Ok(())
+}
+
+/// The capture plot's title.
+pub(crate) fn title(rec: &Recording, info: &DumpInfo) -> String {
+    if info.frozen {
         // The faults of the first period after the fault's: what latched.
         let latched = rec
             .records
@@ -64,22 +94,23 @@ pub(crate) fn dump(c: &mut Client, out: &std::path::Path) -> Result<()> {
         )
     } else {
         "capture of the latest periods (no fault)".to_string()
-    };
-    let written = rec.write_capture(out, &title)?;
+    }
+}
+
+/// One line on what the capture holds; `latched` the faults latched now.
+pub(crate) fn summary(rec: &Recording, info: &DumpInfo, latched: u16) -> String {
     let span_ms = rec.records.len() as f64 * rec.period_s * 1000.0;
     if info.frozen {
-        println!(
+        format!(
             "capture: {} records ({span_ms:.1} ms), frozen by the fault at step {}; latched now: {}",
             rec.records.len(),
             info.fault_step,
-            names::faults(st.faults)
-        );
+            names::faults(latched)
+        )
     } else {
-        println!(
+        format!(
             "capture: {} records ({span_ms:.1} ms) of the latest periods; no fault froze it",
             rec.records.len()
-        );
+        )
     }
-    print_written(&written);
-    Ok(())
 }

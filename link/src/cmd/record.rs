@@ -160,7 +160,7 @@ pub(crate) fn record(
 
 /// Every parameter's name and value (NaN: not in the robot's
 /// configuration), for the recording's `/parameters`.
-fn all_parameters(c: &mut Client) -> Result<Vec<(String, f32)>> {
+pub(crate) fn all_parameters(c: &mut Client) -> Result<Vec<(String, f32)>> {
     let n = match c.request(Request::ParamCount)? {
         Response::ParamCount(n) => n,
         r => bail!("unexpected answer {r:?}"),

@@ -1,7 +1,10 @@
 //! `ui`: the operator's cockpit, a web page served by this client (assets
 //! in the binary, no internet needed): live plots, the state with an
-//! always-visible Disarm, Arm with its refusal, and the parameter table
-//! edited in place.
+//! always-visible Disarm, Arm with its refusal, the parameter table
+//! edited in place, the hop ledger, Record and Stop (telemetry, hops and
+//! faults to CSV and MCAP as they arrive, in a new numbered folder), the
+//! fault capture plotted on demand (and saved), and the bring-up routines
+//! as a guided sequence, each step's result shown.
 //!
 //! The page can drive a real motor, so it lets in only its operator: it
 //! listens on loopback unless `--allow-remote` says otherwise; every
@@ -18,10 +21,12 @@
 
 use super::common::wire_name;
 use anyhow::{bail, Context, Result};
+use hopper_link::record::Streamed;
 use hopper_link::{names, Client};
 use hopper_protocol::{ArmState, Request, Response, RobotMsg};
 use std::io::{Read, Write};
 use std::net::{SocketAddr, TcpListener, TcpStream};
+use std::path::PathBuf;
 use std::sync::mpsc::{channel, Receiver, Sender};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
@@ -48,7 +53,12 @@ type Pages = Arc<Mutex<Vec<Sender<String>>>>;
 
 /// `hopper-link ui --http ADDR [--allow-remote]`: serves the cockpit until
 /// the link closes or the process is stopped.
-pub(crate) fn ui(c: &mut Client, http: &str, allow_remote: bool) -> Result<()> {
+pub(crate) fn ui(
+    c: &mut Client,
+    http: &str,
+    allow_remote: bool,
+    record_dir: &std::path::Path,
+) -> Result<()> {
     let addr: SocketAddr = http.parse().with_context(|| {
         format!("--http {http}: not an address HOST:PORT (e.g. 127.0.0.1:8080)")
     })?;
@@ -88,7 +98,7 @@ pub(crate) fn ui(c: &mut Client, http: &str, allow_remote: bool) -> Result<()> {
             }
         });
     }
-    robot(c, &pages, &inbox)
+    robot(c, &pages, &inbox, record_dir)
 }
 
 /// A random token: 128 bits as hex.
@@ -106,8 +116,78 @@ fn broadcast(pages: &Pages, msg: &serde_json::Value) {
     }
 }
 
+/// What the link's thread keeps between commands: the recording in
+/// progress and where recordings and captures go.
+struct Session {
+    /// The control period, s.
+    period_s: f64,
+    /// Recordings and captures go in numbered folders here.
+    record_dir: PathBuf,
+    /// The recording in progress and its folder.
+    recording: Option<(Streamed, PathBuf)>,
+    /// Telemetry for the pages, sent about 30 times a second.
+    batch: Vec<serde_json::Value>,
+    /// The bring-up routine running, polled while the pages' other
+    /// commands (Disarm above all, which aborts a driving routine) still
+    /// run, and whom to answer when it ends.
+    calibrating: Option<(super::calibrate::Started, Command)>,
+}
+
+impl Session {
+    /// One message from the robot: to the recording, if one runs, and to
+    /// the pages.
+    fn on(&mut self, pages: &Pages, msg: RobotMsg) -> Result<()> {
+        match msg {
+            RobotMsg::Telemetry(r) => {
+                self.batch.push(serde_json::json!([
+                    f64::from(r.step) * self.period_s,
+                    r.body_height_m,
+                    f64::from(r.body_height_m) - hopper_model::design::LEG_LENGTH_M,
+                    r.nut_position_m,
+                    r.spring_force_n,
+                    r.command_a,
+                    r.energy_j,
+                ]));
+                if let Some((rec, _)) = &mut self.recording {
+                    rec.record(r)?;
+                }
+            }
+            RobotMsg::Hop(h) => {
+                broadcast(pages, &serde_json::json!({ "type": "hop", "hop": h }));
+                if let Some((rec, _)) = &mut self.recording {
+                    rec.hop(h)?;
+                }
+            }
+            RobotMsg::Faults { step, bits } => {
+                broadcast(
+                    pages,
+                    &serde_json::json!({ "type": "fault", "step": step, "faults": names::faults(bits) }),
+                );
+                if let Some((rec, _)) = &mut self.recording {
+                    rec.fault(step, bits)?;
+                }
+            }
+            _ => {}
+        }
+        Ok(())
+    }
+
+    /// The first free `NAME-N` folder under the record directory.
+    fn folder(&self, name: &str) -> PathBuf {
+        (1..)
+            .map(|n| self.record_dir.join(format!("{name}-{n}")))
+            .find(|p| !p.exists())
+            .unwrap_or_else(|| self.record_dir.join(name))
+    }
+}
+
 /// The link's thread: telemetry, the state, and the pages' commands.
-fn robot(c: &mut Client, pages: &Pages, inbox: &Receiver<Command>) -> Result<()> {
+fn robot(
+    c: &mut Client,
+    pages: &Pages,
+    inbox: &Receiver<Command>,
+    record_dir: &std::path::Path,
+) -> Result<()> {
     let t = match c.request(Request::Timing)? {
         Response::Timing(t) => t,
         r => bail!("unexpected answer {r:?}"),
@@ -115,18 +195,53 @@ fn robot(c: &mut Client, pages: &Pages, inbox: &Receiver<Command>) -> Result<()>
     let period = f64::from(t.period_s);
     let every = (1.0 / (TELEMETRY_HZ * period)).round().clamp(1.0, 65535.0) as u16;
     c.expect_ok(Request::Telemetry { every })?;
-    let mut batch: Vec<serde_json::Value> = Vec::new();
+    let mut session = Session {
+        period_s: period,
+        record_dir: record_dir.to_path_buf(),
+        recording: None,
+        batch: Vec::new(),
+        calibrating: None,
+    };
+    let mut last_poll = Instant::now();
     let mut last_send = Instant::now();
     let mut last_state = Instant::now() - Duration::from_secs(1);
     let mut last_thermal = last_state;
     loop {
         while let Ok(cmd) = inbox.try_recv() {
-            let answer = run(c, &cmd.json, pages);
+            if cmd.json["cmd"] == "calibrate" {
+                match start_routine(c, &cmd.json, &session) {
+                    Ok(started) => session.calibrating = Some((started, cmd)),
+                    Err(e) => {
+                        let _ = cmd.reply.send(answer(&cmd.json, Err(e)).to_string());
+                    }
+                }
+                continue;
+            }
+            let answer = run(c, &cmd.json, pages, &mut session);
             let _ = cmd.reply.send(answer.to_string());
+        }
+        if session.calibrating.is_some() && last_poll.elapsed() >= Duration::from_millis(100) {
+            last_poll = Instant::now();
+            let mut out = String::new();
+            let ended = match &session.calibrating {
+                Some((started, _)) => super::calibrate::poll(c, started, &mut out).transpose(),
+                None => None,
+            };
+            // (Taken only once it ended: until then it is polled again.)
+            if let Some((result, Some((_, cmd)))) = ended.map(|r| (r, session.calibrating.take())) {
+                let found = out.trim_end().to_string();
+                let result = match result {
+                    Ok(()) => Ok(found),
+                    Err(e) if found.is_empty() => Err(e),
+                    Err(e) => Err(anyhow::anyhow!("{e:#}\n{found}")),
+                };
+                let _ = cmd.reply.send(answer(&cmd.json, result).to_string());
+            }
         }
         if last_state.elapsed() >= Duration::from_millis(100) {
             last_state = Instant::now();
-            broadcast(pages, &state(c)?);
+            let recording = session.recording.as_ref().map(|(_, d)| d.as_path());
+            broadcast(pages, &state(c, recording)?);
         }
         if last_thermal.elapsed() >= Duration::from_millis(500) {
             last_thermal = Instant::now();
@@ -144,38 +259,32 @@ fn robot(c: &mut Client, pages: &Pages, inbox: &Receiver<Command>) -> Result<()>
                 );
             }
         }
+        // What came while the requests above waited, then what comes now.
+        for m in c.take_queued() {
+            session.on(pages, m)?;
+        }
         match c.next_event(Duration::from_millis(10))? {
-            Some(RobotMsg::Telemetry(r)) => batch.push(serde_json::json!([
-                f64::from(r.step) * period,
-                r.body_height_m,
-                f64::from(r.body_height_m) - hopper_model::design::LEG_LENGTH_M,
-                r.nut_position_m,
-                r.spring_force_n,
-                r.command_a,
-                r.energy_j,
-            ])),
-            Some(RobotMsg::Hop(h)) => {
-                broadcast(pages, &serde_json::json!({ "type": "hop", "hop": h }))
+            Some(m) => session.on(pages, m)?,
+            // Idle: what is recorded so far is on disk.
+            None => {
+                if let Some((rec, _)) = &mut session.recording {
+                    rec.flush()?;
+                }
             }
-            Some(RobotMsg::Faults { step, bits }) => broadcast(
-                pages,
-                &serde_json::json!({ "type": "fault", "step": step, "faults": names::faults(bits) }),
-            ),
-            _ => {}
         }
         // About 30 frames a second to the pages.
-        if last_send.elapsed() >= Duration::from_millis(33) && !batch.is_empty() {
+        if last_send.elapsed() >= Duration::from_millis(33) && !session.batch.is_empty() {
             last_send = Instant::now();
             broadcast(
                 pages,
-                &serde_json::json!({ "type": "telemetry", "records": std::mem::take(&mut batch) }),
+                &serde_json::json!({ "type": "telemetry", "records": std::mem::take(&mut session.batch) }),
             );
         }
     }
 }
 
 /// The robot's state for the page.
-fn state(c: &mut Client) -> Result<serde_json::Value> {
+fn state(c: &mut Client, recording: Option<&std::path::Path>) -> Result<serde_json::Value> {
     let s = match c.request(Request::Status)? {
         Response::Status(s) => s,
         r => bail!("unexpected answer {r:?}"),
@@ -201,6 +310,7 @@ fn state(c: &mut Client) -> Result<serde_json::Value> {
         "isr_mean": cost.map(|x| x.isr_mean),
         "isr_max": cost.map(|x| x.isr_max),
         "counter_hz": cost.map(|x| x.counter_hz),
+        "recording": recording.map(|d| d.display().to_string()),
     }))
 }
 
@@ -241,8 +351,12 @@ fn parameters(c: &mut Client) -> Result<serde_json::Value> {
 }
 
 /// Runs one of the page's commands on the robot; the answer for the page.
-fn run(c: &mut Client, cmd: &serde_json::Value, pages: &Pages) -> serde_json::Value {
-    let id = cmd["id"].clone();
+fn run(
+    c: &mut Client,
+    cmd: &serde_json::Value,
+    pages: &Pages,
+    session: &mut Session,
+) -> serde_json::Value {
     let what = cmd["cmd"].as_str().unwrap_or("");
     let result: Result<String> = (|| match what {
         "arm" => match c.request(Request::Arm)? {
@@ -287,14 +401,100 @@ fn run(c: &mut Client, cmd: &serde_json::Value, pages: &Pages) -> serde_json::Va
                 r => bail!("unexpected answer {r:?}"),
             }
         }
+        "record-start" => {
+            if let Some((_, dir)) = &session.recording {
+                bail!("already recording into {}", dir.display());
+            }
+            let dir = session.folder("recording");
+            let parameters = super::record::all_parameters(c)?;
+            let rec = Streamed::create(&dir, session.period_s, &parameters)?;
+            let text = format!("recording into {}", dir.display());
+            session.recording = Some((rec, dir));
+            Ok(text)
+        }
+        "record-stop" => {
+            let Some((rec, dir)) = session.recording.take() else {
+                bail!("not recording");
+            };
+            let target = super::common::get(c, "target_apex_m").ok().map(f64::from);
+            let title = format!("recorded from the cockpit ({})", c.target());
+            let (rec, written) = rec.finish("hop.png", &title, target)?;
+            let span_s = rec
+                .records
+                .first()
+                .zip(rec.records.last())
+                .map_or(0.0, |(a, b)| {
+                    f64::from(b.step.wrapping_sub(a.step)) * session.period_s
+                });
+            Ok(format!(
+                "recorded {span_s:.3} s: {} records, {} dropped, {} hops, into {}: {}",
+                rec.records.len(),
+                rec.dropped(),
+                rec.hops.len(),
+                dir.display(),
+                written
+                    .iter()
+                    .filter_map(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ))
+        }
+        "capture" => {
+            let latched = super::common::status_of(c)?.faults;
+            let (rec, info) = super::dump::fetch(c, &mut |m| session.on(pages, m))?;
+            let dir = session.folder("capture");
+            let written = rec.write_capture(&dir, &super::dump::title(&rec, &info))?;
+            let png = written
+                .iter()
+                .find(|p| p.extension().is_some_and(|e| e == "png"))
+                .map(std::fs::read)
+                .transpose()?;
+            broadcast(
+                pages,
+                &serde_json::json!({
+                    "type": "capture",
+                    "png": png.map(|b| format!("data:image/png;base64,{}", data_encoding::BASE64.encode(&b))),
+                }),
+            );
+            Ok(format!(
+                "{}; wrote {}",
+                super::dump::summary(&rec, &info, latched),
+                dir.display()
+            ))
+        }
         _ => bail!("unknown command `{what}`"),
     })();
+    answer(cmd, result)
+}
+
+/// The page's answer to `cmd`.
+fn answer(cmd: &serde_json::Value, result: Result<String>) -> serde_json::Value {
+    let id = cmd["id"].clone();
     match result {
         Ok(text) => serde_json::json!({ "type": "result", "id": id, "ok": true, "text": text }),
         Err(e) => {
             serde_json::json!({ "type": "result", "id": id, "ok": false, "text": format!("{e:#}") })
         }
     }
+}
+
+/// A bring-up routine the page asked for, started (one at a time).
+fn start_routine(
+    c: &mut Client,
+    cmd: &serde_json::Value,
+    session: &Session,
+) -> Result<super::calibrate::Started> {
+    let routine = cmd["routine"].as_str().unwrap_or("");
+    if !hopper_protocol::vocab::Routine::ALL
+        .iter()
+        .any(|r| r.name() == routine)
+    {
+        bail!("no bring-up routine `{routine}`");
+    }
+    if session.calibrating.is_some() {
+        bail!("calibrate {routine}: another routine is still running");
+    }
+    super::calibrate::start(c, routine, 0.5)
 }
 
 /// The value of query parameter `key` in `target` (`/ws?token=...`).
