@@ -130,24 +130,63 @@ pub const CONTROLLER: &str = "controller";
 /// Parameter `name` as the robot describes it; `None` when the robot has
 /// no parameter of that name.
 pub fn describe(c: &mut Client, name: &str) -> Result<Option<Described>> {
+    described(c, name, None, &mut None)
+}
+
+/// Every parameter as the robot describes it, in the robot's order: two
+/// requests a parameter and one per choice, the controllers' names asked
+/// once for the whole table.
+pub fn table(c: &mut Client) -> Result<Vec<Described>> {
+    let n = match c.request(Request::ParamCount)? {
+        Response::ParamCount(n) => n,
+        r => bail!("unexpected answer {r:?}"),
+    };
+    let mut controllers = None;
+    let mut rows = Vec::with_capacity(usize::from(n));
+    for index in 0..n {
+        let info = info_at(c, index)?;
+        let name = info.name.as_str().to_string();
+        match described(c, &name, Some(info), &mut controllers)? {
+            Some(d) => rows.push(d),
+            None => bail!("parameter {index} ({name}): the robot does not describe it"),
+        }
+    }
+    Ok(rows)
+}
+
+/// [`describe`], with the table entry when the caller has it already and
+/// the controllers' names once known (`None`: ask when needed).
+fn described(
+    c: &mut Client,
+    name: &str,
+    info: Option<ParamInfo>,
+    controllers: &mut Option<Vec<String>>,
+) -> Result<Option<Described>> {
     let meta = match c.request(Request::ParamMeta { name: wire(name)? })? {
         Response::ParamMeta(m) => m,
         Response::Refused(why) if why == Refusal::UnknownParameter => return Ok(None),
         r => bail!("describe {name}: unexpected answer {r:?}"),
     };
-    let info = info_at(c, meta.index)?;
+    let info = match info {
+        Some(i) => i,
+        None => info_at(c, meta.index)?,
+    };
     let choices = (0..meta.choices)
         .map(|v| choice_name(c, name, v))
         .collect::<Result<Vec<_>>>()?;
     let owner = match meta.controller {
         None => None,
         Some(i) => {
+            if controllers.is_none() && name != CONTROLLER {
+                *controllers = Some(controller_names(c)?);
+            }
             let controller = if name == CONTROLLER {
                 None
             } else {
-                describe(c, CONTROLLER)?
+                controllers
+                    .as_ref()
+                    .and_then(|n| n.get(usize::from(i)).cloned())
             }
-            .and_then(|d| d.choices.get(usize::from(i)).cloned())
             .unwrap_or_else(|| format!("{i}"));
             let choice = match meta.needs {
                 None => None,

@@ -8,27 +8,17 @@ use hopper_link::Client;
 use hopper_protocol::{Request, Response};
 
 pub(crate) fn params_list(c: &mut Client) -> Result<()> {
-    let n = match c.request(Request::ParamCount)? {
-        Response::ParamCount(n) => n,
-        r => bail!("unexpected answer {r:?}"),
-    };
     let selected = selected_controller(c)?;
+    let table = names::table(c)?;
+    let n = table.len();
     println!(
         "{:<42} {:>14} {:<8} {:>25} {:>12}  armed",
         "name", "value", "unit", "range", "default"
     );
     let mut inactive = 0;
-    for index in 0..n {
-        let name = match c.request(Request::ParamInfo { index })? {
-            Response::ParamInfo(p) => p.name,
-            Response::Refused(why) => bail!("parameter {index}: {why}"),
-            r => bail!("unexpected answer {r:?}"),
-        };
-        let Some(d) = names::describe(c, name.as_str())? else {
-            bail!("parameter {index} ({name}): the robot does not describe it")
-        };
+    for d in &table {
         inactive += usize::from(d.info.value.is_nan());
-        println!("{}", param_row(&d, selected.as_deref()));
+        println!("{}", param_row(d, selected.as_deref()));
     }
     if inactive > 0 {
         println!(

@@ -316,37 +316,28 @@ fn state(c: &mut Client, recording: Option<&std::path::Path>) -> Result<serde_js
 
 /// Every parameter, for the page's table.
 fn parameters(c: &mut Client) -> Result<serde_json::Value> {
-    let n = match c.request(Request::ParamCount)? {
-        Response::ParamCount(n) => n,
-        r => bail!("unexpected answer {r:?}"),
-    };
     let controllers = names::controller_names(c)?;
     let selected = super::common::get(c, names::CONTROLLER)
         .ok()
         .and_then(|v| controllers.get(v as usize).cloned());
-    let mut rows = Vec::new();
-    for index in 0..n {
-        let name = match c.request(Request::ParamInfo { index })? {
-            Response::ParamInfo(p) => p.name,
-            r => bail!("parameter {index}: unexpected answer {r:?}"),
-        };
-        let Some(d) = names::describe(c, name.as_str())? else {
-            continue;
-        };
-        let p = &d.info;
-        let active = !p.value.is_nan();
-        rows.push(serde_json::json!({
-            "name": p.name.as_str(),
-            "value": if active { d.value(p.value) } else { d.value(p.default) },
-            "unit": p.unit.as_str(),
-            "min": p.min,
-            "max": p.max,
-            "default": d.value(p.default),
-            "live": p.live,
-            "choices": d.choices,
-            "inactive": (!active).then(|| d.inactive_reason(selected.as_deref())),
-        }));
-    }
+    let rows: Vec<serde_json::Value> = names::table(c)?
+        .iter()
+        .map(|d| {
+            let p = &d.info;
+            let active = !p.value.is_nan();
+            serde_json::json!({
+                "name": p.name.as_str(),
+                "value": if active { d.value(p.value) } else { d.value(p.default) },
+                "unit": p.unit.as_str(),
+                "min": p.min,
+                "max": p.max,
+                "default": d.value(p.default),
+                "live": p.live,
+                "choices": d.choices,
+                "inactive": (!active).then(|| d.inactive_reason(selected.as_deref())),
+            })
+        })
+        .collect();
     Ok(serde_json::json!({ "type": "params", "rows": rows }))
 }
 
