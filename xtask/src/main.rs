@@ -56,6 +56,10 @@
 //!   incomplete set: `slurm: tasks=N runs=M merged=identical
 //!   failed_task=K merge_refused=yes` (`cargo xtask test` runs it after
 //!   the cockpit).
+//! * `cargo xtask speed`: the release simulator's speed on this machine,
+//!   hopping and at rest side by side: `speed: hopping=Nx at_rest=Mx
+//!   ratio=R` (reported, not asserted; `cargo xtask test` runs it after
+//!   the Slurm run).
 
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
@@ -68,6 +72,7 @@ mod hil;
 mod qemu;
 mod session;
 mod slurm;
+mod speed;
 
 const TARGET: &str = "thumbv7em-none-eabihf";
 
@@ -99,6 +104,7 @@ fn main() -> ExitCode {
         Some("link-session") => session::against_serve(&root),
         Some("cockpit") => setup(&root).and_then(|_| cockpit::run(&root)),
         Some("slurm") => slurm::run(&root),
+        Some("speed") => speed::run(&root),
         Some("board-init") => setup(&root).and_then(|_| board_init::run(&root)),
         Some("hil") => {
             let serial = match &args[1..] {
@@ -111,7 +117,7 @@ fn main() -> ExitCode {
         Some("docs") => docs_check(&root, &args[1..]),
         _ => {
             eprintln!(
-                "usage: cargo xtask <test|size|qemu|hil|link-session|cockpit|slurm|board-init|docs>"
+                "usage: cargo xtask <test|size|qemu|hil|link-session|cockpit|slurm|speed|board-init|docs>"
             );
             return ExitCode::from(2);
         }
@@ -358,6 +364,7 @@ fn test(root: &Path) -> Result<(), String> {
     session::against_serve(root)?;
     cockpit::run(root)?;
     slurm::run(root)?;
+    speed::run(root)?;
     cargo_test(root)
 }
 
