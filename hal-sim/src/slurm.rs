@@ -141,6 +141,9 @@ impl Job {
             "#SBATCH --output={}",
             quoted_path(&self.out.join(LOGS_DIR).join("merge.log"))
         );
+        // A failed task: the merge is cancelled rather than left pending
+        // for ever (a cluster's default keeps it waiting).
+        let _ = writeln!(s, "#SBATCH --kill-on-invalid-dep=yes");
         let _ = writeln!(s, "set -eu");
         let _ = writeln!(
             s,
@@ -160,6 +163,15 @@ impl Job {
     /// does not create it, and a task whose log cannot open fails without
     /// a word); the files written.
     pub fn write(&self) -> Result<Vec<PathBuf>, String> {
+        // The merge reads every part under parts/: another grid's (an
+        // earlier --slurm into the same directory) would spoil it.
+        let parts = self.out.join(PARTS_DIR);
+        if std::fs::read_dir(&parts).is_ok_and(|mut d| d.next().is_some()) {
+            return Err(format!(
+                "{} already holds a sweep's parts: give --out an empty directory (or remove them)",
+                parts.display()
+            ));
+        }
         let logs = self.out.join(LOGS_DIR);
         std::fs::create_dir_all(&logs).map_err(|e| format!("{}: {e}", logs.display()))?;
         let mut written = Vec::new();
@@ -257,6 +269,23 @@ mod tests {
             "{s}"
         );
         assert!(s.contains("#SBATCH --output=/home/u/study/out/k/logs/merge.log\n"));
+        assert!(s.contains("#SBATCH --kill-on-invalid-dep=yes\n"));
+    }
+
+    #[test]
+    fn scripts_are_written_once_per_set_of_parts() {
+        let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
+        let j = Job {
+            out: dir.path().join("k"),
+            ..job()
+        };
+        let written = j.write().unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(written.len(), 2);
+        assert!(j.out.join(LOGS_DIR).is_dir(), "Slurm does not create it");
+        // A finished task's part there: another --slurm into it is refused.
+        std::fs::create_dir_all(j.part_dir(1)).unwrap_or_else(|e| panic!("{e}"));
+        let e = j.write().err().unwrap_or_default();
+        assert!(e.contains("already holds a sweep's parts"), "{e}");
     }
 
     #[test]

@@ -288,6 +288,15 @@ pub fn run(root: &Path) -> Result<(), String> {
         )
         .is_ok()
         && recordings.join("capture-1").join("capture.png").is_file();
+    // The simulated robot's hoist from the bring-up panel, and the save
+    // that ends the sequence.
+    page.eval("document.getElementById('hoist').click(), ''")?;
+    let hoist = page.until(message, |s| s.starts_with("mount:"))?;
+    page.eval("document.getElementById('release').click(), ''")?;
+    page.until(message, |s| s.starts_with("mount: release"))?;
+    page.eval("document.querySelector('#steps button[data-step=\"8\"]').click(), ''")?;
+    let save = page.until(message, |s| s.starts_with("save"))?;
+    eprintln!("xtask: cockpit: {hoist}; {save} (only the sensors checked)");
     // The page with the capture, for a look.
     let shot = page.call(
         "Page.captureScreenshot",
@@ -310,7 +319,9 @@ pub fn run(root: &Path) -> Result<(), String> {
         && disarmed == "disarmed (command)"
         && bringup == "calibrate sensors: done"
         && files == 4
-        && plotted;
+        && plotted
+        && hoist.starts_with("mount: hoist")
+        && save == "save refused: not-calibrated";
     println!(
         "cockpit: loaded=\"{loaded}\" moved={moved} arm=\"{armed}\" ledger_rows={ledger} refused=\"{refused}\" disarm=\"{disarmed}\" bringup=\"{bringup}\" recorded_files={files} capture_plotted={plotted}"
     );

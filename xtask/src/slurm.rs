@@ -67,15 +67,16 @@ fn write(path: &Path, text: &str) -> Result<(), String> {
 /// The one-node cluster's configuration: this machine as controller and
 /// node, its CPUs, root as the Slurm user, MUNGE on a socket of our own,
 /// no accounting, and process tracking through /proc (no cgroups here).
-fn slurm_conf(dir: &Path, host: &str, cpus: usize) -> String {
+fn slurm_conf(dir: &Path, host: &str, cpus: usize, ports: (u16, u16)) -> String {
     let d = dir.display();
+    let (ctld_port, d_port) = ports;
     format!(
         "ClusterName=hopper\n\
          SlurmctldHost={host}(127.0.0.1)\n\
          SlurmUser=root\n\
          SlurmdUser=root\n\
-         SlurmctldPort=6917\n\
-         SlurmdPort=6918\n\
+         SlurmctldPort={ctld_port}\n\
+         SlurmdPort={d_port}\n\
          AuthType=auth/munge\n\
          CredType=cred/munge\n\
          AuthInfo=socket={d}/munge/munge.socket\n\
@@ -107,6 +108,19 @@ struct Cluster {
     conf: PathBuf,
     dir: PathBuf,
     _daemons: Vec<Reaped>,
+}
+
+impl Drop for Cluster {
+    /// Cancels what is still queued or running (an error path: a job that
+    /// timed out) before the daemons stop, so that no job outlives them.
+    fn drop(&mut self) {
+        let _ = self
+            .client("scancel")
+            .args(["--partition", "debug"])
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .status();
+    }
 }
 
 impl Cluster {
@@ -188,6 +202,19 @@ fn start(dir: &Path) -> Result<Cluster, String> {
     let slurmctld = program("slurmctld", "slurmctld")?;
     let slurmd = program("slurmd", "slurmd")?;
     program("sbatch", "slurm-client")?;
+    // Daemons an interrupted earlier run left behind, by their pid files.
+    for pid_file in [
+        dir.join("slurmd.pid"),
+        dir.join("slurmctld.pid"),
+        dir.join("munge").join("munged.pid"),
+    ] {
+        if let Some(pid) = std::fs::read_to_string(&pid_file)
+            .ok()
+            .and_then(|t| t.trim().parse::<u32>().ok())
+        {
+            let _ = Command::new("kill").arg(pid.to_string()).status();
+        }
+    }
     let _ = std::fs::remove_dir_all(dir);
     for sub in ["munge", "state", "spool"] {
         let d = dir.join(sub);
@@ -202,7 +229,20 @@ fn start(dir: &Path) -> Result<Cluster, String> {
         .to_string();
     let cpus = std::thread::available_parallelism().map_or(1, |n| n.get());
     let conf = dir.join("slurm.conf");
-    write(&conf, &slurm_conf(dir, &host, cpus))?;
+    // Ports of its own, free now (not Slurm's 6817/6818: a real cluster's
+    // daemons may hold those).
+    let port = || -> Result<u16, String> {
+        crate::session::free_addr()?
+            .rsplit(':')
+            .next()
+            .and_then(|p| p.parse().ok())
+            .ok_or_else(|| "no free port".to_string())
+    };
+    let ports = (port()?, port()?);
+    if ports.0 == ports.1 {
+        return Err("the same free port twice; run again".into());
+    }
+    write(&conf, &slurm_conf(dir, &host, cpus, ports))?;
 
     // MUNGE: a fresh key only this cluster uses, readable by root alone.
     let munge = dir.join("munge");
@@ -329,6 +369,11 @@ pub fn run(root: &Path) -> Result<(), String> {
     eprintln!("xtask: slurm");
     let started = Instant::now();
     let dir = crate::target_dir(root)?.join("slurm");
+    // Nothing of an earlier run may pass for this one's (the cluster's
+    // own directory is cleared by `start`, after its daemons are stopped).
+    for old in ["whole", "job", "failing"] {
+        let _ = std::fs::remove_dir_all(dir.join(old));
+    }
     let cluster = start(&dir.join("cluster"))?;
     eprintln!(
         "xtask: slurm: one-node cluster up in {:.1} s",

@@ -8,6 +8,12 @@ use std::time::{Duration, Instant};
 
 /// `save`: the calibration to flash, and how it went.
 pub(crate) fn save(c: &mut Client) -> Result<()> {
+    println!("{}", run(c)?);
+    Ok(())
+}
+
+/// `save`, what happened as one line.
+pub(crate) fn run(c: &mut Client) -> Result<String> {
     // `busy`: a change (a routine's results, a set) is still being
     // installed, a few periods at most: asked again for up to 1 s.
     let deadline = Instant::now() + Duration::from_secs(1);
@@ -29,15 +35,15 @@ pub(crate) fn save(c: &mut Client) -> Result<()> {
             1 if Instant::now() < deadline => continue,
             1 => bail!("save: still pending after 5 s"),
             2 => {
-                println!(
+                return Ok(format!(
                     "saved: {} calibration parameters to flash (they load at the next boot)",
                     s.saved_count
-                );
-                return Ok(());
+                ));
             }
             4 => {
-                println!("saved: the robot restarts to write its flash (home it again after)");
-                return Ok(());
+                return Ok(
+                    "saved: the robot restarts to write its flash (home it again after)".into(),
+                );
             }
             _ => {
                 let require_tare = flag(c, "arming.require_tare");

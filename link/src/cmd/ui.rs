@@ -136,8 +136,8 @@ struct Session {
 impl Session {
     /// One message from the robot: to the recording, if one runs, and to
     /// the pages.
-    fn on(&mut self, pages: &Pages, msg: RobotMsg) -> Result<()> {
-        match msg {
+    fn on(&mut self, pages: &Pages, msg: RobotMsg) {
+        let written = match msg {
             RobotMsg::Telemetry(r) => {
                 self.batch.push(serde_json::json!([
                     f64::from(r.step) * self.period_s,
@@ -148,28 +148,39 @@ impl Session {
                     r.command_a,
                     r.energy_j,
                 ]));
-                if let Some((rec, _)) = &mut self.recording {
-                    rec.record(r)?;
-                }
+                self.recording.as_mut().map(|(rec, _)| rec.record(r))
             }
             RobotMsg::Hop(h) => {
                 broadcast(pages, &serde_json::json!({ "type": "hop", "hop": h }));
-                if let Some((rec, _)) = &mut self.recording {
-                    rec.hop(h)?;
-                }
+                self.recording.as_mut().map(|(rec, _)| rec.hop(h))
             }
             RobotMsg::Faults { step, bits } => {
                 broadcast(
                     pages,
                     &serde_json::json!({ "type": "fault", "step": step, "faults": names::faults(bits) }),
                 );
-                if let Some((rec, _)) = &mut self.recording {
-                    rec.fault(step, bits)?;
-                }
+                self.recording
+                    .as_mut()
+                    .map(|(rec, _)| rec.fault(step, bits))
             }
-            _ => {}
+            _ => None,
+        };
+        self.check(pages, written);
+    }
+
+    /// A recording that cannot be written (a full disk) stops, and the
+    /// pages say so; the cockpit, its Disarm first, goes on.
+    fn check(&mut self, pages: &Pages, written: Option<Result<()>>) {
+        if let Some(Err(e)) = written {
+            let dir = self
+                .recording
+                .take()
+                .map_or_else(String::new, |(_, d)| d.display().to_string());
+            broadcast(
+                pages,
+                &serde_json::json!({ "type": "notice", "ok": false, "text": format!("recording into {dir} stopped: {e:#}") }),
+            );
         }
-        Ok(())
     }
 
     /// The first free `NAME-N` folder under the record directory.
@@ -208,6 +219,10 @@ fn robot(
     let mut last_thermal = last_state;
     loop {
         while let Ok(cmd) = inbox.try_recv() {
+            if cmd.json["cmd"] == "record-stop" {
+                stop_recording(c, cmd, &mut session);
+                continue;
+            }
             if cmd.json["cmd"] == "calibrate" {
                 match start_routine(c, &cmd.json, &session) {
                     Ok(started) => session.calibrating = Some((started, cmd)),
@@ -261,15 +276,14 @@ fn robot(
         }
         // What came while the requests above waited, then what comes now.
         for m in c.take_queued() {
-            session.on(pages, m)?;
+            session.on(pages, m);
         }
         match c.next_event(Duration::from_millis(10))? {
-            Some(m) => session.on(pages, m)?,
+            Some(m) => session.on(pages, m),
             // Idle: what is recorded so far is on disk.
             None => {
-                if let Some((rec, _)) = &mut session.recording {
-                    rec.flush()?;
-                }
+                let flushed = session.recording.as_mut().map(|(rec, _)| rec.flush());
+                session.check(pages, flushed);
             }
         }
         // About 30 frames a second to the pages.
@@ -403,36 +417,26 @@ fn run(
             session.recording = Some((rec, dir));
             Ok(text)
         }
-        "record-stop" => {
-            let Some((rec, dir)) = session.recording.take() else {
-                bail!("not recording");
-            };
-            let target = super::common::get(c, "target_apex_m").ok().map(f64::from);
-            let title = format!("recorded from the cockpit ({})", c.target());
-            let (rec, written) = rec.finish("hop.png", &title, target)?;
-            let span_s = rec
-                .records
-                .first()
-                .zip(rec.records.last())
-                .map_or(0.0, |(a, b)| {
-                    f64::from(b.step.wrapping_sub(a.step)) * session.period_s
-                });
-            Ok(format!(
-                "recorded {span_s:.3} s: {} records, {} dropped, {} hops, into {}: {}",
-                rec.records.len(),
-                rec.dropped(),
-                rec.hops.len(),
-                dir.display(),
-                written
-                    .iter()
-                    .filter_map(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            ))
+        "mount" => {
+            let hoisted = cmd["how"] == "hoist";
+            c.expect_ok(Request::SimulateMount {
+                hoisted,
+                lift_m: 0.05,
+            })
+            .context("mount: only a simulated robot has a hoist to drive")?;
+            Ok(if hoisted {
+                "mount: hoist (the toe 0.05 m above the ground)".into()
+            } else {
+                "mount: release".into()
+            })
         }
+        "save" => super::save::run(c),
         "capture" => {
             let latched = super::common::status_of(c)?.faults;
-            let (rec, info) = super::dump::fetch(c, &mut |m| session.on(pages, m))?;
+            let (rec, info) = super::dump::fetch(c, &mut |m| {
+                session.on(pages, m);
+                Ok(())
+            })?;
             let dir = session.folder("capture");
             let written = rec.write_capture(&dir, &super::dump::title(&rec, &info))?;
             let png = written
@@ -467,6 +471,45 @@ fn answer(cmd: &serde_json::Value, result: Result<String>) -> serde_json::Value 
             serde_json::json!({ "type": "result", "id": id, "ok": false, "text": format!("{e:#}") })
         }
     }
+}
+
+/// Stops the recording: its files completed and its plot drawn on a
+/// thread of their own (a long recording's plot takes a while, and the
+/// link's thread must stay free for Disarm), which answers the page.
+fn stop_recording(c: &mut Client, cmd: Command, session: &mut Session) {
+    let Some((rec, dir)) = session.recording.take() else {
+        let _ = cmd
+            .reply
+            .send(answer(&cmd.json, Err(anyhow::anyhow!("not recording"))).to_string());
+        return;
+    };
+    let target = super::common::get(c, "target_apex_m").ok().map(f64::from);
+    let title = format!("recorded from the cockpit ({})", c.target());
+    let period_s = session.period_s;
+    std::thread::spawn(move || {
+        let result = rec.finish("hop.png", &title, target).map(|(rec, written)| {
+            let span_s = rec
+                .records
+                .first()
+                .zip(rec.records.last())
+                .map_or(0.0, |(a, b)| {
+                    f64::from(b.step.wrapping_sub(a.step)) * period_s
+                });
+            format!(
+                "recorded {span_s:.3} s: {} records, {} dropped, {} hops, into {}: {}",
+                rec.records.len(),
+                rec.dropped(),
+                rec.hops.len(),
+                dir.display(),
+                written
+                    .iter()
+                    .filter_map(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            )
+        });
+        let _ = cmd.reply.send(answer(&cmd.json, result).to_string());
+    });
 }
 
 /// A bring-up routine the page asked for, started (one at a time).
