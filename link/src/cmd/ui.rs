@@ -21,9 +21,9 @@
 
 use super::common::wire_name;
 use anyhow::{bail, Context, Result};
-use hopper_link::record::Streamed;
+use hopper_link::record::{Recording, Streamed};
 use hopper_link::{names, Client};
-use hopper_protocol::{ArmState, Request, Response, RobotMsg};
+use hopper_protocol::{ArmState, DumpInfo, Request, Response, RobotMsg};
 use std::io::{Read, Write};
 use std::net::{SocketAddr, TcpListener, TcpStream};
 use std::path::PathBuf;
@@ -131,6 +131,28 @@ struct Session {
     /// commands (Disarm above all, which aborts a driving routine) still
     /// run, and whom to answer when it ends.
     calibrating: Option<(super::calibrate::Started, Command)>,
+    /// The fault capture being read, record by record, while the link's
+    /// thread goes on (Disarm above all).
+    capturing: Option<Capturing>,
+}
+
+/// A fault capture on its way from the robot.
+struct Capturing {
+    /// Whom to answer.
+    cmd: Command,
+    /// The faults latched when it was asked for.
+    latched: u16,
+    /// When it was first asked for.
+    asked: Instant,
+    /// When to ask again (the capture still filling after a fault: a
+    /// fresh dump restarts), `None` once the robot answered for good.
+    retry_at: Option<Instant>,
+    /// What the robot said it will send.
+    info: Option<DumpInfo>,
+    /// The records so far.
+    rec: Recording,
+    /// When the last record came.
+    quiet: Instant,
 }
 
 impl Session {
@@ -162,6 +184,16 @@ impl Session {
                 self.recording
                     .as_mut()
                     .map(|(rec, _)| rec.fault(step, bits))
+            }
+            RobotMsg::Captured(r) => {
+                if let Some(cap) = &mut self.capturing {
+                    // In order, or from an earlier dump: skip those.
+                    if cap.info.is_some() && r.seq as usize == cap.rec.records.len() {
+                        cap.rec.records.push(r);
+                        cap.quiet = Instant::now();
+                    }
+                }
+                None
             }
             _ => None,
         };
@@ -212,6 +244,7 @@ fn robot(
         recording: None,
         batch: Vec::new(),
         calibrating: None,
+        capturing: None,
     };
     let mut last_poll = Instant::now();
     let mut last_send = Instant::now();
@@ -219,6 +252,10 @@ fn robot(
     let mut last_thermal = last_state;
     loop {
         while let Ok(cmd) = inbox.try_recv() {
+            if cmd.json["cmd"] == "capture" {
+                start_capture(c, pages, cmd, &mut session);
+                continue;
+            }
             if cmd.json["cmd"] == "record-stop" {
                 stop_recording(c, cmd, &mut session);
                 continue;
@@ -235,6 +272,7 @@ fn robot(
             let answer = run(c, &cmd.json, pages, &mut session);
             let _ = cmd.reply.send(answer.to_string());
         }
+        progress_capture(c, pages, &mut session);
         if session.calibrating.is_some() && last_poll.elapsed() >= Duration::from_millis(100) {
             last_poll = Instant::now();
             let mut out = String::new();
@@ -431,32 +469,6 @@ fn run(
             })
         }
         "save" => super::save::run(c),
-        "capture" => {
-            let latched = super::common::status_of(c)?.faults;
-            let (rec, info) = super::dump::fetch(c, &mut |m| {
-                session.on(pages, m);
-                Ok(())
-            })?;
-            let dir = session.folder("capture");
-            let written = rec.write_capture(&dir, &super::dump::title(&rec, &info))?;
-            let png = written
-                .iter()
-                .find(|p| p.extension().is_some_and(|e| e == "png"))
-                .map(std::fs::read)
-                .transpose()?;
-            broadcast(
-                pages,
-                &serde_json::json!({
-                    "type": "capture",
-                    "png": png.map(|b| format!("data:image/png;base64,{}", data_encoding::BASE64.encode(&b))),
-                }),
-            );
-            Ok(format!(
-                "{}; wrote {}",
-                super::dump::summary(&rec, &info, latched),
-                dir.display()
-            ))
-        }
         _ => bail!("unknown command `{what}`"),
     })();
     answer(cmd, result)
@@ -471,6 +483,139 @@ fn answer(cmd: &serde_json::Value, result: Result<String>) -> serde_json::Value 
             serde_json::json!({ "type": "result", "id": id, "ok": false, "text": format!("{e:#}") })
         }
     }
+}
+
+/// Asks the robot for its capture (a page's Capture); the records then
+/// come with the rest of the link's traffic.
+fn start_capture(c: &mut Client, pages: &Pages, cmd: Command, session: &mut Session) {
+    if session.capturing.is_some() {
+        let _ = cmd
+            .reply
+            .send(answer(&cmd.json, Err(anyhow::anyhow!("a capture is still coming"))).to_string());
+        return;
+    }
+    let latched = match super::common::status_of(c) {
+        Ok(s) => s.faults,
+        Err(e) => {
+            let _ = cmd.reply.send(answer(&cmd.json, Err(e)).to_string());
+            return;
+        }
+    };
+    let now = Instant::now();
+    session.capturing = Some(Capturing {
+        cmd,
+        latched,
+        asked: now,
+        retry_at: Some(now),
+        info: None,
+        rec: Recording {
+            period_s: session.period_s,
+            ..Recording::default()
+        },
+        quiet: now,
+    });
+    progress_capture(c, pages, session);
+}
+
+/// Moves the capture on: asks (again) when due, and once every record came
+/// writes its files and plot on a thread of its own, which answers the
+/// page and shows the plot.
+fn progress_capture(c: &mut Client, pages: &Pages, session: &mut Session) {
+    let Some(cap) = &session.capturing else {
+        return;
+    };
+    if cap.retry_at.is_some_and(|t| Instant::now() >= t) {
+        let asked = c.request(Request::Dump).and_then(|r| match r {
+            Response::Dump(i) => Ok(i),
+            r => bail!("unexpected answer {r:?}"),
+        });
+        // Records before the answer belong to an earlier dump: dropped.
+        for m in c.take_queued() {
+            if !matches!(m, RobotMsg::Captured(_)) {
+                session.on(pages, m);
+            }
+        }
+        let Some(cap) = &mut session.capturing else {
+            return;
+        };
+        match asked {
+            Ok(info)
+                if info.frozen
+                    || info.fault_step == 0
+                    || cap.asked.elapsed() > Duration::from_secs(5) =>
+            {
+                cap.info = Some(info);
+                cap.retry_at = None;
+                cap.quiet = Instant::now();
+            }
+            Ok(_) => cap.retry_at = Some(Instant::now() + Duration::from_millis(100)),
+            Err(e) => {
+                if let Some(cap) = session.capturing.take() {
+                    let _ = cap
+                        .cmd
+                        .reply
+                        .send(answer(&cap.cmd.json, Err(e)).to_string());
+                }
+            }
+        }
+        return;
+    }
+    let Some(info) = cap.info else {
+        return;
+    };
+    let complete = cap.rec.records.len() >= usize::from(info.records);
+    if !complete && cap.quiet.elapsed() <= Duration::from_secs(5) {
+        return;
+    }
+    let Some(mut cap) = session.capturing.take() else {
+        return;
+    };
+    if !complete {
+        let e = anyhow::anyhow!(
+            "the capture stopped after {} of {} records",
+            cap.rec.records.len(),
+            info.records
+        );
+        let _ = cap
+            .cmd
+            .reply
+            .send(answer(&cap.cmd.json, Err(e)).to_string());
+        return;
+    }
+    if info.frozen {
+        cap.rec.t0_step = Some(info.fault_step);
+    }
+    // The folder taken now, so that a second capture gets the next one.
+    let dir = session.folder("capture");
+    let _ = std::fs::create_dir_all(&dir);
+    let pages = pages.clone();
+    std::thread::spawn(move || {
+        let result = (|| -> Result<String> {
+            let rec = &cap.rec;
+            let written = rec.write_capture(&dir, &super::dump::title(rec, &info))?;
+            let png = written
+                .iter()
+                .find(|p| p.extension().is_some_and(|e| e == "png"))
+                .map(std::fs::read)
+                .transpose()?;
+            broadcast(
+                &pages,
+                &serde_json::json!({
+                    "type": "capture",
+                    "png": png.map(|b| format!("data:image/png;base64,{}", data_encoding::BASE64.encode(&b))),
+                }),
+            );
+            Ok(format!(
+                "{}; wrote {}",
+                super::dump::summary(rec, &info, cap.latched),
+                dir.display()
+            ))
+        })();
+        let _ = cap
+            .cmd
+            .reply
+            .send(answer(&cap.cmd.json, result).to_string());
+    });
 }
 
 /// Stops the recording: its files completed and its plot drawn on a
