@@ -5,22 +5,14 @@
 mod common;
 
 use hopper_protocol::vocab::Refusal;
-use hopper_protocol::{Hop, ParamInfo, Request, Response, RobotMsg, Telemetry, TimingStats};
+use hopper_protocol::{Hop, ParamInfo, Request, Response, RobotMsg, Telemetry};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 fn answer(req: &Request) -> Response {
     match req {
-        Request::Timing => Response::Timing(TimingStats {
-            period_s: 0.001,
-            periods: 0,
-            missed: 0,
-            step_mean: 0,
-            step_max: 0,
-            link_mean: 0,
-            link_max: 0,
-        }),
+        Request::Timing => common::timing(),
         Request::ParamGet { name } if name.as_str() == "target_apex_m" => Response::Value(0.1),
         Request::ParamCount => Response::ParamCount(2),
         Request::ParamInfo { index } => Response::ParamInfo(ParamInfo {

@@ -9,7 +9,7 @@ mod common;
 use hopper_protocol::vocab::Refusal;
 use hopper_protocol::{
     ArmState, CostStats, ParamInfo, ParamMeta, Request, Response, RobotMsg, Status, Telemetry,
-    ThermalStatus, TimingStats,
+    ThermalStatus,
 };
 use std::io::{BufRead, BufReader, Read, Write};
 use std::net::TcpStream;
@@ -28,15 +28,7 @@ struct Seen {
 
 fn answer(req: &Request, armed: &AtomicBool, seen: &Seen) -> Response {
     match req {
-        Request::Timing => Response::Timing(TimingStats {
-            period_s: 0.001,
-            periods: 0,
-            missed: 0,
-            step_mean: 0,
-            step_max: 0,
-            link_mean: 0,
-            link_max: 0,
-        }),
+        Request::Timing => common::timing(),
         Request::Status => Response::Status(Status {
             arm: if armed.load(Ordering::Relaxed) {
                 ArmState::Armed

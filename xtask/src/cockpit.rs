@@ -61,6 +61,18 @@ impl Page {
         Err(format!("DevTools: no answer to {method}"))
     }
 
+    /// The page as it shows now, to a PNG file at `path`.
+    fn screenshot(&mut self, path: &Path) -> Result<(), String> {
+        let shot = self.call(
+            "Page.captureScreenshot",
+            serde_json::json!({ "format": "png" }),
+        )?;
+        let png = data_encoding::BASE64
+            .decode(shot["data"].as_str().unwrap_or_default().as_bytes())
+            .map_err(|e| format!("the screenshot: {e}"))?;
+        std::fs::write(path, png).map_err(|e| format!("{}: {e}", path.display()))
+    }
+
     /// The value of the page's JavaScript `expr`.
     fn eval(&mut self, expr: &str) -> Result<serde_json::Value, String> {
         let r = self.call(
@@ -267,14 +279,7 @@ pub fn run(root: &Path) -> Result<(), String> {
          i.value = '2.0'; i.dispatchEvent(new KeyboardEvent('keydown', { key: 'Enter' })); return ''; })()",
     )?;
     let refused = page.until(message, |s| s.contains("refused"))?;
-    let shot = page.call(
-        "Page.captureScreenshot",
-        serde_json::json!({ "format": "png" }),
-    )?;
-    let png = data_encoding::BASE64
-        .decode(shot["data"].as_str().unwrap_or_default().as_bytes())
-        .map_err(|e| format!("the screenshot: {e}"))?;
-    std::fs::write(out_dir.join("cockpit.png"), png).map_err(|e| e.to_string())?;
+    page.screenshot(&out_dir.join("cockpit.png"))?;
     // Disarm by its key.
     page.eval("document.dispatchEvent(new KeyboardEvent('keydown', { key: 'Escape' })), ''")?;
     let disarmed = page.until(state, |s| s.starts_with("disarmed"))?;
@@ -298,14 +303,7 @@ pub fn run(root: &Path) -> Result<(), String> {
     let save = page.until(message, |s| s.starts_with("save"))?;
     eprintln!("xtask: cockpit: {hoist}; {save} (only the sensors checked)");
     // The page with the capture, for a look.
-    let shot = page.call(
-        "Page.captureScreenshot",
-        serde_json::json!({ "format": "png" }),
-    )?;
-    let png = data_encoding::BASE64
-        .decode(shot["data"].as_str().unwrap_or_default().as_bytes())
-        .map_err(|e| format!("the screenshot: {e}"))?;
-    std::fs::write(out_dir.join("cockpit-capture.png"), png).map_err(|e| e.to_string())?;
+    page.screenshot(&out_dir.join("cockpit-capture.png"))?;
     eprintln!(
         "xtask: cockpit: {:.1} s in chromium; the screenshot: {}",
         started.elapsed().as_secs_f64(),

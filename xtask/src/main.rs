@@ -371,13 +371,19 @@ fn test(root: &Path) -> Result<(), String> {
 /// The docs' examples against the release `hopper-sim` they name; `only`
 /// (markdown paths from the root) limits the check to those files.
 fn docs_check(root: &Path, only: &[String]) -> Result<(), String> {
-    let sim = build_executable(
+    let sim = release_sim(root, "hopper-sim release build (for the docs' examples)")?;
+    docs::check(root, &sim, only)
+}
+
+/// The release `hopper-sim` (the docs' examples, the Slurm run and the
+/// speed figures run it), built if it is not current.
+fn release_sim(root: &Path, what: &str) -> Result<PathBuf, String> {
+    build_executable(
         root,
-        "hopper-sim release build (for the docs' examples)",
+        what,
         "hopper-sim",
         cargo().args(["build", "--release", "-p", "hal-sim", "--bin", "hopper-sim"]),
-    )?;
-    docs::check(root, &sim, only)
+    )
 }
 
 /// `cargo clippy -p hopper-app --target MCU EXTRA -- -D warnings`.

@@ -360,12 +360,7 @@ fn failed_tasks(dir: &Path) -> Vec<usize> {
 
 /// `cargo xtask slurm`.
 pub fn run(root: &Path) -> Result<(), String> {
-    let sim = crate::build_executable(
-        root,
-        "hopper-sim release build",
-        "hopper-sim",
-        crate::cargo().args(["build", "--release", "-p", "hal-sim", "--bin", "hopper-sim"]),
-    )?;
+    let sim = crate::release_sim(root, "hopper-sim release build")?;
     eprintln!("xtask: slurm");
     let started = Instant::now();
     let dir = crate::target_dir(root)?.join("slurm");

@@ -46,12 +46,7 @@ fn time(sim: &Path, extra: &[&str]) -> Result<f64, String> {
 
 /// `cargo xtask speed`.
 pub fn run(root: &Path) -> Result<(), String> {
-    let sim = crate::build_executable(
-        root,
-        "hopper-sim release build",
-        "hopper-sim",
-        crate::cargo().args(["build", "--release", "-p", "hal-sim", "--bin", "hopper-sim"]),
-    )?;
+    let sim = crate::release_sim(root, "hopper-sim release build")?;
     eprintln!("xtask: speed");
     let started = Instant::now();
     let (mut hop, mut rest) = (f64::INFINITY, f64::INFINITY);

@@ -4,12 +4,26 @@
 //! robot.
 
 use hopper_protocol::{
-    encode, Decoder, HostMsg, Request, Response, RobotMsg, MAX_FRAME, PROTOCOL_VERSION,
+    encode, Decoder, HostMsg, Request, Response, RobotMsg, TimingStats, MAX_FRAME, PROTOCOL_VERSION,
 };
 use std::io::{Read, Write};
 use std::net::{TcpListener, TcpStream};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
+
+/// The fake robot's answer to `Timing`: a 1 kHz control period.
+#[allow(dead_code)] // (not every test binary asks for it)
+pub fn timing() -> Response {
+    Response::Timing(TimingStats {
+        period_s: 0.001,
+        periods: 0,
+        missed: 0,
+        step_mean: 0,
+        step_max: 0,
+        link_mean: 0,
+        link_max: 0,
+    })
+}
 
 /// Sends one message; whether the link took it.
 pub fn send(s: &mut TcpStream, m: &RobotMsg) -> bool {
