@@ -79,6 +79,11 @@ pub trait PlantDriver {
     fn winding_c(&self) -> Option<f64> {
         None
     }
+    /// The winding's resistance at the firmware's temperature estimate
+    /// now, ohm, if it has one (the run books the copper loss with it).
+    fn winding_resistance_ohm(&self) -> Option<f64> {
+        None
+    }
     /// Why the run cannot go on (a hardware-in-the-loop line that lost a
     /// frame), if it cannot: the run stops with this error.
     fn failure(&self) -> Option<String> {
@@ -153,9 +158,44 @@ pub struct ThermalSummary {
     pub final_current_limit_a: f64,
     /// The amplifier's current limit, A.
     pub amplifier_limit_a: f64,
+    /// How long the motor hopped before its winding reached the derating
+    /// temperature, s (`reached_derate_s`, with the protection on or
+    /// off); null if it never did.
+    pub endurance_s: Option<f64>,
+    /// The winding temperature the run was heading for, C: where the
+    /// motor would settle under the mean square current of the last 5 hops
+    /// (`steady_hop`), if the apex was steady; null when it was not, or
+    /// when there is no such temperature (above about 11.4 A RMS with the
+    /// stand-in's data the heat outgrows what the motor sheds).
+    pub steady_winding_c: Option<f64>,
+    /// Whether the run was hopping steadily (a steady apex) with a
+    /// current whose steady temperature is below the derating one: it
+    /// could hop on indefinitely.
+    pub indefinite: bool,
+    /// The motor's thermal data (for the resistance and the steady
+    /// temperature).
+    #[serde(skip)]
+    pub config: ThermalConfig,
 }
 
 impl ThermalSummary {
+    /// The winding's resistance at the last estimate, ohm.
+    pub fn winding_resistance_ohm(&self) -> f64 {
+        f64::from(self.config.resistance_at_ohm(self.final_winding_c as f32))
+    }
+
+    /// Fills `steady_winding_c` and `indefinite` from the steady hops'
+    /// RMS current (`None`: not hopping steadily).
+    pub fn heading_for(&mut self, steady_rms_a: Option<f64>) {
+        let i2 = steady_rms_a.map(|a| (a * a) as f32);
+        self.steady_winding_c = i2
+            .and_then(|i2| self.config.steady_winding_c(i2))
+            .map(f64::from);
+        self.indefinite = self
+            .steady_winding_c
+            .is_some_and(|t| t < self.derate_winding_c);
+    }
+
     /// One period's estimate at `t_s`: the winding at `winding_c`, the
     /// current limit in force `limit_a`, `derated` below the amplifier's.
     pub fn observe(&mut self, t_s: f64, winding_c: f64, limit_a: f64, derated: bool) {
@@ -166,6 +206,7 @@ impl ThermalSummary {
         }
         if winding_c >= self.derate_winding_c && self.reached_derate_s.is_none() {
             self.reached_derate_s = Some(t_s);
+            self.endurance_s = Some(t_s);
         }
         if winding_c >= self.trip_winding_c && self.reached_trip_s.is_none() {
             self.reached_trip_s = Some(t_s);
@@ -195,6 +236,10 @@ impl ThermalSummary {
             reached_trip_s: None,
             final_current_limit_a: limit_a,
             amplifier_limit_a: limit_a,
+            endurance_s: None,
+            steady_winding_c: None,
+            indefinite: false,
+            config: t,
         }
     }
 }
@@ -794,6 +839,10 @@ impl PlantDriver for FirmwareController {
         Some(self.thermal.final_winding_c)
     }
 
+    fn winding_resistance_ohm(&self) -> Option<f64> {
+        Some(self.thermal.winding_resistance_ohm())
+    }
+
     fn arm_refusal(&self) -> Option<&'static str> {
         self.arm_refusal
     }
@@ -832,6 +881,7 @@ mod tests {
             reached_trip_s: trip,
             final_current_limit_a: 17.1,
             amplifier_limit_a: 33.67,
+            ..ThermalSummary::default()
         }
     }
 

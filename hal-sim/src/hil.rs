@@ -687,6 +687,10 @@ impl PlantDriver for HilDriver {
         Some(self.thermal.final_winding_c)
     }
 
+    fn winding_resistance_ohm(&self) -> Option<f64> {
+        Some(self.thermal.winding_resistance_ohm())
+    }
+
     fn arm_refusal(&self) -> Option<&'static str> {
         self.arm_refusal
     }

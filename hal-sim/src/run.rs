@@ -318,6 +318,18 @@ pub struct HopEnergy {
     /// Spring energy the nut holds at the apex beyond the preload,
     /// `0.5 k ((delta0 + p)^2 - delta0^2)`.
     pub actuator_spring_j: f64,
+    /// The hop's time, from the previous apex (or the release), s.
+    pub duration_s: f64,
+    /// Heat in the motor's winding over the hop, `int i^2 R(T) dt` (outside
+    /// the mechanical balance above), J: `stance_copper_loss_j +
+    /// flight_copper_loss_j`.
+    pub copper_loss_j: f64,
+    /// The part of it with the toe on the ground (stance and standing).
+    pub stance_copper_loss_j: f64,
+    /// The part of it in flight (returning the nut, holding it).
+    pub flight_copper_loss_j: f64,
+    /// The motor current's RMS over the hop, A.
+    pub rms_current_a: f64,
 }
 
 impl HopEnergy {
@@ -337,17 +349,68 @@ impl HopEnergy {
             settle_loss_j: sum(|h| h.settle_loss_j),
             actuator_kinetic_j: sum(|h| h.actuator_kinetic_j),
             actuator_spring_j: sum(|h| h.actuator_spring_j),
+            duration_s: sum(|h| h.duration_s),
+            copper_loss_j: sum(|h| h.copper_loss_j),
+            stance_copper_loss_j: sum(|h| h.stance_copper_loss_j),
+            flight_copper_loss_j: sum(|h| h.flight_copper_loss_j),
+            // The RMS over all of them, not the mean of their RMS values.
+            rms_current_a: Self::rms_over(hops)?,
         })
+    }
+
+    /// The current's RMS over consecutive hops, A.
+    fn rms_over(hops: &[HopEnergy]) -> Option<f64> {
+        let t_s: f64 = hops.iter().map(|h| h.duration_s).sum();
+        let a2s: f64 = hops
+            .iter()
+            .map(|h| h.rms_current_a * h.rms_current_a * h.duration_s)
+            .sum();
+        (t_s > 0.0).then(|| (a2s / t_s).sqrt())
     }
 }
 
 /// Per-hop bookkeeping of the plant ledger.
 struct HopTracker {
     last: Ledger,
+    last_apex_s: f64,
+    /// Copper loss since the last apex with the toe on the ground and in
+    /// flight, J.
+    stance_copper_j: f64,
+    flight_copper_j: f64,
     hops: Vec<HopEnergy>,
 }
 
 impl HopTracker {
+    /// Books one period's copper loss `copper_j`, from `t0_s` to `t1_s`,
+    /// to stance or flight: the toe on the ground at the start
+    /// (`on_ground`) and as the period's `events` change it, each part in
+    /// proportion to its time (the current changes little within a period).
+    fn heat(&mut self, on_ground: bool, t0_s: f64, t1_s: f64, copper_j: f64, events: &[Event]) {
+        let span_s = t1_s - t0_s;
+        if span_s <= 0.0 {
+            return;
+        }
+        let (mut t_s, mut ground) = (t0_s, on_ground);
+        let mut book = |ground: bool, dt_s: f64| {
+            let j = copper_j * dt_s / span_s;
+            if ground {
+                self.stance_copper_j += j;
+            } else {
+                self.flight_copper_j += j;
+            }
+        };
+        for e in events {
+            let (te_s, now_ground) = match *e {
+                Event::Touchdown { t_s, .. } => (t_s, true),
+                Event::Liftoff { t_s, .. } => (t_s, false),
+                _ => continue,
+            };
+            book(ground, te_s - t_s);
+            (t_s, ground) = (te_s, now_ground);
+        }
+        book(ground, t1_s - t_s);
+    }
+
     /// Called after a period in which an apex fell.
     fn apex(&mut self, plant: &Plant, t_s: f64, apex_m: f64) {
         let l = *plant.ledger();
@@ -369,8 +432,23 @@ impl HopTracker {
             settle_loss_j: d(|l| l.settle_loss_j),
             actuator_kinetic_j: 0.5 * alpha * s.pd_mps * s.pd_mps,
             actuator_spring_j: 0.5 * k * ((d0 + s.p_m).powi(2) - d0 * d0),
+            duration_s: plant.time_s() - self.last_apex_s,
+            copper_loss_j: d(|l| l.copper_loss_j),
+            stance_copper_loss_j: self.stance_copper_j,
+            flight_copper_loss_j: self.flight_copper_j,
+            rms_current_a: {
+                let t = plant.time_s() - self.last_apex_s;
+                if t > 0.0 {
+                    (d(|l| l.current_squared_a2s) / t).sqrt()
+                } else {
+                    0.0
+                }
+            },
         });
         self.last = l;
+        self.last_apex_s = plant.time_s();
+        self.stance_copper_j = 0.0;
+        self.flight_copper_j = 0.0;
     }
 }
 /// Everything a run produced.
@@ -439,8 +517,19 @@ pub fn run_with_progress(
     let mut first_stance_work_j: Option<f64> = None;
     let mut tracker = HopTracker {
         last: Ledger::default(),
+        last_apex_s: 0.0,
+        stance_copper_j: 0.0,
+        flight_copper_j: 0.0,
         hops: Vec::new(),
     };
+    // The copper loss at the winding's resistance: the firmware's thermal
+    // estimate's `R(T)` each period, or without firmware the stand-in
+    // motor's at the ambient temperature.
+    let fixed_resistance_ohm = controller.winding_resistance_ohm().unwrap_or_else(|| {
+        let t = hopper_control::thermal::ThermalConfig::default();
+        f64::from(t.resistance_at_ohm(t.ambient_c))
+    });
+    plant.set_winding_resistance_ohm(fixed_resistance_ohm);
     // Count-downs to the next progress report and sample: a `k % n` per
     // period is an integer division, a noticeable share of a 100 ns period.
     let (mut to_report, mut to_sample) = (report_every, sample_every);
@@ -454,7 +543,11 @@ pub fn run_with_progress(
         if let Some(e) = controller.failure() {
             return Err(e);
         }
+        if let Some(r_ohm) = controller.winding_resistance_ohm() {
+            plant.set_winding_resistance_ohm(r_ohm);
+        }
         let (t0_s, w0_j, n_events) = (plant.time_s(), plant.ledger().motor_work_j, events.len());
+        let (on_ground, copper0_j) = (plant.mode() != Mode::Flight, plant.ledger().copper_loss_j);
         plant
             .advance(cfg.control_dt_s, cmd, &mut |e| events.push(e))
             .map_err(|e: PlantError| format!("simulation failed: {e}"))?;
@@ -476,6 +569,13 @@ pub fn run_with_progress(
                 }
             }
         }
+        tracker.heat(
+            on_ground,
+            t0_s,
+            plant.time_s(),
+            plant.ledger().copper_loss_j - copper0_j,
+            &events[n_events..],
+        );
         if events.len() > n_events {
             for e in &events[n_events..] {
                 if let Event::Apex { t_s, toe_height_m } = *e {
@@ -543,7 +643,16 @@ pub fn run_with_progress(
                 estimated_events: controller.estimator_events(),
                 contact_latency,
                 arm_refused: controller.arm_refusal(),
-                thermal: controller.thermal(),
+                thermal: controller.thermal().map(|mut t| {
+                    let steady = match tracker.hops.len() {
+                        n if n >= 6 && summary.steady_apex_m.is_some() => {
+                            HopEnergy::rms_over(&tracker.hops[n - 5..])
+                        }
+                        _ => None,
+                    };
+                    t.heading_for(steady);
+                    t
+                }),
                 firmware_hops: controller.hop_ledgers(),
                 hil: controller.hil(),
                 first_stance_motor_work_j: first_stance_work_j,

@@ -344,6 +344,11 @@ fn shaped_with_model_params_and_ledger() {
         "settle_loss_j",
         "actuator_kinetic_j",
         "actuator_spring_j",
+        "duration_s",
+        "copper_loss_j",
+        "stance_copper_loss_j",
+        "flight_copper_loss_j",
+        "rms_current_a",
     ] {
         assert!(hops[0].get(key).is_some(), "hop_ledger lacks {key}");
         assert!(v["steady_hop"].get(key).is_some(), "steady_hop lacks {key}");
@@ -356,7 +361,7 @@ fn shaped_with_model_params_and_ledger() {
     let rows = text
         .lines()
         .filter(|l| {
-            l.split_whitespace().count() == 10 && l.trim_start().starts_with(char::is_numeric)
+            l.split_whitespace().count() == 13 && l.trim_start().starts_with(char::is_numeric)
         })
         .count();
     assert_eq!(rows, hops.len(), "{text}");

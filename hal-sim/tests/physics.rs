@@ -447,3 +447,39 @@ fn the_hoist_lifts_a_standing_robot_off_the_ground() {
     assert_ne!(plant.mode(), Mode::Flight);
     assert!(plant.energy_residual_j().abs() < 1e-6);
 }
+
+#[test]
+fn copper_loss_is_the_current_squared_times_the_resistance_given() {
+    // A hop under a current that swings +-20 A at 5 Hz, the winding's
+    // resistance changing every period as a thermal model would change it:
+    // the ledger's copper loss is sum(i^2 R dt) period by period, to 1e-6 J.
+    let p = Params::design();
+    let mut plant = Plant::new(p, 0.10).unwrap();
+    let dt = 1e-4;
+    let (mut want_j, mut want_a2s) = (0.0, 0.0);
+    for k in 0..30_000 {
+        let t = k as f64 * dt;
+        let cmd_a = 20.0 * (2.0 * std::f64::consts::PI * 5.0 * t).sin();
+        let r_ohm = 0.3 + 0.1 * (0.7 * t).sin();
+        plant.set_winding_resistance_ohm(r_ohm);
+        plant.advance(dt, cmd_a, &mut |_| {}).unwrap();
+        // Within the supply's reach (the current is the command) all along.
+        assert_eq!(plant.motor_current_a(), cmd_a, "at {t} s");
+        want_j += cmd_a * cmd_a * r_ohm * dt;
+        want_a2s += cmd_a * cmd_a * dt;
+    }
+    let l = plant.ledger();
+    assert!(want_j > 100.0, "{want_j} J");
+    assert!(
+        (l.copper_loss_j - want_j).abs() < 1e-6,
+        "{} vs {want_j} J",
+        l.copper_loss_j
+    );
+    assert!((l.current_squared_a2s - want_a2s).abs() < 1e-6);
+    // Outside the mechanical balance: it still closes.
+    assert!(
+        plant.energy_residual_j().abs() < 1e-6,
+        "{}",
+        plant.energy_residual_j()
+    );
+}

@@ -167,3 +167,69 @@ fn a_load_the_derated_limit_carries_settles_without_a_trip() {
         "{th:?}"
     );
 }
+
+#[test]
+fn copper_loss_is_booked_hop_by_hop_and_split_between_stance_and_flight() {
+    // Shaped holding 5 cm on the design machine, 10 s.
+    let r = sim("shaped", Params::design(), 0.05, 0.05, 10.0, &[]);
+    let s = &r.summary;
+    let hops = &s.hop_ledger;
+    // The hops are consecutive: together they are the run's copper loss
+    // up to the last apex.
+    let booked: f64 = hops.iter().map(|h| h.copper_loss_j).sum();
+    let after_last_apex = s.ledger.copper_loss_j - booked;
+    assert!(
+        (0.0..60.0).contains(&after_last_apex),
+        "{booked} of {} J",
+        s.ledger.copper_loss_j
+    );
+    for h in hops {
+        let split = h.stance_copper_loss_j + h.flight_copper_loss_j;
+        assert!(
+            (split - h.copper_loss_j).abs() < 1e-9 * h.copper_loss_j.max(1.0),
+            "{h:?}"
+        );
+    }
+    // A steady hop: 34 times the motor's net work (1.84 J) leaves as heat, more of
+    // it in flight (returning the nut) than in stance.
+    let h = s.steady_hop.unwrap();
+    let within = |got: f64, want: f64| (got - want).abs() < 0.05 * want;
+    assert!(within(h.copper_loss_j, 62.5), "{h:?}");
+    assert!(within(h.stance_copper_loss_j, 23.1), "{h:?}");
+    assert!(within(h.flight_copper_loss_j, 39.4), "{h:?}");
+    assert!(within(h.rms_current_a, 23.4), "{h:?}");
+    // That current has no steady temperature: the winding heats on.
+    let th = s.thermal.unwrap();
+    assert_eq!(th.steady_winding_c, None);
+    assert!(!th.indefinite);
+}
+
+#[test]
+fn the_heat_aware_shaped_hops_at_5_cm_more_than_twice_as_long() {
+    use hopper_control::laws::shaped::Config;
+    use hopper_control::params as p;
+    let cool = Config::heat_aware();
+    let heat_aware = [
+        (&p::SHAPED_BRAKING_MARGIN, cool.braking_margin),
+        (&p::SHAPED_TRACKING_TIME_S, cool.tracking_time_s),
+        (&p::SHAPED_BRAKE_FRACTION, cool.brake_fraction),
+    ];
+    let endurance = |set: &[(&'static p::Param, f32)], secs: f64| {
+        let r = sim("shaped", Params::design(), 0.05, 0.05, secs, set);
+        let s = r.summary;
+        // It holds the apex while it can: every apex from 5 to 10 s within
+        // 2 % of the target.
+        let held = s
+            .hop_ledger
+            .iter()
+            .filter(|h| (5.0..10.0).contains(&h.apex_time_s))
+            .all(|h| (h.apex_m - 0.05).abs() < 0.001);
+        assert!(held, "{:?}", s.apex_heights_m);
+        s.thermal.unwrap().endurance_s.unwrap()
+    };
+    let before = endurance(&[], 20.0);
+    let after = endurance(&heat_aware, 45.0);
+    assert!((before - 13.92).abs() < 0.05 * 13.92, "{before} s");
+    assert!((after - 36.23).abs() < 0.05 * 36.23, "{after} s");
+    assert!(after > 2.0 * before, "{after} s against {before} s");
+}

@@ -128,6 +128,36 @@ impl ThermalConfig {
         }
         Ok(())
     }
+
+    /// The winding's resistance at `winding_c`, ohm (copper's temperature
+    /// coefficient from 25 C; never negative).
+    pub fn resistance_at_ohm(&self, winding_c: f32) -> f32 {
+        crate::num::max(
+            self.winding_resistance_ohm * (1.0 + COPPER_TEMPCO_PER_K * (winding_c - 25.0)),
+            0.0,
+        )
+    }
+
+    /// The winding temperature a steady mean square current `mean_i2_a2`
+    /// settles at, C: the fixed point of the model above with both
+    /// derivatives zero, `T = T_a + i^2 R(T) (R_wh + R_ha)`, linear in `T`
+    /// because `R(T)` is. `None` where there is none: the heat grows with
+    /// the temperature faster than the motor sheds it (thermal runaway,
+    /// `i^2 R_25 a (R_wh + R_ha) >= 1`), or the input is not a finite
+    /// square.
+    pub fn steady_winding_c(&self, mean_i2_a2: f32) -> Option<f32> {
+        if !(0.0..f32::INFINITY).contains(&mean_i2_a2) {
+            return None;
+        }
+        let r_th = self.winding_to_housing_k_per_w + self.housing_to_ambient_k_per_w;
+        let gain = mean_i2_a2 * self.winding_resistance_ohm * r_th;
+        let slope = gain * COPPER_TEMPCO_PER_K;
+        if slope >= 1.0 {
+            return None;
+        }
+        let t = (self.ambient_c + gain * (1.0 - 25.0 * COPPER_TEMPCO_PER_K)) / (1.0 - slope);
+        t.is_finite().then_some(t)
+    }
 }
 
 /// The winding and housing temperatures and the current limit they allow.
@@ -244,9 +274,7 @@ impl MotorThermal {
         let c = &self.config;
         let h = self.pending_s;
         let mean_i2 = self.heat_a2s / h;
-        let r_ohm =
-            c.winding_resistance_ohm * (1.0 + COPPER_TEMPCO_PER_K * (self.winding_c - 25.0));
-        let power_w = mean_i2 * crate::num::max(r_ohm, 0.0);
+        let power_w = mean_i2 * c.resistance_at_ohm(self.winding_c);
         let to_housing_w = (self.winding_c - self.housing_c) / c.winding_to_housing_k_per_w;
         let to_ambient_w = (self.housing_c - c.ambient_c) / c.housing_to_ambient_k_per_w;
         // C = tau / R_th: dT = dt (P_in - P_out) R_th / tau.
@@ -329,6 +357,37 @@ mod tests {
         }
         assert!(!m.tripped(), "{} C", m.winding_c());
         assert!(m.winding_c() > 140.0, "{} C", m.winding_c());
+    }
+
+    #[test]
+    fn the_steady_temperature_is_where_the_model_settles() {
+        let cfg = ThermalConfig {
+            protect: false,
+            ..ThermalConfig::default()
+        };
+        for i in [0.0, 3.0, 6.5, 9.0] {
+            let mut m = MotorThermal::new(cfg).unwrap_or_else(|e| panic!("{e:?}"));
+            for _ in 0..(30_000.0 / THERMAL_STEP_S) as u32 {
+                m.add(i, THERMAL_STEP_S);
+            }
+            let want = cfg.steady_winding_c(i * i).unwrap_or(f32::NAN);
+            // Within 1.5 % of the rise: near steady, a 10 ms step of the
+            // housing (1,120 s) falls below half an f32 ulp of its
+            // temperature and the estimate stops short, erring cold (0.8 C
+            // at 6.5 A, 148 C; 5 C at 9 A, 446 C).
+            let rise = want - cfg.ambient_c;
+            assert!(
+                (m.winding_c() - want).abs() <= 0.015 * rise,
+                "{i} A: settled at {} C, predicted {want} C",
+                m.winding_c()
+            );
+        }
+        // Above 1 / sqrt(R_25 a (R_wh + R_ha)) = 11.4 A the heat outgrows
+        // what the motor sheds: no steady temperature.
+        assert!(cfg.steady_winding_c(11.3 * 11.3).is_some());
+        assert_eq!(cfg.steady_winding_c(11.5 * 11.5), None);
+        assert_eq!(cfg.steady_winding_c(f32::NAN), None);
+        assert_eq!(cfg.steady_winding_c(-1.0), None);
     }
 
     #[test]

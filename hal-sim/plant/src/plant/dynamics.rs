@@ -240,6 +240,9 @@ pub(super) struct AugState {
     pub(super) friction_work_j: f64,
     /// Spring damping dissipation since the start, J.
     pub(super) damping_work_j: f64,
+    /// `int i^2 dt` of the motor current since the start, A^2 s (times
+    /// the winding's resistance, the copper loss).
+    pub(super) current_sq_a2s: f64,
 }
 
 impl AugState {
@@ -253,6 +256,7 @@ impl AugState {
             motor_work_j: 0.0,
             friction_work_j: 0.0,
             damping_work_j: 0.0,
+            current_sq_a2s: 0.0,
         }
     }
 
@@ -265,6 +269,7 @@ impl AugState {
             && self.motor_work_j.is_finite()
             && self.friction_work_j.is_finite()
             && self.damping_work_j.is_finite()
+            && self.current_sq_a2s.is_finite()
     }
 
     /// `self + dt_s k`: an RK4 stage's argument.
@@ -278,6 +283,7 @@ impl AugState {
             motor_work_j: self.motor_work_j + dt_s * k.motor_power_w,
             friction_work_j: self.friction_work_j + dt_s * k.friction_power_w,
             damping_work_j: self.damping_work_j + dt_s * k.damping_power_w,
+            current_sq_a2s: self.current_sq_a2s + dt_s * k.current_sq_a2,
         }
     }
 
@@ -315,12 +321,19 @@ impl AugState {
                     k3.damping_power_w,
                     k4.damping_power_w,
                 ),
+            current_sq_a2s: self.current_sq_a2s
+                + sum(
+                    k1.current_sq_a2,
+                    k2.current_sq_a2,
+                    k3.current_sq_a2,
+                    k4.current_sq_a2,
+                ),
         }
     }
 
     /// The components in a fixed order, for the tests' comparisons.
     #[cfg(test)]
-    pub(super) fn to_array(self) -> [f64; 7] {
+    pub(super) fn to_array(self) -> [f64; 8] {
         [
             self.z_m,
             self.zd_mps,
@@ -329,6 +342,7 @@ impl AugState {
             self.motor_work_j,
             self.friction_work_j,
             self.damping_work_j,
+            self.current_sq_a2s,
         ]
     }
 }
@@ -346,6 +360,8 @@ pub(super) struct Rates {
     friction_power_w: f64,
     /// `c rate^2`, W.
     damping_power_w: f64,
+    /// `i^2`, A^2.
+    current_sq_a2: f64,
 }
 
 /// Generalised forces (friction excluded).
@@ -519,8 +535,8 @@ impl Plant {
     ) -> Rates {
         let c = &self.c;
         let (zd, pd) = (y.zd_mps, y.pd_mps);
-        let torque_nm = c.kt * c.motor_current_from_pd(self.cmd_limited_a, pd);
-        let drive = c.eta_over_r * torque_nm;
+        let current_a = c.motor_current_from_pd(self.cmd_limited_a, pd);
+        let drive = c.eta_over_r * (c.kt * current_a);
         let rate = if STANCE { pd - zd } else { pd };
         let fs = c.k * Self::compression(c, STANCE, y) + c.c * rate;
         // The drive terms do not depend on the state (unless the supply
@@ -539,6 +555,7 @@ impl Plant {
             motor_power_w: drive * pd,
             friction_power_w: friction_w,
             damping_power_w: c.c * rate * rate,
+            current_sq_a2: current_a * current_a,
         }
     }
 }

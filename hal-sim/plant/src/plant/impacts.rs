@@ -10,6 +10,10 @@ impl Plant {
         self.ledger.motor_work_j = self.y.motor_work_j;
         self.ledger.friction_j = self.y.friction_work_j;
         self.ledger.damping_j = self.y.damping_work_j;
+        // The resistance can change between calls: book the increment.
+        let d_a2s = self.y.current_sq_a2s - self.ledger.current_squared_a2s;
+        self.ledger.copper_loss_j += d_a2s * self.loss_resistance_ohm;
+        self.ledger.current_squared_a2s = self.y.current_sq_a2s;
     }
 
     /// After `zd` reached 0 (or at the start): stick if stiction can hold the

@@ -139,6 +139,14 @@ pub struct Ledger {
     pub stop_impact_loss_j: f64,
     /// Kinetic energy dropped when a crawl-speed liftoff became standing.
     pub settle_loss_j: f64,
+    /// `int i^2 dt` of the motor current, A^2 s: electrical, outside the
+    /// mechanical balance.
+    pub current_squared_a2s: f64,
+    /// Heat in the motor's winding, `int i^2 R dt`, with `R` the winding's
+    /// resistance at its temperature as last given by
+    /// [`Plant::set_winding_resistance_ohm`] (the plant's own resistance
+    /// until then): electrical, outside the mechanical balance.
+    pub copper_loss_j: f64,
 }
 
 impl Ledger {
@@ -270,6 +278,8 @@ pub struct Plant {
     /// checked when the last [`Plant::advance`] ended. The next call only has
     /// to re-check the guards that depend on the (new) command.
     guards_clear: bool,
+    /// The winding's resistance the copper loss is booked at, ohm.
+    loss_resistance_ohm: f64,
     /// The body is clamped (a hoist or a stand holds it): `z` moves only by
     /// [`Plant::move_clamped_body`], the nut moves freely against the spring.
     clamped: bool,
@@ -325,6 +335,7 @@ impl Plant {
             max_step_s: Self::DEFAULT_MAX_STEP_S,
             maps: StepMaps::new(&c, Self::DEFAULT_MAX_STEP_S),
             guards_clear: false,
+            loss_resistance_ohm: params.winding_resistance_ohm,
             clamped: false,
         };
         // A nut starting on a stop at rest may be seated on it.
@@ -454,6 +465,15 @@ impl Plant {
     /// Energy ledger since the start.
     pub fn ledger(&self) -> &Ledger {
         &self.ledger
+    }
+
+    /// The winding's resistance from now on, ohm, for the copper loss
+    /// (a thermal model's `R(T)`; the electrical model keeps its own): a
+    /// non-finite or negative value is ignored.
+    pub fn set_winding_resistance_ohm(&mut self, r_ohm: f64) {
+        if r_ohm.is_finite() && r_ohm >= 0.0 {
+            self.loss_resistance_ohm = r_ohm;
+        }
     }
 
     /// Toe height above the ground, m (0 on the ground).

@@ -312,6 +312,8 @@ impl Plant {
             motor_work_j: y0.motor_work_j + drive * dp,
             friction_work_j: y0.friction_work_j + friction * dz,
             damping_work_j: y0.damping_work_j,
+            // The current is the command throughout (checked above).
+            current_sq_a2s: y0.current_sq_a2s + cmd * cmd * self.maps.h_s,
         })
     }
 }
@@ -370,6 +372,7 @@ mod tests {
                                 motor_work_j: uniform(-5.0, 5.0),
                                 friction_work_j: uniform(0.0, 5.0),
                                 damping_work_j: uniform(0.0, 5.0),
+                                current_sq_a2s: uniform(0.0, 5.0),
                             };
                             let want = plant.rk4(&y0, h);
                             let Some(got) = plant.rk4_linear::<true>(&y0, h, 1.0) else {

@@ -262,9 +262,9 @@ pub(crate) fn cmd_run(a: RunArgs) -> Result<()> {
         );
     }
     if a.ledger {
-        say!("  per-hop energy ledger, J (previous apex to this apex; rotor and spring: actuator energy left at this apex)");
+        say!("  per-hop energy ledger, J (previous apex to this apex; rotor and spring: actuator energy left at this apex; copper: heat in the winding, with the toe down and in flight)");
         say!(
-            "  {:>4} {:>8} {:>8} {:>8} {:>8} {:>9} {:>8} {:>8} {:>8} {:>8}",
+            "  {:>4} {:>8} {:>8} {:>8} {:>8} {:>9} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8}",
             "hop",
             "time s",
             "apex m",
@@ -274,11 +274,14 @@ pub(crate) fn cmd_run(a: RunArgs) -> Result<()> {
             "liftoff",
             "stops",
             "rotor",
-            "spring"
+            "spring",
+            "copper",
+            "stance",
+            "flight"
         );
         for (i, h) in s.hop_ledger.iter().enumerate() {
             say!(
-                "  {:>4} {:>8.3} {:>8.4} {:>8.3} {:>8.3} {:>9.3} {:>8.3} {:>8.3} {:>8.3} {:>8.3}",
+                "  {:>4} {:>8.3} {:>8.4} {:>8.3} {:>8.3} {:>9.3} {:>8.3} {:>8.3} {:>8.3} {:>8.3} {:>8.2} {:>8.2} {:>8.2}",
                 i + 1,
                 h.apex_time_s,
                 h.apex_m,
@@ -288,7 +291,10 @@ pub(crate) fn cmd_run(a: RunArgs) -> Result<()> {
                 h.liftoff_loss_j,
                 h.stop_impact_loss_j,
                 h.actuator_kinetic_j,
-                h.actuator_spring_j
+                h.actuator_spring_j,
+                h.copper_loss_j,
+                h.stance_copper_loss_j,
+                h.flight_copper_loss_j
             );
         }
     }
