@@ -16,6 +16,7 @@ pub mod csv_out;
 pub mod design;
 pub mod figures;
 pub mod flight_stability;
+pub mod heat_bound;
 pub mod hil;
 pub mod identify;
 pub mod inject;

@@ -210,9 +210,10 @@ fn the_heat_aware_shaped_hops_at_5_cm_more_than_twice_as_long() {
     use hopper_control::params as p;
     let cool = Config::heat_aware();
     let heat_aware = [
+        (&p::SHAPED_SWITCH_FRACTION, cool.switch_fraction),
+        (&p::SHAPED_BRAKE_FRACTION, cool.brake_fraction),
         (&p::SHAPED_BRAKING_MARGIN, cool.braking_margin),
         (&p::SHAPED_TRACKING_TIME_S, cool.tracking_time_s),
-        (&p::SHAPED_BRAKE_FRACTION, cool.brake_fraction),
     ];
     let endurance = |set: &[(&'static p::Param, f32)], secs: f64| {
         let r = sim("shaped", Params::design(), 0.05, 0.05, secs, set);
@@ -225,11 +226,27 @@ fn the_heat_aware_shaped_hops_at_5_cm_more_than_twice_as_long() {
             .filter(|h| (5.0..10.0).contains(&h.apex_time_s))
             .all(|h| (h.apex_m - 0.05).abs() < 0.001);
         assert!(held, "{:?}", s.apex_heights_m);
-        s.thermal.unwrap().endurance_s.unwrap()
+        // The current's RMS over those hops.
+        let hops: Vec<_> = s
+            .hop_ledger
+            .iter()
+            .filter(|h| (5.0..10.0).contains(&h.apex_time_s))
+            .collect();
+        let t_s: f64 = hops.iter().map(|h| h.duration_s).sum();
+        let a2s: f64 = hops
+            .iter()
+            .map(|h| h.rms_current_a.powi(2) * h.duration_s)
+            .sum();
+        (s.thermal.unwrap().endurance_s.unwrap(), (a2s / t_s).sqrt())
     };
-    let before = endurance(&[], 20.0);
-    let after = endurance(&heat_aware, 45.0);
+    let (before, before_rms) = endurance(&[], 20.0);
+    let (after, after_rms) = endurance(&heat_aware, 55.0);
+    // 23.4 and 14.5 A RMS; the least-heat hop at 5 cm (tests/heat_bound.rs
+    // in hal-sim) is 12.07 A, 43.6 A^2 s per 0.30 s hop.
+    assert!((before_rms - 23.4).abs() < 0.05 * 23.4, "{before_rms} A");
+    assert!((after_rms - 14.5).abs() < 0.05 * 14.5, "{after_rms} A");
+    assert!(after_rms > 12.07);
     assert!((before - 13.92).abs() < 0.05 * 13.92, "{before} s");
-    assert!((after - 36.23).abs() < 0.05 * 36.23, "{after} s");
+    assert!((after - 48.7).abs() < 0.05 * 48.7, "{after} s");
     assert!(after > 2.0 * before, "{after} s against {before} s");
 }

@@ -139,17 +139,19 @@ impl Default for Config {
 
 impl Config {
     /// The heat-aware mode: the same law tuned for copper loss per hop
-    /// instead of climb speed. A slower flight return (tracking the
-    /// braking curve at half the braking deceleration with a 50 ms time
-    /// constant instead of 70 % and 5 ms) and a gentler stance brake (30 %
-    /// of the limit): at a 5 cm apex on the design machine the current is
-    /// 16 A RMS instead of 23, and the motor reaches its derating
-    /// temperature after 36 s instead of 14 (docs/endurance.md).
+    /// instead of climb speed (a random search over its parameters at a
+    /// 5 cm apex on the design machine, docs/endurance.md). The flight
+    /// return tracks the braking curve at half the braking deceleration
+    /// with a 65 ms time constant instead of 70 % and 5 ms, the push ends
+    /// at half the model's stance time and the stance brake uses 30 % of
+    /// the limit: 14.5 A RMS at 5 cm instead of 23.4, and the motor
+    /// reaches its derating temperature after 48.7 s instead of 13.9.
     pub fn heat_aware() -> Self {
         Self {
-            braking_margin: 0.5,
-            tracking_time_s: 0.05,
+            switch_fraction: 0.5,
             brake_fraction: 0.3,
+            braking_margin: 0.5,
+            tracking_time_s: 0.065,
             ..Self::default()
         }
     }
