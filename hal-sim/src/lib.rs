@@ -14,6 +14,7 @@ pub use hopper_sil::{robot, sim_io};
 pub mod controller;
 pub mod csv_out;
 pub mod design;
+pub mod endurance;
 pub mod figures;
 pub mod flight_stability;
 pub mod heat_bound;

@@ -206,15 +206,8 @@ fn copper_loss_is_booked_hop_by_hop_and_split_between_stance_and_flight() {
 
 #[test]
 fn the_heat_aware_shaped_hops_at_5_cm_more_than_twice_as_long() {
-    use hopper_control::laws::shaped::Config;
     use hopper_control::params as p;
-    let cool = Config::heat_aware();
-    let heat_aware = [
-        (&p::SHAPED_SWITCH_FRACTION, cool.switch_fraction),
-        (&p::SHAPED_BRAKE_FRACTION, cool.brake_fraction),
-        (&p::SHAPED_BRAKING_MARGIN, cool.braking_margin),
-        (&p::SHAPED_TRACKING_TIME_S, cool.tracking_time_s),
-    ];
+    let heat_aware = hal_sim::endurance::heat_aware_settings();
     let endurance = |set: &[(&'static p::Param, f32)], secs: f64| {
         let r = sim("shaped", Params::design(), 0.05, 0.05, secs, set);
         let s = r.summary;

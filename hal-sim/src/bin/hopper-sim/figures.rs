@@ -16,3 +16,32 @@ pub(crate) fn cmd_figures(out: &std::path::Path, quick: bool) -> Result<()> {
     );
     Ok(())
 }
+
+/// `hopper-sim endurance`: every law's time to the derating at every apex.
+pub(crate) fn cmd_endurance(
+    preset: &str,
+    duration_s: f64,
+    bound: Option<&std::path::Path>,
+    out: Option<&std::path::Path>,
+) -> Result<()> {
+    use hal_sim::endurance;
+    if !(duration_s.is_finite() && duration_s > 0.0 && duration_s <= 3600.0) {
+        anyhow::bail!("--duration must be in (0, 3600] s, got {duration_s}");
+    }
+    let bound = match bound {
+        Some(path) => endurance::read_bound(path).map_err(anyhow::Error::msg)?,
+        None => Vec::new(),
+    };
+    let cells = endurance::table(preset, duration_s).map_err(anyhow::Error::msg)?;
+    say!(
+        "hopper-sim: time to the derating temperature and copper loss per hop (mean 3-8 s), {preset} parameters, {duration_s} s runs released at the target"
+    );
+    say!("{}", endurance::markdown(&cells).trim_end());
+    if let Some(dir) = out {
+        let files = endurance::plot(&cells, &bound, dir).map_err(anyhow::Error::msg)?;
+        for f in files {
+            say!("  wrote {}", dir.join(f).display());
+        }
+    }
+    Ok(())
+}

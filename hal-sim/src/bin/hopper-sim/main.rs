@@ -46,7 +46,7 @@ mod sweep;
 
 use clap::{Parser, Subcommand};
 use design::{cmd_design, DesignCmd};
-use figures::cmd_figures;
+use figures::{cmd_endurance, cmd_figures};
 use identify::{cmd_identify, IdentifyArgs};
 use params::{cmd_params_show, ParamsCmd};
 use planar::{cmd_planar, PlanarCmd};
@@ -99,6 +99,26 @@ enum Cmd {
         #[command(subcommand)]
         cmd: PlanarCmd,
     },
+    /// How long every law hops before the motor derates, at apexes from 3
+    /// to 15 cm (each released at its target): prints the table (time to
+    /// the derating, copper loss per hop) and with --out draws it
+    /// (endurance.png, endurance.svg) beside the bound (docs/endurance.md).
+    Endurance {
+        /// Plant parameters: a preset (design, identified).
+        #[arg(long, default_value = "design")]
+        params: String,
+        /// Simulated time of each run, s.
+        #[arg(long, default_value_t = 120.0)]
+        duration: f64,
+        /// The bound's longest endurance per apex, a CSV file `apex_m,endurance_s`
+        /// (what `cargo run --release -p hal-sim --example heat_bound` finds;
+        /// docs/img/endurance/bound.csv), drawn dashed.
+        #[arg(long)]
+        bound: Option<PathBuf>,
+        /// Directory for endurance.png and endurance.svg (created if missing).
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
     /// Parameter sets.
     Params {
         #[command(subcommand)]
@@ -129,6 +149,12 @@ fn main() {
             cmd: ParamsCmd::Show { preset },
         } => cmd_params_show(&preset),
         Cmd::Figures { out, quick } => cmd_figures(&out, quick),
+        Cmd::Endurance {
+            params,
+            duration,
+            bound,
+            out,
+        } => cmd_endurance(&params, duration, bound.as_deref(), out.as_deref()),
         Cmd::Spring(args) => cmd_spring(&args),
         Cmd::Design { cmd } => cmd_design(&cmd),
         Cmd::Identify(args) => cmd_identify(&args),

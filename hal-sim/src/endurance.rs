@@ -1,0 +1,265 @@
+//! How long every law hops before the motor derates, at every apex
+//! (`hopper-sim endurance`; docs/endurance.md): the table and its plot,
+//! beside the bound on any controller (`hal_sim::heat_bound`).
+
+use crate::controller::ControllerSpec;
+use crate::params::Params;
+use crate::run::{run, RunConfig};
+use hopper_control::laws::{shaped, ControllerKind};
+use hopper_control::params as p;
+use plotters::prelude::*;
+use std::path::Path;
+
+/// The apexes of the table, m.
+pub const APEXES_M: [f64; 5] = [0.03, 0.05, 0.08, 0.10, 0.15];
+
+/// The name of `shaped`'s heat-aware mode in the table.
+pub const HEAT_AWARE: &str = "shaped, heat-aware";
+
+/// One law at one apex.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Cell {
+    /// The law (a controller name, or [`HEAT_AWARE`]).
+    pub law: String,
+    /// Target and start apex, m.
+    pub apex_m: f64,
+    /// Time to the derating temperature, s (`None`: not within the run).
+    pub endurance_s: Option<f64>,
+    /// Mean copper loss per hop from 3 to 8 s, J (`None`: no hop then).
+    pub copper_per_hop_j: Option<f64>,
+    /// Mean apex from 3 to 8 s, m.
+    pub mean_apex_m: Option<f64>,
+    /// Whether that mean is within 2 % of the target.
+    pub held: bool,
+}
+
+/// Firmware parameters set by name, as [`ControllerSpec::params`] takes them.
+type Settings = Vec<(&'static p::Param, f32)>;
+
+/// The heat-aware mode's settings, by parameter.
+pub fn heat_aware_settings() -> Settings {
+    let c = shaped::Config::heat_aware();
+    vec![
+        (&p::SHAPED_SWITCH_FRACTION, c.switch_fraction),
+        (&p::SHAPED_BRAKE_FRACTION, c.brake_fraction),
+        (&p::SHAPED_BRAKING_MARGIN, c.braking_margin),
+        (&p::SHAPED_TRACKING_TIME_S, c.tracking_time_s),
+    ]
+}
+
+/// Every law but passive, then the heat-aware mode, at every apex of
+/// [`APEXES_M`], `duration_s` each, in parallel; `preset` names the plant.
+pub fn table(preset: &str, duration_s: f64) -> Result<Vec<Cell>, String> {
+    use rayon::prelude::*;
+    let params = Params::preset(preset).ok_or_else(|| format!("no preset {preset}"))?;
+    let mut laws: Vec<(String, &'static str, Settings)> = ControllerKind::ALL
+        .iter()
+        .filter(|k| **k != ControllerKind::Passive)
+        .map(|k| (k.name().to_string(), k.name(), Vec::new()))
+        .collect();
+    laws.push((HEAT_AWARE.to_string(), "shaped", heat_aware_settings()));
+    let jobs: Vec<(usize, f64)> = (0..laws.len())
+        .flat_map(|l| APEXES_M.iter().map(move |a| (l, *a)))
+        .collect();
+    jobs.par_iter()
+        .map(|&(l, apex_m)| {
+            let (law, name, set) = &laws[l];
+            let mut cfg = RunConfig::new(params);
+            cfg.start_apex_m = apex_m;
+            cfg.duration_s = duration_s;
+            cfg.sample_dt_s = 0.0;
+            let spec = ControllerSpec {
+                target_apex_m: apex_m,
+                params: set.clone(),
+                preset: Params::preset_name(preset),
+                ..ControllerSpec::new(name)
+            };
+            let mut c = spec.build(&params, apex_m, cfg.control_dt_s)?;
+            let s = run(&cfg, preset, &mut c)?.summary;
+            let hops: Vec<_> = s
+                .hop_ledger
+                .iter()
+                .filter(|h| (3.0..=8.0).contains(&h.apex_time_s))
+                .collect();
+            let n = hops.len() as f64;
+            let mean = |f: fn(&crate::run::HopEnergy) -> f64| {
+                (n > 0.0).then(|| hops.iter().map(|h| f(h)).sum::<f64>() / n)
+            };
+            let mean_apex_m = mean(|h| h.apex_m);
+            Ok(Cell {
+                law: law.clone(),
+                apex_m,
+                endurance_s: s.thermal.and_then(|t| t.endurance_s),
+                copper_per_hop_j: mean(|h| h.copper_loss_j),
+                mean_apex_m,
+                held: mean_apex_m.is_some_and(|m| (m - apex_m).abs() < 0.02 * apex_m),
+            })
+        })
+        .collect()
+}
+
+/// The table as Markdown: endurance and copper per hop, with the mean apex
+/// where the target is not held.
+pub fn markdown(cells: &[Cell]) -> String {
+    let mut out = String::from("| law |");
+    for a in APEXES_M {
+        out += &format!(" {:.0} cm |", a * 100.0);
+    }
+    out += "\n|---|";
+    out += &"---|".repeat(APEXES_M.len());
+    out += "\n";
+    let mut laws: Vec<&str> = Vec::new();
+    for c in cells {
+        if !laws.contains(&c.law.as_str()) {
+            laws.push(&c.law);
+        }
+    }
+    for law in laws {
+        out += &format!("| {law} |");
+        for c in cells.iter().filter(|c| c.law == law) {
+            let e = c
+                .endurance_s
+                .map_or("none".to_string(), |t| format!("{t:.1} s"));
+            let j = c
+                .copper_per_hop_j
+                .map_or("-".to_string(), |j| format!("{j:.0} J"));
+            let miss = match (c.held, c.mean_apex_m) {
+                (true, _) => String::new(),
+                (false, Some(m)) => format!(" (apex {m:.3})"),
+                (false, None) => " (stops hopping)".to_string(),
+            };
+            out += &format!(" {e}, {j}{miss} |");
+        }
+        out += "\n";
+    }
+    out
+}
+
+/// Draws endurance against apex (endurance.png, endurance.svg in `dir`):
+/// one line per law through the apexes it holds (hollow markers where it
+/// does not), and the bound's longest endurance (`bound`: apex m,
+/// endurance s) dashed.
+pub fn plot(cells: &[Cell], bound: &[(f64, f64)], dir: &Path) -> Result<Vec<String>, String> {
+    crate::plot::ensure_font()?;
+    std::fs::create_dir_all(dir).map_err(|e| format!("cannot create {}: {e}", dir.display()))?;
+    let mut laws: Vec<&str> = Vec::new();
+    for c in cells {
+        if !laws.contains(&c.law.as_str()) {
+            laws.push(&c.law);
+        }
+    }
+    let top = cells
+        .iter()
+        .filter_map(|c| c.endurance_s)
+        .chain(bound.iter().map(|b| b.1))
+        .fold(60.0_f64, f64::max)
+        * 1.1;
+    macro_rules! draw {
+        ($area:expr) => {{
+            let area = $area;
+            area.fill(&WHITE)?;
+            let mut chart = ChartBuilder::on(&area)
+                .caption(
+                    "Time to the motor's derating (135 C), design machine, stand-in motor",
+                    ("sans-serif", 20),
+                )
+                .margin(12)
+                .x_label_area_size(40)
+                .y_label_area_size(55)
+                .build_cartesian_2d(0.02..0.16_f64, 0.0..top)?;
+            chart
+                .configure_mesh()
+                .x_desc("apex held [m] (start = target)")
+                .y_desc("endurance [s]")
+                .draw()?;
+            if !bound.is_empty() {
+                chart
+                    .draw_series(DashedLineSeries::new(
+                        bound.iter().copied(),
+                        8,
+                        5,
+                        BLACK.stroke_width(2),
+                    ))?
+                    .label("bound: the least-heat hop (any controller)")
+                    .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK));
+            }
+            for (i, law) in laws.iter().enumerate() {
+                let colour = if law.contains("heat-aware") {
+                    RGBColor(0, 80, 200).to_rgba()
+                } else {
+                    Palette99::pick(i).to_rgba()
+                };
+                let mine: Vec<&Cell> = cells.iter().filter(|c| c.law == *law).collect();
+                let held: Vec<(f64, f64)> = mine
+                    .iter()
+                    .filter(|c| c.held)
+                    .filter_map(|c| c.endurance_s.map(|e| (c.apex_m, e)))
+                    .collect();
+                let width = if law.contains("heat-aware") { 3 } else { 1 };
+                chart
+                    .draw_series(LineSeries::new(held.clone(), colour.stroke_width(width)))?
+                    .label(*law)
+                    .legend(move |(x, y)| {
+                        PathElement::new(vec![(x, y), (x + 20, y)], colour.stroke_width(width))
+                    });
+                chart.draw_series(
+                    held.iter()
+                        .map(|&(x, y)| Circle::new((x, y), 4, colour.filled())),
+                )?;
+                chart.draw_series(
+                    mine.iter()
+                        .filter(|c| !c.held)
+                        .filter_map(|c| c.endurance_s.map(|e| (c.apex_m, e)))
+                        .map(|(x, y)| Circle::new((x, y), 4, colour.stroke_width(1))),
+                )?;
+            }
+            chart
+                .draw_series(std::iter::empty::<Circle<(f64, f64), i32>>())?
+                .label("hollow marker: target not held (mean apex 3-8 s off by > 2 %)")
+                .legend(|(x, y)| Circle::new((x + 10, y), 4, BLACK.stroke_width(1)));
+            chart
+                .configure_series_labels()
+                .position(SeriesLabelPosition::UpperRight)
+                .background_style(WHITE.mix(0.85))
+                .border_style(BLACK)
+                .draw()?;
+            area.present()?;
+            Ok(())
+        }};
+    }
+    crate::plot::png_and_svg(
+        dir,
+        "endurance",
+        (1000, 650),
+        "the endurance plot",
+        |a| draw!(a),
+        |a| draw!(a),
+    )
+}
+
+/// The bound's longest endurance per apex from a CSV file with columns
+/// `apex_m` and `endurance_s` (a header line first; `endurance_s` empty
+/// where it is indefinite, left out of the plot).
+pub fn read_bound(path: &Path) -> Result<Vec<(f64, f64)>, String> {
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+    let mut out = Vec::new();
+    for (n, line) in text.lines().enumerate().skip(1) {
+        let mut f = line.split(',');
+        let (Some(a), Some(e)) = (f.next(), f.next()) else {
+            return Err(format!(
+                "{}:{}: expected apex_m,endurance_s",
+                path.display(),
+                n + 1
+            ));
+        };
+        let bad = || format!("{}:{}: not a number in `{line}`", path.display(), n + 1);
+        let a: f64 = a.trim().parse().map_err(|_| bad())?;
+        if e.trim().is_empty() {
+            continue;
+        }
+        let e: f64 = e.trim().parse().map_err(|_| bad())?;
+        out.push((a, e));
+    }
+    Ok(out)
+}
