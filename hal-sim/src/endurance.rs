@@ -263,3 +263,96 @@ pub fn read_bound(path: &Path) -> Result<Vec<(f64, f64)>, String> {
     }
     Ok(out)
 }
+
+/// One single change of the design machine, tried for endurance.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct Change {
+    /// What changed: `screw_lead_m`, `spring_stiffness_n_per_m` (plant
+    /// parameters) or `thermal.housing_to_ambient_k_per_w` (a heat sink or
+    /// fan on the motor's housing; the winding's own data unchanged).
+    pub name: &'static str,
+    /// The design value.
+    pub design: f64,
+    /// The value tried.
+    pub value: f64,
+    /// Time to the derating at each apex of [`ENDURANCE_APEXES_M`], s
+    /// (`None`: it did not derate within the run).
+    pub endurance_s: [Option<f64>; 2],
+    /// Whether each apex was held (mean apex 3-8 s within 2 %).
+    pub held: [bool; 2],
+    /// Whether it hopped both apexes for the whole run without derating.
+    pub enough: bool,
+}
+
+/// The apexes the endurance design search must hold, m: a 5 cm and a
+/// 15 cm hop.
+pub const ENDURANCE_APEXES_M: [f64; 2] = [0.05, 0.15];
+
+/// Tries each single change of the design machine (screw lead, spring
+/// rate, the housing's thermal resistance to ambient) with the heat-aware
+/// `shaped`, thermal protection on, released at 5 and 15 cm for
+/// `duration_s` each; in order of how far each is from the design (the
+/// ratio's logarithm), in parallel.
+pub fn single_changes(duration_s: f64) -> Result<Vec<Change>, String> {
+    use rayon::prelude::*;
+    let design = Params::design();
+    let lead = design.screw_lead_m;
+    let spring = design.spring_stiffness_n_per_m;
+    let housing = f64::from(p::THERMAL_HOUSING_TO_AMBIENT.default);
+    let mut tries: Vec<(&'static str, f64, f64)> = Vec::new();
+    for f in [0.6, 0.8, 1.25, 1.5, 1.75, 2.0, 2.5, 3.0] {
+        tries.push(("screw_lead_m", lead, lead * f));
+    }
+    for f in [0.5, 0.7, 1.4, 2.0] {
+        tries.push(("spring_stiffness_n_per_m", spring, spring * f));
+    }
+    for r in [2.0, 1.0, 0.5, 0.1] {
+        tries.push((p::THERMAL_HOUSING_TO_AMBIENT.name, housing, r));
+    }
+    tries.sort_by(|a, b| (a.2 / a.1).ln().abs().total_cmp(&(b.2 / b.1).ln().abs()));
+    tries
+        .par_iter()
+        .map(|&(name, design_value, value)| {
+            let mut params = design;
+            let mut set = heat_aware_settings();
+            match name {
+                "screw_lead_m" => params.screw_lead_m = value,
+                "spring_stiffness_n_per_m" => params.spring_stiffness_n_per_m = value,
+                _ => set.push((&p::THERMAL_HOUSING_TO_AMBIENT, value as f32)),
+            }
+            let mut endurance_s = [None; 2];
+            let mut held = [false; 2];
+            for (i, apex_m) in ENDURANCE_APEXES_M.into_iter().enumerate() {
+                let mut cfg = RunConfig::new(params);
+                cfg.start_apex_m = apex_m;
+                cfg.duration_s = duration_s;
+                cfg.sample_dt_s = 0.0;
+                let spec = ControllerSpec {
+                    target_apex_m: apex_m,
+                    params: set.clone(),
+                    preset: Some("design"),
+                    ..ControllerSpec::new("shaped")
+                };
+                let mut c = spec.build(&params, apex_m, cfg.control_dt_s)?;
+                let s = run(&cfg, "design", &mut c)?.summary;
+                let hops: Vec<f64> = s
+                    .hop_ledger
+                    .iter()
+                    .filter(|h| (3.0..=8.0).contains(&h.apex_time_s))
+                    .map(|h| h.apex_m)
+                    .collect();
+                let mean = hops.iter().sum::<f64>() / hops.len().max(1) as f64;
+                held[i] = !hops.is_empty() && (mean - apex_m).abs() < 0.02 * apex_m;
+                endurance_s[i] = s.thermal.and_then(|t| t.endurance_s);
+            }
+            Ok(Change {
+                name,
+                design: design_value,
+                value,
+                endurance_s,
+                held,
+                enough: held.iter().all(|h| *h) && endurance_s.iter().all(Option::is_none),
+            })
+        })
+        .collect()
+}

@@ -35,6 +35,12 @@ pub(crate) enum DesignCmd {
         /// Directory for feasibility.png and feasibility.svg.
         #[arg(long)]
         out: Option<PathBuf>,
+        /// Instead: the smallest single change of the design machine (lead,
+        /// spring rate, the housing's thermal resistance) with which the
+        /// heat-aware shaped hops 5 cm and 15 cm this long, s, without the
+        /// motor derating (docs/endurance.md).
+        #[arg(long)]
+        endurance: Option<f64>,
         /// Print JSON instead of text.
         #[arg(long)]
         json: bool,
@@ -104,7 +110,67 @@ pub(crate) fn cmd_design(cmd: &DesignCmd) -> Result<()> {
                 );
             }
         }
-        DesignCmd::WouldHop { out, json } => {
+        DesignCmd::WouldHop {
+            endurance: Some(duration_s),
+            json,
+            ..
+        } => {
+            use hal_sim::endurance::{single_changes, ENDURANCE_APEXES_M};
+            if !(duration_s.is_finite() && *duration_s > 0.0 && *duration_s <= 3600.0) {
+                anyhow::bail!("--endurance must be in (0, 3600] s, got {duration_s}");
+            }
+            let bar = indicatif::ProgressBar::new_spinner()
+                .with_finish(indicatif::ProgressFinish::AndClear);
+            bar.set_message(format!(
+                "32 runs of {duration_s} s (16 single changes, 5 and 15 cm)"
+            ));
+            bar.enable_steady_tick(std::time::Duration::from_millis(200));
+            let changes = single_changes(*duration_s).map_err(anyhow::Error::msg)?;
+            bar.finish_and_clear();
+            if *json {
+                say!("{}", serde_json::to_string_pretty(&changes)?);
+                return Ok(());
+            }
+            say!(
+                "single changes of the design machine, heat-aware shaped, thermal protection on, {duration_s} s at {} and {} m (smallest change first):",
+                ENDURANCE_APEXES_M[0],
+                ENDURANCE_APEXES_M[1]
+            );
+            for c in &changes {
+                let at = |i: usize| {
+                    let e = c.endurance_s[i]
+                        .map_or(format!("no derating in {duration_s} s"), |t| {
+                            format!("derates at {t:.0} s")
+                        });
+                    if c.held[i] {
+                        e
+                    } else {
+                        format!("{e}, apex not held")
+                    }
+                };
+                say!(
+                    "  {:<36} {:>9.4} -> {:>9.4}: 5 cm {}; 15 cm {}{}",
+                    c.name,
+                    c.design,
+                    c.value,
+                    at(0),
+                    at(1),
+                    if c.enough { "  <- enough" } else { "" }
+                );
+            }
+            match changes.iter().find(|c| c.enough) {
+                Some(c) => say!(
+                    "smallest single change that hops both for {duration_s} s: {} {} -> {}",
+                    c.name,
+                    c.design,
+                    c.value
+                ),
+                None => say!(
+                    "no single change tried hops both for {duration_s} s (docs/endurance.md: the bound says why)"
+                ),
+            }
+        }
+        DesignCmd::WouldHop { out, json, .. } => {
             use hal_sim::design::{
                 feasibility_map, smallest_changes, write_feasibility_plot, Holder,
             };
