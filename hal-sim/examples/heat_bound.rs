@@ -7,8 +7,9 @@
 //! ```
 //!
 //! `PARAMS`: `design` (default) or `identified`. `SEG` (levels per phase,
-//! default 8), `RUNS` (independent searches, default 6) and `GENERATIONS`
-//! (default 400) from the environment. It prints each apex's best closed
+//! default 8), `RUNS` (independent searches, default 4) and `GENERATIONS`
+//! (default 8,000: about a minute per apex on 2 cores) from the
+//! environment. It prints each apex's best closed
 //! hop and its schedule (levels as fractions of the current limit), which
 //! `tests/heat_bound.rs` replays.
 #![allow(missing_docs)]
@@ -35,7 +36,7 @@ fn main() {
         .get(2)
         .map(|s| s.split(',').filter_map(|h| h.parse().ok()).collect())
         .unwrap_or_else(|| vec![0.03, 0.05, 0.08, 0.10, 0.15]);
-    let (seg, runs, generations) = (env("SEG", 8), env("RUNS", 6), env("GENERATIONS", 400));
+    let (seg, runs, generations) = (env("SEG", 8), env("RUNS", 4), env("GENERATIONS", 8000));
     let thermal = ThermalConfig::default();
     println!(
         "least int i^2 dt per hop holding an apex ({name} parameters, {seg} levels per phase, best of {runs} searches of {generations} generations)"

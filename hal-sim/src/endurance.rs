@@ -33,6 +33,17 @@ pub struct Cell {
     pub held: bool,
 }
 
+/// A run long enough to judge the hops from 3 to 8 s, and at most an hour.
+fn check_duration(duration_s: f64) -> Result<(), String> {
+    if duration_s.is_finite() && (MIN_DURATION_S..=3600.0).contains(&duration_s) {
+        Ok(())
+    } else {
+        Err(format!(
+            "the run must last {MIN_DURATION_S} to 3600 s (apexes are judged from 3 to 8 s), got {duration_s}"
+        ))
+    }
+}
+
 /// Firmware parameters set by name, as [`ControllerSpec::params`] takes them.
 type Settings = Vec<(&'static p::Param, f32)>;
 
@@ -47,10 +58,16 @@ pub fn heat_aware_settings() -> Settings {
     ]
 }
 
+/// The shortest run the table and the design search take, s: whether an
+/// apex is held is judged on the hops from 3 to 8 s.
+pub const MIN_DURATION_S: f64 = 8.0;
+
 /// Every law but passive, then the heat-aware mode, at every apex of
-/// [`APEXES_M`], `duration_s` each, in parallel; `preset` names the plant.
+/// [`APEXES_M`], `duration_s` each (at least [`MIN_DURATION_S`]), in
+/// parallel; `preset` names the plant.
 pub fn table(preset: &str, duration_s: f64) -> Result<Vec<Cell>, String> {
     use rayon::prelude::*;
+    check_duration(duration_s)?;
     let params = Params::preset(preset).ok_or_else(|| format!("no preset {preset}"))?;
     let mut laws: Vec<(String, &'static str, Settings)> = ControllerKind::ALL
         .iter()
@@ -135,11 +152,17 @@ pub fn markdown(cells: &[Cell]) -> String {
     out
 }
 
-/// Draws endurance against apex (endurance.png, endurance.svg in `dir`):
+/// Draws endurance against apex (endurance.png, endurance.svg in `dir`,
+/// titled `caption`):
 /// one line per law through the apexes it holds (hollow markers where it
 /// does not), and the bound's longest endurance (`bound`: apex m,
 /// endurance s) dashed.
-pub fn plot(cells: &[Cell], bound: &[(f64, f64)], dir: &Path) -> Result<Vec<String>, String> {
+pub fn plot(
+    cells: &[Cell],
+    bound: &[(f64, f64)],
+    caption: &str,
+    dir: &Path,
+) -> Result<Vec<String>, String> {
     crate::plot::ensure_font()?;
     std::fs::create_dir_all(dir).map_err(|e| format!("cannot create {}: {e}", dir.display()))?;
     let mut laws: Vec<&str> = Vec::new();
@@ -159,10 +182,7 @@ pub fn plot(cells: &[Cell], bound: &[(f64, f64)], dir: &Path) -> Result<Vec<Stri
             let area = $area;
             area.fill(&WHITE)?;
             let mut chart = ChartBuilder::on(&area)
-                .caption(
-                    "Time to the motor's derating (135 C), design machine, stand-in motor",
-                    ("sans-serif", 20),
-                )
+                .caption(caption, ("sans-serif", 20))
                 .margin(12)
                 .x_label_area_size(40)
                 .y_label_area_size(55)
@@ -243,8 +263,18 @@ pub fn plot(cells: &[Cell], bound: &[(f64, f64)], dir: &Path) -> Result<Vec<Stri
 pub fn read_bound(path: &Path) -> Result<Vec<(f64, f64)>, String> {
     let text = std::fs::read_to_string(path)
         .map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+    let mut lines = text.lines().enumerate();
+    match lines.next() {
+        Some((_, header)) if header.trim().starts_with("apex_m") => {}
+        _ => {
+            return Err(format!(
+                "{}:1: expected the header `apex_m,endurance_s`",
+                path.display()
+            ))
+        }
+    }
     let mut out = Vec::new();
-    for (n, line) in text.lines().enumerate().skip(1) {
+    for (n, line) in lines {
         let mut f = line.split(',');
         let (Some(a), Some(e)) = (f.next(), f.next()) else {
             return Err(format!(
@@ -253,13 +283,25 @@ pub fn read_bound(path: &Path) -> Result<Vec<(f64, f64)>, String> {
                 n + 1
             ));
         };
-        let bad = || format!("{}:{}: not a number in `{line}`", path.display(), n + 1);
-        let a: f64 = a.trim().parse().map_err(|_| bad())?;
+        let bad = || {
+            format!(
+                "{}:{}: not a finite, non-negative number in `{line}`",
+                path.display(),
+                n + 1
+            )
+        };
+        let number = |s: &str| {
+            s.trim()
+                .parse::<f64>()
+                .ok()
+                .filter(|v| v.is_finite() && *v >= 0.0)
+                .ok_or_else(bad)
+        };
+        let a = number(a)?;
         if e.trim().is_empty() {
             continue;
         }
-        let e: f64 = e.trim().parse().map_err(|_| bad())?;
-        out.push((a, e));
+        out.push((a, number(e)?));
     }
     Ok(out)
 }
@@ -271,9 +313,9 @@ pub struct Change {
     /// parameters) or `thermal.housing_to_ambient_k_per_w` (a heat sink or
     /// fan on the motor's housing; the winding's own data unchanged).
     pub name: &'static str,
-    /// The design value.
+    /// The design value, in the changed quantity's unit (m, N/m or K/W).
     pub design: f64,
-    /// The value tried.
+    /// The value tried, in the same unit.
     pub value: f64,
     /// Time to the derating at each apex of [`ENDURANCE_APEXES_M`], s
     /// (`None`: it did not derate within the run).
@@ -295,6 +337,7 @@ pub const ENDURANCE_APEXES_M: [f64; 2] = [0.05, 0.15];
 /// ratio's logarithm), in parallel.
 pub fn single_changes(duration_s: f64) -> Result<Vec<Change>, String> {
     use rayon::prelude::*;
+    check_duration(duration_s)?;
     let design = Params::design();
     let lead = design.screw_lead_m;
     let spring = design.spring_stiffness_n_per_m;

@@ -525,11 +525,11 @@ pub fn run_with_progress(
     // The copper loss at the winding's resistance: the firmware's thermal
     // estimate's `R(T)` each period, or without firmware the stand-in
     // motor's at the ambient temperature.
-    let fixed_resistance_ohm = controller.winding_resistance_ohm().unwrap_or_else(|| {
+    let start_resistance_ohm = controller.winding_resistance_ohm().unwrap_or_else(|| {
         let t = hopper_control::thermal::ThermalConfig::default();
         f64::from(t.resistance_at_ohm(t.ambient_c))
     });
-    plant.set_winding_resistance_ohm(fixed_resistance_ohm);
+    plant.set_winding_resistance_ohm(start_resistance_ohm);
     // Count-downs to the next progress report and sample: a `k % n` per
     // period is an integer division, a noticeable share of a 100 ns period.
     let (mut to_report, mut to_sample) = (report_every, sample_every);

@@ -258,3 +258,19 @@ fn unknown_cli_flag() {
         assert!(o.status.success() && !o.stdout.is_empty(), "{flag}");
     }
 }
+
+#[test]
+fn a_bound_file_that_is_not_finite_numbers_or_a_run_too_short_to_judge() {
+    let c = Case::new();
+    let inf = c.file("inf.csv", "apex_m,endurance_s\n0.05,inf\n");
+    c.fails(
+        &["endurance", "--bound", &inf],
+        &["inf.csv:2", "not a finite, non-negative number"],
+    );
+    let headless = c.file("headless.csv", "0.05,104\n");
+    c.fails(
+        &["endurance", "--bound", &headless],
+        &["headless.csv:1", "apex_m,endurance_s"],
+    );
+    c.fails(&["endurance", "--duration", "2"], &["8 to 3600 s", "got 2"]);
+}

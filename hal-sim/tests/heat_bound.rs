@@ -64,7 +64,7 @@ fn the_least_heat_hop_at_5_cm_closes_and_costs_what_the_docs_say() {
 
 #[test]
 fn a_current_the_motor_sheds_hops_indefinitely() {
-    // 6 A RMS settles at 128 C, under the 135 C derating.
+    // 6 A RMS settles at 123 C, under the 135 C derating.
     let t = ThermalConfig::default();
     assert_eq!(endurance_s(&t, 6.0), None);
     assert!(endurance_s(&t, 6.5).is_some());

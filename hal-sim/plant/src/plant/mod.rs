@@ -144,8 +144,10 @@ pub struct Ledger {
     pub current_squared_a2s: f64,
     /// Heat in the motor's winding, `int i^2 R dt`, with `R` the winding's
     /// resistance at its temperature as last given by
-    /// [`Plant::set_winding_resistance_ohm`] (the plant's own resistance
-    /// until then): electrical, outside the mechanical balance.
+    /// [`Plant::set_winding_resistance_ohm`] (until then the electrical
+    /// model's `winding_resistance_ohm`, 0.356 ohm on the design preset;
+    /// `hal_sim::run` sets the thermal model's instead): electrical,
+    /// outside the mechanical balance.
     pub copper_loss_j: f64,
 }
 

@@ -110,9 +110,10 @@ enum Cmd {
         /// Simulated time of each run, s.
         #[arg(long, default_value_t = 120.0)]
         duration: f64,
-        /// The bound's longest endurance per apex, a CSV file `apex_m,endurance_s`
-        /// (what `cargo run --release -p hal-sim --example heat_bound` finds;
-        /// docs/img/endurance/bound.csv), drawn dashed.
+        /// The bound's longest endurance per apex, a CSV file with the header
+        /// `apex_m,endurance_s` (the last-but-one column of the table
+        /// `cargo run --release -p hal-sim --example heat_bound` prints;
+        /// docs/img/endurance/bound.csv has it), drawn dashed.
         #[arg(long)]
         bound: Option<PathBuf>,
         /// Directory for endurance.png and endurance.svg (created if missing).
