@@ -37,9 +37,6 @@
 #![allow(missing_docs)]
 
 use hal_sim::{Event, Mode, Params, Plant, State};
-use rand_distr::{Distribution, StandardUniform};
-use rand_xoshiro::rand_core::{Rng, SeedableRng};
-use rand_xoshiro::Xoshiro256PlusPlus;
 
 const DT_S: f64 = 1e-4;
 const START_M: f64 = 0.05;
@@ -142,59 +139,17 @@ fn simulate(plant: &Plant, levels: &[f64], grid: Grid) -> Outcome {
     }
 }
 
-fn uniform(rng: &mut Xoshiro256PlusPlus) -> f64 {
-    StandardUniform.sample(rng)
-}
-
-/// Differential evolution (rand/1/bin) over `[-1, 1]^dim`, maximising `f`.
-/// `seeds` join the random initial population.
+/// Differential evolution over `[-1, 1]^dim`, maximising `f`:
+/// [`hal_sim::heat_bound::minimise`] on `-f`.
 fn maximise(
     dim: usize,
     generations: usize,
     seed: u64,
     seeds: &[Vec<f64>],
-    f: impl Fn(&[f64]) -> f64,
+    f: impl Fn(&[f64]) -> f64 + Sync,
 ) -> (Vec<f64>, f64) {
-    let np = 40usize.max(dim);
-    let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
-    let mut pop: Vec<Vec<f64>> = (0..np)
-        .map(|_| (0..dim).map(|_| 2.0 * uniform(&mut rng) - 1.0).collect())
-        .collect();
-    for (member, s) in pop.iter_mut().zip(seeds) {
-        member.clone_from(s);
-    }
-    let mut fit: Vec<f64> = pop.iter().map(|x| f(x)).collect();
-    let (weight, crossover) = (0.6, 0.9);
-    for _ in 0..generations {
-        for i in 0..np {
-            let mut pick = |not: &[usize]| loop {
-                let k = (rng.next_u64() % np as u64) as usize;
-                if !not.contains(&k) {
-                    break k;
-                }
-            };
-            let a = pick(&[i]);
-            let b = pick(&[i, a]);
-            let c = pick(&[i, a, b]);
-            let jr = (rng.next_u64() % dim as u64) as usize;
-            let trial: Vec<f64> = (0..dim)
-                .map(|j| {
-                    if j == jr || uniform(&mut rng) < crossover {
-                        (pop[a][j] + weight * (pop[b][j] - pop[c][j])).clamp(-1.0, 1.0)
-                    } else {
-                        pop[i][j]
-                    }
-                })
-                .collect();
-            let s = f(&trial);
-            if s >= fit[i] {
-                pop[i] = trial;
-                fit[i] = s;
-            }
-        }
-    }
-    let best = (0..np).fold(0, |b, i| if fit[i] > fit[b] { i } else { b });
-    (pop[best].clone(), fit[best])
+    let (x, v) = hal_sim::heat_bound::minimise(dim, generations, seed, seeds, &|x| -f(x));
+    (x, -v)
 }
 
 /// The bang-bang structure of the yardstick (`bang_bang_climb`) as one

@@ -81,38 +81,54 @@ pub fn table(preset: &str, duration_s: f64) -> Result<Vec<Cell>, String> {
     jobs.par_iter()
         .map(|&(l, apex_m)| {
             let (law, name, set) = &laws[l];
-            let mut cfg = RunConfig::new(params);
-            cfg.start_apex_m = apex_m;
-            cfg.duration_s = duration_s;
-            cfg.sample_dt_s = 0.0;
-            let spec = ControllerSpec {
-                target_apex_m: apex_m,
-                params: set.clone(),
-                preset: Params::preset_name(preset),
-                ..ControllerSpec::new(name)
-            };
-            let mut c = spec.build(&params, apex_m, cfg.control_dt_s)?;
-            let s = run(&cfg, preset, &mut c)?.summary;
-            let hops: Vec<_> = s
-                .hop_ledger
-                .iter()
-                .filter(|h| (3.0..=8.0).contains(&h.apex_time_s))
-                .collect();
-            let n = hops.len() as f64;
-            let mean = |f: fn(&crate::run::HopEnergy) -> f64| {
-                (n > 0.0).then(|| hops.iter().map(|h| f(h)).sum::<f64>() / n)
-            };
-            let mean_apex_m = mean(|h| h.apex_m);
-            Ok(Cell {
-                law: law.clone(),
-                apex_m,
-                endurance_s: s.thermal.and_then(|t| t.endurance_s),
-                copper_per_hop_j: mean(|h| h.copper_loss_j),
-                mean_apex_m,
-                held: mean_apex_m.is_some_and(|m| (m - apex_m).abs() < 0.02 * apex_m),
-            })
+            cell(&params, preset, law, name, set, apex_m, duration_s)
         })
         .collect()
+}
+
+/// One run of `controller` (with `settings`) on `params` (from `preset`),
+/// released at and aiming for `apex_m`, `duration_s` long, as a [`Cell`]
+/// named `law`: the table's and the design search's one way to judge a
+/// run.
+fn cell(
+    params: &Params,
+    preset: &str,
+    law: &str,
+    controller: &str,
+    settings: &Settings,
+    apex_m: f64,
+    duration_s: f64,
+) -> Result<Cell, String> {
+    let mut cfg = RunConfig::new(*params);
+    cfg.start_apex_m = apex_m;
+    cfg.duration_s = duration_s;
+    cfg.sample_dt_s = 0.0;
+    let spec = ControllerSpec {
+        target_apex_m: apex_m,
+        params: settings.clone(),
+        preset: Params::preset_name(preset),
+        ..ControllerSpec::new(controller)
+    };
+    let mut c = spec.build(params, apex_m, cfg.control_dt_s)?;
+    let s = run(&cfg, preset, &mut c)?.summary;
+    let hops: Vec<_> = s
+        .hop_ledger
+        .iter()
+        .filter(|h| (3.0..=8.0).contains(&h.apex_time_s))
+        .collect();
+    let n = hops.len() as f64;
+    let mean = |f: fn(&crate::run::HopEnergy) -> f64| {
+        (n > 0.0).then(|| hops.iter().map(|h| f(h)).sum::<f64>() / n)
+    };
+    let mean_apex_m = mean(|h| h.apex_m);
+    Ok(Cell {
+        law: law.to_string(),
+        apex_m,
+        endurance_s: s.thermal.and_then(|t| t.endurance_s),
+        copper_per_hop_j: mean(|h| h.copper_loss_j),
+        mean_apex_m,
+        held: mean_apex_m.is_some_and(|m| (m - apex_m).abs() < 0.02 * apex_m),
+    })
 }
 
 /// The table as Markdown: endurance and copper per hop, with the mean apex
@@ -366,27 +382,8 @@ pub fn single_changes(duration_s: f64) -> Result<Vec<Change>, String> {
             let mut endurance_s = [None; 2];
             let mut held = [false; 2];
             for (i, apex_m) in ENDURANCE_APEXES_M.into_iter().enumerate() {
-                let mut cfg = RunConfig::new(params);
-                cfg.start_apex_m = apex_m;
-                cfg.duration_s = duration_s;
-                cfg.sample_dt_s = 0.0;
-                let spec = ControllerSpec {
-                    target_apex_m: apex_m,
-                    params: set.clone(),
-                    preset: Some("design"),
-                    ..ControllerSpec::new("shaped")
-                };
-                let mut c = spec.build(&params, apex_m, cfg.control_dt_s)?;
-                let s = run(&cfg, "design", &mut c)?.summary;
-                let hops: Vec<f64> = s
-                    .hop_ledger
-                    .iter()
-                    .filter(|h| (3.0..=8.0).contains(&h.apex_time_s))
-                    .map(|h| h.apex_m)
-                    .collect();
-                let mean = hops.iter().sum::<f64>() / hops.len().max(1) as f64;
-                held[i] = !hops.is_empty() && (mean - apex_m).abs() < 0.02 * apex_m;
-                endurance_s[i] = s.thermal.and_then(|t| t.endurance_s);
+                let c = cell(&params, "design", "", "shaped", &set, apex_m, duration_s)?;
+                (endurance_s[i], held[i]) = (c.endurance_s, c.held);
             }
             Ok(Change {
                 name,

@@ -185,9 +185,10 @@ fn uniform(rng: &mut Xoshiro256PlusPlus) -> f64 {
     StandardUniform.sample(rng)
 }
 
-/// Differential evolution (rand/1/bin) over `[-1, 1]^dim`, minimising `f`;
-/// `seeds` join the random initial population.
-fn minimise(
+/// Differential evolution (rand/1/bin, weight 0.6, crossover 0.9,
+/// population `max(40, dim)`) over `[-1, 1]^dim`, minimising `f`; `seeds`
+/// join the random initial population. The best point and its value.
+pub fn minimise(
     dim: usize,
     generations: usize,
     seed: u64,
