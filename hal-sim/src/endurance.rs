@@ -326,13 +326,18 @@ pub fn read_bound(path: &Path) -> Result<Vec<(f64, f64)>, String> {
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct Change {
     /// What changed: `screw_lead_m`, `spring_stiffness_n_per_m` (plant
-    /// parameters) or `thermal.housing_to_ambient_k_per_w` (a heat sink or
-    /// fan on the motor's housing; the winding's own data unchanged).
+    /// parameters), `thermal.housing_to_ambient_k_per_w` (a heat sink or
+    /// fan on the motor's housing; the winding's own data unchanged) or
+    /// `motor` (a catalogue motor, [`crate::motors`]).
     pub name: &'static str,
-    /// The design value, in the changed quantity's unit (m, N/m or K/W).
+    /// The design value, in the changed quantity's unit (m, N/m or K/W;
+    /// for a motor its motor constant `k_t / sqrt(R)`, N m/sqrt(W)).
     pub design: f64,
     /// The value tried, in the same unit.
     pub value: f64,
+    /// The catalogue motor's name where `name` is `motor`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub motor: Option<&'static str>,
     /// Time to the derating at each apex of [`ENDURANCE_APEXES_M`], s
     /// (`None`: it did not derate within the run).
     pub endurance_s: [Option<f64>; 2],
@@ -346,37 +351,39 @@ pub struct Change {
 /// 15 cm hop.
 pub const ENDURANCE_APEXES_M: [f64; 2] = [0.05, 0.15];
 
-/// Tries each single change of the design machine (screw lead, spring
-/// rate, the housing's thermal resistance to ambient) with the heat-aware
-/// `shaped`, thermal protection on, released at 5 and 15 cm for
-/// `duration_s` each; in order of how far each is from the design (the
-/// ratio's logarithm), in parallel.
-pub fn single_changes(duration_s: f64) -> Result<Vec<Change>, String> {
+/// A change to try: the quantity, its design value, the value tried, and
+/// the motor where a motor is tried.
+type Try = (
+    &'static str,
+    f64,
+    f64,
+    Option<&'static crate::motors::CatalogueMotor>,
+);
+
+/// A motor's motor constant `k_t / sqrt(R)`, N m/sqrt(W): torque for the
+/// square root of the copper loss.
+fn motor_constant(m: &crate::design::Motor) -> f64 {
+    m.torque_constant_nm_per_a / m.resistance_ohm.sqrt()
+}
+
+/// Runs each change for `duration_s` at both apexes with the heat-aware
+/// `shaped`, in parallel.
+fn run_changes(tries: &[Try], duration_s: f64) -> Result<Vec<Change>, String> {
     use rayon::prelude::*;
     check_duration(duration_s)?;
     let design = Params::design();
-    let lead = design.screw_lead_m;
-    let spring = design.spring_stiffness_n_per_m;
-    let housing = f64::from(p::THERMAL_HOUSING_TO_AMBIENT.default);
-    let mut tries: Vec<(&'static str, f64, f64)> = Vec::new();
-    for f in [0.6, 0.8, 1.25, 1.5, 1.75, 2.0, 2.5, 3.0] {
-        tries.push(("screw_lead_m", lead, lead * f));
-    }
-    for f in [0.5, 0.7, 1.4, 2.0] {
-        tries.push(("spring_stiffness_n_per_m", spring, spring * f));
-    }
-    for r in [2.0, 1.0, 0.5, 0.1] {
-        tries.push((p::THERMAL_HOUSING_TO_AMBIENT.name, housing, r));
-    }
-    tries.sort_by(|a, b| (a.2 / a.1).ln().abs().total_cmp(&(b.2 / b.1).ln().abs()));
     tries
         .par_iter()
-        .map(|&(name, design_value, value)| {
+        .map(|&(name, design_value, value, motor)| {
             let mut params = design;
             let mut set = heat_aware_settings();
-            match name {
-                "screw_lead_m" => params.screw_lead_m = value,
-                "spring_stiffness_n_per_m" => params.spring_stiffness_n_per_m = value,
+            match (name, motor) {
+                (_, Some(m)) => {
+                    params = m.on(&design);
+                    set.splice(0..0, m.firmware_settings());
+                }
+                ("screw_lead_m", None) => params.screw_lead_m = value,
+                ("spring_stiffness_n_per_m", None) => params.spring_stiffness_n_per_m = value,
                 _ => set.push((&p::THERMAL_HOUSING_TO_AMBIENT, value as f32)),
             }
             let mut endurance_s = [None; 2];
@@ -389,10 +396,195 @@ pub fn single_changes(duration_s: f64) -> Result<Vec<Change>, String> {
                 name,
                 design: design_value,
                 value,
+                motor: motor.map(|m| m.name),
                 endurance_s,
                 held,
                 enough: held.iter().all(|h| *h) && endurance_s.iter().all(Option::is_none),
             })
         })
         .collect()
+}
+
+/// The screw leads tried, as factors of the design's.
+const LEAD_FACTORS: [f64; 8] = [0.6, 0.8, 1.25, 1.5, 1.75, 2.0, 2.5, 3.0];
+/// The spring rates tried, as factors of the design's.
+const SPRING_FACTORS: [f64; 4] = [0.5, 0.7, 1.4, 2.0];
+
+/// Tries each single change of the design machine (screw lead, spring
+/// rate, the housing's thermal resistance to ambient, the catalogue
+/// motors) with the heat-aware `shaped`, thermal protection on, released
+/// at 5 and 15 cm for `duration_s` each; in order of how far each is from
+/// the design (the ratio's logarithm), in parallel.
+pub fn single_changes(duration_s: f64) -> Result<Vec<Change>, String> {
+    let design = Params::design();
+    let lead = design.screw_lead_m;
+    let spring = design.spring_stiffness_n_per_m;
+    let housing = f64::from(p::THERMAL_HOUSING_TO_AMBIENT.default);
+    let mut tries: Vec<Try> = Vec::new();
+    for f in LEAD_FACTORS {
+        tries.push(("screw_lead_m", lead, lead * f, None));
+    }
+    for f in SPRING_FACTORS {
+        tries.push(("spring_stiffness_n_per_m", spring, spring * f, None));
+    }
+    for r in [2.0, 1.0, 0.5, 0.1] {
+        tries.push((p::THERMAL_HOUSING_TO_AMBIENT.name, housing, r, None));
+    }
+    let own = motor_constant(&crate::motors::MOTORS[0].motor);
+    for m in &crate::motors::MOTORS[1..] {
+        tries.push(("motor", own, motor_constant(&m.motor), Some(m)));
+    }
+    tries.sort_by(|a, b| (a.2 / a.1).ln().abs().total_cmp(&(b.2 / b.1).ln().abs()));
+    run_changes(&tries, duration_s)
+}
+
+/// The design machine itself as a [`Change`] of nothing (the screw lead
+/// at its design value), for the plot of [`plot_changes`].
+pub fn unchanged(duration_s: f64) -> Result<Change, String> {
+    let lead = Params::design().screw_lead_m;
+    run_changes(&[("screw_lead_m", lead, lead, None)], duration_s)?
+        .pop()
+        .ok_or_else(|| "no run".to_string())
+}
+
+/// Draws endurance over the screw lead and over the spring rate, at 5 and
+/// 15 cm (would-hop-endurance.png and .svg in `dir`): the leads and
+/// spring rates among `changes` ([`single_changes`]) and `design`
+/// ([`unchanged`]) in both panels.
+pub fn plot_changes(
+    changes: &[Change],
+    design_run: &Change,
+    duration_s: f64,
+    dir: &Path,
+) -> Result<Vec<String>, String> {
+    crate::plot::ensure_font()?;
+    std::fs::create_dir_all(dir).map_err(|e| format!("cannot create {}: {e}", dir.display()))?;
+    let design = Params::design();
+    let top = duration_s * 1.12;
+    // (panel title, axis label, quantity, unit scale, design value)
+    let panels = [
+        (
+            "screw lead",
+            "screw lead [mm]",
+            "screw_lead_m",
+            1e3,
+            design.screw_lead_m,
+        ),
+        (
+            "spring rate",
+            "spring rate [kN/m]",
+            "spring_stiffness_n_per_m",
+            1e-3,
+            design.spring_stiffness_n_per_m,
+        ),
+    ];
+    let colours = [RGBColor(0, 80, 200), RGBColor(200, 40, 40)];
+    macro_rules! draw {
+        ($area:expr) => {{
+            let area = $area;
+            area.fill(&WHITE)?;
+            let (title, rest) = area.split_vertically(40);
+            title.draw_text(
+                &format!(
+                    "Time to the motor's derating, heat-aware shaped, design machine, one change at a time ({duration_s} s runs)"
+                ),
+                &("sans-serif", 18).into_text_style(&title),
+                (12, 12),
+            )?;
+            let halves = rest.split_evenly((1, 2));
+            for ((panel, xdesc, quantity, scale, design_value), half) in
+                panels.iter().zip(halves.iter())
+            {
+                let mut points: Vec<&Change> = changes
+                    .iter()
+                    .filter(|c| c.name == *quantity)
+                    .chain(std::iter::once(design_run))
+                    .collect();
+                let x_of = |c: &Change| {
+                    if c.name == *quantity {
+                        c.value * scale
+                    } else {
+                        design_value * scale
+                    }
+                };
+                points.sort_by(|a, b| x_of(a).total_cmp(&x_of(b)));
+                let xs: Vec<f64> = points.iter().map(|c| x_of(c)).collect();
+                let (lo, hi) = xs
+                    .iter()
+                    .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), x| (l.min(*x), h.max(*x)));
+                let pad = 0.05 * (hi - lo).max(1e-9);
+                let mut chart = ChartBuilder::on(half)
+                    .caption(*panel, ("sans-serif", 18))
+                    .margin(12)
+                    .x_label_area_size(40)
+                    .y_label_area_size(55)
+                    .build_cartesian_2d((lo - pad)..(hi + pad), 0.0..top)?;
+                chart
+                    .configure_mesh()
+                    .x_desc(*xdesc)
+                    .y_desc("time to the derating [s]")
+                    .draw()?;
+                let x_design = design_value * scale;
+                chart.draw_series(DashedLineSeries::new(
+                    [(x_design, 0.0), (x_design, top)],
+                    6,
+                    4,
+                    RGBColor(120, 120, 120).stroke_width(1),
+                ))?;
+                chart
+                    .draw_series(DashedLineSeries::new(
+                        [(lo - pad, duration_s), (hi + pad, duration_s)],
+                        8,
+                        5,
+                        BLACK.stroke_width(1),
+                    ))?
+                    .label(format!("{duration_s} s: no derating in the run (drawn at the run's length)"))
+                    .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK));
+                for (i, apex_m) in ENDURANCE_APEXES_M.iter().enumerate() {
+                    let colour = colours[i];
+                    let line: Vec<(f64, f64, bool)> = points
+                        .iter()
+                        .zip(&xs)
+                        .map(|(c, x)| (*x, c.endurance_s[i].unwrap_or(duration_s), c.held[i]))
+                        .collect();
+                    chart
+                        .draw_series(LineSeries::new(
+                            line.iter().filter(|p| p.2).map(|p| (p.0, p.1)),
+                            colour.stroke_width(2),
+                        ))?
+                        .label(format!("{:.0} cm hop", apex_m * 100.0))
+                        .legend(move |(x, y)| {
+                            PathElement::new(vec![(x, y), (x + 20, y)], colour.stroke_width(2))
+                        });
+                    chart.draw_series(line.iter().map(|&(x, y, held)| {
+                        if held {
+                            Circle::new((x, y), 4, colour.filled())
+                        } else {
+                            Circle::new((x, y), 4, colour.stroke_width(1))
+                        }
+                    }))?;
+                }
+                chart
+                    .draw_series(std::iter::empty::<Circle<(f64, f64), i32>>())?
+                    .label("hollow, off the line: apex not held; grey dashes: the design")
+                    .legend(|(x, y)| Circle::new((x + 10, y), 4, BLACK.stroke_width(1)));
+                chart
+                    .configure_series_labels()
+                    .position(SeriesLabelPosition::MiddleRight)
+                    .background_style(WHITE.mix(0.85))
+                    .border_style(BLACK)
+                    .draw()?;
+            }
+            area.present()?;
+            Ok(())
+        }};
+    }
+    crate::plot::png_and_svg(
+        dir,
+        "would-hop-endurance",
+        (1300, 560),
+        "the endurance design plot",
+        |a| draw!(a),
+        |a| draw!(a),
+    )
 }

@@ -21,6 +21,7 @@ pub mod heat_bound;
 pub mod hil;
 pub mod identify;
 pub mod inject;
+pub mod motors;
 pub mod out_dir;
 pub mod params_toml;
 pub mod planar_sim;

@@ -218,6 +218,9 @@ pub struct Overrides {
     pub plant: Option<PlantSet>,
     /// What the controller believes (default: the plant).
     pub model: Option<Params>,
+    /// A catalogue motor on the plant, its thermal data in the firmware
+    /// ([`crate::motors`]).
+    pub motor: Option<&'static crate::motors::CatalogueMotor>,
     /// Controller name, one of [`CONTROLLER_NAMES`].
     pub controller: Option<ControllerKind>,
     /// Apex target, m.
@@ -257,6 +260,7 @@ impl Overrides {
         Overrides {
             plant: over.plant.clone().or_else(|| self.plant.clone()),
             model: over.model.or(self.model),
+            motor: over.motor.or(self.motor),
             controller: over.controller.or(self.controller),
             target_apex_m: over.target_apex_m.or(self.target_apex_m),
             torque_nm: over.torque_nm.or(self.torque_nm),
@@ -291,6 +295,8 @@ pub struct Settings {
     pub preset: Option<&'static str>,
     /// What the controller believes (None: the plant).
     pub model: Option<Params>,
+    /// The catalogue motor on the plant (None: the plant's own).
+    pub motor: Option<&'static crate::motors::CatalogueMotor>,
     /// Controller name.
     pub controller: ControllerKind,
     /// Apex target, m.
@@ -328,11 +334,23 @@ impl Settings {
             name: DEFAULT_PARAMS.to_string(),
             preset: Params::preset_name(DEFAULT_PARAMS),
         });
+        // A motor replaces the plant's motor and sets the firmware's thermal
+        // data; flags' and files' own `params` settings come after it.
+        let (params, params_name, mut firmware_params) = match o.motor {
+            Some(m) => (
+                m.on(&plant.params),
+                format!("{}+{}", plant.name, m.name),
+                m.firmware_settings(),
+            ),
+            None => (plant.params, plant.name, Vec::new()),
+        };
+        firmware_params.extend(o.firmware_params.unwrap_or_default());
         Settings {
-            params: plant.params,
-            params_name: plant.name,
+            params,
+            params_name,
             preset: plant.preset,
             model: o.model,
+            motor: o.motor,
             controller: o.controller.unwrap_or(DEFAULT_CONTROLLER),
             target_apex_m: o.target_apex_m.unwrap_or(DEFAULT_TARGET_APEX_M),
             torque_nm: o.torque_nm,
@@ -346,7 +364,7 @@ impl Settings {
                 pot_sigma_m: o.pot_sigma_m.unwrap_or(d.pot_sigma_m),
                 ..d
             },
-            firmware_params: o.firmware_params.unwrap_or_default(),
+            firmware_params,
             start_apex_m: o.start_apex_m.unwrap_or(DEFAULT_START_APEX_M),
             duration_s: o.duration_s.unwrap_or(DEFAULT_DURATION_S),
             control_hz: o.control_hz.unwrap_or(DEFAULT_CONTROL_HZ),
@@ -650,6 +668,8 @@ struct FileToml {
     plant: Option<toml::Value>,
     /// The same, for what the controller believes.
     model: Option<toml::Value>,
+    /// A catalogue motor's name ([`crate::motors::MOTORS`]).
+    motor: Option<String>,
     start_apex_m: Option<f64>,
     duration_s: Option<f64>,
     control_hz: Option<f64>,
@@ -927,6 +947,9 @@ pub fn from_toml_str(text: &str, origin: &str) -> Result<Scenario, ScenarioError
         )?,
         ..Overrides::default()
     };
+    if let Some(name) = &file.motor {
+        s.motor = Some(crate::motors::named(name).map_err(|e| r.err("motor", e))?);
+    }
     if let Some(list) = &file.inject {
         s.inject = Some(
             list.iter()

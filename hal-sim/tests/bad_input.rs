@@ -274,3 +274,17 @@ fn a_bound_file_that_is_not_finite_numbers_or_a_run_too_short_to_judge() {
     );
     c.fails(&["endurance", "--duration", "2"], &["8 to 3600 s", "got 2"]);
 }
+
+#[test]
+fn an_unknown_motor() {
+    let c = Case::new();
+    c.fails(
+        &["run", "--motor", "maxon80"],
+        &["unknown motor `maxon80`", "re40", "pittman-14204"],
+    );
+    let s = c.file("s.toml", "duration_s = 1\nmotor = \"ec45\"\n");
+    c.fails(
+        &["run", "--scenario", &s],
+        &["s.toml:2", "unknown motor `ec45`"],
+    );
+}

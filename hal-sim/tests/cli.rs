@@ -505,3 +505,44 @@ fn set_changes_a_firmware_parameter_by_name() {
         );
     }
 }
+
+/// `--motor` changes the plant's motor and the firmware's thermal data
+/// together, and the summary says which.
+#[test]
+fn a_catalogue_motor_on_the_plant_and_in_the_firmware() {
+    let run = |motor: &[&str]| {
+        let mut args = vec![
+            "run",
+            "--controller",
+            "shaped",
+            "--start-apex",
+            "0.05",
+            "--duration",
+            "2",
+            "--json",
+        ];
+        args.extend_from_slice(motor);
+        json(&sim(&args))
+    };
+    let own = run(&[]);
+    let pittman = run(&["--motor", "pittman-14204"]);
+    assert_eq!(pittman["params"], "design+pittman-14204");
+    // Its no-load speed (24 V / 61.2 mN m/A) and its own winding
+    // resistance in the firmware's estimate (1.01 ohm at 25 C).
+    let nl = pittman["no_load_speed_rad_s"].as_f64().unwrap();
+    assert!((nl - 24.0 / 0.0612).abs() < 0.5, "{nl}");
+    // (the plant books the copper at the estimate's R(T)).
+    let r = |s: &serde_json::Value| {
+        s["ledger"]["copper_loss_j"].as_f64().unwrap()
+            / s["ledger"]["current_squared_a2s"].as_f64().unwrap()
+    };
+    assert!((1.01..1.2).contains(&r(&pittman)), "{}", r(&pittman));
+    assert!((0.299..0.36).contains(&r(&own)), "{}", r(&own));
+    assert_eq!(pittman["thermal"]["motor_data"], "configured");
+    // Its stall current, under the amplifier's 33.7 A.
+    let stall = pittman["thermal"]["amplifier_limit_a"].as_f64().unwrap();
+    assert!((stall - 24.0 / 1.01).abs() < 0.01, "{stall}");
+    // `--motor design` is the preset as it is.
+    let same = run(&["--motor", "design"]);
+    assert_eq!(same["apex_heights_m"], own["apex_heights_m"]);
+}

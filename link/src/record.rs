@@ -111,7 +111,7 @@ fn record_header() -> [&'static str; 12] {
     TELEMETRY_FIELDS.map(|f| f.name)
 }
 
-fn hop_row(h: &Hop) -> [String; 8] {
+fn hop_row(h: &Hop) -> [String; 10] {
     [
         h.hop.to_string(),
         format!("{:.5}", h.apex_height_m),
@@ -121,6 +121,8 @@ fn hop_row(h: &Hop) -> [String; 8] {
         format!("{:.5}", h.stance_duration_s),
         format!("{:.3}", h.peak_current_a),
         format!("{:.5}", h.peak_stroke_m),
+        format!("{:.4}", h.copper_loss_j),
+        format!("{:.4}", h.stance_copper_loss_j),
     ]
 }
 

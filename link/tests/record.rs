@@ -76,6 +76,8 @@ fn robot(records: u32, paced: bool, hold: bool) -> (String, std::thread::JoinHan
                         stance_duration_s: 0.2,
                         peak_current_a: 20.0,
                         peak_stroke_m: 0.02,
+                        copper_loss_j: 60.0,
+                        stance_copper_loss_j: 20.0,
                     }),
                 );
             }

@@ -28,7 +28,7 @@ pub struct Field {
 
 /// The hop ledger's fields (the firmware's `HopLedger`, the wire's `Hop`),
 /// the `/hop` channel's schema in every recording.
-pub const HOP_FIELDS: [Field; 8] = [
+pub const HOP_FIELDS: [Field; 10] = [
     field("hop", "integer", "hop number (1 = the first stance)"),
     field(
         "apex_height_m",
@@ -49,6 +49,16 @@ pub const HOP_FIELDS: [Field; 8] = [
     field("stance_duration_s", "number", "stance duration, s"),
     field("peak_current_a", "number", "peak commanded current, A"),
     field("peak_stroke_m", "number", "peak nut stroke, m"),
+    field(
+        "copper_loss_j",
+        "number",
+        "the motor's copper loss, touchdown to apex, J",
+    ),
+    field(
+        "stance_copper_loss_j",
+        "number",
+        "the part of the copper loss in stance, J",
+    ),
 ];
 
 /// A latched fault's fields, the `/fault` channel's schema (a simulation

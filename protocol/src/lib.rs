@@ -29,7 +29,7 @@ pub mod vocab;
 use serde::{Deserialize, Serialize};
 
 /// The protocol version: a host and a robot talk only when theirs agree.
-pub const PROTOCOL_VERSION: u16 = 2;
+pub const PROTOCOL_VERSION: u16 = 3;
 
 /// Largest encoded message, bytes (postcard, before the CRC and COBS).
 pub const MAX_MESSAGE: usize = 120;
@@ -654,6 +654,10 @@ pub struct Hop {
     pub peak_current_a: f32,
     /// Peak nut stroke, m.
     pub peak_stroke_m: f32,
+    /// The motor's copper loss over the hop, J.
+    pub copper_loss_j: f32,
+    /// Its part in stance, J.
+    pub stance_copper_loss_j: f32,
 }
 
 /// Why a message could not be framed.
@@ -991,6 +995,8 @@ mod tests {
             stance_duration_s: 0.1,
             peak_current_a: 30.0,
             peak_stroke_m: 0.01,
+            copper_loss_j: 60.0,
+            stance_copper_loss_j: 20.0,
         };
         let actuate = |hop| {
             RobotMsg::HilActuate(HilActuate {
@@ -1010,7 +1016,7 @@ mod tests {
         };
         assert_eq!(frame(&sample).len(), 28);
         assert_eq!(frame(&actuate(None)).len(), 38);
-        assert_eq!(frame(&actuate(Some(hop))).len(), 71);
+        assert_eq!(frame(&actuate(Some(hop))).len(), 79);
         for m in [actuate(None), actuate(Some(hop))] {
             let mut d = Decoder::new();
             let got: Vec<RobotMsg> = decode_all(&mut d, &frame(&m));

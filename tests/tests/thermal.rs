@@ -190,6 +190,21 @@ fn copper_loss_is_booked_hop_by_hop_and_split_between_stance_and_flight() {
             "{h:?}"
         );
     }
+    // The firmware books each hop's copper too (commanded current, its own
+    // apex), and agrees with the plant's books hop by hop.
+    let fw = &s.firmware_hops;
+    assert_eq!(fw.len(), hops.len());
+    for (f, h) in fw.iter().zip(hops) {
+        let ratio = f64::from(f.copper_loss_j) / h.copper_loss_j;
+        assert!((0.97..1.03).contains(&ratio), "{f:?} {h:?}");
+        let ratio = f64::from(f.stance_copper_loss_j) / h.stance_copper_loss_j;
+        assert!((0.97..1.03).contains(&ratio), "{f:?} {h:?}");
+    }
+    let fw_total: f64 = fw.iter().map(|f| f64::from(f.copper_loss_j)).sum();
+    assert!(
+        (fw_total / booked - 1.0).abs() < 0.01,
+        "{fw_total} {booked}"
+    );
     // A steady hop: 34 times the motor's net work (1.84 J) leaves as heat, more of
     // it in flight (returning the nut) than in stance.
     let h = s.steady_hop.unwrap();

@@ -91,8 +91,10 @@ const TARGET: &str = "thumbv7em-none-eabihf";
 /// "z"` for them saves only 1.6 KB, since under fat LTO their generic code
 /// is the application's. How the image grew: docs/history.md.
 const FLASH_BUDGET_BYTES: u64 = 128 * 1024;
-/// Static RAM budget (data + bss) without the telemetry capture buffer, bytes.
-const RAM_BUDGET_BYTES: u64 = 16 * 1024;
+/// Static RAM budget (data + bss) without the telemetry capture buffer,
+/// bytes: the link's queues, three controller slots, the parameter bank
+/// and the flash store's buffers (docs/history.md: how it grew).
+const RAM_BUDGET_BYTES: u64 = 17 * 1024;
 
 fn main() -> ExitCode {
     let args: Vec<String> = std::env::args().skip(1).collect();

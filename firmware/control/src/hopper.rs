@@ -495,6 +495,7 @@ impl Hopper {
             cal.torque_nm(command.current_a),
             v.motor_rad_s,
             m.nut_position_m,
+            self.supervisor.thermal().winding_resistance_ohm(),
         );
         let faults = self.supervisor.faults();
         StepOutput {

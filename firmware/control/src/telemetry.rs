@@ -205,6 +205,15 @@ pub struct HopLedger {
     pub peak_current_a: f32,
     /// Largest nut displacement over the hop, m.
     pub peak_stroke_m: f32,
+    /// The motor's copper loss over the hop, from the previous apex (or the
+    /// first period after a start) to this apex, as the simulator's
+    /// per-hop ledger counts it: `int i_cmd^2 R(T) dt` with the thermal
+    /// estimate's winding resistance, J: the heat the motor must shed
+    /// (docs/endurance.md).
+    pub copper_loss_j: f32,
+    /// The part of [`Self::copper_loss_j`] spent in stance, J (the rest is
+    /// the flight's, mostly returning the nut).
+    pub stance_copper_loss_j: f32,
 }
 
 /// Builds [`HopLedger`]s from the estimator's events and per-step data.
@@ -214,6 +223,8 @@ pub struct HopLedgerBuilder {
     in_stance: bool,
     started: bool,
     hops: u32,
+    /// Copper loss since the last apex, before the next touchdown, J.
+    falling_copper_j: f32,
 }
 
 impl HopLedgerBuilder {
@@ -229,10 +240,13 @@ impl HopLedgerBuilder {
                 stance_duration_s: 0.0,
                 peak_current_a: 0.0,
                 peak_stroke_m: 0.0,
+                copper_loss_j: 0.0,
+                stance_copper_loss_j: 0.0,
             },
             in_stance: false,
             started: false,
             hops: 0,
+            falling_copper_j: 0.0,
         }
     }
 
@@ -242,8 +256,10 @@ impl HopLedgerBuilder {
         self.cur = HopLedger {
             hop: self.hops,
             energy_at_touchdown_j: energy_j,
+            copper_loss_j: self.falling_copper_j,
             ..HopLedger::default()
         };
+        self.falling_copper_j = 0.0;
         self.in_stance = true;
         self.started = true;
     }
@@ -257,7 +273,8 @@ impl HopLedgerBuilder {
     }
 
     /// Per-step data: time step (s), current command (A), motor torque (N m)
-    /// and speed (rad/s), nut displacement (m). Non-finite values are ignored.
+    /// and speed (rad/s), nut displacement (m), the winding's resistance
+    /// (ohm). Non-finite values are ignored.
     pub fn step(
         &mut self,
         dt_s: f32,
@@ -265,8 +282,12 @@ impl HopLedgerBuilder {
         torque_nm: f32,
         motor_speed_rad_s: f32,
         nut_m: f32,
+        winding_resistance_ohm: f32,
     ) {
+        let heat_j = command_a * command_a * winding_resistance_ohm * dt_s;
+        let heat_j = if heat_j.is_finite() { heat_j } else { 0.0 };
         if !self.started {
+            self.falling_copper_j += heat_j;
             return;
         }
         // A NaN never replaces the peak (`x > peak` is false for it).
@@ -277,7 +298,9 @@ impl HopLedgerBuilder {
         if nut_m > self.cur.peak_stroke_m && nut_m.is_finite() {
             self.cur.peak_stroke_m = nut_m;
         }
+        self.cur.copper_loss_j += heat_j;
         if self.in_stance {
+            self.cur.stance_copper_loss_j += heat_j;
             let power_w = torque_nm * motor_speed_rad_s;
             if power_w.is_finite() && dt_s.is_finite() {
                 self.cur.stance_work_j += power_w * dt_s;
@@ -400,12 +423,16 @@ mod tests {
     fn hop_ledger_accumulates_stance_work() {
         let mut b = HopLedgerBuilder::new();
         assert_eq!(b.apex(0.1), None);
+        // Falling before the touchdown: 1 ms of 10 A on 0.3 ohm.
+        for _ in 0..10 {
+            b.step(1e-4, 10.0, 0.0, 0.0, 0.0, 0.3);
+        }
         b.touchdown(70.0);
         for _ in 0..1000 {
-            b.step(1e-4, 20.0, 0.5, 100.0, 0.02);
+            b.step(1e-4, 20.0, 0.5, 100.0, 0.02, 0.3);
         }
         b.liftoff(72.0);
-        b.step(1e-4, -5.0, -0.1, -50.0, 0.01);
+        b.step(1e-4, -5.0, -0.1, -50.0, 0.01, 0.3);
         let h = b.apex(0.12).unwrap_or_default();
         assert_eq!(h.hop, 1);
         assert!((h.stance_work_j - 5.0).abs() < 1e-3, "{}", h.stance_work_j);
@@ -413,6 +440,11 @@ mod tests {
         assert_eq!(h.peak_current_a, 20.0);
         assert_eq!(h.peak_stroke_m, 0.02);
         assert_eq!(h.energy_at_liftoff_j, 72.0);
+        // 0.1 s of 20 A on 0.3 ohm in stance; in flight 1 ms of 10 A
+        // falling and 0.1 ms of 5 A rising.
+        assert!((h.stance_copper_loss_j - 12.0).abs() < 1e-3);
+        let flight_j = 0.03 + 7.5e-4;
+        assert!((h.copper_loss_j - h.stance_copper_loss_j - flight_j).abs() < 1e-5);
         assert_eq!(b.apex(0.1), None);
     }
 }

@@ -196,6 +196,11 @@ impl MotorThermal {
         &self.config
     }
 
+    /// The winding's resistance at the estimated temperature, ohm.
+    pub fn winding_resistance_ohm(&self) -> f32 {
+        self.config.resistance_at_ohm(self.winding_c())
+    }
+
     /// Winding temperature, C.
     pub const fn winding_c(&self) -> f32 {
         self.winding_c

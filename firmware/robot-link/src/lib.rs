@@ -1210,6 +1210,8 @@ pub fn wire_hop(h: &hopper_control::telemetry::HopLedger) -> Hop {
         stance_duration_s: h.stance_duration_s,
         peak_current_a: h.peak_current_a,
         peak_stroke_m: h.peak_stroke_m,
+        copper_loss_j: h.copper_loss_j,
+        stance_copper_loss_j: h.stance_copper_loss_j,
     }
 }
 
@@ -1224,6 +1226,8 @@ pub fn ledger_from_wire(h: &Hop) -> hopper_control::telemetry::HopLedger {
         stance_duration_s: h.stance_duration_s,
         peak_current_a: h.peak_current_a,
         peak_stroke_m: h.peak_stroke_m,
+        copper_loss_j: h.copper_loss_j,
+        stance_copper_loss_j: h.stance_copper_loss_j,
     }
 }
 

@@ -31,6 +31,14 @@ pub(crate) struct BaseArgs {
     /// `spring_stiffness_n_per_m = 13200`.
     #[arg(long, value_name = "PRESET|PATH.toml")]
     model_params: Option<String>,
+    /// A catalogue motor on the plant, its electrical and thermal data
+    /// together: design (the preset's; thermal data the stand-in's, the
+    /// RE 40's), re40 (maxon RE 40, 24 V), pittman-14204 (Pittman
+    /// 14204S006; docs/endurance.md says which figures are the sheet's).
+    /// The amplifier's current limit stays; the firmware believes the new
+    /// motor unless --model-params says otherwise.
+    #[arg(long, value_parser = parse_motor, value_name = "NAME")]
+    motor: Option<&'static hal_sim::motors::CatalogueMotor>,
     /// Controller: passive, step-open, step-closed, open-torque, energy,
     /// energy-apex (apex-regulating energy law), velocity, modified-torque,
     /// shaped (docs/beat-the-thesis.md).
@@ -89,6 +97,13 @@ pub(crate) struct BaseArgs {
     set: Vec<String>,
 }
 
+/// `--motor NAME`: a catalogue motor.
+fn parse_motor(
+    name: &str,
+) -> std::result::Result<&'static hal_sim::motors::CatalogueMotor, String> {
+    hal_sim::motors::named(name)
+}
+
 /// `--controller NAME`: one of the firmware's controllers, by name.
 fn parse_controller(name: &str) -> std::result::Result<ControllerKind, String> {
     ControllerKind::from_name(name).ok_or_else(|| {
@@ -118,6 +133,7 @@ impl BaseArgs {
                 ),
                 None => None,
             },
+            motor: self.motor,
             controller: self.controller,
             target_apex_m: self.target_apex,
             torque_nm: self.torque,

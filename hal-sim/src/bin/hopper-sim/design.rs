@@ -32,14 +32,16 @@ pub(crate) enum DesignCmd {
     /// machine hold a 5 cm hop under shaped and under open-loop torque, and
     /// with --out the feasibility map over friction and torque limit.
     WouldHop {
-        /// Directory for feasibility.png and feasibility.svg.
+        /// Directory for feasibility.png and feasibility.svg (with
+        /// --endurance: would-hop-endurance.png and .svg, endurance over the
+        /// screw lead and over the spring rate).
         #[arg(long)]
         out: Option<PathBuf>,
         /// Instead: the smallest single change of the design machine (lead,
-        /// spring rate, the housing's thermal resistance) with which the
-        /// heat-aware shaped hops 5 cm and 15 cm this long, s, without the
-        /// motor derating (docs/endurance.md).
-        #[arg(long, conflicts_with = "out")]
+        /// spring rate, the housing's thermal resistance, a catalogue motor)
+        /// with which the heat-aware shaped hops 5 cm and 15 cm this long,
+        /// s, without the motor derating (docs/endurance.md).
+        #[arg(long)]
         endurance: Option<f64>,
         /// Print JSON instead of text.
         #[arg(long)]
@@ -113,16 +115,31 @@ pub(crate) fn cmd_design(cmd: &DesignCmd) -> Result<()> {
         DesignCmd::WouldHop {
             endurance: Some(duration_s),
             json,
-            ..
+            out,
         } => {
-            use hal_sim::endurance::{single_changes, ENDURANCE_APEXES_M};
+            use hal_sim::endurance::{plot_changes, single_changes, unchanged, ENDURANCE_APEXES_M};
             let bar = indicatif::ProgressBar::new_spinner()
                 .with_finish(indicatif::ProgressFinish::AndClear);
             bar.set_message(format!(
-                "32 runs of {duration_s} s (16 single changes, 5 and 15 cm)"
+                "36 runs of {duration_s} s (18 single changes, 5 and 15 cm){}",
+                if out.is_some() {
+                    ", and the design's 2 for the plot"
+                } else {
+                    ""
+                }
             ));
             bar.enable_steady_tick(std::time::Duration::from_millis(200));
             let changes = single_changes(*duration_s).map_err(anyhow::Error::msg)?;
+            let written = match out {
+                Some(dir) => {
+                    let design_run = unchanged(*duration_s).map_err(anyhow::Error::msg)?;
+                    hal_sim::out_dir::write_whole(dir, |staging| {
+                        plot_changes(&changes, &design_run, *duration_s, staging)
+                    })
+                    .map_err(anyhow::Error::msg)?
+                }
+                None => Vec::new(),
+            };
             bar.finish_and_clear();
             if *json {
                 say!("{}", serde_json::to_string_pretty(&changes)?);
@@ -145,9 +162,13 @@ pub(crate) fn cmd_design(cmd: &DesignCmd) -> Result<()> {
                         format!("{e}, apex not held")
                     }
                 };
+                let what = match c.motor {
+                    Some(m) => format!("motor {m} [k_t/sqrt(R)]"),
+                    None => c.name.to_string(),
+                };
                 say!(
                     "  {:<36} {:>9.4} -> {:>9.4}: 5 cm {}; 15 cm {}{}",
-                    c.name,
+                    what,
                     c.design,
                     c.value,
                     at(0),
@@ -165,6 +186,9 @@ pub(crate) fn cmd_design(cmd: &DesignCmd) -> Result<()> {
                 None => say!(
                     "no single change tried hops both for {duration_s} s (docs/endurance.md: the bound says why)"
                 ),
+            }
+            for f in &written {
+                say!("  wrote {}", f.display());
             }
         }
         DesignCmd::WouldHop { out, json, .. } => {

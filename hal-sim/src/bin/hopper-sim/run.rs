@@ -172,6 +172,14 @@ pub(crate) fn cmd_run(a: RunArgs) -> Result<()> {
         s.start_apex_m,
         s.duration_s
     );
+    if let Some(m) = settings.motor {
+        say!(
+            "  motor              {}: {}; {:.1} A continuous under the firmware's thermal model",
+            m.name,
+            m.source,
+            m.continuous_a()
+        );
+    }
     let n = s.apex_heights_m.len();
     let shown: Vec<String> = if n <= 14 {
         s.apex_heights_m.iter().map(|h| format!("{h:.4}")).collect()

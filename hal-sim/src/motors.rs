@@ -1,0 +1,179 @@
+//! The motors a run can take by name (`--motor NAME`, a scenario's
+//! `motor = "NAME"`): each one's electrical data for the plant and thermal
+//! data for the firmware's winding estimate together, with where each
+//! figure comes from (docs/endurance.md, "Other motors").
+//!
+//! The thesis names its motors (Table 3.1) but gives no thermal data for
+//! any; of its four, catalogue sheets were found for two (docs/design.md).
+//! Where a sheet lacks a figure the two-body model needs, the stand-in's
+//! (the maxon RE 40's) is taken and the motor's `source` says so.
+
+use crate::design::{Motor, CATALOGUE, DESIGN_MOTOR};
+use crate::params::Params;
+use hopper_control::params as p;
+use serde::Serialize;
+
+/// A motor's thermal data, the two-body model of `hopper_control::thermal`.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct Heat {
+    /// Winding resistance at 25 C the estimate heats with, ohm.
+    pub winding_resistance_ohm: f64,
+    /// Winding to housing, K/W.
+    pub winding_to_housing_k_per_w: f64,
+    /// Housing to ambient, K/W.
+    pub housing_to_ambient_k_per_w: f64,
+    /// Winding time constant, s.
+    pub winding_time_constant_s: f64,
+    /// Housing time constant, s.
+    pub housing_time_constant_s: f64,
+    /// The most the winding may reach, C (the firmware trips 5 K below).
+    pub max_winding_c: f64,
+}
+
+/// The stand-in's thermal data: the maxon RE 40 (the firmware's `thermal.*`
+/// defaults).
+const RE40_HEAT: Heat = Heat {
+    winding_resistance_ohm: 0.299,
+    winding_to_housing_k_per_w: 1.93,
+    housing_to_ambient_k_per_w: 4.65,
+    winding_time_constant_s: 41.6,
+    housing_time_constant_s: 1120.0,
+    max_winding_c: 155.0,
+};
+
+/// The Pittman 14204's one thermal impedance (winding to ambient, 7.70 C/W,
+/// the 14204 frame's sheet), split as the RE 40's 1.93 : 4.65.
+const PITTMAN_TOTAL_K_PER_W: f64 = 7.70;
+
+/// A motor a run can take by name.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct CatalogueMotor {
+    /// Its name on the command line.
+    pub name: &'static str,
+    /// Electrical and mechanical data (the rotor plus the transmission).
+    pub motor: Motor,
+    /// Thermal data.
+    pub heat: Heat,
+    /// Where the figures come from, the stand-in's named as such.
+    pub source: &'static str,
+}
+
+/// Every motor `--motor` takes; the first is the design preset's.
+pub const MOTORS: [CatalogueMotor; 3] = [
+    CatalogueMotor {
+        name: "design",
+        motor: DESIGN_MOTOR,
+        heat: RE40_HEAT,
+        source: "the design preset's motor (Table 2.1, 2.0 N m stall at 24 V); thermal data the stand-in's, the maxon RE 40's (the thesis gives none)",
+    },
+    CatalogueMotor {
+        name: "re40",
+        motor: CATALOGUE[0],
+        heat: RE40_HEAT,
+        source: "maxon RE 40 (148867, 24 V), its catalogue sheet, electrical and thermal",
+    },
+    CatalogueMotor {
+        name: "pittman-14204",
+        motor: CATALOGUE[1],
+        heat: Heat {
+            winding_resistance_ohm: 1.01,
+            winding_to_housing_k_per_w: PITTMAN_TOTAL_K_PER_W * 1.93 / (1.93 + 4.65),
+            housing_to_ambient_k_per_w: PITTMAN_TOTAL_K_PER_W * 4.65 / (1.93 + 4.65),
+            winding_time_constant_s: 41.6,
+            housing_time_constant_s: 1120.0,
+            max_winding_c: 155.0,
+        },
+        source: "Pittman 14204S006 (24 V), its sheet (electrical) and the 14204 frame's thermal impedance, 7.70 C/W, and 155 C; the split of that impedance and both time constants are the stand-in's (RE 40's): the sheet gives neither",
+    },
+];
+
+/// The motor called `name`, or an error naming the choices.
+pub fn named(name: &str) -> Result<&'static CatalogueMotor, String> {
+    MOTORS.iter().find(|m| m.name == name).ok_or_else(|| {
+        format!(
+            "unknown motor `{name}`: expected one of {:?}",
+            MOTORS.iter().map(|m| m.name).collect::<Vec<_>>()
+        )
+    })
+}
+
+impl CatalogueMotor {
+    /// `params` with this motor: its torque constant, resistance, rotor
+    /// (plus the transmission) and supply; the amplifier's current limit is
+    /// the amplifier's and stays.
+    pub fn on(&self, params: &Params) -> Params {
+        Params {
+            torque_constant_nm_per_a: self.motor.torque_constant_nm_per_a,
+            winding_resistance_ohm: self.motor.resistance_ohm,
+            rotor_inertia_kg_m2: self.motor.rotor_inertia_kg_m2,
+            supply_voltage_v: self.motor.supply_v,
+            ..*params
+        }
+    }
+
+    /// The firmware's `thermal.*` parameters for this motor.
+    pub fn firmware_settings(&self) -> Vec<(&'static p::Param, f32)> {
+        let h = &self.heat;
+        vec![
+            (&p::THERMAL_RESISTANCE_OHM, h.winding_resistance_ohm as f32),
+            (
+                &p::THERMAL_WINDING_TO_HOUSING,
+                h.winding_to_housing_k_per_w as f32,
+            ),
+            (
+                &p::THERMAL_HOUSING_TO_AMBIENT,
+                h.housing_to_ambient_k_per_w as f32,
+            ),
+            (&p::THERMAL_WINDING_TAU, h.winding_time_constant_s as f32),
+            (&p::THERMAL_HOUSING_TAU, h.housing_time_constant_s as f32),
+            (&p::THERMAL_TRIP, (h.max_winding_c - 5.0) as f32),
+        ]
+    }
+
+    /// The RMS current that settles the winding at the trip temperature,
+    /// A (the motor's continuous rating under the firmware's model).
+    pub fn continuous_a(&self) -> f64 {
+        let h = &self.heat;
+        let trip_c = h.max_winding_c - 5.0;
+        let r = h.winding_resistance_ohm * (1.0 + 0.0039 * (trip_c - 25.0));
+        ((trip_c - 25.0) / (r * (h.winding_to_housing_k_per_w + h.housing_to_ambient_k_per_w)))
+            .sqrt()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_design_motor_is_the_design_preset_and_the_firmware_defaults() {
+        let d = Params::design();
+        assert_eq!(MOTORS[0].on(&d), d);
+        for (param, value) in MOTORS[0].firmware_settings() {
+            assert_eq!(value, param.default, "{}", param.name);
+        }
+        // The stand-in's continuous rating: 6.5 A at 150 C (thermal.rs).
+        assert!((MOTORS[0].continuous_a() - 6.5).abs() < 0.05);
+    }
+
+    #[test]
+    fn every_motor_is_a_valid_plant_and_firmware_configuration() {
+        for m in &MOTORS {
+            let params = m.on(&Params::design());
+            params
+                .validate()
+                .unwrap_or_else(|e| panic!("{}: {e}", m.name));
+            for (param, value) in m.firmware_settings() {
+                assert!(
+                    (param.min..=param.max).contains(&value),
+                    "{} {}",
+                    m.name,
+                    param.name
+                );
+            }
+        }
+        assert!(named("re40").is_ok());
+        let e = named("maxon").unwrap_err();
+        assert!(e.contains("pittman-14204"), "{e}");
+    }
+}
