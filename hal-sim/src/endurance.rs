@@ -351,14 +351,33 @@ pub struct Change {
 /// 15 cm hop.
 pub const ENDURANCE_APEXES_M: [f64; 2] = [0.05, 0.15];
 
-/// A change to try: the quantity, its design value, the value tried, and
-/// the motor where a motor is tried.
-type Try = (
-    &'static str,
-    f64,
-    f64,
-    Option<&'static crate::motors::CatalogueMotor>,
-);
+/// What a single change changes.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Knob {
+    /// The screw lead, m.
+    Lead,
+    /// The spring rate, N/m.
+    Spring,
+    /// The housing's thermal resistance to ambient, K/W.
+    Housing,
+    /// The motor, by its motor constant.
+    Motor(&'static crate::motors::CatalogueMotor),
+}
+
+impl Knob {
+    /// [`Change::name`].
+    fn name(self) -> &'static str {
+        match self {
+            Knob::Lead => "screw_lead_m",
+            Knob::Spring => "spring_stiffness_n_per_m",
+            Knob::Housing => p::THERMAL_HOUSING_TO_AMBIENT.name,
+            Knob::Motor(_) => "motor",
+        }
+    }
+}
+
+/// A change to try: the knob, its design value, the value tried.
+type Try = (Knob, f64, f64);
 
 /// A motor's motor constant `k_t / sqrt(R)`, N m/sqrt(W): torque for the
 /// square root of the copper loss.
@@ -374,17 +393,17 @@ fn run_changes(tries: &[Try], duration_s: f64) -> Result<Vec<Change>, String> {
     let design = Params::design();
     tries
         .par_iter()
-        .map(|&(name, design_value, value, motor)| {
+        .map(|&(knob, design_value, value)| {
             let mut params = design;
             let mut set = heat_aware_settings();
-            match (name, motor) {
-                (_, Some(m)) => {
+            match knob {
+                Knob::Motor(m) => {
                     params = m.on(&design);
                     set.splice(0..0, m.firmware_settings());
                 }
-                ("screw_lead_m", None) => params.screw_lead_m = value,
-                ("spring_stiffness_n_per_m", None) => params.spring_stiffness_n_per_m = value,
-                _ => set.push((&p::THERMAL_HOUSING_TO_AMBIENT, value as f32)),
+                Knob::Lead => params.screw_lead_m = value,
+                Knob::Spring => params.spring_stiffness_n_per_m = value,
+                Knob::Housing => set.push((&p::THERMAL_HOUSING_TO_AMBIENT, value as f32)),
             }
             let mut endurance_s = [None; 2];
             let mut held = [false; 2];
@@ -393,10 +412,13 @@ fn run_changes(tries: &[Try], duration_s: f64) -> Result<Vec<Change>, String> {
                 (endurance_s[i], held[i]) = (c.endurance_s, c.held);
             }
             Ok(Change {
-                name,
+                name: knob.name(),
                 design: design_value,
                 value,
-                motor: motor.map(|m| m.name),
+                motor: match knob {
+                    Knob::Motor(m) => Some(m.name),
+                    _ => None,
+                },
                 endurance_s,
                 held,
                 enough: held.iter().all(|h| *h) && endurance_s.iter().all(Option::is_none),
@@ -409,6 +431,13 @@ fn run_changes(tries: &[Try], duration_s: f64) -> Result<Vec<Change>, String> {
 const LEAD_FACTORS: [f64; 8] = [0.6, 0.8, 1.25, 1.5, 1.75, 2.0, 2.5, 3.0];
 /// The spring rates tried, as factors of the design's.
 const SPRING_FACTORS: [f64; 4] = [0.5, 0.7, 1.4, 2.0];
+/// The housing's thermal resistances to ambient tried, K/W.
+const HOUSING_K_PER_W: [f64; 4] = [2.0, 1.0, 0.5, 0.1];
+
+/// How many changes [`single_changes`] tries (each at both apexes).
+pub const SINGLE_CHANGES: usize =
+    LEAD_FACTORS.len() + SPRING_FACTORS.len() + HOUSING_K_PER_W.len() + crate::motors::MOTORS.len()
+        - 1;
 
 /// Tries each single change of the design machine (screw lead, spring
 /// rate, the housing's thermal resistance to ambient, the catalogue
@@ -422,17 +451,17 @@ pub fn single_changes(duration_s: f64) -> Result<Vec<Change>, String> {
     let housing = f64::from(p::THERMAL_HOUSING_TO_AMBIENT.default);
     let mut tries: Vec<Try> = Vec::new();
     for f in LEAD_FACTORS {
-        tries.push(("screw_lead_m", lead, lead * f, None));
+        tries.push((Knob::Lead, lead, lead * f));
     }
     for f in SPRING_FACTORS {
-        tries.push(("spring_stiffness_n_per_m", spring, spring * f, None));
+        tries.push((Knob::Spring, spring, spring * f));
     }
-    for r in [2.0, 1.0, 0.5, 0.1] {
-        tries.push((p::THERMAL_HOUSING_TO_AMBIENT.name, housing, r, None));
+    for r in HOUSING_K_PER_W {
+        tries.push((Knob::Housing, housing, r));
     }
     let own = motor_constant(&crate::motors::MOTORS[0].motor);
     for m in &crate::motors::MOTORS[1..] {
-        tries.push(("motor", own, motor_constant(&m.motor), Some(m)));
+        tries.push((Knob::Motor(m), own, motor_constant(&m.motor)));
     }
     tries.sort_by(|a, b| (a.2 / a.1).ln().abs().total_cmp(&(b.2 / b.1).ln().abs()));
     run_changes(&tries, duration_s)
@@ -442,7 +471,7 @@ pub fn single_changes(duration_s: f64) -> Result<Vec<Change>, String> {
 /// at its design value), for the plot of [`plot_changes`].
 pub fn unchanged(duration_s: f64) -> Result<Change, String> {
     let lead = Params::design().screw_lead_m;
-    run_changes(&[("screw_lead_m", lead, lead, None)], duration_s)?
+    run_changes(&[(Knob::Lead, lead, lead)], duration_s)?
         .pop()
         .ok_or_else(|| "no run".to_string())
 }
@@ -587,4 +616,43 @@ pub fn plot_changes(
         |a| draw!(a),
         |a| draw!(a),
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_motor_change_runs_on_that_motor_and_the_plot_draws_the_runs() {
+        let pittman = &crate::motors::MOTORS[2];
+        let own = motor_constant(&crate::motors::MOTORS[0].motor);
+        let lead = Params::design().screw_lead_m;
+        let runs = run_changes(
+            &[
+                (Knob::Motor(pittman), own, motor_constant(&pittman.motor)),
+                (Knob::Lead, lead, 1.5 * lead),
+            ],
+            MIN_DURATION_S,
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(runs[0].name, "motor");
+        assert_eq!(runs[0].motor, Some("pittman-14204"));
+        assert!(runs[0].value > runs[0].design);
+        // Both hold both apexes for 8 s, too short to derate.
+        for c in &runs {
+            assert_eq!(c.held, [true, true], "{c:?}");
+            assert_eq!(c.endurance_s, [None, None], "{c:?}");
+            assert!(c.enough, "{c:?}");
+        }
+        let design = unchanged(MIN_DURATION_S).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(design.value, design.design);
+        let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
+        let files = plot_changes(&runs, &design, MIN_DURATION_S, dir.path())
+            .unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(files.len(), 2);
+        let svg = std::fs::read_to_string(dir.path().join("would-hop-endurance.svg"))
+            .unwrap_or_else(|e| panic!("{e}"));
+        assert!(svg.contains("screw lead") && svg.contains("spring rate"));
+        assert_eq!(SINGLE_CHANGES, 18);
+    }
 }

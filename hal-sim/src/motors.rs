@@ -26,24 +26,33 @@ pub struct Heat {
     pub winding_time_constant_s: f64,
     /// Housing time constant, s.
     pub housing_time_constant_s: f64,
-    /// The most the winding may reach, C (the firmware trips 5 K below).
+    /// The most the winding may reach, C (the firmware trips
+    /// [`TRIP_BELOW_MAX_K`] below).
     pub max_winding_c: f64,
 }
 
-/// The stand-in's thermal data: the maxon RE 40 (the firmware's `thermal.*`
-/// defaults).
+/// How far below a motor's largest winding temperature the firmware trips,
+/// K (the stand-in's 155 C against the 150 C default).
+pub const TRIP_BELOW_MAX_K: f64 = 5.0;
+
+/// The stand-in's thermal data: the maxon RE 40, as the firmware's
+/// `thermal.*` defaults hold it.
 const RE40_HEAT: Heat = Heat {
-    winding_resistance_ohm: 0.299,
-    winding_to_housing_k_per_w: 1.93,
-    housing_to_ambient_k_per_w: 4.65,
-    winding_time_constant_s: 41.6,
-    housing_time_constant_s: 1120.0,
-    max_winding_c: 155.0,
+    winding_resistance_ohm: p::THERMAL_RESISTANCE_OHM.default as f64,
+    winding_to_housing_k_per_w: p::THERMAL_WINDING_TO_HOUSING.default as f64,
+    housing_to_ambient_k_per_w: p::THERMAL_HOUSING_TO_AMBIENT.default as f64,
+    winding_time_constant_s: p::THERMAL_WINDING_TAU.default as f64,
+    housing_time_constant_s: p::THERMAL_HOUSING_TAU.default as f64,
+    max_winding_c: p::THERMAL_TRIP.default as f64 + TRIP_BELOW_MAX_K,
 };
 
 /// The Pittman 14204's one thermal impedance (winding to ambient, 7.70 C/W,
-/// the 14204 frame's sheet), split as the RE 40's 1.93 : 4.65.
+/// the 14204 frame's sheet), split as the RE 40's winding-to-housing and
+/// housing-to-ambient resistances.
 const PITTMAN_TOTAL_K_PER_W: f64 = 7.70;
+/// The RE 40's share of its thermal resistance that is winding to housing.
+const RE40_WINDING_SHARE: f64 = RE40_HEAT.winding_to_housing_k_per_w
+    / (RE40_HEAT.winding_to_housing_k_per_w + RE40_HEAT.housing_to_ambient_k_per_w);
 
 /// A motor a run can take by name.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
@@ -77,10 +86,10 @@ pub const MOTORS: [CatalogueMotor; 3] = [
         motor: CATALOGUE[1],
         heat: Heat {
             winding_resistance_ohm: 1.01,
-            winding_to_housing_k_per_w: PITTMAN_TOTAL_K_PER_W * 1.93 / (1.93 + 4.65),
-            housing_to_ambient_k_per_w: PITTMAN_TOTAL_K_PER_W * 4.65 / (1.93 + 4.65),
-            winding_time_constant_s: 41.6,
-            housing_time_constant_s: 1120.0,
+            winding_to_housing_k_per_w: PITTMAN_TOTAL_K_PER_W * RE40_WINDING_SHARE,
+            housing_to_ambient_k_per_w: PITTMAN_TOTAL_K_PER_W * (1.0 - RE40_WINDING_SHARE),
+            winding_time_constant_s: RE40_HEAT.winding_time_constant_s,
+            housing_time_constant_s: RE40_HEAT.housing_time_constant_s,
             max_winding_c: 155.0,
         },
         source: "Pittman 14204S006 (24 V), its sheet (electrical) and the 14204 frame's thermal impedance, 7.70 C/W, and 155 C; the split of that impedance and both time constants are the stand-in's (RE 40's): the sheet gives neither",
@@ -126,18 +135,26 @@ impl CatalogueMotor {
             ),
             (&p::THERMAL_WINDING_TAU, h.winding_time_constant_s as f32),
             (&p::THERMAL_HOUSING_TAU, h.housing_time_constant_s as f32),
-            (&p::THERMAL_TRIP, (h.max_winding_c - 5.0) as f32),
+            (
+                &p::THERMAL_TRIP,
+                (h.max_winding_c - TRIP_BELOW_MAX_K) as f32,
+            ),
         ]
     }
 
-    /// The RMS current that settles the winding at the trip temperature,
-    /// A (the motor's continuous rating under the firmware's model).
-    pub fn continuous_a(&self) -> f64 {
+    /// The firmware's thermal configuration with this motor's data (the
+    /// other `thermal.*` parameters at their defaults).
+    pub fn thermal_config(&self) -> hopper_control::thermal::ThermalConfig {
         let h = &self.heat;
-        let trip_c = h.max_winding_c - 5.0;
-        let r = h.winding_resistance_ohm * (1.0 + 0.0039 * (trip_c - 25.0));
-        ((trip_c - 25.0) / (r * (h.winding_to_housing_k_per_w + h.housing_to_ambient_k_per_w)))
-            .sqrt()
+        hopper_control::thermal::ThermalConfig {
+            winding_resistance_ohm: h.winding_resistance_ohm as f32,
+            winding_to_housing_k_per_w: h.winding_to_housing_k_per_w as f32,
+            housing_to_ambient_k_per_w: h.housing_to_ambient_k_per_w as f32,
+            winding_time_constant_s: h.winding_time_constant_s as f32,
+            housing_time_constant_s: h.housing_time_constant_s as f32,
+            trip_winding_c: (h.max_winding_c - TRIP_BELOW_MAX_K) as f32,
+            ..Default::default()
+        }
     }
 }
 
@@ -152,8 +169,10 @@ mod tests {
         for (param, value) in MOTORS[0].firmware_settings() {
             assert_eq!(value, param.default, "{}", param.name);
         }
-        // The stand-in's continuous rating: 6.5 A at 150 C (thermal.rs).
-        assert!((MOTORS[0].continuous_a() - 6.5).abs() < 0.05);
+        assert_eq!(
+            MOTORS[0].thermal_config(),
+            hopper_control::thermal::ThermalConfig::default()
+        );
     }
 
     #[test]
@@ -171,7 +190,13 @@ mod tests {
                     param.name
                 );
             }
+            m.thermal_config()
+                .validate()
+                .unwrap_or_else(|e| panic!("{}: {e:?}", m.name));
         }
+        // The Pittman's rating: 3.3 A against the stand-in's 6.5 A.
+        let c = MOTORS[2].thermal_config().continuous_current_a();
+        assert!((c - 3.3).abs() < 0.05, "{c}");
         assert!(named("re40").is_ok());
         let e = named("maxon").unwrap_err();
         assert!(e.contains("pittman-14204"), "{e}");

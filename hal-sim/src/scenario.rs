@@ -6,6 +6,7 @@
 //! description = "what this scenario shows"
 //! plant = { base = "design", spring_stiffness_n_per_m = 10000.0 }  # or plant = "identified"
 //! model = "design"          # optional: what the controller believes (default: the plant)
+//! motor = "re40"            # optional: a catalogue motor on the plant, its thermal data in the firmware
 //! start_apex_m = 0.10
 //! duration_s = 15.0
 //! control_hz = 10000.0
@@ -335,8 +336,10 @@ impl Settings {
             preset: Params::preset_name(DEFAULT_PARAMS),
         });
         // A motor replaces the plant's motor and sets the firmware's thermal
-        // data; flags' and files' own `params` settings come after it.
-        let (params, params_name, mut firmware_params) = match o.motor {
+        // data. Its settings and the named parameters apply layer by layer:
+        // a layer's own parameters after its motor, the flags' motor after
+        // the file's parameters (the flags win, as everywhere).
+        let (params, params_name, motor_settings) = match o.motor {
             Some(m) => (
                 m.on(&plant.params),
                 format!("{}+{}", plant.name, m.name),
@@ -344,7 +347,14 @@ impl Settings {
             ),
             None => (plant.params, plant.name, Vec::new()),
         };
-        firmware_params.extend(o.firmware_params.unwrap_or_default());
+        let named = o.firmware_params.unwrap_or_default();
+        let motor_from_flags_over_file_params =
+            cli.motor.is_some() && cli.firmware_params.is_none();
+        let firmware_params: Vec<_> = if motor_from_flags_over_file_params {
+            named.into_iter().chain(motor_settings).collect()
+        } else {
+            motor_settings.into_iter().chain(named).collect()
+        };
         Settings {
             params,
             params_name,
@@ -1243,6 +1253,49 @@ mod tests {
         assert_eq!(d.target_apex_m, DEFAULT_TARGET_APEX_M);
         assert_eq!(d.sensors, SensorConfig::DEFAULT);
         assert_eq!(d.control_hz, DEFAULT_CONTROL_HZ);
+    }
+
+    #[test]
+    fn a_motor_and_named_parameters_apply_layer_by_layer() {
+        use hopper_control::params as p;
+        let motor = crate::motors::named("pittman-14204").ok();
+        let file_r = (&p::THERMAL_RESISTANCE_OHM, 2.0_f32);
+        let set_r = (&p::THERMAL_RESISTANCE_OHM, 3.0_f32);
+        let last_r = |s: &Settings| {
+            s.firmware_params
+                .iter()
+                .rev()
+                .find(|(q, _)| q.name == p::THERMAL_RESISTANCE_OHM.name)
+                .map(|(_, v)| *v)
+        };
+        let file = Overrides {
+            firmware_params: Some(vec![file_r]),
+            ..Overrides::default()
+        };
+        // The flags' motor over the file's parameters: the motor's data.
+        let cli = Overrides {
+            motor,
+            ..Overrides::default()
+        };
+        assert_eq!(last_r(&Settings::resolve(Some(&file), &cli)), Some(1.01));
+        // The file's motor under its own parameters: the file's value.
+        let file_motor = Overrides {
+            motor,
+            ..file.clone()
+        };
+        assert_eq!(
+            last_r(&Settings::resolve(Some(&file_motor), &Overrides::default())),
+            Some(2.0)
+        );
+        // `--set` over any motor.
+        let cli_set = Overrides {
+            motor,
+            firmware_params: Some(vec![set_r]),
+            ..Overrides::default()
+        };
+        let s = Settings::resolve(Some(&file), &cli_set);
+        assert_eq!(last_r(&s), Some(3.0));
+        assert_eq!(s.params_name, "design+pittman-14204");
     }
 
     #[test]

@@ -536,8 +536,10 @@ fn a_catalogue_motor_on_the_plant_and_in_the_firmware() {
         s["ledger"]["copper_loss_j"].as_f64().unwrap()
             / s["ledger"]["current_squared_a2s"].as_f64().unwrap()
     };
-    assert!((1.01..1.2).contains(&r(&pittman)), "{}", r(&pittman));
-    assert!((0.299..0.36).contains(&r(&own)), "{}", r(&own));
+    // The winding warms by 15-26 K in 2 s: R(T) 3-10 % above R_25 (the
+    // plant's own 0.356 ohm is 19 % above the stand-in's 0.299).
+    assert!((1.04..1.11).contains(&r(&pittman)), "{}", r(&pittman));
+    assert!((0.305..0.33).contains(&r(&own)), "{}", r(&own));
     assert_eq!(pittman["thermal"]["motor_data"], "configured");
     // Its stall current, under the amplifier's 33.7 A.
     let stall = pittman["thermal"]["amplifier_limit_a"].as_f64().unwrap();
@@ -545,4 +547,31 @@ fn a_catalogue_motor_on_the_plant_and_in_the_firmware() {
     // `--motor design` is the preset as it is.
     let same = run(&["--motor", "design"]);
     assert_eq!(same["apex_heights_m"], own["apex_heights_m"]);
+}
+
+/// The firmware books copper only for current the amplifier was told to
+/// drive: a robot whose arming is refused heats nothing.
+#[test]
+fn a_disarmed_robot_books_no_copper() {
+    let s = json(&sim(&[
+        "run",
+        "--params",
+        "design",
+        "--controller",
+        "open-torque",
+        "--start-apex",
+        "0.10",
+        "--duration",
+        "1.5",
+        "--set",
+        "arming.untethered=0",
+        "--json",
+    ]));
+    assert_eq!(s["arm_refused"], "link-down");
+    let hops = s["firmware_hops"].as_array().unwrap();
+    assert!(hops.len() >= 4, "{hops:?}");
+    for h in hops {
+        assert_eq!(h["copper_loss_j"].as_f64(), Some(0.0), "{h}");
+    }
+    assert_eq!(s["ledger"]["copper_loss_j"].as_f64(), Some(0.0));
 }

@@ -52,7 +52,7 @@ pub const HOP_FIELDS: [Field; 10] = [
     field(
         "copper_loss_j",
         "number",
-        "the motor's copper loss, touchdown to apex, J",
+        "the motor's copper loss from the previous apex to this one, J",
     ),
     field(
         "stance_copper_loss_j",

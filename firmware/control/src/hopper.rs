@@ -355,6 +355,17 @@ impl Hopper {
         &mut self.supervisor
     }
 
+    /// The motor took `applied_a` (what the amplifier was told, 0 when
+    /// disabled) for `dt_s`: the thermal estimate heats with it (an
+    /// overtemperature latches), and the open hop's ledger books its copper
+    /// loss at the winding's estimated resistance, so both count the same
+    /// heat.
+    pub(crate) fn heat(&mut self, applied_a: f32, dt_s: f32) {
+        let r_ohm = self.supervisor.thermal().winding_resistance_ohm();
+        self.ledger.heat(applied_a * applied_a * r_ohm * dt_s);
+        self.supervisor.heat(applied_a, dt_s);
+    }
+
     /// The e-stop, debounced ([`crate::debounce`]).
     pub fn estop_pressed(&self) -> bool {
         self.estop.pressed()
@@ -495,7 +506,6 @@ impl Hopper {
             cal.torque_nm(command.current_a),
             v.motor_rad_s,
             m.nut_position_m,
-            self.supervisor.thermal().winding_resistance_ohm(),
         );
         let faults = self.supervisor.faults();
         StepOutput {

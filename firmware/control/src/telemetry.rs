@@ -207,8 +207,9 @@ pub struct HopLedger {
     pub peak_stroke_m: f32,
     /// The motor's copper loss over the hop, from the previous apex (or the
     /// first period after a start) to this apex, as the simulator's
-    /// per-hop ledger counts it: `int i_cmd^2 R(T) dt` with the thermal
-    /// estimate's winding resistance, J: the heat the motor must shed
+    /// per-hop ledger counts it: `int i^2 R(T) dt` of the current the
+    /// amplifier was told to drive (0 while disabled), at the thermal
+    /// estimate's winding resistance, J: the heat the estimate heats with
     /// (docs/endurance.md).
     pub copper_loss_j: f32,
     /// The part of [`Self::copper_loss_j`] spent in stance, J (the rest is
@@ -253,10 +254,19 @@ impl HopLedgerBuilder {
     /// Touchdown with the energy estimate at that instant, J.
     pub fn touchdown(&mut self, energy_j: f32) {
         self.hops = self.hops.saturating_add(1);
+        // A stance that ended without an apex (too low a bounce to detect
+        // one, a withdrawn touchdown) hands its heat on: a hop's copper runs
+        // from the previous booked apex.
+        let (open_j, open_stance_j) = if self.started {
+            (self.cur.copper_loss_j, self.cur.stance_copper_loss_j)
+        } else {
+            (0.0, 0.0)
+        };
         self.cur = HopLedger {
             hop: self.hops,
             energy_at_touchdown_j: energy_j,
-            copper_loss_j: self.falling_copper_j,
+            copper_loss_j: self.falling_copper_j + open_j,
+            stance_copper_loss_j: open_stance_j,
             ..HopLedger::default()
         };
         self.falling_copper_j = 0.0;
@@ -272,9 +282,26 @@ impl HopLedgerBuilder {
         }
     }
 
+    /// Copper loss the motor took, J (the current the amplifier was told to
+    /// drive, at the winding's estimated resistance: what the thermal
+    /// estimate heats with), booked to the hop open now. Non-finite or
+    /// negative heat is ignored.
+    pub fn heat(&mut self, heat_j: f32) {
+        if !(0.0..f32::INFINITY).contains(&heat_j) {
+            return;
+        }
+        if !self.started {
+            self.falling_copper_j += heat_j;
+            return;
+        }
+        self.cur.copper_loss_j += heat_j;
+        if self.in_stance {
+            self.cur.stance_copper_loss_j += heat_j;
+        }
+    }
+
     /// Per-step data: time step (s), current command (A), motor torque (N m)
-    /// and speed (rad/s), nut displacement (m), the winding's resistance
-    /// (ohm). Non-finite values are ignored.
+    /// and speed (rad/s), nut displacement (m). Non-finite values are ignored.
     pub fn step(
         &mut self,
         dt_s: f32,
@@ -282,12 +309,8 @@ impl HopLedgerBuilder {
         torque_nm: f32,
         motor_speed_rad_s: f32,
         nut_m: f32,
-        winding_resistance_ohm: f32,
     ) {
-        let heat_j = command_a * command_a * winding_resistance_ohm * dt_s;
-        let heat_j = if heat_j.is_finite() { heat_j } else { 0.0 };
         if !self.started {
-            self.falling_copper_j += heat_j;
             return;
         }
         // A NaN never replaces the peak (`x > peak` is false for it).
@@ -298,9 +321,7 @@ impl HopLedgerBuilder {
         if nut_m > self.cur.peak_stroke_m && nut_m.is_finite() {
             self.cur.peak_stroke_m = nut_m;
         }
-        self.cur.copper_loss_j += heat_j;
         if self.in_stance {
-            self.cur.stance_copper_loss_j += heat_j;
             let power_w = torque_nm * motor_speed_rad_s;
             if power_w.is_finite() && dt_s.is_finite() {
                 self.cur.stance_work_j += power_w * dt_s;
@@ -425,14 +446,18 @@ mod tests {
         assert_eq!(b.apex(0.1), None);
         // Falling before the touchdown: 1 ms of 10 A on 0.3 ohm.
         for _ in 0..10 {
-            b.step(1e-4, 10.0, 0.0, 0.0, 0.0, 0.3);
+            b.heat(10.0 * 10.0 * 0.3 * 1e-4);
         }
         b.touchdown(70.0);
         for _ in 0..1000 {
-            b.step(1e-4, 20.0, 0.5, 100.0, 0.02, 0.3);
+            b.step(1e-4, 20.0, 0.5, 100.0, 0.02);
+            b.heat(20.0 * 20.0 * 0.3 * 1e-4);
         }
         b.liftoff(72.0);
-        b.step(1e-4, -5.0, -0.1, -50.0, 0.01, 0.3);
+        b.step(1e-4, -5.0, -0.1, -50.0, 0.01);
+        b.heat(5.0 * 5.0 * 0.3 * 1e-4);
+        b.heat(f32::NAN);
+        b.heat(-1.0);
         let h = b.apex(0.12).unwrap_or_default();
         assert_eq!(h.hop, 1);
         assert!((h.stance_work_j - 5.0).abs() < 1e-3, "{}", h.stance_work_j);
@@ -446,5 +471,28 @@ mod tests {
         let flight_j = 0.03 + 7.5e-4;
         assert!((h.copper_loss_j - h.stance_copper_loss_j - flight_j).abs() < 1e-5);
         assert_eq!(b.apex(0.1), None);
+    }
+
+    #[test]
+    fn a_stance_without_an_apex_hands_its_heat_to_the_next_hop() {
+        let mut b = HopLedgerBuilder::new();
+        b.touchdown(70.0);
+        b.heat(1.0);
+        b.liftoff(70.0);
+        b.heat(2.0);
+        // A bounce too low for an apex: the next touchdown comes first.
+        b.touchdown(70.0);
+        b.heat(4.0);
+        b.liftoff(70.0);
+        b.heat(8.0);
+        let h = b.apex(0.01).unwrap_or_default();
+        assert_eq!(h.hop, 2);
+        assert_eq!(h.copper_loss_j, 15.0);
+        assert_eq!(h.stance_copper_loss_j, 5.0);
+        // The next hop starts from this apex.
+        b.heat(16.0);
+        b.touchdown(70.0);
+        b.liftoff(70.0);
+        assert_eq!(b.apex(0.01).unwrap_or_default().copper_loss_j, 16.0);
     }
 }

@@ -138,6 +138,21 @@ impl ThermalConfig {
         )
     }
 
+    /// The RMS current that settles the winding at the trip temperature, A
+    /// (the motor's continuous rating under this model; from the fixed point
+    /// of [`Self::steady_winding_c`], `i^2 = (T - T_a) / (R(T) (R_wh +
+    /// R_ha))` at `T = trip_winding_c`).
+    pub fn continuous_current_a(&self) -> f32 {
+        let r_ohm = self.resistance_at_ohm(self.trip_winding_c);
+        let rth = self.winding_to_housing_k_per_w + self.housing_to_ambient_k_per_w;
+        let i2 = (self.trip_winding_c - self.ambient_c) / (r_ohm * rth);
+        if i2 > 0.0 && i2 < f32::INFINITY {
+            libm::sqrtf(i2)
+        } else {
+            0.0
+        }
+    }
+
     /// The winding temperature a steady mean square current `mean_i2_a2`
     /// settles at, C: the fixed point of the model above with both
     /// derivatives zero, `T = T_a + i^2 R(T) (R_wh + R_ha)`, linear in `T`
@@ -375,6 +390,7 @@ mod tests {
     fn trip_times_are_the_documented_ones() {
         // The module docs' table (the model integrated in f64 at 10 ms).
         for (i, t) in [
+            (10.0, 392.0),
             (15.0, 52.6),
             (20.7, 21.1),
             (25.3, 13.1),
@@ -423,6 +439,11 @@ mod tests {
                 m.winding_c()
             );
         }
+        // The continuous rating settles at the trip temperature: 6.54 A.
+        let c = cfg.continuous_current_a();
+        assert!((c - 6.535).abs() < 0.005, "{c}");
+        let at = cfg.steady_winding_c(c * c).unwrap_or(f32::NAN);
+        assert!((at - cfg.trip_winding_c).abs() < 0.01, "{at}");
         // Above 1 / sqrt(R_25 a (R_wh + R_ha)) = 11.4 A the heat outgrows
         // what the motor sheds: no steady temperature.
         assert!(cfg.steady_winding_c(11.3 * 11.3).is_some());

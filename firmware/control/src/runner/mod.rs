@@ -457,9 +457,7 @@ impl<H: HopperSlot> PeriodRunner<H> {
         // The motor heated with last period's current: an overtemperature
         // latches before this period's step, so the step's output is
         // already the safe one (100 us late: nothing on a thermal scale).
-        self.hopper
-            .supervisor_mut()
-            .heat(self.applied_a, self.timing.period_s);
+        self.hopper.heat(self.applied_a, self.timing.period_s);
         // A bring-up routine measures disarmed: it starts only disarmed,
         // and arming is refused while it runs. A tare's new offsets apply
         // before this period's step, as a parameter set between periods

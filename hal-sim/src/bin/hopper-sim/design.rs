@@ -117,11 +117,14 @@ pub(crate) fn cmd_design(cmd: &DesignCmd) -> Result<()> {
             json,
             out,
         } => {
-            use hal_sim::endurance::{plot_changes, single_changes, unchanged, ENDURANCE_APEXES_M};
+            use hal_sim::endurance::{
+                plot_changes, single_changes, unchanged, ENDURANCE_APEXES_M, SINGLE_CHANGES,
+            };
             let bar = indicatif::ProgressBar::new_spinner()
                 .with_finish(indicatif::ProgressFinish::AndClear);
             bar.set_message(format!(
-                "36 runs of {duration_s} s (18 single changes, 5 and 15 cm){}",
+                "{} runs of {duration_s} s ({SINGLE_CHANGES} single changes, 5 and 15 cm){}",
+                2 * SINGLE_CHANGES,
                 if out.is_some() {
                     ", and the design's 2 for the plot"
                 } else {
@@ -177,12 +180,17 @@ pub(crate) fn cmd_design(cmd: &DesignCmd) -> Result<()> {
                 );
             }
             match changes.iter().find(|c| c.enough) {
-                Some(c) => say!(
-                    "smallest single change that hops both for {duration_s} s: {} {} -> {}",
-                    c.name,
-                    c.design,
-                    c.value
-                ),
+                Some(c) => match c.motor {
+                    Some(m) => say!(
+                        "smallest single change that hops both for {duration_s} s: the motor {m}"
+                    ),
+                    None => say!(
+                        "smallest single change that hops both for {duration_s} s: {} {} -> {}",
+                        c.name,
+                        c.design,
+                        c.value
+                    ),
+                },
                 None => say!(
                     "no single change tried hops both for {duration_s} s (docs/endurance.md: the bound says why)"
                 ),

@@ -173,12 +173,15 @@ pub(crate) fn cmd_run(a: RunArgs) -> Result<()> {
         s.duration_s
     );
     if let Some(m) = settings.motor {
-        say!(
-            "  motor              {}: {}; {:.1} A continuous under the firmware's thermal model",
-            m.name,
-            m.source,
-            m.continuous_a()
-        );
+        match s.thermal {
+            Some(t) => say!(
+                "  motor              {}: {}; {:.1} A continuous under the firmware's thermal model",
+                m.name,
+                m.source,
+                t.config.continuous_current_a()
+            ),
+            None => say!("  motor              {}: {}", m.name, m.source),
+        }
     }
     let n = s.apex_heights_m.len();
     let shown: Vec<String> = if n <= 14 {
