@@ -64,17 +64,32 @@ pub const MIN_DURATION_S: f64 = 8.0;
 
 /// Every law but passive, then the heat-aware mode, at every apex of
 /// [`APEXES_M`], `duration_s` each (at least [`MIN_DURATION_S`]), in
-/// parallel; `preset` names the plant.
-pub fn table(preset: &str, duration_s: f64) -> Result<Vec<Cell>, String> {
+/// parallel; `preset` names the plant, `motor` a catalogue motor on it
+/// (its thermal data in the firmware; None: the preset's own).
+pub fn table(
+    preset: &str,
+    motor: Option<&crate::motors::CatalogueMotor>,
+    duration_s: f64,
+) -> Result<Vec<Cell>, String> {
     use rayon::prelude::*;
     check_duration(duration_s)?;
     let params = Params::preset(preset).ok_or_else(|| format!("no preset {preset}"))?;
+    let (params, motor_settings) = match motor {
+        Some(m) => (m.on(&params), m.firmware_settings()),
+        None => (params, Vec::new()),
+    };
+    let with_motor =
+        |own: Settings| -> Settings { motor_settings.iter().copied().chain(own).collect() };
     let mut laws: Vec<(String, &'static str, Settings)> = ControllerKind::ALL
         .iter()
         .filter(|k| **k != ControllerKind::Passive)
-        .map(|k| (k.name().to_string(), k.name(), Vec::new()))
+        .map(|k| (k.name().to_string(), k.name(), with_motor(Vec::new())))
         .collect();
-    laws.push((HEAT_AWARE.to_string(), "shaped", heat_aware_settings()));
+    laws.push((
+        HEAT_AWARE.to_string(),
+        "shaped",
+        with_motor(heat_aware_settings()),
+    ));
     let jobs: Vec<(usize, f64)> = (0..laws.len())
         .flat_map(|l| APEXES_M.iter().map(move |a| (l, *a)))
         .collect();

@@ -288,3 +288,13 @@ fn an_unknown_motor() {
         &["s.toml:2", "unknown motor `ec45`"],
     );
 }
+
+#[test]
+fn the_design_motors_bound_is_not_drawn_for_another_motor() {
+    let c = Case::new();
+    let bound = c.file("bound.csv", "apex_m,endurance_s\n0.05,104\n");
+    c.fails(
+        &["endurance", "--motor", "re40", "--bound", &bound],
+        &["'--motor <NAME>' cannot be used with '--bound <BOUND>'"],
+    );
+}

@@ -107,13 +107,18 @@ enum Cmd {
         /// Plant parameters: a preset (design, identified).
         #[arg(long, default_value = "design")]
         params: String,
+        /// A catalogue motor on the plant, its thermal data in the firmware,
+        /// as `run --motor` (design, re40, pittman-14204).
+        #[arg(long, value_parser = hal_sim::motors::named, value_name = "NAME", conflicts_with = "bound")]
+        motor: Option<&'static hal_sim::motors::CatalogueMotor>,
         /// Simulated time of each run, s.
         #[arg(long, default_value_t = 120.0)]
         duration: f64,
         /// The bound's longest endurance per apex, a CSV file with the header
         /// `apex_m,endurance_s` (the last-but-one column of the table
         /// `cargo run --release -p hal-sim --example heat_bound` prints;
-        /// docs/img/endurance/bound.csv has it), drawn dashed.
+        /// docs/img/endurance/bound.csv has it, for the design motor), drawn
+        /// dashed.
         #[arg(long)]
         bound: Option<PathBuf>,
         /// Directory for endurance.png and endurance.svg (created if missing).
@@ -152,10 +157,11 @@ fn main() {
         Cmd::Figures { out, quick } => cmd_figures(&out, quick),
         Cmd::Endurance {
             params,
+            motor,
             duration,
             bound,
             out,
-        } => cmd_endurance(&params, duration, bound.as_deref(), out.as_deref()),
+        } => cmd_endurance(&params, motor, duration, bound.as_deref(), out.as_deref()),
         Cmd::Spring(args) => cmd_spring(&args),
         Cmd::Design { cmd } => cmd_design(&cmd),
         Cmd::Identify(args) => cmd_identify(&args),
