@@ -74,22 +74,22 @@ pub fn table(
     use rayon::prelude::*;
     check_duration(duration_s)?;
     let params = Params::preset(preset).ok_or_else(|| format!("no preset {preset}"))?;
-    let (params, motor_settings) = match motor {
-        Some(m) => (m.on(&params), m.firmware_settings()),
-        None => (params, Vec::new()),
-    };
-    let with_motor =
-        |own: Settings| -> Settings { motor_settings.iter().copied().chain(own).collect() };
     let mut laws: Vec<(String, &'static str, Settings)> = ControllerKind::ALL
         .iter()
         .filter(|k| **k != ControllerKind::Passive)
-        .map(|k| (k.name().to_string(), k.name(), with_motor(Vec::new())))
+        .map(|k| (k.name().to_string(), k.name(), Vec::new()))
         .collect();
-    laws.push((
-        HEAT_AWARE.to_string(),
-        "shaped",
-        with_motor(heat_aware_settings()),
-    ));
+    laws.push((HEAT_AWARE.to_string(), "shaped", heat_aware_settings()));
+    let (params, laws) = match motor {
+        Some(m) => {
+            let laws = laws
+                .into_iter()
+                .map(|(law, name, own)| (law, name, m.apply(&params, own).1))
+                .collect();
+            (m.on(&params), laws)
+        }
+        None => (params, laws),
+    };
     let jobs: Vec<(usize, f64)> = (0..laws.len())
         .flat_map(|l| APEXES_M.iter().map(move |a| (l, *a)))
         .collect();
@@ -264,16 +264,11 @@ pub fn plot(
                         .map(|(x, y)| Circle::new((x, y), 4, colour.stroke_width(1))),
                 )?;
             }
-            chart
-                .draw_series(std::iter::empty::<Circle<(f64, f64), i32>>())?
-                .label("hollow marker: target not held (mean apex 3-8 s off by > 2 %)")
-                .legend(|(x, y)| Circle::new((x + 10, y), 4, BLACK.stroke_width(1)));
-            chart
-                .configure_series_labels()
-                .position(SeriesLabelPosition::UpperRight)
-                .background_style(WHITE.mix(0.85))
-                .border_style(BLACK)
-                .draw()?;
+            crate::plot::hollow_marker_key(
+                &mut chart,
+                "hollow marker: target not held (mean apex 3-8 s off by > 2 %)",
+            )?;
+            crate::plot::legend(&mut chart, SeriesLabelPosition::UpperRight)?;
             area.present()?;
             Ok(())
         }};
@@ -409,13 +404,9 @@ fn run_changes(tries: &[Try], duration_s: f64) -> Result<Vec<Change>, String> {
     tries
         .par_iter()
         .map(|&(knob, design_value, value)| {
-            let mut params = design;
-            let mut set = heat_aware_settings();
+            let (mut params, mut set) = (design, heat_aware_settings());
             match knob {
-                Knob::Motor(m) => {
-                    params = m.on(&design);
-                    set.splice(0..0, m.firmware_settings());
-                }
+                Knob::Motor(m) => (params, set) = m.apply(&design, set),
                 Knob::Lead => params.screw_lead_m = value,
                 Knob::Spring => params.spring_stiffness_n_per_m = value,
                 Knob::Housing => set.push((&p::THERMAL_HOUSING_TO_AMBIENT, value as f32)),
@@ -553,9 +544,7 @@ pub fn plot_changes(
                 };
                 points.sort_by(|a, b| x_of(a).total_cmp(&x_of(b)));
                 let xs: Vec<f64> = points.iter().map(|c| x_of(c)).collect();
-                let (lo, hi) = xs
-                    .iter()
-                    .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), x| (l.min(*x), h.max(*x)));
+                let (lo, hi) = crate::plot::extent(xs.iter().copied());
                 let pad = 0.05 * (hi - lo).max(1e-9);
                 let mut chart = ChartBuilder::on(half)
                     .caption(*panel, ("sans-serif", 18))
@@ -608,16 +597,11 @@ pub fn plot_changes(
                         }
                     }))?;
                 }
-                chart
-                    .draw_series(std::iter::empty::<Circle<(f64, f64), i32>>())?
-                    .label("hollow, off the line: apex not held; grey dashes: the design")
-                    .legend(|(x, y)| Circle::new((x + 10, y), 4, BLACK.stroke_width(1)));
-                chart
-                    .configure_series_labels()
-                    .position(SeriesLabelPosition::MiddleRight)
-                    .background_style(WHITE.mix(0.85))
-                    .border_style(BLACK)
-                    .draw()?;
+                crate::plot::hollow_marker_key(
+                    &mut chart,
+                    "hollow, off the line: apex not held; grey dashes: the design",
+                )?;
+                crate::plot::legend(&mut chart, SeriesLabelPosition::MiddleRight)?;
             }
             area.present()?;
             Ok(())

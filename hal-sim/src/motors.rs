@@ -120,6 +120,19 @@ impl CatalogueMotor {
         }
     }
 
+    /// `params` with this motor, and `own` firmware settings after the
+    /// motor's (so they win): how a run takes a motor ([`Self::on`],
+    /// [`Self::firmware_settings`]).
+    pub fn apply(
+        &self,
+        params: &Params,
+        own: Vec<(&'static p::Param, f32)>,
+    ) -> (Params, Vec<(&'static p::Param, f32)>) {
+        let mut set = self.firmware_settings();
+        set.extend(own);
+        (self.on(params), set)
+    }
+
     /// The firmware's `thermal.*` parameters for this motor.
     pub fn firmware_settings(&self) -> Vec<(&'static p::Param, f32)> {
         let h = &self.heat;

@@ -55,6 +55,21 @@ where
         .draw()
 }
 
+/// A legend entry for hollow markers (drawn elsewhere): a hollow black
+/// circle and `label`.
+pub fn hollow_marker_key<'a, DB>(
+    c: &mut ChartContext<'a, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>,
+    label: &str,
+) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>>
+where
+    DB: DrawingBackend + 'a,
+{
+    c.draw_series(std::iter::empty::<Circle<(f64, f64), i32>>())?
+        .label(label)
+        .legend(|(x, y)| Circle::new((x + 10, y), 4, BLACK.stroke_width(1)));
+    Ok(())
+}
+
 /// Load a system font once and register it as "sans-serif" for plotters'
 /// pure-Rust text renderer (no fontconfig needed at build time).
 pub fn ensure_font() -> Result<(), String> {
