@@ -13,12 +13,19 @@
 //! either, so the control task never runs, and the trace ends with the
 //! watchdog's first reload.
 //!
+//! The same runs for each pin map (`firmware/app/src/pinmap.rs`): the
+//! default (Olimex STM32-H405) against `tests/board-init.trace`, the
+//! Adafruit Feather's (`--features feather`) against
+//! `tests/board-init-feather.trace`, whose deadman (TIM12) and motor
+//! encoder (TIM8) QEMU does not model, so their writes are traced too.
+//!
 //! The trace (writes by device and register, and the polled registers,
-//! each poll run collapsed to one line) must equal `tests/board-init.trace`;
+//! each poll run collapsed to one line) must equal the map's golden file;
 //! `HOPPER_UPDATE_GOLDEN=1 cargo xtask qemu` rewrites it after a deliberate
 //! change. Beyond the equality, the properties that matter are checked by
-//! name, so a failure says which one broke: AMP_EN (PB0) driven low before
-//! the pin becomes an output; the DAC's zero-current code written before
+//! name, so a failure says which one broke: AMP_EN (the map's pin) driven
+//! low before the pin becomes an output; the deadman's output forced low
+//! before AMP_EN becomes its pin (where the timer is traced); the DAC's zero-current code written before
 //! the DAC is enabled; the alternate functions of the encoder, USART and
 //! analog pins; the watchdog's key order (unlock, prescaler, reload, start,
 //! reload); every wait bounded. The ADC trigger selection is in a register
@@ -29,8 +36,65 @@ use std::path::Path;
 use std::process::Stdio;
 use std::time::{Duration, Instant};
 
-/// The golden trace, relative to the workspace root.
-const GOLDEN: &str = "tests/board-init.trace";
+/// A pin map of the board image (`firmware/app/src/pinmap.rs`): what its
+/// init must do, by name.
+#[derive(Debug)]
+struct Map {
+    /// The summary line's prefix.
+    line: &'static str,
+    /// The image's cargo features.
+    features: &'static [&'static str],
+    /// The golden trace, relative to the workspace root.
+    golden: &'static str,
+    /// AMP_EN's pin number on GPIOB.
+    amp_en: u32,
+    /// `(register, pin, AF, what)`: the alternate functions the map sets.
+    alternate: &'static [(&'static str, u32, u32, &'static str)],
+    /// The deadman's channel-mode register and the value that forces its
+    /// output low, where QEMU does not model the timer (so its writes are
+    /// in the trace): the channel must be forced low before AMP_EN becomes
+    /// the timer's pin.
+    deadman_forced_low: Option<(&'static str, u32)>,
+}
+
+/// The default map (Olimex STM32-H405). Its deadman timer, TIM3, is one
+/// QEMU models, so its writes are not in the trace.
+const H405: Map = Map {
+    line: "board-init",
+    features: &[],
+    golden: "tests/board-init.trace",
+    amp_en: 0,
+    alternate: &[
+        ("GPIOA.AFRH", 9, 7, "PA9 USART1_TX"),
+        ("GPIOA.AFRH", 10, 7, "PA10 USART1_RX"),
+        ("GPIOA.AFRH", 15, 1, "PA15 TIM2_CH1"),
+        ("GPIOB.AFRL", 3, 1, "PB3 TIM2_CH2"),
+        ("GPIOA.AFRL", 0, 2, "PA0 TIM5_CH1"),
+        ("GPIOA.AFRL", 1, 2, "PA1 TIM5_CH2"),
+        ("GPIOB.AFRL", 0, 2, "PB0 TIM3_CH3 (AMP_EN)"),
+    ],
+    deadman_forced_low: None,
+};
+
+/// The Adafruit Feather STM32F405 Express's map (`--features feather`).
+/// QEMU models neither TIM8 nor TIM12: their writes are in the trace.
+const FEATHER: Map = Map {
+    line: "board-init-feather",
+    features: &["--features", "feather"],
+    golden: "tests/board-init-feather.trace",
+    amp_en: 14,
+    alternate: &[
+        ("GPIOB.AFRH", 10, 7, "PB10 USART3_TX"),
+        ("GPIOB.AFRH", 11, 7, "PB11 USART3_RX"),
+        ("GPIOC.AFRL", 6, 3, "PC6 TIM8_CH1"),
+        ("GPIOC.AFRL", 7, 3, "PC7 TIM8_CH2"),
+        ("GPIOA.AFRL", 6, 2, "PA6 TIM3_CH1"),
+        ("GPIOA.AFRL", 7, 2, "PA7 TIM3_CH2"),
+        ("GPIOB.AFRH", 14, 9, "PB14 TIM12_CH1 (AMP_EN)"),
+    ],
+    // OC1M = 100 (force inactive), CC1S = 00 (output).
+    deadman_forced_low: Some(("TIM12.CCMR1", 0x0000_0040)),
+};
 /// How long init may take in wall time before it counts as hung.
 const INIT_TIMEOUT: Duration = Duration::from_secs(90);
 
@@ -77,6 +141,21 @@ fn register(device: &str, offset: u32) -> String {
             0x08 => "DHR12R1",
             _ => "",
         },
+        (d, o) if d.starts_with("TIM") => match o {
+            0x00 => "CR1",
+            0x08 => "SMCR",
+            0x0c => "DIER",
+            0x10 => "SR",
+            0x14 => "EGR",
+            0x18 => "CCMR1",
+            0x1c => "CCMR2",
+            0x20 => "CCER",
+            0x24 => "CNT",
+            0x28 => "PSC",
+            0x2c => "ARR",
+            0x34 => "CCR1",
+            _ => "",
+        },
         // QEMU 7.2 names the unimplemented region at 0x4000_3000, which
         // is the IWDG's, `I2S2ext`.
         ("IWDG", o) => match o {
@@ -103,9 +182,14 @@ fn parse(log: &str) -> Vec<Access> {
             continue;
         };
         let device = match device {
-            "I2S2ext" => "IWDG",
-            "Flash Int" => "FLASH",
-            d => d,
+            "I2S2ext" => "IWDG".to_string(),
+            "Flash Int" => "FLASH".to_string(),
+            // The timers QEMU does not model (TIM1, TIM8-TIM14) are
+            // `timer[N]`.
+            d => match d.strip_prefix("timer[").and_then(|n| n.strip_suffix(']')) {
+                Some(n) => format!("TIM{n}"),
+                None => d.to_string(),
+            },
         };
         let field = |key: &str| {
             rest.split_once(key)
@@ -116,7 +200,7 @@ fn parse(log: &str) -> Vec<Access> {
             continue;
         };
         out.push(Access {
-            device: device.to_string(),
+            device,
             offset,
             write: if rest.starts_with("write") {
                 field("value ")
@@ -179,21 +263,39 @@ fn value_of(line: &str) -> Option<u32> {
         .and_then(|(_, v)| u32::from_str_radix(v, 16).ok())
 }
 
-/// The properties that matter, by name; the problems found.
-fn check(lines: &[String]) -> Vec<String> {
+/// The properties that matter on `map`, by name; the problems found.
+fn check(lines: &[String], map: &Map) -> Vec<String> {
     let mut problems = Vec::new();
-    // AMP_EN: BSRR's BR0 (bit 16) before MODER0 becomes output (01).
+    // AMP_EN: BSRR's reset bit (16 + pin) before its MODER field becomes
+    // output (01).
+    let pin = map.amp_en;
+    let moder = |l: &str| value_of(l).map(|v| (v >> (2 * pin)) & 0b11);
     let low = position(lines, |l| {
-        l.starts_with("GPIOB.BSRR = ") && value_of(l).is_some_and(|v| v & (1 << 16) != 0)
+        l.starts_with("GPIOB.BSRR = ") && value_of(l).is_some_and(|v| v & (1 << (16 + pin)) != 0)
     });
     let output = position(lines, |l| {
-        l.starts_with("GPIOB.MODER = ") && value_of(l).is_some_and(|v| v & 0b11 == 0b01)
+        l.starts_with("GPIOB.MODER = ") && moder(l) == Some(0b01)
     });
     match (low, output) {
         (Some(l), Some(o)) if l < o => {}
         _ => problems.push(format!(
-            "AMP_EN (PB0) is not driven low before it becomes an output (BSRR BR0 at {low:?}, MODER0 = output at {output:?})"
+            "AMP_EN (PB{pin}) is not driven low before it becomes an output (BSRR BR{pin} at {low:?}, MODER{pin} = output at {output:?})"
         )),
+    }
+    // The deadman's output forced low before AMP_EN becomes its pin (10).
+    if let Some((register, forced)) = map.deadman_forced_low {
+        let low = position(lines, |l| {
+            l.starts_with(&format!("{register} = ")) && value_of(l) == Some(forced)
+        });
+        let handed = position(lines, |l| {
+            l.starts_with("GPIOB.MODER = ") && moder(l) == Some(0b10)
+        });
+        match (low, handed) {
+            (Some(l), Some(h)) if l < h => {}
+            _ => problems.push(format!(
+                "the deadman's output is not forced low before AMP_EN (PB{pin}) becomes its pin ({register} at {low:?}, MODER{pin} = alternate at {handed:?})"
+            )),
+        }
     }
     // The DAC: DHR12R1 = 0x800 (the zero-current code) before CR.EN1.
     let zero = position(lines, |l| l == "DAC.DHR12R1 = 0x00000800");
@@ -206,10 +308,10 @@ fn check(lines: &[String]) -> Vec<String> {
             "the DAC's zero code is not written before the DAC is enabled (DHR12R1 at {zero:?}, EN1 at {enable:?})"
         )),
     }
-    // Alternate functions: PA9/PA10 AF7 (USART1), PA15 AF1 (TIM2_CH1), PB3
-    // AF1 (TIM2_CH2), PA0/PA1 AF2 (TIM5). An unmodelled register reads 0,
-    // so each read-modify-write shows only the fields it sets: a pin's
-    // function is its field in the last write that sets it.
+    // Alternate functions: the map's link, encoder and deadman pins. An
+    // unmodelled register reads 0, so each read-modify-write shows only
+    // the fields it sets: a pin's function is its field in the last write
+    // that sets it.
     let af = |reg: &str, pin: u32| {
         lines
             .iter()
@@ -219,14 +321,7 @@ fn check(lines: &[String]) -> Vec<String> {
             .map(|v| (v >> (4 * (pin % 8))) & 0xF)
             .find(|f| *f != 0)
     };
-    for (reg, pin, want, what) in [
-        ("GPIOA.AFRH", 9, 7, "PA9 USART1_TX"),
-        ("GPIOA.AFRH", 10, 7, "PA10 USART1_RX"),
-        ("GPIOA.AFRH", 15, 1, "PA15 TIM2_CH1"),
-        ("GPIOB.AFRL", 3, 1, "PB3 TIM2_CH2"),
-        ("GPIOA.AFRL", 0, 2, "PA0 TIM5_CH1"),
-        ("GPIOA.AFRL", 1, 2, "PA1 TIM5_CH2"),
-    ] {
+    for &(reg, pin, want, what) in map.alternate {
         let got = af(reg, pin);
         if got != Some(want) {
             problems.push(format!("{what}: AF{got:?}, not AF{want}"));
@@ -269,17 +364,61 @@ fn spawn_unimp(elf: &Path, log_path: &Path) -> Result<std::process::Child, Strin
         .map_err(|e| format!("cannot start qemu-system-arm: {e}"))
 }
 
-/// Builds the board image, runs its init on QEMU and checks the trace;
-/// prints `board-init: ...`.
+/// Builds the board image on each pin map, runs its init on QEMU and
+/// checks the trace; prints `board-init: ...` (the default map) and
+/// `board-init-feather: ...`, then runs the fault test.
 pub fn run(root: &Path) -> Result<(), String> {
-    let elf = crate::board_image(root)?;
     let dir = crate::target_dir(root)?.join("board-init");
     std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
-    let log_path = dir.join("unimp.log");
+    let elf = crate::board_image(root)?;
+    let h405 = run_map(root, &H405, &elf, &dir);
+    let feather = match map_image(root, &FEATHER, &dir) {
+        Ok(elf) => run_map(root, &FEATHER, &elf, &dir),
+        Err(e) => {
+            println!("{}: error (see above)", FEATHER.line);
+            Err(format!("board init failed ({}): {e}", FEATHER.line))
+        }
+    };
+    h405.and(feather)?;
+    fault_test(root)
+}
+
+/// The board image built with `map`'s features, copied out of cargo's
+/// output (the next default build overwrites that path).
+fn map_image(root: &Path, map: &Map, dir: &Path) -> Result<std::path::PathBuf, String> {
+    let built = crate::build_executable(
+        root,
+        &format!("firmware release build ({} pin map)", map.line),
+        "hopper-fw",
+        crate::cargo()
+            .args([
+                "build",
+                "-p",
+                "hopper-app",
+                "--bin",
+                "hopper-fw",
+                "--release",
+                "--target",
+                crate::TARGET,
+            ])
+            .args(map.features),
+    )?;
+    let elf = dir.join(format!("hopper-fw-{}.elf", map.line));
+    std::fs::copy(&built, &elf).map_err(|e| format!("{}: {e}", elf.display()))?;
+    Ok(elf)
+}
+
+/// `elf`'s init on QEMU, its trace checked against `map`; prints
+/// `<map.line>: ...`.
+fn run_map(root: &Path, map: &Map, elf: &Path, dir: &Path) -> Result<(), String> {
+    let log_path = dir.join(format!("{}-unimp.log", map.line));
     let _ = std::fs::remove_file(&log_path);
-    eprintln!("xtask: running the board image's init on qemu-system-arm (netduinoplus2, -d unimp)");
+    eprintln!(
+        "xtask: running the board image's init ({}) on qemu-system-arm (netduinoplus2, -d unimp)",
+        map.line
+    );
     let started = Instant::now();
-    let mut child = spawn_unimp(&elf, &log_path)?;
+    let mut child = spawn_unimp(elf, &log_path)?;
     // Init is done at the watchdog's first reload: nothing follows it in
     // QEMU (the control task waits for an ADC interrupt that never comes).
     let done = loop {
@@ -295,7 +434,7 @@ pub fn run(root: &Path) -> Result<(), String> {
     };
     let _ = child.kill();
     let _ = child.wait();
-    crate::took("board init on QEMU", started);
+    crate::took(&format!("{} on QEMU", map.line), started);
     let log =
         std::fs::read_to_string(&log_path).map_err(|e| format!("{}: {e}", log_path.display()))?;
     let (lines, longest_poll) = trace(&parse(&log));
@@ -306,7 +445,7 @@ pub fn run(root: &Path) -> Result<(), String> {
             INIT_TIMEOUT.as_secs()
         ));
     }
-    problems.extend(check(&lines));
+    problems.extend(check(&lines, map));
     let mut text = String::from(
         "# The board image's init on QEMU netduinoplus2 (-d unimp): writes to the\n\
          # registers QEMU does not model, in order, and the registers polled\n\
@@ -315,15 +454,19 @@ pub fn run(root: &Path) -> Result<(), String> {
          # flag stays low: the first clock wait (HSIRDY) and the LSI's time\n\
          # out, and init goes on on the HSI, as when the crystal never starts.\n",
     );
+    if !map.features.is_empty() {
+        let _ = writeln!(text, "# The image built with `{}`.", map.features.join(" "));
+    }
     for l in &lines {
         let _ = writeln!(text, "{l}");
     }
-    let golden_path = root.join(GOLDEN);
-    let actual_path = dir.join("actual.trace");
+    let golden_name = map.golden;
+    let golden_path = root.join(golden_name);
+    let actual_path = dir.join(format!("{}-actual.trace", map.line));
     let _ = std::fs::write(&actual_path, &text);
     if std::env::var_os("HOPPER_UPDATE_GOLDEN").is_some() {
-        std::fs::write(&golden_path, &text).map_err(|e| format!("{GOLDEN}: {e}"))?;
-        eprintln!("xtask: wrote {GOLDEN}");
+        std::fs::write(&golden_path, &text).map_err(|e| format!("{golden_name}: {e}"))?;
+        eprintln!("xtask: wrote {golden_name}");
     }
     let golden = std::fs::read_to_string(&golden_path).unwrap_or_default();
     let same = golden == text;
@@ -335,7 +478,7 @@ pub fn run(root: &Path) -> Result<(), String> {
             .position(|(a, b)| a != b)
             .unwrap_or(lines.len().min(g.len()));
         problems.push(format!(
-            "the trace differs from {GOLDEN} at write {first}: got {:?}, golden {:?} (whole trace: {}; HOPPER_UPDATE_GOLDEN=1 accepts a deliberate change)",
+            "the trace differs from {golden_name} at write {first}: got {:?}, golden {:?} (whole trace: {}; HOPPER_UPDATE_GOLDEN=1 accepts a deliberate change)",
             lines.get(first),
             g.get(first),
             actual_path.display()
@@ -344,16 +487,21 @@ pub fn run(root: &Path) -> Result<(), String> {
     let writes = lines.iter().filter(|l| !l.starts_with("poll ")).count();
     let polls = lines.len() - writes;
     println!(
-        "board-init: writes={writes} polled_registers={polls} longest_poll_reads={longest_poll} terminated={done} golden={}",
+        "{}: writes={writes} polled_registers={polls} longest_poll_reads={longest_poll} terminated={done} golden={}",
+        map.line,
         if same { "same" } else { "DIFFERENT" }
     );
     if !problems.is_empty() {
         for p in &problems {
-            eprintln!("xtask: board-init: {p}");
+            eprintln!("xtask: {}: {p}", map.line);
         }
-        return Err(format!("board init failed: {}", problems.join("; ")));
+        return Err(format!(
+            "board init failed ({}): {}",
+            map.line,
+            problems.join("; ")
+        ));
     }
-    fault_test(root)
+    Ok(())
 }
 
 /// The HardFault entry on QEMU: the board image built with `fault-test`
@@ -473,7 +621,7 @@ I2S2ext: unimplemented device write (size 2, offset 0x000, value 0x5555)\n";
     /// Whether `check` names a problem starting with `what` in `trace`.
     fn caught(trace: &[&str], what: &str) -> bool {
         let lines: Vec<String> = trace.iter().map(|l| l.to_string()).collect();
-        check(&lines).iter().any(|p| p.starts_with(what))
+        check(&lines, &H405).iter().any(|p| p.starts_with(what))
     }
 
     #[test]
@@ -482,6 +630,42 @@ I2S2ext: unimplemented device write (size 2, offset 0x000, value 0x5555)\n";
             &["GPIOB.MODER = 0x00000001", "GPIOB.BSRR = 0x00010000"],
             "AMP_EN"
         ));
+    }
+
+    #[test]
+    fn the_feathers_amp_en_and_deadman_order_is_checked() {
+        let lines = |t: &[&str]| t.iter().map(|l| l.to_string()).collect::<Vec<_>>();
+        let good = [
+            "GPIOB.BSRR = 0x40000000",
+            "GPIOB.MODER = 0x10000000",
+            "TIM12.CCMR1 = 0x00000040",
+            "GPIOB.AFRH = 0x09000000",
+            "GPIOB.MODER = 0x20000000",
+        ];
+        let problems = check(&lines(&good), &FEATHER);
+        assert!(
+            !problems
+                .iter()
+                .any(|p| p.starts_with("AMP_EN") || p.starts_with("the deadman")),
+            "{problems:?}"
+        );
+        // PB14 handed to the timer before its output is forced low.
+        let early = [good[0], good[1], good[3], good[4], good[2]];
+        assert!(check(&lines(&early), &FEATHER)
+            .iter()
+            .any(|p| p.starts_with("the deadman's output is not forced low")));
+        // PB0's order says nothing about PB14.
+        let pb0 = ["GPIOB.BSRR = 0x00010000", "GPIOB.MODER = 0x00000001"];
+        assert!(check(&lines(&pb0), &FEATHER)
+            .iter()
+            .any(|p| p.starts_with("AMP_EN (PB14)")));
+    }
+
+    #[test]
+    fn unmodelled_timers_are_named() {
+        let log =
+            "timer[12]: unimplemented device write (size 4, offset 0x018, value 0x00000040)\n";
+        assert_eq!(trace(&parse(log)).0, ["TIM12.CCMR1 = 0x00000040"]);
     }
 
     #[test]

@@ -27,7 +27,8 @@
 //!   the board image's init
 //!   on QEMU with `-d unimp`, checked against `tests/board-init.trace`:
 //!   `board-init: writes=... polled_registers=... longest_poll_reads=...
-//!   terminated=... golden=...`.
+//!   terminated=... golden=...`, and the same for the Feather's pin map
+//!   against `tests/board-init-feather.trace`: `board-init-feather: ...`.
 //! * `cargo xtask board-init`: the board image's init check alone.
 //! * `cargo xtask hil [--serial PORT]`: the hardware-in-the-loop image
 //!   (`hopper-hil`) on QEMU (or a board on PORT) against `hopper-sim run
@@ -328,6 +329,13 @@ fn test(root: &Path) -> Result<(), String> {
         root,
         "clippy (MCU target, 12 MHz crystal profile)",
         &["--features", "hse-12mhz"],
+    )?;
+    // The Adafruit Feather's pin map (its timers, channels and USART are
+    // other PAC types; `cargo xtask board-init` runs its init on QEMU).
+    mcu_clippy(
+        root,
+        "clippy (MCU target, Feather pin map)",
+        &["--features", "feather"],
     )?;
     // The QEMU variant pulls in the plant: this also checks that
     // `hopper-plant` builds `no_std` for the MCU (the QEMU images then build

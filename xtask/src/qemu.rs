@@ -82,6 +82,7 @@ pub fn run(root: &Path) -> Result<(), String> {
             // Every summary line still printed, `qemu:` last.
             println!("qemu-link: error (see above)");
             println!("board-init: error (see above)");
+            println!("board-init-feather: error (see above)");
             for s in &SCENARIOS {
                 println!("{}: error (see above)", s.label);
             }

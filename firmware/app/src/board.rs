@@ -26,6 +26,9 @@
 //! (`hopper_control::boot::BootReport`).
 //!
 //! # Wiring
+//! The default pin map's ([`crate::pinmap::h405`]; the Feather's is
+//! [`crate::pinmap::feather`]):
+//!
 //! | Pin  | Peripheral / AF           | Signal                              | Direction        | Safe state / reset |
 //! |------|---------------------------|-------------------------------------|------------------|--------------------|
 //! | PB0  | TIM3_CH3 (AF2), push-pull | `AMP_EN`, amplifier enable, active high, through the deadman (`configure_deadman`) | output | low: a GPIO output driven low from `init`'s first step until the timer takes it, forced low; external pull-down while the pin floats (reset to `init`) |
@@ -42,8 +45,8 @@
 //! | PA9  | USART1_TX, AF7            | host link, to the USB-UART adapter's RX, 921,600 baud 8N1 | output | idle high |
 //! | PA10 | USART1_RX, AF7, pull-up   | host link, from the adapter's TX    | input            | idle high when unplugged |
 //!
-//! PA15, PB3 and PB4 are JTAG pins at reset (JTDI, JTDO/SWO, NJTRST): after
-//! [`init`] the board is debuggable over SWD only (PA13/PA14, untouched) and
+//! PA15, PB3 and PB4 are JTAG pins at reset (JTDI, JTDO/SWO, NJTRST): on
+//! this map, after [`init`] the board is debuggable over SWD only (PA13/PA14, untouched) and
 //! has no SWO trace, which defmt over RTT does not need.
 //!
 //! The encoder inputs have the internal pull-ups on so that open-collector
@@ -62,11 +65,12 @@
 //! [`BoardIo::ack_control_irq`] first.
 //!
 //! # Encoders
-//! TIM2 and TIM5 are 32-bit timers in encoder mode 3 (both edges of both
-//! channels, ×4) with ARR = 0xFFFF_FFFF: the raw counts wrap at **32 bits**,
-//! so the calibration must say `motor_counter_bits = 32` and
-//! `height_counter_bits = 32` ([`ENCODER_COUNTER_BITS`]); the 16-bit
-//! defaults would reject every count above 65 535 as out of range.
+//! On the default map TIM2 and TIM5 are 32-bit timers in encoder mode 3
+//! (both edges of both channels, ×4) with ARR = 0xFFFF_FFFF: the raw counts
+//! wrap at **32 bits**, so the calibration must say `motor_counter_bits =
+//! 32` and `height_counter_bits = 32` ([`ENCODER_COUNTER_BITS`]); the
+//! 16-bit defaults would reject every count above 65 535 as out of range.
+//! The Feather's TIM8 and TIM3 wrap at 16 bits.
 //!
 //! # Watchdog
 //! The IWDG runs from the LSI (nominally 32 kHz) with prescaler 4 and reload
@@ -87,6 +91,8 @@ use hopper_control::hal::{
     AmpEnable, Converters, HopperIo, IoError, PinError, PinnedIo, RawSample,
 };
 use stm32f4::stm32f405::{self as pac, Peripherals};
+
+use crate::pinmap::{self, DeadmanChannel, PortPin};
 
 /// The DWT cycle counter as the period runner's step timer (core cycles)
 /// and its clock for the period-start jitter check. A copy reads the same
@@ -125,9 +131,9 @@ impl hopper_control::runner::CycleCounter for CycleCounter {
 /// Core clock after `init`, Hz (when the crystal starts; see [`BoardIo::sysclk_hz`]).
 pub const SYSCLK_HZ: u32 = 168_000_000;
 
-/// Width of both encoder counters in bits: the value for the calibration's
-/// `motor_counter_bits` and `height_counter_bits`.
-pub const ENCODER_COUNTER_BITS: u8 = 32;
+/// Width of both encoder counters in bits (the pin map's): the value for
+/// the calibration's `motor_counter_bits` and `height_counter_bits`.
+pub const ENCODER_COUNTER_BITS: u8 = pinmap::ENCODER_COUNTER_BITS;
 
 /// The core clock when the crystal or the PLL fails: the internal HSI oscillator.
 const HSI_HZ: u32 = 16_000_000;
@@ -189,11 +195,6 @@ const MIN_CONTROL_HZ: u32 = 1;
 /// fallback (ADCCLK 4 MHz), both well inside a 50 µs period.
 const MAX_CONTROL_HZ: u32 = 20_000;
 
-/// ADC channel of the load cell (PA2).
-const LOADCELL_CHANNEL: u8 = 2;
-/// ADC channel of the leg potentiometer (PA3).
-const POT_CHANNEL: u8 = 3;
-
 /// Largest 12-bit DAC code.
 const DAC_MAX_CODE: u16 = 0x0FFF;
 /// Zero-current code used when `init` gets an impossible one: mid-scale, the
@@ -204,51 +205,6 @@ const DAC_FALLBACK_ZERO_CODE: u16 = 2048;
 const IWDG_RELOAD: u16 = 39;
 const _: () = assert!(IWDG_RELOAD <= 0x0FFF);
 
-/// Encoder mode 3 (×4) on CH1/CH2 of a 32-bit timer, filtered, wrapping at 32
-/// bits, counter at 0 and running. A macro because TIM2 and TIM5 are
-/// different PAC types with the same registers.
-///
-/// Filter f_DTS/2, N = 8: an edge must be stable 8 samples at 42 MHz (190 ns;
-/// 1 µs on the HSI fallback) to count. The motor encoder's fastest edges
-/// (500 lines ×4 at 10 000 rpm) are 3 µs apart.
-macro_rules! configure_encoder {
-    ($tim:expr) => {{
-        let tim = &$tim;
-        tim.cr1().modify(|_, w| w.cen().disabled());
-        tim.smcr().modify(|_, w| w.sms().disabled());
-        tim.ccmr1_input().write(|w| {
-            w.cc1s()
-                .ti1()
-                .ic1f()
-                .fdts_div2_n8()
-                .ic1psc()
-                .no_prescaler()
-                .cc2s()
-                .ti2()
-                .ic2f()
-                .fdts_div2_n8()
-                .ic2psc()
-                .no_prescaler()
-        });
-        // Non-inverted inputs: CCxP = CCxNP = 0 (both edges are counted by
-        // the encoder mode itself).
-        tim.ccer().write(|w| {
-            w.cc1p()
-                .rising_edge()
-                .cc1np()
-                .clear_bit()
-                .cc2p()
-                .rising_edge()
-                .cc2np()
-                .clear_bit()
-        });
-        tim.arr().write(|w| w.arr().set(u32::MAX));
-        tim.cnt().write(|w| w.cnt().set(0));
-        tim.smcr().modify(|_, w| w.sms().encoder_mode_3());
-        tim.cr1().modify(|_, w| w.ckd().div1().cen().enabled());
-    }};
-}
-
 /// Everything the RTIC app needs from the board.
 pub struct Board {
     /// Sensors, DAC and amplifier enable: the control step's [`HopperIo`].
@@ -257,7 +213,7 @@ pub struct Board {
     pub watchdog: Watchdog,
     /// The dump button (PC13).
     pub dump_button: DumpButton,
-    /// The host link's USART1 (PA9/PA10), receiving.
+    /// The host link's USART (the pin map's), receiving.
     pub serial: crate::serial::Serial<'static>,
     /// What init found: the reset causes, the brown-out reset, the clock.
     pub boot: hopper_control::boot::BootReport,
@@ -274,6 +230,8 @@ struct Clocks {
     sysclk_hz: u32,
     /// Clock of the APB1 timers (TIM2..TIM5), Hz.
     apb1_timer_hz: u32,
+    /// APB1 clock (USART2, USART3), Hz.
+    pclk1_hz: u32,
     /// APB2 clock (USART1), Hz.
     pclk2_hz: u32,
 }
@@ -302,7 +260,7 @@ pub fn init(
 
     // 1. AMP_EN (PB0): latch the output low *before* making the pin an output,
     //    so it never drives high, not even for one cycle.
-    amp_en_low(&dp.RCC, &dp.GPIOB);
+    pinmap::amp_en_low(&dp.RCC, &dp.GPIOB);
 
     // 2. DAC channel 1 (PA4) at the zero-current code. PA4 goes analog first
     //    (RM0090: avoids the digital input's parasitic consumption); with no
@@ -328,35 +286,25 @@ pub fn init(
     dp.DAC.dhr12r1().write(|w| w.daccdhr().set(zero_code));
 
     // 3. The other pins.
-    configure_inputs(&dp.GPIOB, &dp.GPIOC);
-    configure_analog_and_encoder_pins(&dp.GPIOA, &dp.GPIOB);
+    pinmap::configure_inputs(&dp.GPIOB, &dp.GPIOC);
+    pinmap::configure_analog_and_encoder_pins(&dp.GPIOA, &dp.GPIOB, &dp.GPIOC);
 
     // 4. Clocks. Everything timed below derives from the clock that runs.
     let clocks = configure_clocks(&dp.RCC, &dp.FLASH, &dp.PWR, &dp.TIM11);
 
     // 5. Encoders.
-    dp.RCC.apb1enr().modify(|_, w| {
-        w.tim2en()
-            .enabled()
-            .tim3en()
-            .enabled()
-            .tim4en()
-            .enabled()
-            .tim5en()
-            .enabled()
-    });
-    dp.RCC.apb2enr().modify(|_, w| w.adc1en().enabled());
-    let _ = dp.RCC.apb2enr().read();
-    configure_encoder!(dp.TIM2);
-    configure_encoder!(dp.TIM5);
+    pinmap::enable_clocks(&dp.RCC);
+    let (motor_counter, height_counter) = pinmap::take_counters!(dp);
+    let (deadman_timer, link_usart) = pinmap::take_deadman_and_link!(dp);
+    pinmap::configure_encoders(&motor_counter, &height_counter);
 
     // 6. TIM4 at the control rate, stopped; configured while the ADC's
     //    trigger input is still disabled, so loading it cannot trigger.
     let control_hz = configure_control_timer(&dp.TIM4, clocks.apb1_timer_hz, control_hz);
 
-    // 6b. The hardware deadman: AMP_EN becomes TIM3_CH3, forced low until
-    //     the first enabled period retriggers it.
-    configure_deadman(&dp.TIM3, &dp.GPIOB, clocks.apb1_timer_hz, control_hz);
+    // 6b. The hardware deadman: AMP_EN becomes the deadman timer's
+    //     output, forced low until the first enabled period retriggers it.
+    configure_deadman(&deadman_timer, &dp.GPIOB, clocks.apb1_timer_hz, control_hz);
 
     // 7. ADC1 injected group, triggered by TIM4 TRGO, interrupt at its end.
     configure_adc(&dp.ADC_COMMON, &dp.ADC1);
@@ -365,12 +313,13 @@ pub fn init(
     //    ADC powered and settled.
     dp.TIM4.cr1().modify(|_, w| w.cen().enabled());
 
-    // 9. The host link: USART1 on PA9/PA10.
+    // 9. The host link: the pin map's USART.
     let serial = crate::serial::Serial::new(
-        dp.USART1,
+        link_usart,
         &dp.RCC,
         &dp.GPIOA,
-        clocks.pclk2_hz,
+        &dp.GPIOB,
+        clocks.link_bus_hz(),
         link.0,
         link.1,
     );
@@ -402,15 +351,15 @@ pub fn init(
         io: BoardIo {
             io: PinnedIo::new(
                 BoardConverters {
-                    tim2: dp.TIM2,
-                    tim5: dp.TIM5,
+                    motor: motor_counter,
+                    height: height_counter,
                     adc: dp.ADC1,
                     dac: dp.DAC,
                 },
                 PortPin::new(),
                 PortPin::new(),
                 Deadman {
-                    tim3: dp.TIM3,
+                    timer: deadman_timer,
                     running: false,
                 },
             ),
@@ -437,7 +386,7 @@ pub fn init(
 pub struct HilBoard {
     /// The e-stop input and AMP_EN, as a plain output.
     pub pins: HilPins,
-    /// The host link's USART1 (PA9/PA10).
+    /// The host link's USART (the pin map's).
     pub serial: crate::serial::Serial<'static>,
     /// What init found (no watchdog runs: the reset causes are read).
     pub boot: hopper_control::boot::BootReport,
@@ -448,9 +397,10 @@ pub struct HilBoard {
     pub tim5: pac::TIM5,
 }
 
-/// The board's e-stop input (PB1) and AMP_EN (PB0) in the loop.
+/// The board's e-stop input and AMP_EN in the loop (PB1 and PB0 on the
+/// default pin map).
 ///
-/// AMP_EN is the hardware deadman (TIM3_CH3), as on the robot, with a
+/// AMP_EN is the hardware deadman, as on the robot, with a
 /// window of [`HIL_DEADMAN_WINDOW_US`] of wall-clock time instead of three
 /// control periods: the host paces the periods (hundreds to thousands a
 /// second), and when it stops sending (a crash, an unplugged cable, the
@@ -460,7 +410,7 @@ pub struct HilBoard {
 /// would the robot.
 #[derive(Debug)]
 pub struct HilPins {
-    estop: PortPin<'B', 1>,
+    estop: pinmap::Estop,
     enable: Deadman,
 }
 
@@ -482,30 +432,30 @@ impl hopper_robot_link::hil::HilPins for HilPins {
 }
 
 /// Brings up the HIL image's board: AMP_EN low first, the inputs, the
-/// clocks (the HSI on a failed crystal, and in QEMU), the link on USART1.
+/// clocks (the HSI on a failed crystal, and in QEMU), the link on the pin
+/// map's USART.
 /// No converters, encoders, control timer, deadman or watchdog: the
 /// periods come from the host.
 pub fn init_hil(dp: Peripherals, link: (Producer<'static, u8>, Consumer<'static, u8>)) -> HilBoard {
-    amp_en_low(&dp.RCC, &dp.GPIOB);
-    configure_inputs(&dp.GPIOB, &dp.GPIOC);
+    pinmap::amp_en_low(&dp.RCC, &dp.GPIOB);
+    pinmap::configure_inputs(&dp.GPIOB, &dp.GPIOC);
     let clocks = configure_clocks(&dp.RCC, &dp.FLASH, &dp.PWR, &dp.TIM11);
     // The deadman with a wall-clock window (`HilPins`): three "periods" of
     // a third of the window each.
-    dp.RCC
-        .apb1enr()
-        .modify(|_, w| w.tim3en().enabled().tim5en().enabled());
-    let _ = dp.RCC.apb1enr().read();
+    pinmap::enable_hil_clocks(&dp.RCC);
+    let (deadman_timer, link_usart) = pinmap::take_deadman_and_link!(dp);
     configure_deadman(
-        &dp.TIM3,
+        &deadman_timer,
         &dp.GPIOB,
         clocks.apb1_timer_hz,
         hopper_control::deadman::WINDOW_PERIODS * 1_000_000 / HIL_DEADMAN_WINDOW_US,
     );
     let serial = crate::serial::Serial::new(
-        dp.USART1,
+        link_usart,
         &dp.RCC,
         &dp.GPIOA,
-        clocks.pclk2_hz,
+        &dp.GPIOB,
+        clocks.link_bus_hz(),
         link.0,
         link.1,
     );
@@ -524,7 +474,7 @@ pub fn init_hil(dp: Peripherals, link: (Producer<'static, u8>, Consumer<'static,
         pins: HilPins {
             estop: PortPin::new(),
             enable: Deadman {
-                tim3: dp.TIM3,
+                timer: deadman_timer,
                 running: false,
             },
         },
@@ -535,27 +485,6 @@ pub fn init_hil(dp: Peripherals, link: (Producer<'static, u8>, Consumer<'static,
     }
 }
 
-/// AMP_EN (PB0) low and an output, the GPIO ports clocked: the output is
-/// latched low *before* the pin becomes an output, so it never drives
-/// high, not even for one cycle. Every image's `init` does this first.
-fn amp_en_low(rcc: &pac::RCC, gpiob: &pac::GPIOB) {
-    rcc.ahb1enr().modify(|_, w| {
-        w.gpioaen()
-            .enabled()
-            .gpioben()
-            .enabled()
-            .gpiocen()
-            .enabled()
-    });
-    // Read back: errata ES0182 "delay after an RCC peripheral clock enabling".
-    let _ = rcc.ahb1enr().read();
-    gpiob.bsrr().write(|w| w.br0().set_bit());
-    gpiob.otyper().modify(|_, w| w.ot0().push_pull());
-    gpiob.ospeedr().modify(|_, w| w.ospeedr0().low_speed());
-    gpiob.pupdr().modify(|_, w| w.pupdr0().floating());
-    gpiob.moder().modify(|_, w| w.moder0().output());
-}
-
 /// Every reset flag of RCC_CSR, then cleared (RMVF), so that the next
 /// reset reports only its own cause.
 fn take_reset_causes(rcc: &pac::RCC) -> hopper_control::boot::ResetCauses {
@@ -564,79 +493,28 @@ fn take_reset_causes(rcc: &pac::RCC) -> hopper_control::boot::ResetCauses {
     causes
 }
 
-/// E-stop (PB1), amplifier fault (PB4) and dump button (PC13): inputs with pull-ups.
-fn configure_inputs(gpiob: &pac::GPIOB, gpioc: &pac::GPIOC) {
-    gpiob
-        .pupdr()
-        .modify(|_, w| w.pupdr1().pull_up().pupdr4().pull_up());
-    gpiob
-        .moder()
-        .modify(|_, w| w.moder1().input().moder4().input());
-    gpioc.pupdr().modify(|_, w| w.pupdr13().pull_up());
-    gpioc.moder().modify(|_, w| w.moder13().input());
-}
-
-/// ADC inputs (PA2, PA3) analog; encoder inputs (PA0, PA1, PA15, PB3) in
-/// their alternate functions with pull-ups. The AF number is written before
-/// the mode, so a pin never sits in the wrong alternate function.
-fn configure_analog_and_encoder_pins(gpioa: &pac::GPIOA, gpiob: &pac::GPIOB) {
-    gpioa.pupdr().modify(|_, w| {
-        w.pupdr2()
-            .floating()
-            .pupdr3()
-            .floating()
-            .pupdr0()
-            .pull_up()
-            .pupdr1()
-            .pull_up()
-            .pupdr15()
-            .pull_up()
-    });
-    gpioa
-        .moder()
-        .modify(|_, w| w.moder2().analog().moder3().analog());
-    gpioa.afrl().modify(|_, w| w.afrl0().af2().afrl1().af2());
-    gpioa.afrh().modify(|_, w| w.afrh15().af1());
-    gpioa.moder().modify(|_, w| {
-        w.moder0()
-            .alternate()
-            .moder1()
-            .alternate()
-            .moder15()
-            .alternate()
-    });
-    gpiob.pupdr().modify(|_, w| w.pupdr3().pull_up());
-    gpiob.afrl().modify(|_, w| w.afrl3().af1());
-    gpiob.moder().modify(|_, w| w.moder3().alternate());
-}
-
-/// The deadman on AMP_EN (`hopper_control::deadman`, docs/board.md):
-/// TIM3 ticking at 1 MHz, one-pulse, its window [`deadman::window_ticks`]
-/// of the control rate; CH3 forced low, then PB0 handed from its GPIO
-/// output (driven low since step 1) to TIM3_CH3 (AF2), the AF number
-/// before the mode, so the pin never drives high. The debugger's freeze of
-/// TIM3 (DBGMCU_APB1_FZ.DBG_TIM3_STOP) stays off: a halted core drops the
-/// enable too.
+/// The deadman on AMP_EN (`hopper_control::deadman`, docs/board.md): the
+/// pin map's timer ticking at 1 MHz, one-pulse, its window
+/// [`deadman::window_ticks`] of the control rate; its channel forced low,
+/// then AMP_EN handed from its GPIO output (driven low since step 1) to
+/// the timer's channel, the AF number before the mode, so the pin never
+/// drives high. The debugger's freeze of the timer (DBGMCU_APB1_FZ) stays
+/// off: a halted core drops the enable too.
 ///
 /// [`deadman::window_ticks`]: hopper_control::deadman::window_ticks
-fn configure_deadman(tim: &pac::TIM3, gpiob: &pac::GPIOB, timer_hz: u32, control_hz: u32) {
+fn configure_deadman(
+    tim: &pinmap::DeadmanTimer,
+    gpiob: &pac::GPIOB,
+    timer_hz: u32,
+    control_hz: u32,
+) {
     use hopper_control::deadman;
-    tim.cr1().write(|w| w.opm().enabled().cen().disabled());
-    tim.psc()
-        .write(|w| w.psc().set(deadman::prescaler(timer_hz)));
-    tim.arr()
-        .write(|w| w.arr().set(deadman::window_ticks(control_hz)));
-    tim.ccr3().write(|w| w.ccr().set(deadman::COMPARE));
-    // Output compare, no preload (a mode write takes effect at once).
-    tim.ccmr2_output()
-        .write(|w| w.cc3s().output().oc3pe().disabled().oc3m().force_inactive());
-    // Load the prescaler (an update event, with the counter stopped).
-    tim.egr().write(|w| w.ug().set_bit());
-    tim.sr().write(|w| w.uif().clear_bit());
-    tim.cnt().write(|w| w.cnt().set(0));
-    tim.ccer().write(|w| w.cc3p().clear_bit().cc3e().set_bit());
-    gpiob.afrl().modify(|_, w| w.afrl0().af2());
-    gpiob.moder().modify(|_, w| w.moder0().alternate());
+    tim.setup(
+        deadman::prescaler(timer_hz),
+        deadman::window_ticks(control_hz),
+        deadman::COMPARE,
+    );
+    pinmap::amp_en_to_deadman(gpiob);
 }
 
 /// Polls `ready` up to [`READY_POLLS`] times; whether it became true.
@@ -660,6 +538,7 @@ fn configure_clocks(
         hse_measured_hz: 0,
         sysclk_hz: HSI_HZ,
         apb1_timer_hz: HSI_HZ,
+        pclk1_hz: HSI_HZ,
         pclk2_hz: HSI_HZ,
     };
 
@@ -757,7 +636,18 @@ fn configure_clocks(
         sysclk_hz: SYSCLK_HZ,
         // APB1 prescaler ≠ 1: its timers run at twice PCLK1.
         apb1_timer_hz: 2 * PLL_PCLK1_HZ,
+        pclk1_hz: PLL_PCLK1_HZ,
         pclk2_hz: SYSCLK_HZ / 2,
+    }
+}
+
+impl Clocks {
+    /// The clock of the pin map's link USART, Hz.
+    fn link_bus_hz(&self) -> u32 {
+        match pinmap::LINK_BUS {
+            pinmap::Bus::Apb1 => self.pclk1_hz,
+            pinmap::Bus::Apb2 => self.pclk2_hz,
+        }
     }
 }
 
@@ -867,8 +757,7 @@ fn configure_adc(common: &pac::ADC_COMMON, adc: &pac::ADC1) {
     adc.cr2().modify(|_, w| w.adon().disabled());
     // ADCCLK = PCLK2 / 4: 21 MHz at 168 MHz (the F405's maximum is 36 MHz).
     common.ccr().modify(|_, w| w.adcpre().div4());
-    adc.smpr2()
-        .modify(|_, w| w.smp2().cycles56().smp3().cycles56());
+    pinmap::set_sample_times(adc);
     set_injected_sequence(adc);
     // SCAN: convert the whole injected group on one trigger (JEOC at its end).
     adc.cr1().modify(|_, w| {
@@ -912,9 +801,14 @@ fn set_injected_sequence(adc: &pac::ADC1) {
     adc.jsqr().write(|w| {
         // SAFETY: channels 2 and 3 exist on ADC1 (the field takes 0..=18) and
         // are what JSQ3/JSQ4 hold; the ADC is off (ADON = 0) while it is set.
-        unsafe { w.jsq3().bits(LOADCELL_CHANNEL).jsq4().bits(POT_CHANNEL) }
-            .jl()
-            .set(1)
+        unsafe {
+            w.jsq3()
+                .bits(pinmap::LOADCELL_CHANNEL)
+                .jsq4()
+                .bits(pinmap::POT_CHANNEL)
+        }
+        .jl()
+        .set(1)
     });
 }
 
@@ -962,73 +856,11 @@ pub struct BoardIo {
     /// the converters and counters, the e-stop (PB1) and amplifier-fault
     /// (PB4) inputs, the deadman on AMP_EN (PB0). Another board is another
     /// set of these: a pin map.
-    io: PinnedIo<BoardConverters, PortPin<'B', 1>, PortPin<'B', 4>, Deadman>,
+    io: PinnedIo<BoardConverters, pinmap::Estop, pinmap::AmpFault, Deadman>,
     /// Core clock that `init` achieved.
     sysclk_hz: u32,
     /// Control (TIM4 update) rate that `init` achieved.
     control_hz: u32,
-}
-
-/// One pin of GPIOB or GPIOC (`PORT`), number `N`, as an embedded-hal pin.
-/// Zero-sized: its reads are of IDR and its writes one atomic BSRR store,
-/// which no other owner of the port can race with.
-/// Made only here (`new` is private), so no other code can drive AMP_EN.
-#[derive(Debug)]
-pub struct PortPin<const PORT: char, const N: u8>(());
-
-impl<const PORT: char, const N: u8> PortPin<PORT, N> {
-    /// The pin; `PORT` must be `'B'` or `'C'` and `N` below 16.
-    const fn new() -> Self {
-        const {
-            assert!(N < 16 && (PORT == 'B' || PORT == 'C'));
-        }
-        PortPin(())
-    }
-
-    /// The port's input data register.
-    fn idr() -> u32 {
-        #[allow(unsafe_code)] // A read of a port's input register.
-        // SAFETY: the fixed addresses of GPIOB's and GPIOC's register
-        // blocks; IDR is read-only.
-        unsafe {
-            match PORT {
-                'C' => (*pac::GPIOC::ptr()).idr().read().bits(),
-                _ => (*pac::GPIOB::ptr()).idr().read().bits(),
-            }
-        }
-    }
-}
-
-impl<const PORT: char, const N: u8> embedded_hal::digital::ErrorType for PortPin<PORT, N> {
-    type Error = core::convert::Infallible;
-}
-
-impl<const PORT: char, const N: u8> embedded_hal::digital::InputPin for PortPin<PORT, N> {
-    fn is_high(&mut self) -> Result<bool, Self::Error> {
-        Ok(Self::idr() & (1 << N) != 0)
-    }
-    fn is_low(&mut self) -> Result<bool, Self::Error> {
-        Ok(Self::idr() & (1 << N) == 0)
-    }
-}
-
-impl<const N: u8> embedded_hal::digital::OutputPin for PortPin<'B', N> {
-    fn set_low(&mut self) -> Result<(), Self::Error> {
-        #[allow(unsafe_code)] // One atomic store to the port's set/reset register.
-        // SAFETY: GPIOB's fixed address; BSRR's write touches only pin N.
-        unsafe {
-            (*pac::GPIOB::ptr()).bsrr().write(|w| w.bits(1 << (N + 16)));
-        }
-        Ok(())
-    }
-    fn set_high(&mut self) -> Result<(), Self::Error> {
-        #[allow(unsafe_code)] // One atomic store to the port's set/reset register.
-        // SAFETY: GPIOB's fixed address; BSRR's write touches only pin N.
-        unsafe {
-            (*pac::GPIOB::ptr()).bsrr().write(|w| w.bits(1 << N));
-        }
-        Ok(())
-    }
 }
 
 /// The converters and counters (what embedded-hal has no traits for): the
@@ -1037,15 +869,18 @@ impl<const N: u8> embedded_hal::digital::OutputPin for PortPin<'B', N> {
 /// channel 1.
 #[derive(Debug)]
 pub struct BoardConverters {
-    tim2: pac::TIM2,
-    tim5: pac::TIM5,
+    motor: pinmap::MotorCounter,
+    height: pinmap::HeightCounter,
     adc: pac::ADC1,
     dac: pac::DAC,
 }
 
 impl Converters for BoardConverters {
     fn counters(&mut self) -> (u32, u32) {
-        (self.tim2.cnt().read().bits(), self.tim5.cnt().read().bits())
+        (
+            self.motor.cnt().read().bits(),
+            self.height.cnt().read().bits(),
+        )
     }
 
     fn codes(&mut self) -> (u16, u16) {
@@ -1065,11 +900,11 @@ impl Converters for BoardConverters {
     }
 }
 
-/// The hardware deadman on AMP_EN (TIM3_CH3 on PB0,
+/// The hardware deadman on AMP_EN (the pin map's timer and channel,
 /// `hopper_control::deadman`) as the amplifier enable.
 #[derive(Debug)]
 pub struct Deadman {
-    tim3: pac::TIM3,
+    timer: pinmap::DeadmanTimer,
     /// Whether the output is in PWM mode 2 (not forced low).
     running: bool,
 }
@@ -1083,43 +918,34 @@ impl AmpEnable for Deadman {
     fn set(&mut self, on: bool) -> Result<(), DeadmanLapsed> {
         match hopper_control::deadman::write_for(on) {
             hopper_control::deadman::Write::Retrigger => {
-                if self.running && self.tim3.cr1().read().cen().is_disabled() {
+                if self.running && self.timer.stopped() {
                     // The window lapsed since the last enabled period (the
                     // control interrupt stopped for 3 periods: a halt, a
                     // stall): the amplifier went off by itself, and the
                     // state it would resume on is stale. Off it stays: the
                     // runner latches `amp-fault`.
-                    self.tim3
-                        .ccmr2_output()
-                        .modify(|_, w| w.oc3m().force_inactive());
+                    self.timer.force_low();
                     self.running = false;
                     return Err(DeadmanLapsed);
                 }
                 if !self.running {
-                    self.tim3.ccmr2_output().modify(|_, w| w.oc3m().pwm_mode2());
+                    self.timer.pulse();
                     self.running = true;
                 }
-                self.tim3
-                    .cnt()
-                    .write(|w| w.cnt().set(hopper_control::deadman::COMPARE));
-                self.tim3.cr1().write(|w| w.opm().enabled().cen().enabled());
+                self.timer.retrigger(hopper_control::deadman::COMPARE);
             }
             hopper_control::deadman::Write::ForceLow => {
-                self.tim3
-                    .ccmr2_output()
-                    .modify(|_, w| w.oc3m().force_inactive());
-                self.tim3
-                    .cr1()
-                    .write(|w| w.opm().enabled().cen().disabled());
+                self.timer.force_low();
+                self.timer.stop();
                 self.running = false;
             }
         }
         Ok(())
     }
 
-    /// PB0's input register follows the pin in its alternate function too.
+    /// AMP_EN's input register follows the pin in its alternate function too.
     fn reads_off(&mut self) -> Option<bool> {
-        embedded_hal::digital::InputPin::is_low(&mut PortPin::<'B', 0>::new()).ok()
+        embedded_hal::digital::InputPin::is_low(&mut PortPin::<'B', { pinmap::AMP_EN }>::new()).ok()
     }
 }
 
@@ -1237,7 +1063,7 @@ impl Watchdog {
 #[derive(Debug)]
 pub struct DumpButton {
     /// PC13.
-    pin: PortPin<'C', 13>,
+    pin: pinmap::Dump,
     /// Debounced state: pressed.
     pressed: bool,
     /// The previous raw sample: pressed.

@@ -6,7 +6,7 @@
 //!
 //! | Binary | Source | Image | Features |
 //! |--------|--------|-------|----------|
-//! | `hopper-fw` | `src/main.rs` | the board | `board` (default); `hse-12mhz`, `fault-test` |
+//! | `hopper-fw` | `src/main.rs` | the board | `board` (default); `hse-12mhz`, `feather` (the pin map, [`pinmap`]), `fault-test` |
 //! | `hopper-selftest` | `src/bin/selftest.rs` | the on-target self-test | `board` |
 //! | `hopper-hil` | `src/bin/hil.rs` | hardware in the loop: the board's firmware, its sensors the host's models | `board` |
 //! | `hopper-sih` | `src/bin/sih.rs` | the simulated hopper on a board (the plant on the chip, the link on its USART) | `sih` |
@@ -31,33 +31,40 @@ pub mod serial;
 pub mod board;
 
 #[cfg(target_os = "none")]
+pub mod pinmap;
+
+#[cfg(target_os = "none")]
 pub mod flash;
 
-/// Drives the amplifier-enable pin (PB0) low with one atomic BSRR write.
+/// Drives the amplifier-enable pin (the pin map's AMP_EN: PB0 by
+/// default) low with one atomic BSRR write.
 ///
 /// Usable from any context, including the panic and fault handlers: it needs
 /// no owned peripheral. If GPIOB is not clocked yet the write is ignored and
 /// the external pull-down keeps the amplifier off.
 #[cfg(target_os = "none")]
 pub fn disable_amplifier() {
-    // SAFETY: `GPIOB::ptr()` and `TIM3::ptr()` are the fixed addresses of
-    // their register blocks. BSRR resets only PB0 (one store). Then PB0
-    // leaves the deadman timer's alternate function for a GPIO output,
-    // which drives the low just latched, whatever the timer does; and the
-    // timer's output is forced low too. The MODER read-modify-write can
-    // race with nothing: every other path that writes MODER runs in `init`
-    // or in a fault handler, which does not return.
-    #[allow(unsafe_code)] // Needed to reach GPIOB and TIM3 without owning them (panic path).
-    let (gpiob, tim3) = unsafe {
+    use pinmap::DeadmanChannel as _;
+    // SAFETY: `GPIOB::ptr()` and the deadman timer's `ptr()` are the fixed
+    // addresses of their register blocks. BSRR resets only AMP_EN (one
+    // store). Then AMP_EN leaves the deadman timer's alternate function for
+    // a GPIO output, which drives the low just latched, whatever the timer
+    // does; and the timer's output is forced low too. The MODER
+    // read-modify-write can race with nothing: every other path that writes
+    // MODER runs in `init` or in a fault handler, which does not return.
+    #[allow(unsafe_code)] // Needed to reach GPIOB and the timer without owning them (panic path).
+    let (gpiob, timer) = unsafe {
         (
             &*stm32f4::stm32f405::GPIOB::ptr(),
-            &*stm32f4::stm32f405::TIM3::ptr(),
+            &*pinmap::DeadmanTimer::ptr(),
         )
     };
-    gpiob.bsrr().write(|w| w.br0().set_bit());
-    gpiob.moder().modify(|_, w| w.moder0().output());
-    tim3.ccmr2_output().modify(|_, w| w.oc3m().force_inactive());
-    tim3.cr1().write(|w| w.cen().disabled());
+    gpiob.bsrr().write(|w| w.br(pinmap::AMP_EN).set_bit());
+    gpiob
+        .moder()
+        .modify(|_, w| w.moder(pinmap::AMP_EN).output());
+    timer.force_low();
+    timer.stop();
 }
 
 /// What every fault path of the board's images ends in: `AMP_EN` low, the
@@ -571,8 +578,9 @@ pub mod log {
 /// HardFault (entered from its vector, through cortex-m-rt's trampoline
 /// where the version has one, which uses no stack): before anything
 /// touches the stack, which may be the fault (flip-link puts it below the
-/// statics, so an overflow faults), AMP_EN is driven low (PB0 reset through
-/// BSRR, then a GPIO output, off the deadman timer), TIM3 is stopped, and
+/// statics, so an overflow faults), AMP_EN is driven low (reset through
+/// BSRR, then a GPIO output, off the deadman timer: the pin map's pin and
+/// timer), the deadman timer is stopped, and
 /// the DAC takes the zero code ([`HOPPER_DAC_ZERO_CODE`]); then a fresh
 /// stack at its top (`_stack_start`) for the Rust handler, which ends in
 /// `$park`.
@@ -597,16 +605,19 @@ macro_rules! fault_handlers {
                 ".type HardFault, %function",
                 ".thumb_func",
                 "HardFault:",
-                // GPIOB (0x4002_0400): BSRR = BR0, then MODER0 = 0b01 (output).
+                // GPIOB (0x4002_0400): BSRR = AMP_EN's reset bit, then
+                // its MODER field = 0b01 (output).
                 "ldr r0, =0x40020400",
-                "mov r1, #0x10000",
+                "ldr r1, ={bsrr}",
                 "str r1, [r0, #0x18]",
                 "ldr r1, [r0, #0x00]",
-                "bic r1, r1, #3",
-                "orr r1, r1, #1",
+                "ldr r2, ={moder_mask}",
+                "bic r1, r1, r2",
+                "ldr r2, ={moder_output}",
+                "orr r1, r1, r2",
                 "str r1, [r0, #0x00]",
-                // TIM3 (0x4000_0400): CR1 = 0, the counter stopped.
-                "ldr r0, =0x40000400",
+                // The deadman timer: CR1 = 0, the counter stopped.
+                "ldr r0, ={deadman}",
                 "mov r1, #0",
                 "str r1, [r0, #0x00]",
                 // DAC (0x4000_7400): DHR12R1 = the zero code.
@@ -620,6 +631,10 @@ macro_rules! fault_handlers {
                 "msr msp, r0",
                 "b hopper_hard_fault",
                 ".ltorg",
+                bsrr = const $crate::pinmap::AMP_EN_BSRR_RESET,
+                moder_mask = const $crate::pinmap::AMP_EN_MODER_MASK,
+                moder_output = const $crate::pinmap::AMP_EN_MODER_OUTPUT,
+                deadman = const $crate::pinmap::DEADMAN_TIMER_ADDR,
             );
         }
 

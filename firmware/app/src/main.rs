@@ -122,7 +122,10 @@ mod app {
         link_queues: LinkEnds<'static, Slot>,
         link_rx: Consumer<'static, u8>,
         link_tx: LinkTx<'static>,
+        #[cfg(not(feature = "feather"))]
         serial: Serial<'static>,
+        #[cfg(feature = "feather")]
+        serial3: Serial<'static>,
     }
 
     #[init(local = [
@@ -134,7 +137,7 @@ mod app {
     ])]
     fn init(cx: init::Context) -> (Shared, Local) {
         let mut cfg = HopperConfig::default();
-        // TIM2 and TIM5 count the encoders over 32 bits.
+        // The pin map's encoder counters (32 bits on the H405, 16 on the Feather).
         cfg.calibration.motor_counter_bits = board::ENCODER_COUNTER_BITS;
         cfg.calibration.height_counter_bits = board::ENCODER_COUNTER_BITS;
         // The calibration offsets are placeholders until a tare or a saved
@@ -241,10 +244,12 @@ mod app {
             runner.report_overrun();
         }
         defmt::info!(
-            "hopper-fw: board build ({=str}), control at {=u32} Hz, core clock {=u32} Hz, link on USART1 at {=u32} baud; disarmed until the host arms",
+            "hopper-fw: board build ({=str}, {=str} pin map), control at {=u32} Hz, core clock {=u32} Hz, link on {=str} at {=u32} baud; disarmed until the host arms",
             board::CLOCK_PROFILE,
+            hopper_app::pinmap::NAME,
             board.io.control_hz(),
             board.io.sysclk_hz(),
+            hopper_app::pinmap::LINK_NAME,
             hopper_app::serial::LINK_BAUD
         );
         let (port_queues, link_queues) = cx.local.queues.split();
@@ -265,7 +270,10 @@ mod app {
                 link_queues,
                 link_rx: rx_out,
                 link_tx: LinkTx::new(tx_in),
+                #[cfg(not(feature = "feather"))]
                 serial: board.serial,
+                #[cfg(feature = "feather")]
+                serial3: board.serial,
             },
         )
     }
@@ -363,10 +371,20 @@ mod app {
     /// The link's bytes in and out, above the control task: the USART has
     /// no receive FIFO (`serial`'s module docs). It times itself in core
     /// cycles.
+    #[cfg(not(feature = "feather"))]
     #[task(binds = USART1, priority = 4, local = [serial])]
     fn usart1(cx: usart1::Context) {
         let t0 = cortex_m::peripheral::DWT::cycle_count();
         cx.local.serial.on_interrupt();
+        hopper_app::serial_cost::record(cortex_m::peripheral::DWT::cycle_count().wrapping_sub(t0));
+    }
+
+    /// The same on the Feather's pin map (its link is USART3).
+    #[cfg(feature = "feather")]
+    #[task(binds = USART3, priority = 4, local = [serial3])]
+    fn usart3(cx: usart3::Context) {
+        let t0 = cortex_m::peripheral::DWT::cycle_count();
+        cx.local.serial3.on_interrupt();
         hopper_app::serial_cost::record(cortex_m::peripheral::DWT::cycle_count().wrapping_sub(t0));
     }
 

@@ -1,10 +1,11 @@
-//! The host link's transport on USART1, for the board and the
-//! QEMU image alike: PA9 TX, PA10 RX (AF7), 8N1 at [`LINK_BAUD`].
+//! The host link's transport on the pin map's USART (USART1 on PA9 TX,
+//! PA10 RX by default; `crate::pinmap`), for the board and the QEMU image
+//! alike: 8N1 at [`LINK_BAUD`].
 //!
 //! The bytes go through two lock-free single-producer queues, so neither
 //! side ever waits for the other:
 //!
-//! - receive: the `USART1` interrupt moves each received byte into
+//! - receive: the USART's interrupt moves each received byte into
 //!   [`RxQueue`]. It runs at priority 4, *above* the control task: the USART
 //!   has no receive FIFO, and at 921,600 baud a byte must be read within
 //!   10.85 us, less than the control task's period. Its handler is a few
@@ -61,44 +62,40 @@ impl Tx for LinkTx<'_> {
             let _ = self.tx.enqueue(b);
         }
         // Start the transmitter (the interrupt stops itself when done).
-        cortex_m::peripheral::NVIC::pend(pac::Interrupt::USART1);
+        cortex_m::peripheral::NVIC::pend(crate::pinmap::LINK_INTERRUPT);
     }
 }
 
 /// The interrupt's side: the USART and the queues' other ends.
 pub struct Serial<'a> {
-    usart: pac::USART1,
+    usart: crate::pinmap::LinkUsart,
     rx: Producer<'a, u8>,
     tx: Consumer<'a, u8>,
     /// Received bytes dropped (receive queue full, or an overrun).
     lost: u32,
 }
 
-/// The USART1 divider for `baud` from `pclk2_hz` (16x oversampling),
-/// rounded to the nearest sixteenth.
-pub const fn brr(pclk2_hz: u32, baud: u32) -> u32 {
-    (pclk2_hz + baud / 2) / baud
+/// The USART divider for `baud` from its bus clock `bus_hz` (16x
+/// oversampling), rounded to the nearest sixteenth.
+pub const fn brr(bus_hz: u32, baud: u32) -> u32 {
+    (bus_hz + baud / 2) / baud
 }
 
 impl<'a> Serial<'a> {
-    /// Configures PA9/PA10 and USART1 at [`LINK_BAUD`] from `pclk2_hz`, the
-    /// receive interrupt on. `gpioa` must be clocked.
+    /// Configures the pin map's link pins and USART at [`LINK_BAUD`] from
+    /// `bus_hz` (its bus clock), the receive interrupt on. The GPIO ports
+    /// must be clocked.
     pub fn new(
-        usart: pac::USART1,
+        usart: crate::pinmap::LinkUsart,
         rcc: &pac::RCC,
         gpioa: &pac::GPIOA,
-        pclk2_hz: u32,
+        gpiob: &pac::GPIOB,
+        bus_hz: u32,
         rx: Producer<'a, u8>,
         tx: Consumer<'a, u8>,
     ) -> Self {
-        rcc.apb2enr().modify(|_, w| w.usart1en().enabled());
-        let _ = rcc.apb2enr().read();
-        gpioa.afrh().modify(|_, w| w.afrh9().af7().afrh10().af7());
-        gpioa.pupdr().modify(|_, w| w.pupdr10().pull_up());
-        gpioa
-            .moder()
-            .modify(|_, w| w.moder9().alternate().moder10().alternate());
-        usart.brr().write(|w| brr_bits(w, brr(pclk2_hz, LINK_BAUD)));
+        crate::pinmap::configure_link(rcc, gpioa, gpiob);
+        usart.brr().write(|w| brr_bits(w, brr(bus_hz, LINK_BAUD)));
         usart.cr1().write(|w| {
             w.ue()
                 .enabled()

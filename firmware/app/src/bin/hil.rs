@@ -83,8 +83,14 @@ mod app {
         link_tx: LinkTx<'static>,
         samples_out: Producer<'static, HilSample>,
         answers_in: Consumer<'static, HilActuate>,
+        #[cfg(not(feature = "feather"))]
         serial: Serial<'static>,
+        #[cfg(not(feature = "feather"))]
         serial_ticks: Ticks,
+        #[cfg(feature = "feather")]
+        serial3: Serial<'static>,
+        #[cfg(feature = "feather")]
+        serial3_ticks: Ticks,
     }
 
     #[init(local = [
@@ -127,8 +133,9 @@ mod app {
         let (answers_out, answers_in) = cx.local.answers.split();
         let (port_queues, link_queues) = cx.local.queues.split();
         defmt::info!(
-            "hopper-hil: hardware-in-the-loop image, {=u32} Hz periods paced by the host over USART1 at {=u32} baud; core clock {=u32} Hz; disarmed",
+            "hopper-hil: hardware-in-the-loop image, {=u32} Hz periods paced by the host over {=str} at {=u32} baud; core clock {=u32} Hz; disarmed",
             CONTROL_HZ,
+            hopper_app::pinmap::LINK_NAME,
             hopper_app::serial::LINK_BAUD,
             board.sysclk_hz
         );
@@ -150,8 +157,14 @@ mod app {
                 link_tx: LinkTx::new(tx_in),
                 samples_out,
                 answers_in,
+                #[cfg(not(feature = "feather"))]
                 serial: board.serial,
+                #[cfg(not(feature = "feather"))]
                 serial_ticks: ticks,
+                #[cfg(feature = "feather")]
+                serial3: board.serial,
+                #[cfg(feature = "feather")]
+                serial3_ticks: ticks,
             },
         )
     }
@@ -231,11 +244,22 @@ mod app {
 
     /// The link's bytes in and out, above the control task (as the
     /// board's); a received byte pends the link task.
+    #[cfg(not(feature = "feather"))]
     #[task(binds = USART1, priority = 4, local = [serial, serial_ticks])]
     fn usart1(cx: usart1::Context) {
         let t0 = cx.local.serial_ticks.raw();
         cx.local.serial.on_interrupt();
         hopper_app::serial_cost::record(cx.local.serial_ticks.raw().wrapping_sub(t0));
+        rtic::pend(LINK_IRQ);
+    }
+
+    /// The same on the Feather's pin map (its link is USART3).
+    #[cfg(feature = "feather")]
+    #[task(binds = USART3, priority = 4, local = [serial3, serial3_ticks])]
+    fn usart3(cx: usart3::Context) {
+        let t0 = cx.local.serial3_ticks.raw();
+        cx.local.serial3.on_interrupt();
+        hopper_app::serial_cost::record(cx.local.serial3_ticks.raw().wrapping_sub(t0));
         rtic::pend(LINK_IRQ);
     }
 }

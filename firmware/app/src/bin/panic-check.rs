@@ -33,6 +33,12 @@ fn main() {
 #[allow(dead_code)]
 mod serial;
 
+/// The board's pin map (the link's USART and pins), as the image builds it.
+#[cfg(target_os = "none")]
+#[path = "../pinmap.rs"]
+#[allow(dead_code, unused_macros, unused_imports)]
+mod pinmap;
+
 #[cfg(target_os = "none")]
 mod check {
     use core::hint::black_box;
@@ -98,10 +104,12 @@ mod check {
                 cortex_m::asm::nop();
             }
         };
+        let (_, link_usart) = crate::take_deadman_and_link!(dp);
         let mut usart = serial::Serial::new(
-            dp.USART1,
+            link_usart,
             &dp.RCC,
             &dp.GPIOA,
+            &dp.GPIOB,
             black_box(16_000_000),
             rx_in,
             tx_out,

@@ -94,7 +94,9 @@ mod app {
 
         let (rx_in, rx_out) = cx.local.rxq.split();
         let (tx_in, tx_out) = cx.local.txq.split();
-        let serial = Serial::new(dp.USART1, &dp.RCC, &dp.GPIOA, PCLK2_HZ, rx_in, tx_out);
+        let serial = Serial::new(
+            dp.USART1, &dp.RCC, &dp.GPIOA, &dp.GPIOB, PCLK2_HZ, rx_in, tx_out,
+        );
         let (port_queues, link_queues) = cx.local.queues.split();
 
         hopper_app::qemu::start_systick(&mut core.SYST, hopper_app::qemu::PERIOD_TICKS);

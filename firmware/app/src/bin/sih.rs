@@ -72,8 +72,14 @@ mod app {
         flash: Flash,
         link_rx: Consumer<'static, u8>,
         link_tx: LinkTx<'static>,
+        #[cfg(not(feature = "feather"))]
         serial: Serial<'static>,
+        #[cfg(not(feature = "feather"))]
         serial_ticks: Ticks,
+        #[cfg(feature = "feather")]
+        serial3: Serial<'static>,
+        #[cfg(feature = "feather")]
+        serial3_ticks: Ticks,
     }
 
     #[init(local = [
@@ -113,8 +119,9 @@ mod app {
         core.SYST.enable_interrupt();
         core.SYST.enable_counter();
         defmt::info!(
-            "hopper-sih: the simulated hopper on the chip, core clock {=u32} Hz, link on USART1 at {=u32} baud; disarmed, held {=f64} m up until armed",
+            "hopper-sih: the simulated hopper on the chip, core clock {=u32} Hz, link on {=str} at {=u32} baud; disarmed, held {=f64} m up until armed",
             board.sysclk_hz,
+            hopper_app::pinmap::LINK_NAME,
             hopper_app::serial::LINK_BAUD,
             START_APEX_M
         );
@@ -135,8 +142,14 @@ mod app {
                 flash,
                 link_rx: rx_out,
                 link_tx: LinkTx::new(tx_in),
+                #[cfg(not(feature = "feather"))]
                 serial: board.serial,
+                #[cfg(not(feature = "feather"))]
                 serial_ticks: ticks,
+                #[cfg(feature = "feather")]
+                serial3: board.serial,
+                #[cfg(feature = "feather")]
+                serial3_ticks: ticks,
             },
         )
     }
@@ -219,10 +232,20 @@ mod app {
 
     /// The link's bytes in and out, above the control task (as the
     /// board's).
+    #[cfg(not(feature = "feather"))]
     #[task(binds = USART1, priority = 4, local = [serial, serial_ticks])]
     fn usart1(cx: usart1::Context) {
         let t0 = cx.local.serial_ticks.raw();
         cx.local.serial.on_interrupt();
         hopper_app::serial_cost::record(cx.local.serial_ticks.raw().wrapping_sub(t0));
+    }
+
+    /// The same on the Feather's pin map (its link is USART3).
+    #[cfg(feature = "feather")]
+    #[task(binds = USART3, priority = 4, local = [serial3, serial3_ticks])]
+    fn usart3(cx: usart3::Context) {
+        let t0 = cx.local.serial3_ticks.raw();
+        cx.local.serial3.on_interrupt();
+        hopper_app::serial_cost::record(cx.local.serial3_ticks.raw().wrapping_sub(t0));
     }
 }
