@@ -36,44 +36,36 @@
 //! identified plant with the design's 1 N m current limit).
 #![allow(missing_docs)]
 
-use hal_sim::{Event, Mode, Params, Plant, State};
+use hal_sim::heat_bound::{run_levels, Grid};
+use hal_sim::{Mode, Params, Plant, State};
 
-const DT_S: f64 = 1e-4;
 const START_M: f64 = 0.05;
 const TARGET_M: f64 = 0.15;
 /// Largest nut speed at the starting apex, m/s (about the
 /// motor's no-load speed through the screw).
 const NUT_SPEED_RANGE_MPS: f64 = 0.8;
 
-/// The schedule's grid: `seg` levels per phase (`SEG`, default 8), the
-/// stance's spread over `stance_span` model stance times (`STANCE_SPAN`,
-/// default 1); from the environment, to check that the grid does not limit
-/// the result.
-#[derive(Clone, Copy)]
-struct Grid {
-    seg: usize,
-    stance_span: f64,
+/// The schedule's grid ([`Grid`]): `seg` levels per phase (`SEG`, default
+/// 8), the stance's spread over `stance_span` model stance times
+/// (`STANCE_SPAN`, default 1); from the environment, to check that the
+/// grid does not limit the result.
+fn grid_from_env() -> Grid {
+    let env = |name: &str| std::env::var(name).ok();
+    Grid {
+        seg: env("SEG")
+            .and_then(|s| s.parse().ok())
+            .filter(|&n| n > 0)
+            .unwrap_or(8),
+        stance_span: env("STANCE_SPAN")
+            .and_then(|s| s.parse().ok())
+            .filter(|&x: &f64| x > 0.0 && x.is_finite())
+            .unwrap_or(1.0),
+    }
 }
 
-impl Grid {
-    fn from_env() -> Self {
-        let env = |name: &str| std::env::var(name).ok();
-        Grid {
-            seg: env("SEG")
-                .and_then(|s| s.parse().ok())
-                .filter(|&n| n > 0)
-                .unwrap_or(8),
-            stance_span: env("STANCE_SPAN")
-                .and_then(|s| s.parse().ok())
-                .filter(|&x: &f64| x > 0.0 && x.is_finite())
-                .unwrap_or(1.0),
-        }
-    }
-
-    /// Levels per hop.
-    fn levels(self) -> usize {
-        3 * self.seg
-    }
+/// Levels per hop.
+fn levels(grid: Grid) -> usize {
+    3 * grid.seg
 }
 
 /// What one hop's schedule did.
@@ -85,53 +77,15 @@ struct Outcome {
     plant: Plant,
 }
 
-/// Run one hop's `levels` from `plant`, which must be at an apex.
-fn simulate(plant: &Plant, levels: &[f64], grid: Grid) -> Outcome {
-    let p = *plant.params();
+/// Run one hop's `levels` from `plant`, at an apex `apex_m` high: the
+/// heat bound's hop ([`run_levels`]); a plant error ends the hop without
+/// an apex.
+fn simulate(plant: &Plant, apex_m: f64, levels: &[f64], grid: Grid) -> Outcome {
     let mut plant = plant.clone();
     let impact0 = plant.ledger().stop_impact_loss_j;
-    let i_max = p.current_limit_a;
-    let m_t = p.body_mass_kg + p.nut_mass_kg + p.unsprung_mass_kg;
-    let g_up = p.gravity_mps2 + p.planarizer_friction_n / m_t;
-    let g_dn = p.gravity_mps2 - p.planarizer_friction_n / m_t;
-    let t_stance = core::f64::consts::PI
-        * ((p.body_mass_kg + p.nut_mass_kg) / p.spring_stiffness_n_per_m).sqrt();
-    // Phase: 0 descent, 1 stance, 2 ascent; its start time and expected length.
-    let mut phase = 0usize;
-    let mut phase_t0 = plant.time_s();
-    let mut phase_len = (2.0 * plant.toe_height_m().max(1e-4) / g_dn).sqrt();
-    let mut apex_m = None;
-    let mut events = Vec::new();
-    let t_end = plant.time_s() + 2.0;
-    while apex_m.is_none() && plant.time_s() < t_end {
-        let part = (((plant.time_s() - phase_t0) / phase_len * grid.seg as f64) as usize)
-            .min(grid.seg - 1);
-        let cmd = levels.get(phase * grid.seg + part).copied().unwrap_or(0.0) * i_max;
-        events.clear();
-        if plant.advance(DT_S, cmd, &mut |e| events.push(e)).is_err() {
-            break;
-        }
-        for &e in &events {
-            match e {
-                Event::Touchdown { t_s, .. } => {
-                    phase = 1;
-                    phase_t0 = t_s;
-                    phase_len = grid.stance_span * t_stance;
-                }
-                Event::Liftoff {
-                    t_s, zd_after_mps, ..
-                } => {
-                    phase = 2;
-                    phase_t0 = t_s;
-                    phase_len = zd_after_mps.max(1e-3) / g_up;
-                }
-                // Only the apex after a liftoff ends the hop (a nut started
-                // moving can lift the body off its starting apex at once).
-                Event::Apex { toe_height_m, .. } if phase == 2 => apex_m = Some(toe_height_m),
-                _ => {}
-            }
-        }
-    }
+    let apex_m = run_levels(&mut plant, apex_m, levels, grid, &mut |_, _| {})
+        .ok()
+        .flatten();
     Outcome {
         apex_m,
         impact_j: plant.ledger().stop_impact_loss_j - impact0,
@@ -156,7 +110,7 @@ fn maximise(
 /// hop's levels: reverse, then push in the descent; push in stance; reverse
 /// in the ascent.
 fn bang_bang_levels(grid: Grid) -> Vec<f64> {
-    (0..grid.levels())
+    (0..levels(grid))
         .map(|i| match i / grid.seg {
             0 if i < grid.seg / 2 => -1.0,
             0 | 1 => 1.0,
@@ -196,12 +150,12 @@ fn gain(p: &Params, penalty: f64, heights: &[f64], grid: Grid) {
     println!("   h (m)   next (m)   rise (m)   impacts (J)   nut p (mm)   nut v (m/s)   below best (mm): seeded worst, unseeded best");
     let mut best_rise = f64::NEG_INFINITY;
     for &h in heights {
-        let dim = grid.levels() + 2;
+        let dim = levels(grid) + 2;
         let mut start = bang_bang_levels(grid);
         start.extend([-1.0, 0.0]);
         let score = |x: &[f64]| {
             let plant = apex_plant(p, h, x[dim - 2], x[dim - 1]);
-            let o = simulate(&plant, &x[..dim - 2], grid);
+            let o = simulate(&plant, h, &x[..dim - 2], grid);
             o.apex_m.unwrap_or(-1.0) - penalty * o.impact_j
         };
         // Five searches: three start from the push-reverse-push shape (nut at
@@ -230,7 +184,7 @@ fn gain(p: &Params, penalty: f64, heights: &[f64], grid: Grid) {
             continue;
         };
         let plant = apex_plant(p, h, x[dim - 2], x[dim - 1]);
-        let o = simulate(&plant, &x[..dim - 2], grid);
+        let o = simulate(&plant, h, &x[..dim - 2], grid);
         let next = o.apex_m.unwrap_or(f64::NAN);
         best_rise = best_rise.max(next - h);
         println!(
@@ -285,5 +239,5 @@ fn main() {
         .get(3)
         .map(|s| s.split(',').filter_map(|h| h.parse().ok()).collect())
         .unwrap_or_else(|| vec![0.01, 0.03, 0.05, 0.07, 0.09, 0.11, 0.13, 0.15]);
-    gain(&p, penalty, &heights, Grid::from_env());
+    gain(&p, penalty, &heights, grid_from_env());
 }

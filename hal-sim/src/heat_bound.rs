@@ -116,46 +116,11 @@ pub fn fly_watched(
         pd_mps: plan.nut_mps,
     };
     let mut plant = Plant::with_state(*p, Mode::Flight, start).map_err(|e| e.to_string())?;
-    let seg = plan.seg().max(1);
-    let i_max = p.current_limit_a;
-    let m_t = p.body_mass_kg + p.nut_mass_kg + p.unsprung_mass_kg;
-    let g_up = p.gravity_mps2 + p.planarizer_friction_n / m_t;
-    let g_dn = p.gravity_mps2 - p.planarizer_friction_n / m_t;
-    let t_stance = core::f64::consts::PI
-        * ((p.body_mass_kg + p.nut_mass_kg) / p.spring_stiffness_n_per_m).sqrt();
-    // Phase: 0 descent, 1 stance, 2 ascent; its start and expected length.
-    let mut phase = 0usize;
-    let mut phase_t0 = 0.0;
-    let mut phase_len = (2.0 * apex_m.max(1e-4) / g_dn).sqrt();
-    let mut apex = None;
-    let mut events = Vec::new();
-    while apex.is_none() && plant.time_s() < 2.0 {
-        let part = (((plant.time_s() - phase_t0) / phase_len * seg as f64) as usize).min(seg - 1);
-        let cmd = plan.levels.get(phase * seg + part).copied().unwrap_or(0.0) * i_max;
-        events.clear();
-        plant
-            .advance(DT_S, cmd, &mut |e| events.push(e))
-            .map_err(|e| e.to_string())?;
-        watch(&plant, cmd);
-        for &e in &events {
-            match e {
-                Event::Touchdown { t_s, .. } if phase == 0 => {
-                    phase = 1;
-                    phase_t0 = t_s;
-                    phase_len = t_stance;
-                }
-                Event::Liftoff {
-                    t_s, zd_after_mps, ..
-                } => {
-                    phase = 2;
-                    phase_t0 = t_s;
-                    phase_len = zd_after_mps.max(1e-3) / g_up;
-                }
-                Event::Apex { toe_height_m, .. } if phase == 2 => apex = Some(toe_height_m),
-                _ => {}
-            }
-        }
-    }
+    let grid = Grid {
+        seg: plan.seg(),
+        stance_span: 1.0,
+    };
+    let apex = run_levels(&mut plant, apex_m, &plan.levels, grid, watch)?;
     let l = plant.ledger();
     Ok(HopOutcome {
         apex_m: apex,
@@ -165,6 +130,84 @@ pub fn fly_watched(
         motor_work_j: l.motor_work_j,
         stop_impact_j: l.stop_impact_loss_j,
     })
+}
+
+/// How a hop's schedule is laid over its phases: `seg` levels per phase
+/// (descent, stance, ascent), the stance's spread over `stance_span`
+/// times the model's half period.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Grid {
+    /// Levels per phase (at least 1).
+    pub seg: usize,
+    /// The stance's levels spread over this many model stance times (the
+    /// last held until liftoff).
+    pub stance_span: f64,
+}
+
+/// The one open-loop hop of both searches (this module's least heat, and
+/// the `one_hop_bound` example's largest rise): `levels` (fractions of the
+/// current limit; `3 * grid.seg` of them, missing ones 0) from `plant`, at
+/// an apex `apex_m` high, each held over its segment of the hop's phases,
+/// timed from the hop's own events: the descent in `seg` parts of its
+/// predicted duration, the stance in `seg` parts of `stance_span` times
+/// the model's half period `pi sqrt((M + m_s) / k)`, the ascent in `seg`
+/// parts of its predicted duration (each phase's last held until the next
+/// event). The hop ends at the apex after its liftoff (returned) or 2 s
+/// on (`None`). Only the first touchdown starts the stance: a toe that
+/// bounces off the ground in the ascent keeps the ascent's levels.
+/// `watch(plant, command_a)` is called after every period.
+pub fn run_levels(
+    plant: &mut Plant,
+    apex_m: f64,
+    levels: &[f64],
+    grid: Grid,
+    watch: &mut dyn FnMut(&Plant, f64),
+) -> Result<Option<f64>, String> {
+    let p = *plant.params();
+    let seg = grid.seg.max(1);
+    let i_max = p.current_limit_a;
+    let m_t = p.body_mass_kg + p.nut_mass_kg + p.unsprung_mass_kg;
+    let g_up = p.gravity_mps2 + p.planarizer_friction_n / m_t;
+    let g_dn = p.gravity_mps2 - p.planarizer_friction_n / m_t;
+    let t_stance = core::f64::consts::PI
+        * ((p.body_mass_kg + p.nut_mass_kg) / p.spring_stiffness_n_per_m).sqrt();
+    // Phase: 0 descent, 1 stance, 2 ascent; its start and expected length.
+    let mut phase = 0usize;
+    let mut phase_t0 = plant.time_s();
+    let mut phase_len = (2.0 * apex_m.max(1e-4) / g_dn).sqrt();
+    let t_end = plant.time_s() + 2.0;
+    let mut apex = None;
+    let mut events = Vec::new();
+    while apex.is_none() && plant.time_s() < t_end {
+        let part = (((plant.time_s() - phase_t0) / phase_len * seg as f64) as usize).min(seg - 1);
+        let cmd = levels.get(phase * seg + part).copied().unwrap_or(0.0) * i_max;
+        events.clear();
+        plant
+            .advance(DT_S, cmd, &mut |e| events.push(e))
+            .map_err(|e| e.to_string())?;
+        watch(plant, cmd);
+        for &e in &events {
+            match e {
+                Event::Touchdown { t_s, .. } if phase == 0 => {
+                    phase = 1;
+                    phase_t0 = t_s;
+                    phase_len = grid.stance_span * t_stance;
+                }
+                Event::Liftoff {
+                    t_s, zd_after_mps, ..
+                } => {
+                    phase = 2;
+                    phase_t0 = t_s;
+                    phase_len = zd_after_mps.max(1e-3) / g_up;
+                }
+                // Only the apex after a liftoff ends the hop (a nut started
+                // moving can lift the body off its starting apex at once).
+                Event::Apex { toe_height_m, .. } if phase == 2 => apex = Some(toe_height_m),
+                _ => {}
+            }
+        }
+    }
+    Ok(apex)
 }
 
 /// The least-heat hop found at one apex.
