@@ -42,8 +42,12 @@ use std::time::{Duration, Instant};
 struct Map {
     /// The summary line's prefix.
     line: &'static str,
-    /// The image's cargo features.
-    features: &'static [&'static str],
+    /// The image's cargo feature (`None`: the default map).
+    feature: Option<&'static str>,
+    /// Its own target directory under cargo's (`None`: cargo's own),
+    /// so that the default image at cargo's usual path stays the default
+    /// map's (the one the docs tell a user to flash).
+    target_dir: Option<&'static str>,
     /// The golden trace, relative to the workspace root.
     golden: &'static str,
     /// AMP_EN's pin number on GPIOB.
@@ -55,13 +59,22 @@ struct Map {
     /// in the trace): the channel must be forced low before AMP_EN becomes
     /// the timer's pin.
     deadman_forced_low: Option<(&'static str, u32)>,
+    /// The fault test's summary line prefix.
+    fault_line: &'static str,
+    /// Its target directory under cargo's.
+    fault_target_dir: &'static str,
+    /// The HardFault entry's writes before the DAC's zero code: AMP_EN low
+    /// (BSRR, then a GPIO output), the deadman timer stopped where QEMU
+    /// does not model it.
+    fault_entry: &'static [&'static str],
 }
 
 /// The default map (Olimex STM32-H405). Its deadman timer, TIM3, is one
 /// QEMU models, so its writes are not in the trace.
 const H405: Map = Map {
     line: "board-init",
-    features: &[],
+    feature: None,
+    target_dir: None,
     golden: "tests/board-init.trace",
     amp_en: 0,
     alternate: &[
@@ -74,13 +87,17 @@ const H405: Map = Map {
         ("GPIOB.AFRL", 0, 2, "PB0 TIM3_CH3 (AMP_EN)"),
     ],
     deadman_forced_low: None,
+    fault_line: "fault-test",
+    fault_target_dir: "fault-test",
+    fault_entry: &["GPIOB.BSRR = 0x00010000", "GPIOB.MODER = 0x00000001"],
 };
 
 /// The Adafruit Feather STM32F405 Express's map (`--features feather`).
 /// QEMU models neither TIM8 nor TIM12: their writes are in the trace.
 const FEATHER: Map = Map {
     line: "board-init-feather",
-    features: &["--features", "feather"],
+    feature: Some("feather"),
+    target_dir: Some("feather"),
     golden: "tests/board-init-feather.trace",
     amp_en: 14,
     alternate: &[
@@ -94,6 +111,13 @@ const FEATHER: Map = Map {
     ],
     // OC1M = 100 (force inactive), CC1S = 00 (output).
     deadman_forced_low: Some(("TIM12.CCMR1", 0x0000_0040)),
+    fault_line: "fault-test-feather",
+    fault_target_dir: "feather",
+    fault_entry: &[
+        "GPIOB.BSRR = 0x40000000",
+        "GPIOB.MODER = 0x10000000",
+        "TIM12.CR1 = 0x00000000",
+    ],
 };
 /// How long init may take in wall time before it counts as hung.
 const INIT_TIMEOUT: Duration = Duration::from_secs(90);
@@ -380,28 +404,37 @@ pub fn run(root: &Path) -> Result<(), String> {
         }
     };
     h405.and(feather)?;
-    fault_test(root)
+    let h405 = fault_test(root, &H405);
+    let feather = fault_test(root, &FEATHER);
+    h405.and(feather)
 }
 
 /// The board image built with `map`'s features, copied out of cargo's
 /// output (the next default build overwrites that path).
 fn map_image(root: &Path, map: &Map, dir: &Path) -> Result<std::path::PathBuf, String> {
+    let mut cmd = crate::cargo();
+    cmd.args([
+        "build",
+        "-p",
+        "hopper-app",
+        "--bin",
+        "hopper-fw",
+        "--release",
+        "--target",
+        crate::TARGET,
+    ]);
+    if let Some(f) = map.feature {
+        cmd.args(["--features", f]);
+    }
+    if let Some(d) = map.target_dir {
+        cmd.arg("--target-dir")
+            .arg(crate::target_dir(root)?.join(d));
+    }
     let built = crate::build_executable(
         root,
         &format!("firmware release build ({} pin map)", map.line),
         "hopper-fw",
-        crate::cargo()
-            .args([
-                "build",
-                "-p",
-                "hopper-app",
-                "--bin",
-                "hopper-fw",
-                "--release",
-                "--target",
-                crate::TARGET,
-            ])
-            .args(map.features),
+        &mut cmd,
     )?;
     let elf = dir.join(format!("hopper-fw-{}.elf", map.line));
     std::fs::copy(&built, &elf).map_err(|e| format!("{}: {e}", elf.display()))?;
@@ -454,8 +487,8 @@ fn run_map(root: &Path, map: &Map, elf: &Path, dir: &Path) -> Result<(), String>
          # flag stays low: the first clock wait (HSIRDY) and the LSI's time\n\
          # out, and init goes on on the HSI, as when the crystal never starts.\n",
     );
-    if !map.features.is_empty() {
-        let _ = writeln!(text, "# The image built with `{}`.", map.features.join(" "));
+    if let Some(f) = map.feature {
+        let _ = writeln!(text, "# The image built with `--features {f}`.");
     }
     for l in &lines {
         let _ = writeln!(text, "{l}");
@@ -504,18 +537,24 @@ fn run_map(root: &Path, map: &Map, elf: &Path, dir: &Path) -> Result<(), String>
     Ok(())
 }
 
-/// The HardFault entry on QEMU: the board image built with `fault-test`
-/// (a calibrated zero code of 2050) faults right after init with its main
-/// stack pointer off the SRAM, so the exception cannot stack. What it
-/// writes after init, in order, must be AMP_EN low (BSRR BR0, then PB0 a
-/// GPIO output) and the calibrated zero code, from the assembly entry
-/// that uses no stack, then the same again from the Rust handler on its
-/// fresh stack. Prints `fault-test: ...`.
-fn fault_test(root: &Path) -> Result<(), String> {
-    let target_dir = crate::target_dir(root)?.join("fault-test");
+/// The HardFault entry on QEMU: the board image on `map` built with
+/// `fault-test` (a calibrated zero code of 2050) faults right after init
+/// with its main stack pointer off the SRAM, so the exception cannot
+/// stack. What it writes after init, in order, must be AMP_EN low (BSRR's
+/// reset bit, then the pin a GPIO output; on the Feather's map the
+/// deadman timer stopped too) and the calibrated zero code, from the
+/// assembly entry that uses no stack, then the same again from the Rust
+/// handler on its fresh stack. Prints `fault-test: ...` (the default map)
+/// or `fault-test-feather: ...`.
+fn fault_test(root: &Path, map: &Map) -> Result<(), String> {
+    let target_dir = crate::target_dir(root)?.join(map.fault_target_dir);
+    let features = match map.feature {
+        Some(f) => format!("{f},fault-test"),
+        None => "fault-test".to_string(),
+    };
     let elf = crate::build_executable(
         root,
-        "firmware release build (fault test)",
+        &format!("firmware release build ({})", map.fault_line),
         "hopper-fw",
         crate::cargo()
             .args([
@@ -528,11 +567,11 @@ fn fault_test(root: &Path) -> Result<(), String> {
                 "--target",
                 crate::TARGET,
             ])
-            .args(["--features", "fault-test", "--target-dir"])
+            .args(["--features", &features, "--target-dir"])
             .arg(&target_dir),
     )?;
     let dir = crate::target_dir(root)?.join("board-init");
-    let log_path = dir.join("fault-test.log");
+    let log_path = dir.join(format!("{}.log", map.fault_line));
     let _ = std::fs::remove_file(&log_path);
     let started = Instant::now();
     let mut child = spawn_unimp(&elf, &log_path)?;
@@ -567,16 +606,17 @@ fn fault_test(root: &Path) -> Result<(), String> {
     }
     let _ = child.kill();
     let _ = child.wait();
-    crate::took("fault test on QEMU", started);
+    crate::took(&format!("{} on QEMU", map.fault_line), started);
     let zero = "DAC.DHR12R1 = 0x00000802";
-    let entry = ["GPIOB.BSRR = 0x00010000", "GPIOB.MODER = 0x00000001", zero];
+    let entry: Vec<&str> = map.fault_entry.iter().copied().chain([zero]).collect();
     let entry_first =
         writes.len() >= entry.len() && writes.iter().zip(entry.iter()).all(|(w, e)| w == e);
     let handler = writes
         .get(entry.len()..)
         .is_some_and(|rest| rest.iter().any(|l| l == zero));
     println!(
-        "fault-test: hardfault_off_the_stack amp_en_low_first={entry_first} calibrated_zero_first={entry_first} rust_handler_ran={handler} writes_after_init={}",
+        "{}: hardfault_off_the_stack amp_en_low_first={entry_first} calibrated_zero_first={entry_first} rust_handler_ran={handler} writes_after_init={}",
+        map.fault_line,
         writes.len()
     );
     if entry_first && handler {

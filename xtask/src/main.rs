@@ -28,7 +28,9 @@
 //!   on QEMU with `-d unimp`, checked against `tests/board-init.trace`:
 //!   `board-init: writes=... polled_registers=... longest_poll_reads=...
 //!   terminated=... golden=...`, and the same for the Feather's pin map
-//!   against `tests/board-init-feather.trace`: `board-init-feather: ...`.
+//!   against `tests/board-init-feather.trace`: `board-init-feather: ...`;
+//!   then the HardFault entry on both maps: `fault-test: ...`,
+//!   `fault-test-feather: ...`.
 //! * `cargo xtask board-init`: the board image's init check alone.
 //! * `cargo xtask hil [--serial PORT]`: the hardware-in-the-loop image
 //!   (`hopper-hil`) on QEMU (or a board on PORT) against `hopper-sim run

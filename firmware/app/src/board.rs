@@ -92,7 +92,7 @@ use hopper_control::hal::{
 };
 use stm32f4::stm32f405::{self as pac, Peripherals};
 
-use crate::pinmap::{self, DeadmanChannel, PortPin};
+use crate::pinmap::{self, DeadmanChannel};
 
 /// The DWT cycle counter as the period runner's step timer (core cycles)
 /// and its clock for the period-start jitter check. A copy reads the same
@@ -211,7 +211,7 @@ pub struct Board {
     pub io: BoardIo,
     /// The running independent watchdog; give it to the control task only.
     pub watchdog: Watchdog,
-    /// The dump button (PC13).
+    /// The dump button (the pin map's: PC13 on the H405).
     pub dump_button: DumpButton,
     /// The host link's USART (the pin map's), receiving.
     pub serial: crate::serial::Serial<'static>,
@@ -228,7 +228,7 @@ struct Clocks {
     hse_measured_hz: u32,
     /// Core and AHB clock, Hz.
     sysclk_hz: u32,
-    /// Clock of the APB1 timers (TIM2..TIM5), Hz.
+    /// Clock of the APB1 timers (TIM2..TIM7, TIM12..TIM14), Hz.
     apb1_timer_hz: u32,
     /// APB1 clock (USART2, USART3), Hz.
     pclk1_hz: u32,
@@ -258,7 +258,7 @@ pub fn init(
         DAC_FALLBACK_ZERO_CODE
     };
 
-    // 1. AMP_EN (PB0): latch the output low *before* making the pin an output,
+    // 1. AMP_EN (the pin map's, PB0 on the H405): latch the output low *before* making the pin an output,
     //    so it never drives high, not even for one cycle.
     pinmap::amp_en_low(&dp.RCC, &dp.GPIOB);
 
@@ -356,8 +356,8 @@ pub fn init(
                     adc: dp.ADC1,
                     dac: dp.DAC,
                 },
-                PortPin::new(),
-                PortPin::new(),
+                pinmap::estop(),
+                pinmap::amp_fault(),
                 Deadman {
                     timer: deadman_timer,
                     running: false,
@@ -368,7 +368,7 @@ pub fn init(
         },
         watchdog,
         dump_button: DumpButton {
-            pin: PortPin::new(),
+            pin: pinmap::dump_button(),
             // Start as "held": a button held (or shorted) at boot must be
             // seen released before a press counts.
             pressed: true,
@@ -392,7 +392,7 @@ pub struct HilBoard {
     pub boot: hopper_control::boot::BootReport,
     /// Core clock, Hz.
     pub sysclk_hz: u32,
-    /// TIM5, clocked and idle (no height encoder here): the control
+    /// TIM5, clocked and idle (no height encoder in this image): the control
     /// interrupt's counter where the core has no cycle counter (QEMU).
     pub tim5: pac::TIM5,
 }
@@ -472,7 +472,7 @@ pub fn init_hil(dp: Peripherals, link: (Producer<'static, u8>, Consumer<'static,
     };
     HilBoard {
         pins: HilPins {
-            estop: PortPin::new(),
+            estop: pinmap::estop(),
             enable: Deadman {
                 timer: deadman_timer,
                 running: false,
@@ -751,7 +751,8 @@ fn write_pll_config(rcc: &pac::RCC) {
     });
 }
 
-/// ADC1: 12 bit, right aligned, injected group PA2 → JDR1, PA3 → JDR2,
+/// ADC1: 12 bit, right aligned, injected group load cell → JDR1,
+/// potentiometer → JDR2 (the pin map's channels: PA2 and PA3 on the H405),
 /// triggered by TIM4 TRGO (rising edge), interrupt at the group's end.
 fn configure_adc(common: &pac::ADC_COMMON, adc: &pac::ADC1) {
     adc.cr2().modify(|_, w| w.adon().disabled());
@@ -799,7 +800,8 @@ fn configure_adc(common: &pac::ADC_COMMON, adc: &pac::ADC1) {
 #[allow(unsafe_code)] // The JSQx fields have no safe writer in the PAC.
 fn set_injected_sequence(adc: &pac::ADC1) {
     adc.jsqr().write(|w| {
-        // SAFETY: channels 2 and 3 exist on ADC1 (the field takes 0..=18) and
+        // SAFETY: the map's channels (2 and 3, or 14 and 15) exist on ADC1
+        // (the field takes 0..=18) and
         // are what JSQ3/JSQ4 hold; the ADC is off (ADON = 0) while it is set.
         unsafe {
             w.jsq3()
@@ -853,9 +855,9 @@ fn control_timer_setup(timer_hz: u32, control_hz: u32) -> (u16, u16, u32) {
 #[derive(Debug)]
 pub struct BoardIo {
     /// The board's parts as the hopper's I/O (`hopper_control::hal::PinnedIo`):
-    /// the converters and counters, the e-stop (PB1) and amplifier-fault
-    /// (PB4) inputs, the deadman on AMP_EN (PB0). Another board is another
-    /// set of these: a pin map.
+    /// the converters and counters, the e-stop and amplifier-fault inputs,
+    /// the deadman on AMP_EN, each where the pin map ([`crate::pinmap`])
+    /// puts it.
     io: PinnedIo<BoardConverters, pinmap::Estop, pinmap::AmpFault, Deadman>,
     /// Core clock that `init` achieved.
     sysclk_hz: u32,
@@ -864,7 +866,7 @@ pub struct BoardIo {
 }
 
 /// The converters and counters (what embedded-hal has no traits for): the
-/// encoders on TIM2 (motor) and TIM5 (height), the load cell and the
+/// encoders on the pin map's counters (TIM2 and TIM5 on the H405), the load cell and the
 /// potentiometer on ADC1's injected group, the current command on DAC
 /// channel 1.
 #[derive(Debug)]
@@ -945,7 +947,7 @@ impl AmpEnable for Deadman {
 
     /// AMP_EN's input register follows the pin in its alternate function too.
     fn reads_off(&mut self) -> Option<bool> {
-        embedded_hal::digital::InputPin::is_low(&mut PortPin::<'B', { pinmap::AMP_EN }>::new()).ok()
+        Some(pinmap::amp_en_reads_low())
     }
 }
 
@@ -1059,10 +1061,10 @@ impl Watchdog {
     }
 }
 
-/// The dump button (PC13 to GND, pull-up), debounced by slow polling.
+/// The dump button (to GND, pull-up; PC13 on the H405), debounced by slow polling.
 #[derive(Debug)]
 pub struct DumpButton {
-    /// PC13.
+    /// Its pin.
     pin: pinmap::Dump,
     /// Debounced state: pressed.
     pressed: bool,

@@ -64,7 +64,7 @@ pub fn disable_amplifier() {
         .moder()
         .modify(|_, w| w.moder(pinmap::AMP_EN).output());
     timer.force_low();
-    timer.stop();
+    timer.halt();
 }
 
 /// What every fault path of the board's images ends in: `AMP_EN` low, the

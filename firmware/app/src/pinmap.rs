@@ -43,14 +43,15 @@ compile_error!(
 /// One pin of GPIOB or GPIOC (`PORT`), number `N`, as an embedded-hal pin.
 /// Zero-sized: its reads are of IDR and its writes one atomic BSRR store,
 /// which no other owner of the port can race with.
-/// Made only here and in `board` (`new` is private to the crate), so no
-/// other code can drive AMP_EN.
+/// Made only here (`new` is private; the board gets its inputs from
+/// [`estop`], [`amp_fault`] and [`dump_button`]), so no other code can
+/// drive AMP_EN.
 #[derive(Debug)]
 pub struct PortPin<const PORT: char, const N: u8>(());
 
 impl<const PORT: char, const N: u8> PortPin<PORT, N> {
     /// The pin; `PORT` must be `'B'` or `'C'` and `N` below 16.
-    pub(crate) const fn new() -> Self {
+    const fn new() -> Self {
         const {
             assert!(N < 16 && (PORT == 'B' || PORT == 'C'));
         }
@@ -101,6 +102,27 @@ impl<const N: u8> embedded_hal::digital::OutputPin for PortPin<'B', N> {
         }
         Ok(())
     }
+}
+
+/// The e-stop input.
+pub(crate) const fn estop() -> Estop {
+    PortPin::new()
+}
+
+/// The amplifier-fault input.
+pub(crate) const fn amp_fault() -> AmpFault {
+    PortPin::new()
+}
+
+/// The dump button.
+pub(crate) const fn dump_button() -> Dump {
+    PortPin::new()
+}
+
+/// Whether AMP_EN reads low: its input register follows the pin in its
+/// alternate function too (the deadman's readback).
+pub(crate) fn amp_en_reads_low() -> bool {
+    PortPin::<'B', { AMP_EN }>::idr() & (1 << AMP_EN) == 0
 }
 
 /// Moves the map's encoder counters out of the device peripherals: `(motor,
@@ -184,6 +206,8 @@ pub trait DeadmanChannel {
     fn pulse(&self);
     /// The counter stopped and one-pulse kept.
     fn stop(&self);
+    /// CR1 cleared: the counter stopped (what the fault paths do).
+    fn halt(&self);
     /// Whether the counter stopped by itself (the window's end).
     fn stopped(&self) -> bool;
     /// The counter at `count` and running: the window starts again.
@@ -215,6 +239,9 @@ macro_rules! deadman_channel {
             }
             fn stop(&self) {
                 self.cr1().write(|w| w.opm().enabled().cen().disabled());
+            }
+            fn halt(&self) {
+                self.cr1().write(|w| w.cen().disabled());
             }
             fn stopped(&self) -> bool {
                 self.cr1().read().cen().is_disabled()

@@ -25,7 +25,10 @@ hopper_app::fault_handlers!(hopper_app::park);
 /// The on-target self-test (`hopper-selftest`): the board's `init`,
 /// then one [`hopper_control::selftest`] step per control period on the
 /// loopback harness (docs/board.md, "Self-test"), the verdicts over defmt.
-#[cfg(target_os = "none")]
+/// The harness is the H405 map's (PC6-PC12): on the Feather's map those
+/// pins carry the motor encoder and the microSD card, so there the image
+/// only says so and parks (below).
+#[cfg(all(target_os = "none", not(feature = "feather")))]
 #[rtic::app(device = stm32f4::stm32f405, peripherals = true)]
 mod app {
     use hopper_app::board::{self, BoardIo, Watchdog};
@@ -157,4 +160,17 @@ mod app {
             }
         }
     }
+}
+
+/// The Feather's map has no loopback harness: AMP_EN stays low (it floats
+/// to the external pull-down until driven), the log says why, and the
+/// image parks.
+#[cfg(all(target_os = "none", feature = "feather"))]
+#[cortex_m_rt::entry]
+fn main() -> ! {
+    hopper_app::disable_amplifier();
+    defmt::error!(
+        "hopper-selftest: no loopback harness on the feather pin map (its PC6-PC12 carry the motor encoder and the microSD card): build it without `feather`"
+    );
+    hopper_app::park()
 }
