@@ -22,6 +22,7 @@ pub mod hil;
 pub mod identify;
 pub mod inject;
 pub mod motors;
+pub mod names;
 pub mod out_dir;
 pub mod params_toml;
 pub mod planar_sim;

@@ -121,29 +121,41 @@ pub enum Dedicated {
 }
 
 impl Dedicated {
-    /// The dedicated setting of firmware parameter `name`, if it has one.
+    /// The dedicated setting of firmware parameter `name`, if it has one
+    /// (its alias has a flag, [`crate::names`]).
     pub fn of(name: &str) -> Option<Self> {
-        Some(match name {
+        let alias = crate::names::of(name).filter(|a| a.flag.is_some())?;
+        Some(match alias.name() {
             "controller" => Dedicated::Controller,
             "target_apex_m" => Dedicated::TargetApex,
             "flight.kp_a_per_rad" => Dedicated::FlightKp,
             "flight.kd_a_s_per_rad" => Dedicated::FlightKd,
-            "constant_torque.torque_nm" | "modified_torque.torque_nm" => Dedicated::Torque,
-            "energy.gain_nm_per_j" | "energy_apex.gain_nm_per_j" => Dedicated::EnergyGain,
+            "constant_torque.torque_nm" => Dedicated::Torque,
+            "energy.gain_nm_per_j" => Dedicated::EnergyGain,
+            // A run setting (the start height, the seed), not a firmware
+            // parameter.
             _ => return None,
         })
     }
 
-    /// Where to set it: the flag and the scenario key.
-    pub fn flag(self) -> &'static str {
+    /// The firmware parameter it stands for (the first, where it sets two).
+    fn name(self) -> &'static str {
+        use hopper_control::params as fw;
         match self {
-            Dedicated::Controller => "--controller / controller.name",
-            Dedicated::TargetApex => "--target-apex / controller.target_apex_m",
-            Dedicated::FlightKp => "--flight-kp / controller.flight_kp_a_per_rad",
-            Dedicated::FlightKd => "--flight-kd / controller.flight_kd_a_s_per_rad",
-            Dedicated::Torque => "--torque / controller.torque_nm",
-            Dedicated::EnergyGain => "--ke / controller.energy_gain_nm_per_j",
+            Dedicated::Controller => fw::CONTROLLER.name,
+            Dedicated::TargetApex => fw::TARGET_APEX_M.name,
+            Dedicated::FlightKp => fw::FLIGHT_KP.name,
+            Dedicated::FlightKd => fw::FLIGHT_KD.name,
+            Dedicated::Torque => fw::CONSTANT_TORQUE_NM.name,
+            Dedicated::EnergyGain => fw::ENERGY_GAIN.name,
         }
+    }
+
+    /// Where to set it: `--flag / scenario.key`.
+    pub fn flag(self) -> String {
+        crate::names::of(self.name())
+            .and_then(crate::names::Alias::setter)
+            .unwrap_or_default()
     }
 }
 
@@ -448,13 +460,13 @@ impl Settings {
             let kp = self.flight_kp_a_per_rad.unwrap_or(f64::from(d.gains.kp));
             let kd = self.flight_kd_a_s_per_rad.unwrap_or(f64::from(d.gains.kd));
             check_range(
-                "--flight-kp / controller.flight_kp_a_per_rad",
+                &Dedicated::FlightKp.flag(),
                 kp,
                 limits::FLIGHT_KP_A_PER_RAD,
                 "A/rad",
             )?;
             check_range(
-                "--flight-kd / controller.flight_kd_a_s_per_rad",
+                &Dedicated::FlightKd.flag(),
                 kd,
                 limits::FLIGHT_KD_A_S_PER_RAD,
                 "A s/rad",
@@ -568,12 +580,14 @@ impl Settings {
                 };
                 // The gains as f32 (what the firmware runs) print as given.
                 Err(format!(
-                    "--flight-kd / controller.flight_kd_a_s_per_rad = {} A s/rad makes the flight PD unstable ({why}) with kp = {} A/rad at {hz} Hz: stable for kd in {lo:.4} ..= {hi:.4} A s/rad (A = {:.1} rad/s^2/A, eq 4.1 filter G = {})",
+                    "{} = {} A s/rad makes the flight PD unstable ({why}) with kp = {} A/rad at {hz} Hz: stable for kd in {lo:.4} ..= {hi:.4} A s/rad (A = {:.1} rad/s^2/A, eq 4.1 filter G = {})",
+                    Dedicated::FlightKd.flag(),
                     gains.kd, gains.kp, lp.plant_gain, self.filter_gain() as f32
                 ))
             }
             None => Err(format!(
-                "--flight-kp / controller.flight_kp_a_per_rad = {} A/rad gives an unstable flight PD at --control-hz / control_hz = {hz} Hz for every kd up to 1000 A s/rad: raise the control rate or lower kp",
+                "{} = {} A/rad gives an unstable flight PD at --control-hz / control_hz = {hz} Hz for every kd up to 1000 A s/rad: raise the control rate or lower kp",
+                Dedicated::FlightKp.flag(),
                 gains.kp
             )),
         }

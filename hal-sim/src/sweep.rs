@@ -13,6 +13,7 @@
 //! `flight_kp`, `flight_kd` (or their column names, e.g. `torque_nm`).
 
 use crate::csv_out::Shown;
+use crate::names;
 use crate::params::{field, FieldSpec, FIELDS};
 use crate::plot::viridis;
 use crate::run::{self, Summary};
@@ -62,103 +63,50 @@ pub enum Knob {
     Param(&'static Param),
 }
 
-/// Controller settings a sweep accepts: (short name, column name, knob).
-const SETTING_KNOBS: [(&str, &str, Knob); 14] = [
-    ("torque", "torque_nm", Knob::Torque),
-    ("target_apex", "target_apex_m", Knob::TargetApex),
-    ("start_apex", "start_apex_m", Knob::StartApex),
-    ("ke", "energy_gain_nm_per_j", Knob::EnergyGain),
-    ("flight_kp", "flight_kp_a_per_rad", Knob::FlightKp),
-    ("flight_kd", "flight_kd_a_s_per_rad", Knob::FlightKd),
-    ("seed", "noise_seed", Knob::Seed),
-    (
-        "spin_up",
-        "shaped_spin_up_fraction",
-        Knob::Param(&fw::SHAPED_SPIN_UP_FRACTION),
-    ),
-    (
-        "switch",
-        "shaped_switch_fraction",
-        Knob::Param(&fw::SHAPED_SWITCH_FRACTION),
-    ),
-    (
-        "brake",
-        "shaped_brake_fraction",
-        Knob::Param(&fw::SHAPED_BRAKE_FRACTION),
-    ),
-    (
-        "level_ki",
-        "shaped_level_gain_per_j",
-        Knob::Param(&fw::SHAPED_LEVEL_GAIN),
-    ),
-    (
-        "level_kp",
-        "shaped_level_proportional_per_j",
-        Knob::Param(&fw::SHAPED_LEVEL_PROPORTIONAL),
-    ),
-    (
-        "braking_margin",
-        "shaped_braking_margin",
-        Knob::Param(&fw::SHAPED_BRAKING_MARGIN),
-    ),
-    (
-        "integral_start",
-        "shaped_integral_start",
-        Knob::Param(&fw::SHAPED_INTEGRAL_START),
-    ),
-];
-
-/// Short names of plant parameters, the thesis's symbols (`k`, `c`: the
-/// leg spring's stiffness and damping, section 2.2) and the ball-screw
-/// `lead` (Table 2.1), so `--param k=8000:20000:13` works as written.
-const PLANT_ALIASES: [(&str, &str); 3] = [
-    ("k", "spring_stiffness_n_per_m"),
-    ("c", "spring_damping_ns_per_m"),
-    ("lead", "screw_lead_m"),
-];
-
 impl Knob {
-    /// Look a name up: a plant field (or its short name), or a setting's
-    /// short or column name.
+    /// Look a name up: a plant field, a firmware parameter or a run
+    /// setting, by its name or an alias ([`crate::names`]: a sweep's short
+    /// name or column name).
     pub fn parse(name: &str) -> Option<Knob> {
-        let name = PLANT_ALIASES
-            .iter()
-            .find(|(short, _)| *short == name)
-            .map_or(name, |(_, full)| full);
+        let name = names::resolve(name);
         if let Some(f) = field(name) {
             return Some(Knob::Plant(f));
         }
-        SETTING_KNOBS
-            .iter()
-            .find(|(short, column, _)| *short == name || *column == name)
-            .map(|(_, _, k)| *k)
-            .or_else(|| match Dedicated::of(name) {
-                // The table's names for settings with a knob of their own.
-                Some(Dedicated::TargetApex) => Some(Knob::TargetApex),
-                Some(Dedicated::FlightKp) => Some(Knob::FlightKp),
-                Some(Dedicated::FlightKd) => Some(Knob::FlightKd),
-                Some(Dedicated::Torque) => Some(Knob::Torque),
-                Some(Dedicated::EnergyGain) => Some(Knob::EnergyGain),
-                Some(Dedicated::Controller) => None,
-                None => fw::find(name).map(Knob::Param),
-            })
+        match name {
+            "start_apex_m" => return Some(Knob::StartApex),
+            "noise_seed" => return Some(Knob::Seed),
+            _ => {}
+        }
+        match Dedicated::of(name) {
+            // The settings with a flag of their own have a knob of their own.
+            Some(Dedicated::TargetApex) => Some(Knob::TargetApex),
+            Some(Dedicated::FlightKp) => Some(Knob::FlightKp),
+            Some(Dedicated::FlightKd) => Some(Knob::FlightKd),
+            Some(Dedicated::Torque) => Some(Knob::Torque),
+            Some(Dedicated::EnergyGain) => Some(Knob::EnergyGain),
+            Some(Dedicated::Controller) => None,
+            None => fw::find(name).map(Knob::Param),
+        }
     }
 
-    /// CSV column name (with its unit).
-    pub fn column(&self) -> &'static str {
+    /// The quantity's one name ([`crate::names`]).
+    fn name(&self) -> &'static str {
         match self {
             Knob::Plant(f) => f.name,
-            // A table parameter without a column of its own is named as in
-            // the table.
-            Knob::Param(p) => SETTING_KNOBS
-                .iter()
-                .find(|(_, _, k)| k.same(self))
-                .map_or(p.name, |(_, column, _)| column),
-            other => SETTING_KNOBS
-                .iter()
-                .find(|(_, _, k)| k.same(other))
-                .map_or("?", |(_, column, _)| column),
+            Knob::Param(p) => p.name,
+            Knob::Torque => fw::CONSTANT_TORQUE_NM.name,
+            Knob::TargetApex => fw::TARGET_APEX_M.name,
+            Knob::StartApex => "start_apex_m",
+            Knob::EnergyGain => fw::ENERGY_GAIN.name,
+            Knob::FlightKp => fw::FLIGHT_KP.name,
+            Knob::FlightKd => fw::FLIGHT_KD.name,
+            Knob::Seed => "noise_seed",
         }
+    }
+
+    /// CSV column name (with its unit): the alias's column, else the name.
+    pub fn column(&self) -> &'static str {
+        names::column(self.name())
     }
 
     /// Set the value in `s`.
@@ -179,15 +127,6 @@ impl Knob {
                 s.firmware_params.retain(|(q, _)| q.name != p.name);
                 s.firmware_params.push((p, v as f32));
             }
-        }
-    }
-
-    /// Whether two knobs change the same setting.
-    fn same(&self, other: &Knob) -> bool {
-        match (self, other) {
-            (Knob::Param(a), Knob::Param(b)) => a.name == b.name,
-            (Knob::Plant(a), Knob::Plant(b)) => a.name == b.name,
-            (a, b) => std::mem::discriminant(a) == std::mem::discriminant(b),
         }
     }
 
@@ -242,10 +181,16 @@ pub fn parse_axis(spec: &str) -> Result<Axis, String> {
     let name = name.trim();
     let knob = Knob::parse(name).ok_or_else(|| {
         let plant: Vec<&str> = FIELDS.iter().map(|f| f.name).collect();
-        let settings: Vec<&str> = SETTING_KNOBS.iter().map(|(s, _, _)| *s).collect();
-        let short: Vec<String> = PLANT_ALIASES
+        let is_plant = |a: &&names::Alias| field(a.name()).is_some();
+        let settings: Vec<&str> = names::ALIASES
             .iter()
-            .map(|(s, full)| format!("{s} = {full}"))
+            .filter(|a| !is_plant(a))
+            .filter_map(|a| a.short)
+            .collect();
+        let short: Vec<String> = names::ALIASES
+            .iter()
+            .filter(is_plant)
+            .filter_map(|a| Some(format!("{} = {}", a.short?, a.name())))
             .collect();
         bad(format!(
             "unknown parameter `{name}`: expected a controller setting {settings:?} or a plant parameter {plant:?} (short names: {})",
@@ -2060,7 +2005,7 @@ mod tests {
         assert_eq!(c.knob.column(), "spring_damping_ns_per_m");
         // The short name and the full one are the same knob.
         let full = parse_axis("spring_stiffness_n_per_m=1:2:2").unwrap_or_else(|e| panic!("{e}"));
-        assert!(k.knob.same(&full.knob));
+        assert_eq!(k.knob.name(), full.knob.name());
         let err = parse_axis("kk=1:2:2").err().unwrap_or_default();
         assert!(err.contains("unknown parameter `kk`"), "{err}");
         assert!(err.contains("k = spring_stiffness_n_per_m"), "{err}");

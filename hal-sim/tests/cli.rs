@@ -575,3 +575,35 @@ fn a_disarmed_robot_books_no_copper() {
     }
     assert_eq!(s["ledger"]["copper_loss_j"].as_f64(), Some(0.0));
 }
+
+/// Every flag and scenario key of [`hal_sim::names::ALIASES`] is one that
+/// `hopper-sim run` and the scenario reader take, so the table of a
+/// quantity's other names cannot name one that does not exist.
+#[test]
+fn every_alias_flag_and_key_exists() {
+    let help = String::from_utf8(sim(&["run", "--help"]).stdout).unwrap();
+    for a in hal_sim::names::ALIASES {
+        if let Some(flag) = a.flag {
+            assert!(
+                help.split_whitespace().any(|w| w == flag),
+                "`hopper-sim run` has no {flag}"
+            );
+        }
+        if let Some(key) = a.key {
+            let value = match a.name() {
+                "controller" => "\"shaped\"".to_string(),
+                "noise_seed" => "1".to_string(),
+                n => hopper_control::params::find(n)
+                    .map_or(0.1, |p| f64::from(p.default))
+                    .to_string(),
+            };
+            let toml = match key.split_once('.') {
+                Some((table, k)) => format!("[{table}]\n{k} = {value}\n"),
+                None => format!("{key} = {value}\n"),
+            };
+            if let Err(e) = hal_sim::scenario::from_toml_str(&toml, "alias test") {
+                panic!("scenario key {key}: {e}");
+            }
+        }
+    }
+}
