@@ -396,7 +396,7 @@ pub fn run(root: &Path) -> Result<(), String> {
     std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
     let elf = crate::board_image(root)?;
     let h405 = run_map(root, &H405, &elf, &dir);
-    let feather = match map_image(root, &FEATHER, &dir) {
+    let feather = match map_image(root, &FEATHER) {
         Ok(elf) => run_map(root, &FEATHER, &elf, &dir),
         Err(e) => {
             println!("{}: error (see above)", FEATHER.line);
@@ -409,20 +409,10 @@ pub fn run(root: &Path) -> Result<(), String> {
     h405.and(feather)
 }
 
-/// The board image built with `map`'s features, copied out of cargo's
-/// output (the next default build overwrites that path).
-fn map_image(root: &Path, map: &Map, dir: &Path) -> Result<std::path::PathBuf, String> {
-    let mut cmd = crate::cargo();
-    cmd.args([
-        "build",
-        "-p",
-        "hopper-app",
-        "--bin",
-        "hopper-fw",
-        "--release",
-        "--target",
-        crate::TARGET,
-    ]);
+/// The board image built with `map`'s features, in its own target
+/// directory (so that cargo's usual path keeps the default map's image).
+fn map_image(root: &Path, map: &Map) -> Result<std::path::PathBuf, String> {
+    let mut cmd = crate::hopper_fw_build();
     if let Some(f) = map.feature {
         cmd.args(["--features", f]);
     }
@@ -430,15 +420,12 @@ fn map_image(root: &Path, map: &Map, dir: &Path) -> Result<std::path::PathBuf, S
         cmd.arg("--target-dir")
             .arg(crate::target_dir(root)?.join(d));
     }
-    let built = crate::build_executable(
+    crate::build_executable(
         root,
         &format!("firmware release build ({} pin map)", map.line),
         "hopper-fw",
         &mut cmd,
-    )?;
-    let elf = dir.join(format!("hopper-fw-{}.elf", map.line));
-    std::fs::copy(&built, &elf).map_err(|e| format!("{}: {e}", elf.display()))?;
-    Ok(elf)
+    )
 }
 
 /// `elf`'s init on QEMU, its trace checked against `map`; prints
@@ -556,17 +543,7 @@ fn fault_test(root: &Path, map: &Map) -> Result<(), String> {
         root,
         &format!("firmware release build ({})", map.fault_line),
         "hopper-fw",
-        crate::cargo()
-            .args([
-                "build",
-                "-p",
-                "hopper-app",
-                "--bin",
-                "hopper-fw",
-                "--release",
-                "--target",
-                crate::TARGET,
-            ])
+        crate::hopper_fw_build()
             .args(["--features", &features, "--target-dir"])
             .arg(&target_dir),
     )?;

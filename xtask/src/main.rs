@@ -420,17 +420,26 @@ fn board_image(root: &Path) -> Result<PathBuf, String> {
         root,
         "firmware release build",
         "hopper-fw",
-        cargo().args([
-            "build",
-            "-p",
-            "hopper-app",
-            "--bin",
-            "hopper-fw",
-            "--release",
-            "--target",
-            TARGET,
-        ]),
+        &mut hopper_fw_build(),
     )
+}
+
+/// `cargo build` of the board image, `hopper-fw`, in release for the MCU:
+/// the default image here, the other pin maps and the fault test add
+/// their features and target directories.
+fn hopper_fw_build() -> Command {
+    let mut cmd = cargo();
+    cmd.args([
+        "build",
+        "-p",
+        "hopper-app",
+        "--bin",
+        "hopper-fw",
+        "--release",
+        "--target",
+        TARGET,
+    ]);
+    cmd
 }
 
 fn size(root: &Path) -> Result<(), String> {

@@ -90,6 +90,14 @@ pub mod serial_cost {
     static MAX: AtomicU32 = AtomicU32::new(0);
     static COUNT: AtomicU32 = AtomicU32::new(0);
 
+    /// The serial interrupt's work on `serial`, timed with the image's
+    /// counter `now` and recorded: what every image's USART task does.
+    pub fn serve(serial: &mut crate::serial::Serial<'_>, now: impl Fn() -> u32) {
+        let t0 = now();
+        serial.on_interrupt();
+        record(now().wrapping_sub(t0));
+    }
+
     /// One interrupt of `ticks`.
     pub fn record(ticks: u32) {
         SPENT.fetch_add(ticks, Relaxed);

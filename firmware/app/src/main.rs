@@ -374,18 +374,14 @@ mod app {
     #[cfg(not(feature = "feather"))]
     #[task(binds = USART1, priority = 4, local = [serial])]
     fn usart1(cx: usart1::Context) {
-        let t0 = cortex_m::peripheral::DWT::cycle_count();
-        cx.local.serial.on_interrupt();
-        hopper_app::serial_cost::record(cortex_m::peripheral::DWT::cycle_count().wrapping_sub(t0));
+        hopper_app::serial_cost::serve(cx.local.serial, cortex_m::peripheral::DWT::cycle_count);
     }
 
     /// The same on the Feather's pin map (its link is USART3).
     #[cfg(feature = "feather")]
     #[task(binds = USART3, priority = 4, local = [serial3])]
     fn usart3(cx: usart3::Context) {
-        let t0 = cortex_m::peripheral::DWT::cycle_count();
-        cx.local.serial3.on_interrupt();
-        hopper_app::serial_cost::record(cortex_m::peripheral::DWT::cycle_count().wrapping_sub(t0));
+        hopper_app::serial_cost::serve(cx.local.serial3, cortex_m::peripheral::DWT::cycle_count);
     }
 
     /// Logs hop ledgers and faults as the control task queues them.

@@ -199,8 +199,6 @@ mod app {
     /// times itself all the same.
     #[task(binds = USART1, priority = 3, local = [serial])]
     fn usart1(cx: usart1::Context) {
-        let t0 = hopper_app::qemu::tim5_now();
-        cx.local.serial.on_interrupt();
-        hopper_app::serial_cost::record(hopper_app::qemu::tim5_now().wrapping_sub(t0));
+        hopper_app::serial_cost::serve(cx.local.serial, hopper_app::qemu::tim5_now);
     }
 }

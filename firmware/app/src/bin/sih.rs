@@ -235,17 +235,15 @@ mod app {
     #[cfg(not(feature = "feather"))]
     #[task(binds = USART1, priority = 4, local = [serial, serial_ticks])]
     fn usart1(cx: usart1::Context) {
-        let t0 = cx.local.serial_ticks.raw();
-        cx.local.serial.on_interrupt();
-        hopper_app::serial_cost::record(cx.local.serial_ticks.raw().wrapping_sub(t0));
+        let ticks = &*cx.local.serial_ticks;
+        hopper_app::serial_cost::serve(cx.local.serial, || ticks.raw());
     }
 
     /// The same on the Feather's pin map (its link is USART3).
     #[cfg(feature = "feather")]
     #[task(binds = USART3, priority = 4, local = [serial3, serial3_ticks])]
     fn usart3(cx: usart3::Context) {
-        let t0 = cx.local.serial3_ticks.raw();
-        cx.local.serial3.on_interrupt();
-        hopper_app::serial_cost::record(cx.local.serial3_ticks.raw().wrapping_sub(t0));
+        let ticks = &*cx.local.serial3_ticks;
+        hopper_app::serial_cost::serve(cx.local.serial3, || ticks.raw());
     }
 }
