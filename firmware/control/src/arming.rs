@@ -71,12 +71,7 @@ impl Default for ArmingConfig {
 impl ArmingConfig {
     /// Every field in its documented range, or the first one that is not.
     pub fn validate(&self) -> Result<(), InvalidField> {
-        p::ARM_LINK_TIMEOUT_S.check(self.link_timeout_s)?;
-        p::ARM_HOME_TOLERANCE_M.check(self.home_tolerance_m)?;
-        p::ARM_STILL_MPS.check(self.still_velocity_mps)?;
-        p::ARM_REQUIRE_TARE.check_flag(self.require_tare)?;
-        p::ARM_REQUIRE_HOME.check_flag(self.require_home)?;
-        Ok(())
+        p::validate_part(|c| c.arming = *self)
     }
 }
 

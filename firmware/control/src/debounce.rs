@@ -35,9 +35,7 @@ impl Default for DebounceConfig {
 impl DebounceConfig {
     /// Both times within their parameters' ranges, else the one that is not.
     pub fn validate(&self) -> Result<(), InvalidField> {
-        p::ESTOP_PRESS_S.check(self.press_s)?;
-        p::ESTOP_RELEASE_S.check(self.release_s)?;
-        Ok(())
+        p::validate_part(|c| c.estop = *self)
     }
 }
 

@@ -130,7 +130,8 @@ pub enum ConfigError {
     Estimator(EstimatorError),
     /// The target apex is not in `0..=1` m.
     TargetApex,
-    /// A controller or flight-PD field is out of its documented range.
+    /// A parameter is out of its entry's range, or a controller's or the
+    /// flight PD's field is unusable (named).
     Law(InvalidField),
 }
 
@@ -235,7 +236,6 @@ impl Hopper {
     /// Validates `cfg` and builds the controller (in flight, no fault).
     pub fn new(cfg: HopperConfig) -> Result<Self, ConfigError> {
         cfg.model.validate().map_err(ConfigError::Model)?;
-        cfg.bringup.validate()?;
         let converter = Converter::new(cfg.calibration).map_err(ConfigError::Calibration)?;
         // The estimator's contact evidence (load-cell force in excess of
         // `k (delta0 + p)`) is a cross-check of two sensors through the spring,
@@ -251,6 +251,11 @@ impl Hopper {
             PhaseEstimator::new(cfg.estimator, &sensed).map_err(ConfigError::Estimator)?;
         let desired_energy_j = Self::desired_for(&cfg.model, cfg.target_apex_m)?;
         let controller = Controller::new(&cfg.strategy, &cfg.model, &cfg.flight)?;
+        // Every parameter against its entry's range, the parts without a
+        // range check of their own (estimator, calibration, supervisor,
+        // bring-up) included; after the parts' own checks, which name
+        // what they find in their own terms.
+        crate::params::validate(&cfg)?;
         Ok(Self {
             controller,
             cfg,
@@ -684,17 +689,16 @@ mod tests {
         assert!(out.faults.contains(Fault::SensorRange));
         assert_eq!(out.command, Command::SAFE);
 
-        // A calibration that overflows f32 on a real code: converted value is inf.
+        // A calibration that would overflow f32 on a real code (a converted
+        // value of inf) is refused before it runs, by its entry's name.
         let mut cfg = HopperConfig::default();
         cfg.calibration.loadcell_gain_n_per_code = f32::MAX;
-        let mut h = Hopper::new(cfg).unwrap_or_else(|e| panic!("{e:?}"));
-        let raw = RawSample {
-            loadcell_code: 4000,
-            ..RawSample::default()
-        };
-        let out = h.step(Some(&raw), 1e-4);
-        assert!(out.faults.contains(Fault::SensorNonFinite), "{out:?}");
-        assert_eq!(out.command, Command::SAFE);
+        assert_eq!(
+            Hopper::new(cfg).err(),
+            Some(ConfigError::Law(InvalidField(
+                "calibration.loadcell_gain_n_per_code"
+            )))
+        );
     }
 
     #[test]

@@ -75,11 +75,6 @@ impl Param {
         }
     }
 
-    /// Checks a flag's or choice's stored value (`true` is 1).
-    pub fn check_flag(&self, on: bool) -> Result<bool, InvalidField> {
-        self.check(if on { 1.0 } else { 0.0 }).map(|_| on)
-    }
-
     /// The default of a flag.
     pub const fn default_flag(&self) -> bool {
         self.default != 0.0
@@ -851,6 +846,44 @@ pub fn read(c: &mut HopperConfig, p: &Param) -> Result<f32, ParamError> {
     })
 }
 
+/// Checks every parameter `cfg` holds against its entry's range (and
+/// wholeness), naming the first one out of range in table order: the one
+/// range check of a configuration, so a new entry is checked with no code
+/// of its own. `Hopper::new` runs it on the whole configuration; each
+/// part's `validate` runs it on the part in place ([`validate_part`]).
+pub fn validate(cfg: &HopperConfig) -> Result<(), InvalidField> {
+    check_in(&mut { *cfg })
+}
+
+/// [`validate`] for one part of a configuration, whose entries are found
+/// where they live: `place` puts the part into the default configuration
+/// (whose other values are the table's defaults, all in range).
+pub fn validate_part(place: impl FnOnce(&mut HopperConfig)) -> Result<(), InvalidField> {
+    let mut cfg = defaults();
+    place(&mut cfg);
+    check_in(&mut cfg)
+}
+
+/// The default configuration, built in one place in the image (not once
+/// per part that [`validate_part`] checks).
+#[inline(never)]
+fn defaults() -> HopperConfig {
+    HopperConfig::default()
+}
+
+/// [`validate`] through a configuration lent mutably (the slots are
+/// reached by `&mut`; nothing is changed).
+#[inline(never)]
+fn check_in(cfg: &mut HopperConfig) -> Result<(), InvalidField> {
+    for p in TABLE {
+        // A parameter of another controller is not in `cfg` to check.
+        if let Ok(v) = read(cfg, p) {
+            p.check(v)?;
+        }
+    }
+    Ok(())
+}
+
 /// Sets parameter `name` of `cfg` to `value`, after checking it against the
 /// parameter's range. The whole configuration is validated again when a
 /// controller is built from it (`Hopper::new`).
@@ -1135,6 +1168,51 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// Every entry's range is enforced with no code of its own: a value
+    /// out of range put straight into its slot (past `set`'s check) makes
+    /// [`validate`] name that entry and `Hopper::new` refuse the
+    /// configuration, for every controller's parameters.
+    #[test]
+    fn every_entry_out_of_range_is_refused_by_name() {
+        let mut checked = 0;
+        for i in 0..CONTROLLER_NAMES.len() {
+            let cfg = with_controller(i).unwrap_or_else(|| panic!("controller {i}"));
+            assert_eq!(validate(&cfg), Ok(()), "defaults of controller {i}");
+            for p in TABLE {
+                let mut c = cfg;
+                let put = match slot(&mut c, p) {
+                    Some(Slot::Real(v)) => {
+                        *v = f32::NAN;
+                        true
+                    }
+                    // Below the least count (flags and choices cannot be
+                    // out of range).
+                    Some(Slot::U32(n)) if p.min >= 1.0 => {
+                        *n = 0;
+                        true
+                    }
+                    Some(Slot::U16(n)) if p.min >= 1.0 => {
+                        *n = 0;
+                        true
+                    }
+                    Some(Slot::U8(n)) if p.min >= 1.0 => {
+                        *n = 0;
+                        true
+                    }
+                    _ => false,
+                };
+                if !put {
+                    continue;
+                }
+                assert_eq!(validate(&c), Err(InvalidField(p.name)), "{}", p.name);
+                assert!(Hopper::new(c).is_err(), "{} = NaN was built", p.name);
+                checked += 1;
+            }
+        }
+        // Every real and count entry of some controller was tried.
+        assert!(checked >= 100, "{checked}");
     }
 
     /// The parameter table as Markdown (`docs/parameters.md`).

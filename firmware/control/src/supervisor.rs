@@ -377,7 +377,10 @@ impl SupervisorConfig {
     /// ordered ranges and stroke limits, a positive current limit with the
     /// trip level at or above it, a positive braking deceleration and spring
     /// rate, finite contact thresholds, and positive cross-check bounds
-    /// (`f32::INFINITY` turns a cross-check off).
+    /// (`f32::INFINITY` turns a cross-check off). A robot's configuration
+    /// is held to the narrower ranges of the `supervisor.*` entries too
+    /// (`params::validate`, run by `Hopper::new`: 1e30 turns a cross-check
+    /// off there); the supervisor alone needs only these to run.
     pub fn validate(&self) -> Result<(), InvalidField> {
         let finite_range = |r: &Range| r.min.is_finite() && r.max.is_finite() && r.min <= r.max;
         let ranges = [

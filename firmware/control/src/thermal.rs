@@ -109,17 +109,8 @@ impl ThermalConfig {
     /// above the ambient and below the trip; the first one that is not is
     /// named.
     pub fn validate(&self) -> Result<(), InvalidField> {
-        p::THERMAL_PROTECT.check_flag(self.protect)?;
-        p::THERMAL_RESISTANCE_OHM.check(self.winding_resistance_ohm)?;
-        p::THERMAL_WINDING_TO_HOUSING.check(self.winding_to_housing_k_per_w)?;
-        p::THERMAL_HOUSING_TO_AMBIENT.check(self.housing_to_ambient_k_per_w)?;
-        p::THERMAL_WINDING_TAU.check(self.winding_time_constant_s)?;
-        p::THERMAL_HOUSING_TAU.check(self.housing_time_constant_s)?;
-        p::THERMAL_AMBIENT.check(self.ambient_c)?;
-        p::THERMAL_DERATE.check(self.derate_winding_c)?;
-        p::THERMAL_TRIP.check(self.trip_winding_c)?;
-        p::THERMAL_DERATED_FRACTION.check(self.derated_limit_fraction)?;
-        // Finite by the checks above.
+        p::validate_part(|c| c.supervisor.thermal = *self)?;
+        // Finite by the entries' ranges.
         if self.derate_winding_c <= self.ambient_c {
             return Err(InvalidField(p::THERMAL_DERATE.name));
         }

@@ -111,10 +111,7 @@ impl Default for BringupConfig {
 impl BringupConfig {
     /// Every field within its parameter's range, else the first that is not.
     pub fn validate(&self) -> Result<(), InvalidField> {
-        p::BRINGUP_CURRENT_LIMIT_A.check(self.current_limit_a)?;
-        p::BRINGUP_SPEED_MPS.check(self.speed_mps)?;
-        p::BRINGUP_SWEEP_M.check(self.sweep_m)?;
-        Ok(())
+        p::validate_part(|c| c.bringup = *self)
     }
 }
 

@@ -11,8 +11,9 @@
 use super::{
     flight_pd::FlightPd, require, Actuator, ControlInput, ControlLaw, EventInput, InvalidField,
 };
+use super::{StanceLaw, Strategy};
 use crate::estimator::Phase;
-use crate::params::{self, Param};
+use crate::params;
 
 /// Configuration of the energy-feedback torque law.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -33,6 +34,15 @@ impl Default for Config {
     }
 }
 
+impl Config {
+    /// Checks every field against its `energy.*` entry, naming the first
+    /// one out of range (energy-apex checks its own copy against its
+    /// `energy_apex.*` entries).
+    pub fn validate(&self) -> Result<(), InvalidField> {
+        params::validate_part(|c| c.strategy = Strategy::Thesis(StanceLaw::Energy(*self)))
+    }
+}
+
 /// Eq 2.52 on a given actuator, its configuration checked once.
 #[derive(Debug, Clone, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -44,11 +54,10 @@ pub struct Law {
 }
 
 impl Law {
-    /// Checks `c`, its gain against `gain` (the table entry of the
-    /// controller that runs it: [`params::ENERGY_GAIN`] or
-    /// [`params::ENERGY_APEX_GAIN`]).
-    pub fn new(c: &Config, act: &Actuator, gain: &Param) -> Result<Self, InvalidField> {
-        gain.check(c.gain_nm_per_j)?;
+    /// The law of `c`, which the controller that runs it has checked
+    /// against its own entries ([`Config::validate`], or energy-apex's
+    /// `ApexLoop::validate`); refused for an unusable actuator.
+    pub fn new(c: &Config, act: &Actuator) -> Result<Self, InvalidField> {
         let kt = act.torque_constant_nm_per_a;
         require(kt > 0.0 && kt.is_finite(), "model.torque_constant_nm_per_a")?;
         Ok(Law {
@@ -103,7 +112,10 @@ impl Energy {
     /// Checks `c`.
     pub fn new(c: &Config, act: &Actuator, flight: FlightPd) -> Result<Self, InvalidField> {
         Ok(Self {
-            law: Law::new(c, act, &params::ENERGY_GAIN)?,
+            law: {
+                c.validate()?;
+                Law::new(c, act)?
+            },
             flight,
         })
     }
@@ -129,7 +141,7 @@ mod tests {
     #[test]
     fn eq_2_52_values_sign_and_saturation() -> Result<(), InvalidField> {
         let act = Actuator::default();
-        let law = Law::new(&Config::default(), &act, &params::ENERGY_GAIN)?;
+        let law = Law::new(&Config::default(), &act)?;
         // 2 J short -> 0.4 N m -> 13.47 A.
         assert!(close(law.torque_nm(68.0, 70.0), 0.4, 1e-5));
         assert!(close(law.current_a(68.0, 70.0), 13.468, 1e-2));
@@ -141,7 +153,6 @@ mod tests {
                 ..Config::default()
             },
             &act,
-            &params::ENERGY_GAIN,
         )?;
         assert_eq!(add_only.current_a(71.0, 70.0), 0.0);
         // 20 J short -> 4 N m -> saturates.
@@ -159,8 +170,10 @@ mod tests {
                 gain_nm_per_j: k,
                 ..Config::default()
             };
+            let flight = FlightPd::new(&super::super::flight_pd::Config::default(), &act)
+                .unwrap_or_else(|e| panic!("{e:?}"));
             assert_eq!(
-                Law::new(&c, &act, &params::ENERGY_GAIN).err(),
+                Energy::new(&c, &act, flight).err(),
                 Some(InvalidField("energy.gain_nm_per_j"))
             );
         }
@@ -173,7 +186,7 @@ mod tests {
             neg in proptest::bool::ANY,
         ) {
             let act = Actuator::default();
-            let law = Law::new(&Config { gain_nm_per_j: k, allow_negative: neg }, &act, &params::ENERGY_GAIN)
+            let law = Law::new(&Config { gain_nm_per_j: k, allow_negative: neg }, &act)
                 .map_err(|f| proptest::test_runner::TestCaseError::fail(f.0))?;
             let i = law.current_a(e, ed);
             proptest::prop_assert!(i.is_finite() && i.abs() <= act.current_limit_a);

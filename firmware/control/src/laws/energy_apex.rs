@@ -94,12 +94,7 @@ impl ApexLoop {
     /// Checks every field against [`params`], naming the first one out of
     /// range.
     pub fn validate(&self) -> Result<(), InvalidField> {
-        params::ENERGY_APEX_INTEGRAL.check(self.gain)?;
-        params::ENERGY_APEX_PROPORTIONAL.check(self.proportional)?;
-        params::ENERGY_APEX_MAX_OFFSET_J.check(self.max_offset_j)?;
-        params::ENERGY_APEX_MIN_OFFSET_J.check(self.min_offset_j)?;
-        params::ENERGY_APEX_SPIN_UP.check(self.spin_up_fraction)?;
-        Ok(())
+        params::validate_part(|c| c.strategy = super::Strategy::EnergyApex(*self))
     }
 }
 
@@ -130,7 +125,7 @@ impl EnergyApex {
         cfg.validate()?;
         Ok(Self {
             cfg: *cfg,
-            law: energy::Law::new(&cfg.law, act, &params::ENERGY_APEX_GAIN)?,
+            law: energy::Law::new(&cfg.law, act)?,
             flight,
             energy: EnergyModel::new(model)
                 .map_err(|_| InvalidField("model.spring_stiffness_n_per_m"))?,

@@ -54,9 +54,7 @@ impl FlightPd {
     /// stroke (a bad one is refused by name: with it the nut would not be
     /// driven home in flight).
     pub fn new(c: &Config, act: &Actuator) -> Result<Self, InvalidField> {
-        params::FLIGHT_KP.check(c.gains.kp)?;
-        params::FLIGHT_KD.check(c.gains.kd)?;
-        params::FLIGHT_START_M.check(c.start_position_m)?;
+        params::validate_part(|k| k.flight = *c)?;
         require(
             c.start_position_m <= act.stroke_m,
             params::FLIGHT_START_M.name,

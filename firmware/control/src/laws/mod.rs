@@ -192,17 +192,6 @@ impl Default for NutPositionPd {
 }
 
 impl NutPositionPd {
-    /// Checks the gains against the table entries `kp` and `kd` of the law
-    /// that runs this loop.
-    pub fn validate(
-        &self,
-        kp: &crate::params::Param,
-        kd: &crate::params::Param,
-    ) -> Result<(), InvalidField> {
-        kp.check(self.kp_n_per_m)?;
-        kd.check(self.kd_n_s_per_m).map(|_| ())
-    }
-
     /// Current that drives the nut from `p` (m) at `pd` (m/s) to `p_ref` (m)
     /// against the measured spring force `spring_force_n` (N), A, clamped.
     pub fn current_a(

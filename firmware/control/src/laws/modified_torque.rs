@@ -76,10 +76,9 @@ pub fn command(c: &Config, act: &Actuator) -> Result<f32, LawError> {
 impl Config {
     /// Checks every field, naming the first one out of range.
     pub fn validate(&self) -> Result<(), InvalidField> {
-        params::MODIFIED_TORQUE_NM.check(self.torque_nm)?;
-        params::MODIFIED_TORQUE_APEX_FRACTION
-            .check(self.apex_fraction)
-            .map(|_| ())
+        params::validate_part(|c| {
+            c.strategy = super::Strategy::Thesis(super::StanceLaw::ModifiedTorque(*self))
+        })
     }
 }
 

@@ -33,7 +33,9 @@ pub fn command(c: &Config, act: &Actuator) -> Result<f32, LawError> {
 impl Config {
     /// Checks every field, naming the first one out of range.
     pub fn validate(&self) -> Result<(), InvalidField> {
-        params::CONSTANT_TORQUE_NM.check(self.torque_nm).map(|_| ())
+        params::validate_part(|c| {
+            c.strategy = super::Strategy::Thesis(super::StanceLaw::OpenTorque(*self))
+        })
     }
 }
 

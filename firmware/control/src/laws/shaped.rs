@@ -159,26 +159,7 @@ impl Config {
     /// Checks every field (finite and in its documented range), naming the
     /// first one out of range.
     pub fn validate(&self) -> Result<(), InvalidField> {
-        let fields = [
-            (self.spin_up_fraction, &params::SHAPED_SPIN_UP_FRACTION),
-            (self.spin_up_min_apex_m, &params::SHAPED_SPIN_UP_MIN_APEX_M),
-            (self.switch_fraction, &params::SHAPED_SWITCH_FRACTION),
-            (self.brake_fraction, &params::SHAPED_BRAKE_FRACTION),
-            (self.initial_level, &params::SHAPED_INITIAL_LEVEL),
-            (self.integral_start, &params::SHAPED_INTEGRAL_START),
-            (self.level_gain_per_j, &params::SHAPED_LEVEL_GAIN),
-            (
-                self.level_proportional_per_j,
-                &params::SHAPED_LEVEL_PROPORTIONAL,
-            ),
-            (self.braking_margin, &params::SHAPED_BRAKING_MARGIN),
-            (self.tracking_time_s, &params::SHAPED_TRACKING_TIME_S),
-            (self.creep_speed_mps, &params::SHAPED_CREEP_SPEED_MPS),
-        ];
-        for (v, p) in fields {
-            p.check(v)?;
-        }
-        Ok(())
+        params::validate_part(|c| c.strategy = super::Strategy::Shaped(*self))
     }
 }
 

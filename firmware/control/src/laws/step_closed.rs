@@ -153,14 +153,9 @@ impl Latch {
 impl Config {
     /// Checks every field, naming the first one out of range.
     pub fn validate(&self) -> Result<(), InvalidField> {
-        match self.gain {
-            Gain::Fixed { kp_m_per_j } => params::STEP_CLOSED_KP_M_PER_J.check(kp_m_per_j)?,
-            Gain::Normalised { min_compression_m } => {
-                params::STEP_CLOSED_MIN_COMPRESSION_M.check(min_compression_m)?
-            }
-        };
-        self.pd
-            .validate(&params::STEP_CLOSED_KP, &params::STEP_CLOSED_KD)
+        params::validate_part(|c| {
+            c.strategy = super::Strategy::Thesis(super::StanceLaw::StepClosed(*self))
+        })
     }
 }
 

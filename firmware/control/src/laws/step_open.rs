@@ -58,9 +58,9 @@ pub fn command(c: &Config, act: &Actuator, x: &StanceInput) -> Result<f32, LawEr
 impl Config {
     /// Checks every field, naming the first one out of range.
     pub fn validate(&self) -> Result<(), InvalidField> {
-        params::STEP_OPEN_M.check(self.step_m)?;
-        self.pd
-            .validate(&params::STEP_OPEN_KP, &params::STEP_OPEN_KD)
+        params::validate_part(|c| {
+            c.strategy = super::Strategy::Thesis(super::StanceLaw::StepOpen(*self))
+        })
     }
 }
 

@@ -73,10 +73,9 @@ pub fn command(c: &Config, act: &Actuator, x: &StanceInput) -> Result<f32, LawEr
 impl Config {
     /// Checks every field, naming the first one out of range.
     pub fn validate(&self) -> Result<(), InvalidField> {
-        params::VELOCITY_GAIN.check(self.gain_mps_per_j)?;
-        params::VELOCITY_LOOP_GAIN
-            .check(self.loop_gain_n_s_per_m)
-            .map(|_| ())
+        params::validate_part(|c| {
+            c.strategy = super::Strategy::Thesis(super::StanceLaw::Velocity(*self))
+        })
     }
 }
 
