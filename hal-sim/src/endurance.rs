@@ -55,6 +55,10 @@ pub fn heat_aware_settings() -> Settings {
         (&p::SHAPED_BRAKE_FRACTION, c.brake_fraction),
         (&p::SHAPED_BRAKING_MARGIN, c.braking_margin),
         (&p::SHAPED_TRACKING_TIME_S, c.tracking_time_s),
+        (
+            &p::SHAPED_LEAST_EFFORT_RETURN,
+            f32::from(u8::from(c.least_effort_return)),
+        ),
     ]
 }
 

@@ -737,6 +737,12 @@ params! {
         "Body height z where the height encoder counted from at boot (the leg length l0 with the toe on the ground; a simulated run's start height).",
         |c| Some(R(&mut c.calibration.height_at_origin_m))
     }
+    // --- added later: at the end, so the link's numbers of the others stay ---
+    SHAPED_LEAST_EFFORT_RETURN {
+        "shaped.least_effort_return", "-", Flag, [0.0, 1.0], 0.0, LIVE,
+        "Bring the nut home in flight with the least int i^2 dt (the spring helping, reaching the stop when the push is due) instead of along the braking curve.",
+        |c| shaped(c).map(|s| B(&mut s.least_effort_return))
+    }
 }
 
 /// The master switches of protections, each with its safe value: a real

@@ -55,7 +55,28 @@
 //! ```
 //!
 //! clamped to the current limit, so the nut arrives at the stop at the creep
-//! speed. The square root is [`sqrt_approx`] (two Newton steps, about 20
+//! speed.
+//!
+//! # Least-effort return
+//! With `least_effort_return` (the heat-aware mode), the nut comes home
+//! with the least `int i^2 dt` instead, as the least-heat hop of
+//! docs/endurance.md does: the spring helps, and the nut strikes its stop
+//! when the push is due rather than creeping onto it. With `y = delta0 +
+//! p` and `w^2 = k / alpha`, the nut in flight obeys `y'' = -w^2 y + u`
+//! (`u = eta k_m i / (r alpha)`). Unforced it would be at `y_free = y0
+//! cos(w tau) + v0 sin(w tau) / w` when the push is due, `tau` from now
+//! (the toe falling to `spin_up_fraction` of the flight's apex, predicted
+//! from the body's height and speed in free fall; touchdown for a flight
+//! too low to spin up). The `u` of least `int u^2 dt` that puts it at
+//! `delta0` (the stop) then, whatever its speed, is `mu sin(w (tau - t))`
+//! with `mu = w (delta0 - y_free) / S` and `S = int_0^tau sin^2(w s) ds =
+//! tau / 2 - sin(2 w tau) / (4 w)`: the current is largest at liftoff and
+//! falls to zero at the stop. It is planned again every period from the
+//! measured state (the plan of an exact model is the same at every
+//! step); the braking curve takes over on the stop, within the last
+//! millisecond and for non-finite inputs.
+//!
+//! The square root is [`sqrt_approx`] (two Newton steps, about 20
 //! instructions; `libm::sqrtf` costs several times that on the M4F without
 //! `vsqrt.f32`).
 
@@ -117,6 +138,12 @@ pub struct Config {
     /// Speed at which the nut reaches the stop, m/s, in `[0, 0.1]`. Default
     /// 0.01 (an impact of 0.02 J with Table 2.1's rotor).
     pub creep_speed_mps: f32,
+    /// Bring the nut home in flight with the least effort instead of along
+    /// the braking curve: the current that reaches the stop when the push
+    /// is due with the least `int i^2 dt`, the spring helping, arriving at
+    /// the speed that takes (module docs, "Least-effort return"). Default
+    /// false.
+    pub least_effort_return: bool,
 }
 
 impl Default for Config {
@@ -133,25 +160,29 @@ impl Default for Config {
             braking_margin: params::SHAPED_BRAKING_MARGIN.default,
             tracking_time_s: params::SHAPED_TRACKING_TIME_S.default,
             creep_speed_mps: params::SHAPED_CREEP_SPEED_MPS.default,
+            least_effort_return: params::SHAPED_LEAST_EFFORT_RETURN.default_flag(),
         }
     }
 }
 
 impl Config {
     /// The heat-aware mode: the same law tuned for copper loss per hop
-    /// instead of climb speed (a random search over its parameters at a
-    /// 5 cm apex on the design machine, docs/endurance.md). The flight
-    /// return tracks the braking curve at half the braking deceleration
-    /// with a 65 ms time constant instead of 70 % and 5 ms, the push ends
-    /// at half the model's stance time and the stance brake uses 30 % of
-    /// the limit: 14.5 A RMS at 5 cm instead of 23.4, and the motor
-    /// reaches its derating temperature after 48.7 s instead of 13.9.
+    /// instead of climb speed (random searches over its parameters at a
+    /// 5 cm apex on the design machine, docs/endurance.md). The nut comes
+    /// home in flight with the least effort (the braking curve, at half
+    /// the braking deceleration with a 65 ms time constant, only holds it
+    /// on its stop), the push ends at half the model's stance time and the
+    /// stance brake uses 30 % of the limit: 13.3 A RMS at 5 cm instead of
+    /// 23.4, within 25 % of the least heat per hop any schedule needs at
+    /// 3-15 cm, and the motor reaches its derating temperature after
+    /// 58.5 s instead of 13.9.
     pub fn heat_aware() -> Self {
         Self {
             switch_fraction: 0.5,
             brake_fraction: 0.3,
             braking_margin: 0.5,
             tracking_time_s: 0.065,
+            least_effort_return: true,
             ..Self::default()
         }
     }
@@ -233,6 +264,11 @@ impl ControlLaw for Shaped {
             {
                 return self.k.push_current_a(self.level);
             }
+            if self.k.cfg.least_effort_return {
+                if let Some(i) = self.k.least_effort_current_a(x) {
+                    return i;
+                }
+            }
             return self
                 .k
                 .backdrive_current_a(x.nut_position_m, x.nut_velocity_mps);
@@ -274,6 +310,13 @@ pub struct Constants {
     /// Gravitational acceleration of the model, m/s^2 (the fall test of
     /// the spin-up).
     gravity_mps2: f32,
+    /// Amps per m/s^2 of the nut, `alpha r / (eta k_m)`.
+    a_per_mps2: f32,
+    /// The nut's natural frequency on the spring in flight,
+    /// `w = sqrt(k / alpha)`, rad/s.
+    omega_rad_s: f32,
+    /// Spring preload `delta0`, m.
+    preload_m: f32,
 }
 
 impl Constants {
@@ -299,6 +342,9 @@ impl Constants {
             two_margin_per_alpha: 2.0 * cfg.braking_margin / alpha,
             max_force_n: torque_per_a * limit_a / r,
             gravity_mps2: model.gravity_mps2,
+            a_per_mps2: alpha * r / torque_per_a,
+            omega_rad_s: libm::sqrtf(k / alpha),
+            preload_m: model.preload_m,
         };
         let all_finite = [
             p.switch_s,
@@ -308,6 +354,9 @@ impl Constants {
             p.two_margin_per_alpha,
             p.max_force_n,
             p.gravity_mps2,
+            p.a_per_mps2,
+            p.omega_rad_s,
+            p.preload_m,
         ]
         .iter()
         .all(|v| v.is_finite() && *v >= 0.0);
@@ -414,6 +463,56 @@ impl Constants {
         }
     }
 
+    /// Least-effort return to the upper stop, A (module docs), or `None`
+    /// where the braking curve takes over: the nut at or above its stop,
+    /// the push due within a millisecond, or a non-finite input.
+    #[inline]
+    pub fn least_effort_current_a(&self, x: &ControlInput) -> Option<f32> {
+        let g = self.gravity_mps2;
+        let vb = x.body_velocity_mps;
+        let toe = x.toe_height_m;
+        // The flight's apex: predicted while rising, the peak once falling.
+        let rising = if vb > 0.0 { vb * vb / (2.0 * g) } else { 0.0 };
+        let peak = x.flight_peak_toe_m.unwrap_or(toe);
+        let apex = if toe + rising > peak {
+            toe + rising
+        } else {
+            peak
+        };
+        // The push is due at the spin-up height, or at touchdown without one.
+        let push_m = if apex >= self.cfg.spin_up_min_apex_m {
+            self.cfg.spin_up_fraction * apex
+        } else {
+            0.0
+        };
+        // `toe + vb t - g t^2 / 2 = push_m`, the later root (none once the
+        // toe is past it on the way down: the push runs).
+        let discriminant = vb * vb + 2.0 * g * (toe - push_m);
+        if !(x.nut_position_m > 0.0 && discriminant > 0.0) {
+            return None;
+        }
+        let tau_s = (vb + sqrt_approx(discriminant)) / g;
+        // NaN fails the comparison too: the braking curve then.
+        let due_later = tau_s > 1.0e-3;
+        if !due_later {
+            return None;
+        }
+        // `y = delta0 + p` obeys `y'' = -w^2 y + u`; unforced it would be at
+        // `y_free` after `tau`. The `u` of least `int u^2 dt` that puts it
+        // at `delta0` (the stop) then is `mu sin(w (tau - t))`, now
+        // `mu sin(w tau)`, with `mu = w (delta0 - y_free) / S`,
+        // `S = int_0^tau sin^2(w s) ds`.
+        let w = self.omega_rad_s;
+        let (s, c) = (libm::sinf(w * tau_s), libm::cosf(w * tau_s));
+        let y0 = self.preload_m + x.nut_position_m;
+        let y_free = y0 * c + x.nut_velocity_mps * s / w;
+        let big_s = 0.5 * tau_s - s * c / (2.0 * w);
+        let u = w * (self.preload_m - y_free) / big_s * s;
+        let i = self.a_per_mps2 * u;
+        i.is_finite()
+            .then(|| crate::num::clamp(i, -self.limit_a, self.limit_a))
+    }
+
     /// The outer loop after an apex whose energy `measured_j` fell short of
     /// `desired_j` (J): the new integral `b` and the level `u` to use, both
     /// in `[0, 1]`. A non-finite error leaves both unchanged.
@@ -479,6 +578,78 @@ mod tests {
         assert_eq!(sqrt_approx(-1.0), 0.0);
         assert_eq!(sqrt_approx(f32::NAN), 0.0);
         assert_eq!(sqrt_approx(f32::INFINITY), f32::INFINITY);
+    }
+
+    /// A 5 cm flight from liftoff, the nut 8 mm down and at rest, the
+    /// body in free fall, the nut on the spring and its stop: the nut's
+    /// position when the push is due and the flight's `int i^2 dt`.
+    fn return_flight(least_effort: bool) -> (f32, f32) {
+        let model = ModelParams::default();
+        let act = Actuator::from_model(&model);
+        let cfg = Config {
+            least_effort_return: least_effort,
+            ..Config::heat_aware()
+        };
+        let k = Constants::new(&cfg, &act, &model).unwrap_or_else(|e| panic!("{e:?}"));
+        let (alpha, g, dt) = (model.reflected_inertia_kg(), model.gravity_mps2, 1.0e-4);
+        let (mut p, mut v) = (0.008_f32, 0.0_f32);
+        let (mut toe, mut vb, mut peak) = (0.0_f32, libm::sqrtf(2.0 * g * 0.05), 0.0_f32);
+        let mut a2s = 0.0;
+        while !k.spin_up(toe, vb, Some(peak)) {
+            let x = ControlInput {
+                phase: Phase::Flight,
+                body_height_m: 0.61 + toe,
+                toe_height_m: toe,
+                body_velocity_mps: vb,
+                motor_angle_rad: p / act.screw_m_per_rad,
+                motor_rate_rad_s: v / act.screw_m_per_rad,
+                nut_position_m: p,
+                nut_velocity_mps: v,
+                spring_force_n: 0.0,
+                leg_compression_m: 0.0,
+                energy_j: 0.0,
+                desired_energy_j: 0.0,
+                target_apex_m: 0.05,
+                flight_peak_toe_m: Some(peak),
+                last_apex_m: None,
+                dt_s: dt,
+            };
+            let i = if least_effort {
+                k.least_effort_current_a(&x)
+                    .unwrap_or_else(|| k.backdrive_current_a(p, v))
+            } else {
+                k.backdrive_current_a(p, v)
+            };
+            a2s += i * i * dt;
+            let force_n = i / k.a_per_n - model.spring_stiffness_n_per_m * (model.preload_m + p);
+            v += force_n / alpha * dt;
+            p += v * dt;
+            if p < 0.0 {
+                (p, v) = (0.0, 0.0);
+            }
+            toe += vb * dt;
+            vb -= g * dt;
+            peak = if toe > peak { toe } else { peak };
+        }
+        (p, a2s)
+    }
+
+    /// The least-effort return brings the nut home by the time the push is
+    /// due, for much less heat than the braking curve (which also gets it
+    /// home): the gap between the heat-aware mode and the least-heat hop
+    /// was mostly this.
+    #[test]
+    fn least_effort_return_is_home_for_the_push_at_less_heat() {
+        let (p_least, a2s_least) = return_flight(true);
+        let (p_curve, a2s_curve) = return_flight(false);
+        assert!(p_least < 1.0e-4, "{p_least} m from the stop");
+        assert!(p_curve < 1.0e-4, "{p_curve} m from the stop");
+        // 3.76 against 12.1 A^2 s on this frictionless nut.
+        assert!((a2s_least - 3.76).abs() < 0.05 * 3.76, "{a2s_least} A^2 s");
+        assert!(
+            a2s_least < 0.35 * a2s_curve,
+            "{a2s_least} against {a2s_curve} A^2 s"
+        );
     }
 
     fn prepared() -> Constants {
