@@ -501,12 +501,15 @@ impl Constants {
         // `y_free` after `tau`. The `u` of least `int u^2 dt` that puts it
         // at `delta0` (the stop) then is `mu sin(w (tau - t))`, now
         // `mu sin(w tau)`, with `mu = w (delta0 - y_free) / S`,
-        // `S = int_0^tau sin^2(w s) ds`.
+        // `S = int_0^tau sin^2(w s) ds = (2 w tau - sin(2 w tau)) / (4 w)`.
+        // A push due more than a quarter of the nut's period away is planned
+        // for a quarter period (the nut then waits on its stop).
         let w = self.omega_rad_s;
-        let (s, c) = (libm::sinf(w * tau_s), libm::cosf(w * tau_s));
+        let theta = crate::num::clamp(w * tau_s, 0.0, core::f32::consts::FRAC_PI_2);
+        let (s, c) = sin_cos_quadrant(theta);
         let y0 = self.preload_m + x.nut_position_m;
         let y_free = y0 * c + x.nut_velocity_mps * s / w;
-        let big_s = 0.5 * tau_s - s * c / (2.0 * w);
+        let big_s = phi_minus_sin(2.0 * theta) / (4.0 * w);
         let u = w * (self.preload_m - y_free) / big_s * s;
         let i = self.a_per_mps2 * u;
         i.is_finite()
@@ -539,6 +542,52 @@ impl Constants {
         };
         (b, crate::num::clamp(b + kp * e, 0.0, 1.0))
     }
+}
+
+/// `(sin x, cos x)` for `x` in `[0, pi/2]`: their Taylor polynomials to
+/// `x^11` and `x^12`, whose first terms left out are below 6e-8 there.
+/// (libm's `sinf`/`cosf` would bring their reduction of any argument, with
+/// its table of `2/pi`, and 13 KB of flash; the least-effort return needs
+/// only this quadrant.)
+#[inline]
+pub fn sin_cos_quadrant(x: f32) -> (f32, f32) {
+    let x2 = x * x;
+    let s = x
+        * (1.0
+            + x2 * (-1.0 / 6.0
+                + x2 * (1.0 / 120.0
+                    + x2 * (-1.0 / 5040.0 + x2 * (1.0 / 362_880.0 - x2 / 39_916_800.0)))));
+    let c = 1.0
+        + x2 * (-0.5
+            + x2 * (1.0 / 24.0
+                + x2 * (-1.0 / 720.0
+                    + x2 * (1.0 / 40_320.0 + x2 * (-1.0 / 3_628_800.0 + x2 / 479_001_600.0)))));
+    (s, c)
+}
+
+/// `phi - sin(phi)` for `phi` in `[0, pi]`, from its series `phi^3/3! -
+/// phi^5/5! + ...` to `phi^17` (the next term is below 3e-8 there), so it
+/// keeps its precision where the difference of the two is all rounding
+/// (`phi^3 / 6` for small `phi`).
+#[inline]
+pub fn phi_minus_sin(phi: f32) -> f32 {
+    let p2 = phi * phi;
+    // 1/3!, -1/5!, 1/7!, ..., 1/17! (Horner from the last).
+    const C: [f32; 8] = [
+        1.0 / 6.0,
+        -1.0 / 120.0,
+        1.0 / 5040.0,
+        -1.0 / 362_880.0,
+        1.0 / 39_916_800.0,
+        -1.0 / 6_227_020_800.0,
+        1.0 / 1_307_674_368_000.0,
+        -1.0 / 355_687_428_096_000.0,
+    ];
+    let mut sum = 0.0;
+    for k in C.iter().rev() {
+        sum = k + p2 * sum;
+    }
+    phi * p2 * sum
 }
 
 /// `sqrt(x)` to a relative error below 1e-5 for normal positive `x` (0 for
@@ -650,6 +699,24 @@ mod tests {
             a2s_least < 0.35 * a2s_curve,
             "{a2s_least} against {a2s_curve} A^2 s"
         );
+    }
+
+    #[test]
+    fn the_quadrant_trigonometry_matches_libm() {
+        let mut x = 0.0_f32;
+        while x <= core::f32::consts::FRAC_PI_2 {
+            let (s, c) = sin_cos_quadrant(x);
+            assert!((s - libm::sinf(x)).abs() < 2.0e-7, "sin {x}");
+            assert!((c - libm::cosf(x)).abs() < 2.0e-7, "cos {x}");
+            let phi = 2.0 * x;
+            let exact = f64::from(phi) - libm::sin(f64::from(phi));
+            let got = f64::from(phi_minus_sin(phi));
+            assert!(
+                (got - exact).abs() <= 1.0e-6 * exact + 1.0e-30,
+                "phi - sin phi at {phi}: {got} against {exact}"
+            );
+            x += 1.0e-3;
+        }
     }
 
     fn prepared() -> Constants {
