@@ -9,7 +9,8 @@
 //! * for the QEMU images (feature `qemu-sim`), reads the scenario the
 //!   scenario image runs from `scenarios/qemu/NAME.toml`
 //!   (`HOPPER_QEMU_SCENARIO`, default `energy-apex`; the file the xtask's
-//!   golden check runs on the host too) into `$OUT_DIR/qemu_scenario.rs`.
+//!   golden check runs on the host too) into `$OUT_DIR/qemu_scenario.rs`,
+//!   its `[params]` included.
 //!
 //! A bad value stops the build with one error naming it.
 
@@ -129,6 +130,23 @@ fn qemu_scenario(root: &std::path::Path) -> Result<String, Box<dyn Error>> {
     }
     // Quick profiling runs shorten it.
     let seconds = env_u32("HOPPER_QEMU_SECONDS", duration as u32, 1..=600)?;
+    // Firmware parameters by name, set on the configuration as the host's
+    // scenario reader sets them (the image checks each name and value).
+    let mut params = String::new();
+    if let Some(table) = at(&["params"]) {
+        let table = table
+            .as_table()
+            .ok_or_else(|| bad("`[params]` must be a table of NAME = number"))?;
+        for (name, value) in table {
+            let v = match value {
+                toml::Value::Float(v) => *v,
+                toml::Value::Integer(v) => *v as f64,
+                toml::Value::Boolean(b) => f64::from(u8::from(*b)),
+                _ => return Err(bad(&format!("`params.{name}` must be a number")).into()),
+            };
+            write!(params, "({name:?}, {:?}_f32), ", v as f32)?;
+        }
+    }
     let mut s = String::new();
     writeln!(
         s,
@@ -142,7 +160,10 @@ fn qemu_scenario(root: &std::path::Path) -> Result<String, Box<dyn Error>> {
          pub const TARGET_APEX_M: f64 = {target:?};\n\
          /// Simulated time, s (`HOPPER_QEMU_SECONDS` at build time overrides\n\
          /// the file's for quick profiling runs).\n\
-         pub const DURATION_S: u32 = {seconds};"
+         pub const DURATION_S: u32 = {seconds};\n\
+         /// The scenario's `[params]`: firmware parameters by name, set in\n\
+         /// this order on the configuration before the runner is built.\n\
+         pub const PARAMS: &[(&str, f32)] = &[{params}];"
     )?;
     Ok(s)
 }

@@ -15,7 +15,8 @@
 //!   the closed-loop scenarios in `qemu-system-arm` (installing it with
 //!   apt-get if missing), decode their defmt logs, check each against the
 //!   host simulation of the same scenario (the golden check) and the
-//!   instruction budget. The `shaped` scenario prints `qemu-shaped: ...`;
+//!   instruction budget. The `shaped` scenario prints `qemu-shaped: ...`,
+//!   its heat-aware mode `qemu-heat-aware: ...`;
 //!   the last line is `qemu: steady_apex_m=... hops_to_converge=...
 //!   step_instr_min=... step_instr_mean=... step_instr_max=... missed=...`
 //!   (the energy-apex scenario). Before the scenarios it runs the link

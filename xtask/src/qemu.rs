@@ -40,11 +40,18 @@ impl Scenario {
 }
 
 /// The shaped law from 0.05 m to the thesis's 0.15 m (the `qemu-shaped:`
-/// line), then the energy-apex scenario (the `qemu:` line, last as before).
-const SCENARIOS: [Scenario; 2] = [
+/// line), its heat-aware mode holding 0.05 m (`qemu-heat-aware:`, the
+/// least-effort return's cost on the target), then the energy-apex scenario
+/// (the `qemu:` line, last as before).
+const SCENARIOS: [Scenario; 3] = [
     Scenario {
         name: "shaped",
         label: "qemu-shaped",
+        overrun_check: false,
+    },
+    Scenario {
+        name: "heat-aware",
+        label: "qemu-heat-aware",
         overrun_check: false,
     },
     Scenario {

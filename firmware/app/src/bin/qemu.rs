@@ -95,6 +95,14 @@ mod app {
             TARGET_APEX_M,
             START_APEX_M,
         );
+        // The scenario's own settings, by name, as the host's run sets them;
+        // a name or value the table refuses stops the run.
+        for &(name, value) in PARAMS {
+            if let Err(e) = hopper_control::params::set(&mut cfg, name, value) {
+                defmt::error!("scenario parameter {=str} = {=f32}: {}", name, value, e);
+                debug::exit(debug::EXIT_FAILURE);
+            }
+        }
         // The scenario is the operator: no link (untethered), and one arm
         // request, decided at the first period like any other (the runner
         // boots disarmed).

@@ -310,11 +310,14 @@ pub struct Constants {
     /// Gravitational acceleration of the model, m/s^2 (the fall test of
     /// the spin-up).
     gravity_mps2: f32,
-    /// Amps per m/s^2 of the nut, `alpha r / (eta k_m)`.
-    a_per_mps2: f32,
     /// The nut's natural frequency on the spring in flight,
-    /// `w = sqrt(k / alpha)`, rad/s.
+    /// `w = sqrt(k / alpha)`, rad/s, and its inverse, s.
     omega_rad_s: f32,
+    per_omega_s: f32,
+    /// The least-effort plan's gain `4 w^2 alpha r / (eta k_m)`, A/m (the
+    /// current now is this times `(delta0 - y_free) sin(w tau) /
+    /// (2 w tau - sin(2 w tau))`).
+    plan_a_per_m: f32,
     /// Spring preload `delta0`, m.
     preload_m: f32,
 }
@@ -342,8 +345,9 @@ impl Constants {
             two_margin_per_alpha: 2.0 * cfg.braking_margin / alpha,
             max_force_n: torque_per_a * limit_a / r,
             gravity_mps2: model.gravity_mps2,
-            a_per_mps2: alpha * r / torque_per_a,
             omega_rad_s: libm::sqrtf(k / alpha),
+            per_omega_s: libm::sqrtf(alpha / k),
+            plan_a_per_m: 4.0 * k * r / torque_per_a,
             preload_m: model.preload_m,
         };
         let all_finite = [
@@ -354,8 +358,9 @@ impl Constants {
             p.two_margin_per_alpha,
             p.max_force_n,
             p.gravity_mps2,
-            p.a_per_mps2,
             p.omega_rad_s,
+            p.per_omega_s,
+            p.plan_a_per_m,
             p.preload_m,
         ]
         .iter()
@@ -504,14 +509,14 @@ impl Constants {
         // `S = int_0^tau sin^2(w s) ds = (2 w tau - sin(2 w tau)) / (4 w)`.
         // A push due more than a quarter of the nut's period away is planned
         // for a quarter period (the nut then waits on its stop).
-        let w = self.omega_rad_s;
-        let theta = crate::num::clamp(w * tau_s, 0.0, core::f32::consts::FRAC_PI_2);
+        // The current is `alpha r / (eta k_m) u`, and with `S` written out,
+        // `u = 4 w^2 (delta0 - y_free) sin(w tau) / (2 w tau - sin(2 w tau))`.
+        let theta = crate::num::clamp(self.omega_rad_s * tau_s, 0.0, core::f32::consts::FRAC_PI_2);
         let (s, c) = sin_cos_quadrant(theta);
         let y0 = self.preload_m + x.nut_position_m;
-        let y_free = y0 * c + x.nut_velocity_mps * s / w;
-        let big_s = phi_minus_sin(2.0 * theta) / (4.0 * w);
-        let u = w * (self.preload_m - y_free) / big_s * s;
-        let i = self.a_per_mps2 * u;
+        let y_free = y0 * c + x.nut_velocity_mps * s * self.per_omega_s;
+        let i =
+            self.plan_a_per_m * (self.preload_m - y_free) * s / two_theta_minus_sin(theta, s, c);
         i.is_finite()
             .then(|| crate::num::clamp(i, -self.limit_a, self.limit_a))
     }
@@ -545,49 +550,35 @@ impl Constants {
 }
 
 /// `(sin x, cos x)` for `x` in `[0, pi/2]`: their Taylor polynomials to
-/// `x^11` and `x^12`, whose first terms left out are below 6e-8 there.
-/// (libm's `sinf`/`cosf` would bring their reduction of any argument, with
-/// its table of `2/pi`, and 13 KB of flash; the least-effort return needs
-/// only this quadrant.)
+/// `x^9` and `x^10`, whose first terms left out are below 4e-6 and 5e-7
+/// there. (libm's `sinf`/`cosf` bring their reduction of any argument,
+/// with its table of `2/pi`, and 13 KB of flash; the least-effort return
+/// needs only this quadrant.)
 #[inline]
 pub fn sin_cos_quadrant(x: f32) -> (f32, f32) {
     let x2 = x * x;
-    let s = x
-        * (1.0
-            + x2 * (-1.0 / 6.0
-                + x2 * (1.0 / 120.0
-                    + x2 * (-1.0 / 5040.0 + x2 * (1.0 / 362_880.0 - x2 / 39_916_800.0)))));
+    let s =
+        x * (1.0 + x2 * (-1.0 / 6.0 + x2 * (1.0 / 120.0 + x2 * (-1.0 / 5040.0 + x2 / 362_880.0))));
     let c = 1.0
         + x2 * (-0.5
-            + x2 * (1.0 / 24.0
-                + x2 * (-1.0 / 720.0
-                    + x2 * (1.0 / 40_320.0 + x2 * (-1.0 / 3_628_800.0 + x2 / 479_001_600.0)))));
+            + x2 * (1.0 / 24.0 + x2 * (-1.0 / 720.0 + x2 * (1.0 / 40_320.0 - x2 / 3_628_800.0))));
     (s, c)
 }
 
-/// `phi - sin(phi)` for `phi` in `[0, pi]`, from its series `phi^3/3! -
-/// phi^5/5! + ...` to `phi^17` (the next term is below 3e-8 there), so it
-/// keeps its precision where the difference of the two is all rounding
-/// (`phi^3 / 6` for small `phi`).
+/// `2 theta - sin(2 theta)` for `theta` in `[0, pi/2]`, given `s` and `c`,
+/// its sine and cosine: `2 theta - 2 s c` from `theta = 0.5` on (at least
+/// 0.159 there, so the rounding of `2 s c` is a few millionths of it), and
+/// below, where the difference is all rounding, its series in `phi = 2
+/// theta`, `phi^3/3! - phi^5/5! + phi^7/7! - phi^9/9!` (the next term is
+/// below 3e-8).
 #[inline]
-pub fn phi_minus_sin(phi: f32) -> f32 {
-    let p2 = phi * phi;
-    // 1/3!, -1/5!, 1/7!, ..., 1/17! (Horner from the last).
-    const C: [f32; 8] = [
-        1.0 / 6.0,
-        -1.0 / 120.0,
-        1.0 / 5040.0,
-        -1.0 / 362_880.0,
-        1.0 / 39_916_800.0,
-        -1.0 / 6_227_020_800.0,
-        1.0 / 1_307_674_368_000.0,
-        -1.0 / 355_687_428_096_000.0,
-    ];
-    let mut sum = 0.0;
-    for k in C.iter().rev() {
-        sum = k + p2 * sum;
+pub fn two_theta_minus_sin(theta: f32, s: f32, c: f32) -> f32 {
+    let phi = 2.0 * theta;
+    if theta >= 0.5 {
+        return phi - 2.0 * s * c;
     }
-    phi * p2 * sum
+    let p2 = phi * phi;
+    phi * p2 * (1.0 / 6.0 + p2 * (-1.0 / 120.0 + p2 * (1.0 / 5040.0 - p2 / 362_880.0)))
 }
 
 /// `sqrt(x)` to a relative error below 1e-5 for normal positive `x` (0 for
@@ -706,14 +697,14 @@ mod tests {
         let mut x = 0.0_f32;
         while x <= core::f32::consts::FRAC_PI_2 {
             let (s, c) = sin_cos_quadrant(x);
-            assert!((s - libm::sinf(x)).abs() < 2.0e-7, "sin {x}");
-            assert!((c - libm::cosf(x)).abs() < 2.0e-7, "cos {x}");
-            let phi = 2.0 * x;
-            let exact = f64::from(phi) - libm::sin(f64::from(phi));
-            let got = f64::from(phi_minus_sin(phi));
+            assert!((s - libm::sinf(x)).abs() < 4.0e-6, "sin {x}");
+            assert!((c - libm::cosf(x)).abs() < 1.0e-6, "cos {x}");
+            let phi = 2.0 * f64::from(x);
+            let exact = phi - libm::sin(phi);
+            let got = f64::from(two_theta_minus_sin(x, s, c));
             assert!(
-                (got - exact).abs() <= 1.0e-6 * exact + 1.0e-30,
-                "phi - sin phi at {phi}: {got} against {exact}"
+                (got - exact).abs() <= 2.0e-5 * exact + 1.0e-30,
+                "2 theta - sin(2 theta) at {x}: {got} against {exact}"
             );
             x += 1.0e-3;
         }
