@@ -144,6 +144,9 @@ fn qemu_scenario(root: &std::path::Path) -> Result<String, Box<dyn Error>> {
                 toml::Value::Boolean(b) => f64::from(u8::from(*b)),
                 _ => return Err(bad(&format!("`params.{name}` must be a number")).into()),
             };
+            if !(v as f32).is_finite() {
+                return Err(bad(&format!("`params.{name}` must be a finite f32")).into());
+            }
             write!(params, "({name:?}, {:?}_f32), ", v as f32)?;
         }
     }

@@ -311,7 +311,8 @@ pub fn config(input: &Input) -> (HopperConfig, Timing) {
     cfg.arming.untethered = true;
     let p = input.perturb;
     if p.disagree_off {
-        cfg.supervisor.spring_mismatch_n = f32::INFINITY;
+        // The table's "off" (its range ends at 1e30; infinity is refused).
+        cfg.supervisor.spring_mismatch_n = 1.0e30;
     }
     if p.counters_32 {
         cfg.calibration.motor_counter_bits = 32;

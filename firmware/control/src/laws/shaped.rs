@@ -74,7 +74,9 @@
 //! falls to zero at the stop. It is planned again every period from the
 //! measured state (the plan of an exact model is the same at every
 //! step); the braking curve takes over on the stop, within the last
-//! millisecond and for non-finite inputs.
+//! millisecond and for non-finite inputs. A push due more than a quarter
+//! of the nut's period `2 pi / w` away gets no current until it is within
+//! it: the spring alone moves the nut towards its stop meanwhile.
 //!
 //! The square root is [`sqrt_approx`] (two Newton steps, about 20
 //! instructions; `libm::sqrtf` costs several times that on the M4F without
@@ -507,11 +509,16 @@ impl Constants {
         // at `delta0` (the stop) then is `mu sin(w (tau - t))`, now
         // `mu sin(w tau)`, with `mu = w (delta0 - y_free) / S`,
         // `S = int_0^tau sin^2(w s) ds = (2 w tau - sin(2 w tau)) / (4 w)`.
-        // A push due more than a quarter of the nut's period away is planned
-        // for a quarter period (the nut then waits on its stop).
         // The current is `alpha r / (eta k_m) u`, and with `S` written out,
         // `u = 4 w^2 (delta0 - y_free) sin(w tau) / (2 w tau - sin(2 w tau))`.
-        let theta = crate::num::clamp(self.omega_rad_s * tau_s, 0.0, core::f32::consts::FRAC_PI_2);
+        // With the push more than a quarter of the nut's period away, no
+        // current: the spring alone brings the nut towards its stop (from
+        // rest, within that quarter period), and the plan starts once the
+        // push is within it (the range of `sin_cos_quadrant`).
+        let theta = self.omega_rad_s * tau_s;
+        if theta > core::f32::consts::FRAC_PI_2 {
+            return Some(0.0);
+        }
         let (s, c) = sin_cos_quadrant(theta);
         let y0 = self.preload_m + x.nut_position_m;
         let y_free = y0 * c + x.nut_velocity_mps * s * self.per_omega_s;
@@ -567,7 +574,7 @@ pub fn sin_cos_quadrant(x: f32) -> (f32, f32) {
 
 /// `2 theta - sin(2 theta)` for `theta` in `[0, pi/2]`, given `s` and `c`,
 /// its sine and cosine: `2 theta - 2 s c` from `theta = 0.5` on (at least
-/// 0.159 there, so the rounding of `2 s c` is a few millionths of it), and
+/// 0.1585 there, so the rounding of `2 s c` is a few millionths of it), and
 /// below, where the difference is all rounding, its series in `phi = 2
 /// theta`, `phi^3/3! - phi^5/5! + phi^7/7! - phi^9/9!` (the next term is
 /// below 3e-8).
