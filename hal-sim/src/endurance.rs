@@ -623,6 +623,32 @@ pub fn plot_changes(
 
 #[cfg(test)]
 mod tests {
+    /// The QEMU image's heat-aware scenario runs the heat-aware mode: its
+    /// `[params]` are [`heat_aware_settings`], the one declaration (the
+    /// file cannot name the Rust type, so a test keeps them equal).
+    #[test]
+    fn the_qemu_heat_aware_scenario_is_the_heat_aware_mode() {
+        let path = concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../scenarios/qemu/heat-aware.toml"
+        );
+        let s = crate::scenario::load(std::path::Path::new(path)).unwrap_or_else(|e| panic!("{e}"));
+        let mut got: Vec<_> = s
+            .settings
+            .firmware_params
+            .unwrap_or_default()
+            .into_iter()
+            .map(|(p, v)| (p.name, v))
+            .collect();
+        let mut want: Vec<_> = heat_aware_settings()
+            .into_iter()
+            .map(|(p, v)| (p.name, v))
+            .collect();
+        got.sort_by(|a, b| a.0.cmp(b.0));
+        want.sort_by(|a, b| a.0.cmp(b.0));
+        assert_eq!(got, want);
+    }
+
     use super::*;
 
     #[test]

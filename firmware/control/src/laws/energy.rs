@@ -111,11 +111,9 @@ pub struct Energy {
 impl Energy {
     /// Checks `c`.
     pub fn new(c: &Config, act: &Actuator, flight: FlightPd) -> Result<Self, InvalidField> {
+        c.validate()?;
         Ok(Self {
-            law: {
-                c.validate()?;
-                Law::new(c, act)?
-            },
+            law: Law::new(c, act)?,
             flight,
         })
     }
