@@ -27,44 +27,58 @@ use crate::laws::InvalidField;
 use crate::params as p;
 use crate::supervisor::Faults;
 
-/// Arming limits (the parameter table's `arming.*`).
-#[derive(Debug, Clone, Copy, PartialEq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct ArmingConfig {
-    /// No valid link frame for this long disarms, s (finite, > 0). Default 0.2.
-    pub link_timeout_s: f32,
-    /// Run without a link: the link-alive condition and the link timeout
-    /// are off. Default false (a tethered robot stops when the host goes
-    /// quiet); the simulator, which has no link, sets it.
-    pub untethered: bool,
-    /// The nut may be at most this far from its upper stop to arm, m
-    /// (finite, >= 0). Default 0.001.
-    pub home_tolerance_m: f32,
-    /// Nut and body must be slower than this to arm, m/s (finite, > 0).
-    /// Default 0.05.
-    pub still_velocity_mps: f32,
-    /// Refuse to arm until a tare (`hopper-link calibrate tare`) has
-    /// succeeded since boot or a saved calibration was loaded at boot.
-    /// Default false; the board sets it, since without either its offsets
-    /// are placeholders.
-    pub require_tare: bool,
-    /// Refuse to arm until the nut was homed since boot
-    /// ([`crate::bringup::Routine::Home`], which needs a direction check
-    /// first). Default false; the board sets it: its motor encoder is
-    /// incremental and boots wherever the nut stands.
-    pub require_home: bool,
-}
-
-impl Default for ArmingConfig {
-    fn default() -> Self {
-        Self {
-            link_timeout_s: p::ARM_LINK_TIMEOUT_S.default,
-            untethered: p::ARM_UNTETHERED.default_flag(),
-            home_tolerance_m: p::ARM_HOME_TOLERANCE_M.default,
-            still_velocity_mps: p::ARM_STILL_MPS.default,
-            require_tare: p::ARM_REQUIRE_TARE.default_flag(),
-            require_home: p::ARM_REQUIRE_HOME.default_flag(),
+crate::params::config! {
+    /// Arming limits (the parameter table's `arming.*`).
+    #[derive(Debug, Clone, Copy, PartialEq)]
+    #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+    pub struct ArmingConfig, reached |c| Some(&mut c.arming);
+    params {
+        /// No valid link frame for this long disarms, s (finite, > 0). Default 0.2.
+        52 ARM_LINK_TIMEOUT_S link_timeout_s: f32 {
+            "arming.link_timeout_s", "s", Real, [1.0e-3, 60.0], 0.2, DISARMED,
+            "No valid link frame for this long disarms the amplifier (and a dead link refuses arming)."
         }
+        /// Run without a link: the link-alive condition and the link timeout
+        /// are off. Default false (a tethered robot stops when the host goes
+        /// quiet); the simulator, which has no link, sets it.
+        53 ARM_UNTETHERED untethered: bool {
+            "arming.untethered", "-", Flag, [0.0, 1.0], 0.0, DISARMED,
+            "Run without a link: no link needed to arm, and link loss does not disarm (an explicit choice; the simulator sets it)."
+        }
+        /// The nut may be at most this far from its upper stop to arm, m
+        /// (finite, >= 0). Default 0.001.
+        54 ARM_HOME_TOLERANCE_M home_tolerance_m: f32 {
+            "arming.home_tolerance_m", "m", Real, [0.0, 0.05], 0.001, DISARMED,
+            "To arm, the nut must be at most this far from its upper stop."
+        }
+        /// Nut and body must be slower than this to arm, m/s (finite, > 0).
+        /// Default 0.05.
+        55 ARM_STILL_MPS still_velocity_mps: f32 {
+            "arming.still_velocity_mps", "m/s", Real, [1.0e-4, 10.0], 0.05, DISARMED,
+            "To arm, nut and body must be slower than this."
+        }
+        /// Refuse to arm until a tare (`hopper-link calibrate tare`) has
+        /// succeeded since boot or a saved calibration was loaded at boot.
+        /// Default false; the board sets it, since without either its offsets
+        /// are placeholders.
+        56 ARM_REQUIRE_TARE require_tare: bool {
+            "arming.require_tare", "-", Flag, [0.0, 1.0], 0.0, DISARMED,
+            "Refuse to arm until a tare (hopper-link calibrate tare) has succeeded since boot (the board sets it: its offsets are not saved yet)."
+        }
+        /// Refuse to arm until the nut was homed since boot
+        /// ([`crate::bringup::Routine::Home`], which needs a direction check
+        /// first). Default false; the board sets it: its motor encoder is
+        /// incremental and boots wherever the nut stands.
+        57 ARM_REQUIRE_HOME require_home: bool {
+            "arming.require_home", "-", Flag, [0.0, 1.0], 0.0, DISARMED,
+            "Refuse to arm until the nut was homed (hopper-link calibrate home, after calibrate direction) since boot: the motor encoder is incremental, its zero is lost at power-off."
+        }
+    }
+    nested {
+    }
+    custom {
+    }
+    plain {
     }
 }
 

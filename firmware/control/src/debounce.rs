@@ -13,22 +13,28 @@
 use crate::laws::InvalidField;
 use crate::params as p;
 
-/// How long the input must hold a new level before it counts.
-#[derive(Debug, Clone, Copy, PartialEq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct DebounceConfig {
-    /// Pressed without a break for this long is a press, s.
-    pub press_s: f32,
-    /// Released without a break for this long is a release, s.
-    pub release_s: f32,
-}
-
-impl Default for DebounceConfig {
-    fn default() -> Self {
-        Self {
-            press_s: p::ESTOP_PRESS_S.default,
-            release_s: p::ESTOP_RELEASE_S.default,
+crate::params::config! {
+    /// How long the input must hold a new level before it counts.
+    #[derive(Debug, Clone, Copy, PartialEq)]
+    #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+    pub struct DebounceConfig, reached |c| Some(&mut c.estop);
+    params {
+        /// Pressed without a break for this long is a press, s.
+        86 ESTOP_PRESS_S press_s: f32 {
+            "estop.press_s", "s", Real, [0.0, 0.01], 2.0e-4, DISARMED,
+            "The e-stop input pressed without a break for this long is a press (shorter is a glitch; the button also breaks the amplifier enable in hardware)."
         }
+        /// Released without a break for this long is a release, s.
+        87 ESTOP_RELEASE_S release_s: f32 {
+            "estop.release_s", "s", Real, [0.0, 2.0], 0.05, DISARMED,
+            "The e-stop input released without a break for this long is a release (arming and fault resets wait for it: longer than a contact's bounce)."
+        }
+    }
+    nested {
+    }
+    custom {
+    }
+    plain {
     }
 }
 

@@ -2,12 +2,23 @@
 //! default, whether it may change while the motor is driven, and a one-line
 //! doc.
 //!
-//! Each parameter is declared once, in the `params!` list below. The
-//! configuration types' `Default` impls and their `validate` checks read
-//! these entries, the host tools (`hopper-sim`'s scenario files and sweeps)
-//! look parameters up here by name, the link exposes exactly [`TABLE`], and
+//! Each parameter is declared once, as a field of the configuration type
+//! that holds it, with `config!` (`laws/shaped.rs`, `estimator.rs`, ...):
+//! that one line gives the field, its default, its doc, its entry here
+//! (number on the link, name, unit, kind, range, whether it may change
+//! armed) and its slot for get/set by name. [`TABLE`] gathers the entries by
+//! number, the link exposes exactly it, the host tools (`hopper-sim`'s
+//! `--set`, scenario files and sweeps) look parameters up in it by name,
+//! [`validate`] is the one range check of a configuration, and
 //! `docs/parameters.md` is generated from it (a test fails when the page is
-//! stale).
+//! stale). This module declares only [`HopperConfig`]'s own two.
+//!
+//! Not parameters: what follows from the model (the overcurrent trip at 10x
+//! the current limit, the stroke soft limits with the braking deceleration
+//! they assume, the stops, the calibration's lead and torque constant) and
+//! board facts (counter and converter widths). Estimator, supervisor,
+//! calibration, bring-up and thermal entries change only with the amplifier
+//! disabled.
 //!
 //! Every value is an `f32`: a flag is 0 or 1, a choice is the index of one
 //! of its names, a count is a whole number. [`get`] and [`set`] read and
@@ -36,11 +47,12 @@ pub enum Kind {
 }
 
 /// One runtime parameter.
-#[derive(Debug, Clone, Copy, PartialEq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[derive(Debug, Clone, Copy)]
 pub struct Param {
-    /// Which parameter this is.
-    pub id: Id,
+    /// Its number on the link: its index in [`TABLE`]. Given in the
+    /// declaration, so a parameter added later (at the end) leaves every
+    /// other parameter's number as it was.
+    pub number: u16,
     /// Name, as a path in the configuration (`flight.kp_a_per_rad`).
     pub name: &'static str,
     /// Unit (SI; `1` for a dimensionless number, `-` for flags and choices).
@@ -59,6 +71,26 @@ pub struct Param {
     /// One line: what it is, and where it comes from (thesis equation);
     /// empty in the firmware image.
     pub doc: &'static str,
+    /// Where the value lives in a [`HopperConfig`]; `None` when it belongs
+    /// to a controller other than the selected one.
+    pub(crate) slot: SlotFn,
+}
+
+/// The lookup of a parameter's value in a configuration.
+pub(crate) type SlotFn = for<'a> fn(&'a mut HopperConfig) -> Option<Slot<'a>>;
+
+impl PartialEq for Param {
+    /// One parameter per number (a const check on [`TABLE`]).
+    fn eq(&self, other: &Self) -> bool {
+        self.number == other.number && self.name == other.name
+    }
+}
+
+#[cfg(feature = "defmt")]
+impl defmt::Format for Param {
+    fn format(&self, f: defmt::Formatter) {
+        defmt::write!(f, "{=str}", self.name)
+    }
 }
 
 impl Param {
@@ -81,667 +113,325 @@ impl Param {
     }
 }
 
-const LIVE: bool = true;
-const DISARMED: bool = false;
+/// May change while the motor is driven.
+pub(crate) const LIVE: bool = true;
+/// Changes only while the amplifier is disabled.
+pub(crate) const DISARMED: bool = false;
 
-/// Declares every parameter once: `ID { name, unit, kind, [min, max],
-/// default, live, doc, |cfg| slot }`, where `slot` is where the value lives
-/// in a [`HopperConfig`] (`None` when it belongs to a controller other than
-/// the selected one). Generates the `pub const` entry, [`Id`], [`TABLE`] (in
-/// declaration order: the link's parameter index and the docs' order) and
-/// the slot lookup behind [`get`], [`read`] and [`set`].
+/// One parameter's entry: `NUMBER ID { name, unit, kind, [min, max],
+/// default, LIVE | DISARMED, doc }, |cfg| slot`, where `slot` is where the
+/// value lives in a [`HopperConfig`] (`None` when it belongs to a
+/// controller other than the selected one). The configuration types
+/// declare their parameters with `config!`, which writes these.
+macro_rules! entry {
+    (
+        $(#[$meta:meta])*
+        $number:literal $id:ident {
+            $name:literal, $unit:literal, $kind:expr, [$min:expr, $max:expr], $default:expr,
+            $live:ident, $doc:literal $(,)?
+        },
+        |$c:ident| $slot:expr
+    ) => {
+        $(#[$meta])*
+        #[doc = $doc]
+        pub const $id: $crate::params::Param = $crate::params::Param {
+            number: $number,
+            name: $name,
+            unit: $unit,
+            kind: {
+                #[allow(unused_imports)]
+                use $crate::params::Kind::{self, Count, Flag, Real};
+                $kind
+            },
+            min: $min,
+            max: $max,
+            default: $default,
+            live: $crate::params::$live,
+            // The firmware image carries no docs (the host tools and
+            // docs/parameters.md do): the link's table needs names and
+            // units only, and the docs were 7 KB of flash.
+            doc: if cfg!(target_os = "none") { "" } else { $doc },
+            slot: |$c| {
+                #[allow(unused_imports)]
+                use $crate::params::Slot::{self, Flag as B, Real as R};
+                $slot
+            },
+        };
+    };
+}
+pub(crate) use entry;
+
+/// Declares a configuration type and its runtime parameters in one place.
+///
+/// ```text
+/// config! {
+///     /// docs and derives of the type
+///     pub struct Config, reached |cfg| <Option<&mut Config> in a HopperConfig>;
+///     params {
+///         /// (more docs of the field)
+///         NUMBER ID field: type { name, unit, kind, [min, max], default, LIVE | DISARMED, doc }
+///     }
+///     nested {
+///         NUMBER ID at field.inner { ... }
+///     }
+///     custom {
+///         NUMBER ID |s| <Option<Slot> from s: &mut Config>, { ... }
+///     }
+///     plain {
+///         /// docs
+///         pub field: type = default,
+///     }
+/// }
+/// ```
+///
+/// Each `params` line is a field of the type whose doc, default and entry
+/// in [`TABLE`] (number on the link, name, unit, range, kind, whether it
+/// may change armed) all come from that one line; `f32`, `bool`, `u8`,
+/// `u16` and `u32` fields. A `nested` entry lives in a field of a `plain`
+/// field (its default is written there after the plain default), a `custom`
+/// one where its slot says (the plain field's default holds its default; a
+/// test checks every entry reads its default). The entries are declared as
+/// constants in a module `entries` (re-exported here) and listed in
+/// `PARAMS`, which [`TABLE`] gathers by number.
+macro_rules! config {
+    (
+        $(#[$smeta:meta])*
+        $vis:vis struct $name:ident, reached |$rc:ident| $reach:expr;
+        params {$(
+            $(#[$fmeta:meta])*
+            $fnum:literal $fid:ident $field:ident: $fty:ty {
+                $fname:literal, $funit:literal, $fkind:expr, [$fmin:expr, $fmax:expr], $fdef:expr,
+                $flive:ident, $fdoc:literal $(,)?
+            }
+        )*}
+        nested {$(
+            $nnum:literal $nid:ident at $($npath:ident).+ { $($nspec:tt)* }
+        )*}
+        custom {$(
+            $cnum:literal $cid:ident |$cs:ident| $cslot:expr, { $($cspec:tt)* }
+        )*}
+        plain {$(
+            $(#[$pmeta:meta])*
+            $pvis:vis $pfield:ident: $pty:ty = $pdef:expr,
+        )*}
+    ) => {
+        $(#[$smeta])*
+        $vis struct $name {
+            $(
+                #[doc = $fdoc]
+                #[doc = ""]
+                $(#[$fmeta])*
+                #[doc = ""]
+                #[doc = concat!(
+                    "Runtime parameter `", $fname, "` (", $funit, "), in `[",
+                    stringify!($fmin), ", ", stringify!($fmax), "]`, default `",
+                    stringify!($fdef), "`."
+                )]
+                pub $field: $fty,
+            )*
+            $(
+                $(#[$pmeta])*
+                $pvis $pfield: $pty,
+            )*
+        }
+
+        impl Default for $name {
+            /// The parameter table's defaults.
+            fn default() -> Self {
+                #[allow(unused_mut)]
+                let mut s = Self {
+                    $($field: $crate::params::FromDefault::from_default(entries::$fid.default),)*
+                    $($pfield: $pdef,)*
+                };
+                $(
+                    s.$($npath).+ = $crate::params::FromDefault::from_default(entries::$nid.default);
+                )*
+                s
+            }
+        }
+
+        /// The runtime parameters of this module's configuration, declared
+        /// with its fields ([`crate::params`] re-exports them).
+        pub mod entries {
+            #[allow(unused_imports)]
+            use super::*;
+            $(
+                $crate::params::entry! {
+                    $fnum $fid {
+                        $fname, $funit, $fkind, [$fmin, $fmax], $fdef, $flive, $fdoc
+                    },
+                    |c| ({ let $rc = c; $reach }).map(|s| Slot::from(&mut s.$field))
+                }
+            )*
+            $(
+                $crate::params::entry! {
+                    $nnum $nid { $($nspec)* },
+                    |c| ({ let $rc = c; $reach }).map(|s| Slot::from(&mut s.$($npath).+))
+                }
+            )*
+            $(
+                $crate::params::entry! {
+                    $cnum $cid { $($cspec)* },
+                    |c| ({ let $rc = c; $reach }).and_then(|$cs| $cslot)
+                }
+            )*
+        }
+
+        /// This module's entries of [`crate::params::TABLE`].
+        pub(crate) const PARAMS: &[&$crate::params::Param] =
+            &[$(&entries::$fid,)* $(&entries::$nid,)* $(&entries::$cid,)*];
+    };
+}
+pub(crate) use config;
+
+/// A field's value from its entry's default (`f32` in the table).
+pub(crate) trait FromDefault {
+    /// The field's value for `v`, which is in the entry's range (and whole
+    /// for a count or flag).
+    fn from_default(v: f32) -> Self;
+}
+
+impl FromDefault for f32 {
+    fn from_default(v: f32) -> Self {
+        v
+    }
+}
+
+impl FromDefault for bool {
+    fn from_default(v: f32) -> Self {
+        v != 0.0
+    }
+}
+
+macro_rules! from_default_count {
+    ($($t:ty),*) => {$(
+        impl FromDefault for $t {
+            fn from_default(v: f32) -> Self {
+                // Whole and within the count's range (a test checks every
+                // entry reads its default).
+                v as $t
+            }
+        }
+    )*};
+}
+from_default_count!(u8, u16, u32);
+
+/// The entries this module declares: those of [`HopperConfig`]'s own
+/// fields (the controller choice and the target), whose type builds its
+/// defaults from the model rather than through `config!`.
 macro_rules! params {
     ($(
         $(#[$meta:meta])*
-        $id:ident {
-            $name:literal, $unit:literal, $kind:expr, [$min:expr, $max:expr], $default:expr, $live:expr,
+        $number:literal $id:ident {
+            $name:literal, $unit:literal, $kind:expr, [$min:expr, $max:expr], $default:expr, $live:ident,
             $doc:literal,
             |$c:ident| $slot:expr
         }
     )*) => {
-        /// Which parameter an entry is: the key of its slot.
-        #[allow(non_camel_case_types)]
-        #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-        #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-        pub enum Id {
-            $(
-                #[doc = $doc]
-                $id,
-            )*
-        }
-
         $(
-            $(#[$meta])*
-            #[doc = $doc]
-            pub const $id: Param = Param {
-                id: Id::$id,
-                name: $name,
-                unit: $unit,
-                kind: $kind,
-                min: $min,
-                max: $max,
-                default: $default,
-                live: $live,
-                // The firmware image carries no docs (the host tools and
-                // docs/parameters.md do): the link's table needs names and
-                // units only, and the docs were 7 KB of flash.
-                doc: if cfg!(target_os = "none") { "" } else { $doc },
-            };
+            entry! {
+                $(#[$meta])*
+                $number $id { $name, $unit, $kind, [$min, $max], $default, $live, $doc },
+                |$c| $slot
+            }
         )*
 
-        /// Every parameter, in the order the docs list them (a parameter's
-        /// index here is its number on the link).
-        pub const TABLE: &[&Param] = &[$(&$id),*];
-
-        /// The slot of `p` in `cfg`; `None` when `p` belongs to a
-        /// controller other than the selected one.
-        fn slot<'a>(cfg: &'a mut HopperConfig, p: &Param) -> Option<Slot<'a>> {
-            use Slot::{Flag as B, Real as R};
-            match p.id {
-                $(Id::$id => {
-                    let $c = cfg;
-                    $slot
-                })*
-            }
-        }
+        /// The entries declared in this module.
+        const OWN: &[&Param] = &[$(&$id),*];
     };
+}
+
+/// Every parameter, in the order the docs list them (a parameter's index
+/// here is its number on the link).
+pub static TABLE: &[&Param] = &GATHERED;
+
+/// The configuration types that declare parameters (`config!`): their
+/// entries are re-exported here and gathered into [`TABLE`].
+macro_rules! groups {
+    ($($($module:ident)::+),* $(,)?) => {
+        $(
+            pub use $($module)::+::entries::*;
+        )*
+
+        /// Every group of entries, this module's first.
+        const GROUPS: &[&[&Param]] = &[OWN, $($($module)::+::PARAMS),*];
+    };
+}
+
+groups!(
+    crate::laws::flight_pd,
+    crate::laws::energy,
+    crate::laws::open_torque,
+    crate::laws::modified_torque,
+    crate::laws::step_open,
+    crate::laws::step_closed,
+    crate::laws::velocity,
+    crate::laws::energy_apex,
+    crate::laws::shaped,
+    crate::estimator,
+    crate::arming,
+    crate::bringup,
+    crate::supervisor,
+    crate::debounce,
+    crate::thermal,
+    crate::calibration,
+);
+
+/// How many parameters there are.
+// Evaluated by the compiler only: an index out of bounds is a build error.
+#[allow(clippy::indexing_slicing)]
+const COUNT: usize = {
+    let mut n = 0;
+    let mut g = 0;
+    while g < GROUPS.len() {
+        n += GROUPS[g].len();
+        g += 1;
+    }
+    n
+};
+
+/// [`TABLE`] as an array: the groups' entries placed by their numbers.
+static GATHERED: [&Param; COUNT] = gather(GROUPS);
+
+/// Places each entry of `groups` at its number, refusing (at compile time)
+/// a number given twice or a number past the end (with `N` the number of
+/// entries, that also leaves no gap). Evaluated by the compiler only: an
+/// index out of bounds or a failed check is a build error.
+#[allow(clippy::indexing_slicing)]
+const fn gather<const N: usize>(groups: &[&[&'static Param]]) -> [&'static Param; N] {
+    let mut out = [groups[0][0]; N];
+    let mut placed = [false; N];
+    let mut g = 0;
+    while g < groups.len() {
+        let mut i = 0;
+        while i < groups[g].len() {
+            let p = groups[g][i];
+            let n = p.number as usize;
+            assert!(n < N, "a parameter's number is past the end of the table");
+            assert!(!placed[n], "two parameters have the same number");
+            out[n] = p;
+            placed[n] = true;
+            i += 1;
+        }
+        g += 1;
+    }
+    out
 }
 
 /// The controllers [`CONTROLLER`] chooses from, by name (the index is the
 /// value): [`ControllerKind::ALL`]'s names.
 pub const CONTROLLER_NAMES: &[&str] = <ControllerKind as strum::VariantNames>::VARIANTS;
 
-/// Names of [`STEP_CLOSED_GAIN`]'s choices.
-const STEP_CLOSED_GAINS: [&str; 2] = ["fixed", "normalised"];
-/// Names of [`ENERGY_APEX_MEASURE`]'s choices.
-const ENERGY_MEASURES: [&str; 2] = ["total", "body"];
-
-use Kind::{Count, Flag, Real};
-
 params! {
-    // --- The controller and its target -----------------------------------------
-    CONTROLLER {
+    0 CONTROLLER {
         "controller", "-", Kind::Choice(CONTROLLER_NAMES), [0.0, 8.0], 5.0, DISARMED,
         "The controller that runs in stance and flight (selecting one starts it from its defaults).",
         |_cfg| Some(Slot::Controller)
     }
-    TARGET_APEX_M {
+    1 TARGET_APEX_M {
         "target_apex_m", "m", Real, [0.0, 1.0], 0.05, LIVE,
         "Desired apex toe height H_D (E_D of eq 2.43).",
         |c| Some(R(&mut c.target_apex_m))
-    }
-    // --- Flight PD, eq 4.4 -----------------------------------------------------
-    FLIGHT_KP {
-        "flight.kp_a_per_rad", "A/rad", Real, [0.0, 1.0e4], 20.3152, LIVE,
-        "Flight PD position gain on the motor angle (eq 4.4; default eq 4.13; hopper-sim's design preset runs Table 2.1's 8e4 N/m on the nut, 1.8953 A/rad, with the Chapter 2 laws).",
-        |c| Some(R(&mut c.flight.gains.kp))
-    }
-    FLIGHT_KD {
-        "flight.kd_a_s_per_rad", "A s/rad", Real, [0.0, 1.0e3], 0.6077, LIVE,
-        "Flight PD rate gain (eq 4.4; default eq 4.13; the design preset's Chapter 2 laws: Table 2.1's 300 N s/m, 0.0071073 A s/rad).",
-        |c| Some(R(&mut c.flight.gains.kd))
-    }
-    FLIGHT_START_M {
-        "flight.start_position_m", "m", Real, [0.0, 1.0], 0.0, LIVE,
-        "Nut position the flight PD returns to (0: the upper stop; at most the stroke).",
-        |c| Some(R(&mut c.flight.start_position_m))
-    }
-    // --- Thesis stance laws ----------------------------------------------------
-    ENERGY_GAIN {
-        "energy.gain_nm_per_j", "N m/J", Real, [0.0, 100.0], 0.2, LIVE,
-        "K_e of eq 2.52 (Table 2.1: 0.2).",
-        |c| energy(c).map(|s| R(&mut s.gain_nm_per_j))
-    }
-    ENERGY_ALLOW_NEGATIVE {
-        "energy.allow_negative", "-", Flag, [0.0, 1.0], 1.0, LIVE,
-        "Eq 2.52 may command negative torque on an energy surplus.",
-        |c| energy(c).map(|s| B(&mut s.allow_negative))
-    }
-    // The open-torque law's parameter keeps its `constant_torque.` name:
-    // parameter names are a contract (scenario files, the link,
-    // docs/parameters.md) kept from before the law was renamed.
-    CONSTANT_TORQUE_NM {
-        "constant_torque.torque_nm", "N m", Real, [-10.0, 10.0], 1.0, LIVE,
-        "Open-loop stance torque (section 2.1.3.4; Table 2.1: 1 N m).",
-        |c| open_torque(c).map(|s| R(&mut s.torque_nm))
-    }
-    MODIFIED_TORQUE_NM {
-        "modified_torque.torque_nm", "N m", Real, [-10.0, 10.0], 1.0, LIVE,
-        "Modified-torque law's torque in stance and late descent (section 4.4.3).",
-        |c| modified_torque(c).map(|s| R(&mut s.torque_nm))
-    }
-    MODIFIED_TORQUE_APEX_FRACTION {
-        "modified_torque.apex_fraction", "1", Real, [0.0, 1.0], 0.4, LIVE,
-        "Fraction of the last apex below which the descent starts the torque (section 4.4.3: 40 %).",
-        |c| modified_torque(c).map(|s| R(&mut s.apex_fraction))
-    }
-    STEP_OPEN_M {
-        "step_open.step_m", "m", Real, [0.0, 1.0], 0.01, LIVE,
-        "Step height l1 of eq 2.49 (Table 2.1: 10 mm; clamped to the stroke).",
-        |c| step_open(c).map(|s| R(&mut s.step_m))
-    }
-    STEP_OPEN_KP {
-        "step_open.kp_n_per_m", "N/m", Real, [0.0, 1.0e7], 8.0e4, LIVE,
-        "Nut position loop gain k_p,f of eq 2.49 (Table 2.1).",
-        |c| step_open(c).map(|s| R(&mut s.pd.kp_n_per_m))
-    }
-    STEP_OPEN_KD {
-        "step_open.kd_n_s_per_m", "N s/m", Real, [0.0, 1.0e5], 300.0, LIVE,
-        "Nut velocity loop gain k_v,f of eq 2.49 (Table 2.1).",
-        |c| step_open(c).map(|s| R(&mut s.pd.kd_n_s_per_m))
-    }
-    STEP_OPEN_FEEDFORWARD {
-        "step_open.spring_feedforward", "-", Flag, [0.0, 1.0], 1.0, LIVE,
-        "Add the measured spring force to the position loop.",
-        |c| step_open(c).map(|s| B(&mut s.pd.spring_feedforward))
-    }
-    STEP_CLOSED_GAIN {
-        "step_closed.gain", "-", Kind::Choice(&STEP_CLOSED_GAINS), [0.0, 1.0], 0.0, LIVE,
-        "k_p of eq 2.50: fixed (step_closed.kp_m_per_j) or eq 2.51 normalised by the compression.",
-        |c| step_closed(c).map(|s| Slot::StepClosedGain(&mut s.gain))
-    }
-    STEP_CLOSED_KP_M_PER_J {
-        "step_closed.kp_m_per_j", "m/J", Real, [0.0, 1.0], 2.0e-3, LIVE,
-        "Fixed k_p of eq 2.50 (Table 2.1's 0.2 read as cm/J).",
-        |c| step_closed(c).and_then(|s| match &mut s.gain {
-            step_closed::Gain::Fixed { kp_m_per_j } => Some(R(kp_m_per_j)),
-            step_closed::Gain::Normalised { .. } => None,
-        })
-    }
-    STEP_CLOSED_MIN_COMPRESSION_M {
-        "step_closed.min_compression_m", "m", Real, [1.0e-4, 1.0], 0.005, LIVE,
-        "Floor on the compression in eq 2.51's normalised gain.",
-        |c| step_closed(c).and_then(|s| match &mut s.gain {
-            step_closed::Gain::Normalised { min_compression_m } => Some(R(min_compression_m)),
-            step_closed::Gain::Fixed { .. } => None,
-        })
-    }
-    STEP_CLOSED_KP {
-        "step_closed.kp_n_per_m", "N/m", Real, [0.0, 1.0e7], 8.0e4, LIVE,
-        "Nut position loop gain of eq 2.50 (Table 2.1).",
-        |c| step_closed(c).map(|s| R(&mut s.pd.kp_n_per_m))
-    }
-    STEP_CLOSED_KD {
-        "step_closed.kd_n_s_per_m", "N s/m", Real, [0.0, 1.0e5], 300.0, LIVE,
-        "Nut velocity loop gain of eq 2.50 (Table 2.1).",
-        |c| step_closed(c).map(|s| R(&mut s.pd.kd_n_s_per_m))
-    }
-    STEP_CLOSED_FEEDFORWARD {
-        "step_closed.spring_feedforward", "-", Flag, [0.0, 1.0], 1.0, LIVE,
-        "Add the measured spring force to the position loop.",
-        |c| step_closed(c).map(|s| B(&mut s.pd.spring_feedforward))
-    }
-    VELOCITY_GAIN {
-        "velocity.gain_mps_per_j", "m/(s J)", Real, [0.0, 10.0], 0.03, LIVE,
-        "K_v of eq 2.53 (Table 2.1's 30 read as mm/(s J)).",
-        |c| velocity(c).map(|s| R(&mut s.gain_mps_per_j))
-    }
-    VELOCITY_LOOP_GAIN {
-        "velocity.loop_gain_n_s_per_m", "N s/m", Real, [0.0, 1.0e6], 5000.0, LIVE,
-        "Velocity loop gain from nut speed error to force.",
-        |c| velocity(c).map(|s| R(&mut s.loop_gain_n_s_per_m))
-    }
-    VELOCITY_FEEDFORWARD {
-        "velocity.spring_feedforward", "-", Flag, [0.0, 1.0], 1.0, LIVE,
-        "Add the measured spring force to the velocity loop.",
-        |c| velocity(c).map(|s| B(&mut s.spring_feedforward))
-    }
-    // --- energy-apex -----------------------------------------------------------
-    ENERGY_APEX_GAIN {
-        "energy_apex.gain_nm_per_j", "N m/J", Real, [0.0, 100.0], 3.0, LIVE,
-        "K_e of the inner eq 2.52 (full torque for a 0.33 J deficit).",
-        |c| energy_apex(c).map(|s| R(&mut s.law.gain_nm_per_j))
-    }
-    ENERGY_APEX_ALLOW_NEGATIVE {
-        "energy_apex.allow_negative", "-", Flag, [0.0, 1.0], 0.0, LIVE,
-        "The inner law may command negative torque.",
-        |c| energy_apex(c).map(|s| B(&mut s.law.allow_negative))
-    }
-    ENERGY_APEX_MEASURE {
-        "energy_apex.measure", "-", Kind::Choice(&ENERGY_MEASURES), [0.0, 1.0], 0.0, LIVE,
-        "Energy fed back: total (eq 2.44) or body only.",
-        |c| energy_apex(c).map(|s| Slot::Measure(&mut s.measure))
-    }
-    ENERGY_APEX_PROPORTIONAL {
-        "energy_apex.proportional_gain", "1", Real, [0.0, 10.0], 0.0, LIVE,
-        "Outer loop's proportional gain on the last apex error (J per J).",
-        |c| energy_apex(c).map(|s| R(&mut s.proportional))
-    }
-    ENERGY_APEX_INTEGRAL {
-        "energy_apex.integral_gain", "1", Real, [1.0e-3, 9.99], 0.6, LIVE,
-        "Outer loop's integral gain on the apex error (J of offset per J).",
-        |c| energy_apex(c).map(|s| R(&mut s.gain))
-    }
-    ENERGY_APEX_MAX_OFFSET_J {
-        "energy_apex.max_offset_j", "J", Real, [0.0, 1000.0], 30.0, LIVE,
-        "Upper bound on the outer loop's correction of E_D.",
-        |c| energy_apex(c).map(|s| R(&mut s.max_offset_j))
-    }
-    ENERGY_APEX_MIN_OFFSET_J {
-        "energy_apex.min_offset_j", "J", Real, [-1000.0, 0.0], -5.0, LIVE,
-        "Lower bound on the outer loop's correction of E_D.",
-        |c| energy_apex(c).map(|s| R(&mut s.min_offset_j))
-    }
-    ENERGY_APEX_SPIN_UP {
-        "energy_apex.spin_up_fraction", "1", Real, [0.0, 1.0], 0.0, LIVE,
-        "Fraction of the target apex below which the descent runs the stance law (0: off).",
-        |c| energy_apex(c).map(|s| R(&mut s.spin_up_fraction))
-    }
-    // --- shaped ----------------------------------------------------------------
-    SHAPED_SPIN_UP_FRACTION {
-        "shaped.spin_up_fraction", "1", Real, [0.0, 1.0], 0.6, LIVE,
-        "Fraction of the flight's apex below which the descent spins the rotor up.",
-        |c| shaped(c).map(|s| R(&mut s.spin_up_fraction))
-    }
-    SHAPED_SPIN_UP_MIN_APEX_M {
-        "shaped.spin_up_min_apex_m", "m", Real, [0.0, 1.0], 0.005, LIVE,
-        "Smallest flight apex that spins up.",
-        |c| shaped(c).map(|s| R(&mut s.spin_up_min_apex_m))
-    }
-    SHAPED_SWITCH_FRACTION {
-        "shaped.switch_fraction", "1", Real, [0.0, 2.0], 0.6, LIVE,
-        "Fraction of the model's stance time T = pi sqrt((M + m_s)/k) after which the push turns to braking.",
-        |c| shaped(c).map(|s| R(&mut s.switch_fraction))
-    }
-    SHAPED_BRAKE_FRACTION {
-        "shaped.brake_fraction", "1", Real, [0.0, 1.0], 1.0, LIVE,
-        "Braking current, fraction of the current limit.",
-        |c| shaped(c).map(|s| R(&mut s.brake_fraction))
-    }
-    SHAPED_INITIAL_LEVEL {
-        "shaped.initial_level", "1", Real, [0.0, 1.0], 1.0, LIVE,
-        "Torque level of the first hop, fraction of the current limit.",
-        |c| shaped(c).map(|s| R(&mut s.initial_level))
-    }
-    SHAPED_INTEGRAL_START {
-        "shaped.integral_start", "1", Real, [0.0, 1.0], 0.8, LIVE,
-        "Starting integral of the per-hop level loop.",
-        |c| shaped(c).map(|s| R(&mut s.integral_start))
-    }
-    SHAPED_LEVEL_GAIN {
-        "shaped.level_gain_per_j", "1/J", Real, [0.0, 10.0], 0.1, LIVE,
-        "Integral gain of the level loop on the apex energy error.",
-        |c| shaped(c).map(|s| R(&mut s.level_gain_per_j))
-    }
-    SHAPED_LEVEL_PROPORTIONAL {
-        "shaped.level_proportional_per_j", "1/J", Real, [0.0, 10.0], 0.2, LIVE,
-        "Proportional gain of the level loop.",
-        |c| shaped(c).map(|s| R(&mut s.level_proportional_per_j))
-    }
-    SHAPED_BRAKING_MARGIN {
-        "shaped.braking_margin", "1", Real, [1.0e-3, 1.0], 0.7, LIVE,
-        "Fraction of the available braking deceleration the flight return plans with.",
-        |c| shaped(c).map(|s| R(&mut s.braking_margin))
-    }
-    SHAPED_TRACKING_TIME_S {
-        "shaped.tracking_time_s", "s", Real, [1.0e-3, 0.1], 0.005, LIVE,
-        "Time constant of the flight return's speed tracking.",
-        |c| shaped(c).map(|s| R(&mut s.tracking_time_s))
-    }
-    SHAPED_CREEP_SPEED_MPS {
-        "shaped.creep_speed_mps", "m/s", Real, [0.0, 0.1], 0.01, LIVE,
-        "Speed at which the nut arrives at its stop.",
-        |c| shaped(c).map(|s| R(&mut s.creep_speed_mps))
-    }
-    // --- Phase estimator -------------------------------------------------------
-    // Estimator, supervisor and calibration entries are set with the
-    // amplifier disabled only. Derived from the model and not listed: the
-    // overcurrent trip (10x the current limit), the stroke soft limits with
-    // the braking deceleration they assume, the stops, the lead and torque
-    // constant of the calibration, and the counter and converter widths
-    // (board facts). The height encoder's origin is listed last (the
-    // table's order is the link's numbering).
-    EST_TOUCHDOWN_FORCE_N {
-        "estimator.touchdown_force_n", "N", Real, [0.0, 1.0e4], 40.0, DISARMED,
-        "Load-cell force beyond k (delta0 + p) that counts as touchdown evidence (8 sigma of 5 N).",
-        |c| Some(R(&mut c.estimator.touchdown_force_n))
-    }
-    EST_LIFTOFF_FORCE_N {
-        "estimator.liftoff_force_n", "N", Real, [-1.0e4, 1.0e4], 20.0, DISARMED,
-        "Excess force below which liftoff is considered (below the touchdown force).",
-        |c| Some(R(&mut c.estimator.liftoff_force_n))
-    }
-    EST_TOUCHDOWN_COMPRESSION_M {
-        "estimator.touchdown_compression_m", "m", Real, [0.0, 0.5], 0.002, DISARMED,
-        "Potentiometer compression above which touchdown is considered.",
-        |c| Some(R(&mut c.estimator.touchdown_compression_m))
-    }
-    EST_LIFTOFF_COMPRESSION_M {
-        "estimator.liftoff_compression_m", "m", Real, [-0.5, 0.5], 0.001, DISARMED,
-        "Potentiometer compression below which liftoff is considered (below the touchdown compression).",
-        |c| Some(R(&mut c.estimator.liftoff_compression_m))
-    }
-    EST_DEBOUNCE_SAMPLES {
-        "estimator.debounce_samples", "samples", Count, [1.0, 255.0], 3.0, DISARMED,
-        "Consecutive agreeing samples needed to change phase.",
-        |c| Some(Slot::U8(&mut c.estimator.debounce_samples))
-    }
-    EST_FILTER_GAIN {
-        "estimator.velocity_filter_gain", "1", Real, [0.0, 0.999], 0.9, DISARMED,
-        "Filter gain G of eq 4.1 for both velocities.",
-        |c| Some(R(&mut c.estimator.velocity_filter_gain))
-    }
-    EST_APEX_ARM_MPS {
-        "estimator.apex_arm_velocity_mps", "m/s", Real, [1.0e-4, 10.0], 0.1, DISARMED,
-        "Upward body velocity that arms apex detection in flight.",
-        |c| Some(R(&mut c.estimator.apex_arm_velocity_mps))
-    }
-    EST_BOTTOM_ARM_MPS {
-        "estimator.bottom_arm_velocity_mps", "m/s", Real, [1.0e-4, 10.0], 0.1, DISARMED,
-        "Downward body speed that arms bottom detection in stance.",
-        |c| Some(R(&mut c.estimator.bottom_arm_velocity_mps))
-    }
-    EST_PREDICT_CONTACT {
-        "estimator.predict_contact", "-", Flag, [0.0, 1.0], 1.0, DISARMED,
-        "Predict touchdown and liftoff from the height encoder (the toe reaching the ground within half a period); load cell and potentiometer confirm (0: those two alone, late by their thresholds).",
-        |c| Some(B(&mut c.estimator.predict_contact))
-    }
-    EST_CONTACT_CONFIRM_S {
-        "estimator.contact_confirm_s", "s", Real, [1.0e-3, 1.0], 0.03, DISARMED,
-        "Time within which load cell and potentiometer must confirm a predicted touchdown; else it is withdrawn (a liftoff) and prediction stays off.",
-        |c| Some(R(&mut c.estimator.contact_confirm_s))
-    }
-    // --- Arming ----------------------------------------------------------------
-    ARM_LINK_TIMEOUT_S {
-        "arming.link_timeout_s", "s", Real, [1.0e-3, 60.0], 0.2, DISARMED,
-        "No valid link frame for this long disarms the amplifier (and a dead link refuses arming).",
-        |c| Some(R(&mut c.arming.link_timeout_s))
-    }
-    ARM_UNTETHERED {
-        "arming.untethered", "-", Flag, [0.0, 1.0], 0.0, DISARMED,
-        "Run without a link: no link needed to arm, and link loss does not disarm (an explicit choice; the simulator sets it).",
-        |c| Some(B(&mut c.arming.untethered))
-    }
-    ARM_HOME_TOLERANCE_M {
-        "arming.home_tolerance_m", "m", Real, [0.0, 0.05], 0.001, DISARMED,
-        "To arm, the nut must be at most this far from its upper stop.",
-        |c| Some(R(&mut c.arming.home_tolerance_m))
-    }
-    ARM_STILL_MPS {
-        "arming.still_velocity_mps", "m/s", Real, [1.0e-4, 10.0], 0.05, DISARMED,
-        "To arm, nut and body must be slower than this.",
-        |c| Some(R(&mut c.arming.still_velocity_mps))
-    }
-    ARM_REQUIRE_TARE {
-        "arming.require_tare", "-", Flag, [0.0, 1.0], 0.0, DISARMED,
-        "Refuse to arm until a tare (hopper-link calibrate tare) has succeeded since boot (the board sets it: its offsets are not saved yet).",
-        |c| Some(B(&mut c.arming.require_tare))
-    }
-    ARM_REQUIRE_HOME {
-        "arming.require_home", "-", Flag, [0.0, 1.0], 0.0, DISARMED,
-        "Refuse to arm until the nut was homed (hopper-link calibrate home, after calibrate direction) since boot: the motor encoder is incremental, its zero is lost at power-off.",
-        |c| Some(B(&mut c.arming.require_home))
-    }
-    // --- Bring-up routines -----------------------------------------------------
-    BRINGUP_CURRENT_LIMIT_A {
-        "bringup.current_limit_a", "A", Real, [0.1, 10.0], 6.0, DISARMED,
-        "Largest current a motor-driving bring-up routine commands (6 A: 200 N on the nut, 18% of the amplifier's limit).",
-        |c| Some(R(&mut c.bringup.current_limit_a))
-    }
-    BRINGUP_SPEED_MPS {
-        "bringup.speed_mps", "m/s", Real, [0.001, 0.05], 0.005, DISARMED,
-        "Nut speed of the homing move and the spring sweep (5 mm/s: a stop reached at it stores 5 mJ in the 426 kg reflected rotor inertia).",
-        |c| Some(R(&mut c.bringup.speed_mps))
-    }
-    BRINGUP_SWEEP_M {
-        "bringup.sweep_m", "m", Real, [0.002, 0.03], 0.01, DISARMED,
-        "Nut travel of the spring sweep, down from the upper stop and back.",
-        |c| Some(R(&mut c.bringup.sweep_m))
-    }
-    // --- Supervisor limits -----------------------------------------------------
-    SUP_MAX_MOTOR_DELTA {
-        "supervisor.max_motor_delta_counts", "counts", Count, [1.0, 1.0e6], 64.0, DISARMED,
-        "Largest plausible motor counter change per period (1000 rad/s at 2000 counts/rev and 10 kHz is 32, x2).",
-        |c| Some(Slot::U32(&mut c.supervisor.max_motor_delta_counts))
-    }
-    SUP_MAX_HEIGHT_DELTA {
-        "supervisor.max_height_delta_counts", "counts", Count, [1.0, 1.0e6], 32.0, DISARMED,
-        "Largest plausible height counter change per period (10 m/s on a 20 mm pulley at 10 kHz is 16, x2).",
-        |c| Some(Slot::U32(&mut c.supervisor.max_height_delta_counts))
-    }
-    SUP_NUT_POSITION_MIN_M {
-        "supervisor.nut_position_min_m", "m", Real, [-1.0, 1.0], -0.01, DISARMED,
-        "Lowest plausible nut position (stops at 0 and 0.05 m).",
-        |c| Some(R(&mut c.supervisor.nut_position_range_m.min))
-    }
-    SUP_NUT_POSITION_MAX_M {
-        "supervisor.nut_position_max_m", "m", Real, [-1.0, 1.0], 0.06, DISARMED,
-        "Highest plausible nut position (stops at 0 and 0.05 m).",
-        |c| Some(R(&mut c.supervisor.nut_position_range_m.max))
-    }
-    SUP_NUT_VELOCITY_MIN_MPS {
-        "supervisor.nut_velocity_min_mps", "m/s", Real, [-100.0, 100.0], -1.0, DISARMED,
-        "Lowest plausible nut velocity (the no-load speed is 0.64 m/s).",
-        |c| Some(R(&mut c.supervisor.nut_velocity_range_mps.min))
-    }
-    SUP_NUT_VELOCITY_MAX_MPS {
-        "supervisor.nut_velocity_max_mps", "m/s", Real, [-100.0, 100.0], 1.0, DISARMED,
-        "Highest plausible nut velocity (the no-load speed is 0.64 m/s).",
-        |c| Some(R(&mut c.supervisor.nut_velocity_range_mps.max))
-    }
-    SUP_MOTOR_SPEED_MIN_RAD_S {
-        "supervisor.motor_speed_min_rad_s", "rad/s", Real, [-1.0e5, 1.0e5], -1200.0, DISARMED,
-        "Lowest plausible motor speed (no-load 808 rad/s).",
-        |c| Some(R(&mut c.supervisor.motor_speed_range_rad_s.min))
-    }
-    SUP_MOTOR_SPEED_MAX_RAD_S {
-        "supervisor.motor_speed_max_rad_s", "rad/s", Real, [-1.0e5, 1.0e5], 1200.0, DISARMED,
-        "Highest plausible motor speed (no-load 808 rad/s).",
-        |c| Some(R(&mut c.supervisor.motor_speed_range_rad_s.max))
-    }
-    SUP_BODY_HEIGHT_MIN_M {
-        "supervisor.body_height_min_m", "m", Real, [-10.0, 100.0], 0.4, DISARMED,
-        "Lowest plausible body height z (l0 = 0.61 m).",
-        |c| Some(R(&mut c.supervisor.body_height_range_m.min))
-    }
-    SUP_BODY_HEIGHT_MAX_M {
-        "supervisor.body_height_max_m", "m", Real, [-10.0, 100.0], 3.0, DISARMED,
-        "Highest plausible body height z (l0 = 0.61 m).",
-        |c| Some(R(&mut c.supervisor.body_height_range_m.max))
-    }
-    SUP_BODY_VELOCITY_MIN_MPS {
-        "supervisor.body_velocity_min_mps", "m/s", Real, [-1000.0, 1000.0], -10.0, DISARMED,
-        "Lowest plausible body velocity.",
-        |c| Some(R(&mut c.supervisor.body_velocity_range_mps.min))
-    }
-    SUP_BODY_VELOCITY_MAX_MPS {
-        "supervisor.body_velocity_max_mps", "m/s", Real, [-1000.0, 1000.0], 10.0, DISARMED,
-        "Highest plausible body velocity.",
-        |c| Some(R(&mut c.supervisor.body_velocity_range_mps.max))
-    }
-    SUP_SPRING_FORCE_MIN_N {
-        "supervisor.spring_force_min_n", "N", Real, [-1.0e5, 1.0e5], -50.0, DISARMED,
-        "Lowest plausible spring force (both load-cell rails outside).",
-        |c| Some(R(&mut c.supervisor.spring_force_range_n.min))
-    }
-    SUP_SPRING_FORCE_MAX_N {
-        "supervisor.spring_force_max_n", "N", Real, [-1.0e5, 1.0e5], 1800.0, DISARMED,
-        "Highest plausible spring force (both load-cell rails outside).",
-        |c| Some(R(&mut c.supervisor.spring_force_range_n.max))
-    }
-    SUP_LEG_COMPRESSION_MIN_M {
-        "supervisor.leg_compression_min_m", "m", Real, [-1.0, 1.0], -0.004, DISARMED,
-        "Lowest plausible leg compression (both potentiometer rails outside).",
-        |c| Some(R(&mut c.supervisor.leg_compression_range_m.min))
-    }
-    SUP_LEG_COMPRESSION_MAX_M {
-        "supervisor.leg_compression_max_m", "m", Real, [-1.0, 1.0], 0.1, DISARMED,
-        "Highest plausible leg compression (both potentiometer rails outside).",
-        |c| Some(R(&mut c.supervisor.leg_compression_range_m.max))
-    }
-    SUP_SPRING_RATE {
-        "supervisor.spring_rate_n_per_m", "N/m", Real, [10.0, 1.0e7], 11000.0, DISARMED,
-        "Spring rate k of the sensor cross-checks (calibrated; Table 2.1: 11 kN/m).",
-        |c| Some(R(&mut c.supervisor.spring_rate_n_per_m))
-    }
-    SUP_SPRING_PRELOAD {
-        "supervisor.spring_preload_m", "m", Real, [0.0, 0.5], crate::model::design::SPRING_PRELOAD_M as f32, DISARMED,
-        "Spring preload delta0 of the sensor cross-checks (calibrated; design: none).",
-        |c| Some(R(&mut c.supervisor.spring_preload_m))
-    }
-    SUP_CONTACT_FORCE {
-        "supervisor.contact_force_n", "N", Real, [-1.0e4, 1.0e4], 150.0, DISARMED,
-        "Excess force above which the load cell says contact.",
-        |c| Some(R(&mut c.supervisor.contact_force_n))
-    }
-    SUP_FREE_FORCE {
-        "supervisor.free_force_n", "N", Real, [-1.0e4, 1.0e4], 40.0, DISARMED,
-        "Excess force below which the load cell says no contact.",
-        |c| Some(R(&mut c.supervisor.free_force_n))
-    }
-    SUP_CONTACT_COMPRESSION {
-        "supervisor.contact_compression_m", "m", Real, [-1.0, 1.0], 0.015, DISARMED,
-        "Leg compression above which the potentiometer says contact.",
-        |c| Some(R(&mut c.supervisor.contact_compression_m))
-    }
-    SUP_FREE_COMPRESSION {
-        "supervisor.free_compression_m", "m", Real, [-1.0, 1.0], 0.003, DISARMED,
-        "Leg compression below which the potentiometer says no contact.",
-        |c| Some(R(&mut c.supervisor.free_compression_m))
-    }
-    SUP_CONTACT_DISAGREE_PERIODS {
-        "supervisor.contact_disagree_periods", "periods", Count, [1.0, 65535.0], 20.0, DISARMED,
-        "Consecutive disagreeing periods before contact-disagree latches (2 ms at 10 kHz).",
-        |c| Some(Slot::U16(&mut c.supervisor.contact_disagree_periods))
-    }
-    SUP_SPRING_MISMATCH {
-        "supervisor.spring_mismatch_n", "N", Real, [1.0e-3, 1.0e30], 30.0, DISARMED,
-        "Largest plausible |F - k (delta0 + p + x)| before sensor-disagree (13 sigma; 1e30 turns it off).",
-        |c| Some(R(&mut c.supervisor.spring_mismatch_n))
-    }
-    SUP_FROZEN_SPEED {
-        "supervisor.frozen_speed_rad_s", "rad/s", Real, [1.0e-3, 1.0e30], 100.0, DISARMED,
-        "Motor speed above which a period without a count is encoder-frozen (1e30 turns it off).",
-        |c| Some(R(&mut c.supervisor.frozen_speed_rad_s))
-    }
-    // --- E-stop debounce -------------------------------------------------------
-    ESTOP_PRESS_S {
-        "estop.press_s", "s", Real, [0.0, 0.01], 2.0e-4, DISARMED,
-        "The e-stop input pressed without a break for this long is a press (shorter is a glitch; the button also breaks the amplifier enable in hardware).",
-        |c| Some(R(&mut c.estop.press_s))
-    }
-    ESTOP_RELEASE_S {
-        "estop.release_s", "s", Real, [0.0, 2.0], 0.05, DISARMED,
-        "The e-stop input released without a break for this long is a release (arming and fault resets wait for it: longer than a contact's bounce).",
-        |c| Some(R(&mut c.estop.release_s))
-    }
-    // --- Motor thermal model and protection ------------------------------------
-    THERMAL_PROTECT {
-        "thermal.protect", "-", Flag, [0.0, 1.0], 1.0, DISARMED,
-        "Derate and fault on the winding temperature estimate; 0 only for control studies past the motor's thermal limit (the estimate is still reported), never on a robot.",
-        |c| Some(B(&mut c.supervisor.thermal.protect))
-    }
-    THERMAL_RESISTANCE_OHM {
-        "thermal.winding_resistance_ohm", "ohm", Real, [1.0e-3, 100.0], 0.299, DISARMED,
-        "Motor winding resistance at 25 C (the RE 40 24 V winding's; use your motor's datasheet).",
-        |c| Some(R(&mut c.supervisor.thermal.winding_resistance_ohm))
-    }
-    THERMAL_WINDING_TO_HOUSING {
-        "thermal.winding_to_housing_k_per_w", "K/W", Real, [1.0e-2, 100.0], 1.93, DISARMED,
-        "Thermal resistance winding to housing (motor datasheet).",
-        |c| Some(R(&mut c.supervisor.thermal.winding_to_housing_k_per_w))
-    }
-    THERMAL_HOUSING_TO_AMBIENT {
-        "thermal.housing_to_ambient_k_per_w", "K/W", Real, [1.0e-2, 100.0], 4.65, DISARMED,
-        "Thermal resistance housing to ambient (motor datasheet; a heat sink lowers it).",
-        |c| Some(R(&mut c.supervisor.thermal.housing_to_ambient_k_per_w))
-    }
-    THERMAL_WINDING_TAU {
-        "thermal.winding_time_constant_s", "s", Real, [0.1, 1.0e4], 41.6, DISARMED,
-        "Winding thermal time constant (motor datasheet).",
-        |c| Some(R(&mut c.supervisor.thermal.winding_time_constant_s))
-    }
-    THERMAL_HOUSING_TAU {
-        "thermal.housing_time_constant_s", "s", Real, [1.0, 1.0e5], 1120.0, DISARMED,
-        "Motor (housing) thermal time constant (motor datasheet).",
-        |c| Some(R(&mut c.supervisor.thermal.housing_time_constant_s))
-    }
-    THERMAL_AMBIENT {
-        "thermal.ambient_c", "degC", Real, [-40.0, 80.0], 25.0, DISARMED,
-        "Ambient temperature; the motor is taken to be at it at boot.",
-        |c| Some(R(&mut c.supervisor.thermal.ambient_c))
-    }
-    THERMAL_DERATE {
-        "thermal.derate_winding_c", "degC", Real, [0.0, 250.0], 135.0, DISARMED,
-        "Estimated winding temperature where the current limit starts to fall.",
-        |c| Some(R(&mut c.supervisor.thermal.derate_winding_c))
-    }
-    THERMAL_TRIP {
-        "thermal.trip_winding_c", "degC", Real, [0.0, 250.0], 150.0, DISARMED,
-        "Estimated winding temperature that latches overtemperature (5 K under the RE 40's 155 C).",
-        |c| Some(R(&mut c.supervisor.thermal.trip_winding_c))
-    }
-    THERMAL_DERATED_FRACTION {
-        "thermal.derated_limit_fraction", "1", Real, [0.05, 1.0], 0.5, DISARMED,
-        "Current limit at the trip temperature, as a fraction of the amplifier's (linear from the derate temperature).",
-        |c| Some(R(&mut c.supervisor.thermal.derated_limit_fraction))
-    }
-    // --- Sensor and DAC calibration --------------------------------------------
-    CAL_MOTOR_COUNTS_PER_REV {
-        "calibration.motor_counts_per_rev", "counts", Count, [1.0, 1.0e6], 2000.0, DISARMED,
-        "Motor encoder counts per revolution (500 lines x 4).",
-        |c| Some(Slot::U32(&mut c.calibration.motor_counts_per_rev))
-    }
-    CAL_MOTOR_POSITIVE_DOWN {
-        "calibration.motor_counts_positive_down", "-", Flag, [0.0, 1.0], 1.0, DISARMED,
-        "Motor counts increase when the nut moves down.",
-        |c| Some(B(&mut c.calibration.motor_counts_positive_down))
-    }
-    CAL_HEIGHT_COUNTS_PER_REV {
-        "calibration.height_counts_per_rev", "counts", Count, [1.0, 1.0e6], 2000.0, DISARMED,
-        "Height encoder counts per pulley revolution (placeholder).",
-        |c| Some(Slot::U32(&mut c.calibration.height_counts_per_rev))
-    }
-    CAL_HEIGHT_POSITIVE_UP {
-        "calibration.height_counts_positive_up", "-", Flag, [0.0, 1.0], 1.0, DISARMED,
-        "Height counts increase when the body moves up.",
-        |c| Some(B(&mut c.calibration.height_counts_positive_up))
-    }
-    CAL_PULLEY_RADIUS {
-        "calibration.height_pulley_radius_m", "m", Real, [1.0e-4, 1.0], 0.02, DISARMED,
-        "Radius of the height-sensor pulley (placeholder).",
-        |c| Some(R(&mut c.calibration.height_pulley_radius_m))
-    }
-    CAL_LOADCELL_GAIN {
-        "calibration.loadcell_gain_n_per_code", "N/code", Real, [-1.0e3, 1.0e3], 0.5, DISARMED,
-        "Load-cell gain, compression positive (placeholder; not 0).",
-        |c| Some(R(&mut c.calibration.loadcell_gain_n_per_code))
-    }
-    CAL_LOADCELL_OFFSET {
-        "calibration.loadcell_offset_code", "code", Real, [-1.0e5, 1.0e5], 200.0, DISARMED,
-        "Load-cell code at zero force (placeholder).",
-        |c| Some(R(&mut c.calibration.loadcell_offset_code))
-    }
-    CAL_POT_GAIN {
-        "calibration.pot_gain_m_per_code", "m/code", Real, [-1.0, 1.0], 0.12 / 4096.0, DISARMED,
-        "Potentiometer gain, m of leg compression per code (placeholder 0.12/4096; not 0).",
-        |c| Some(R(&mut c.calibration.pot_gain_m_per_code))
-    }
-    CAL_POT_OFFSET {
-        "calibration.pot_offset_code", "code", Real, [-1.0e5, 1.0e5], 205.0, DISARMED,
-        "Potentiometer code at zero compression (placeholder).",
-        |c| Some(R(&mut c.calibration.pot_offset_code))
-    }
-    CAL_DAC_ZERO {
-        "calibration.dac_zero_code", "code", Count, [0.0, 65535.0], 2048.0, DISARMED,
-        "DAC code for zero current (mid-scale; within the DAC range).",
-        |c| Some(Slot::U16(&mut c.calibration.dac_zero_code))
-    }
-    CAL_DAC_AMPS {
-        "calibration.dac_amps_per_code", "A/code", Real, [1.0e-6, 100.0], 0.01953125, DISARMED,
-        "Amplifier current per DAC code (placeholder 40 A / 2048).",
-        |c| Some(R(&mut c.calibration.dac_amps_per_code))
-    }
-    CAL_HEIGHT_AT_ORIGIN_M {
-        "calibration.height_at_origin_m", "m", Real, [0.0, 10.0], 0.61, DISARMED,
-        "Body height z where the height encoder counted from at boot (the leg length l0 with the toe on the ground; a simulated run's start height).",
-        |c| Some(R(&mut c.calibration.height_at_origin_m))
-    }
-    // --- added later: at the end, so the link's numbers of the others stay ---
-    SHAPED_LEAST_EFFORT_RETURN {
-        "shaped.least_effort_return", "-", Flag, [0.0, 1.0], 0.0, LIVE,
-        "Bring the nut home in flight with the least int i^2 dt (the spring helping, reaching the stop when the push is due) instead of along the braking curve.",
-        |c| shaped(c).map(|s| B(&mut s.least_effort_return))
     }
 }
 
@@ -784,7 +474,8 @@ pub fn controller_default(index: usize) -> Option<Strategy> {
 }
 
 /// Where a parameter lives in a configuration.
-enum Slot<'a> {
+#[allow(missing_docs)]
+pub(crate) enum Slot<'a> {
     Real(&'a mut f32),
     Flag(&'a mut bool),
     U32(&'a mut u32),
@@ -795,12 +486,23 @@ enum Slot<'a> {
     Measure(&'a mut energy_apex::EnergyMeasure),
 }
 
+macro_rules! slot_from {
+    ($($t:ty => $v:ident),*) => {$(
+        impl<'a> From<&'a mut $t> for Slot<'a> {
+            fn from(v: &'a mut $t) -> Self {
+                Slot::$v(v)
+            }
+        }
+    )*};
+}
+slot_from!(f32 => Real, bool => Flag, u32 => U32, u16 => U16, u8 => U8);
+
 /// The selected controller's configuration, if it is the one named: a
 /// controller's parameters exist only while it is selected.
 macro_rules! selected {
     ($($(#[$meta:meta])* $fn:ident => $pattern:pat => $cfg:ident: $ty:ty;)*) => {$(
         $(#[$meta])*
-        fn $fn(c: &mut HopperConfig) -> Option<&mut $ty> {
+        pub(crate) fn $fn(c: &mut HopperConfig) -> Option<&mut $ty> {
             match &mut c.strategy {
                 $pattern => Some($cfg),
                 _ => None,
@@ -832,7 +534,7 @@ pub fn get(cfg: &HopperConfig, name: &str) -> Result<f32, ParamError> {
 /// many parameters costs no lookups by name and no copies.
 pub fn read(c: &mut HopperConfig, p: &Param) -> Result<f32, ParamError> {
     let index = controller_index(&c.strategy);
-    Ok(match slot(c, p).ok_or(ParamError::NotSelected(p.name))? {
+    Ok(match (p.slot)(c).ok_or(ParamError::NotSelected(p.name))? {
         Slot::Real(v) => *v,
         Slot::Flag(b) => f32::from(u8::from(*b)),
         // Counts are checked against their (below 2^24) ranges on set, so
@@ -900,7 +602,7 @@ pub fn set(cfg: &mut HopperConfig, name: &str, value: f32) -> Result<(), ParamEr
 /// [`set`] by table entry.
 pub fn write(cfg: &mut HopperConfig, p: &Param, value: f32) -> Result<(), ParamError> {
     let v = p.check(value).map_err(|f| ParamError::OutOfRange(f.0))?;
-    match slot(cfg, p).ok_or(ParamError::NotSelected(p.name))? {
+    match (p.slot)(cfg).ok_or(ParamError::NotSelected(p.name))? {
         Slot::Real(x) => *x = v,
         Slot::Flag(b) => *b = v != 0.0,
         // Whole and within the count's range (checked above).
@@ -965,7 +667,7 @@ fn readable_with(cfg: &HopperConfig, q: &Param, v: usize, p: &Param) -> bool {
 /// number of values.
 fn choices_of(cfg: &HopperConfig) -> impl Iterator<Item = (&'static Param, usize)> + '_ {
     TABLE.iter().copied().filter_map(move |q| match q.kind {
-        Kind::Choice(values) if q.id != Id::CONTROLLER && read(&mut { *cfg }, q).is_ok() => {
+        Kind::Choice(values) if q.number != CONTROLLER.number && read(&mut { *cfg }, q).is_ok() => {
             Some((q, values.len()))
         }
         _ => None,
@@ -1188,7 +890,7 @@ mod tests {
             assert_eq!(validate(&cfg), Ok(()), "defaults of controller {i}");
             for p in TABLE {
                 let mut c = cfg;
-                let put = match slot(&mut c, p) {
+                let put = match (p.slot)(&mut c) {
                     Some(Slot::Real(v)) => {
                         *v = f32::NAN;
                         true

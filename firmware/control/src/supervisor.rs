@@ -217,150 +217,198 @@ pub struct Range {
 }
 
 impl Range {
+    /// `0..=0`: the start of a range whose ends are set after (the
+    /// configuration's defaults put the parameter table's there).
+    pub const ZERO: Range = Range { min: 0.0, max: 0.0 };
+
     /// Whether `x` is within the range (NaN is not).
     pub fn contains(&self, x: f32) -> bool {
         x >= self.min && x <= self.max
     }
 }
 
-/// Supervisor limits. Defaults are for the thesis hardware at a 10 kHz control rate.
-#[derive(Debug, Clone, Copy, PartialEq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct SupervisorConfig {
-    /// A request with magnitude above this, A, is an overcurrent fault (requests between
-    /// the limit and this are clamped silently). Default 337 (10x the limit: a runaway law).
-    pub overcurrent_trip_a: f32,
-    /// Largest plausible motor counter change per [`REFERENCE_PERIOD_S`]
-    /// (100 us), counts; the limit scales with the control period (at least
-    /// 2 counts). Default 64: 1000 rad/s (above the 808 rad/s no-load speed)
-    /// at 2000 counts/rev is 32 counts per 100 us, x2 margin.
-    pub max_motor_delta_counts: u32,
-    /// Largest plausible height counter change per [`REFERENCE_PERIOD_S`],
-    /// counts, scaled as the motor's. Default 32: 10 m/s with a 20 mm pulley
-    /// at 2000 counts/rev is 16 counts per 100 us, x2 margin.
-    pub max_height_delta_counts: u32,
-    /// Plausible nut position, m. Default -0.01..=0.06 (stops at 0 and 0.05).
-    pub nut_position_range_m: Range,
-    /// Plausible nut velocity, m/s. Default ±1.0 (1000 rad/s is 0.8 m/s).
-    pub nut_velocity_range_mps: Range,
-    /// Plausible motor speed, rad/s. Default ±1200.
-    pub motor_speed_range_rad_s: Range,
-    /// Plausible body height `z`, m. Default 0.4..=3.0 (`l0` = 0.61, hops up to ~2 m).
-    pub body_height_range_m: Range,
-    /// Plausible body velocity, m/s. Default ±10.
-    pub body_velocity_range_mps: Range,
-    /// Plausible spring force, N. Default -50..=1800: about 600 N at full
-    /// stroke in flight, 1.35 kN with the nut down in a 0.25 m hop; both
-    /// rails of the default load-cell calibration (-100 N, 1947 N) are outside.
-    pub spring_force_range_n: Range,
-    /// Plausible leg compression, m. Default -0.004..=0.1: both rails of the
-    /// default potentiometer calibration (-6 mm, 114 mm) are outside, so an
-    /// open or shorted wiper trips.
-    pub leg_compression_range_m: Range,
-    /// Spring rate `k`, N/m, for the contact check. Default 11 000 (Table 2.1).
-    pub spring_rate_n_per_m: f32,
-    /// Spring preload `delta0`, m, for the contact check. Default 0 (the design machine has none).
-    pub spring_preload_m: f32,
-    /// Contact force above the flight force `k (delta0 + p)` that means "load cell says contact", N. Default 150.
-    pub contact_force_n: f32,
-    /// Contact force below which the load cell says "no contact", N. Default 40.
-    pub free_force_n: f32,
-    /// Leg compression above which the pot says "contact", m. Default 0.015.
-    pub contact_compression_m: f32,
-    /// Leg compression below which the pot says "no contact", m. Default 0.003.
-    pub free_compression_m: f32,
-    /// How long load cell and potentiometer must disagree before the
-    /// contact-disagree fault, in [`REFERENCE_PERIOD_S`] units (consecutive
-    /// periods at 10 kHz; the time is what counts at any rate). Default 20 (2 ms).
-    pub contact_disagree_periods: u16,
-    /// Largest plausible `|F - k (delta0 + p + x)|`, N: the load cell's force
-    /// against the spring compression the motor encoder (`p`) and the
-    /// potentiometer (`x`) give. Beyond it [`Fault::SensorDisagree`] latches
-    /// in the same period. Default 30: the residual is noise only (load cell
-    /// 2 N and `k` x pot 1.1 N, 1 sigma: 2.3 N, so 30 N is 13 sigma) when the
-    /// spring has no damping and the model's `k` and `delta0` are the
-    /// plant's; 30 N is 2.7 mm of nut or leg travel the other sensors do not
-    /// see. `f32::INFINITY` disables the check (e.g. a spring with damping,
-    /// or a `k` known only roughly).
-    pub spring_mismatch_n: f32,
-    /// Filtered motor speed, rad/s, above which [`REFERENCE_PERIOD_S`]
-    /// (100 us, one period at 10 kHz, ten at 100 kHz) without a single motor
-    /// count is impossible away from the stops: [`Fault::EncoderFrozen`].
-    /// Default 100: 3.2 counts per 100 us at 2000 counts/rev, and
-    /// the motor (2 N m stall, 1 N m of spring through the screw, 2.7e-4
-    /// kg m^2) loses at most about 1.1 rad/s in a period; the eq 4.1 filter's
-    /// lag adds about 10 rad/s. `f32::INFINITY` disables the check.
-    pub frozen_speed_rad_s: f32,
-    /// The nut's mechanical stops, m (`min`: upper stop, `max`: lower stop).
-    /// Within [`STOP_BAND_M`] of one a nut may halt at once, so
-    /// [`Fault::EncoderFrozen`] is not checked there. Default 0..=0.05.
-    pub nut_stops_m: Range,
-    /// Lower stroke soft limit for the predicted stopping point, m. Default -0.005
-    /// (hitting the upper stop at 0 faster than about 0.17 m/s under `brake_decel_mps2`).
-    pub stroke_min_m: f32,
-    /// Upper stroke soft limit for the predicted stopping point, m. Default 0.055 (stop at 0.05).
-    pub stroke_max_m: f32,
-    /// Nut deceleration available for braking, m/s^2, in `p + pd |pd| / (2 a)`. Default 3.0
-    /// (1.0 N m through the 426 kg reflected rotor inertia; spring help ignored). `> 0`.
-    pub brake_decel_mps2: f32,
-    /// The motor's thermal model and the protection's thresholds.
-    pub thermal: crate::thermal::ThermalConfig,
-}
-
-impl Default for SupervisorConfig {
-    /// The parameter table's defaults ([`crate::params`]); the fields
-    /// derived from the model (trip level, stops, stroke limits) take the
-    /// default model's values here and `HopperConfig::for_model` sets them.
-    fn default() -> Self {
-        use crate::params as p;
-        let range = |min: &p::Param, max: &p::Param| Range {
-            min: min.default,
-            max: max.default,
-        };
-        Self {
-            overcurrent_trip_a: 337.0,
-            max_motor_delta_counts: p::SUP_MAX_MOTOR_DELTA.default as u32,
-            max_height_delta_counts: p::SUP_MAX_HEIGHT_DELTA.default as u32,
-            nut_position_range_m: range(&p::SUP_NUT_POSITION_MIN_M, &p::SUP_NUT_POSITION_MAX_M),
-            nut_velocity_range_mps: range(
-                &p::SUP_NUT_VELOCITY_MIN_MPS,
-                &p::SUP_NUT_VELOCITY_MAX_MPS,
-            ),
-            motor_speed_range_rad_s: range(
-                &p::SUP_MOTOR_SPEED_MIN_RAD_S,
-                &p::SUP_MOTOR_SPEED_MAX_RAD_S,
-            ),
-            body_height_range_m: range(&p::SUP_BODY_HEIGHT_MIN_M, &p::SUP_BODY_HEIGHT_MAX_M),
-            body_velocity_range_mps: range(
-                &p::SUP_BODY_VELOCITY_MIN_MPS,
-                &p::SUP_BODY_VELOCITY_MAX_MPS,
-            ),
-            spring_force_range_n: range(&p::SUP_SPRING_FORCE_MIN_N, &p::SUP_SPRING_FORCE_MAX_N),
-            leg_compression_range_m: range(
-                &p::SUP_LEG_COMPRESSION_MIN_M,
-                &p::SUP_LEG_COMPRESSION_MAX_M,
-            ),
-            spring_rate_n_per_m: p::SUP_SPRING_RATE.default,
-            spring_preload_m: p::SUP_SPRING_PRELOAD.default,
-            contact_force_n: p::SUP_CONTACT_FORCE.default,
-            free_force_n: p::SUP_FREE_FORCE.default,
-            contact_compression_m: p::SUP_CONTACT_COMPRESSION.default,
-            free_compression_m: p::SUP_FREE_COMPRESSION.default,
-            contact_disagree_periods: p::SUP_CONTACT_DISAGREE_PERIODS.default as u16,
-            spring_mismatch_n: p::SUP_SPRING_MISMATCH.default,
-            frozen_speed_rad_s: p::SUP_FROZEN_SPEED.default,
-            nut_stops_m: Range {
+crate::params::config! {
+    /// Supervisor limits. Defaults are for the thesis hardware at a 10 kHz control rate.
+    #[derive(Debug, Clone, Copy, PartialEq)]
+    #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+    pub struct SupervisorConfig, reached |c| Some(&mut c.supervisor);
+    params {
+        /// Largest plausible motor counter change per [`REFERENCE_PERIOD_S`]
+        /// (100 us), counts; the limit scales with the control period (at least
+        /// 2 counts). Default 64: 1000 rad/s (above the 808 rad/s no-load speed)
+        /// at 2000 counts/rev is 32 counts per 100 us, x2 margin.
+        61 SUP_MAX_MOTOR_DELTA max_motor_delta_counts: u32 {
+            "supervisor.max_motor_delta_counts", "counts", Count, [1.0, 1.0e6], 64.0, DISARMED,
+            "Largest plausible motor counter change per period (1000 rad/s at 2000 counts/rev and 10 kHz is 32, x2)."
+        }
+        /// Largest plausible height counter change per [`REFERENCE_PERIOD_S`],
+        /// counts, scaled as the motor's. Default 32: 10 m/s with a 20 mm pulley
+        /// at 2000 counts/rev is 16 counts per 100 us, x2 margin.
+        62 SUP_MAX_HEIGHT_DELTA max_height_delta_counts: u32 {
+            "supervisor.max_height_delta_counts", "counts", Count, [1.0, 1.0e6], 32.0, DISARMED,
+            "Largest plausible height counter change per period (10 m/s on a 20 mm pulley at 10 kHz is 16, x2)."
+        }
+        /// Spring rate `k`, N/m, for the contact check. Default 11 000 (Table 2.1).
+        77 SUP_SPRING_RATE spring_rate_n_per_m: f32 {
+            "supervisor.spring_rate_n_per_m", "N/m", Real, [10.0, 1.0e7], 11000.0, DISARMED,
+            "Spring rate k of the sensor cross-checks (calibrated; Table 2.1: 11 kN/m)."
+        }
+        /// Spring preload `delta0`, m, for the contact check. Default 0 (the design machine has none).
+        78 SUP_SPRING_PRELOAD spring_preload_m: f32 {
+            "supervisor.spring_preload_m", "m", Real, [0.0, 0.5], crate::model::design::SPRING_PRELOAD_M as f32, DISARMED,
+            "Spring preload delta0 of the sensor cross-checks (calibrated; design: none)."
+        }
+        /// Contact force above the flight force `k (delta0 + p)` that means "load cell says contact", N. Default 150.
+        79 SUP_CONTACT_FORCE contact_force_n: f32 {
+            "supervisor.contact_force_n", "N", Real, [-1.0e4, 1.0e4], 150.0, DISARMED,
+            "Excess force above which the load cell says contact."
+        }
+        /// Contact force below which the load cell says "no contact", N. Default 40.
+        80 SUP_FREE_FORCE free_force_n: f32 {
+            "supervisor.free_force_n", "N", Real, [-1.0e4, 1.0e4], 40.0, DISARMED,
+            "Excess force below which the load cell says no contact."
+        }
+        /// Leg compression above which the pot says "contact", m. Default 0.015.
+        81 SUP_CONTACT_COMPRESSION contact_compression_m: f32 {
+            "supervisor.contact_compression_m", "m", Real, [-1.0, 1.0], 0.015, DISARMED,
+            "Leg compression above which the potentiometer says contact."
+        }
+        /// Leg compression below which the pot says "no contact", m. Default 0.003.
+        82 SUP_FREE_COMPRESSION free_compression_m: f32 {
+            "supervisor.free_compression_m", "m", Real, [-1.0, 1.0], 0.003, DISARMED,
+            "Leg compression below which the potentiometer says no contact."
+        }
+        /// How long load cell and potentiometer must disagree before the
+        /// contact-disagree fault, in [`REFERENCE_PERIOD_S`] units (consecutive
+        /// periods at 10 kHz; the time is what counts at any rate). Default 20 (2 ms).
+        83 SUP_CONTACT_DISAGREE_PERIODS contact_disagree_periods: u16 {
+            "supervisor.contact_disagree_periods", "periods", Count, [1.0, 65535.0], 20.0, DISARMED,
+            "Consecutive disagreeing periods before contact-disagree latches (2 ms at 10 kHz)."
+        }
+        /// Largest plausible `|F - k (delta0 + p + x)|`, N: the load cell's force
+        /// against the spring compression the motor encoder (`p`) and the
+        /// potentiometer (`x`) give. Beyond it [`Fault::SensorDisagree`] latches
+        /// in the same period. Default 30: the residual is noise only (load cell
+        /// 2 N and `k` x pot 1.1 N, 1 sigma: 2.3 N, so 30 N is 13 sigma) when the
+        /// spring has no damping and the model's `k` and `delta0` are the
+        /// plant's; 30 N is 2.7 mm of nut or leg travel the other sensors do not
+        /// see. `f32::INFINITY` disables the check (e.g. a spring with damping,
+        /// or a `k` known only roughly).
+        84 SUP_SPRING_MISMATCH spring_mismatch_n: f32 {
+            "supervisor.spring_mismatch_n", "N", Real, [1.0e-3, 1.0e30], 30.0, DISARMED,
+            "Largest plausible |F - k (delta0 + p + x)| before sensor-disagree (13 sigma; 1e30 turns it off)."
+        }
+        /// Filtered motor speed, rad/s, above which [`REFERENCE_PERIOD_S`]
+        /// (100 us, one period at 10 kHz, ten at 100 kHz) without a single motor
+        /// count is impossible away from the stops: [`Fault::EncoderFrozen`].
+        /// Default 100: 3.2 counts per 100 us at 2000 counts/rev, and
+        /// the motor (2 N m stall, 1 N m of spring through the screw, 2.7e-4
+        /// kg m^2) loses at most about 1.1 rad/s in a period; the eq 4.1 filter's
+        /// lag adds about 10 rad/s. `f32::INFINITY` disables the check.
+        85 SUP_FROZEN_SPEED frozen_speed_rad_s: f32 {
+            "supervisor.frozen_speed_rad_s", "rad/s", Real, [1.0e-3, 1.0e30], 100.0, DISARMED,
+            "Motor speed above which a period without a count is encoder-frozen (1e30 turns it off)."
+        }
+    }
+    nested {
+        63 SUP_NUT_POSITION_MIN_M at nut_position_range_m.min {
+            "supervisor.nut_position_min_m", "m", Real, [-1.0, 1.0], -0.01, DISARMED,
+            "Lowest plausible nut position (stops at 0 and 0.05 m)."
+        }
+        64 SUP_NUT_POSITION_MAX_M at nut_position_range_m.max {
+            "supervisor.nut_position_max_m", "m", Real, [-1.0, 1.0], 0.06, DISARMED,
+            "Highest plausible nut position (stops at 0 and 0.05 m)."
+        }
+        65 SUP_NUT_VELOCITY_MIN_MPS at nut_velocity_range_mps.min {
+            "supervisor.nut_velocity_min_mps", "m/s", Real, [-100.0, 100.0], -1.0, DISARMED,
+            "Lowest plausible nut velocity (the no-load speed is 0.64 m/s)."
+        }
+        66 SUP_NUT_VELOCITY_MAX_MPS at nut_velocity_range_mps.max {
+            "supervisor.nut_velocity_max_mps", "m/s", Real, [-100.0, 100.0], 1.0, DISARMED,
+            "Highest plausible nut velocity (the no-load speed is 0.64 m/s)."
+        }
+        67 SUP_MOTOR_SPEED_MIN_RAD_S at motor_speed_range_rad_s.min {
+            "supervisor.motor_speed_min_rad_s", "rad/s", Real, [-1.0e5, 1.0e5], -1200.0, DISARMED,
+            "Lowest plausible motor speed (no-load 808 rad/s)."
+        }
+        68 SUP_MOTOR_SPEED_MAX_RAD_S at motor_speed_range_rad_s.max {
+            "supervisor.motor_speed_max_rad_s", "rad/s", Real, [-1.0e5, 1.0e5], 1200.0, DISARMED,
+            "Highest plausible motor speed (no-load 808 rad/s)."
+        }
+        69 SUP_BODY_HEIGHT_MIN_M at body_height_range_m.min {
+            "supervisor.body_height_min_m", "m", Real, [-10.0, 100.0], 0.4, DISARMED,
+            "Lowest plausible body height z (l0 = 0.61 m)."
+        }
+        70 SUP_BODY_HEIGHT_MAX_M at body_height_range_m.max {
+            "supervisor.body_height_max_m", "m", Real, [-10.0, 100.0], 3.0, DISARMED,
+            "Highest plausible body height z (l0 = 0.61 m)."
+        }
+        71 SUP_BODY_VELOCITY_MIN_MPS at body_velocity_range_mps.min {
+            "supervisor.body_velocity_min_mps", "m/s", Real, [-1000.0, 1000.0], -10.0, DISARMED,
+            "Lowest plausible body velocity."
+        }
+        72 SUP_BODY_VELOCITY_MAX_MPS at body_velocity_range_mps.max {
+            "supervisor.body_velocity_max_mps", "m/s", Real, [-1000.0, 1000.0], 10.0, DISARMED,
+            "Highest plausible body velocity."
+        }
+        73 SUP_SPRING_FORCE_MIN_N at spring_force_range_n.min {
+            "supervisor.spring_force_min_n", "N", Real, [-1.0e5, 1.0e5], -50.0, DISARMED,
+            "Lowest plausible spring force (both load-cell rails outside)."
+        }
+        74 SUP_SPRING_FORCE_MAX_N at spring_force_range_n.max {
+            "supervisor.spring_force_max_n", "N", Real, [-1.0e5, 1.0e5], 1800.0, DISARMED,
+            "Highest plausible spring force (both load-cell rails outside)."
+        }
+        75 SUP_LEG_COMPRESSION_MIN_M at leg_compression_range_m.min {
+            "supervisor.leg_compression_min_m", "m", Real, [-1.0, 1.0], -0.004, DISARMED,
+            "Lowest plausible leg compression (both potentiometer rails outside)."
+        }
+        76 SUP_LEG_COMPRESSION_MAX_M at leg_compression_range_m.max {
+            "supervisor.leg_compression_max_m", "m", Real, [-1.0, 1.0], 0.1, DISARMED,
+            "Highest plausible leg compression (both potentiometer rails outside)."
+        }
+    }
+    custom {
+    }
+    plain {
+        /// A request with magnitude above this, A, is an overcurrent fault (requests between
+        /// the limit and this are clamped silently). Default 337 (10x the limit: a runaway law).
+        pub overcurrent_trip_a: f32 = 337.0,
+        /// Plausible nut position, m. Default -0.01..=0.06 (stops at 0 and 0.05).
+        pub nut_position_range_m: Range = Range::ZERO,
+        /// Plausible nut velocity, m/s. Default ±1.0 (1000 rad/s is 0.8 m/s).
+        pub nut_velocity_range_mps: Range = Range::ZERO,
+        /// Plausible motor speed, rad/s. Default ±1200.
+        pub motor_speed_range_rad_s: Range = Range::ZERO,
+        /// Plausible body height `z`, m. Default 0.4..=3.0 (`l0` = 0.61, hops up to ~2 m).
+        pub body_height_range_m: Range = Range::ZERO,
+        /// Plausible body velocity, m/s. Default ±10.
+        pub body_velocity_range_mps: Range = Range::ZERO,
+        /// Plausible spring force, N. Default -50..=1800: about 600 N at full
+        /// stroke in flight, 1.35 kN with the nut down in a 0.25 m hop; both
+        /// rails of the default load-cell calibration (-100 N, 1947 N) are outside.
+        pub spring_force_range_n: Range = Range::ZERO,
+        /// Plausible leg compression, m. Default -0.004..=0.1: both rails of the
+        /// default potentiometer calibration (-6 mm, 114 mm) are outside, so an
+        /// open or shorted wiper trips.
+        pub leg_compression_range_m: Range = Range::ZERO,
+        /// The nut's mechanical stops, m (`min`: upper stop, `max`: lower stop).
+        /// Within [`STOP_BAND_M`] of one a nut may halt at once, so
+        /// [`Fault::EncoderFrozen`] is not checked there. Default 0..=0.05.
+        pub nut_stops_m: Range = Range {
                 min: 0.0,
                 max: 0.05,
             },
-            stroke_min_m: -0.005,
-            stroke_max_m: 0.055,
-            // Tied to the stroke soft limits `HopperConfig::for_model` puts
-            // at the braking distance from the largest tolerated stop-impact
-            // speed: not a parameter of its own.
-            brake_decel_mps2: 3.0,
-            thermal: crate::thermal::ThermalConfig::default(),
-        }
+        /// Lower stroke soft limit for the predicted stopping point, m. Default -0.005
+        /// (hitting the upper stop at 0 faster than about 0.17 m/s under `brake_decel_mps2`).
+        pub stroke_min_m: f32 = -0.005,
+        /// Upper stroke soft limit for the predicted stopping point, m. Default 0.055 (stop at 0.05).
+        pub stroke_max_m: f32 = 0.055,
+        /// Nut deceleration available for braking, m/s^2, in `p + pd |pd| / (2 a)`. Default 3.0
+        /// (1.0 N m through the 426 kg reflected rotor inertia; spring help ignored). `> 0`.
+        pub brake_decel_mps2: f32 = 3.0,
+        /// The motor's thermal model and the protection's thresholds.
+        pub thermal: crate::thermal::ThermalConfig = crate::thermal::ThermalConfig::default(),
     }
 }
 

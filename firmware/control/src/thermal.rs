@@ -57,50 +57,72 @@ pub const THERMAL_STEP_S: f32 = 0.01;
 /// is stated at 25 C).
 pub const COPPER_TEMPCO_PER_K: f32 = 0.0039;
 
-/// The motor's thermal data and the protection's thresholds; every field
-/// is a `thermal.*` parameter ([`crate::params`]).
-#[derive(Debug, Clone, Copy, PartialEq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct ThermalConfig {
-    /// Whether the estimate derates the current limit and latches the
-    /// fault (`false` only for control studies past the motor's thermal
-    /// limit: the temperatures are still estimated and reported).
-    pub protect: bool,
-    /// Winding (terminal) resistance at 25 C, ohm.
-    pub winding_resistance_ohm: f32,
-    /// Thermal resistance winding to housing, K/W.
-    pub winding_to_housing_k_per_w: f32,
-    /// Thermal resistance housing to ambient, K/W.
-    pub housing_to_ambient_k_per_w: f32,
-    /// Winding thermal time constant, s.
-    pub winding_time_constant_s: f32,
-    /// Motor (housing) thermal time constant, s.
-    pub housing_time_constant_s: f32,
-    /// Ambient temperature, C (the motor's at boot).
-    pub ambient_c: f32,
-    /// Winding temperature where the current limit starts to fall, C.
-    pub derate_winding_c: f32,
-    /// Winding temperature that latches the fault, C.
-    pub trip_winding_c: f32,
-    /// The current limit at `trip_winding_c`, as a fraction of the
-    /// amplifier's.
-    pub derated_limit_fraction: f32,
-}
-
-impl Default for ThermalConfig {
-    fn default() -> Self {
-        Self {
-            protect: p::THERMAL_PROTECT.default_flag(),
-            winding_resistance_ohm: p::THERMAL_RESISTANCE_OHM.default,
-            winding_to_housing_k_per_w: p::THERMAL_WINDING_TO_HOUSING.default,
-            housing_to_ambient_k_per_w: p::THERMAL_HOUSING_TO_AMBIENT.default,
-            winding_time_constant_s: p::THERMAL_WINDING_TAU.default,
-            housing_time_constant_s: p::THERMAL_HOUSING_TAU.default,
-            ambient_c: p::THERMAL_AMBIENT.default,
-            derate_winding_c: p::THERMAL_DERATE.default,
-            trip_winding_c: p::THERMAL_TRIP.default,
-            derated_limit_fraction: p::THERMAL_DERATED_FRACTION.default,
+crate::params::config! {
+    /// The motor's thermal data and the protection's thresholds; every field
+    /// is a `thermal.*` parameter ([`crate::params`]).
+    #[derive(Debug, Clone, Copy, PartialEq)]
+    #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+    pub struct ThermalConfig, reached |c| Some(&mut c.supervisor.thermal);
+    params {
+        /// Whether the estimate derates the current limit and latches the
+        /// fault (`false` only for control studies past the motor's thermal
+        /// limit: the temperatures are still estimated and reported).
+        88 THERMAL_PROTECT protect: bool {
+            "thermal.protect", "-", Flag, [0.0, 1.0], 1.0, DISARMED,
+            "Derate and fault on the winding temperature estimate; 0 only for control studies past the motor's thermal limit (the estimate is still reported), never on a robot."
         }
+        /// Winding (terminal) resistance at 25 C, ohm.
+        89 THERMAL_RESISTANCE_OHM winding_resistance_ohm: f32 {
+            "thermal.winding_resistance_ohm", "ohm", Real, [1.0e-3, 100.0], 0.299, DISARMED,
+            "Motor winding resistance at 25 C (the RE 40 24 V winding's; use your motor's datasheet)."
+        }
+        /// Thermal resistance winding to housing, K/W.
+        90 THERMAL_WINDING_TO_HOUSING winding_to_housing_k_per_w: f32 {
+            "thermal.winding_to_housing_k_per_w", "K/W", Real, [1.0e-2, 100.0], 1.93, DISARMED,
+            "Thermal resistance winding to housing (motor datasheet)."
+        }
+        /// Thermal resistance housing to ambient, K/W.
+        91 THERMAL_HOUSING_TO_AMBIENT housing_to_ambient_k_per_w: f32 {
+            "thermal.housing_to_ambient_k_per_w", "K/W", Real, [1.0e-2, 100.0], 4.65, DISARMED,
+            "Thermal resistance housing to ambient (motor datasheet; a heat sink lowers it)."
+        }
+        /// Winding thermal time constant, s.
+        92 THERMAL_WINDING_TAU winding_time_constant_s: f32 {
+            "thermal.winding_time_constant_s", "s", Real, [0.1, 1.0e4], 41.6, DISARMED,
+            "Winding thermal time constant (motor datasheet)."
+        }
+        /// Motor (housing) thermal time constant, s.
+        93 THERMAL_HOUSING_TAU housing_time_constant_s: f32 {
+            "thermal.housing_time_constant_s", "s", Real, [1.0, 1.0e5], 1120.0, DISARMED,
+            "Motor (housing) thermal time constant (motor datasheet)."
+        }
+        /// Ambient temperature, C (the motor's at boot).
+        94 THERMAL_AMBIENT ambient_c: f32 {
+            "thermal.ambient_c", "degC", Real, [-40.0, 80.0], 25.0, DISARMED,
+            "Ambient temperature; the motor is taken to be at it at boot."
+        }
+        /// Winding temperature where the current limit starts to fall, C.
+        95 THERMAL_DERATE derate_winding_c: f32 {
+            "thermal.derate_winding_c", "degC", Real, [0.0, 250.0], 135.0, DISARMED,
+            "Estimated winding temperature where the current limit starts to fall."
+        }
+        /// Winding temperature that latches the fault, C.
+        96 THERMAL_TRIP trip_winding_c: f32 {
+            "thermal.trip_winding_c", "degC", Real, [0.0, 250.0], 150.0, DISARMED,
+            "Estimated winding temperature that latches overtemperature (5 K under the RE 40's 155 C)."
+        }
+        /// The current limit at `trip_winding_c`, as a fraction of the
+        /// amplifier's.
+        97 THERMAL_DERATED_FRACTION derated_limit_fraction: f32 {
+            "thermal.derated_limit_fraction", "1", Real, [0.05, 1.0], 0.5, DISARMED,
+            "Current limit at the trip temperature, as a fraction of the amplifier's (linear from the derate temperature)."
+        }
+    }
+    nested {
+    }
+    custom {
+    }
+    plain {
     }
 }
 

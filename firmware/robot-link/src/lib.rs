@@ -1110,7 +1110,7 @@ pub fn param_meta(name: &str) -> Response {
         params::Kind::Choice(names) => (ParamKind::Choice, names.len()),
     };
     let owner = params::owner(p);
-    let index_of = |q: &params::Param| params::TABLE.iter().position(|t| t.id == q.id);
+    let index_of = |q: &params::Param| Some(usize::from(q.number));
     Response::ParamMeta(hopper_protocol::ParamMeta {
         index: index as u16,
         kind: kind.code(),

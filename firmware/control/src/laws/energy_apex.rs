@@ -20,73 +20,95 @@ pub enum EnergyMeasure {
     Body,
 }
 
-/// The apex-regulating energy law (`energy-apex`): eq 2.52 in stance, with
-/// `E_D` corrected after every flight apex from the measured apex height.
-///
-/// The thesis's eq 2.52 settles where the torque it asks for balances the
-/// losses, i.e. below `E_D`, and it counts energy that never reaches the
-/// apex (rotor kinetic energy, spring energy stored by the actuator). An
-/// outer per-hop loop removes both biases: after apex `k` with toe height
-/// `H_k`,
-///
-/// ```text
-/// offset_{k+1} = clamp(offset_k + K_i (E_D(H_target) - E_D(H_k)), ±max_offset)
-/// E_D,eff = E_D(H_target) + offset
-/// ```
-///
-/// an integral action on the apex error in energy units (J per J).
-#[derive(Debug, Clone, Copy, PartialEq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct ApexLoop {
-    /// The inner law, eq 2.52 (`K_e` in N m/J). Default `K_e = 3` (full
-    /// torque for a 0.33 J deficit) and no negative torque: with the 1 N m
-    /// motor the Table 2.1 gain of 0.2 leaves the law short of torque
-    /// exactly when the hop is low, and pulling energy out with negative
-    /// torque from a high start drives the hop into the low, lossy regime
-    /// (below about 0.02 m, where full stance torque cannot sustain hopping
-    /// with the eq 4.13 flight PD); passive decay brings a high hop down
-    /// gently instead. Tuned in simulation (design parameters, targets
-    /// 0.03-0.05 m, starts 0.02-0.25 m).
-    pub law: energy::Config,
-    /// The energy fed back.
-    pub measure: EnergyMeasure,
-    /// Proportional gain `K_p`, dimensionless (J of correction per J of the
-    /// last apex error), >= 0: damps the slow outer loop. Default 0.
-    pub proportional: f32,
-    /// Integral gain `K_i`, dimensionless (J of offset per J of apex error), in (0, 10). Default 0.6.
-    pub gain: f32,
-    /// Bound on the offset, J (>= 0). Default 30.
-    pub max_offset_j: f32,
-    /// Lower bound on the offset, J (<= 0). Default -5: the inner law only
-    /// ever falls short of `E_D` (losses, rotor energy counted), so a large
-    /// negative offset can only be wind-up from a high start.
-    pub min_offset_j: f32,
-    /// Pre-touchdown spin-up (section 4.4.3's idea): on the way down, once
-    /// the toe is below this fraction of the target apex, the stance law's
-    /// command is applied in flight already, so the motor is moving at
-    /// touchdown. In `[0, 1]`; 0 disables it. Default 0 (off: in simulation it
-    /// did not widen the range of starts that converge).
-    pub spin_up_fraction: f32,
-}
+/// Names of [`crate::params::ENERGY_APEX_MEASURE`]'s choices.
+const ENERGY_MEASURES: [&str; 2] = ["total", "body"];
 
-impl Default for ApexLoop {
-    fn default() -> Self {
-        Self {
-            law: energy::Config {
-                gain_nm_per_j: params::ENERGY_APEX_GAIN.default,
-                allow_negative: params::ENERGY_APEX_ALLOW_NEGATIVE.default_flag(),
-            },
-            measure: if params::ENERGY_APEX_MEASURE.default == 0.0 {
+crate::params::config! {
+    /// The apex-regulating energy law (`energy-apex`): eq 2.52 in stance, with
+    /// `E_D` corrected after every flight apex from the measured apex height.
+    ///
+    /// The thesis's eq 2.52 settles where the torque it asks for balances the
+    /// losses, i.e. below `E_D`, and it counts energy that never reaches the
+    /// apex (rotor kinetic energy, spring energy stored by the actuator). An
+    /// outer per-hop loop removes both biases: after apex `k` with toe height
+    /// `H_k`,
+    ///
+    /// ```text
+    /// offset_{k+1} = clamp(offset_k + K_i (E_D(H_target) - E_D(H_k)), ±max_offset)
+    /// E_D,eff = E_D(H_target) + offset
+    /// ```
+    ///
+    /// an integral action on the apex error in energy units (J per J).
+    #[derive(Debug, Clone, Copy, PartialEq)]
+    #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+    pub struct ApexLoop, reached |c| crate::params::energy_apex(c);
+    params {
+        /// Proportional gain `K_p`, dimensionless (J of correction per J of the
+        /// last apex error), >= 0: damps the slow outer loop. Default 0.
+        26 ENERGY_APEX_PROPORTIONAL proportional: f32 {
+            "energy_apex.proportional_gain", "1", Real, [0.0, 10.0], 0.0, LIVE,
+            "Outer loop's proportional gain on the last apex error (J per J)."
+        }
+        /// Integral gain `K_i`, dimensionless (J of offset per J of apex error), in (0, 10). Default 0.6.
+        27 ENERGY_APEX_INTEGRAL gain: f32 {
+            "energy_apex.integral_gain", "1", Real, [1.0e-3, 9.99], 0.6, LIVE,
+            "Outer loop's integral gain on the apex error (J of offset per J)."
+        }
+        /// Bound on the offset, J (>= 0). Default 30.
+        28 ENERGY_APEX_MAX_OFFSET_J max_offset_j: f32 {
+            "energy_apex.max_offset_j", "J", Real, [0.0, 1000.0], 30.0, LIVE,
+            "Upper bound on the outer loop's correction of E_D."
+        }
+        /// Lower bound on the offset, J (<= 0). Default -5: the inner law only
+        /// ever falls short of `E_D` (losses, rotor energy counted), so a large
+        /// negative offset can only be wind-up from a high start.
+        29 ENERGY_APEX_MIN_OFFSET_J min_offset_j: f32 {
+            "energy_apex.min_offset_j", "J", Real, [-1000.0, 0.0], -5.0, LIVE,
+            "Lower bound on the outer loop's correction of E_D."
+        }
+        /// Pre-touchdown spin-up (section 4.4.3's idea): on the way down, once
+        /// the toe is below this fraction of the target apex, the stance law's
+        /// command is applied in flight already, so the motor is moving at
+        /// touchdown. In `[0, 1]`; 0 disables it. Default 0 (off: in simulation it
+        /// did not widen the range of starts that converge).
+        30 ENERGY_APEX_SPIN_UP spin_up_fraction: f32 {
+            "energy_apex.spin_up_fraction", "1", Real, [0.0, 1.0], 0.0, LIVE,
+            "Fraction of the target apex below which the descent runs the stance law (0: off)."
+        }
+    }
+    nested {
+        23 ENERGY_APEX_GAIN at law.gain_nm_per_j {
+            "energy_apex.gain_nm_per_j", "N m/J", Real, [0.0, 100.0], 3.0, LIVE,
+            "K_e of the inner eq 2.52 (full torque for a 0.33 J deficit)."
+        }
+        24 ENERGY_APEX_ALLOW_NEGATIVE at law.allow_negative {
+            "energy_apex.allow_negative", "-", Flag, [0.0, 1.0], 0.0, LIVE,
+            "The inner law may command negative torque."
+        }
+    }
+    custom {
+        25 ENERGY_APEX_MEASURE |s| Some(Slot::Measure(&mut s.measure)), {
+            "energy_apex.measure", "-", Kind::Choice(&ENERGY_MEASURES), [0.0, 1.0], 0.0, LIVE,
+            "Energy fed back: total (eq 2.44) or body only."
+        }
+    }
+    plain {
+        /// The inner law, eq 2.52 (`K_e` in N m/J). Default `K_e = 3` (full
+        /// torque for a 0.33 J deficit) and no negative torque: with the 1 N m
+        /// motor the Table 2.1 gain of 0.2 leaves the law short of torque
+        /// exactly when the hop is low, and pulling energy out with negative
+        /// torque from a high start drives the hop into the low, lossy regime
+        /// (below about 0.02 m, where full stance torque cannot sustain hopping
+        /// with the eq 4.13 flight PD); passive decay brings a high hop down
+        /// gently instead. Tuned in simulation (design parameters, targets
+        /// 0.03-0.05 m, starts 0.02-0.25 m).
+        pub law: energy::Config = energy::Config::default(),
+        /// The energy fed back.
+        pub measure: EnergyMeasure = if params::ENERGY_APEX_MEASURE.default == 0.0 {
                 EnergyMeasure::Total
             } else {
                 EnergyMeasure::Body
             },
-            proportional: params::ENERGY_APEX_PROPORTIONAL.default,
-            gain: params::ENERGY_APEX_INTEGRAL.default,
-            max_offset_j: params::ENERGY_APEX_MAX_OFFSET_J.default,
-            min_offset_j: params::ENERGY_APEX_MIN_OFFSET_J.default,
-            spin_up_fraction: params::ENERGY_APEX_SPIN_UP.default,
-        }
     }
 }
 

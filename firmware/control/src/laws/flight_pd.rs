@@ -16,26 +16,37 @@ use super::{require, Actuator, InvalidField};
 use crate::params;
 use crate::pd_design::PdGains;
 
-/// Configuration of the flight PD.
-#[derive(Debug, Clone, Copy, PartialEq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct Config {
-    /// PD gains: `kp` in A/rad, `kd` in A s/rad (both finite, >= 0). Default eq 4.13:
-    /// `kp = 20.3152`, `kd = 0.6077` (= `pd_design::pd_gains(110.0, 0.707, 0.1)`).
-    pub gains: PdGains,
-    /// Start position of the nut, m, on the stroke (0 = upper stop). Default 0.
-    pub start_position_m: f32,
-}
-
-impl Default for Config {
-    fn default() -> Self {
-        Self {
-            gains: PdGains {
+crate::params::config! {
+    /// Configuration of the flight PD.
+    #[derive(Debug, Clone, Copy, PartialEq)]
+    #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+    pub struct Config, reached |c| Some(&mut c.flight);
+    params {
+        /// Start position of the nut, m, on the stroke (0 = upper stop). Default 0.
+        4 FLIGHT_START_M start_position_m: f32 {
+            "flight.start_position_m", "m", Real, [0.0, 1.0], 0.0, LIVE,
+            "Nut position the flight PD returns to (0: the upper stop; at most the stroke)."
+        }
+    }
+    nested {
+        2 FLIGHT_KP at gains.kp {
+            "flight.kp_a_per_rad", "A/rad", Real, [0.0, 1.0e4], 20.3152, LIVE,
+            "Flight PD position gain on the motor angle (eq 4.4; default eq 4.13; hopper-sim's design preset runs Table 2.1's 8e4 N/m on the nut, 1.8953 A/rad, with the Chapter 2 laws)."
+        }
+        3 FLIGHT_KD at gains.kd {
+            "flight.kd_a_s_per_rad", "A s/rad", Real, [0.0, 1.0e3], 0.6077, LIVE,
+            "Flight PD rate gain (eq 4.4; default eq 4.13; the design preset's Chapter 2 laws: Table 2.1's 300 N s/m, 0.0071073 A s/rad)."
+        }
+    }
+    custom {
+    }
+    plain {
+        /// PD gains: `kp` in A/rad, `kd` in A s/rad (both finite, >= 0). Default eq 4.13:
+        /// `kp = 20.3152`, `kd = 0.6077` (= `pd_design::pd_gains(110.0, 0.707, 0.1)`).
+        pub gains: PdGains = PdGains {
                 kp: params::FLIGHT_KP.default,
                 kd: params::FLIGHT_KD.default,
             },
-            start_position_m: params::FLIGHT_START_M.default,
-        }
     }
 }
 

@@ -8,19 +8,26 @@ use super::{
 use crate::estimator::Phase;
 use crate::params;
 
-/// Configuration of the constant-torque law.
-#[derive(Debug, Clone, Copy, PartialEq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct Config {
-    /// Stance torque, N m (positive compresses the spring). Default 1.0 (Table 2.1).
-    pub torque_nm: f32,
-}
-
-impl Default for Config {
-    fn default() -> Self {
-        Self {
-            torque_nm: params::CONSTANT_TORQUE_NM.default,
+crate::params::config! {
+    /// Configuration of the constant-torque law.
+    #[derive(Debug, Clone, Copy, PartialEq)]
+    #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+    pub struct Config, reached |c| crate::params::open_torque(c);
+    params {
+        // The open-torque law's parameter keeps its `constant_torque.` name:
+        // parameter names are a contract (scenario files, the link,
+        // docs/parameters.md) kept from before the law was renamed.
+        /// Stance torque, N m (positive compresses the spring). Default 1.0 (Table 2.1).
+        7 CONSTANT_TORQUE_NM torque_nm: f32 {
+            "constant_torque.torque_nm", "N m", Real, [-10.0, 10.0], 1.0, LIVE,
+            "Open-loop stance torque (section 2.1.3.4; Table 2.1: 1 N m)."
         }
+    }
+    nested {
+    }
+    custom {
+    }
+    plain {
     }
 }
 

@@ -41,20 +41,53 @@ pub enum Gain {
     },
 }
 
-/// Configuration of the closed-loop step.
-#[derive(Debug, Clone, Copy, PartialEq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct Config {
-    /// Gain choice. Default `Fixed { kp_m_per_j: 2e-3 }` (Table 2.1's 0.2 in cm/J).
-    pub gain: Gain,
-    /// Position loop tracking the reference (gains in N/m and N s/m on the nut).
-    pub pd: NutPositionPd,
-}
+/// Names of [`crate::params::STEP_CLOSED_GAIN`]'s choices.
+const STEP_CLOSED_GAINS: [&str; 2] = ["fixed", "normalised"];
 
-impl Default for Config {
-    fn default() -> Self {
-        Self {
-            gain: if params::STEP_CLOSED_GAIN.default == 0.0 {
+crate::params::config! {
+    /// Configuration of the closed-loop step.
+    #[derive(Debug, Clone, Copy, PartialEq)]
+    #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+    pub struct Config, reached |c| crate::params::step_closed(c);
+    params {
+    }
+    nested {
+        17 STEP_CLOSED_KP at pd.kp_n_per_m {
+            "step_closed.kp_n_per_m", "N/m", Real, [0.0, 1.0e7], 8.0e4, LIVE,
+            "Nut position loop gain of eq 2.50 (Table 2.1)."
+        }
+        18 STEP_CLOSED_KD at pd.kd_n_s_per_m {
+            "step_closed.kd_n_s_per_m", "N s/m", Real, [0.0, 1.0e5], 300.0, LIVE,
+            "Nut velocity loop gain of eq 2.50 (Table 2.1)."
+        }
+        19 STEP_CLOSED_FEEDFORWARD at pd.spring_feedforward {
+            "step_closed.spring_feedforward", "-", Flag, [0.0, 1.0], 1.0, LIVE,
+            "Add the measured spring force to the position loop."
+        }
+    }
+    custom {
+        14 STEP_CLOSED_GAIN |s| Some(Slot::StepClosedGain(&mut s.gain)), {
+            "step_closed.gain", "-", Kind::Choice(&STEP_CLOSED_GAINS), [0.0, 1.0], 0.0, LIVE,
+            "k_p of eq 2.50: fixed (step_closed.kp_m_per_j) or eq 2.51 normalised by the compression."
+        }
+        15 STEP_CLOSED_KP_M_PER_J |s| match &mut s.gain {
+            Gain::Fixed { kp_m_per_j } => Some(R(kp_m_per_j)),
+            Gain::Normalised { .. } => None,
+        }, {
+            "step_closed.kp_m_per_j", "m/J", Real, [0.0, 1.0], 2.0e-3, LIVE,
+            "Fixed k_p of eq 2.50 (Table 2.1's 0.2 read as cm/J)."
+        }
+        16 STEP_CLOSED_MIN_COMPRESSION_M |s| match &mut s.gain {
+            Gain::Normalised { min_compression_m } => Some(R(min_compression_m)),
+            Gain::Fixed { .. } => None,
+        }, {
+            "step_closed.min_compression_m", "m", Real, [1.0e-4, 1.0], 0.005, LIVE,
+            "Floor on the compression in eq 2.51's normalised gain."
+        }
+    }
+    plain {
+        /// Gain choice. Default `Fixed { kp_m_per_j: 2e-3 }` (Table 2.1's 0.2 in cm/J).
+        pub gain: Gain = if params::STEP_CLOSED_GAIN.default == 0.0 {
                 Gain::Fixed {
                     kp_m_per_j: params::STEP_CLOSED_KP_M_PER_J.default,
                 }
@@ -63,12 +96,8 @@ impl Default for Config {
                     min_compression_m: params::STEP_CLOSED_MIN_COMPRESSION_M.default,
                 }
             },
-            pd: NutPositionPd {
-                kp_n_per_m: params::STEP_CLOSED_KP.default,
-                kd_n_s_per_m: params::STEP_CLOSED_KD.default,
-                spring_feedforward: params::STEP_CLOSED_FEEDFORWARD.default_flag(),
-            },
-        }
+        /// Position loop tracking the reference (gains in N/m and N s/m on the nut).
+        pub pd: NutPositionPd = NutPositionPd::default(),
     }
 }
 

@@ -10,26 +10,41 @@ use super::{
 use crate::estimator::Phase;
 use crate::params;
 
-/// Configuration of the open-loop step.
-#[derive(Debug, Clone, Copy, PartialEq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct Config {
-    /// Step height `l1`, m, in `0..=stroke` (clamped to the stroke). Default 0.01 (Table 2.1).
-    pub step_m: f32,
-    /// Position loop tracking the reference (gains in N/m and N s/m on the nut).
-    pub pd: NutPositionPd,
-}
-
-impl Default for Config {
-    fn default() -> Self {
-        Self {
-            step_m: params::STEP_OPEN_M.default,
-            pd: NutPositionPd {
+crate::params::config! {
+    /// Configuration of the open-loop step.
+    #[derive(Debug, Clone, Copy, PartialEq)]
+    #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+    pub struct Config, reached |c| crate::params::step_open(c);
+    params {
+        /// Step height `l1`, m, in `0..=stroke` (clamped to the stroke). Default 0.01 (Table 2.1).
+        10 STEP_OPEN_M step_m: f32 {
+            "step_open.step_m", "m", Real, [0.0, 1.0], 0.01, LIVE,
+            "Step height l1 of eq 2.49 (Table 2.1: 10 mm; clamped to the stroke)."
+        }
+    }
+    nested {
+        11 STEP_OPEN_KP at pd.kp_n_per_m {
+            "step_open.kp_n_per_m", "N/m", Real, [0.0, 1.0e7], 8.0e4, LIVE,
+            "Nut position loop gain k_p,f of eq 2.49 (Table 2.1)."
+        }
+        12 STEP_OPEN_KD at pd.kd_n_s_per_m {
+            "step_open.kd_n_s_per_m", "N s/m", Real, [0.0, 1.0e5], 300.0, LIVE,
+            "Nut velocity loop gain k_v,f of eq 2.49 (Table 2.1)."
+        }
+        13 STEP_OPEN_FEEDFORWARD at pd.spring_feedforward {
+            "step_open.spring_feedforward", "-", Flag, [0.0, 1.0], 1.0, LIVE,
+            "Add the measured spring force to the position loop."
+        }
+    }
+    custom {
+    }
+    plain {
+        /// Position loop tracking the reference (gains in N/m and N s/m on the nut).
+        pub pd: NutPositionPd = NutPositionPd {
                 kp_n_per_m: params::STEP_OPEN_KP.default,
                 kd_n_s_per_m: params::STEP_OPEN_KD.default,
                 spring_feedforward: params::STEP_OPEN_FEEDFORWARD.default_flag(),
             },
-        }
     }
 }
 
