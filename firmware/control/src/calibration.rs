@@ -114,10 +114,6 @@ crate::params::config! {
             "Amplifier current per DAC code (placeholder 40 A / 2048)."
         }
     }
-    nested {
-    }
-    custom {
-    }
     plain {
         /// Motor counter width in bits, for wrap-around. Default 16. `8..=32`.
         pub motor_counter_bits: u8 = 16,

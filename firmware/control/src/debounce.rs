@@ -30,12 +30,6 @@ crate::params::config! {
             "The e-stop input released without a break for this long is a release (arming and fault resets wait for it: longer than a contact's bounce)."
         }
     }
-    nested {
-    }
-    custom {
-    }
-    plain {
-    }
 }
 
 impl DebounceConfig {

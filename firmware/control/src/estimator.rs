@@ -169,12 +169,6 @@ crate::params::config! {
             "Time within which load cell and potentiometer must confirm a predicted touchdown; else it is withdrawn (a liftoff) and prediction stays off."
         }
     }
-    nested {
-    }
-    custom {
-    }
-    plain {
-    }
 }
 
 /// Why a [`PhaseEstimator`] could not be built.

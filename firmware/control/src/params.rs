@@ -171,7 +171,7 @@ pub(crate) use entry;
 ///         /// (more docs of the field)
 ///         NUMBER ID field: type { name, unit, kind, [min, max], default, LIVE | DISARMED, doc }
 ///     }
-///     nested {
+///     nested {                      (each section may be left out)
 ///         NUMBER ID at field.inner { ... }
 ///     }
 ///     custom {
@@ -197,27 +197,27 @@ macro_rules! config {
     (
         $(#[$smeta:meta])*
         $vis:vis struct $name:ident, reached |$rc:ident| $reach:expr;
-        params {$(
+        $(params {$(
             $(#[$fmeta:meta])*
             $fnum:literal $fid:ident $field:ident: $fty:ty {
                 $fname:literal, $funit:literal, $fkind:expr, [$fmin:expr, $fmax:expr], $fdef:expr,
                 $flive:ident, $fdoc:literal $(,)?
             }
-        )*}
-        nested {$(
+        )*})?
+        $(nested {$(
             $nnum:literal $nid:ident at $($npath:ident).+ { $($nspec:tt)* }
-        )*}
-        custom {$(
+        )*})?
+        $(custom {$(
             $cnum:literal $cid:ident |$cs:ident| $cslot:expr, { $($cspec:tt)* }
-        )*}
-        plain {$(
+        )*})?
+        $(plain {$(
             $(#[$pmeta:meta])*
             $pvis:vis $pfield:ident: $pty:ty = $pdef:expr,
-        )*}
+        )*})?
     ) => {
         $(#[$smeta])*
         $vis struct $name {
-            $(
+            $($(
                 #[doc = $fdoc]
                 #[doc = ""]
                 $(#[$fmeta])*
@@ -228,11 +228,11 @@ macro_rules! config {
                     stringify!($fdef), "`."
                 )]
                 pub $field: $fty,
-            )*
-            $(
+            )*)?
+            $($(
                 $(#[$pmeta])*
                 $pvis $pfield: $pty,
-            )*
+            )*)?
         }
 
         impl Default for $name {
@@ -240,12 +240,12 @@ macro_rules! config {
             fn default() -> Self {
                 #[allow(unused_mut)]
                 let mut s = Self {
-                    $($field: $crate::params::FromDefault::from_default(entries::$fid.default),)*
-                    $($pfield: $pdef,)*
+                    $($($field: $crate::params::FromDefault::from_default(entries::$fid.default),)*)?
+                    $($($pfield: $pdef,)*)?
                 };
-                $(
+                $($(
                     s.$($npath).+ = $crate::params::FromDefault::from_default(entries::$nid.default);
-                )*
+                )*)?
                 s
             }
         }
@@ -255,31 +255,31 @@ macro_rules! config {
         pub mod entries {
             #[allow(unused_imports)]
             use super::*;
-            $(
+            $($(
                 $crate::params::entry! {
                     $fnum $fid {
                         $fname, $funit, $fkind, [$fmin, $fmax], $fdef, $flive, $fdoc
                     },
                     |c| ({ let $rc = c; $reach }).map(|s| Slot::from(&mut s.$field))
                 }
-            )*
-            $(
+            )*)?
+            $($(
                 $crate::params::entry! {
                     $nnum $nid { $($nspec)* },
                     |c| ({ let $rc = c; $reach }).map(|s| Slot::from(&mut s.$($npath).+))
                 }
-            )*
-            $(
+            )*)?
+            $($(
                 $crate::params::entry! {
                     $cnum $cid { $($cspec)* },
                     |c| ({ let $rc = c; $reach }).and_then(|$cs| $cslot)
                 }
-            )*
+            )*)?
         }
 
         /// This module's entries of [`crate::params::TABLE`].
         pub(crate) const PARAMS: &[&$crate::params::Param] =
-            &[$(&entries::$fid,)* $(&entries::$nid,)* $(&entries::$cid,)*];
+            &[$($(&entries::$fid,)*)? $($(&entries::$nid,)*)? $($(&entries::$cid,)*)?];
     };
 }
 pub(crate) use config;

@@ -368,30 +368,28 @@ crate::params::config! {
             "Highest plausible leg compression (both potentiometer rails outside)."
         }
     }
-    custom {
-    }
     plain {
         /// A request with magnitude above this, A, is an overcurrent fault (requests between
         /// the limit and this are clamped silently). Default 337 (10x the limit: a runaway law).
         pub overcurrent_trip_a: f32 = 337.0,
         /// Plausible nut position, m. Default -0.01..=0.06 (stops at 0 and 0.05).
-        pub nut_position_range_m: Range = Range::ZERO,
+        pub nut_position_range_m: Range = Range::ZERO, // its ends are the entries above
         /// Plausible nut velocity, m/s. Default ±1.0 (1000 rad/s is 0.8 m/s).
-        pub nut_velocity_range_mps: Range = Range::ZERO,
+        pub nut_velocity_range_mps: Range = Range::ZERO, // its ends are the entries above
         /// Plausible motor speed, rad/s. Default ±1200.
-        pub motor_speed_range_rad_s: Range = Range::ZERO,
+        pub motor_speed_range_rad_s: Range = Range::ZERO, // its ends are the entries above
         /// Plausible body height `z`, m. Default 0.4..=3.0 (`l0` = 0.61, hops up to ~2 m).
-        pub body_height_range_m: Range = Range::ZERO,
+        pub body_height_range_m: Range = Range::ZERO, // its ends are the entries above
         /// Plausible body velocity, m/s. Default ±10.
-        pub body_velocity_range_mps: Range = Range::ZERO,
+        pub body_velocity_range_mps: Range = Range::ZERO, // its ends are the entries above
         /// Plausible spring force, N. Default -50..=1800: about 600 N at full
         /// stroke in flight, 1.35 kN with the nut down in a 0.25 m hop; both
         /// rails of the default load-cell calibration (-100 N, 1947 N) are outside.
-        pub spring_force_range_n: Range = Range::ZERO,
+        pub spring_force_range_n: Range = Range::ZERO, // its ends are the entries above
         /// Plausible leg compression, m. Default -0.004..=0.1: both rails of the
         /// default potentiometer calibration (-6 mm, 114 mm) are outside, so an
         /// open or shorted wiper trips.
-        pub leg_compression_range_m: Range = Range::ZERO,
+        pub leg_compression_range_m: Range = Range::ZERO, // its ends are the entries above
         /// The nut's mechanical stops, m (`min`: upper stop, `max`: lower stop).
         /// Within [`STOP_BAND_M`] of one a nut may halt at once, so
         /// [`Fault::EncoderFrozen`] is not checked there. Default 0..=0.05.

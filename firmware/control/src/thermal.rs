@@ -118,12 +118,6 @@ crate::params::config! {
             "Current limit at the trip temperature, as a fraction of the amplifier's (linear from the derate temperature)."
         }
     }
-    nested {
-    }
-    custom {
-    }
-    plain {
-    }
 }
 
 impl ThermalConfig {

@@ -108,12 +108,6 @@ crate::params::config! {
             "Nut travel of the spring sweep, down from the upper stop and back."
         }
     }
-    nested {
-    }
-    custom {
-    }
-    plain {
-    }
 }
 
 impl BringupConfig {

@@ -32,12 +32,6 @@ crate::params::config! {
             "Eq 2.52 may command negative torque on an energy surplus."
         }
     }
-    nested {
-    }
-    custom {
-    }
-    plain {
-    }
 }
 
 impl Config {

@@ -102,6 +102,7 @@ crate::params::config! {
         /// with the eq 4.13 flight PD); passive decay brings a high hop down
         /// gently instead. Tuned in simulation (design parameters, targets
         /// 0.03-0.05 m, starts 0.02-0.25 m).
+        // Its gain and sign are the entries above, written after.
         pub law: energy::Config = energy::Config::default(),
         /// The energy fed back.
         pub measure: EnergyMeasure = if params::ENERGY_APEX_MEASURE.default == 0.0 {

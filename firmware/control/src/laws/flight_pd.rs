@@ -38,15 +38,11 @@ crate::params::config! {
             "Flight PD rate gain (eq 4.4; default eq 4.13; the design preset's Chapter 2 laws: Table 2.1's 300 N s/m, 0.0071073 A s/rad)."
         }
     }
-    custom {
-    }
     plain {
         /// PD gains: `kp` in A/rad, `kd` in A s/rad (both finite, >= 0). Default eq 4.13:
         /// `kp = 20.3152`, `kd = 0.6077` (= `pd_design::pd_gains(110.0, 0.707, 0.1)`).
-        pub gains: PdGains = PdGains {
-                kp: params::FLIGHT_KP.default,
-                kd: params::FLIGHT_KD.default,
-            },
+        // Both gains are the entries above, written after.
+        pub gains: PdGains = PdGains { kp: 0.0, kd: 0.0 },
     }
 }
 

@@ -29,12 +29,6 @@ crate::params::config! {
             "Fraction of the last apex below which the descent starts the torque (section 4.4.3: 40 %)."
         }
     }
-    nested {
-    }
-    custom {
-    }
-    plain {
-    }
 }
 
 /// Whether the law is active in flight: descending (`body_velocity_mps < 0`)

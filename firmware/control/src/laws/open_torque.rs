@@ -23,12 +23,6 @@ crate::params::config! {
             "Open-loop stance torque (section 2.1.3.4; Table 2.1: 1 N m)."
         }
     }
-    nested {
-    }
-    custom {
-    }
-    plain {
-    }
 }
 
 /// Current command `tau / k_m`, A, clamped (a non-finite torque is refused

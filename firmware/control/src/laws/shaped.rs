@@ -185,12 +185,6 @@ crate::params::config! {
             "Bring the nut home in flight with the least int i^2 dt (the spring helping, reaching the stop when the push is due) instead of along the braking curve."
         }
     }
-    nested {
-    }
-    custom {
-    }
-    plain {
-    }
 }
 
 impl Config {

@@ -49,8 +49,6 @@ crate::params::config! {
     #[derive(Debug, Clone, Copy, PartialEq)]
     #[cfg_attr(feature = "defmt", derive(defmt::Format))]
     pub struct Config, reached |c| crate::params::step_closed(c);
-    params {
-    }
     nested {
         17 STEP_CLOSED_KP at pd.kp_n_per_m {
             "step_closed.kp_n_per_m", "N/m", Real, [0.0, 1.0e7], 8.0e4, LIVE,
@@ -97,6 +95,7 @@ crate::params::config! {
                 }
             },
         /// Position loop tracking the reference (gains in N/m and N s/m on the nut).
+        // Its gains and feed-forward are the entries above, written after.
         pub pd: NutPositionPd = NutPositionPd::default(),
     }
 }

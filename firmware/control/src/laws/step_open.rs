@@ -36,15 +36,10 @@ crate::params::config! {
             "Add the measured spring force to the position loop."
         }
     }
-    custom {
-    }
     plain {
         /// Position loop tracking the reference (gains in N/m and N s/m on the nut).
-        pub pd: NutPositionPd = NutPositionPd {
-                kp_n_per_m: params::STEP_OPEN_KP.default,
-                kd_n_s_per_m: params::STEP_OPEN_KD.default,
-                spring_feedforward: params::STEP_OPEN_FEEDFORWARD.default_flag(),
-            },
+        // Its gains and feed-forward are the entries above, written after.
+        pub pd: NutPositionPd = NutPositionPd::default(),
     }
 }
 

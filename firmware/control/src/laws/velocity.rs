@@ -45,12 +45,6 @@ crate::params::config! {
             "Add the measured spring force to the velocity loop."
         }
     }
-    nested {
-    }
-    custom {
-    }
-    plain {
-    }
 }
 
 /// Velocity reference of eq 2.53, m/s.
