@@ -42,36 +42,63 @@ pub use crate::laws::Strategy;
 /// the soft limits sit 26.7 mm outside the stops.
 pub const STOP_IMPACT_SPEED_MPS: f32 = 0.4;
 
-/// Everything the control period needs. Each part documents its units.
-#[derive(Debug, Clone, Copy, PartialEq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct HopperConfig {
-    /// The model the controller believes (energy, `E_D`, actuator constants).
-    pub model: ModelParams,
-    /// Raw-to-SI conversion.
-    pub calibration: Calibration,
-    /// Phase estimator and velocity filters.
-    pub estimator: EstimatorConfig,
-    /// Safety limits.
-    pub supervisor: SupervisorConfig,
-    /// Flight back-drive (eq 4.4 with the eq 4.13 gains by default).
-    pub flight: flight_pd::Config,
-    /// Stance and flight laws.
-    pub strategy: Strategy,
-    /// Desired apex toe height `H_D`, m, in `0..=1`. Default 0.05.
-    pub target_apex_m: f32,
-    /// Arming: the period runner's gate on the output.
-    pub arming: ArmingConfig,
-    /// The e-stop input's debouncing.
-    pub estop: crate::debounce::DebounceConfig,
-    /// The motor-driving bring-up routines.
-    pub bringup: crate::bringup::BringupConfig,
+crate::params::config! {
+    /// Everything the control period needs. Each part documents its units.
+    /// Its default is [`HopperConfig::for_model`] of the default model.
+    #[derive(Debug, Clone, Copy, PartialEq)]
+    #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+    pub struct HopperConfig, reached |c| Some(c);
+    params {
+        1 TARGET_APEX_M target_apex_m: f32 {
+            "target_apex_m", "m", Real, [0.0, 1.0], 0.05, LIVE,
+            "Desired apex toe height H_D (E_D of eq 2.43)."
+        }
+    }
+    custom {
+        // The selected controller is the strategy's variant.
+        0 CONTROLLER |_s| Some(Slot::Controller), {
+            "controller", "-", Kind::Choice(crate::params::CONTROLLER_NAMES), [0.0, 8.0], 5.0,
+            DISARMED,
+            "The controller that runs in stance and flight (selecting one starts it from its defaults)."
+        }
+    }
+    plain {
+        /// The model the controller believes (energy, `E_D`, actuator constants).
+        pub model: ModelParams = ModelParams::default(),
+        /// Raw-to-SI conversion.
+        pub calibration: Calibration = Self::calibration_for(&ModelParams::default()),
+        /// Phase estimator and velocity filters.
+        pub estimator: EstimatorConfig = EstimatorConfig::default(),
+        /// Safety limits.
+        pub supervisor: SupervisorConfig = Self::supervisor_for(&ModelParams::default()),
+        /// Flight back-drive (eq 4.4 with the eq 4.13 gains by default).
+        pub flight: flight_pd::Config = flight_pd::Config::default(),
+        /// Stance and flight laws (the default is [`CONTROLLER`](crate::params::CONTROLLER)'s).
+        pub strategy: Strategy = Strategy::default(),
+        /// Arming: the period runner's gate on the output.
+        pub arming: ArmingConfig = ArmingConfig::default(),
+        /// The e-stop input's debouncing.
+        pub estop: crate::debounce::DebounceConfig = crate::debounce::DebounceConfig::default(),
+        /// The motor-driving bring-up routines.
+        pub bringup: crate::bringup::BringupConfig = crate::bringup::BringupConfig::default(),
+    }
 }
 
 impl HopperConfig {
     /// Defaults for `model`: the supervisor's current limit, spring and
     /// stroke limits follow the model; everything else is the default.
     pub fn for_model(model: ModelParams) -> Self {
+        Self {
+            model,
+            calibration: Self::calibration_for(&model),
+            supervisor: Self::supervisor_for(&model),
+            ..Self::default()
+        }
+    }
+
+    /// The supervisor's defaults for `model`: its current limit, spring and
+    /// stroke limits follow the model.
+    fn supervisor_for(model: &ModelParams) -> SupervisorConfig {
         let mut supervisor = SupervisorConfig {
             // A request ten times the limit is a runaway law or a unit error.
             overcurrent_trip_a: 10.0 * model.usable_current_limit_a(),
@@ -91,30 +118,18 @@ impl HopperConfig {
             max: model.stroke_m,
         };
         supervisor.stroke_max_m = model.stroke_m + margin_m;
-        let calibration = Calibration {
+        supervisor
+    }
+
+    /// The calibration's defaults for `model`: its lead, torque constant and
+    /// start height are the model's.
+    fn calibration_for(model: &ModelParams) -> Calibration {
+        Calibration {
             torque_constant_nm_per_a: model.torque_constant_nm_per_a,
             lead_m_per_rev: model.screw_lead_m,
             height_at_origin_m: model.leg_length_m,
             ..Calibration::default()
-        };
-        Self {
-            model,
-            calibration,
-            estimator: EstimatorConfig::default(),
-            supervisor,
-            flight: flight_pd::Config::default(),
-            strategy: Strategy::default(),
-            target_apex_m: crate::params::TARGET_APEX_M.default,
-            arming: ArmingConfig::default(),
-            estop: crate::debounce::DebounceConfig::default(),
-            bringup: crate::bringup::BringupConfig::default(),
         }
-    }
-}
-
-impl Default for HopperConfig {
-    fn default() -> Self {
-        Self::for_model(ModelParams::default())
     }
 }
 

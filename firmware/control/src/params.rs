@@ -11,7 +11,7 @@
 //! `--set`, scenario files and sweeps) look parameters up in it by name,
 //! [`validate`] is the one range check of a configuration, and
 //! `docs/parameters.md` is generated from it (a test fails when the page is
-//! stale). This module declares only [`HopperConfig`]'s own two.
+//! stale).
 //!
 //! Not parameters: what follows from the model (the overcurrent trip at 10x
 //! the current limit, the stroke soft limits with the braking deceleration
@@ -316,31 +316,6 @@ macro_rules! from_default_count {
 }
 from_default_count!(u8, u16, u32);
 
-/// The entries this module declares: those of [`HopperConfig`]'s own
-/// fields (the controller choice and the target), whose type builds its
-/// defaults from the model rather than through `config!`.
-macro_rules! params {
-    ($(
-        $(#[$meta:meta])*
-        $number:literal $id:ident {
-            $name:literal, $unit:literal, $kind:expr, [$min:expr, $max:expr], $default:expr, $live:ident,
-            $doc:literal,
-            |$c:ident| $slot:expr
-        }
-    )*) => {
-        $(
-            entry! {
-                $(#[$meta])*
-                $number $id { $name, $unit, $kind, [$min, $max], $default, $live, $doc },
-                |$c| $slot
-            }
-        )*
-
-        /// The entries declared in this module.
-        const OWN: &[&Param] = &[$(&$id),*];
-    };
-}
-
 /// Every parameter, in the order the docs list them (a parameter's index
 /// here is its number on the link).
 pub static TABLE: &[&Param] = &GATHERED;
@@ -353,12 +328,13 @@ macro_rules! groups {
             pub use $($module)::+::entries::*;
         )*
 
-        /// Every group of entries, this module's first.
-        const GROUPS: &[&[&Param]] = &[OWN, $($($module)::+::PARAMS),*];
+        /// Every group of entries.
+        const GROUPS: &[&[&Param]] = &[$($($module)::+::PARAMS),*];
     };
 }
 
 groups!(
+    crate::hopper,
     crate::laws::flight_pd,
     crate::laws::energy,
     crate::laws::open_torque,
@@ -422,18 +398,6 @@ const fn gather<const N: usize>(groups: &[&[&'static Param]]) -> [&'static Param
 /// value): [`ControllerKind::ALL`]'s names.
 pub const CONTROLLER_NAMES: &[&str] = <ControllerKind as strum::VariantNames>::VARIANTS;
 
-params! {
-    0 CONTROLLER {
-        "controller", "-", Kind::Choice(CONTROLLER_NAMES), [0.0, 8.0], 5.0, DISARMED,
-        "The controller that runs in stance and flight (selecting one starts it from its defaults).",
-        |_cfg| Some(Slot::Controller)
-    }
-    1 TARGET_APEX_M {
-        "target_apex_m", "m", Real, [0.0, 1.0], 0.05, LIVE,
-        "Desired apex toe height H_D (E_D of eq 2.43).",
-        |c| Some(R(&mut c.target_apex_m))
-    }
-}
 
 /// The master switches of protections, each with its safe value: a real
 /// robot's link refuses any other value (a simulator keeps them, for
