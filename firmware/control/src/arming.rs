@@ -33,42 +33,36 @@ crate::params::config! {
     #[cfg_attr(feature = "defmt", derive(defmt::Format))]
     pub struct ArmingConfig, reached |c| Some(&mut c.arming);
     params {
-        /// No valid link frame for this long disarms, s (finite, > 0). Default 0.2.
         52 ARM_LINK_TIMEOUT_S link_timeout_s: f32 {
             "arming.link_timeout_s", "s", Real, [1.0e-3, 60.0], 0.2, DISARMED,
             "No valid link frame for this long disarms the amplifier (and a dead link refuses arming)."
         }
-        /// Run without a link: the link-alive condition and the link timeout
-        /// are off. Default false (a tethered robot stops when the host goes
-        /// quiet); the simulator, which has no link, sets it.
+        /// Run without a link: the link-alive condition and the link timeout are off. The
+        /// default keeps a tethered robot stopping when the host goes quiet; the
+        /// simulator, which has no link, sets it.
         53 ARM_UNTETHERED untethered: bool {
             "arming.untethered", "-", Flag, [0.0, 1.0], 0.0, DISARMED,
             "Run without a link: no link needed to arm, and link loss does not disarm (an explicit choice; the simulator sets it)."
         }
-        /// The nut may be at most this far from its upper stop to arm, m
-        /// (finite, >= 0). Default 0.001.
         54 ARM_HOME_TOLERANCE_M home_tolerance_m: f32 {
             "arming.home_tolerance_m", "m", Real, [0.0, 0.05], 0.001, DISARMED,
             "To arm, the nut must be at most this far from its upper stop."
         }
-        /// Nut and body must be slower than this to arm, m/s (finite, > 0).
-        /// Default 0.05.
         55 ARM_STILL_MPS still_velocity_mps: f32 {
             "arming.still_velocity_mps", "m/s", Real, [1.0e-4, 10.0], 0.05, DISARMED,
             "To arm, nut and body must be slower than this."
         }
-        /// Refuse to arm until a tare (`hopper-link calibrate tare`) has
-        /// succeeded since boot or a saved calibration was loaded at boot.
-        /// Default false; the board sets it, since without either its offsets
-        /// are placeholders.
+        /// Refuse to arm until a tare (`hopper-link calibrate tare`) has succeeded since
+        /// boot or a saved calibration was loaded at boot. The board sets it, since
+        /// without either its offsets are placeholders.
         56 ARM_REQUIRE_TARE require_tare: bool {
             "arming.require_tare", "-", Flag, [0.0, 1.0], 0.0, DISARMED,
             "Refuse to arm until a tare (hopper-link calibrate tare) has succeeded since boot (the board sets it: its offsets are not saved yet)."
         }
         /// Refuse to arm until the nut was homed since boot
-        /// ([`crate::bringup::Routine::Home`], which needs a direction check
-        /// first). Default false; the board sets it: its motor encoder is
-        /// incremental and boots wherever the nut stands.
+        /// ([`crate::bringup::Routine::Home`], which needs a direction check first). The
+        /// board sets it: its motor encoder is incremental and boots wherever the nut
+        /// stands.
         57 ARM_REQUIRE_HOME require_home: bool {
             "arming.require_home", "-", Flag, [0.0, 1.0], 0.0, DISARMED,
             "Refuse to arm until the nut was homed (hopper-link calibrate home, after calibrate direction) since boot: the motor encoder is incremental, its zero is lost at power-off."

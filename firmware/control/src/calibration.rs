@@ -46,69 +46,63 @@ crate::params::config! {
     #[cfg_attr(feature = "defmt", derive(defmt::Format))]
     pub struct Calibration, reached |c| Some(&mut c.calibration);
     params {
-        /// Motor encoder counts per motor revolution (lines x 4). Default 2000 (500 lines, x4). `> 0`.
         98 CAL_MOTOR_COUNTS_PER_REV motor_counts_per_rev: u32 {
             "calibration.motor_counts_per_rev", "counts", Count, [1.0, 1.0e6], 2000.0, DISARMED,
             "Motor encoder counts per revolution (500 lines x 4)."
         }
-        /// Motor counts increase when the nut moves down (`true`) or up (`false`). Default `true`.
         99 CAL_MOTOR_POSITIVE_DOWN motor_counts_positive_down: bool {
             "calibration.motor_counts_positive_down", "-", Flag, [0.0, 1.0], 1.0, DISARMED,
             "Motor counts increase when the nut moves down."
         }
-        /// Height encoder counts per pulley revolution. Default 2000 (*placeholder*). `> 0`.
         100 CAL_HEIGHT_COUNTS_PER_REV height_counts_per_rev: u32 {
             "calibration.height_counts_per_rev", "counts", Count, [1.0, 1.0e6], 2000.0, DISARMED,
             "Height encoder counts per pulley revolution (placeholder)."
         }
-        /// Height counts increase when the body moves up (`true`). Default `true`.
         101 CAL_HEIGHT_POSITIVE_UP height_counts_positive_up: bool {
             "calibration.height_counts_positive_up", "-", Flag, [0.0, 1.0], 1.0, DISARMED,
             "Height counts increase when the body moves up."
         }
-        /// Radius of the height-sensor pulley, m. Default 0.02 (*placeholder*). Finite, `> 0`.
         102 CAL_PULLEY_RADIUS height_pulley_radius_m: f32 {
             "calibration.height_pulley_radius_m", "m", Real, [1.0e-4, 1.0], 0.02, DISARMED,
             "Radius of the height-sensor pulley (placeholder)."
         }
-        /// Body height `z` at the first sample after [`Converter::new`] / re-zero, m.
-        /// Default 0.61 (`l0`: started standing on the uncompressed leg). Finite.
+        /// The height at the first sample after [`Converter::new`] or a re-zero. The
+        /// default is `l0`: started standing on the uncompressed leg.
         109 CAL_HEIGHT_AT_ORIGIN_M height_at_origin_m: f32 {
             "calibration.height_at_origin_m", "m", Real, [0.0, 10.0], 0.61, DISARMED,
             "Body height z where the height encoder counted from at boot (the leg length l0 with the toe on the ground; a simulated run's start height)."
         }
-        /// Load-cell gain, N per ADC code (compression positive). Default 0.5
-        /// (*placeholder*: with the default offset, -100 N to 1947 N over 12 bits;
-        /// the spring reaches about 1.3 kN with the nut down in a 0.15 m hop). Finite, non-zero.
+        /// The default is a placeholder: with the default offset it spans -100 N to
+        /// 1947 N over 12 bits (the spring reaches about 1.3 kN with the nut down in a
+        /// 0.15 m hop).
         103 CAL_LOADCELL_GAIN loadcell_gain_n_per_code: f32 {
             "calibration.loadcell_gain_n_per_code", "N/code", Real, [-1.0e3, 1.0e3], 0.5, DISARMED,
             "Load-cell gain, compression positive (placeholder; not 0)."
         }
-        /// Load-cell code at zero force. Default 200 (*placeholder*: a small
-        /// negative range, so a rail reading is distinguishable from 0 N). Finite.
+        /// The default is a placeholder that leaves a small negative range, so a rail
+        /// reading is distinguishable from 0 N.
         104 CAL_LOADCELL_OFFSET loadcell_offset_code: f32 {
             "calibration.loadcell_offset_code", "code", Real, [-1.0e5, 1.0e5], 200.0, DISARMED,
             "Load-cell code at zero force (placeholder)."
         }
-        /// Potentiometer gain, m of leg compression per ADC code. Default 0.12 / 4096
-        /// (*placeholder*: with the default offset, -6 mm to 114 mm). Finite, non-zero.
+        /// The default is a placeholder: with the default offset it spans -6 mm to 114 mm.
         105 CAL_POT_GAIN pot_gain_m_per_code: f32 {
             "calibration.pot_gain_m_per_code", "m/code", Real, [-1.0, 1.0], 0.12 / 4096.0, DISARMED,
             "Potentiometer gain, m of leg compression per code (placeholder 0.12/4096; not 0)."
         }
-        /// Potentiometer code at zero leg compression. Default 205 (*placeholder*:
-        /// both rails lie outside the physical range, so an open wiper is detected). Finite.
+        /// The default is a placeholder that puts both rails outside the physical range,
+        /// so an open wiper is detected.
         106 CAL_POT_OFFSET pot_offset_code: f32 {
             "calibration.pot_offset_code", "code", Real, [-1.0e5, 1.0e5], 205.0, DISARMED,
             "Potentiometer code at zero compression (placeholder)."
         }
-        /// DAC code for zero current. Default 2048 (mid-scale). `<= 2^dac_bits - 1`.
+        /// At most `2^dac_bits - 1`.
         107 CAL_DAC_ZERO dac_zero_code: u16 {
             "calibration.dac_zero_code", "code", Count, [0.0, 65535.0], 2048.0, DISARMED,
             "DAC code for zero current (mid-scale; within the DAC range)."
         }
-        /// Amplifier current per DAC code, A (current command positive = torque pushing the nut down).
-        /// Default 40 / 2048 (±10 V to ±40 A, *placeholder*). Finite, `> 0`.
+        /// A positive current command is torque pushing the nut down. The default is a
+        /// placeholder (±10 V to ±40 A).
         108 CAL_DAC_AMPS dac_amps_per_code: f32 {
             "calibration.dac_amps_per_code", "A/code", Real, [1.0e-6, 100.0], 0.01953125, DISARMED,
             "Amplifier current per DAC code (placeholder 40 A / 2048)."

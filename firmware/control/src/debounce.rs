@@ -19,12 +19,10 @@ crate::params::config! {
     #[cfg_attr(feature = "defmt", derive(defmt::Format))]
     pub struct DebounceConfig, reached |c| Some(&mut c.estop);
     params {
-        /// Pressed without a break for this long is a press, s.
         86 ESTOP_PRESS_S press_s: f32 {
             "estop.press_s", "s", Real, [0.0, 0.01], 2.0e-4, DISARMED,
             "The e-stop input pressed without a break for this long is a press (shorter is a glitch; the button also breaks the amplifier enable in hardware)."
         }
-        /// Released without a break for this long is a release, s.
         87 ESTOP_RELEASE_S release_s: f32 {
             "estop.release_s", "s", Real, [0.0, 2.0], 0.05, DISARMED,
             "The e-stop input released without a break for this long is a release (arming and fault resets wait for it: longer than a contact's bounce)."

@@ -114,56 +114,47 @@ crate::params::config! {
     #[cfg_attr(feature = "defmt", derive(defmt::Format))]
     pub struct EstimatorConfig, reached |c| Some(&mut c.estimator);
     params {
-        /// Excess load-cell force `F - k (delta0 + p)` above which touchdown is
-        /// considered, N, > `liftoff_force_n`. Default 40 (8 sigma of 5 N noise).
+        /// Must exceed `liftoff_force_n`. The default is 8 sigma of 5 N of noise.
         42 EST_TOUCHDOWN_FORCE_N touchdown_force_n: f32 {
             "estimator.touchdown_force_n", "N", Real, [0.0, 1.0e4], 40.0, DISARMED,
             "Load-cell force beyond k (delta0 + p) that counts as touchdown evidence (8 sigma of 5 N)."
         }
-        /// Excess force below which liftoff is considered, N. Default 20.
         43 EST_LIFTOFF_FORCE_N liftoff_force_n: f32 {
             "estimator.liftoff_force_n", "N", Real, [-1.0e4, 1.0e4], 20.0, DISARMED,
             "Excess force below which liftoff is considered (below the touchdown force)."
         }
-        /// Potentiometer compression above which touchdown is considered, m,
-        /// > `liftoff_compression_m`. Default 0.002.
+        /// Must exceed `liftoff_compression_m`.
         44 EST_TOUCHDOWN_COMPRESSION_M touchdown_compression_m: f32 {
             "estimator.touchdown_compression_m", "m", Real, [0.0, 0.5], 0.002, DISARMED,
             "Potentiometer compression above which touchdown is considered."
         }
-        /// Potentiometer compression below which liftoff is considered, m. Default 0.001.
         45 EST_LIFTOFF_COMPRESSION_M liftoff_compression_m: f32 {
             "estimator.liftoff_compression_m", "m", Real, [-0.5, 0.5], 0.001, DISARMED,
             "Potentiometer compression below which liftoff is considered (below the touchdown compression)."
         }
-        /// Consecutive agreeing samples needed to change phase, in 1..=255. Default 3.
         46 EST_DEBOUNCE_SAMPLES debounce_samples: u8 {
             "estimator.debounce_samples", "samples", Count, [1.0, 255.0], 3.0, DISARMED,
             "Consecutive agreeing samples needed to change phase."
         }
-        /// Filter gain `G` of eq 4.1 for both velocities, in [0, 1). Default 0.9.
         47 EST_FILTER_GAIN velocity_filter_gain: f32 {
             "estimator.velocity_filter_gain", "1", Real, [0.0, 0.999], 0.9, DISARMED,
             "Filter gain G of eq 4.1 for both velocities."
         }
-        /// Upward body velocity that arms apex detection in flight, m/s, > 0. Default 0.1.
         48 EST_APEX_ARM_MPS apex_arm_velocity_mps: f32 {
             "estimator.apex_arm_velocity_mps", "m/s", Real, [1.0e-4, 10.0], 0.1, DISARMED,
             "Upward body velocity that arms apex detection in flight."
         }
-        /// Downward body speed that arms bottom detection in stance, m/s, > 0. Default 0.1.
         49 EST_BOTTOM_ARM_MPS bottom_arm_velocity_mps: f32 {
             "estimator.bottom_arm_velocity_mps", "m/s", Real, [1.0e-4, 10.0], 0.1, DISARMED,
             "Downward body speed that arms bottom detection in stance."
         }
-        /// Predict touchdown and liftoff from the height encoder (module doc). Default true.
+        /// The module doc describes the prediction.
         50 EST_PREDICT_CONTACT predict_contact: bool {
             "estimator.predict_contact", "-", Flag, [0.0, 1.0], 1.0, DISARMED,
             "Predict touchdown and liftoff from the height encoder (the toe reaching the ground within half a period); load cell and potentiometer confirm (0: those two alone, late by their thresholds)."
         }
-        /// Time within which the sensors must confirm a predicted touchdown, s,
-        /// finite and > 0. Default 0.03 (the 40 N and 2 mm take 9 ms at a 1 cm
-        /// hop's 0.44 m/s).
+        /// The default allows for the touchdown thresholds: the 40 N and 2 mm take 9 ms at
+        /// a 1 cm hop's 0.44 m/s.
         51 EST_CONTACT_CONFIRM_S contact_confirm_s: f32 {
             "estimator.contact_confirm_s", "s", Real, [1.0e-3, 1.0], 0.03, DISARMED,
             "Time within which load cell and potentiometer must confirm a predicted touchdown; else it is withdrawn (a liftoff) and prediction stays off."

@@ -398,7 +398,6 @@ const fn gather<const N: usize>(groups: &[&[&'static Param]]) -> [&'static Param
 /// value): [`ControllerKind::ALL`]'s names.
 pub const CONTROLLER_NAMES: &[&str] = <ControllerKind as strum::VariantNames>::VARIANTS;
 
-
 /// The master switches of protections, each with its safe value: a real
 /// robot's link refuses any other value (a simulator keeps them, for
 /// control studies). The protections' thresholds (`thermal.*`, the link

@@ -233,78 +233,69 @@ crate::params::config! {
     #[cfg_attr(feature = "defmt", derive(defmt::Format))]
     pub struct SupervisorConfig, reached |c| Some(&mut c.supervisor);
     params {
-        /// Largest plausible motor counter change per [`REFERENCE_PERIOD_S`]
-        /// (100 us), counts; the limit scales with the control period (at least
-        /// 2 counts). Default 64: 1000 rad/s (above the 808 rad/s no-load speed)
-        /// at 2000 counts/rev is 32 counts per 100 us, x2 margin.
+        /// Counted per [`REFERENCE_PERIOD_S`] (100 us); the limit scales with the control
+        /// period (at least 2 counts). The default is 1000 rad/s (above the 808 rad/s
+        /// no-load speed) at 2000 counts/rev, 32 counts per 100 us, with a x2 margin.
         61 SUP_MAX_MOTOR_DELTA max_motor_delta_counts: u32 {
             "supervisor.max_motor_delta_counts", "counts", Count, [1.0, 1.0e6], 64.0, DISARMED,
             "Largest plausible motor counter change per period (1000 rad/s at 2000 counts/rev and 10 kHz is 32, x2)."
         }
-        /// Largest plausible height counter change per [`REFERENCE_PERIOD_S`],
-        /// counts, scaled as the motor's. Default 32: 10 m/s with a 20 mm pulley
-        /// at 2000 counts/rev is 16 counts per 100 us, x2 margin.
+        /// Counted per [`REFERENCE_PERIOD_S`] and scaled with the control period as the
+        /// motor's limit is. The default is 10 m/s with a 20 mm pulley at 2000 counts/rev,
+        /// 16 counts per 100 us, with a x2 margin.
         62 SUP_MAX_HEIGHT_DELTA max_height_delta_counts: u32 {
             "supervisor.max_height_delta_counts", "counts", Count, [1.0, 1.0e6], 32.0, DISARMED,
             "Largest plausible height counter change per period (10 m/s on a 20 mm pulley at 10 kHz is 16, x2)."
         }
-        /// Spring rate `k`, N/m, for the contact check. Default 11 000 (Table 2.1).
         77 SUP_SPRING_RATE spring_rate_n_per_m: f32 {
             "supervisor.spring_rate_n_per_m", "N/m", Real, [10.0, 1.0e7], 11000.0, DISARMED,
             "Spring rate k of the sensor cross-checks (calibrated; Table 2.1: 11 kN/m)."
         }
-        /// Spring preload `delta0`, m, for the contact check. Default 0 (the design machine has none).
         78 SUP_SPRING_PRELOAD spring_preload_m: f32 {
             "supervisor.spring_preload_m", "m", Real, [0.0, 0.5], crate::model::design::SPRING_PRELOAD_M as f32, DISARMED,
             "Spring preload delta0 of the sensor cross-checks (calibrated; design: none)."
         }
-        /// Contact force above the flight force `k (delta0 + p)` that means "load cell says contact", N. Default 150.
+        /// The excess is the force above the flight force `k (delta0 + p)`.
         79 SUP_CONTACT_FORCE contact_force_n: f32 {
             "supervisor.contact_force_n", "N", Real, [-1.0e4, 1.0e4], 150.0, DISARMED,
             "Excess force above which the load cell says contact."
         }
-        /// Contact force below which the load cell says "no contact", N. Default 40.
         80 SUP_FREE_FORCE free_force_n: f32 {
             "supervisor.free_force_n", "N", Real, [-1.0e4, 1.0e4], 40.0, DISARMED,
             "Excess force below which the load cell says no contact."
         }
-        /// Leg compression above which the pot says "contact", m. Default 0.015.
         81 SUP_CONTACT_COMPRESSION contact_compression_m: f32 {
             "supervisor.contact_compression_m", "m", Real, [-1.0, 1.0], 0.015, DISARMED,
             "Leg compression above which the potentiometer says contact."
         }
-        /// Leg compression below which the pot says "no contact", m. Default 0.003.
         82 SUP_FREE_COMPRESSION free_compression_m: f32 {
             "supervisor.free_compression_m", "m", Real, [-1.0, 1.0], 0.003, DISARMED,
             "Leg compression below which the potentiometer says no contact."
         }
-        /// How long load cell and potentiometer must disagree before the
-        /// contact-disagree fault, in [`REFERENCE_PERIOD_S`] units (consecutive
-        /// periods at 10 kHz; the time is what counts at any rate). Default 20 (2 ms).
+        /// Counted in [`REFERENCE_PERIOD_S`] units (consecutive periods at 10 kHz; the
+        /// time is what counts at any rate).
         83 SUP_CONTACT_DISAGREE_PERIODS contact_disagree_periods: u16 {
             "supervisor.contact_disagree_periods", "periods", Count, [1.0, 65535.0], 20.0, DISARMED,
             "Consecutive disagreeing periods before contact-disagree latches (2 ms at 10 kHz)."
         }
-        /// Largest plausible `|F - k (delta0 + p + x)|`, N: the load cell's force
-        /// against the spring compression the motor encoder (`p`) and the
-        /// potentiometer (`x`) give. Beyond it [`Fault::SensorDisagree`] latches
-        /// in the same period. Default 30: the residual is noise only (load cell
-        /// 2 N and `k` x pot 1.1 N, 1 sigma: 2.3 N, so 30 N is 13 sigma) when the
-        /// spring has no damping and the model's `k` and `delta0` are the
-        /// plant's; 30 N is 2.7 mm of nut or leg travel the other sensors do not
-        /// see. `f32::INFINITY` disables the check (e.g. a spring with damping,
-        /// or a `k` known only roughly).
+        /// `F` is the load cell's force, `k (delta0 + p + x)` the spring force from the
+        /// compression the motor encoder (`p`) and the potentiometer (`x`) give. Beyond
+        /// the limit [`Fault::SensorDisagree`] latches in the same period. The default is
+        /// 13 sigma of the residual, which is noise only (load cell 2 N and `k` x pot
+        /// 1.1 N, 1 sigma: 2.3 N) when the spring has no damping and the model's `k` and
+        /// `delta0` are the plant's; it is 2.7 mm of nut or leg travel the other sensors
+        /// do not see. `f32::INFINITY` disables the check (e.g. a spring with damping, or
+        /// a `k` known only roughly).
         84 SUP_SPRING_MISMATCH spring_mismatch_n: f32 {
             "supervisor.spring_mismatch_n", "N", Real, [1.0e-3, 1.0e30], 30.0, DISARMED,
             "Largest plausible |F - k (delta0 + p + x)| before sensor-disagree (13 sigma; 1e30 turns it off)."
         }
-        /// Filtered motor speed, rad/s, above which [`REFERENCE_PERIOD_S`]
-        /// (100 us, one period at 10 kHz, ten at 100 kHz) without a single motor
-        /// count is impossible away from the stops: [`Fault::EncoderFrozen`].
-        /// Default 100: 3.2 counts per 100 us at 2000 counts/rev, and
-        /// the motor (2 N m stall, 1 N m of spring through the screw, 2.7e-4
-        /// kg m^2) loses at most about 1.1 rad/s in a period; the eq 4.1 filter's
-        /// lag adds about 10 rad/s. `f32::INFINITY` disables the check.
+        /// The speed is the filtered one. Above it, [`REFERENCE_PERIOD_S`] (100 us, one
+        /// period at 10 kHz, ten at 100 kHz) without a single motor count is impossible
+        /// away from the stops: [`Fault::EncoderFrozen`]. The default is 3.2 counts per
+        /// 100 us at 2000 counts/rev, and the motor (2 N m stall, 1 N m of spring through
+        /// the screw, 2.7e-4 kg m^2) loses at most about 1.1 rad/s in a period; the eq 4.1
+        /// filter's lag adds about 10 rad/s. `f32::INFINITY` disables the check.
         85 SUP_FROZEN_SPEED frozen_speed_rad_s: f32 {
             "supervisor.frozen_speed_rad_s", "rad/s", Real, [1.0e-3, 1.0e30], 100.0, DISARMED,
             "Motor speed above which a period without a count is encoder-frozen (1e30 turns it off)."

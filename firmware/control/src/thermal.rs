@@ -71,42 +71,35 @@ crate::params::config! {
             "thermal.protect", "-", Flag, [0.0, 1.0], 1.0, DISARMED,
             "Derate and fault on the winding temperature estimate; 0 only for control studies past the motor's thermal limit (the estimate is still reported), never on a robot."
         }
-        /// Winding (terminal) resistance at 25 C, ohm.
+        /// Winding (terminal) resistance at 25 C.
         89 THERMAL_RESISTANCE_OHM winding_resistance_ohm: f32 {
             "thermal.winding_resistance_ohm", "ohm", Real, [1.0e-3, 100.0], 0.299, DISARMED,
             "Motor winding resistance at 25 C (the RE 40 24 V winding's; use your motor's datasheet)."
         }
-        /// Thermal resistance winding to housing, K/W.
         90 THERMAL_WINDING_TO_HOUSING winding_to_housing_k_per_w: f32 {
             "thermal.winding_to_housing_k_per_w", "K/W", Real, [1.0e-2, 100.0], 1.93, DISARMED,
             "Thermal resistance winding to housing (motor datasheet)."
         }
-        /// Thermal resistance housing to ambient, K/W.
         91 THERMAL_HOUSING_TO_AMBIENT housing_to_ambient_k_per_w: f32 {
             "thermal.housing_to_ambient_k_per_w", "K/W", Real, [1.0e-2, 100.0], 4.65, DISARMED,
             "Thermal resistance housing to ambient (motor datasheet; a heat sink lowers it)."
         }
-        /// Winding thermal time constant, s.
         92 THERMAL_WINDING_TAU winding_time_constant_s: f32 {
             "thermal.winding_time_constant_s", "s", Real, [0.1, 1.0e4], 41.6, DISARMED,
             "Winding thermal time constant (motor datasheet)."
         }
-        /// Motor (housing) thermal time constant, s.
         93 THERMAL_HOUSING_TAU housing_time_constant_s: f32 {
             "thermal.housing_time_constant_s", "s", Real, [1.0, 1.0e5], 1120.0, DISARMED,
             "Motor (housing) thermal time constant (motor datasheet)."
         }
-        /// Ambient temperature, C (the motor's at boot).
         94 THERMAL_AMBIENT ambient_c: f32 {
             "thermal.ambient_c", "degC", Real, [-40.0, 80.0], 25.0, DISARMED,
             "Ambient temperature; the motor is taken to be at it at boot."
         }
-        /// Winding temperature where the current limit starts to fall, C.
         95 THERMAL_DERATE derate_winding_c: f32 {
             "thermal.derate_winding_c", "degC", Real, [0.0, 250.0], 135.0, DISARMED,
             "Estimated winding temperature where the current limit starts to fall."
         }
-        /// Winding temperature that latches the fault, C.
         96 THERMAL_TRIP trip_winding_c: f32 {
             "thermal.trip_winding_c", "degC", Real, [0.0, 250.0], 150.0, DISARMED,
             "Estimated winding temperature that latches overtemperature (5 K under the RE 40's 155 C)."

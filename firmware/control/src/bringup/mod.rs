@@ -92,17 +92,14 @@ crate::params::config! {
     #[cfg_attr(feature = "defmt", derive(defmt::Format))]
     pub struct BringupConfig, reached |c| Some(&mut c.bringup);
     params {
-        /// Largest current commanded, A. Default 6.
         58 BRINGUP_CURRENT_LIMIT_A current_limit_a: f32 {
             "bringup.current_limit_a", "A", Real, [0.1, 10.0], 6.0, DISARMED,
             "Largest current a motor-driving bring-up routine commands (6 A: 200 N on the nut, 18% of the amplifier's limit)."
         }
-        /// Nut speed of the homing move and the spring sweep, m/s. Default 0.005.
         59 BRINGUP_SPEED_MPS speed_mps: f32 {
             "bringup.speed_mps", "m/s", Real, [0.001, 0.05], 0.005, DISARMED,
             "Nut speed of the homing move and the spring sweep (5 mm/s: a stop reached at it stores 5 mJ in the 426 kg reflected rotor inertia)."
         }
-        /// Spring sweep travel, m. Default 0.01.
         60 BRINGUP_SWEEP_M sweep_m: f32 {
             "bringup.sweep_m", "m", Real, [0.002, 0.03], 0.01, DISARMED,
             "Nut travel of the spring sweep, down from the upper stop and back."

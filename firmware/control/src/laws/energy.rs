@@ -21,12 +21,10 @@ crate::params::config! {
     #[cfg_attr(feature = "defmt", derive(defmt::Format))]
     pub struct Config, reached |c| crate::params::energy(c);
     params {
-        /// `K_e`, N m/J (finite, >= 0). Default 0.2 (Table 2.1).
         5 ENERGY_GAIN gain_nm_per_j: f32 {
             "energy.gain_nm_per_j", "N m/J", Real, [0.0, 100.0], 0.2, LIVE,
             "K_e of eq 2.52 (Table 2.1: 0.2)."
         }
-        /// Whether an energy surplus may command negative torque. Default true.
         6 ENERGY_ALLOW_NEGATIVE allow_negative: bool {
             "energy.allow_negative", "-", Flag, [0.0, 1.0], 1.0, LIVE,
             "Eq 2.52 may command negative torque on an energy surplus."

@@ -43,34 +43,31 @@ crate::params::config! {
     #[cfg_attr(feature = "defmt", derive(defmt::Format))]
     pub struct ApexLoop, reached |c| crate::params::energy_apex(c);
     params {
-        /// Proportional gain `K_p`, dimensionless (J of correction per J of the
-        /// last apex error), >= 0: damps the slow outer loop. Default 0.
+        /// `K_p`: damps the slow outer loop.
         26 ENERGY_APEX_PROPORTIONAL proportional: f32 {
             "energy_apex.proportional_gain", "1", Real, [0.0, 10.0], 0.0, LIVE,
             "Outer loop's proportional gain on the last apex error (J per J)."
         }
-        /// Integral gain `K_i`, dimensionless (J of offset per J of apex error), in (0, 10). Default 0.6.
+        /// `K_i` of the offset update in the type's doc.
         27 ENERGY_APEX_INTEGRAL gain: f32 {
             "energy_apex.integral_gain", "1", Real, [1.0e-3, 9.99], 0.6, LIVE,
             "Outer loop's integral gain on the apex error (J of offset per J)."
         }
-        /// Bound on the offset, J (>= 0). Default 30.
         28 ENERGY_APEX_MAX_OFFSET_J max_offset_j: f32 {
             "energy_apex.max_offset_j", "J", Real, [0.0, 1000.0], 30.0, LIVE,
             "Upper bound on the outer loop's correction of E_D."
         }
-        /// Lower bound on the offset, J (<= 0). Default -5: the inner law only
-        /// ever falls short of `E_D` (losses, rotor energy counted), so a large
-        /// negative offset can only be wind-up from a high start.
+        /// The default is small: the inner law only ever falls short of `E_D` (losses,
+        /// rotor energy counted), so a large negative offset can only be wind-up from a
+        /// high start.
         29 ENERGY_APEX_MIN_OFFSET_J min_offset_j: f32 {
             "energy_apex.min_offset_j", "J", Real, [-1000.0, 0.0], -5.0, LIVE,
             "Lower bound on the outer loop's correction of E_D."
         }
-        /// Pre-touchdown spin-up (section 4.4.3's idea): on the way down, once
-        /// the toe is below this fraction of the target apex, the stance law's
-        /// command is applied in flight already, so the motor is moving at
-        /// touchdown. In `[0, 1]`; 0 disables it. Default 0 (off: in simulation it
-        /// did not widen the range of starts that converge).
+        /// Pre-touchdown spin-up (section 4.4.3's idea): on the way down, once the toe is
+        /// below this fraction of the target apex, the stance law's command is applied in
+        /// flight already, so the motor is moving at touchdown; 0 disables it. It is off
+        /// by default: in simulation it did not widen the range of starts that converge.
         30 ENERGY_APEX_SPIN_UP spin_up_fraction: f32 {
             "energy_apex.spin_up_fraction", "1", Real, [0.0, 1.0], 0.0, LIVE,
             "Fraction of the target apex below which the descent runs the stance law (0: off)."

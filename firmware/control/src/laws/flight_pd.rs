@@ -22,7 +22,6 @@ crate::params::config! {
     #[cfg_attr(feature = "defmt", derive(defmt::Format))]
     pub struct Config, reached |c| Some(&mut c.flight);
     params {
-        /// Start position of the nut, m, on the stroke (0 = upper stop). Default 0.
         4 FLIGHT_START_M start_position_m: f32 {
             "flight.start_position_m", "m", Real, [0.0, 1.0], 0.0, LIVE,
             "Nut position the flight PD returns to (0: the upper stop; at most the stroke)."

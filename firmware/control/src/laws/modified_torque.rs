@@ -17,13 +17,12 @@ crate::params::config! {
     #[cfg_attr(feature = "defmt", derive(defmt::Format))]
     pub struct Config, reached |c| crate::params::modified_torque(c);
     params {
-        /// Torque applied, N m (positive compresses the spring). Default 1.0 (full torque).
+        /// Positive compresses the spring. The default is full torque.
         8 MODIFIED_TORQUE_NM torque_nm: f32 {
             "modified_torque.torque_nm", "N m", Real, [-10.0, 10.0], 1.0, LIVE,
             "Modified-torque law's torque in stance and late descent (section 4.4.3)."
         }
-        /// Fraction of the last apex toe height below which the descent starts
-        /// the torque, dimensionless in [0, 1]. Default 0.4.
+        /// The fraction is of the toe height at the last apex.
         9 MODIFIED_TORQUE_APEX_FRACTION apex_fraction: f32 {
             "modified_torque.apex_fraction", "1", Real, [0.0, 1.0], 0.4, LIVE,
             "Fraction of the last apex below which the descent starts the torque (section 4.4.3: 40 %)."

@@ -17,7 +17,7 @@ crate::params::config! {
         // The open-torque law's parameter keeps its `constant_torque.` name:
         // parameter names are a contract (scenario files, the link,
         // docs/parameters.md) kept from before the law was renamed.
-        /// Stance torque, N m (positive compresses the spring). Default 1.0 (Table 2.1).
+        /// Positive compresses the spring.
         7 CONSTANT_TORQUE_NM torque_nm: f32 {
             "constant_torque.torque_nm", "N m", Real, [-10.0, 10.0], 1.0, LIVE,
             "Open-loop stance torque (section 2.1.3.4; Table 2.1: 1 N m)."

@@ -94,92 +94,82 @@ crate::params::config! {
     #[cfg_attr(feature = "defmt", derive(defmt::Format))]
     pub struct Config, reached |c| crate::params::shaped(c);
     params {
-        /// On the way down, the push starts once the toe is below this fraction
-        /// of the present flight's apex (its highest point), in `[0, 1]`.
-        /// Default 0.6 (tuned in simulation, design parameters; the thesis used
-        /// 0.4).
+        /// On the way down, the push starts once the toe is below this fraction of the
+        /// present flight's apex (its highest point). The default is tuned in simulation
+        /// (design parameters; the thesis used 0.4).
         31 SHAPED_SPIN_UP_FRACTION spin_up_fraction: f32 {
             "shaped.spin_up_fraction", "1", Real, [0.0, 1.0], 0.6, LIVE,
             "Fraction of the flight's apex below which the descent spins the rotor up."
         }
-        /// No spin-up in a flight whose apex is below this toe height, m, in
-        /// `[0, 1]`. Default 0.005: a flight that low is too short for the
-        /// back-drive to bring the nut home, and a robot standing on its
-        /// extended leg reads as a flight of zero height (the spin-up would
-        /// pump the nut into its stops).
+        /// No spin-up in a flight whose apex is below this toe height: a flight that low
+        /// is too short for the back-drive to bring the nut home, and a robot standing on
+        /// its extended leg reads as a flight of zero height (the spin-up would pump the
+        /// nut into its stops).
         32 SHAPED_SPIN_UP_MIN_APEX_M spin_up_min_apex_m: f32 {
             "shaped.spin_up_min_apex_m", "m", Real, [0.0, 1.0], 0.005, LIVE,
             "Smallest flight apex that spins up."
         }
-        /// The push ends and braking starts this far into stance, as a fraction
-        /// of the model's stance time `pi sqrt((M + m_s) / k)`, in `[0, 2]`.
-        /// Default 0.6 (tuned in simulation: 0.66 converges sooner with an exact
-        /// model but fails with the model's `k` 20 % low).
+        /// The push ends and braking starts this far into stance, as a fraction of the
+        /// model's stance time `pi sqrt((M + m_s) / k)`. The default is tuned in
+        /// simulation: 0.66 converges sooner with an exact model but fails with the
+        /// model's `k` 20 % low.
         33 SHAPED_SWITCH_FRACTION switch_fraction: f32 {
             "shaped.switch_fraction", "1", Real, [0.0, 2.0], 0.6, LIVE,
             "Fraction of the model's stance time T = pi sqrt((M + m_s)/k) after which the push turns to braking."
         }
-        /// Braking current after the switch, fraction of the current limit, in
-        /// `[0, 1]`. Default 1.0.
+        /// Applied after the switch.
         34 SHAPED_BRAKE_FRACTION brake_fraction: f32 {
             "shaped.brake_fraction", "1", Real, [0.0, 1.0], 1.0, LIVE,
             "Braking current, fraction of the current limit."
         }
-        /// Torque level before the first apex, fraction of the current limit, in
-        /// `[0, 1]`. Default 1.0.
+        /// Used until the first apex.
         35 SHAPED_INITIAL_LEVEL initial_level: f32 {
             "shaped.initial_level", "1", Real, [0.0, 1.0], 1.0, LIVE,
             "Torque level of the first hop, fraction of the current limit."
         }
-        /// The outer loop's integral at start: the level expected to hold the
-        /// target, in `[0, 1]`. Default 0.8, about what holds 0.15 m with the
-        /// design parameters (tuned there; for other targets or machines the
-        /// integral moves to its own steady level once the climb is done).
-        /// Starting it at the steady level rather than at full lets the
-        /// proportional term take the level down as the apex nears the target,
-        /// instead of climbing at full level into an overshoot (16 instead of 19
-        /// hops to converge from 0.05 m, with the spin-up otherwise unchanged).
+        /// The outer loop's integral at start: the level expected to hold the target. The
+        /// default is about what holds 0.15 m with the design parameters (tuned there; for
+        /// other targets or machines the integral moves to its own steady level once the
+        /// climb is done). Starting it at the steady level rather than at full lets the
+        /// proportional term take the level down as the apex nears the target, instead of
+        /// climbing at full level into an overshoot (16 instead of 19 hops to converge
+        /// from 0.05 m, with the spin-up otherwise unchanged).
         36 SHAPED_INTEGRAL_START integral_start: f32 {
             "shaped.integral_start", "1", Real, [0.0, 1.0], 0.8, LIVE,
             "Starting integral of the per-hop level loop."
         }
-        /// Outer-loop integral gain `K_i`, 1/J (level change per J of apex
-        /// energy error), in `[0, 10]`. Default 0.1 (tuned in simulation with
-        /// `K_p`, design parameters, 0.15 m target).
+        /// `K_i`: level change per J of apex energy error. The default is tuned in
+        /// simulation with `K_p` (design parameters, 0.15 m target).
         37 SHAPED_LEVEL_GAIN level_gain_per_j: f32 {
             "shaped.level_gain_per_j", "1/J", Real, [0.0, 10.0], 0.1, LIVE,
             "Integral gain of the level loop on the apex energy error."
         }
-        /// Outer-loop proportional gain `K_p`, 1/J, in `[0, 10]`. Default 0.2.
+        /// `K_p`: level change per J of apex energy error.
         38 SHAPED_LEVEL_PROPORTIONAL level_proportional_per_j: f32 {
             "shaped.level_proportional_per_j", "1/J", Real, [0.0, 10.0], 0.2, LIVE,
             "Proportional gain of the level loop."
         }
-        /// Braking-curve margin: the fraction of the largest braking deceleration
-        /// the back-drive plans with, in `(0, 1]`. Default 0.7 (room for a 20 %
-        /// error in `k` and for friction).
+        /// Braking-curve margin: the fraction of the largest braking deceleration the
+        /// back-drive plans with. The default leaves room for a 20 % error in `k` and for
+        /// friction.
         39 SHAPED_BRAKING_MARGIN braking_margin: f32 {
             "shaped.braking_margin", "1", Real, [1.0e-3, 1.0], 0.7, LIVE,
             "Fraction of the available braking deceleration the flight return plans with."
         }
-        /// Velocity-tracking time constant of the back-drive, s, in
-        /// `[1e-3, 0.1]`. Default 0.005 (50 control periods at 10 kHz; the eq 4.1
-        /// filter lags about 1 ms).
+        /// The default is 50 control periods at 10 kHz; the eq 4.1 filter lags about 1 ms.
         40 SHAPED_TRACKING_TIME_S tracking_time_s: f32 {
             "shaped.tracking_time_s", "s", Real, [1.0e-3, 0.1], 0.005, LIVE,
             "Time constant of the flight return's speed tracking."
         }
-        /// Speed at which the nut reaches the stop, m/s, in `[0, 0.1]`. Default
-        /// 0.01 (an impact of 0.02 J with Table 2.1's rotor).
+        /// At the default the impact is 0.02 J with Table 2.1's rotor.
         41 SHAPED_CREEP_SPEED_MPS creep_speed_mps: f32 {
             "shaped.creep_speed_mps", "m/s", Real, [0.0, 0.1], 0.01, LIVE,
             "Speed at which the nut arrives at its stop."
         }
-        /// Bring the nut home in flight with the least effort instead of along
-        /// the braking curve: the current that reaches the stop when the push
-        /// is due with the least `int i^2 dt`, the spring helping, arriving at
-        /// the speed that takes (module docs, "Least-effort return"). Default
-        /// false.
+        /// Bring the nut home in flight with the least effort instead of along the braking
+        /// curve: the current that reaches the stop when the push is due with the least
+        /// `int i^2 dt`, the spring helping, arriving at the speed that takes (module
+        /// docs, "Least-effort return").
         110 SHAPED_LEAST_EFFORT_RETURN least_effort_return: bool {
             "shaped.least_effort_return", "-", Flag, [0.0, 1.0], 0.0, LIVE,
             "Bring the nut home in flight with the least int i^2 dt (the spring helping, reaching the stop when the push is due) instead of along the braking curve."

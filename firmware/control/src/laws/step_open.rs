@@ -16,7 +16,6 @@ crate::params::config! {
     #[cfg_attr(feature = "defmt", derive(defmt::Format))]
     pub struct Config, reached |c| crate::params::step_open(c);
     params {
-        /// Step height `l1`, m, in `0..=stroke` (clamped to the stroke). Default 0.01 (Table 2.1).
         10 STEP_OPEN_M step_m: f32 {
             "step_open.step_m", "m", Real, [0.0, 1.0], 0.01, LIVE,
             "Step height l1 of eq 2.49 (Table 2.1: 10 mm; clamped to the stroke)."

@@ -28,18 +28,16 @@ crate::params::config! {
     #[cfg_attr(feature = "defmt", derive(defmt::Format))]
     pub struct Config, reached |c| crate::params::velocity(c);
     params {
-        /// `K_v`, m/(s J) (>= 0). Default 0.03 (Table 2.1's 30 read as mm/(s J)).
         20 VELOCITY_GAIN gain_mps_per_j: f32 {
             "velocity.gain_mps_per_j", "m/(s J)", Real, [0.0, 10.0], 0.03, LIVE,
             "K_v of eq 2.53 (Table 2.1's 30 read as mm/(s J))."
         }
-        /// Velocity-loop gain `k_vel`, N s/m (force on the nut per m/s of
-        /// velocity error), >= 0. Default 5000 (0.1 m/s error: 500 N, 0.44 N m).
+        /// `k_vel`: force on the nut per m/s of velocity error. At the default a 0.1 m/s
+        /// error gives 500 N (0.44 N m).
         21 VELOCITY_LOOP_GAIN loop_gain_n_s_per_m: f32 {
             "velocity.loop_gain_n_s_per_m", "N s/m", Real, [0.0, 1.0e6], 5000.0, LIVE,
             "Velocity loop gain from nut speed error to force."
         }
-        /// Whether to add the measured spring force as feed-forward. Default true.
         22 VELOCITY_FEEDFORWARD spring_feedforward: bool {
             "velocity.spring_feedforward", "-", Flag, [0.0, 1.0], 1.0, LIVE,
             "Add the measured spring force to the velocity loop."
