@@ -63,10 +63,17 @@ struct Map {
     fault_line: &'static str,
     /// Its target directory under cargo's.
     fault_target_dir: &'static str,
+    /// The fault test's writes after init that enable the deadman (its
+    /// counter running, its channel in PWM mode 2), where QEMU does not
+    /// model the timer.
+    fault_enable: &'static [&'static str],
     /// The HardFault entry's writes before the DAC's zero code: AMP_EN low
-    /// (BSRR, then a GPIO output), the deadman timer stopped where QEMU
-    /// does not model it.
+    /// (BSRR, then a GPIO output), the deadman channel forced inactive and
+    /// its counter stopped and cleared where QEMU does not model the timer.
     fault_entry: &'static [&'static str],
+    /// Where QEMU models the deadman timer: its CR1, channel mode register
+    /// and CNT addresses, read back through QEMU's monitor after the fault.
+    deadman_readback: Option<[u32; 3]>,
 }
 
 /// The default map (Olimex STM32-H405). Its deadman timer, TIM3, is one
@@ -89,7 +96,10 @@ const H405: Map = Map {
     deadman_forced_low: None,
     fault_line: "fault-test",
     fault_target_dir: "fault-test",
+    fault_enable: &[],
     fault_entry: &["GPIOB.BSRR = 0x00010000", "GPIOB.MODER = 0x00000001"],
+    // TIM3's CR1, CCMR2 and CNT.
+    deadman_readback: Some([0x4000_0400, 0x4000_041c, 0x4000_0424]),
 };
 
 /// The Adafruit Feather STM32F405 Express's map (`--features feather`).
@@ -113,11 +123,22 @@ const FEATHER: Map = Map {
     deadman_forced_low: Some(("TIM12.CCMR1", 0x0000_0040)),
     fault_line: "fault-test-feather",
     fault_target_dir: "feather",
+    // CR1 = OPM | CEN, CNT = 1, CCMR1's OC1M = 111 (PWM mode 2).
+    fault_enable: &[
+        "TIM12.CR1 = 0x00000009",
+        "TIM12.CNT = 0x00000001",
+        "TIM12.CCMR1 = 0x00000070",
+    ],
+    // QEMU reads the timer as 0, so the entry's read-modify-write of CCMR1
+    // shows only OC1M = 100 (forced inactive); then CR1 = OPM, CNT = 0.
     fault_entry: &[
         "GPIOB.BSRR = 0x40000000",
         "GPIOB.MODER = 0x10000000",
-        "TIM12.CR1 = 0x00000000",
+        "TIM12.CCMR1 = 0x00000040",
+        "TIM12.CR1 = 0x00000008",
+        "TIM12.CNT = 0x00000000",
     ],
+    deadman_readback: None,
 };
 /// How long init may take in wall time before it counts as hung.
 const INIT_TIMEOUT: Duration = Duration::from_secs(90);
@@ -377,9 +398,17 @@ fn check(lines: &[String], map: &Map) -> Vec<String> {
 
 /// QEMU on `elf`, logging every access to an unmodelled register
 /// (`-d unimp`) to `log_path`.
-fn spawn_unimp(elf: &Path, log_path: &Path) -> Result<std::process::Child, String> {
-    crate::qemu::qemu_command(elf, 0, "null")
-        .args(["-d", "unimp"])
+fn spawn_unimp(
+    elf: &Path,
+    log_path: &Path,
+    monitor: Option<&Path>,
+) -> Result<std::process::Child, String> {
+    let mut cmd = crate::qemu::qemu_command(elf, 0, "null");
+    if let Some(m) = monitor {
+        cmd.arg("-monitor")
+            .arg(format!("unix:{},server=on,wait=off", m.display()));
+    }
+    cmd.args(["-d", "unimp"])
         .arg("-D")
         .arg(log_path)
         .stdout(Stdio::null())
@@ -438,7 +467,7 @@ fn run_map(root: &Path, map: &Map, elf: &Path, dir: &Path) -> Result<(), String>
         map.line
     );
     let started = Instant::now();
-    let mut child = spawn_unimp(elf, &log_path)?;
+    let mut child = spawn_unimp(elf, &log_path, None)?;
     // Init is done at the watchdog's first reload: nothing follows it in
     // QEMU (the control task waits for an ADC interrupt that never comes).
     let done = loop {
@@ -551,7 +580,9 @@ fn fault_test(root: &Path, map: &Map) -> Result<(), String> {
     let log_path = dir.join(format!("{}.log", map.fault_line));
     let _ = std::fs::remove_file(&log_path);
     let started = Instant::now();
-    let mut child = spawn_unimp(&elf, &log_path)?;
+    let monitor = dir.join(format!("{}.monitor", map.fault_line));
+    let _ = std::fs::remove_file(&monitor);
+    let mut child = spawn_unimp(&elf, &log_path, Some(&monitor))?;
     // Done when the Rust handler's zero code is written (the second after
     // init), or after the timeout.
     let after_init = |log: &str| -> Vec<String> {
@@ -581,28 +612,93 @@ fn fault_test(root: &Path, map: &Map) -> Result<(), String> {
             break;
         }
     }
+    // Where QEMU models the timer, its registers after the fault.
+    let readback = map
+        .deadman_readback
+        .map(|addrs| read_words(&monitor, &addrs));
     let _ = child.kill();
     let _ = child.wait();
     crate::took(&format!("{} on QEMU", map.fault_line), started);
     let zero = "DAC.DHR12R1 = 0x00000802";
-    let entry: Vec<&str> = map.fault_entry.iter().copied().chain([zero]).collect();
+    let expected: Vec<&str> = map
+        .fault_enable
+        .iter()
+        .chain(map.fault_entry.iter())
+        .copied()
+        .chain([zero])
+        .collect();
     let entry_first =
-        writes.len() >= entry.len() && writes.iter().zip(entry.iter()).all(|(w, e)| w == e);
+        writes.len() >= expected.len() && writes.iter().zip(expected.iter()).all(|(w, e)| w == e);
     let handler = writes
-        .get(entry.len()..)
+        .get(expected.len()..)
         .is_some_and(|rest| rest.iter().any(|l| l == zero));
+    // The channel forced inactive (OCxM = 100), the counter stopped, CNT 0:
+    // in the traced writes, or read back.
+    let (forced, how) = match &readback {
+        None => (
+            entry_first
+                && map
+                    .fault_entry
+                    .iter()
+                    .any(|w| w.ends_with(&format!("= 0x{:08x}", 0b100u32 << 4))),
+            "traced".to_string(),
+        ),
+        // QEMU 7.2's timer derives CNT from the virtual clock whether or
+        // not CEN is set, so CNT is shown, not checked, here (the host
+        // tests of `hopper_control::deadman` check it).
+        Some(Ok([cr1, ccmr, cnt])) => (
+            (ccmr >> 4) & 0b111 == 0b100 && cr1 & 1 == 0,
+            format!("read_back_cr1=0x{cr1:x} ccmr=0x{ccmr:x} cnt_qemu={cnt}"),
+        ),
+        Some(Err(e)) => (false, format!("read_back_failed ({e})")),
+    };
     println!(
-        "{}: hardfault_off_the_stack amp_en_low_first={entry_first} calibrated_zero_first={entry_first} rust_handler_ran={handler} writes_after_init={}",
+        "{}: hardfault_off_the_stack amp_en_low_first={entry_first} calibrated_zero_first={entry_first} deadman_forced_inactive={forced} ({how}) rust_handler_ran={handler} writes_after_init={}",
         map.fault_line,
         writes.len()
     );
-    if entry_first && handler {
+    if entry_first && handler && forced {
         Ok(())
     } else {
         Err(format!(
-            "the HardFault entry's writes after init are {writes:?}, not {entry:?} then the Rust handler's {zero}"
+            "the HardFault entry's writes after init are {writes:?}, not {expected:?} then the Rust handler's {zero}; the deadman forced inactive: {forced} ({how})"
         ))
     }
+}
+
+/// Three words at `addrs`, read through QEMU's monitor on the unix socket
+/// `monitor` (`xp`, which reads a modelled device's registers).
+fn read_words(monitor: &Path, addrs: &[u32; 3]) -> Result<[u32; 3], String> {
+    use std::io::{Read as _, Write as _};
+    let mut sock = std::os::unix::net::UnixStream::connect(monitor)
+        .map_err(|e| format!("{}: {e}", monitor.display()))?;
+    sock.set_read_timeout(Some(Duration::from_millis(500)))
+        .map_err(|e| e.to_string())?;
+    let mut out = [0u32; 3];
+    let mut text = String::new();
+    for (k, a) in addrs.iter().enumerate() {
+        write!(sock, "xp /1wx 0x{a:08x}\r\n").map_err(|e| e.to_string())?;
+        let key = format!("{a:016x}:");
+        let started = Instant::now();
+        let value = loop {
+            let mut buf = [0u8; 512];
+            match sock.read(&mut buf) {
+                Ok(0) => return Err("the monitor closed".into()),
+                Ok(n) => text.push_str(&String::from_utf8_lossy(&buf[..n])),
+                Err(_) if started.elapsed() < Duration::from_secs(5) => {}
+                Err(e) => return Err(format!("no answer for 0x{a:08x}: {e}")),
+            }
+            if let Some(v) = text.split(&key).nth(1).and_then(|rest| {
+                let w = rest.split_whitespace().next()?;
+                u32::from_str_radix(w.trim_start_matches("0x"), 16).ok()
+            }) {
+                break v;
+            }
+        };
+        out[k] = value;
+        text.clear();
+    }
+    Ok(out)
 }
 
 #[cfg(test)]

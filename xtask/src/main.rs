@@ -111,7 +111,9 @@ fn main() -> ExitCode {
         Some("cockpit") => setup(&root).and_then(|_| cockpit::run(&root)),
         Some("slurm") => slurm::run(&root),
         Some("speed") => speed::run(&root),
-        Some("board-init") => setup(&root).and_then(|_| board_init::run(&root)),
+        Some("board-init") => setup(&root)
+            .and_then(|_| qemu::ensure_qemu())
+            .and_then(|_| board_init::run(&root)),
         Some("hil") => {
             let serial = match &args[1..] {
                 [] => Ok(None),

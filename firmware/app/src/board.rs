@@ -87,12 +87,10 @@
 //! tells the application that the IWDG caused the last reset.
 
 use heapless::spsc::{Consumer, Producer};
-use hopper_control::hal::{
-    AmpEnable, Converters, HopperIo, IoError, PinError, PinnedIo, RawSample,
-};
+use hopper_control::hal::{Converters, HopperIo, IoError, PinError, PinnedIo, RawSample};
 use stm32f4::stm32f405::{self as pac, Peripherals};
 
-use crate::pinmap::{self, DeadmanChannel};
+use crate::pinmap;
 
 /// The DWT cycle counter as the period runner's step timer (core cycles)
 /// and its clock for the period-start jitter check. A copy reads the same
@@ -101,6 +99,8 @@ use crate::pinmap::{self, DeadmanChannel};
 pub struct CycleCounter {
     /// The core clock the counter runs at, Hz (0 until [`Self::set_hz`]).
     hz: u32,
+    /// Core cycles a control period (0 until [`Self::set_hz`]).
+    period_cycles: u32,
 }
 
 impl CycleCounter {
@@ -108,15 +108,23 @@ impl CycleCounter {
     pub fn start(dcb: &mut cortex_m::peripheral::DCB, dwt: &mut cortex_m::peripheral::DWT) -> Self {
         dcb.enable_trace();
         dwt.enable_cycle_counter();
-        CycleCounter { hz: 0 }
+        CycleCounter {
+            hz: 0,
+            period_cycles: 0,
+        }
     }
 
-    /// The core clock `init` ended up with ([`BoardIo::sysclk_hz`]): the
-    /// period starts are timed with it from then on.
-    pub fn set_hz(&mut self, hz: u32) {
+    /// The core clock `init` ended up with ([`BoardIo::sysclk_hz`]) and
+    /// the control rate its timer runs at: the period starts are timed
+    /// with them from then on.
+    pub fn set_hz(&mut self, hz: u32, control_hz: u32) {
         self.hz = hz;
+        self.period_cycles = hz / control_hz.max(1);
     }
 }
+
+/// DEMCR's TRCENA: the DWT (and its cycle counter) powered.
+const DEMCR_TRCENA: u32 = 1 << 24;
 
 impl hopper_control::runner::CycleCounter for CycleCounter {
     #[inline(always)]
@@ -125,6 +133,36 @@ impl hopper_control::runner::CycleCounter for CycleCounter {
     }
     fn hz(&self) -> u32 {
         self.hz
+    }
+    fn pacing(&self) -> hopper_control::runner::Pacing {
+        if self.period_cycles == 0 {
+            hopper_control::runner::Pacing::NoClock
+        } else {
+            hopper_control::runner::Pacing::Trigger {
+                ticks: self.period_cycles,
+            }
+        }
+    }
+    /// The cycle counter, or `None` (and started again) when a debugger
+    /// turned it off (DEMCR.TRCENA or DWT_CTRL.CYCCNTENA cleared): the
+    /// check skips the interval rather than latch an overrun.
+    fn clock(&mut self) -> Option<u32> {
+        #[allow(unsafe_code)] // Reads (and a restart) of the core's debug registers.
+        // SAFETY: DCB and DWT are the core's fixed register blocks; the
+        // read-modify-writes only set the enables this image set at start-up
+        // (nothing else in it writes them), on the control task alone.
+        unsafe {
+            let dcb = &*cortex_m::peripheral::DCB::PTR;
+            let dwt = &*cortex_m::peripheral::DWT::PTR;
+            let trace_on = dcb.demcr.read() & DEMCR_TRCENA != 0;
+            let counting = dwt.ctrl.read() & 1 != 0;
+            if trace_on && counting {
+                return Some(cortex_m::peripheral::DWT::cycle_count());
+            }
+            dcb.demcr.modify(|w| w | DEMCR_TRCENA);
+            dwt.ctrl.modify(|w| w | 1);
+            None
+        }
     }
 }
 
@@ -304,7 +342,13 @@ pub fn init(
 
     // 6b. The hardware deadman: AMP_EN becomes the deadman timer's
     //     output, forced low until the first enabled period retriggers it.
-    configure_deadman(&deadman_timer, &dp.GPIOB, clocks.apb1_timer_hz, control_hz);
+    let deadman = configure_deadman(
+        deadman_timer,
+        &dp.GPIOB,
+        &dp.DBGMCU,
+        clocks.apb1_timer_hz,
+        control_hz,
+    );
 
     // 7. ADC1 injected group, triggered by TIM4 TRGO, interrupt at its end.
     configure_adc(&dp.ADC_COMMON, &dp.ADC1);
@@ -333,7 +377,7 @@ pub fn init(
     // The saved calibration: a save waiting in RAM is written now (a
     // sector erase stalls the core for a second or two: before the
     // watchdog, with the amplifier off), then the record is read.
-    let stored = crate::flash::at_boot(&dp.FLASH);
+    let stored = crate::flash::at_boot(&dp.FLASH, &dp.PWR);
 
     // 10. The watchdog, last: from here on the control task must run.
     let watchdog = Watchdog::start(dp.IWDG, &dp.RCC);
@@ -358,10 +402,7 @@ pub fn init(
                 },
                 pinmap::estop(),
                 pinmap::amp_fault(),
-                Deadman {
-                    timer: deadman_timer,
-                    running: false,
-                },
+                deadman,
             ),
             sysclk_hz: clocks.sysclk_hz,
             control_hz,
@@ -434,8 +475,9 @@ impl hopper_robot_link::hil::HilPins for HilPins {
 /// Brings up the HIL image's board: AMP_EN low first, the inputs, the
 /// clocks (the HSI on a failed crystal, and in QEMU), the link on the pin
 /// map's USART.
-/// No converters, encoders, control timer, deadman or watchdog: the
-/// periods come from the host.
+/// The deadman on AMP_EN with a wall-clock window ([`HilPins`]); no
+/// converters, encoders, control timer or watchdog: the periods come from
+/// the host.
 pub fn init_hil(dp: Peripherals, link: (Producer<'static, u8>, Consumer<'static, u8>)) -> HilBoard {
     pinmap::amp_en_low(&dp.RCC, &dp.GPIOB);
     pinmap::configure_inputs(&dp.GPIOB, &dp.GPIOC);
@@ -444,9 +486,10 @@ pub fn init_hil(dp: Peripherals, link: (Producer<'static, u8>, Consumer<'static,
     // a third of the window each.
     pinmap::enable_hil_clocks(&dp.RCC);
     let (deadman_timer, link_usart) = pinmap::take_deadman_and_link!(dp);
-    configure_deadman(
-        &deadman_timer,
+    let deadman = configure_deadman(
+        deadman_timer,
         &dp.GPIOB,
+        &dp.DBGMCU,
         clocks.apb1_timer_hz,
         hopper_control::deadman::WINDOW_PERIODS * 1_000_000 / HIL_DEADMAN_WINDOW_US,
     );
@@ -473,10 +516,7 @@ pub fn init_hil(dp: Peripherals, link: (Producer<'static, u8>, Consumer<'static,
     HilBoard {
         pins: HilPins {
             estop: pinmap::estop(),
-            enable: Deadman {
-                timer: deadman_timer,
-                running: false,
-            },
+            enable: deadman,
         },
         serial,
         boot,
@@ -498,23 +538,22 @@ fn take_reset_causes(rcc: &pac::RCC) -> hopper_control::boot::ResetCauses {
 /// [`deadman::window_ticks`] of the control rate; its channel forced low,
 /// then AMP_EN handed from its GPIO output (driven low since step 1) to
 /// the timer's channel, the AF number before the mode, so the pin never
-/// drives high. The debugger's freeze of the timer (DBGMCU_APB1_FZ) stays
-/// off: a halted core drops the enable too.
+/// drives high. The debugger's freeze of the timer (DBGMCU_APB1_FZ, which
+/// a system reset does not clear) is cleared: a halted core drops the
+/// enable too.
 ///
 /// [`deadman::window_ticks`]: hopper_control::deadman::window_ticks
 fn configure_deadman(
-    tim: &pinmap::DeadmanTimer,
+    tim: pinmap::DeadmanTimer,
     gpiob: &pac::GPIOB,
+    dbgmcu: &pac::DBGMCU,
     timer_hz: u32,
     control_hz: u32,
-) {
-    use hopper_control::deadman;
-    tim.setup(
-        deadman::prescaler(timer_hz),
-        deadman::window_ticks(control_hz),
-        deadman::COMPARE,
-    );
+) -> Deadman {
+    pinmap::unfreeze_timers(dbgmcu);
+    let deadman = Deadman::new(pinmap::DeadmanRegs(tim), timer_hz, control_hz);
     pinmap::amp_en_to_deadman(gpiob);
+    deadman
 }
 
 /// Polls `ready` up to [`READY_POLLS`] times; whether it became true.
@@ -903,53 +942,8 @@ impl Converters for BoardConverters {
 }
 
 /// The hardware deadman on AMP_EN (the pin map's timer and channel,
-/// `hopper_control::deadman`) as the amplifier enable.
-#[derive(Debug)]
-pub struct Deadman {
-    timer: pinmap::DeadmanTimer,
-    /// Whether the output is in PWM mode 2 (not forced low).
-    running: bool,
-}
-
-impl AmpEnable for Deadman {
-    type Error = DeadmanLapsed;
-
-    /// Enabled, the deadman retriggered (high for
-    /// `hopper_control::deadman::WINDOW_PERIODS` more periods unless
-    /// retriggered again); disabled, forced low at once.
-    fn set(&mut self, on: bool) -> Result<(), DeadmanLapsed> {
-        match hopper_control::deadman::write_for(on) {
-            hopper_control::deadman::Write::Retrigger => {
-                if self.running && self.timer.stopped() {
-                    // The window lapsed since the last enabled period (the
-                    // control interrupt stopped for 3 periods: a halt, a
-                    // stall): the amplifier went off by itself, and the
-                    // state it would resume on is stale. Off it stays: the
-                    // runner latches `amp-fault`.
-                    self.timer.force_low();
-                    self.running = false;
-                    return Err(DeadmanLapsed);
-                }
-                if !self.running {
-                    self.timer.pulse();
-                    self.running = true;
-                }
-                self.timer.retrigger(hopper_control::deadman::COMPARE);
-            }
-            hopper_control::deadman::Write::ForceLow => {
-                self.timer.force_low();
-                self.timer.stop();
-                self.running = false;
-            }
-        }
-        Ok(())
-    }
-
-    /// AMP_EN's input register follows the pin in its alternate function too.
-    fn reads_off(&mut self) -> Option<bool> {
-        Some(pinmap::amp_en_reads_low())
-    }
-}
+/// [`hopper_control::deadman::Deadman`]'s writes) as the amplifier enable.
+pub type Deadman = hopper_control::deadman::Deadman<pinmap::DeadmanRegs>;
 
 impl BoardIo {
     /// Clears the control interrupt's flag (ADC injected end of conversion); returns whether it was set.
@@ -981,8 +975,7 @@ impl BoardIo {
 
 /// The deadman's window lapsed between two enabled periods
 /// ([`Deadman`]).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct DeadmanLapsed;
+pub use hopper_control::deadman::Lapsed as DeadmanLapsed;
 
 impl HopperIo for BoardIo {
     type Error = PinError<DeadmanLapsed>;

@@ -247,9 +247,9 @@ pub fn queue_save(record: &[u8]) {
     let n = record.len().min(MAX_RECORD);
     let mut bytes = [0u8; MAX_RECORD];
     bytes[..n].copy_from_slice(&record[..n]);
-    // SAFETY: only the control task (one priority) and `init` (before any
-    // task runs) touch the slot; written through a raw pointer, never
-    // referenced.
+    // SAFETY: only the link task (one priority; the control task resets
+    // the MCU after it) and `init` (before any task runs) touch the slot;
+    // written through a raw pointer, never referenced.
     unsafe {
         let s = core::ptr::addr_of_mut!(SLOT).cast::<Slot>();
         core::ptr::write_volatile(
@@ -270,8 +270,11 @@ pub struct AtBoot {
     pub record: [u8; MAX_RECORD],
     /// Its length, if one was read.
     pub len: Option<usize>,
-    /// A save was pending and written (`Some(true)`) or failed to be.
+    /// A save was pending and written and read back (`Some(true)`) or
+    /// failed to be.
     pub saved: Option<bool>,
+    /// Why a pending save was refused, if it was ([`save_refusal`]).
+    pub refused: Option<&'static str>,
     /// The store's error, if reading it failed.
     pub error: Option<hopper_store::StoreError>,
 }
@@ -283,28 +286,58 @@ impl AtBoot {
     }
 }
 
+/// FLASH_OPTCR's WDG_SW (bit 5): 0 is the hardware watchdog option, the
+/// IWDG running from reset (RM0090, option bytes).
+const OPTCR_WDG_SW: u32 = 1 << 5;
+
+/// Why a pending save is not written, if it must not be: the hardware
+/// watchdog option (its reset, 0.5 s after boot at its reset prescaler,
+/// would cut the 1-2 s sector erase, and every later boot would try it
+/// again), or a supply below the erase's minimum for x32 parallelism
+/// (2.7 V, RM0090 Table 13), read through the programmable voltage
+/// detector at its 2.8 V level.
+pub fn save_refusal(flash: &pac::FLASH, pwr: &pac::PWR) -> Option<&'static str> {
+    if flash.optcr().read().bits() & OPTCR_WDG_SW == 0 {
+        return Some("the hardware watchdog option (WDG_SW = 0) is set: its reset would cut the sector erase");
+    }
+    // PVD at level 6 (2.8 V rising, 2.7 V falling, DS8626): PVDO reads 1
+    // while VDD is below it. It settles within 100 us (DS8626 t_PVD):
+    // about 17,000 cycles at 168 MHz, 1,600 on the HSI; wait 20,000 nops.
+    pwr.cr().modify(|_, w| w.pls().set(6).pvde().set_bit());
+    for _ in 0..20_000 {
+        cortex_m::asm::nop();
+    }
+    let low = pwr.csr().read().pvdo().bit_is_set();
+    pwr.cr().modify(|_, w| w.pvde().clear_bit());
+    low.then_some("the supply is below 2.8 V (the PVD): a sector erase at x32 needs 2.7-3.6 V")
+}
+
 /// In `init`, before the watchdog starts: writes a pending save, then
-/// reads the saved record.
+/// reads the saved record. The slot is marked taken only once the record
+/// reads back from flash as written (a reset in the middle of the erase
+/// tries again at the next boot), or when the save is refused
+/// ([`save_refusal`]: it is dropped, and `init` says why).
 #[allow(unsafe_code)] // The slot is a `static mut` in `.uninit`.
-pub fn at_boot(flash: &pac::FLASH) -> AtBoot {
+pub fn at_boot(flash: &pac::FLASH, pwr: &pac::PWR) -> AtBoot {
     // SAFETY: `init` runs before every task: nothing else touches the slot;
     // read as words through a raw pointer (its bytes may be a power-on's
     // random RAM: every value is checked before use).
+    let slot = core::ptr::addr_of_mut!(SLOT).cast::<Slot>();
     let pending = unsafe {
-        let s = core::ptr::addr_of_mut!(SLOT).cast::<Slot>();
-        let magic = core::ptr::read_volatile(core::ptr::addr_of!((*s).magic));
-        let len = core::ptr::read_volatile(core::ptr::addr_of!((*s).len)) as usize;
-        let crc = core::ptr::read_volatile(core::ptr::addr_of!((*s).crc));
-        let record = core::ptr::read_volatile(core::ptr::addr_of!((*s).record));
-        // Taken: a later reset does not write it again.
-        core::ptr::write_volatile(core::ptr::addr_of_mut!((*s).magic), 0);
+        let magic = core::ptr::read_volatile(core::ptr::addr_of!((*slot).magic));
+        let len = core::ptr::read_volatile(core::ptr::addr_of!((*slot).len)) as usize;
+        let crc = core::ptr::read_volatile(core::ptr::addr_of!((*slot).crc));
+        let record = core::ptr::read_volatile(core::ptr::addr_of!((*slot).record));
         (magic == PENDING && len <= MAX_RECORD && crc == slot_crc(&record[..len]))
             .then_some((record, len))
     };
+    // SAFETY: as above.
+    let take = || unsafe { core::ptr::write_volatile(core::ptr::addr_of_mut!((*slot).magic), 0) };
     let mut out = AtBoot {
         record: [0; MAX_RECORD],
         len: None,
         saved: None,
+        refused: None,
         error: None,
     };
     let mut store = match hopper_store::Store::new(InternalFlash::new(flash), STORE_RANGE) {
@@ -315,7 +348,20 @@ pub fn at_boot(flash: &pac::FLASH) -> AtBoot {
         }
     };
     if let Some((record, len)) = pending {
-        out.saved = Some(hopper_store::block_on(store.save(&record[..len])).is_ok());
+        if let Some(why) = save_refusal(flash, pwr) {
+            take();
+            out.saved = Some(false);
+            out.refused = Some(why);
+        } else {
+            let written = hopper_store::block_on(store.save(&record[..len])).is_ok();
+            let mut back = [0u8; MAX_RECORD];
+            let verified = written
+                && matches!(hopper_store::block_on(store.load(&mut back)), Ok(Some(n)) if back[..n] == record[..len]);
+            // Taken once it reads back; a failed write is not retried
+            // either (the same write would fail the same way at every boot).
+            take();
+            out.saved = Some(verified);
+        }
     }
     match hopper_store::block_on(store.load(&mut out.record)) {
         Ok(len) => out.len = len,

@@ -57,6 +57,20 @@ hopper_app::fault_handlers!(hopper_app::park);
 /// The fault test (`--features fault-test`, `cargo xtask board-init`).
 #[cfg(all(target_os = "none", feature = "fault-test"))]
 mod fault_test {
+    /// The deadman as an enabled period leaves it (the counter running,
+    /// the channel in PWM mode 2, AMP_EN high), so that the fault entry
+    /// has an enabled channel to force inactive.
+    pub fn enable_deadman() {
+        use hopper_control::deadman::{OcMode, TimerRegs, COMPARE};
+        #[allow(unsafe_code)] // The test's own handle; the control task never runs in it.
+        // SAFETY: in the fault test the control task never runs (QEMU models
+        // no injected ADC), and this path ends in the fault.
+        let mut t = unsafe { hopper_app::pinmap::DeadmanRegs::steal() };
+        t.write_cr1(true, true);
+        t.write_cnt(COMPARE);
+        t.write_ocm(OcMode::Pwm2);
+    }
+
     /// Moves the main stack pointer below the SRAM (where a stack that
     /// flip-link put below the statics overflows to) and executes an
     /// undefined instruction: the exception's entry cannot stack, and the
@@ -72,7 +86,7 @@ mod fault_test {
 
 /// The board application.
 #[cfg(target_os = "none")]
-#[rtic::app(device = stm32f4::stm32f405, peripherals = true, dispatchers = [FSMC, FPU])]
+#[rtic::app(device = stm32f4::stm32f405, peripherals = true, dispatchers = [CAN2_SCE, CAN2_RX1])]
 mod app {
     use cortex_m::peripheral::NVIC;
     use heapless::spsc::Consumer;
@@ -183,7 +197,7 @@ mod app {
             (rx_in, tx_out),
         );
         // Period starts are timed with the clock that runs.
-        cycles.set_hz(board.io.sysclk_hz());
+        cycles.set_hz(board.io.sysclk_hz(), board.io.control_hz());
         if let Some(e) = board.stored.error {
             defmt::error!("calibration store: {=str}: the defaults run", e.name());
         }
@@ -193,7 +207,9 @@ mod app {
         // The saved calibration (written by this init if a save waited).
         if let Some(ok) = board.stored.saved {
             link.save_done(ok, false);
-            if ok {
+            if let Some(why) = board.stored.refused {
+                defmt::error!("calibration save refused: {=str}", why);
+            } else if ok {
                 defmt::info!("calibration saved to flash");
             } else {
                 defmt::error!("calibration save to flash failed");
@@ -281,7 +297,10 @@ mod app {
     #[idle]
     fn idle(_: idle::Context) -> ! {
         #[cfg(feature = "fault-test")]
-        crate::fault_test::hard_fault_off_the_stack();
+        {
+            crate::fault_test::enable_deadman();
+            crate::fault_test::hard_fault_off_the_stack();
+        }
         #[cfg(not(feature = "fault-test"))]
         loop {
             cortex_m::asm::nop();
@@ -330,7 +349,9 @@ mod app {
             cx.local.log.push(item);
         }
         *cx.local.polls = cx.local.polls.wrapping_add(1);
-        if cx.local.polls.is_multiple_of(100) && cx.local.dump.pressed() {
+        // The dump's thousand log frames only while disarmed: each frame
+        // masks interrupts (docs/safety.md, "Logging").
+        if cx.local.polls.is_multiple_of(100) && !p.armed && cx.local.dump.pressed() {
             let _ = dump::spawn(cx.local.log.dropped());
         }
         rtic::pend(LINK_IRQ);

@@ -170,6 +170,11 @@ pub const AMP_EN_BSRR_RESET: u32 = 1 << (16 + AMP_EN as u32);
 pub const AMP_EN_MODER_MASK: u32 = 0b11 << (2 * AMP_EN as u32);
 /// AMP_EN's MODER bits for a general-purpose output (0b01).
 pub const AMP_EN_MODER_OUTPUT: u32 = 0b01 << (2 * AMP_EN as u32);
+/// The deadman channel's OCxM field in its CCMR (bits 6:4 for channel 1
+/// and channel 3 alike), for the HardFault entry's writes.
+pub const DEADMAN_OCM_MASK: u32 = 0b111 << 4;
+/// OCxM = 0b100, forced inactive.
+pub const DEADMAN_OCM_FORCE_INACTIVE: u32 = 0b100 << 4;
 
 /// AMP_EN low, then an output, its port clocked (GPIOA-C): the output is
 /// latched low *before* the pin becomes an output, so it never drives
@@ -192,88 +197,91 @@ pub fn amp_en_low(rcc: &pac::RCC, gpiob: &pac::GPIOB) {
     gpiob.moder().modify(|_, w| w.moder(AMP_EN).output());
 }
 
-/// The deadman's one-pulse output channel, written once per timer type
-/// (TIM3's channel 3 on the H405, TIM12's channel 1 on the Feather):
-/// what `board::Deadman` and the fault paths do with it.
-pub trait DeadmanChannel {
-    /// One-pulse, stopped, the prescaler loaded, the window `arr`, the
-    /// channel an output compare forced low, without preload (a mode
-    /// write takes effect at once), enabled, active high.
-    fn setup(&self, psc: u16, arr: u16, compare: u16);
-    /// The output forced low at once.
-    fn force_low(&self);
-    /// PWM mode 2: high while `CNT >= CCR`.
-    fn pulse(&self);
-    /// The counter stopped and one-pulse kept.
-    fn stop(&self);
-    /// CR1 cleared: the counter stopped (what the fault paths do).
-    fn halt(&self);
-    /// Whether the counter stopped by itself (the window's end).
-    fn stopped(&self) -> bool;
-    /// The counter at `count` and running: the window starts again.
-    fn retrigger(&self, count: u16);
+/// The debugger's freeze of both maps' deadman timers (TIM3, TIM12) off
+/// (DBGMCU_APB1_FZ): a debugger may have set it in an earlier session, and
+/// only a power-on reset clears it; frozen, a halted core would hold the
+/// enable high.
+pub fn unfreeze_timers(dbgmcu: &pac::DBGMCU) {
+    dbgmcu
+        .apb1_fz()
+        .modify(|_, w| w.dbg_tim3_stop().clear_bit().dbg_tim12_stop().clear_bit());
+}
+
+/// The deadman timer's registers, for [`hopper_control::deadman`]'s one
+/// sequence of writes (`TimerRegs`: one method, one register write),
+/// written once per timer type (TIM3's channel 3 on the H405, TIM12's
+/// channel 1 on the Feather).
+#[derive(Debug)]
+pub struct DeadmanRegs(pub DeadmanTimer);
+
+impl DeadmanRegs {
+    /// The registers from any context (the panic and fault paths, which
+    /// own no peripheral).
+    ///
+    /// # Safety
+    /// Only where nothing else can write the timer meanwhile: a path that
+    /// does not return (the other owner never runs again).
+    #[allow(unsafe_code)] // A second handle on the timer, for a path that does not return.
+    pub unsafe fn steal() -> Self {
+        // SAFETY: the caller's.
+        DeadmanRegs(unsafe { DeadmanTimer::steal() })
+    }
 }
 
 /// The deadman on a timer type: its channel's register and field names.
-macro_rules! deadman_channel {
-    ($block:ty, $ccmr:ident, $ocm:ident, $ocpe:ident, $ccs:ident, $ccr:ident, $cce:ident, $ccp:ident) => {
-        impl DeadmanChannel for $block {
-            fn setup(&self, psc: u16, arr: u16, compare: u16) {
-                self.cr1().write(|w| w.opm().enabled().cen().disabled());
-                self.psc().write(|w| w.psc().set(psc));
-                self.arr().write(|w| w.arr().set(arr));
-                self.$ccr().write(|w| w.ccr().set(compare));
-                self.$ccmr()
-                    .write(|w| w.$ccs().output().$ocpe().disabled().$ocm().force_inactive());
-                // Load the prescaler (an update event, with the counter stopped).
-                self.egr().write(|w| w.ug().set_bit());
-                self.sr().write(|w| w.uif().clear_bit());
-                self.cnt().write(|w| w.cnt().set(0));
-                self.ccer().write(|w| w.$ccp().clear_bit().$cce().set_bit());
+macro_rules! deadman_regs {
+    ($ccmr:ident, $ocm:ident, $ocpe:ident, $ccs:ident, $ccr:ident, $cce:ident, $ccp:ident) => {
+        impl hopper_control::deadman::TimerRegs for DeadmanRegs {
+            fn write_cr1(&mut self, opm: bool, cen: bool) {
+                self.0.cr1().write(|w| w.opm().bit(opm).cen().bit(cen));
             }
-            fn force_low(&self) {
-                self.$ccmr().modify(|_, w| w.$ocm().force_inactive());
+            fn counter_enabled(&self) -> bool {
+                self.0.cr1().read().cen().is_enabled()
             }
-            fn pulse(&self) {
-                self.$ccmr().modify(|_, w| w.$ocm().pwm_mode2());
+            fn write_psc(&mut self, psc: u16) {
+                self.0.psc().write(|w| w.psc().set(psc));
             }
-            fn stop(&self) {
-                self.cr1().write(|w| w.opm().enabled().cen().disabled());
+            fn write_arr(&mut self, arr: u16) {
+                self.0.arr().write(|w| w.arr().set(arr));
             }
-            fn halt(&self) {
-                self.cr1().write(|w| w.cen().disabled());
+            fn write_ccr(&mut self, ccr: u16) {
+                self.0.$ccr().write(|w| w.ccr().set(ccr));
             }
-            fn stopped(&self) -> bool {
-                self.cr1().read().cen().is_disabled()
+            fn write_ocm(&mut self, mode: hopper_control::deadman::OcMode) {
+                use hopper_control::deadman::OcMode;
+                self.0.$ccmr().modify(|_, w| {
+                    let w = w.$ccs().output().$ocpe().disabled();
+                    match mode {
+                        OcMode::ForceInactive => w.$ocm().force_inactive(),
+                        OcMode::Pwm2 => w.$ocm().pwm_mode2(),
+                    }
+                });
             }
-            fn retrigger(&self, count: u16) {
-                self.cnt().write(|w| w.cnt().set(count));
-                self.cr1().write(|w| w.opm().enabled().cen().enabled());
+            fn generate_update(&mut self) {
+                self.0.egr().write(|w| w.ug().set_bit());
+            }
+            fn clear_update_flag(&mut self) {
+                self.0.sr().write(|w| w.uif().clear_bit());
+            }
+            fn write_cnt(&mut self, cnt: u16) {
+                self.0.cnt().write(|w| w.cnt().set(cnt));
+            }
+            fn enable_output(&mut self) {
+                self.0
+                    .ccer()
+                    .write(|w| w.$ccp().clear_bit().$cce().set_bit());
+            }
+            fn pin_reads_low(&self) -> Option<bool> {
+                Some(amp_en_reads_low())
             }
         }
     };
 }
 
-deadman_channel!(
-    pac::tim3::RegisterBlock,
-    ccmr2_output,
-    oc3m,
-    oc3pe,
-    cc3s,
-    ccr3,
-    cc3e,
-    cc3p
-);
-deadman_channel!(
-    pac::tim9::RegisterBlock,
-    ccmr1_output,
-    oc1m,
-    oc1pe,
-    cc1s,
-    ccr1,
-    cc1e,
-    cc1p
-);
+#[cfg(not(feature = "feather"))]
+deadman_regs!(ccmr2_output, oc3m, oc3pe, cc3s, ccr3, cc3e, cc3p);
+#[cfg(feature = "feather")]
+deadman_regs!(ccmr1_output, oc1m, oc1pe, cc1s, ccr1, cc1e, cc1p);
 
 /// Encoder mode 3 (×4) on CH1/CH2, filtered, wrapping at the counter's
 /// width (`$max`), counter at 0 and running. A macro because the
@@ -345,6 +353,9 @@ pub mod h405 {
     pub type DeadmanTimer = pac::TIM3;
     /// TIM3's register block address (RM0090, memory map).
     pub const DEADMAN_TIMER_ADDR: u32 = 0x4000_0400;
+    /// The offset of the deadman channel's mode register: TIM3_CCMR2
+    /// (OC3M in bits 6:4).
+    pub const DEADMAN_CCMR_OFFSET: u32 = 0x1C;
     /// The e-stop input, PB1.
     pub type Estop = PortPin<'B', 1>;
     /// The amplifier-fault input, PB4.
@@ -495,6 +506,9 @@ pub mod feather {
     pub type DeadmanTimer = pac::TIM12;
     /// TIM12's register block address (RM0090, memory map).
     pub const DEADMAN_TIMER_ADDR: u32 = 0x4000_1800;
+    /// The offset of the deadman channel's mode register: TIM12_CCMR1
+    /// (OC1M in bits 6:4).
+    pub const DEADMAN_CCMR_OFFSET: u32 = 0x18;
     /// The e-stop input, PB9 (D10).
     pub type Estop = PortPin<'B', 9>;
     /// The amplifier-fault input, PC2 (D12).

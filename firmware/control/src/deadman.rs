@@ -2,17 +2,31 @@
 //! switch off. The enable pin is a timer's output in one-pulse mode
 //! (docs/board.md, "Hardware deadman on AMP_EN"): the output is high only
 //! while the timer counts, every control period that drives the motor
-//! restarts the count ([`Write::Retrigger`]), and the count stops by itself
+//! restarts the count ([`Deadman::set`]), and the count stops by itself
 //! [`WINDOW_PERIODS`] periods after the last restart. So the amplifier
 //! drops within that window of the control interrupt stopping, whatever
 //! the core does: a lockup, a debugger halt (the timer keeps counting), a
 //! handler that hangs. A period that does not drive the motor forces the
-//! output low at once ([`Write::ForceLow`]).
+//! output low at once ([`force_off`]).
 //!
-//! The board programs the timer from [`prescaler`] and [`window_ticks`];
-//! [`OnePulse`] is the timer as RM0090 describes it (upcounting, one-pulse
-//! mode, PWM mode 2 with the compare at 1), so the retrigger logic is
-//! tested here, on the host.
+//! The board's register writes are here, once, as [`Deadman`] over the
+//! timer's registers ([`TimerRegs`]: one method, one register write), so
+//! that the same call sequence runs on the board (the pin map implements
+//! [`TimerRegs`] for its timer) and, in this module's tests, against
+//! [`Gpt`], a register-level model of a general-purpose timer as RM0090
+//! describes it (CNT, ARR, CCR, CR1's CEN and OPM, CCMRx's OCxM, EGR's UG,
+//! CCER; the output computed from them). The tests check after every
+//! single write, as a halt (a breakpoint) between any two would leave it,
+//! that the output is high only while the counter runs and that it falls
+//! within `ARR` ticks: a halted core drops the enable (DBGMCU's freeze bits
+//! cleared at boot keep the timer counting through a halt).
+//!
+//! The order that gives this: the counter runs before the channel leaves
+//! forced-inactive (an enable starts the count, then PWM mode 2); a
+//! retrigger starts the counter before it moves `CNT` back; a disable
+//! forces the channel inactive, then stops the counter, then clears `CNT`
+//! (a stopped counter left at `CNT >= CCR` would drive the output high the
+//! moment PWM mode 2 returns).
 
 /// The timer's tick, Hz (1 us).
 pub const TICK_HZ: u32 = 1_000_000;
@@ -37,82 +51,267 @@ pub fn window_ticks(control_hz: u32) -> u16 {
     u16::try_from(ticks.max(2)).unwrap_or(u16::MAX)
 }
 
-/// What a control period writes to the timer.
+/// The channel's output-compare mode (CCMRx's OCxM) the deadman uses.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Write {
-    /// The amplifier enabled this period: `CNT = COMPARE`, PWM mode 2, the
-    /// counter started (the window starts again).
-    Retrigger,
-    /// Disabled: the output forced low (OC3M = force inactive), the
-    /// counter stopped.
-    ForceLow,
+pub enum OcMode {
+    /// `0b100`: OCxREF forced low.
+    ForceInactive,
+    /// `0b111`, PWM mode 2 (upcounting): OCxREF high while `CNT >= CCR`.
+    Pwm2,
 }
 
-/// The period's write for the enable it decided.
-pub fn write_for(enable: bool) -> Write {
-    if enable {
-        Write::Retrigger
-    } else {
-        Write::ForceLow
+/// The deadman timer's registers, one write a method (a general-purpose
+/// timer, RM0090 section 18; 16-bit on both pin maps' deadman timers).
+/// The pin map implements it for its timer; [`Gpt`] models it.
+pub trait TimerRegs {
+    /// CR1: one-pulse mode `opm`, counter enable `cen` (every other bit 0).
+    fn write_cr1(&mut self, opm: bool, cen: bool);
+    /// CR1's CEN: whether the counter runs (OPM clears it at the update).
+    fn counter_enabled(&self) -> bool;
+    /// PSC (loaded at the next update event).
+    fn write_psc(&mut self, psc: u16);
+    /// ARR, without preload.
+    fn write_arr(&mut self, arr: u16);
+    /// The channel's CCR.
+    fn write_ccr(&mut self, ccr: u16);
+    /// The channel's CCMRx field: output, no preload, mode `mode`.
+    fn write_ocm(&mut self, mode: OcMode);
+    /// EGR's UG: an update event (the counter to 0, the prescaler loaded).
+    fn generate_update(&mut self);
+    /// SR's UIF cleared.
+    fn clear_update_flag(&mut self);
+    /// CNT.
+    fn write_cnt(&mut self, cnt: u16);
+    /// CCER: the channel's output enabled, active high.
+    fn enable_output(&mut self);
+    /// Whether the pin reads low, where it can be read back.
+    fn pin_reads_low(&self) -> Option<bool> {
+        None
     }
 }
 
-/// The timer, upcounting in one-pulse mode: counts from `CNT` to `ARR`,
-/// then the update event returns it to 0 and stops it. Its output, in PWM
-/// mode 2 with the compare at [`COMPARE`], is high while the counter is at
-/// or beyond the compare; forced low, it is low.
+/// The window lapsed between two enabled periods: the amplifier went off
+/// by itself, and stays off ([`Deadman::set`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct OnePulse {
-    cnt: u32,
-    arr: u32,
-    running: bool,
-    forced_low: bool,
+pub struct Lapsed;
+
+/// Sets the timer up: stopped, one-pulse, ticking at the prescaled rate,
+/// the window `arr` ticks, the channel forced inactive and enabled, the
+/// counter at 0. The output is low throughout.
+pub fn setup<T: TimerRegs>(t: &mut T, psc: u16, arr: u16) {
+    t.write_ocm(OcMode::ForceInactive);
+    t.write_cr1(true, false);
+    t.write_psc(psc);
+    t.write_arr(arr);
+    t.write_ccr(COMPARE);
+    // Load the prescaler (an update event, with the counter stopped).
+    t.generate_update();
+    t.clear_update_flag();
+    t.write_cnt(0);
+    t.enable_output();
 }
 
-impl OnePulse {
-    /// As `init` leaves it: stopped, forced low, the window `arr` ticks.
-    pub fn new(arr: u16) -> Self {
+/// The enable off at once, by writes alone (what a disable and every
+/// fault path do): the channel forced inactive first (the output low
+/// whatever the counter does), then the counter stopped and cleared, so
+/// that nothing of it is left to drive the output when PWM mode 2 returns.
+pub fn force_off<T: TimerRegs>(t: &mut T) {
+    t.write_ocm(OcMode::ForceInactive);
+    t.write_cr1(true, false);
+    t.write_cnt(0);
+}
+
+/// The amplifier enable through the deadman timer: every enabled period
+/// restarts the window, a disabled one forces the output off.
+#[derive(Debug)]
+pub struct Deadman<T> {
+    timer: T,
+    /// Whether the channel is in PWM mode 2 (not forced inactive).
+    running: bool,
+}
+
+impl<T: TimerRegs> Deadman<T> {
+    /// The timer set up ([`setup`]) with the window of [`WINDOW_PERIODS`]
+    /// periods at `control_hz`, its clock at `timer_hz`; the output low.
+    pub fn new(mut timer: T, timer_hz: u32, control_hz: u32) -> Self {
+        setup(&mut timer, prescaler(timer_hz), window_ticks(control_hz));
+        Self {
+            timer,
+            running: false,
+        }
+    }
+
+    /// The timer's registers.
+    pub fn timer(&self) -> &T {
+        &self.timer
+    }
+
+    /// Enabled: the window starts again (high for [`WINDOW_PERIODS`] more
+    /// periods unless retriggered); disabled: forced off at once.
+    ///
+    /// An enabled period after the window lapsed (the control interrupt
+    /// stopped for that long: a halt, a stall) gets [`Lapsed`] and leaves
+    /// the output off: the state the amplifier would resume on is stale.
+    pub fn set(&mut self, on: bool) -> Result<(), Lapsed> {
+        if !on {
+            force_off(&mut self.timer);
+            self.running = false;
+            return Ok(());
+        }
+        if self.running && !self.timer.counter_enabled() {
+            force_off(&mut self.timer);
+            self.running = false;
+            return Err(Lapsed);
+        }
+        // The counter runs before CNT moves back to the compare, and both
+        // before the channel can drive high.
+        self.timer.write_cr1(true, true);
+        self.timer.write_cnt(COMPARE);
+        if !self.running {
+            self.timer.write_ocm(OcMode::Pwm2);
+            self.running = true;
+        }
+        Ok(())
+    }
+}
+
+impl<T: TimerRegs> crate::hal::AmpEnable for Deadman<T> {
+    type Error = Lapsed;
+
+    fn set(&mut self, on: bool) -> Result<(), Lapsed> {
+        Deadman::set(self, on)
+    }
+
+    fn reads_off(&mut self) -> Option<bool> {
+        self.timer.pin_reads_low()
+    }
+}
+
+/// A general-purpose timer's registers and output as RM0090 describes
+/// them (upcounting, 16-bit), for the tests of the board's sequences.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Gpt {
+    /// CNT.
+    pub cnt: u16,
+    /// ARR.
+    pub arr: u16,
+    /// The channel's CCR.
+    pub ccr: u16,
+    /// CR1.CEN.
+    pub cen: bool,
+    /// CR1.OPM.
+    pub opm: bool,
+    /// The channel's OCxM (`None`: frozen, its reset value).
+    pub ocm: Option<OcMode>,
+    /// CCER's CCxE.
+    pub output_enabled: bool,
+    /// Register writes so far.
+    pub writes: u32,
+}
+
+impl Default for Gpt {
+    /// As after reset: every register 0 (ARR 0xFFFF).
+    fn default() -> Self {
         Self {
             cnt: 0,
-            arr: u32::from(arr),
-            running: false,
-            forced_low: true,
+            arr: u16::MAX,
+            ccr: 0,
+            cen: false,
+            opm: false,
+            ocm: None,
+            output_enabled: false,
+            writes: 0,
         }
     }
+}
 
-    /// A period's write.
-    pub fn apply(&mut self, w: Write) {
-        match w {
-            Write::Retrigger => {
-                self.forced_low = false;
-                self.cnt = u32::from(COMPARE);
-                self.running = true;
-            }
-            Write::ForceLow => {
-                self.forced_low = true;
-                self.running = false;
-            }
-        }
+impl Gpt {
+    /// The pin: OCxREF through the enabled, active-high channel.
+    pub fn output(&self) -> bool {
+        let reference = match self.ocm {
+            Some(OcMode::Pwm2) => self.cnt >= self.ccr,
+            Some(OcMode::ForceInactive) | None => false,
+        };
+        self.output_enabled && reference
     }
 
-    /// `ticks` of the timer's clock.
-    pub fn advance(&mut self, ticks: u32) {
-        if !self.running {
+    /// One tick of the prescaled clock: the counter up to ARR, then the
+    /// update event (to 0; in one-pulse mode, stopped). From above ARR it
+    /// counts on to the top and wraps.
+    pub fn tick(&mut self) {
+        if !self.cen {
             return;
         }
-        let to_update = self.arr.saturating_sub(self.cnt);
-        if ticks > to_update {
-            // The update event: back to 0 and stopped (OPM).
+        if self.cnt == self.arr {
             self.cnt = 0;
-            self.running = false;
+            if self.opm {
+                self.cen = false;
+            }
         } else {
-            self.cnt += ticks;
+            self.cnt = self.cnt.wrapping_add(1);
         }
     }
 
-    /// The pin: high (the amplifier enabled) or low.
-    pub fn output(&self) -> bool {
-        !self.forced_low && self.cnt >= u32::from(COMPARE)
+    /// Ticks until the output falls with nothing written (`None`: never).
+    pub fn ticks_until_low(&self) -> Option<u32> {
+        let mut t = *self;
+        for n in 0..=u32::from(u16::MAX) + 1 {
+            if !t.output() {
+                return Some(n);
+            }
+            if !t.cen {
+                return None;
+            }
+            t.tick();
+        }
+        None
+    }
+}
+
+impl TimerRegs for Gpt {
+    fn write_cr1(&mut self, opm: bool, cen: bool) {
+        self.writes += 1;
+        self.opm = opm;
+        self.cen = cen;
+    }
+    fn counter_enabled(&self) -> bool {
+        self.cen
+    }
+    fn write_psc(&mut self, _psc: u16) {
+        self.writes += 1;
+    }
+    fn write_arr(&mut self, arr: u16) {
+        self.writes += 1;
+        self.arr = arr;
+    }
+    fn write_ccr(&mut self, ccr: u16) {
+        self.writes += 1;
+        self.ccr = ccr;
+    }
+    fn write_ocm(&mut self, mode: OcMode) {
+        self.writes += 1;
+        self.ocm = Some(mode);
+    }
+    fn generate_update(&mut self) {
+        self.writes += 1;
+        self.cnt = 0;
+        if self.opm {
+            self.cen = false;
+        }
+    }
+    fn clear_update_flag(&mut self) {
+        self.writes += 1;
+    }
+    fn write_cnt(&mut self, cnt: u16) {
+        self.writes += 1;
+        self.cnt = cnt;
+    }
+    fn enable_output(&mut self) {
+        self.writes += 1;
+        self.output_enabled = true;
+    }
+    fn pin_reads_low(&self) -> Option<bool> {
+        Some(!self.output())
     }
 }
 
@@ -120,9 +319,95 @@ impl OnePulse {
 mod tests {
     extern crate std;
     use super::*;
+    use std::string::String;
 
     const CONTROL_HZ: u32 = 10_000;
+    const TIMER_HZ: u32 = 84_000_000;
     const TICKS_PER_PERIOD: u32 = TICK_HZ / CONTROL_HZ;
+
+    /// [`Gpt`] checked after every single write, as a halt between any two
+    /// writes would leave it: the output high only with the counter
+    /// running, and falling within ARR ticks. The first write that breaks
+    /// it is kept.
+    #[derive(Default)]
+    struct Checked {
+        t: Gpt,
+        broken: Option<String>,
+    }
+
+    impl Checked {
+        fn check(&mut self, what: &str) {
+            if self.broken.is_some() || !self.t.output() {
+                return;
+            }
+            let ok = self.t.cen
+                && self
+                    .t
+                    .ticks_until_low()
+                    .is_some_and(|n| n <= u32::from(self.t.arr));
+            if !ok {
+                self.broken = Some(std::format!(
+                    "after write {} ({what}): output high, {:?}",
+                    self.t.writes,
+                    self.t
+                ));
+            }
+        }
+        fn tick(&mut self, n: u32) {
+            for _ in 0..n {
+                self.t.tick();
+            }
+        }
+    }
+
+    impl TimerRegs for Checked {
+        fn write_cr1(&mut self, opm: bool, cen: bool) {
+            self.t.write_cr1(opm, cen);
+            self.check("CR1");
+        }
+        fn counter_enabled(&self) -> bool {
+            self.t.counter_enabled()
+        }
+        fn write_psc(&mut self, psc: u16) {
+            self.t.write_psc(psc);
+            self.check("PSC");
+        }
+        fn write_arr(&mut self, arr: u16) {
+            self.t.write_arr(arr);
+            self.check("ARR");
+        }
+        fn write_ccr(&mut self, ccr: u16) {
+            self.t.write_ccr(ccr);
+            self.check("CCR");
+        }
+        fn write_ocm(&mut self, mode: OcMode) {
+            self.t.write_ocm(mode);
+            self.check("OCxM");
+        }
+        fn generate_update(&mut self) {
+            self.t.generate_update();
+            self.check("UG");
+        }
+        fn clear_update_flag(&mut self) {
+            self.t.clear_update_flag();
+            self.check("UIF");
+        }
+        fn write_cnt(&mut self, cnt: u16) {
+            self.t.write_cnt(cnt);
+            self.check("CNT");
+        }
+        fn enable_output(&mut self) {
+            self.t.enable_output();
+            self.check("CCER");
+        }
+        fn pin_reads_low(&self) -> Option<bool> {
+            self.t.pin_reads_low()
+        }
+    }
+
+    fn deadman() -> Deadman<Checked> {
+        Deadman::new(Checked::default(), TIMER_HZ, CONTROL_HZ)
+    }
 
     #[test]
     fn the_board_clock_ticks_at_a_microsecond_and_the_window_is_three_periods() {
@@ -135,62 +420,107 @@ mod tests {
         assert_eq!(window_ticks(20_000_000), 2);
     }
 
+    /// Enable, disable part-way through a window, enable again, lapse,
+    /// the fault entry's writes: the output is never high with the
+    /// counter stopped, after any single write.
+    #[test]
+    fn every_write_of_every_sequence_leaves_a_high_output_running_and_falling_within_the_window() {
+        let mut d = deadman();
+        assert!(!d.timer.t.output(), "low after setup");
+        // Enabled for some periods, then disabled 150 ticks into a window:
+        // the counter must not be left where PWM mode 2 reads it high.
+        for _ in 0..5 {
+            d.set(true).unwrap();
+            d.timer.tick(TICKS_PER_PERIOD);
+        }
+        d.timer.tick(50);
+        d.set(false).unwrap();
+        assert!(!d.timer.t.output());
+        d.timer.tick(1_000);
+        // Enabled again: checked after each of its writes.
+        d.set(true).unwrap();
+        assert!(d.timer.t.output());
+        // The periods stop: low within the window, and the next enabled
+        // period finds it lapsed and keeps it off.
+        d.timer.tick(u32::from(window_ticks(CONTROL_HZ)));
+        assert!(!d.timer.t.output());
+        assert_eq!(d.set(true), Err(Lapsed));
+        assert!(!d.timer.t.output());
+        // Enabled again, then the fault entry's writes mid-window.
+        d.set(false).unwrap();
+        d.set(true).unwrap();
+        d.timer.tick(120);
+        force_off(&mut d.timer);
+        assert!(!d.timer.t.output());
+        assert!(!d.timer.t.cen);
+        assert_eq!(d.timer.t.ocm, Some(OcMode::ForceInactive));
+        assert_eq!(d.timer.broken, None);
+    }
+
     /// Retriggered every period (jittering by up to a quarter period) the
     /// output never drops; once the periods stop it drops within the
     /// window, and stays low; a disabled period drops it at once.
     #[test]
     fn the_enable_holds_while_retriggered_and_drops_within_the_window() {
         let arr = window_ticks(CONTROL_HZ);
-        let mut t = OnePulse::new(arr);
-        assert!(!t.output(), "low from init");
+        let mut d = deadman();
         for k in 0..10_000u32 {
-            t.apply(write_for(true));
-            assert!(t.output());
+            d.set(true).unwrap();
+            assert!(d.timer.t.output());
             // A period of 100 us, +- 25 us.
             let jitter = (k * 7919) % 51;
-            t.advance(TICKS_PER_PERIOD + jitter - 25);
-            assert!(t.output(), "dropped while retriggered, period {k}");
+            d.timer.tick(TICKS_PER_PERIOD + jitter - 25);
+            assert!(d.timer.t.output(), "dropped while retriggered, period {k}");
         }
         // The control interrupt stops: low after at most the window.
         let mut high_for = 0;
-        while t.output() {
-            t.advance(1);
+        while d.timer.t.output() {
+            d.timer.tick(1);
             high_for += 1;
             assert!(high_for <= u32::from(arr), "still high");
         }
         assert!(high_for <= u32::from(arr) - TICKS_PER_PERIOD + 25);
         for _ in 0..1_000 {
-            t.advance(TICKS_PER_PERIOD);
-            assert!(!t.output(), "rose again without a retrigger");
+            d.timer.tick(TICKS_PER_PERIOD);
+            assert!(!d.timer.t.output(), "rose again without a retrigger");
         }
-        // Enabled again, then disabled: low at once, and it stays low.
-        t.apply(write_for(true));
-        assert!(t.output());
-        t.apply(write_for(false));
-        assert!(!t.output());
-        t.advance(1);
-        assert!(!t.output());
+        // Enabled again (after the lapse is reported), then disabled: low
+        // at once, and it stays low.
+        assert_eq!(d.set(true), Err(Lapsed));
+        d.set(true).unwrap();
+        assert!(d.timer.t.output());
+        d.set(false).unwrap();
+        assert!(!d.timer.t.output());
+        d.timer.tick(1);
+        assert!(!d.timer.t.output());
+        assert_eq!(d.timer.broken, None);
     }
 
     /// Whatever the periods do, the output is high only within the window
-    /// after a retrigger.
+    /// after a retrigger, and no write leaves it high with the counter
+    /// stopped.
     #[test]
     fn the_output_is_high_only_within_a_window_of_a_retrigger() {
         use proptest::prelude::*;
         proptest!(|(steps in proptest::collection::vec((any::<bool>(), 0u32..1_000), 1..200))| {
             let arr = window_ticks(CONTROL_HZ);
-            let mut t = OnePulse::new(arr);
+            let mut d = deadman();
+            let mut lapsed = false;
             for (enable, ticks) in steps {
-                t.apply(write_for(enable));
-                // Ticks since the last retrigger (a disabled period ends it).
-                let mut since = enable.then_some(0u32);
+                let r = d.set(enable);
+                // Ticks since the last retrigger (a disabled or lapsed
+                // period ends it).
+                let mut since = (enable && r.is_ok()).then_some(0u32);
+                lapsed |= r.is_err();
                 for _ in 0..ticks {
-                    t.advance(1);
+                    d.timer.tick(1);
                     since = since.map(|s| s + 1);
                     let in_window = since.is_some_and(|s| s < u32::from(arr));
-                    prop_assert_eq!(t.output(), in_window);
+                    prop_assert_eq!(d.timer.t.output(), in_window);
                 }
             }
+            let _ = lapsed;
+            prop_assert_eq!(d.timer.broken.take(), None);
         });
     }
 }

@@ -146,7 +146,7 @@ mod app {
             Local {
                 io: HilIo::new(board.pins),
                 firmware: ControlLoop::new(runner),
-                control_ticks: Control(ticks),
+                control_ticks: Control(ticks, hopper_control::runner::Pacing::Host),
                 port_queues,
                 samples_in,
                 answers_out,

@@ -187,22 +187,21 @@ mod app {
         }
 
         // The plant between this tick and the next (not part of the period).
-        cx.local.syst.disable_counter();
         let current_a = sim.hal.mean_current_a(f64::from(CONTROL_PERIOD_S));
         let apexes = &mut sim.apexes;
-        let advanced = sim
-            .plant
-            .advance(f64::from(CONTROL_PERIOD_S), current_a, &mut |e| {
+        let plant = &mut sim.plant;
+        let advanced = hopper_app::qemu::with_systick_stopped(cx.local.syst, || {
+            plant.advance(f64::from(CONTROL_PERIOD_S), current_a, &mut |e| {
                 if let Event::Apex { toe_height_m, .. } = e {
                     defmt::println!("apex {=usize} {=f64}", apexes.len() + 1, toe_height_m);
                     let _ = apexes.push(toe_height_m);
                 }
-            });
+            })
+        });
         if advanced.is_err() {
             defmt::error!("plant integration failed");
             debug::exit(debug::EXIT_FAILURE);
         }
-        cx.local.syst.enable_counter();
         // The next tick came before this one finished: a missed deadline.
         runner.end_period(SCB::is_pendst_pending());
         let period = runner.periods();

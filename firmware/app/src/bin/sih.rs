@@ -132,7 +132,7 @@ mod app {
             Local {
                 robot,
                 port_queues,
-                control_ticks: Control(ticks),
+                control_ticks: Control(ticks, hopper_control::runner::Pacing::Sustained),
                 syst: core.SYST,
                 reload,
                 sysclk_hz: board.sysclk_hz,

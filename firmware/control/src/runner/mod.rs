@@ -64,9 +64,96 @@ pub trait CycleCounter {
 
     /// Its rate, Hz, when it counts real time (the board's cycle counter
     /// at the core clock); 0 when it does not (QEMU's instruction count,
-    /// the simulator): the period-start jitter check is then off.
+    /// the simulator). For the cost figures' units only: what the period
+    /// starts are checked against is [`Self::pacing`].
     fn hz(&self) -> u32 {
         0
+    }
+
+    /// What paces the periods, and so whether (and against what) their
+    /// starts are checked.
+    fn pacing(&self) -> Pacing {
+        Pacing::NoClock
+    }
+
+    /// The clock the period starts are read from: everything counted (the
+    /// interrupts that preempt the period included, which [`Self::now`]
+    /// may leave out); `None` when it was found stopped or disturbed (a
+    /// debugger turned the cycle counter off, and it was started again):
+    /// the interval around it is not checked.
+    fn clock(&mut self) -> Option<u32> {
+        Some(self.now())
+    }
+}
+
+/// What paces the control periods: whether the runner checks their
+/// starts ([`Timing::max_jitter_s`]) and against what.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Pacing {
+    /// A hardware trigger at the control rate, `ticks` of
+    /// [`CycleCounter::clock`] a period (the board's timer; SysTick on
+    /// QEMU, in guest instructions): the starts are checked.
+    Trigger {
+        /// Clock ticks a period.
+        ticks: u32,
+    },
+    /// No clock that counts the periods' time (the host simulator): no
+    /// check.
+    NoClock,
+    /// The host paces the periods (hardware in the loop: a period per
+    /// sample received): no check, the host owns the clock.
+    Host,
+    /// A trigger that slows to the rate the chip sustains (the simulated
+    /// hopper on a board, whose robot time is a count of periods): no
+    /// check.
+    Sustained,
+}
+
+impl Pacing {
+    /// Its code on the link (`status`): 0 trigger, 1 no clock, 2 the host,
+    /// 3 sustained.
+    pub fn code(self) -> u8 {
+        match self {
+            Pacing::Trigger { .. } => 0,
+            Pacing::NoClock => 1,
+            Pacing::Host => 2,
+            Pacing::Sustained => 3,
+        }
+    }
+}
+
+/// A period that was late ([`PeriodRunner::last_late`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct LatePeriod {
+    /// Its number ([`PeriodRunner::periods`] when it ran: the periods
+    /// before it).
+    pub period: u32,
+    /// How it was late.
+    pub cause: LateCause,
+    /// For [`LateCause::Start`]: how far its start was from the period,
+    /// s (negative: early); 0 otherwise.
+    pub jitter_s: f32,
+}
+
+/// How a period was late.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum LateCause {
+    /// The next period's trigger came before it ended.
+    Deadline,
+    /// It started outside the jitter bound.
+    Start,
+}
+
+impl LateCause {
+    /// Its code on the link: 0 deadline, 1 start.
+    pub fn code(self) -> u8 {
+        match self {
+            LateCause::Deadline => 0,
+            LateCause::Start => 1,
+        }
     }
 }
 
@@ -283,8 +370,13 @@ pub struct PeriodRunner<H = Owned> {
     /// The current the amplifier was told to drive last period, A (0 while
     /// disabled): the thermal model's input.
     applied_a: f32,
-    /// The counter at the last period's start (`None` before the first).
+    /// The clock at the last period's start (`None` before the first).
     last_start: Option<u32>,
+    /// Period starts read since the clock was last (re)started (2 and up:
+    /// the interval is checked).
+    starts: u8,
+    /// The last period that was late, and how.
+    late: Option<LatePeriod>,
     /// The bring-up routine running, or the last one's report.
     cal: crate::bringup::Calibrator,
     /// Largest deviation of a period-start interval from the period so
@@ -345,6 +437,8 @@ impl<H: HopperSlot> PeriodRunner<H> {
             unsettled: 0,
             applied_a: 0.0,
             last_start: None,
+            starts: 0,
+            late: None,
             cal: crate::bringup::Calibrator::new(),
             max_jitter_s: 0.0,
             at_boot: crate::persist::AtBoot::NoStore,
@@ -432,6 +526,51 @@ impl<H: HopperSlot> PeriodRunner<H> {
         self.feed.starved().is_some()
     }
 
+    /// The period-start check: the interval since the last start must be
+    /// the period within [`Timing::max_jitter_s`], on a trigger-paced
+    /// clock ([`Pacing::Trigger`]). The first interval after the first
+    /// period is not checked: the first period runs whenever start-up
+    /// ends (its trigger pending since the timer started), the second at
+    /// the next trigger, any time up to a period later. Nor is one around
+    /// a clock found stopped, or one that runs backwards (a debugger
+    /// cleared the counter; a wrap is told apart by the last start lying
+    /// within two periods of the top).
+    fn check_start<C: CycleCounter>(&mut self, counter: &mut C) {
+        let Pacing::Trigger { ticks } = counter.pacing() else {
+            return;
+        };
+        let Some(start) = counter.clock() else {
+            self.last_start = None;
+            self.starts = 0;
+            return;
+        };
+        if let Some(last) = self.last_start {
+            let went_back = start < last && last < u32::MAX - ticks.saturating_mul(2);
+            if went_back {
+                self.starts = 0;
+            } else if self.starts >= 2 && ticks > 0 {
+                let interval = start.wrapping_sub(last);
+                let off = interval.abs_diff(ticks);
+                let jitter_s = off as f32 / ticks as f32 * self.timing.period_s;
+                self.max_jitter_s = crate::num::max(self.max_jitter_s, jitter_s);
+                if jitter_s > self.timing.max_jitter_s {
+                    self.late = Some(LatePeriod {
+                        period: self.periods,
+                        cause: LateCause::Start,
+                        jitter_s: if interval < ticks {
+                            -jitter_s
+                        } else {
+                            jitter_s
+                        },
+                    });
+                    self.report_overrun();
+                }
+            }
+        }
+        self.starts = self.starts.saturating_add(1);
+        self.last_start = Some(start);
+    }
+
     /// One whole control period (see the [module documentation](self)).
     pub fn run_period<Io: HopperIo, C: CycleCounter>(
         &mut self,
@@ -440,19 +579,7 @@ impl<H: HopperSlot> PeriodRunner<H> {
     ) -> Period {
         // Each period's start, from the hardware counter: the interval
         // since the last one must be the period, within the jitter bound.
-        let start = counter.now();
-        let hz = counter.hz();
-        if hz > 0 {
-            if let Some(last) = self.last_start {
-                let interval_s = start.wrapping_sub(last) as f32 / hz as f32;
-                let jitter_s = (interval_s - self.timing.period_s).abs();
-                self.max_jitter_s = crate::num::max(self.max_jitter_s, jitter_s);
-                if jitter_s > self.timing.max_jitter_s {
-                    self.report_overrun();
-                }
-            }
-            self.last_start = Some(start);
-        }
+        self.check_start(counter);
         let raw = io.read().ok();
         // The motor heated with last period's current: an overtemperature
         // latches before this period's step, so the step's output is
@@ -601,6 +728,11 @@ impl<H: HopperSlot> PeriodRunner<H> {
     /// periods in a row latch [`Fault::Overrun`] (the next period is safe).
     pub fn end_period(&mut self, late: bool) {
         if late {
+            self.late = Some(LatePeriod {
+                period: self.periods,
+                cause: LateCause::Deadline,
+                jitter_s: 0.0,
+            });
             self.missed = self.missed.saturating_add(1);
             self.late_in_a_row = self.late_in_a_row.saturating_add(1);
             if self.late_in_a_row >= self.timing.overrun_limit {
@@ -625,6 +757,12 @@ impl<H: HopperSlot> PeriodRunner<H> {
     /// far, s (0 when the counter does not count real time).
     pub fn max_jitter_s(&self) -> f32 {
         self.max_jitter_s
+    }
+
+    /// The last period that was late (missed its deadline, or started
+    /// outside the jitter bound), if any.
+    pub fn last_late(&self) -> Option<LatePeriod> {
+        self.late
     }
 
     /// The control step's cost over every period so far.
@@ -889,6 +1027,136 @@ mod tests {
         fn hz(&self) -> u32 {
             self.hz
         }
+        fn pacing(&self) -> Pacing {
+            if self.hz > 0 {
+                Pacing::Trigger {
+                    ticks: self.hz / 10_000,
+                }
+            } else {
+                Pacing::NoClock
+            }
+        }
+    }
+
+    /// Where [`run_gaps`]'s clock starts: 40 periods of 168 MHz below the
+    /// top, so that a longer run wraps.
+    const PACED_START: u32 = u32::MAX - 40 * 16_800;
+
+    /// Periods whose starts are `gaps` apart, in ticks of a counter of
+    /// `hz` with `pacing`, optionally found stopped at some periods;
+    /// whether overrun latched, and the largest jitter.
+    fn run_gaps(gaps: &[u32], pacing: Pacing, hz: u32, stopped_at: &[usize]) -> (bool, f32) {
+        struct Paced {
+            t: u32,
+            gaps: std::vec::Vec<u32>,
+            next: usize,
+            pacing: Pacing,
+            hz: u32,
+            stopped_at: std::vec::Vec<usize>,
+        }
+        impl CycleCounter for Paced {
+            fn now(&mut self) -> u32 {
+                self.t
+            }
+            fn hz(&self) -> u32 {
+                self.hz
+            }
+            fn pacing(&self) -> Pacing {
+                self.pacing
+            }
+            fn clock(&mut self) -> Option<u32> {
+                let k = self.next;
+                if k > 0 {
+                    self.t = self.t.wrapping_add(self.gaps[k - 1]);
+                }
+                self.next += 1;
+                (!self.stopped_at.contains(&k)).then_some(self.t)
+            }
+        }
+        let rest = crate::proptest_support::rest_sample(&HopperConfig::default().calibration);
+        let mut r = runner(Strategy::default());
+        let mut io = Io::new(rest);
+        let mut c = Paced {
+            t: PACED_START,
+            gaps: gaps.to_vec(),
+            next: 0,
+            pacing,
+            hz,
+            stopped_at: stopped_at.to_vec(),
+        };
+        for _ in 0..=gaps.len() {
+            r.arming_mut().link_frame();
+            r.run_period(&mut io, &mut c);
+        }
+        (
+            r.hopper().supervisor().faults().contains(Fault::Overrun),
+            r.max_jitter_s(),
+        )
+    }
+
+    /// The board: TIM4 starts in `init`, whose flash and watchdog work go
+    /// on meanwhile, so the first period runs when `init` ends and the
+    /// second at the next trigger, any time up to a period later. Any such
+    /// boot at 168 MHz, the periods then on time, latches nothing; a
+    /// later short interval still does.
+    #[test]
+    fn a_boot_at_any_phase_of_the_control_timer_latches_no_overrun() {
+        use proptest::prelude::*;
+        const TICKS: u32 = 168_000_000 / 10_000;
+        let pacing = Pacing::Trigger { ticks: TICKS };
+        proptest!(ProptestConfig::with_cases(64), |(first in 0u32..=TICKS, jitter in proptest::collection::vec(-800i32..800, 20))| {
+            let mut gaps = std::vec![first];
+            gaps.extend(jitter.iter().map(|j| TICKS.wrapping_add_signed(*j)));
+            let (latched, max) = run_gaps(&gaps, pacing, 168_000_000, &[]);
+            prop_assert!(!latched, "first interval {first}, max jitter {max}");
+            prop_assert!(max < 5e-6);
+        });
+        // A spurious trigger later on is still caught.
+        let (latched, _) = run_gaps(&[3_000, TICKS, TICKS / 3, TICKS], pacing, 168_000_000, &[]);
+        assert!(latched);
+    }
+
+    /// Hardware in the loop and the simulated hopper on a board: the
+    /// cycle counter runs at 168 MHz, but the host (a sample at a time)
+    /// or a slowed SysTick paces the periods: no check, whatever the
+    /// intervals; the same intervals on a trigger-paced clock latch.
+    #[test]
+    fn periods_the_host_or_a_sustained_rate_paces_are_not_checked_against_the_clock() {
+        let gaps = [168_000, 90_000, 400_000, 17_000, 1_680_000, 168_000];
+        for pacing in [Pacing::Host, Pacing::Sustained, Pacing::NoClock] {
+            assert_eq!(
+                run_gaps(&gaps, pacing, 168_000_000, &[]),
+                (false, 0.0),
+                "{pacing:?}"
+            );
+        }
+        let trigger = Pacing::Trigger { ticks: 16_800 };
+        assert!(run_gaps(&gaps, trigger, 168_000_000, &[]).0);
+    }
+
+    /// A debugger that turns the cycle counter off (the clock is found
+    /// stopped and started again) or clears it (the count runs backwards)
+    /// costs the check an interval, not a spurious overrun.
+    #[test]
+    fn a_cycle_counter_stopped_or_cleared_by_a_debugger_latches_no_overrun() {
+        const TICKS: u32 = 16_800;
+        let trigger = Pacing::Trigger { ticks: TICKS };
+        let mut gaps = std::vec![TICKS; 30];
+        // Found stopped at period 10 (then, restarted, from some other count).
+        gaps[10] = 7;
+        gaps[11] = 3_000_000;
+        assert!(!run_gaps(&gaps, trigger, 168_000_000, &[11]).0);
+        // Cleared to a small count at period 20 (the start runs backwards).
+        let mut gaps = std::vec![TICKS; 30];
+        gaps[19] = 500u32.wrapping_sub(PACED_START.wrapping_add(19 * TICKS));
+        assert!(!run_gaps(&gaps, trigger, 168_000_000, &[]).0);
+        // The counter wraps on time (at period 40): still checked, on time;
+        // late across the wrap, caught.
+        let wrap = run_gaps(&std::vec![TICKS; 60], trigger, 168_000_000, &[]);
+        assert_eq!(wrap, (false, 0.0));
+        let mut gaps = std::vec![TICKS; 60];
+        gaps[40] = TICKS + TICKS / 2;
+        assert!(run_gaps(&gaps, trigger, 168_000_000, &[]).0);
     }
 
     #[test]
