@@ -349,7 +349,6 @@ pub fn at_boot(flash: &pac::FLASH, pwr: &pac::PWR) -> AtBoot {
     };
     if let Some((record, len)) = pending {
         if let Some(why) = save_refusal(flash, pwr) {
-            take();
             out.saved = Some(false);
             out.refused = Some(why);
         } else {
@@ -357,11 +356,12 @@ pub fn at_boot(flash: &pac::FLASH, pwr: &pac::PWR) -> AtBoot {
             let mut back = [0u8; MAX_RECORD];
             let verified = written
                 && matches!(hopper_store::block_on(store.load(&mut back)), Ok(Some(n)) if back[..n] == record[..len]);
-            // Taken once it reads back; a failed write is not retried
-            // either (the same write would fail the same way at every boot).
-            take();
             out.saved = Some(verified);
         }
+        // Taken only now, after the write and its read-back (a reset
+        // during the erase leaves it pending); a refused or failed save is
+        // not retried (it would fail the same way at every boot).
+        take();
     }
     match hopper_store::block_on(store.load(&mut out.record)) {
         Ok(len) => out.len = len,

@@ -61,14 +61,11 @@ mod fault_test {
     /// the channel in PWM mode 2, AMP_EN high), so that the fault entry
     /// has an enabled channel to force inactive.
     pub fn enable_deadman() {
-        use hopper_control::deadman::{OcMode, TimerRegs, COMPARE};
         #[allow(unsafe_code)] // The test's own handle; the control task never runs in it.
         // SAFETY: in the fault test the control task never runs (QEMU models
         // no injected ADC), and this path ends in the fault.
-        let mut t = unsafe { hopper_app::pinmap::DeadmanRegs::steal() };
-        t.write_cr1(true, true);
-        t.write_cnt(COMPARE);
-        t.write_ocm(OcMode::Pwm2);
+        let timer = unsafe { hopper_app::pinmap::DeadmanRegs::steal() };
+        let _ = hopper_control::deadman::Deadman::resume(timer).set(true);
     }
 
     /// Moves the main stack pointer below the SRAM (where a stack that

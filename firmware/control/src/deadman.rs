@@ -135,15 +135,16 @@ impl<T: TimerRegs> Deadman<T> {
     /// periods at `control_hz`, its clock at `timer_hz`; the output low.
     pub fn new(mut timer: T, timer_hz: u32, control_hz: u32) -> Self {
         setup(&mut timer, prescaler(timer_hz), window_ticks(control_hz));
+        Self::resume(timer)
+    }
+
+    /// A timer [`setup`] already set up (and forced off since): the image
+    /// that takes it over from the one that set it up.
+    pub fn resume(timer: T) -> Self {
         Self {
             timer,
             running: false,
         }
-    }
-
-    /// The timer's registers.
-    pub fn timer(&self) -> &T {
-        &self.timer
     }
 
     /// Enabled: the window starts again (high for [`WINDOW_PERIODS`] more
@@ -207,6 +208,10 @@ pub struct Gpt {
     pub output_enabled: bool,
     /// Register writes so far.
     pub writes: u32,
+    /// The first write after which the output was high with the counter
+    /// stopped, or high for longer than ARR ticks: (its number, the
+    /// register). A halt right after it would hold the enable high.
+    pub broken: Option<(u32, &'static str)>,
 }
 
 impl Default for Gpt {
@@ -221,11 +226,27 @@ impl Default for Gpt {
             ocm: None,
             output_enabled: false,
             writes: 0,
+            broken: None,
         }
     }
 }
 
 impl Gpt {
+    /// One register write done: counted, and the output checked as a
+    /// halt right after it would leave it ([`Gpt::broken`]).
+    fn wrote(&mut self, register: &'static str) {
+        self.writes += 1;
+        if self.broken.is_some() || !self.output() {
+            return;
+        }
+        let falls = self
+            .ticks_until_low()
+            .is_some_and(|n| n <= u32::from(self.arr));
+        if !(self.cen && falls) {
+            self.broken = Some((self.writes, register));
+        }
+    }
+
     /// The pin: OCxREF through the enabled, active-high channel.
     pub fn output(&self) -> bool {
         let reference = match self.ocm {
@@ -270,45 +291,45 @@ impl Gpt {
 
 impl TimerRegs for Gpt {
     fn write_cr1(&mut self, opm: bool, cen: bool) {
-        self.writes += 1;
         self.opm = opm;
         self.cen = cen;
+        self.wrote("CR1");
     }
     fn counter_enabled(&self) -> bool {
         self.cen
     }
     fn write_psc(&mut self, _psc: u16) {
-        self.writes += 1;
+        self.wrote("PSC");
     }
     fn write_arr(&mut self, arr: u16) {
-        self.writes += 1;
         self.arr = arr;
+        self.wrote("ARR");
     }
     fn write_ccr(&mut self, ccr: u16) {
-        self.writes += 1;
         self.ccr = ccr;
+        self.wrote("CCR");
     }
     fn write_ocm(&mut self, mode: OcMode) {
-        self.writes += 1;
         self.ocm = Some(mode);
+        self.wrote("OCxM");
     }
     fn generate_update(&mut self) {
-        self.writes += 1;
         self.cnt = 0;
         if self.opm {
             self.cen = false;
         }
+        self.wrote("UG");
     }
     fn clear_update_flag(&mut self) {
-        self.writes += 1;
+        self.wrote("UIF");
     }
     fn write_cnt(&mut self, cnt: u16) {
-        self.writes += 1;
         self.cnt = cnt;
+        self.wrote("CNT");
     }
     fn enable_output(&mut self) {
-        self.writes += 1;
         self.output_enabled = true;
+        self.wrote("CCER");
     }
     fn pin_reads_low(&self) -> Option<bool> {
         Some(!self.output())
@@ -319,94 +340,20 @@ impl TimerRegs for Gpt {
 mod tests {
     extern crate std;
     use super::*;
-    use std::string::String;
 
     const CONTROL_HZ: u32 = 10_000;
     const TIMER_HZ: u32 = 84_000_000;
     const TICKS_PER_PERIOD: u32 = TICK_HZ / CONTROL_HZ;
 
-    /// [`Gpt`] checked after every single write, as a halt between any two
-    /// writes would leave it: the output high only with the counter
-    /// running, and falling within ARR ticks. The first write that breaks
-    /// it is kept.
-    #[derive(Default)]
-    struct Checked {
-        t: Gpt,
-        broken: Option<String>,
+    fn deadman() -> Deadman<Gpt> {
+        Deadman::new(Gpt::default(), TIMER_HZ, CONTROL_HZ)
     }
 
-    impl Checked {
-        fn check(&mut self, what: &str) {
-            if self.broken.is_some() || !self.t.output() {
-                return;
-            }
-            let ok = self.t.cen
-                && self
-                    .t
-                    .ticks_until_low()
-                    .is_some_and(|n| n <= u32::from(self.t.arr));
-            if !ok {
-                self.broken = Some(std::format!(
-                    "after write {} ({what}): output high, {:?}",
-                    self.t.writes,
-                    self.t
-                ));
-            }
+    /// `n` ticks of the timer's clock.
+    fn tick(t: &mut Gpt, n: u32) {
+        for _ in 0..n {
+            t.tick();
         }
-        fn tick(&mut self, n: u32) {
-            for _ in 0..n {
-                self.t.tick();
-            }
-        }
-    }
-
-    impl TimerRegs for Checked {
-        fn write_cr1(&mut self, opm: bool, cen: bool) {
-            self.t.write_cr1(opm, cen);
-            self.check("CR1");
-        }
-        fn counter_enabled(&self) -> bool {
-            self.t.counter_enabled()
-        }
-        fn write_psc(&mut self, psc: u16) {
-            self.t.write_psc(psc);
-            self.check("PSC");
-        }
-        fn write_arr(&mut self, arr: u16) {
-            self.t.write_arr(arr);
-            self.check("ARR");
-        }
-        fn write_ccr(&mut self, ccr: u16) {
-            self.t.write_ccr(ccr);
-            self.check("CCR");
-        }
-        fn write_ocm(&mut self, mode: OcMode) {
-            self.t.write_ocm(mode);
-            self.check("OCxM");
-        }
-        fn generate_update(&mut self) {
-            self.t.generate_update();
-            self.check("UG");
-        }
-        fn clear_update_flag(&mut self) {
-            self.t.clear_update_flag();
-            self.check("UIF");
-        }
-        fn write_cnt(&mut self, cnt: u16) {
-            self.t.write_cnt(cnt);
-            self.check("CNT");
-        }
-        fn enable_output(&mut self) {
-            self.t.enable_output();
-            self.check("CCER");
-        }
-        fn pin_reads_low(&self) -> Option<bool> {
-            self.t.pin_reads_low()
-        }
-    }
-
-    fn deadman() -> Deadman<Checked> {
-        Deadman::new(Checked::default(), TIMER_HZ, CONTROL_HZ)
     }
 
     #[test]
@@ -426,34 +373,34 @@ mod tests {
     #[test]
     fn every_write_of_every_sequence_leaves_a_high_output_running_and_falling_within_the_window() {
         let mut d = deadman();
-        assert!(!d.timer.t.output(), "low after setup");
+        assert!(!d.timer.output(), "low after setup");
         // Enabled for some periods, then disabled 150 ticks into a window:
         // the counter must not be left where PWM mode 2 reads it high.
         for _ in 0..5 {
             d.set(true).unwrap();
-            d.timer.tick(TICKS_PER_PERIOD);
+            tick(&mut d.timer, TICKS_PER_PERIOD);
         }
-        d.timer.tick(50);
+        tick(&mut d.timer, 50);
         d.set(false).unwrap();
-        assert!(!d.timer.t.output());
-        d.timer.tick(1_000);
+        assert!(!d.timer.output());
+        tick(&mut d.timer, 1_000);
         // Enabled again: checked after each of its writes.
         d.set(true).unwrap();
-        assert!(d.timer.t.output());
+        assert!(d.timer.output());
         // The periods stop: low within the window, and the next enabled
         // period finds it lapsed and keeps it off.
-        d.timer.tick(u32::from(window_ticks(CONTROL_HZ)));
-        assert!(!d.timer.t.output());
+        tick(&mut d.timer, u32::from(window_ticks(CONTROL_HZ)));
+        assert!(!d.timer.output());
         assert_eq!(d.set(true), Err(Lapsed));
-        assert!(!d.timer.t.output());
+        assert!(!d.timer.output());
         // Enabled again, then the fault entry's writes mid-window.
         d.set(false).unwrap();
         d.set(true).unwrap();
-        d.timer.tick(120);
+        tick(&mut d.timer, 120);
         force_off(&mut d.timer);
-        assert!(!d.timer.t.output());
-        assert!(!d.timer.t.cen);
-        assert_eq!(d.timer.t.ocm, Some(OcMode::ForceInactive));
+        assert!(!d.timer.output());
+        assert!(!d.timer.cen);
+        assert_eq!(d.timer.ocm, Some(OcMode::ForceInactive));
         assert_eq!(d.timer.broken, None);
     }
 
@@ -466,33 +413,33 @@ mod tests {
         let mut d = deadman();
         for k in 0..10_000u32 {
             d.set(true).unwrap();
-            assert!(d.timer.t.output());
+            assert!(d.timer.output());
             // A period of 100 us, +- 25 us.
             let jitter = (k * 7919) % 51;
-            d.timer.tick(TICKS_PER_PERIOD + jitter - 25);
-            assert!(d.timer.t.output(), "dropped while retriggered, period {k}");
+            tick(&mut d.timer, TICKS_PER_PERIOD + jitter - 25);
+            assert!(d.timer.output(), "dropped while retriggered, period {k}");
         }
         // The control interrupt stops: low after at most the window.
         let mut high_for = 0;
-        while d.timer.t.output() {
-            d.timer.tick(1);
+        while d.timer.output() {
+            tick(&mut d.timer, 1);
             high_for += 1;
             assert!(high_for <= u32::from(arr), "still high");
         }
         assert!(high_for <= u32::from(arr) - TICKS_PER_PERIOD + 25);
         for _ in 0..1_000 {
-            d.timer.tick(TICKS_PER_PERIOD);
-            assert!(!d.timer.t.output(), "rose again without a retrigger");
+            tick(&mut d.timer, TICKS_PER_PERIOD);
+            assert!(!d.timer.output(), "rose again without a retrigger");
         }
         // Enabled again (after the lapse is reported), then disabled: low
         // at once, and it stays low.
         assert_eq!(d.set(true), Err(Lapsed));
         d.set(true).unwrap();
-        assert!(d.timer.t.output());
+        assert!(d.timer.output());
         d.set(false).unwrap();
-        assert!(!d.timer.t.output());
-        d.timer.tick(1);
-        assert!(!d.timer.t.output());
+        assert!(!d.timer.output());
+        tick(&mut d.timer, 1);
+        assert!(!d.timer.output());
         assert_eq!(d.timer.broken, None);
     }
 
@@ -513,14 +460,14 @@ mod tests {
                 let mut since = (enable && r.is_ok()).then_some(0u32);
                 lapsed |= r.is_err();
                 for _ in 0..ticks {
-                    d.timer.tick(1);
+                    tick(&mut d.timer, 1);
                     since = since.map(|s| s + 1);
                     let in_window = since.is_some_and(|s| s < u32::from(arr));
-                    prop_assert_eq!(d.timer.t.output(), in_window);
+                    prop_assert_eq!(d.timer.output(), in_window);
                 }
             }
             let _ = lapsed;
-            prop_assert_eq!(d.timer.broken.take(), None);
+            prop_assert_eq!(d.timer.broken, None);
         });
     }
 }

@@ -110,19 +110,6 @@ pub enum Pacing {
     Sustained,
 }
 
-impl Pacing {
-    /// Its code on the link (`status`): 0 trigger, 1 no clock, 2 the host,
-    /// 3 sustained.
-    pub fn code(self) -> u8 {
-        match self {
-            Pacing::Trigger { .. } => 0,
-            Pacing::NoClock => 1,
-            Pacing::Host => 2,
-            Pacing::Sustained => 3,
-        }
-    }
-}
-
 /// A period that was late ([`PeriodRunner::last_late`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -145,16 +132,6 @@ pub enum LateCause {
     Deadline,
     /// It started outside the jitter bound.
     Start,
-}
-
-impl LateCause {
-    /// Its code on the link: 0 deadline, 1 start.
-    pub fn code(self) -> u8 {
-        match self {
-            LateCause::Deadline => 0,
-            LateCause::Start => 1,
-        }
-    }
 }
 
 /// No counter (the host simulator): every step costs 0.
@@ -952,6 +929,8 @@ mod tests {
             r.end_period(late);
         }
         assert_eq!(r.missed(), 4);
+        let late = r.last_late().expect("a late period recorded");
+        assert_eq!((late.period, late.cause), (5, LateCause::Deadline));
         r.end_period(true);
         let p = r.run_period(&mut io, &mut NoCounter);
         assert!(p.out.faults.contains(Fault::Overrun));
@@ -1195,6 +1174,13 @@ mod tests {
             }
             let latched = r.hopper().supervisor().faults().contains(Fault::Overrun);
             assert_eq!(latched, latches, "{gaps:?} at {hz} Hz");
+            // The late start is recorded, with how far off it was.
+            let late = r.last_late();
+            assert_eq!(late.is_some(), latches, "{gaps:?}");
+            if let Some(l) = late {
+                assert_eq!(l.cause, LateCause::Start);
+                assert!(l.jitter_s.abs() > 25e-6, "{l:?}");
+            }
             if hz > 0 && !latches {
                 assert!(r.max_jitter_s() <= 24.5e-6, "{}", r.max_jitter_s());
             }
