@@ -53,6 +53,12 @@ fn answer(req: &Request, armed: &AtomicBool, seen: &Seen) -> Response {
             serial_count: 0,
             max_jitter_s: 0.0,
             notes_dropped: 0,
+            pacing: 1,
+            late_period: hopper_protocol::NO_LATE_PERIOD,
+            late_cause: 0,
+            late_jitter_s: 0.0,
+            late_serial: 0,
+            serial_lost: 0,
         }),
         Request::Thermal => Response::Thermal(ThermalStatus {
             winding_c: 40.0,

@@ -29,7 +29,7 @@ pub mod vocab;
 use serde::{Deserialize, Serialize};
 
 /// The protocol version: a host and a robot talk only when theirs agree.
-pub const PROTOCOL_VERSION: u16 = 3;
+pub const PROTOCOL_VERSION: u16 = 4;
 
 /// Largest encoded message, bytes (postcard, before the CRC and COBS).
 pub const MAX_MESSAGE: usize = 120;
@@ -398,7 +398,25 @@ pub struct CostStats {
     pub max_jitter_s: f32,
     /// Period notes the link task had no room for (telemetry gaps).
     pub notes_dropped: u32,
+    /// What paces the periods ([`vocab::Pacing`] by code).
+    pub pacing: u8,
+    /// The last late period's number ([`NO_LATE_PERIOD`]: none so far).
+    pub late_period: u32,
+    /// How it was late ([`vocab::LateCause`] by code).
+    pub late_cause: u8,
+    /// For a late start, how far it was from the period, s (negative:
+    /// early).
+    pub late_jitter_s: f32,
+    /// Serial interrupts from the end of the period before it to its end:
+    /// what preempted it.
+    pub late_serial: u32,
+    /// Bytes the robot's serial line lost (a USART overrun, or a receive
+    /// queue with no room).
+    pub serial_lost: u32,
 }
+
+/// [`CostStats::late_period`] when no period was late.
+pub const NO_LATE_PERIOD: u32 = u32::MAX;
 
 /// What the weighing found (`hopper_control::bringup::Routine::Weight`): a
 /// standing nut sweep, the body lifted and lowered on the spring; NaN where

@@ -42,8 +42,43 @@ vocabulary!(
     LoadError,
     PhaseEvent,
     Refusal,
-    ParamKind
+    ParamKind,
+    Pacing,
+    LateCause
 );
+
+/// What paces the robot's control periods (`CostStats::pacing`), and so
+/// whether their starts are checked against the period.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, IntoStaticStr, VariantArray, FromRepr)]
+#[repr(u8)]
+pub enum Pacing {
+    /// A trigger at the control rate (the board's timer, QEMU's SysTick):
+    /// every start is checked.
+    #[strum(serialize = "a trigger at the control rate (starts checked)")]
+    Trigger = 0,
+    /// No clock counts the periods' time (the simulator): no check.
+    #[strum(serialize = "the simulator (no clock: starts not checked)")]
+    NoClock = 1,
+    /// The host paces them (hardware in the loop): no check.
+    #[strum(serialize = "the host's samples (starts not checked)")]
+    Host = 2,
+    /// A trigger slowed to what the chip sustains (the simulated hopper on
+    /// a board): no check.
+    #[strum(serialize = "the rate the chip sustains (starts not checked)")]
+    Sustained = 3,
+}
+
+/// How a period was late (`CostStats::late_cause`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, IntoStaticStr, VariantArray, FromRepr)]
+#[repr(u8)]
+pub enum LateCause {
+    /// The next period's trigger came before it ended.
+    #[strum(serialize = "missed its deadline")]
+    Deadline = 0,
+    /// It started outside the jitter bound.
+    #[strum(serialize = "started off the period")]
+    Start = 1,
+}
 
 /// One fault the robot's supervisor latches: its code is its bit in
 /// `Status::faults` and `Telemetry::faults` (bit `n` is the fault of code

@@ -98,7 +98,8 @@ pub fn run(root: &Path) -> Result<(), String> {
     };
     let mut failed = Vec::new();
     if let Err(e) = link_session(root, &link) {
-        if !e.starts_with("qemu-link session failed") {
+        if !e.starts_with("qemu-link session failed") && !e.starts_with("qemu-link-bringup failed")
+        {
             println!("qemu-link: error (see above)");
         }
         failed.push(e);
@@ -171,7 +172,9 @@ fn link_session(root: &Path, link: &Path) -> Result<(), String> {
         cargo(),
         &target_dir,
     )?;
-    crate::session::against_qemu(root, link, &elf)
+    let main = crate::session::against_qemu(root, link, &elf);
+    let bringup = crate::session::bringup_against_qemu(root, link, &elf);
+    main.and(bringup)
 }
 
 fn run_scenario(root: &Path, scenario: &Scenario, sim: &Path) -> Result<(), String> {

@@ -206,6 +206,75 @@ fn start_serve(sim: &Path, flash: &Path) -> Result<(Reaped, String), String> {
 
 /// `cargo xtask qemu`'s session against the QEMU link image `elf`.
 pub fn against_qemu(root: &Path, link: &Path, elf: &Path) -> Result<(), String> {
+    let out_dir = crate::target_dir(root)?.join("link-session").join("qemu");
+    on_link_image(elf, "qemu-link", |addr| {
+        run_session(link, addr, &out_dir, "qemu-link")
+    })
+    .map(|r| println!("{}", r.line("qemu-link", "instr")))
+}
+
+/// The bring-up order of docs/board.md (`tests/link-session-bringup.txt`:
+/// every routine, the weighing, the height, a target and the shaped law,
+/// arming, then `params list` and `status` while armed) against a fresh
+/// QEMU link image: it must end armed with `faults: none` and `missed
+/// deadlines 0`. Prints `qemu-link-bringup: missed=N faults=F
+/// start_jitter_max_us=J`.
+pub fn bringup_against_qemu(root: &Path, link: &Path, elf: &Path) -> Result<(), String> {
+    const LABEL: &str = "qemu-link-bringup";
+    let script = crate::workspace_root()
+        .join("tests")
+        .join("link-session-bringup.txt");
+    let out_dir = crate::target_dir(root)?.join("link-session").join(LABEL);
+    let (ok, out, err) = on_link_image(elf, LABEL, |addr| {
+        shell(link, addr, &script, &out_dir, LABEL)
+    })?;
+    let lines: Vec<String> = out.lines().map(str::to_string).collect();
+    // The last `status`'s figures: the first number after each phrase.
+    let after = |phrase: &str| {
+        lines
+            .iter()
+            .rev()
+            .find_map(|l| l.split_once(phrase))
+            .and_then(|(_, rest)| numbers(rest).first().copied())
+    };
+    let missed = after("missed deadlines ");
+    let jitter = after("start jitter max ");
+    let faults = lines
+        .iter()
+        .rev()
+        .find_map(|l| l.strip_prefix("faults: "))
+        .unwrap_or("-")
+        .to_string();
+    println!(
+        "{LABEL}: missed={} faults={faults} start_jitter_max_us={}",
+        missed.map_or("-".into(), |m| format!("{m:.0}")),
+        jitter.map_or("-".into(), |j| format!("{j:.1}"))
+    );
+    let mut problems = Vec::new();
+    if !ok {
+        problems.push(format!("hopper-link failed: {}", err.trim()));
+    }
+    if missed != Some(0.0) {
+        problems.push(format!("missed deadlines {missed:?}, not 0"));
+    }
+    if faults != "none" {
+        problems.push(format!("faults {faults}, not none"));
+    }
+    if problems.is_empty() {
+        Ok(())
+    } else {
+        Err(format!("{LABEL} failed: {}", problems.join("; ")))
+    }
+}
+
+/// The QEMU link image `elf` booted with its USART1 on a free TCP port,
+/// `session` run against it (given the address), then QEMU stopped and
+/// its log printed as `<label>| ...`.
+fn on_link_image<T>(
+    elf: &Path,
+    label: &str,
+    session: impl FnOnce(&str) -> Result<T, String>,
+) -> Result<T, String> {
     let addr = free_addr()?;
     eprintln!("xtask: running the link image on qemu-system-arm, USART1 on tcp {addr}");
     let mut child = crate::qemu::qemu_command(elf, 0, &format!("tcp:{addr},server=on,wait=off"))
@@ -220,16 +289,15 @@ pub fn against_qemu(root: &Path, link: &Path, elf: &Path) -> Result<(), String> 
         buf
     });
     wait_listening(&addr)?;
-    let out_dir = crate::target_dir(root)?.join("link-session").join("qemu");
-    let report = run_session(link, &addr, &out_dir, "qemu-link");
+    let result = session(&addr);
     drop(qemu);
     if let Ok(bytes) = log.join() {
         match crate::qemu::decode(elf, &bytes) {
-            Ok(lines) => lines.iter().for_each(|l| println!("qemu-link| {l}")),
+            Ok(lines) => lines.iter().for_each(|l| println!("{label}| {l}")),
             Err(e) => eprintln!("xtask: the link image's log: {e}"),
         }
     }
-    report.map(|r| println!("{}", r.line("qemu-link", "instr")))
+    result
 }
 
 /// What a session showed.
@@ -330,10 +398,17 @@ fn numbers(l: &str) -> Vec<f64> {
         .collect()
 }
 
-fn run_session(link: &Path, addr: &str, out_dir: &Path, label: &str) -> Result<Report, String> {
-    let root = crate::workspace_root();
-    let script_path = root.join("tests").join("link-session.txt");
-    let script = std::fs::read_to_string(&script_path)
+/// `hopper-link --tcp ADDR shell < SCRIPT` (its `OUT/` paths under
+/// `out_dir`), its output printed as `<label>| ...`: whether it succeeded,
+/// its stdout and its stderr.
+fn shell(
+    link: &Path,
+    addr: &str,
+    script_path: &Path,
+    out_dir: &Path,
+    label: &str,
+) -> Result<(bool, String, String), String> {
+    let script = std::fs::read_to_string(script_path)
         .map_err(|e| format!("{}: {e}", script_path.display()))?
         .replace("OUT/", &format!("{}/", out_dir.display()));
     let _ = std::fs::remove_dir_all(out_dir);
@@ -386,10 +461,18 @@ fn run_session(link: &Path, addr: &str, out_dir: &Path, label: &str) -> Result<R
         "xtask: {label}: the session took {:.1} s",
         started.elapsed().as_secs_f64()
     );
+    Ok((status.success(), out, err))
+}
+
+fn run_session(link: &Path, addr: &str, out_dir: &Path, label: &str) -> Result<Report, String> {
+    let script_path = crate::workspace_root()
+        .join("tests")
+        .join("link-session.txt");
+    let (success, out, err) = shell(link, addr, &script_path, out_dir, label)?;
     let lines: Vec<String> = out.lines().map(str::to_string).collect();
     let mut problems = Vec::new();
-    if !status.success() {
-        problems.push(format!("hopper-link exited with {status}: {}", err.trim()));
+    if !success {
+        problems.push(format!("hopper-link failed: {}", err.trim()));
     }
     let mut r = Report::default();
     // Convergence: the steady apex and the last hops of hops.csv.

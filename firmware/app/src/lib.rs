@@ -90,6 +90,7 @@ pub mod serial_cost {
     static SPENT: AtomicU32 = AtomicU32::new(0);
     static MAX: AtomicU32 = AtomicU32::new(0);
     static COUNT: AtomicU32 = AtomicU32::new(0);
+    static LOST: AtomicU32 = AtomicU32::new(0);
 
     /// The serial interrupt's work on `serial`, timed with the image's
     /// counter `now` and recorded: what every image's USART task does.
@@ -97,6 +98,7 @@ pub mod serial_cost {
         let t0 = now();
         serial.on_interrupt();
         record(now().wrapping_sub(t0));
+        LOST.store(serial.lost(), Relaxed);
     }
 
     /// One interrupt of `ticks`.
@@ -111,9 +113,10 @@ pub mod serial_cost {
         SPENT.load(Relaxed)
     }
 
-    /// The largest and the count so far.
-    pub fn max_and_count() -> (u32, u32) {
-        (MAX.load(Relaxed), COUNT.load(Relaxed))
+    /// The largest, the count and the bytes the line lost (USART
+    /// overruns, a full receive queue) so far.
+    pub fn totals() -> (u32, u32, u32) {
+        (MAX.load(Relaxed), COUNT.load(Relaxed), LOST.load(Relaxed))
     }
 
     /// `counter()` and the ticks spent so far, read together: a serial
@@ -213,9 +216,9 @@ pub mod qemu {
         overhead: u32,
         /// The link task's: the control task's instructions left out too.
         below_control: bool,
-        /// Whether the control task's period starts are checked
-        /// ([`Instructions::unchecked`]).
-        checked: bool,
+        /// The clock at the control task's entry ([`Instructions::enter`]),
+        /// until the runner reads it as the period's start.
+        entry: Option<u32>,
     }
 
     impl Instructions {
@@ -228,21 +231,24 @@ pub mod qemu {
             Instructions {
                 overhead: b.wrapping_sub(a),
                 below_control: true,
-                checked: false,
+                entry: None,
             }
         }
 
-        /// The same counter with the period-start check off
-        /// (`Pacing::NoClock`): the QEMU link image's, whose starts under
-        /// the link session are delayed now and then by about 6,700
-        /// instructions (26-27 us of the period's 100) by work not yet
-        /// found (docs/safety.md, "Control overruns").
-        pub fn unchecked(self) -> Self {
-            Instructions {
-                checked: false,
-                ..self
-            }
+        /// The control task's entry: the period starts here, whatever the
+        /// task does before the runner reads its clock (the link image's
+        /// sensor models sample the plant first, in soft `f64`: up to
+        /// about 6,700 instructions, which the board's ADC and timers do
+        /// in hardware).
+        pub fn enter(&mut self) {
+            self.entry = Some(clock_now());
         }
+    }
+
+    /// TIM5 with SysTick running: less the plant's integration
+    /// ([`with_systick_stopped`]).
+    fn clock_now() -> u32 {
+        tim5_now().wrapping_sub(STOPPED.load(Ordering::Relaxed))
     }
 
     impl CycleCounter for Instructions {
@@ -264,7 +270,7 @@ pub mod qemu {
         /// instructions a period (the control task's counter; the link
         /// task's reader checks nothing).
         fn pacing(&self) -> Pacing {
-            if self.below_control || !self.checked {
+            if self.below_control {
                 Pacing::NoClock
             } else {
                 Pacing::Trigger {
@@ -272,10 +278,12 @@ pub mod qemu {
                 }
             }
         }
-        /// Guest instructions with SysTick running: TIM5 less the plant's
-        /// integration, which runs with SysTick stopped ([`with_systick_stopped`]).
+        /// Guest instructions with SysTick running (TIM5 less the plant's
+        /// integration, which runs with SysTick stopped:
+        /// [`with_systick_stopped`]), at the task's entry where it was
+        /// marked ([`Instructions::enter`]).
         fn clock(&mut self) -> Option<u32> {
-            Some(tim5_now().wrapping_sub(STOPPED.load(Ordering::Relaxed)))
+            Some(self.entry.take().unwrap_or_else(clock_now))
         }
     }
 
@@ -401,7 +409,6 @@ pub mod qemu {
         let _ = tim5;
         Instructions {
             below_control: false,
-            checked: true,
             ..Instructions::reader()
         }
     }

@@ -352,8 +352,8 @@ mod app {
             let _ = dump::spawn(cx.local.log.dropped());
         }
         rtic::pend(LINK_IRQ);
-        let (irq_max, irq_count) = hopper_app::serial_cost::max_and_count();
-        port.set_serial_cost(irq_max, irq_count);
+        let (irq_max, irq_count, irq_lost) = hopper_app::serial_cost::totals();
+        port.set_serial_cost(irq_max, irq_count, irq_lost);
         // Entry to exit, less the serial interrupts that preempted it
         // (counted per byte in the budget, docs/link.md).
         let (t1, serial1) = hopper_app::serial_cost::stamp(cortex_m::peripheral::DWT::cycle_count);

@@ -660,6 +660,13 @@ pub struct Stats {
     pub housing_c: f32,
     /// The thermal derating of the current limit (1: none).
     pub limit_scale: f32,
+    /// What paces the periods.
+    pub pacing: hopper_control::runner::Pacing,
+    /// The last late period, and the serial interrupts in the periods
+    /// around it (the one before it to the one after).
+    pub late: Option<(hopper_control::runner::LatePeriod, u32)>,
+    /// Bytes the serial line lost so far.
+    pub serial_lost: u32,
 }
 
 /// Periods between two [`Stats`] (10 ms at 10 kHz).
@@ -668,6 +675,26 @@ pub const STATS_EVERY: u32 = 100;
 /// Dump records queued per note at most (bounds the link task's work per
 /// period; the line is the real limit).
 const DUMP_PER_PERIOD: u16 = 4;
+
+/// What paces the periods, on the wire.
+fn pacing(p: hopper_control::runner::Pacing) -> hopper_protocol::vocab::Pacing {
+    use hopper_control::runner::Pacing as P;
+    match p {
+        P::Trigger { .. } => hopper_protocol::vocab::Pacing::Trigger,
+        P::NoClock => hopper_protocol::vocab::Pacing::NoClock,
+        P::Host => hopper_protocol::vocab::Pacing::Host,
+        P::Sustained => hopper_protocol::vocab::Pacing::Sustained,
+    }
+}
+
+/// How a period was late, on the wire.
+fn late_cause(c: hopper_control::runner::LateCause) -> hopper_protocol::vocab::LateCause {
+    use hopper_control::runner::LateCause as C;
+    match c {
+        C::Deadline => hopper_protocol::vocab::LateCause::Deadline,
+        C::Start => hopper_protocol::vocab::LateCause::Start,
+    }
+}
 
 /// The disarm reasons by their wire code ([`ArmState::Disarmed`]).
 pub const DISARM_REASONS: [DisarmReason; 6] = [
@@ -693,9 +720,14 @@ pub struct ControlPort {
     isr: StepStats,
     /// Its last sample.
     isr_last: u32,
-    /// The serial interrupt's largest cost and count so far (it preempts
-    /// the control interrupt; the application measures it).
-    serial: (u32, u32),
+    /// The serial interrupt's largest cost, count and bytes lost so far
+    /// (it preempts the control interrupt; the application measures it).
+    serial: (u32, u32, u32),
+    /// The serial interrupts counted at the last three periods' ends
+    /// (period, count), oldest first: what preempted a late period.
+    serial_at: [(u32, u32); 3],
+    /// The last late period, with the serial interrupts around it.
+    late: Option<(hopper_control::runner::LatePeriod, u32)>,
     notes_dropped: u32,
     /// The simulated e-stop, as last asked.
     sim_estop: bool,
@@ -727,9 +759,10 @@ impl ControlPort {
     }
 
     /// The serial interrupt's largest cost and how many ran so far, in the
-    /// counter's units (published with the next note).
-    pub fn set_serial_cost(&mut self, max: u32, count: u32) {
-        self.serial = (max, count);
+    /// counter's units, and the bytes the line lost so far (an overrun, a
+    /// full receive queue), published with the next note.
+    pub fn set_serial_cost(&mut self, max: u32, count: u32, lost: u32) {
+        self.serial = (max, count, lost);
     }
 
     /// The simulated e-stop as the host last set it (never on a real
@@ -830,8 +863,25 @@ impl ControlPort {
                 self.notes_dropped = self.notes_dropped.saturating_add(1);
             }
         }
+        self.note_late(runner);
         if runner.periods().is_multiple_of(STATS_EVERY) {
             let _ = stats.put(self.stats(runner));
+        }
+    }
+
+    /// The serial interrupts at this period's end; a late period the
+    /// runner recorded, once the period after it ended, with the serial
+    /// interrupts from the one before it to the one after.
+    fn note_late<H: HopperSlot>(&mut self, runner: &PeriodRunner<H>) {
+        let this = runner.periods().wrapping_sub(1);
+        self.serial_at = [self.serial_at[1], self.serial_at[2], (this, self.serial.1)];
+        let Some(l) = runner.last_late() else {
+            return;
+        };
+        let [(before, first), _, (after, last)] = self.serial_at;
+        let new = self.late.is_none_or(|(seen, _)| seen != l);
+        if new && after == l.period.wrapping_add(1) && before == l.period.wrapping_sub(1) {
+            self.late = Some((l, last.wrapping_sub(first)));
         }
     }
 
@@ -995,6 +1045,9 @@ impl ControlPort {
             winding_c: m.winding_c(),
             housing_c: m.housing_c(),
             limit_scale: m.limit_scale(),
+            pacing: runner.pacing(),
+            late: self.late,
+            serial_lost: self.serial.2,
         }
     }
 
@@ -1681,6 +1734,20 @@ impl<H: HopperSlot> Endpoint<H> {
                     serial_count: st.map_or(0, |n| n.serial_count),
                     max_jitter_s: st.map_or(0.0, |n| n.max_jitter_s),
                     notes_dropped: st.map_or(0, |n| n.notes_dropped),
+                    pacing: st
+                        .map_or(hopper_protocol::vocab::Pacing::NoClock, |n| {
+                            pacing(n.pacing)
+                        })
+                        .code(),
+                    late_period: st
+                        .and_then(|n| n.late)
+                        .map_or(hopper_protocol::NO_LATE_PERIOD, |(l, _)| l.period),
+                    late_cause: st
+                        .and_then(|n| n.late)
+                        .map_or(0, |(l, _)| late_cause(l.cause).code()),
+                    late_jitter_s: st.and_then(|n| n.late).map_or(0.0, |(l, _)| l.jitter_s),
+                    late_serial: st.and_then(|n| n.late).map_or(0, |(_, k)| k),
+                    serial_lost: st.map_or(0, |n| n.serial_lost),
                 }))
             }
             Request::Thermal => {
@@ -2269,8 +2336,16 @@ mod tests {
         fn periods(&mut self, n: usize) -> Period {
             let mut last = None;
             for _ in 0..n {
+                last = Some(self.period(false));
+            }
+            last.unwrap_or_else(|| panic!("no period"))
+        }
+
+        /// One period, `late` (its deadline missed), then the link task.
+        fn period(&mut self, late: bool) -> Period {
+            {
                 let p = self.runner.run_period(&mut self.io, &mut NoCounter);
-                self.runner.end_period(false);
+                self.runner.end_period(late);
                 self.port.after_period(
                     &mut self.runner,
                     &p,
@@ -2293,9 +2368,8 @@ mod tests {
                     &mut self.tx,
                     &mut NoCounter,
                 );
-                last = Some(p);
+                p
             }
-            last.unwrap_or_else(|| panic!("no period"))
         }
 
         /// What the robot sent so far, decoded as the host does.
@@ -2883,6 +2957,45 @@ mod tests {
         assert!(core::ptr::eq(runner.hopper(), spare));
         assert_eq!(ep.spares.len(), 1);
         assert!(core::ptr::eq(&*ep.spares[0], running));
+    }
+
+    /// `status` says which period was late, how, and what preempted it
+    /// (the serial interrupts around it), what paces the periods, and the
+    /// bytes the serial line lost.
+    #[test]
+    fn the_link_names_the_last_late_period_and_the_serial_bytes_lost() {
+        let mut r = Robot::new();
+        // Two serial interrupts a period; period 150 misses its deadline,
+        // with 40 interrupts in the period after it; 3 bytes lost by then.
+        for k in 0..300u32 {
+            let count = 2 * k + if k > 150 { 40 } else { 0 };
+            r.port
+                .set_serial_cost(500, count, if k > 150 { 3 } else { 0 });
+            r.period(k == 150);
+        }
+        r.request(1, Request::Cost);
+        r.periods(2);
+        let msgs = r.take();
+        let k = msgs
+            .iter()
+            .find_map(|m| match m {
+                RobotMsg::Response {
+                    id: 1,
+                    resp: Response::Cost(k),
+                } => Some(*k),
+                _ => None,
+            })
+            .unwrap_or_else(|| panic!("{msgs:?}"));
+        assert_eq!(k.late_period, 150);
+        assert_eq!(
+            k.late_cause,
+            hopper_protocol::vocab::LateCause::Deadline.code()
+        );
+        // From period 149's end to period 151's: 2 + 2 + 40.
+        assert_eq!(k.late_serial, 44);
+        assert_eq!(k.serial_lost, 3);
+        // No counter: the simulator's pacing, no start check.
+        assert_eq!(k.pacing, hopper_protocol::vocab::Pacing::NoClock.code());
     }
 
     /// A board starts the motor's estimate hot at every boot, and says so:

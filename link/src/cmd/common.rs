@@ -104,9 +104,42 @@ pub(crate) fn cost_unit(k: &CostStats) -> &'static str {
     }
 }
 
-/// The `control interrupt:`, `serial interrupt:` and `link task:` lines
-/// of `status` and `flood`.
-pub(crate) fn cost_lines(k: &CostStats) -> [String; 3] {
+/// The `timing:` line: what paces the periods, the last late one and why,
+/// and the bytes the serial line lost.
+fn timing_line(k: &CostStats) -> String {
+    use hopper_protocol::vocab::{LateCause, Pacing};
+    let pacing = Pacing::from_code(k.pacing)
+        .map_or_else(|| format!("code {}", k.pacing), |p| p.name().to_string());
+    let late = if k.late_period == hopper_protocol::NO_LATE_PERIOD {
+        "no period late".to_string()
+    } else {
+        let how = match LateCause::from_code(k.late_cause) {
+            Some(LateCause::Start) => format!(
+                "started {:.1} us {}",
+                f64::from(k.late_jitter_s.abs()) * 1e6,
+                if k.late_jitter_s < 0.0 {
+                    "early"
+                } else {
+                    "late"
+                }
+            ),
+            Some(c) => c.name().to_string(),
+            None => format!("late (code {})", k.late_cause),
+        };
+        format!(
+            "last late period {}: {how}, {} serial interrupts from the period before it to the one after",
+            k.late_period, k.late_serial
+        )
+    };
+    format!(
+        "timing: periods paced by {pacing}; {late}; serial line: {} bytes lost (USART overrun or a full receive queue)",
+        k.serial_lost
+    )
+}
+
+/// The `control interrupt:`, `serial interrupt:`, `link task:` and
+/// `timing:` lines of `status` and `flood`.
+pub(crate) fn cost_lines(k: &CostStats) -> [String; 4] {
     let us = |n: u32| {
         if k.counter_hz > 0 {
             format!(" = {:.1} us", f64::from(n) * 1e6 / f64::from(k.counter_hz))
@@ -133,6 +166,7 @@ pub(crate) fn cost_lines(k: &CostStats) -> [String; 3] {
             "link task: mean {} max {} per period, below the control interrupt (decode, answer, encode, build sets); {} period notes dropped",
             k.link_mean, k.link_max, k.notes_dropped
         ),
+        timing_line(k),
     ]
 }
 

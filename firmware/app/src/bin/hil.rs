@@ -198,8 +198,8 @@ mod app {
         );
         // The host owns the clock: no period is late.
         firmware.runner.end_period(false);
-        let (irq_max, irq_count) = hopper_app::serial_cost::max_and_count();
-        firmware.port.set_serial_cost(irq_max, irq_count);
+        let (irq_max, irq_count, irq_lost) = hopper_app::serial_cost::totals();
+        firmware.port.set_serial_cost(irq_max, irq_count, irq_lost);
         let (t1, serial1) = hopper_app::serial_cost::stamp(move || ticks.raw());
         let own = t1
             .wrapping_sub(t0)

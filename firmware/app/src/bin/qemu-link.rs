@@ -80,7 +80,7 @@ mod app {
     fn init(cx: init::Context) -> (Shared, Local) {
         let dp = cx.device;
         let mut core = cx.core;
-        let counter = hopper_app::qemu::start(&dp.RCC, &dp.GPIOB, dp.TIM5).unchecked();
+        let counter = hopper_app::qemu::start(&dp.RCC, &dp.GPIOB, dp.TIM5);
 
         let Some((robot, spares, flash)) = virtual_robot::session(cx.local.bank) else {
             defmt::error!("link image set-up failed");
@@ -138,11 +138,15 @@ mod app {
     /// the scenario image); the link task is pended.
     #[task(binds = SysTick, priority = 3, local = [robot, port_queues, counter, syst], shared = [capture])]
     fn control(mut cx: control::Context) {
+        cx.local.counter.enter();
         let (t0, serial0) = hopper_app::serial_cost::stamp(hopper_app::qemu::tim5_now);
         let robot = &mut *cx.local.robot;
         let (queues, counter) = (&mut *cx.local.port_queues, &mut *cx.local.counter);
-        let (irq_max, irq_count) = hopper_app::serial_cost::max_and_count();
-        robot.firmware.port.set_serial_cost(irq_max, irq_count);
+        let (irq_max, irq_count, irq_lost) = hopper_app::serial_cost::totals();
+        robot
+            .firmware
+            .port
+            .set_serial_cost(irq_max, irq_count, irq_lost);
         cx.shared
             .capture
             .lock(|c| robot.control_period(c, queues, counter));

@@ -169,6 +169,7 @@ mod app {
     /// work (the period, logging) overran.
     #[task(binds = SysTick, priority = 3, local = [firmware, sim, counter, syst, log], shared = [capture])]
     fn control(cx: control::Context) {
+        cx.local.counter.enter();
         let sim = &mut *cx.local.sim;
         let firmware = &mut *cx.local.firmware;
         // No link: the scenario is the operator.

@@ -169,8 +169,11 @@ mod app {
         let (t0, serial0) = hopper_app::serial_cost::stamp(move || ticks.raw());
         let robot = &mut *cx.local.robot;
         let (queues, counter) = (&mut *cx.local.port_queues, &mut *cx.local.control_ticks);
-        let (irq_max, irq_count) = hopper_app::serial_cost::max_and_count();
-        robot.firmware.port.set_serial_cost(irq_max, irq_count);
+        let (irq_max, irq_count, irq_lost) = hopper_app::serial_cost::totals();
+        robot
+            .firmware
+            .port
+            .set_serial_cost(irq_max, irq_count, irq_lost);
         cx.shared
             .capture
             .lock(|c| robot.control_period(c, queues, counter));

@@ -354,6 +354,11 @@ pub struct PeriodRunner<H = Owned> {
     starts: u8,
     /// The last period that was late, and how.
     late: Option<LatePeriod>,
+    /// What paced the last period (its counter's).
+    pacing: Pacing,
+    /// The start check in ticks: the clock's ticks a period, the jitter
+    /// bound in them, and the largest deviation seen at that rate.
+    bound: (u32, u32, u32),
     /// The bring-up routine running, or the last one's report.
     cal: crate::bringup::Calibrator,
     /// Largest deviation of a period-start interval from the period so
@@ -416,6 +421,8 @@ impl<H: HopperSlot> PeriodRunner<H> {
             last_start: None,
             starts: 0,
             late: None,
+            pacing: Pacing::NoClock,
+            bound: (0, 0, 0),
             cal: crate::bringup::Calibrator::new(),
             max_jitter_s: 0.0,
             at_boot: crate::persist::AtBoot::NoStore,
@@ -513,7 +520,8 @@ impl<H: HopperSlot> PeriodRunner<H> {
     /// cleared the counter; a wrap is told apart by the last start lying
     /// within two periods of the top).
     fn check_start<C: CycleCounter>(&mut self, counter: &mut C) {
-        let Pacing::Trigger { ticks } = counter.pacing() else {
+        self.pacing = counter.pacing();
+        let Pacing::Trigger { ticks } = self.pacing else {
             return;
         };
         let Some(start) = counter.clock() else {
@@ -528,9 +536,20 @@ impl<H: HopperSlot> PeriodRunner<H> {
             } else if self.starts >= 2 && ticks > 0 {
                 let interval = start.wrapping_sub(last);
                 let off = interval.abs_diff(ticks);
-                let jitter_s = off as f32 / ticks as f32 * self.timing.period_s;
-                self.max_jitter_s = crate::num::max(self.max_jitter_s, jitter_s);
-                if jitter_s > self.timing.max_jitter_s {
+                // In ticks every period; seconds only for a new largest
+                // deviation or a late start (rare): the bound in ticks is
+                // worked out once per clock rate.
+                if self.bound.0 != ticks {
+                    let bound = self.timing.max_jitter_s / self.timing.period_s * ticks as f32;
+                    self.bound = (ticks, bound as u32, 0);
+                }
+                let to_s = |off: u32| off as f32 / ticks as f32 * self.timing.period_s;
+                if off > self.bound.2 {
+                    self.bound.2 = off;
+                    self.max_jitter_s = crate::num::max(self.max_jitter_s, to_s(off));
+                }
+                if off > self.bound.1 {
+                    let jitter_s = to_s(off);
                     self.late = Some(LatePeriod {
                         period: self.periods,
                         cause: LateCause::Start,
@@ -706,7 +725,8 @@ impl<H: HopperSlot> PeriodRunner<H> {
     pub fn end_period(&mut self, late: bool) {
         if late {
             self.late = Some(LatePeriod {
-                period: self.periods,
+                // This period's number: `run_period` counted it already.
+                period: self.periods.wrapping_sub(1),
                 cause: LateCause::Deadline,
                 jitter_s: 0.0,
             });
@@ -734,6 +754,11 @@ impl<H: HopperSlot> PeriodRunner<H> {
     /// far, s (0 when the counter does not count real time).
     pub fn max_jitter_s(&self) -> f32 {
         self.max_jitter_s
+    }
+
+    /// What paced the last period ([`CycleCounter::pacing`]).
+    pub fn pacing(&self) -> Pacing {
+        self.pacing
     }
 
     /// The last period that was late (missed its deadline, or started
@@ -930,7 +955,7 @@ mod tests {
         }
         assert_eq!(r.missed(), 4);
         let late = r.last_late().expect("a late period recorded");
-        assert_eq!((late.period, late.cause), (5, LateCause::Deadline));
+        assert_eq!((late.period, late.cause), (4, LateCause::Deadline));
         r.end_period(true);
         let p = r.run_period(&mut io, &mut NoCounter);
         assert!(p.out.faults.contains(Fault::Overrun));
