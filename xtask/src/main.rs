@@ -77,6 +77,7 @@ mod qemu;
 mod session;
 mod slurm;
 mod speed;
+mod stack;
 
 const TARGET: &str = "thumbv7em-none-eabihf";
 
@@ -482,7 +483,95 @@ fn size(root: &Path) -> Result<(), String> {
     if !ok {
         return Err("firmware exceeds its size budget".into());
     }
-    Ok(())
+    stack_bound(&tool, &elf, RAM_BYTES.saturating_sub(ram))
+}
+
+/// The board's RAM (memory.x: SRAM1 and SRAM2, 128 KiB); the stack has
+/// what the statics leave.
+const RAM_BYTES: u64 = 128 * 1024;
+
+/// An exception's stacked frame with the FPU's state reserved (lazy
+/// stacking): 26 words.
+const EXCEPTION_FRAME_BYTES: u64 = 104;
+
+/// The worst-case stack per task of the board image (`stack::depth` on its
+/// disassembly): prints `stack: control=N link=N serial=N logger=N idle=N
+/// init=N worst=N bytes (budget B); largest frame F (N B)`, and fails when
+/// the worst case (idle, then every priority level's task preempting the
+/// one below, each with an exception frame) or `init` exceeds the budget,
+/// or when a task's depth cannot be bounded (an indirect call, recursion).
+fn stack_bound(llvm_size: &Path, elf: &Path, budget: u64) -> Result<(), String> {
+    let objdump = llvm_size.with_file_name("llvm-objdump");
+    let out = Command::new(&objdump)
+        .args(["-d", "--no-show-raw-insn"])
+        .arg(elf)
+        .output()
+        .map_err(|e| format!("cannot run {}: {e}", objdump.display()))?;
+    if !out.status.success() {
+        return Err(format!(
+            "llvm-objdump failed: {}",
+            String::from_utf8_lossy(&out.stderr)
+        ));
+    }
+    let funcs = stack::parse(&String::from_utf8_lossy(&out.stdout));
+    let dump = Command::new(&objdump)
+        .args(["-s", "-j", ".rodata", "-j", ".data"])
+        .arg(elf)
+        .output()
+        .map_err(|e| format!("cannot run {}: {e}", objdump.display()))?;
+    let taken = stack::address_taken(&funcs, &String::from_utf8_lossy(&dump.stdout));
+    // The board image's handlers (src/main.rs): the control task on the
+    // ADC's interrupt (priority 3), the link task on SDIO's (2), the
+    // serial interrupt on USART1's (4), the logger and the dump on the
+    // priority-1 dispatcher; `main` runs `init`, then idle's loop, which
+    // calls nothing.
+    let task = |entry: &str| {
+        stack::depth(&funcs, &taken, entry).map_err(|e| format!("stack: {entry}: {e}"))
+    };
+    let (control, control_path) = task("ADC")?;
+    let (link, _) = task("SDIO")?;
+    let (serial, _) = task("USART1")?;
+    let logger = ["CAN2_SCE", "CAN2_RX1"]
+        .iter()
+        .filter(|d| funcs.contains_key(**d))
+        .map(|d| task(d).map(|(n, _)| n))
+        .collect::<Result<Vec<_>, _>>()?
+        .into_iter()
+        .max()
+        .unwrap_or(0);
+    let (init, _) = task("main")?;
+    let idle = funcs.get("main").map_or(0, |f| f.frame);
+    let worst = idle
+        + [logger, link, control, serial]
+            .iter()
+            .map(|d| d + EXCEPTION_FRAME_BYTES)
+            .sum::<u64>();
+    let (largest, largest_frame) = funcs
+        .iter()
+        .map(|(n, f)| (n.as_str(), f.frame))
+        .max_by_key(|(_, b)| *b)
+        .unwrap_or(("-", 0));
+    let ok = worst <= budget && init <= budget;
+    let short = |n: &str| format!("{:#}", rustc_demangle::demangle(n));
+    let largest = short(largest);
+    eprintln!(
+        "xtask: stack: the control task's deepest path: {}",
+        control_path
+            .iter()
+            .map(|n| short(n))
+            .collect::<Vec<_>>()
+            .join(" > ")
+    );
+    println!(
+        "stack: control={control} link={link} serial={serial} logger={logger} idle={idle} init={init} worst={worst} bytes (budget {budget}); largest frame {largest} ({largest_frame} B)"
+    );
+    if ok {
+        Ok(())
+    } else {
+        Err(format!(
+            "the stack's worst case ({worst} B, init {init} B) exceeds its room ({budget} B)"
+        ))
+    }
 }
 
 /// Size of the telemetry capture buffer, bytes: the board's `init` local

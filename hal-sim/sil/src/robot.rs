@@ -15,6 +15,7 @@
 //! hoist lifts the body at [`LIFT_SPEED_MPS`] to a toe height, or lets go.
 
 use crate::sim_io::SimHal;
+use hopper_control::hal::RawSample;
 use hopper_control::runner::{CycleCounter, HopperSlot, Owned, Period, PeriodRunner};
 use hopper_control::telemetry::{FaultCapture, CAPTURE_LEN};
 use hopper_plant::{Event, Plant, PlantError};
@@ -83,27 +84,35 @@ impl<H: HopperSlot> VirtualRobot<H> {
         self.lift_to_m = None;
     }
 
-    /// One control period on the sensors' present state
-    /// ([`ControlLoop::period`]: the period's record into `capture`, frozen
-    /// around a fault, its note published, at most one command applied),
-    /// timed with `counter` as the board times its whole control interrupt
-    /// (the sensor models' work before it, as the board's ADC and timers do
-    /// theirs). The caller runs the link task ([`Endpoint::serve`]) after
-    /// it, at a lower priority or in line ([`control`](Self::control)), and
-    /// reports the period's lateness with `runner.end_period`.
-    pub fn control_period<C: CycleCounter>(
-        &mut self,
-        capture: &mut FaultCapture<CAPTURE_LEN>,
-        queues: &mut impl PortQueues<H>,
-        counter: &mut C,
-    ) -> Period {
+    /// The world before a control period: the simulated e-stop and a
+    /// mount change the host asked for applied, then the sensors sampled
+    /// (as the board's ADC and timers have the sample when the control
+    /// interrupt enters). The sensor models' work is the world's, not the
+    /// firmware's: an image that paces its periods with a timer runs this
+    /// with the timer stopped, as it does [`advance`](Self::advance).
+    pub fn sample(&mut self) -> Option<RawSample> {
         self.hal.faults.estop = self.firmware.port.sim_estop();
         if let Some((hoisted, lift_m)) = self.firmware.port.take_sim_mount() {
             self.mount(hoisted.then_some(f64::from(lift_m)));
         }
-        // The sample first (the board's ADC and timers have it when the
-        // interrupt enters): the timing is the firmware's.
-        let mut io = self.hal.sampled(&self.plant);
+        self.hal.take_sample(&self.plant)
+    }
+
+    /// One control period on `sample` ([`sample`](Self::sample))
+    /// ([`ControlLoop::period`]: the period's record into `capture`, frozen
+    /// around a fault, its note published, at most one command applied),
+    /// timed with `counter` as the board times its whole control interrupt.
+    /// The caller runs the link task ([`Endpoint::serve`]) after it, at a
+    /// lower priority or in line ([`control`](Self::control)), and reports
+    /// the period's lateness with `runner.end_period`.
+    pub fn control_period<C: CycleCounter>(
+        &mut self,
+        sample: Option<RawSample>,
+        capture: &mut FaultCapture<CAPTURE_LEN>,
+        queues: &mut impl PortQueues<H>,
+        counter: &mut C,
+    ) -> Period {
+        let mut io = self.hal.with_sample(sample);
         let t0 = counter.now();
         let p = self
             .firmware
@@ -134,7 +143,8 @@ impl<H: HopperSlot> VirtualRobot<H> {
         queues: &mut Queues<H>,
         counter: &mut C,
     ) -> Period {
-        let p = self.control_period(capture, queues, counter);
+        let sample = self.sample();
+        let p = self.control_period(sample, capture, queues, counter);
         link.serve(queues, rx, &mut &mut *capture, tx, counter);
         p
     }

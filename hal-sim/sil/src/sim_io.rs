@@ -338,11 +338,25 @@ impl SimHal {
     /// the sample ready when the control interrupt enters, so the period's
     /// timing counts the firmware's work, not the sensor models'.
     pub fn sampled(&mut self, plant: &Plant) -> SampledIo<'_> {
-        let sample = if self.faults.read_error {
+        let sample = self.take_sample(plant);
+        self.with_sample(sample)
+    }
+
+    /// This period's sample ([`sample`](Self::sample)), or `None` under an
+    /// injected read error: the sensor models' work, which an image may
+    /// run outside the firmware's time ([`sampled`](Self::sampled) then
+    /// [`with_sample`](Self::with_sample) in two steps).
+    pub fn take_sample(&mut self, plant: &Plant) -> Option<RawSample> {
+        if self.faults.read_error {
             None
         } else {
             Some(self.sample(plant))
-        };
+        }
+    }
+
+    /// The I/O with `sample`, taken before the period
+    /// ([`take_sample`](Self::take_sample)).
+    pub fn with_sample(&mut self, sample: Option<RawSample>) -> SampledIo<'_> {
         SampledIo { hal: self, sample }
     }
 

@@ -141,6 +141,9 @@ mod app {
         cx.local.counter.enter();
         let (t0, serial0) = hopper_app::serial_cost::stamp(hopper_app::qemu::tim5_now);
         let robot = &mut *cx.local.robot;
+        // The sensor models (the board's ADC and timers), outside the
+        // firmware's time, as the plant is.
+        let sample = hopper_app::qemu::with_systick_stopped(cx.local.syst, || robot.sample());
         let (queues, counter) = (&mut *cx.local.port_queues, &mut *cx.local.counter);
         let (irq_max, irq_count, irq_lost) = hopper_app::serial_cost::totals();
         robot
@@ -149,7 +152,7 @@ mod app {
             .set_serial_cost(irq_max, irq_count, irq_lost);
         cx.shared
             .capture
-            .lock(|c| robot.control_period(c, queues, counter));
+            .lock(|c| robot.control_period(sample, c, queues, counter));
         if hopper_app::qemu::with_systick_stopped(cx.local.syst, || robot.advance(&mut |_| {}))
             .is_err()
         {

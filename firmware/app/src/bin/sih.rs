@@ -168,6 +168,7 @@ mod app {
         let ticks = cx.local.control_ticks.0;
         let (t0, serial0) = hopper_app::serial_cost::stamp(move || ticks.raw());
         let robot = &mut *cx.local.robot;
+        let sample = robot.sample();
         let (queues, counter) = (&mut *cx.local.port_queues, &mut *cx.local.control_ticks);
         let (irq_max, irq_count, irq_lost) = hopper_app::serial_cost::totals();
         robot
@@ -176,7 +177,7 @@ mod app {
             .set_serial_cost(irq_max, irq_count, irq_lost);
         cx.shared
             .capture
-            .lock(|c| robot.control_period(c, queues, counter));
+            .lock(|c| robot.control_period(sample, c, queues, counter));
         if robot.advance(&mut |_| {}).is_err() {
             defmt::error!("plant integration failed: the simulated robot stops");
             hopper_app::park();
