@@ -531,6 +531,8 @@ fn stack_bound(llvm_size: &Path, elf: &Path, budget: u64) -> Result<(), String> 
     let (control, control_path) = task("ADC")?;
     let (link, _) = task("SDIO")?;
     let (serial, _) = task("USART1")?;
+    // RTIC runs the priority-1 tasks from one of the image's dispatchers
+    // (main.rs's `dispatchers`): the one it defines a handler for.
     let logger = ["CAN2_SCE", "CAN2_RX1"]
         .iter()
         .filter(|d| funcs.contains_key(**d))
@@ -538,7 +540,7 @@ fn stack_bound(llvm_size: &Path, elf: &Path, budget: u64) -> Result<(), String> 
         .collect::<Result<Vec<_>, _>>()?
         .into_iter()
         .max()
-        .unwrap_or(0);
+        .ok_or("stack: no handler for either dispatcher (CAN2_SCE, CAN2_RX1): main.rs's `dispatchers` changed")?;
     let (init, _) = task("main")?;
     let idle = funcs.get("main").map_or(0, |f| f.frame);
     let worst = idle
