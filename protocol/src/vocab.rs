@@ -409,6 +409,13 @@ pub enum Refusal {
     LegLoaded = 34,
     /// The toe is not on the ground for a routine that needs it there.
     NotOnGround = 35,
+    /// The board cannot save: the hardware watchdog option (WDG_SW = 0)
+    /// would reset it in the middle of the sector erase.
+    HardwareWatchdogOption = 36,
+    /// The board cannot save: its supply is below the sector erase's
+    /// minimum (the PVD at 2.8 V).
+    #[strum(serialize = "supply-too-low-to-erase-flash")]
+    SupplyLow = 37,
 }
 
 /// What kind of value a parameter holds (`ParamMeta::kind`).

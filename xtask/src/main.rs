@@ -10,7 +10,11 @@
 //!   `xtask: N passed, M failed` line counting the tests of every run
 //!   (the control crate alone, the workspace, the fuzz target's stable tests).
 //! * `cargo xtask size`: build the board firmware with defmt and check its size
-//!   budget; the last line is `size: flash=N ram=M capture=C` (bytes).
+//!   budget: `size: flash=N ram=M capture=C` (bytes); then, from its
+//!   machine code ([`stack`]), `stack: control=N ... bytes (budget B)` and
+//!   `isolation: panic_paths=none ... critical_section=basepri` (no task
+//!   can panic; the control and serial interrupts take no critical
+//!   section and mask nothing).
 //! * `cargo xtask qemu`: build the QEMU variant (`--features qemu-sim`), run
 //!   the closed-loop scenarios in `qemu-system-arm` (installing it with
 //!   apt-get if missing), decode their defmt logs, check each against the
@@ -18,13 +22,17 @@
 //!   instruction budget. The `shaped` scenario prints `qemu-shaped: ...`,
 //!   its heat-aware mode `qemu-heat-aware: ...`;
 //!   the last line is `qemu: steady_apex_m=... hops_to_converge=...
-//!   step_instr_min=... step_instr_mean=... step_instr_max=... missed=...`
-//!   (the energy-apex scenario). Before the scenarios it runs the link
+//!   step_instr_min=... step_instr_mean=... step_instr_max=... missed=...
+//!   stack_peak_b=... log_frame_instr_max=... step_cycles_est_max=...
+//!   cs_masks_control=false` (the energy-apex scenario; the step in
+//!   estimated Cortex-M4 cycles from QEMU's execution trace, [`cycles`]). Before the scenarios it runs the link
 //!   session (`tests/link-session.txt`) with `hopper-link` against the QEMU
 //!   link image: `qemu-link: steady_apex_m=... records=... dropped=...
 //!   link_lost_s=... frames_bad=... step_instr_mean=... step_instr_max=...
 //!   link_instr_mean=... link_instr_max=... isr_instr_mean=...
-//!   isr_instr_max=... flood_requests=... flood_isr_instr_max=...`. Then
+//!   isr_instr_max=... flood_requests=... flood_isr_instr_max=... ...
+//!   isr_cycles_est_max=...`, and the bring-up order on a fresh image,
+//!   `qemu-link-bringup: missed=0 faults=none start_jitter_max_us=...`. Then
 //!   the board image's init
 //!   on QEMU with `-d unimp`, checked against `tests/board-init.trace`:
 //!   `board-init: writes=... polled_registers=... longest_poll_reads=...
@@ -71,6 +79,7 @@ use std::process::{Command, ExitCode, Stdio};
 
 mod board_init;
 mod cockpit;
+mod cycles;
 mod docs;
 mod hil;
 mod qemu;
@@ -531,16 +540,8 @@ fn stack_bound(llvm_size: &Path, elf: &Path, budget: u64) -> Result<(), String> 
     let (control, control_path) = task("ADC")?;
     let (link, _) = task("SDIO")?;
     let (serial, _) = task("USART1")?;
-    // RTIC runs the priority-1 tasks from one of the image's dispatchers
-    // (main.rs's `dispatchers`): the one it defines a handler for.
-    let logger = ["CAN2_SCE", "CAN2_RX1"]
-        .iter()
-        .filter(|d| funcs.contains_key(**d))
-        .map(|d| task(d).map(|(n, _)| n))
-        .collect::<Result<Vec<_>, _>>()?
-        .into_iter()
-        .max()
-        .ok_or("stack: no handler for either dispatcher (CAN2_SCE, CAN2_RX1): main.rs's `dispatchers` changed")?;
+    // The logger on CAN2_RX1's vector (main.rs's `LOGGER_IRQ`).
+    let (logger, _) = task("CAN2_RX1")?;
     let (init, _) = task("main")?;
     let idle = funcs.get("main").map_or(0, |f| f.frame);
     let worst = idle
@@ -555,6 +556,7 @@ fn stack_bound(llvm_size: &Path, elf: &Path, budget: u64) -> Result<(), String> 
         .unwrap_or(("-", 0));
     let ok = worst <= budget && init <= budget;
     let short = |n: &str| format!("{:#}", rustc_demangle::demangle(n));
+    let isolation = isolation(&funcs, &taken);
     let largest = short(largest);
     eprintln!(
         "xtask: stack: the control task's deepest path: {}",
@@ -567,6 +569,8 @@ fn stack_bound(llvm_size: &Path, elf: &Path, budget: u64) -> Result<(), String> 
     println!(
         "stack: control={control} link={link} serial={serial} logger={logger} idle={idle} init={init} worst={worst} bytes (budget {budget}); largest frame {largest} ({largest_frame} B)"
     );
+    let isolation = isolation?;
+    println!("{isolation}");
     if ok {
         Ok(())
     } else {
@@ -574,6 +578,76 @@ fn stack_bound(llvm_size: &Path, elf: &Path, budget: u64) -> Result<(), String> 
             "the stack's worst case ({worst} B, init {init} B) exceeds its room ({budget} B)"
         ))
     }
+}
+
+/// What the board image's tasks can reach, from its call graph: no task
+/// reaches the panic handler (the board's own types, the RTIC glue and
+/// the libraries as linked, beyond `panic-check`'s control period), and
+/// neither the control task nor the serial interrupt takes a critical
+/// section or masks interrupts, which is what makes the image's BASEPRI
+/// critical section (masking the tasks below them) exclusive. Prints
+/// `isolation: panic_paths=none masking=none critical_section=basepri(0xe0)
+/// masks=1-2`, or fails naming the path.
+fn isolation(
+    funcs: &std::collections::HashMap<String, stack::Function>,
+    taken: &[u64],
+) -> Result<String, String> {
+    let short = |n: &str| format!("{:#}", rustc_demangle::demangle(n));
+    let path = |p: Vec<String>| p.iter().map(|n| short(n)).collect::<Vec<_>>().join(" > ");
+    let is_panic =
+        |n: &str| n.ends_with("rust_begin_unwind") || short(n).starts_with("core::panicking::");
+    let is_cs = |n: &str| short(n).ends_with("critical_section::Impl>::acquire");
+    let masks = |n: &str| funcs.get(n).is_some_and(|f| f.masks_all);
+    let tasks = [
+        ("control", "ADC"),
+        ("serial", "USART1"),
+        ("link", "SDIO"),
+        ("logger", "CAN2_RX1"),
+    ];
+    // defmt-rtt's two guards (a frame begun inside a frame, a frame ended
+    // that never began) are the logger's only panics: left out, because
+    // the tasks that could begin a frame inside one (control, serial) are
+    // shown below never to take the critical section a frame holds.
+    let panic_at: std::collections::HashSet<u64> = funcs
+        .iter()
+        .filter(|(n, _)| is_panic(n))
+        .map(|(_, f)| f.addr)
+        .collect();
+    let mut guarded = funcs.clone();
+    for n in ["_defmt_acquire", "_defmt_release"] {
+        if let Some(f) = guarded.get_mut(n) {
+            f.calls.retain(|a| !panic_at.contains(a));
+        }
+    }
+    for (task, entry) in tasks {
+        if let Some(p) = stack::reaches(&guarded, taken, entry, &is_panic) {
+            return Err(format!("isolation: the {task} task can panic: {}", path(p)));
+        }
+    }
+    for (task, entry) in &tasks[..2] {
+        if let Some(p) = stack::reaches(funcs, taken, entry, &|n| is_cs(n) || masks(n)) {
+            return Err(format!(
+                "isolation: the {task} task takes a critical section or masks interrupts: {}",
+                path(p)
+            ));
+        }
+    }
+    // The critical section in use raises BASEPRI and never masks all.
+    let acquire: Vec<_> = funcs.iter().filter(|(n, _)| is_cs(n)).collect();
+    let [(name, f)] = acquire[..] else {
+        return Err(format!(
+            "isolation: expected one critical-section acquire, found {}",
+            acquire.len()
+        ));
+    };
+    if f.masks_all || !f.raises_basepri {
+        return Err(format!(
+            "isolation: {} does not raise BASEPRI alone (masks all: {})",
+            short(name),
+            f.masks_all
+        ));
+    }
+    Ok("isolation: panic_paths=none (control serial link logger; defmt-rtt's frame guards left out) masking=none (control serial) critical_section=basepri".to_string())
 }
 
 /// Size of the telemetry capture buffer, bytes: the board's `init` local

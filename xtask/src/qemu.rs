@@ -172,6 +172,7 @@ fn link_session(root: &Path, link: &Path) -> Result<(), String> {
         cargo(),
         &target_dir,
     )?;
+    // The main session runs traced (the control interrupt in cycles).
     let main = crate::session::against_qemu(root, link, &elf);
     let bringup = crate::session::bringup_against_qemu(root, link, &elf);
     main.and(bringup)
@@ -191,7 +192,9 @@ fn run_scenario(root: &Path, scenario: &Scenario, sim: &Path) -> Result<(), Stri
         build,
         &target_dir,
     )?;
-    let (bytes, status) = run_qemu(&elf, 0)?;
+    // Traced: QEMU's log of the firmware's code, weighed in cycles.
+    let trace = crate::cycles::marks_for(&elf, "SysTick")?;
+    let (bytes, status, traced) = run_qemu_traced(&elf, 0, Some(trace))?;
     let lines = decode(&elf, &bytes)?;
     for l in &lines {
         println!("qemu| {l}");
@@ -259,6 +262,15 @@ fn run_scenario(root: &Path, scenario: &Scenario, sim: &Path) -> Result<(), Stri
             problems.push(format!("overrun check: {e}"));
         }
     }
+    // The step in cycles: the traced window between the two clock
+    // readings around it.
+    let cycles_txt = match step_cycles(scenario, traced, (imean, imax)) {
+        Ok(c) => c.to_string(),
+        Err(e) => {
+            problems.push(format!("cycle estimate: {e}"));
+            "-".to_string()
+        }
+    };
     let steady_txt = if steady < 0.0 {
         "none".to_string()
     } else {
@@ -273,8 +285,16 @@ fn run_scenario(root: &Path, scenario: &Scenario, sim: &Path) -> Result<(), Stri
     // the deepest the tasks went (the firmware paints the free stack).
     let stack_peak = kv.get("stack_peak_b").copied().unwrap_or("-");
     let log_frame = kv.get("log_frame_instr_max").copied().unwrap_or("-");
+    // A log frame's critical section must not hold off the control
+    // task's priority (the image pends a task there inside one).
+    let cs_masks = kv.get("cs_masks_control").copied().unwrap_or("-");
+    if cs_masks != "false" {
+        problems.push(format!(
+            "a critical section masks the control task's priority (cs_masks_control={cs_masks})"
+        ));
+    }
     let line = format!(
-        "{}: steady_apex_m={steady_txt} hops_to_converge={htc_txt} step_instr_min={imin} step_instr_mean={imean} step_instr_max={imax} missed={missed} stack_peak_b={stack_peak} log_frame_instr_max={log_frame}",
+        "{}: steady_apex_m={steady_txt} hops_to_converge={htc_txt} step_instr_min={imin} step_instr_mean={imean} step_instr_max={imax} missed={missed} stack_peak_b={stack_peak} log_frame_instr_max={log_frame} step_cycles_est_max={cycles_txt} cs_masks_control={cs_masks}",
         scenario.label
     );
     if problems.is_empty() {
@@ -291,6 +311,30 @@ fn run_scenario(root: &Path, scenario: &Scenario, sim: &Path) -> Result<(), Stri
             problems.join("; ")
         ))
     }
+}
+
+/// The scenario's step in cycles: the traced window between the two
+/// clock readings around the step (the one whose instruction counts are
+/// the run's own step `(mean, max)` plus the reading's overhead), its
+/// largest.
+fn step_cycles(
+    scenario: &Scenario,
+    traced: Option<crate::cycles::Reader>,
+    (mean, max): (u64, u64),
+) -> Result<u64, String> {
+    let traced = traced.ok_or("no trace read")?;
+    let s = traced.segment_like(mean as f64, max)?;
+    eprintln!(
+        "xtask: {}: the step traced over {} periods: the window's instructions mean {:.1} max {} (the step's {mean}/{max} plus the reading's), cycles max {} ({:.2} a instruction), {} with every 16-byte flash line a miss once (5 wait states)",
+        scenario.label,
+        s.count,
+        s.mean_instructions(),
+        s.max_instructions,
+        s.max_cycles,
+        s.max_cycles as f64 / s.max_instructions.max(1) as f64,
+        s.max_cold,
+    );
+    Ok(s.max_cycles)
 }
 
 /// The firmware's last `summary key=value ...` line, whole and as a map.
@@ -415,12 +459,32 @@ pub(crate) fn qemu_command(elf: &Path, shift: u32, serial: &str) -> Command {
 /// Runs the image with `-icount shift=SHIFT`; returns its stdout (the defmt
 /// stream) and whether it exited with success.
 fn run_qemu(elf: &Path, shift: u32) -> Result<(Vec<u8>, bool), String> {
+    run_qemu_traced(elf, shift, None).map(|(b, ok, _)| (b, ok))
+}
+
+/// [`run_qemu`], and with `trace` (marks and `-dfilter`) QEMU's execution
+/// log of the firmware's code read as it runs (`cycles::Reader`).
+fn run_qemu_traced(
+    elf: &Path,
+    shift: u32,
+    trace: Option<(crate::cycles::Marks, String)>,
+) -> Result<(Vec<u8>, bool, Option<crate::cycles::Reader>), String> {
     eprintln!(
-        "xtask: running {} on qemu-system-arm (netduinoplus2, -icount shift={shift})",
-        elf.display()
+        "xtask: running {} on qemu-system-arm (netduinoplus2, -icount shift={shift}{})",
+        elf.display(),
+        if trace.is_some() {
+            ", execution traced"
+        } else {
+            ""
+        }
     );
     let started = Instant::now();
-    let mut child = qemu_command(elf, shift, "none")
+    let mut cmd = qemu_command(elf, shift, "none");
+    if let Some((_, dfilter)) = &trace {
+        cmd.args(crate::cycles::qemu_args(dfilter));
+        cmd.stderr(Stdio::piped());
+    }
+    let mut child = cmd
         .stdout(Stdio::piped())
         .spawn()
         .map_err(|e| format!("cannot start qemu-system-arm: {e}"))?;
@@ -430,6 +494,12 @@ fn run_qemu(elf: &Path, shift: u32) -> Result<(Vec<u8>, bool), String> {
         let _ = out.read_to_end(&mut buf);
         buf
     });
+    // The log, line by line as QEMU writes it (hundreds of megabytes:
+    // never kept).
+    let tracer = match (trace, child.stderr.take()) {
+        (Some((marks, _)), Some(err)) => Some(crate::cycles::read_in_thread(marks, err)),
+        _ => None,
+    };
     let status = loop {
         match child.try_wait() {
             Ok(Some(s)) => break s,
@@ -443,11 +513,18 @@ fn run_qemu(elf: &Path, shift: u32) -> Result<(Vec<u8>, bool), String> {
         }
     };
     let bytes = reader.join().map_err(|_| "reading qemu output failed")?;
+    let traced = match tracer {
+        Some(t) => Some(t.join().map_err(|_| "reading qemu's trace failed")?),
+        None => None,
+    };
+    for l in traced.iter().flat_map(|t| &t.other) {
+        eprintln!("xtask: qemu: {l}");
+    }
     eprintln!(
         "xtask: QEMU finished in {:.1} s ({status})",
         started.elapsed().as_secs_f64()
     );
-    Ok((bytes, status.success()))
+    Ok((bytes, status.success(), traced))
 }
 
 /// Decodes a defmt byte stream with the ELF's format table.

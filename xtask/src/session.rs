@@ -204,13 +204,34 @@ fn start_serve(sim: &Path, flash: &Path) -> Result<(Reaped, String), String> {
     Ok((server, addr))
 }
 
-/// `cargo xtask qemu`'s session against the QEMU link image `elf`.
+/// `cargo xtask qemu`'s session against the QEMU link image `elf`, run
+/// traced: the control interrupt's window is weighed in cycles
+/// (`cycles`), the one
+/// whose instruction counts are the session's own `status` figures plus
+/// the readings' overhead (`isr_cycles_est_max=` on the line).
 pub fn against_qemu(root: &Path, link: &Path, elf: &Path) -> Result<(), String> {
     let out_dir = crate::target_dir(root)?.join("link-session").join("qemu");
-    on_link_image(elf, "qemu-link", |addr| {
+    let trace = crate::cycles::marks_for(elf, "SysTick")?;
+    let (r, traced) = on_link_image_traced(elf, "qemu-link", Some(trace), |addr| {
         run_session(link, addr, &out_dir, "qemu-link")
-    })
-    .map(|r| println!("{}", r.line("qemu-link", "instr")))
+    })?;
+    let traced = traced.ok_or("no trace of the link image")?;
+    let mut r = r?;
+    let w = traced.segment_like(r.isr_mean as f64, r.isr_max)?;
+    eprintln!(
+        "xtask: qemu-link: the control interrupt traced over {} periods: the window's instructions mean {:.1} max {} (the session's {}/{} plus the readings'), cycles max {} ({:.2} a instruction), {} with every 16-byte flash line a miss once (5 wait states)",
+        w.count,
+        w.mean_instructions(),
+        w.max_instructions,
+        r.isr_mean,
+        r.isr_max,
+        w.max_cycles,
+        w.max_cycles as f64 / w.max_instructions.max(1) as f64,
+        w.max_cold
+    );
+    r.isr_cycles_est_max = Some(w.max_cycles);
+    println!("{}", r.line("qemu-link", "instr"));
+    Ok(())
 }
 
 /// The bring-up order of docs/board.md (`tests/link-session-bringup.txt`:
@@ -275,13 +296,40 @@ fn on_link_image<T>(
     label: &str,
     session: impl FnOnce(&str) -> Result<T, String>,
 ) -> Result<T, String> {
+    on_link_image_traced(elf, label, None, session).and_then(|(r, _)| r)
+}
+
+/// [`on_link_image`], with QEMU's execution log read as it runs when
+/// `trace` (marks and `-dfilter`) is given.
+fn on_link_image_traced<T>(
+    elf: &Path,
+    label: &str,
+    trace: Option<(crate::cycles::Marks, String)>,
+    session: impl FnOnce(&str) -> Result<T, String>,
+) -> Result<(Result<T, String>, Option<crate::cycles::Reader>), String> {
     let addr = free_addr()?;
-    eprintln!("xtask: running the link image on qemu-system-arm, USART1 on tcp {addr}");
-    let mut child = crate::qemu::qemu_command(elf, 0, &format!("tcp:{addr},server=on,wait=off"))
+    eprintln!(
+        "xtask: running the link image on qemu-system-arm, USART1 on tcp {addr}{}",
+        if trace.is_some() {
+            ", execution traced"
+        } else {
+            ""
+        }
+    );
+    let mut cmd = crate::qemu::qemu_command(elf, 0, &format!("tcp:{addr},server=on,wait=off"));
+    if let Some((_, dfilter)) = &trace {
+        cmd.args(crate::cycles::qemu_args(dfilter));
+        cmd.stderr(Stdio::piped());
+    }
+    let mut child = cmd
         .stdout(Stdio::piped())
         .spawn()
         .map_err(|e| format!("cannot start qemu-system-arm: {e}"))?;
     let mut stdout = child.stdout.take().ok_or("no stdout from qemu")?;
+    let tracer = match (trace, child.stderr.take()) {
+        (Some((marks, _)), Some(err)) => Some(crate::cycles::read_in_thread(marks, err)),
+        _ => None,
+    };
     let qemu = Reaped(child);
     let log = std::thread::spawn(move || {
         let mut buf = Vec::new();
@@ -297,7 +345,14 @@ fn on_link_image<T>(
             Err(e) => eprintln!("xtask: the link image's log: {e}"),
         }
     }
-    result
+    let traced = match tracer {
+        Some(t) => Some(t.join().map_err(|_| "reading qemu's trace failed")?),
+        None => None,
+    };
+    for l in traced.iter().flat_map(|t| &t.other) {
+        eprintln!("xtask: qemu: {l}");
+    }
+    Ok((result, traced))
 }
 
 /// What a session showed.
@@ -332,6 +387,8 @@ struct Report {
     /// by its end.
     flood_requests: u64,
     flood_isr_max: u64,
+    /// The control interrupt's largest, in estimated cycles (a traced run).
+    isr_cycles_est_max: Option<u64>,
 }
 
 impl Report {
@@ -359,7 +416,9 @@ impl Report {
             self.height_mm,
             if self.reboot.is_empty() { "-" } else { &self.reboot },
             self.gain_error
-        )
+        ) + &self
+            .isr_cycles_est_max
+            .map_or(String::new(), |c| format!(" isr_cycles_est_max={c}"))
     }
 }
 

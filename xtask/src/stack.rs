@@ -11,7 +11,7 @@
 //! - a task's depth is its handler's frame plus its deepest callee's,
 //!   through the call graph.
 //!
-//! An indirect call (`blx rN`, `bx rN` other than `bx lr`: a waker's or a
+//! An indirect call (`blx rN`, `bx rN` other than `bx lr`: a
 //! parameter slot's function pointer) may reach any function whose
 //! address the image holds in its read-only data or its initialised data
 //! (a vtable, a table of slots: [`address_taken`]); it is bounded by the
@@ -20,6 +20,12 @@
 //! is refused, not guessed: a
 //! stack pointer moved by a register, or recursion, reachable from a task,
 //! fails the check with the function named.
+//!
+//! The same call graph says what a task can reach ([`reaches`],
+//! [`reachable`]): `cargo xtask size`'s `isolation:` check (no task
+//! reaches the panic handler; the control and serial interrupts reach no
+//! critical section and mask no interrupt) and the functions `cargo xtask
+//! qemu`'s execution trace keeps.
 //!
 //! The main stack is shared: `init` runs alone first; then `idle` runs,
 //! and each priority level's task can preempt the one below, each
@@ -44,6 +50,11 @@ pub struct Function {
     /// What makes its depth unknown, if anything (a stack pointer set
     /// from a register).
     pub unbounded: Option<String>,
+    /// Whether it masks every interrupt (`cpsid`, a PRIMASK or FAULTMASK
+    /// write).
+    pub masks_all: bool,
+    /// Whether it raises BASEPRI (`msr basepri_max`).
+    pub raises_basepri: bool,
 }
 
 /// The image's functions by name, from `llvm-objdump -d` output.
@@ -148,6 +159,9 @@ fn apply(f: &mut Function, name: &str, op: &str, args: &str) {
             ));
         }
         "blx" | "bx" if args != "lr" && !args.starts_with("0x") => f.indirect = true,
+        "cpsid" => f.masks_all = true,
+        "msr" if args.starts_with("primask") || args.starts_with("faultmask") => f.masks_all = true,
+        "msr" if args.starts_with("basepri_max") => f.raises_basepri = true,
         _ if op.starts_with('b') || op.starts_with("cb") => {
             // "bl\t0x8003cc8 <name>", "b.w\t0x... <other>": a call, or a
             // branch out of this function (a tail call).
@@ -268,6 +282,75 @@ fn walk(
     Ok(d)
 }
 
+/// A path from `entry` to a function `hit` accepts (names, entry first),
+/// through direct calls and, from an indirect call, any of `taken`; or
+/// `None` when no such function is reachable. An over-approximation in
+/// the same way as [`depth`]: a call on one path counts on every path.
+pub fn reaches(
+    funcs: &HashMap<String, Function>,
+    taken: &[u64],
+    entry: &str,
+    hit: &dyn Fn(&str) -> bool,
+) -> Option<Vec<String>> {
+    let by_addr: HashMap<u64, &str> = funcs.iter().map(|(n, f)| (f.addr, n.as_str())).collect();
+    // Breadth first, so the path named is a shortest one.
+    let mut from: HashMap<&str, &str> = HashMap::new();
+    let mut queue = std::collections::VecDeque::from([entry]);
+    let mut seen: HashSet<&str> = HashSet::from([entry]);
+    while let Some(name) = queue.pop_front() {
+        if hit(name) {
+            let mut path = vec![name.to_string()];
+            let mut at = name;
+            while let Some(prev) = from.get(at) {
+                path.push(prev.to_string());
+                at = prev;
+            }
+            path.reverse();
+            return Some(path);
+        }
+        let Some(f) = funcs.get(name) else {
+            continue;
+        };
+        let indirect = if f.indirect { taken } else { &[] };
+        for a in f.calls.iter().chain(indirect) {
+            if let Some(callee) = by_addr.get(a) {
+                if seen.insert(callee) {
+                    from.insert(callee, name);
+                    queue.push_back(callee);
+                }
+            }
+        }
+    }
+    None
+}
+
+/// Every function reachable from `entry` (itself included), not going
+/// on through the ones `stop` accepts (which are included).
+pub fn reachable(
+    funcs: &HashMap<String, Function>,
+    taken: &[u64],
+    entry: &str,
+    stop: &dyn Fn(&str) -> bool,
+) -> HashSet<String> {
+    let by_addr: HashMap<u64, &str> = funcs.iter().map(|(n, f)| (f.addr, n.as_str())).collect();
+    let mut seen = HashSet::from([entry.to_string()]);
+    let mut queue = vec![entry.to_string()];
+    while let Some(name) = queue.pop() {
+        let Some(f) = funcs.get(&name).filter(|_| !stop(&name)) else {
+            continue;
+        };
+        let indirect = if f.indirect { taken } else { &[] };
+        for a in f.calls.iter().chain(indirect) {
+            if let Some(callee) = by_addr.get(a) {
+                if seen.insert(callee.to_string()) {
+                    queue.push(callee.to_string());
+                }
+            }
+        }
+    }
+    seen
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -291,6 +374,7 @@ mod tests {
 
 08000300 <leaf>:
  8000300:      \tstr\tr4, [sp, #-8]!
+ 8000302:      \tcpsid\ti
  8000304:      \tbx\tlr
 
 08000400 <ptr>:
@@ -309,6 +393,7 @@ mod tests {
         assert_eq!(f["ADC"].frame, 36 + 16 + 456);
         assert_eq!(f["step"].frame, 8 + 256);
         assert_eq!(f["leaf"].frame, 8);
+        assert!(f["leaf"].masks_all && !f["step"].masks_all);
         // The branch inside ADC is not a call; the tail call to `leaf` is.
         assert_eq!(f["ADC"].calls, [0x800_0200, 0x800_0300]);
         let (d, path) = depth(&f, &[], "ADC").unwrap();
@@ -335,5 +420,20 @@ mod tests {
         assert!(depth(&f, &[], "rec")
             .unwrap_err()
             .contains("rec: recursion"));
+    }
+
+    #[test]
+    fn a_reachable_function_is_found_with_its_path() {
+        let f = parse(DIS);
+        assert_eq!(
+            reaches(&f, &[], "ADC", &|n| n == "leaf").unwrap(),
+            ["ADC", "leaf"]
+        );
+        assert_eq!(reaches(&f, &[], "step", &|n| n == "rec"), None);
+        // Through a function pointer: any address-taken function.
+        assert_eq!(
+            reaches(&f, &[0x800_0500], "ptr", &|n| n == "rec").unwrap(),
+            ["ptr", "rec"]
+        );
     }
 }

@@ -86,7 +86,7 @@
 //! unless its output contradicts itself. [`Watchdog::caused_last_reset`]
 //! tells the application that the IWDG caused the last reset.
 
-use heapless::spsc::{Consumer, Producer};
+use crate::serial::{RxIn, TxOut};
 use hopper_control::hal::{Converters, HopperIo, IoError, PinError, PinnedIo, RawSample};
 use stm32f4::stm32f405::{self as pac, Peripherals};
 
@@ -288,7 +288,7 @@ pub fn init(
     dp: Peripherals,
     control_hz: u32,
     dac_zero_code: u16,
-    link: (Producer<'static, u8>, Consumer<'static, u8>),
+    link: (RxIn<'static>, TxOut<'static>),
 ) -> Board {
     let zero_code = if dac_zero_code <= DAC_MAX_CODE {
         dac_zero_code
@@ -478,7 +478,7 @@ impl hopper_robot_link::hil::HilPins for HilPins {
 /// The deadman on AMP_EN with a wall-clock window ([`HilPins`]); no
 /// converters, encoders, control timer or watchdog: the periods come from
 /// the host.
-pub fn init_hil(dp: Peripherals, link: (Producer<'static, u8>, Consumer<'static, u8>)) -> HilBoard {
+pub fn init_hil(dp: Peripherals, link: (RxIn<'static>, TxOut<'static>)) -> HilBoard {
     pinmap::amp_en_low(&dp.RCC, &dp.GPIOB);
     pinmap::configure_inputs(&dp.GPIOB, &dp.GPIOC);
     let clocks = configure_clocks(&dp.RCC, &dp.FLASH, &dp.PWR, &dp.TIM11);

@@ -312,6 +312,32 @@ pub fn save_refusal(flash: &pac::FLASH, pwr: &pac::PWR) -> Option<&'static str> 
     low.then_some("the supply is below 2.8 V (the PVD): a sector erase at x32 needs 2.7-3.6 V")
 }
 
+/// Why a save asked for now could not be written after the restart, read
+/// without waiting (the link task, before it answers a `save`): the
+/// hardware watchdog option, or the supply below the PVD's 2.8 V. The
+/// first call turns the PVD on at that level and leaves it on (it settles
+/// within 100 us, DS8626 t_PVD: a period; its output reads "not low"
+/// until then); `at_boot` checks both again before it erases.
+#[allow(unsafe_code)] // Reads of FLASH_OPTCR and PWR_CSR, and PWR_CR's PVD bits, owned by no task.
+pub fn save_refusal_now() -> Option<hopper_robot_link::Refusal> {
+    // SAFETY: the registers' fixed addresses. OPTCR and CSR are read
+    // only; CR is written only here after `init` (its other bits, the
+    // voltage scaling `init` set, are kept by the read-modify-write, and
+    // no other task touches PWR).
+    let (flash, pwr) = unsafe { (&*pac::FLASH::ptr(), &*pac::PWR::ptr()) };
+    if flash.optcr().read().bits() & OPTCR_WDG_SW == 0 {
+        return Some(hopper_robot_link::Refusal::HardwareWatchdogOption);
+    }
+    if pwr.cr().read().pvde().bit_is_clear() {
+        pwr.cr().modify(|_, w| w.pls().set(6).pvde().set_bit());
+    }
+    pwr.csr()
+        .read()
+        .pvdo()
+        .bit_is_set()
+        .then_some(hopper_robot_link::Refusal::SupplyLow)
+}
+
 /// In `init`, before the watchdog starts: writes a pending save, then
 /// reads the saved record. The slot is marked taken only once the record
 /// reads back from flash as written (a reset in the middle of the erase

@@ -492,14 +492,19 @@ pub mod ticks {
 
     /// TIM5's count now, from any task (free-running: the QEMU images'
     /// counter, and this one's where the core has no cycle counter).
+    /// Each reading is marked by a `YIELD` (a hint: one instruction, no
+    /// effect on a single core) that QEMU's execution trace shows: `cargo
+    /// xtask qemu` weighs the instructions between two readings in cycles
+    /// (the `*_cycles_est_max` figures). The mark is inside what the
+    /// counter's overhead (two readings back to back) takes off.
+    #[allow(unsafe_code)] // The marker, and a read of a free-running counter's register.
     pub fn tim5_now() -> u32 {
-        #[allow(unsafe_code)] // A read of a free-running counter's register.
+        // SAFETY: a hint instruction; it touches no memory or register.
+        unsafe { core::arch::asm!("yield", options(nomem, nostack, preserves_flags)) };
         // SAFETY: `TIM5::ptr()` is its register block's fixed address; CNT
         // has no read side effect, and TIM5 is only written while it is
         // set up, before any task runs.
-        unsafe {
-            (*pac::TIM5::ptr()).cnt().read().bits()
-        }
+        unsafe { (*pac::TIM5::ptr()).cnt().read().bits() }
     }
 
     impl Ticks {
@@ -578,42 +583,125 @@ pub mod ticks {
     }
 }
 
-/// The log channel's ends and the count of items it had no room for.
+/// The image's critical section, for the crates that take one (defmt's
+/// logger above all): it raises BASEPRI to mask the tasks at
+/// [`MASKED_PRIORITY`] and below, never the control task or the serial
+/// interrupt above them. Mutual exclusion holds because no code at those
+/// higher priorities takes a critical section: `cargo xtask size` checks
+/// the board image's call graph for it (and for `cpsid`), so a log frame
+/// costs the control trigger and the USART nothing, whatever its length.
+#[cfg(target_os = "none")]
+#[allow(unsafe_code)] // The `critical_section::Impl` contract is `unsafe`.
+mod critical {
+    use cortex_m::register::{basepri, basepri_max};
+
+    /// The highest task priority a critical section masks: the link
+    /// task's (main.rs). The control task (3) and the serial interrupt
+    /// (4) run through it.
+    pub const MASKED_PRIORITY: u8 = 2;
+
+    /// BASEPRI's value for [`MASKED_PRIORITY`]: RTIC's logical priority
+    /// `p` is the hardware level `(16 - p) << 4` with the F4's four
+    /// priority bits (PM0214 4.2.7), and BASEPRI masks that level and
+    /// every lower priority (higher value).
+    pub const BASEPRI: u8 = ((1u8 << stm32f4::stm32f405::NVIC_PRIO_BITS) - MASKED_PRIORITY)
+        << (8 - stm32f4::stm32f405::NVIC_PRIO_BITS);
+
+    struct BasePri;
+    critical_section::set_impl!(BasePri);
+
+    // SAFETY: acquire only raises BASEPRI (`basepri_max`) and release puts
+    // back what it read, so sections nest; nothing above
+    // `MASKED_PRIORITY` enters one (checked on the image), so every
+    // section excludes every other.
+    unsafe impl critical_section::Impl for BasePri {
+        #[inline(never)]
+        unsafe fn acquire() -> critical_section::RawRestoreState {
+            let old = basepri::read();
+            basepri_max::write(BASEPRI);
+            old
+        }
+
+        #[inline(never)]
+        unsafe fn release(old: critical_section::RawRestoreState) {
+            // SAFETY: `old` is what `acquire` read, an earlier level.
+            unsafe { basepri::write(old) };
+        }
+    }
+}
+
+#[cfg(target_os = "none")]
+pub use critical::{BASEPRI as CRITICAL_SECTION_BASEPRI, MASKED_PRIORITY};
+
+/// The log queue's ends, the count of items it had no room for, and the
+/// dump request: the control task's side never waits and never masks an
+/// interrupt (a lock-free queue, atomics and a pend); the logger task, at
+/// the lowest priority, drains it and prints.
 #[cfg(target_os = "none")]
 pub mod log {
     use crate::control::LOG_CAPACITY;
+    use core::sync::atomic::{AtomicBool, AtomicU32, Ordering};
     use hopper_control::runner::LogItem;
+    use stm32f4::stm32f405::Interrupt;
 
+    /// The queue's length: it holds one less.
+    pub const LOG_QUEUE: usize = LOG_CAPACITY + 1;
+    /// The queue, [`LOG_CAPACITY`] items.
+    pub type LogQueue = spsc::spsc::Queue<LogItem, LOG_QUEUE>;
     /// The control task's end.
-    pub type Sender = rtic_sync::channel::Sender<'static, LogItem, LOG_CAPACITY>;
+    pub type Sender = spsc::spsc::Producer<'static, LogItem, LOG_QUEUE>;
     /// The logger's end.
-    pub type Receiver = rtic_sync::channel::Receiver<'static, LogItem, LOG_CAPACITY>;
+    pub type Receiver = spsc::spsc::Consumer<'static, LogItem, LOG_QUEUE>;
 
-    /// The control task's side of the log: never blocks; an item that finds
-    /// the channel full is dropped and counted, and the count goes out with
-    /// the next item that fits.
+    /// Items that found the queue full.
+    static DROPPED: AtomicU32 = AtomicU32::new(0);
+    /// A capture dump asked for and not yet begun.
+    static DUMP: AtomicBool = AtomicBool::new(false);
+
+    /// The control task's side of the log: an item that finds the queue
+    /// full is dropped and counted.
     pub struct Log {
         tx: Sender,
-        dropped: u32,
+        logger: Interrupt,
     }
 
     impl Log {
-        /// Wraps the sending end.
-        pub fn new(tx: Sender) -> Self {
-            Self { tx, dropped: 0 }
+        /// Wraps the sending end; `logger` is the logger task's interrupt.
+        pub fn new(tx: Sender, logger: Interrupt) -> Self {
+            Self { tx, logger }
         }
 
-        /// Queues `item` if there is room.
-        pub fn push(&mut self, item: LogItem) {
-            if self.tx.try_send(item).is_err() {
-                self.dropped = self.dropped.saturating_add(1);
+        /// Queues `item` if there is room, and wakes the logger. Out of
+        /// line: a hop or a fault, rarely, and the period's code stays as
+        /// compact around it as without a log.
+        #[inline(never)]
+        pub fn push(&mut self, item: &LogItem) {
+            if self.tx.enqueue(*item).is_err() {
+                DROPPED.fetch_add(1, Ordering::Relaxed);
             }
+            cortex_m::peripheral::NVIC::pend(self.logger);
+        }
+
+        /// Asks the logger for a capture dump.
+        pub fn request_dump(&mut self) {
+            DUMP.store(true, Ordering::Relaxed);
+            cortex_m::peripheral::NVIC::pend(self.logger);
         }
 
         /// Items dropped so far.
         pub fn dropped(&self) -> u32 {
-            self.dropped
+            dropped()
         }
+    }
+
+    /// Items dropped so far.
+    pub fn dropped() -> u32 {
+        DROPPED.load(Ordering::Relaxed)
+    }
+
+    /// Whether a dump was asked for since the last call.
+    pub fn take_dump() -> bool {
+        DUMP.swap(false, Ordering::Relaxed)
     }
 
     /// Control periods run, for the log's timestamps (the control task

@@ -18,8 +18,7 @@
 //! | `usart1`  | 4        | USART1 (the host link's bytes; board; 3 in the QEMU link image, whose USART has no baud rate) |
 //! | `control` | 3        | board: ADC injected end of conversion (TIM4 at `CONTROL_HZ`); QEMU: SysTick at `CONTROL_HZ` |
 //! | `link`    | 2        | SDIO (spare), pended by `control` every period: decode, answer, encode, build sets (board and QEMU link image) |
-//! | `logger`  | 1        | started in `init`; waits on the log channel (hop ledgers, faults) |
-//! | `dump`    | 1        | board: spawned when the dump button is pressed; drains the capture |
+//! | `logger`  | 1        | CAN2_RX1 (spare), pended by `control` when it queues a log item (hop ledgers, faults) or the dump button asks for the capture; its log frames' critical section masks priorities 1-2 only (BASEPRI) |
 //! | `idle`    | 0        | busy loop (no `wfi`: QEMU 7.2 loses SysTick ticks while sleeping) |
 //!
 //! # Safety
@@ -83,23 +82,23 @@ mod fault_test {
 
 /// The board application.
 #[cfg(target_os = "none")]
-#[rtic::app(device = stm32f4::stm32f405, peripherals = true, dispatchers = [CAN2_SCE, CAN2_RX1])]
+#[rtic::app(device = stm32f4::stm32f405, peripherals = true)]
 mod app {
     use cortex_m::peripheral::NVIC;
-    use heapless::spsc::Consumer;
     use hopper_app::board::{self, BoardIo, CycleCounter, DumpButton, Watchdog};
-    use hopper_app::control::{Bank, Capture, Locked, Slot, CONTROL_HZ, LOG_CAPACITY, TIMING};
+    use hopper_app::control::{Bank, Capture, Locked, Slot, CONTROL_HZ, TIMING};
     use hopper_app::log::{self, Log};
-    use hopper_app::serial::{LinkTx, RxQueue, Serial, TxQueue};
+    use hopper_app::serial::{LinkTx, RxOut, RxQueue, Serial, TxQueue};
     use hopper_control::hopper::HopperConfig;
-    use hopper_control::runner::LogItem;
     use hopper_robot_link::{ControlLoop, Endpoint, LinkEnds, PortEnds, Queues};
-    use rtic_sync::make_channel;
     use stm32f4::stm32f405::Interrupt;
 
     /// The link task's interrupt: a spare one (the SD card interface is
     /// not used), pended by the control task every period.
     const LINK_IRQ: Interrupt = Interrupt::SDIO;
+    /// The logger task's vector: an unused peripheral's (never the FPU's,
+    /// which floating-point exceptions pend).
+    const LOGGER_IRQ: Interrupt = Interrupt::CAN2_RX1;
 
     /// The link task's own cycles (the control task's and the serial
     /// interrupt's that preempt it left out).
@@ -127,11 +126,12 @@ mod app {
         firmware: ControlLoop<Slot>,
         cycles: CycleCounter,
         log: Log,
+        log_rx: log::Receiver,
         port_queues: PortEnds<'static, Slot>,
         link: Endpoint<Slot>,
         link_cycles: LinkCycles,
         link_queues: LinkEnds<'static, Slot>,
-        link_rx: Consumer<'static, u8>,
+        link_rx: RxOut<'static>,
         link_tx: LinkTx<'static>,
         #[cfg(not(feature = "feather"))]
         serial: Serial<'static>,
@@ -143,6 +143,7 @@ mod app {
         rxq: RxQueue = RxQueue::new(),
         txq: TxQueue = TxQueue::new(),
         capture: Capture = Capture::new(),
+        log_queue: log::LogQueue = log::LogQueue::new(),
         queues: Queues<Slot> = Queues::new(),
         bank: Bank = [None, None, None],
     ])]
@@ -242,10 +243,7 @@ mod app {
             runner.report_overrun();
             runner.arming_mut().note_watchdog_reset();
         }
-        let (tx, rx) = make_channel!(LogItem, LOG_CAPACITY);
-        if logger::spawn(rx).is_err() {
-            defmt::error!("logger did not start: hop and fault logs are off");
-        }
+        let (log_tx, log_rx) = cx.local.log_queue.split();
         if board.io.control_hz() != CONTROL_HZ {
             // The runner steps with the built-in period: on another rate
             // every filter and law would be wrong, so the motor stays off.
@@ -276,7 +274,8 @@ mod app {
                 dump: board.dump_button,
                 firmware: ControlLoop::new(runner),
                 cycles,
-                log: Log::new(tx),
+                log: Log::new(log_tx, LOGGER_IRQ),
+                log_rx,
                 port_queues,
                 link,
                 link_cycles: LinkCycles,
@@ -343,13 +342,13 @@ mod app {
         runner.end_period(NVIC::is_pending(Interrupt::ADC));
         log::PERIODS.store(runner.periods(), core::sync::atomic::Ordering::Relaxed);
         if let Some(item) = p.log {
-            cx.local.log.push(item);
+            cx.local.log.push(&item);
         }
         *cx.local.polls = cx.local.polls.wrapping_add(1);
         // The dump's thousand log frames only while disarmed: each frame
         // masks interrupts (docs/safety.md, "Logging").
         if cx.local.polls.is_multiple_of(100) && !p.armed && cx.local.dump.pressed() {
-            let _ = dump::spawn(cx.local.log.dropped());
+            cx.local.log.request_dump();
         }
         rtic::pend(LINK_IRQ);
         let (irq_max, irq_count, irq_lost) = hopper_app::serial_cost::totals();
@@ -373,6 +372,9 @@ mod app {
     fn link(cx: link::Context) {
         let link = &mut *cx.local.link;
         let rx = &mut *cx.local.link_rx;
+        // A save the board could not write after its restart is refused
+        // when asked, with the reason.
+        link.set_save_refusal(hopper_app::flash::save_refusal_now());
         link.serve(
             cx.local.link_queues,
             core::iter::from_fn(|| rx.dequeue()),
@@ -402,22 +404,26 @@ mod app {
         hopper_app::serial_cost::serve(cx.local.serial3, cortex_m::peripheral::DWT::cycle_count);
     }
 
-    /// Logs hop ledgers and faults as the control task queues them.
-    #[task(priority = 1)]
-    async fn logger(_: logger::Context, mut rx: log::Receiver) {
-        while let Ok(item) = rx.recv().await {
+    /// Logs hop ledgers and faults as the control task queues them, and
+    /// prints the capture when the dump button asked for it. Lowest
+    /// priority: its log frames take the image's critical section, which
+    /// masks this task and the link task, never the control or serial
+    /// interrupts.
+    #[task(binds = CAN2_RX1, priority = 1, local = [log_rx], shared = [capture])]
+    fn logger(mut cx: logger::Context) {
+        while let Some(item) = cx.local.log_rx.dequeue() {
             log::print(&item);
+        }
+        if log::take_dump() {
+            dump(&mut cx.shared.capture, log::dropped());
         }
     }
 
-    /// Prints the capture (the dump button), oldest first; it stays in
-    /// place (the link's `dump` reads the same records).
-    #[task(priority = 1, shared = [capture])]
-    async fn dump(mut cx: dump::Context, log_dropped: u32) {
-        let (n, frozen, fault_step) = cx
-            .shared
-            .capture
-            .lock(|c| (c.len(), c.frozen(), c.fault_step().unwrap_or(0)));
+    /// Prints the capture, oldest first; it stays in place (the link's
+    /// `dump` reads the same records).
+    fn dump(capture: &mut impl rtic::Mutex<T = &'static mut Capture>, log_dropped: u32) {
+        let (n, frozen, fault_step) =
+            capture.lock(|c| (c.len(), c.frozen(), c.fault_step().unwrap_or(0)));
         defmt::info!(
             "capture dump begins: {=usize} records, frozen by a fault: {=bool} (step {=u32})",
             n,
@@ -425,7 +431,7 @@ mod app {
             fault_step
         );
         for i in 0..n {
-            if let Some(r) = cx.shared.capture.lock(|c| c.get(i).copied()) {
+            if let Some(r) = capture.lock(|c| c.get(i).copied()) {
                 defmt::info!("{}", r);
             }
         }

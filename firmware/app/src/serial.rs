@@ -23,8 +23,8 @@
 //! its baud rate: there the bytes move as fast as the host socket takes
 //! them.
 
-use heapless::spsc::{Consumer, Producer, Queue};
 use hopper_robot_link::Tx;
+use spsc::spsc::{Consumer, Producer, Queue};
 use stm32f4::stm32f405 as pac;
 
 /// The link's baud rate: 921,600 carries 92,160 bytes/s, 1 kHz of full
@@ -33,19 +33,31 @@ pub const LINK_BAUD: u32 = 921_600;
 
 /// Received bytes waiting for the control task: 512 bytes, 5.6 ms of the
 /// line at full rate, more than 50 periods.
-pub type RxQueue = Queue<u8, 512>;
+pub type RxQueue = Queue<u8, RX_BYTES>;
+/// [`RxQueue`]'s length.
+pub const RX_BYTES: usize = 512;
+/// The serial interrupt's end of [`RxQueue`].
+pub type RxIn<'a> = Producer<'a, u8, RX_BYTES>;
+/// The link task's end of [`RxQueue`].
+pub type RxOut<'a> = Consumer<'a, u8, RX_BYTES>;
 
 /// Bytes waiting for the line: 4 KiB, 44 ms at 921,600 baud.
-pub type TxQueue = Queue<u8, 4096>;
+pub type TxQueue = Queue<u8, TX_BYTES>;
+/// [`TxQueue`]'s length.
+pub const TX_BYTES: usize = 4096;
+/// The link task's end of [`TxQueue`].
+pub type TxIn<'a> = Producer<'a, u8, TX_BYTES>;
+/// The serial interrupt's end of [`TxQueue`].
+pub type TxOut<'a> = Consumer<'a, u8, TX_BYTES>;
 
 /// The link task's end of the transmit queue.
 pub struct LinkTx<'a> {
-    tx: Producer<'a, u8>,
+    tx: TxIn<'a>,
 }
 
 impl<'a> LinkTx<'a> {
     /// Wraps the producer.
-    pub fn new(tx: Producer<'a, u8>) -> Self {
+    pub fn new(tx: TxIn<'a>) -> Self {
         Self { tx }
     }
 }
@@ -69,8 +81,8 @@ impl Tx for LinkTx<'_> {
 /// The interrupt's side: the USART and the queues' other ends.
 pub struct Serial<'a> {
     usart: crate::pinmap::LinkUsart,
-    rx: Producer<'a, u8>,
-    tx: Consumer<'a, u8>,
+    rx: RxIn<'a>,
+    tx: TxOut<'a>,
     /// Received bytes dropped (receive queue full, or an overrun).
     lost: u32,
 }
@@ -91,8 +103,8 @@ impl<'a> Serial<'a> {
         gpioa: &pac::GPIOA,
         gpiob: &pac::GPIOB,
         bus_hz: u32,
-        rx: Producer<'a, u8>,
-        tx: Consumer<'a, u8>,
+        rx: RxIn<'a>,
+        tx: TxOut<'a>,
     ) -> Self {
         crate::pinmap::configure_link(rcc, gpioa, gpiob);
         usart.brr().write(|w| brr_bits(w, brr(bus_hz, LINK_BAUD)));

@@ -48,7 +48,7 @@ use hopper_control::runner::{
     CycleCounter, HopperSlot, LogItem, Owned, Period, PeriodRunner, Prepared, StepStats, Then,
 };
 use hopper_control::telemetry::{FaultCapture, StepRecord};
-use hopper_protocol::vocab::Refusal;
+pub use hopper_protocol::vocab::Refusal;
 use hopper_protocol::{
     encode, ArmState, CostStats, Decoder, DumpInfo, HilActuate, HilSample, Hop, HostMsg, ParamInfo,
     Request, Response, RobotMsg, Status, StoredInfo, Telemetry, ThermalStatus, TimingStats,
@@ -1107,6 +1107,9 @@ pub struct Endpoint<H = Owned> {
     save_taken: bool,
     /// The last save's state (`StoredInfo::save`).
     save_state: u8,
+    /// Why the board cannot write its flash now, if it cannot
+    /// ([`set_save_refusal`](Self::set_save_refusal)).
+    save_refusal: Option<Refusal>,
     /// The control period's configuration and its generation
     /// ([`PeriodRunner::config_gen`]), as its answers confirmed them.
     confirmed: (HopperConfig, u32),
@@ -1366,6 +1369,7 @@ impl<H: HopperSlot> Endpoint<H> {
             save_len: 0,
             save_taken: false,
             save_state: 0,
+            save_refusal: None,
             confirmed: (*runner.hopper().config(), runner.config_gen()),
             pending: heapless::Deque::new(),
             stats: None,
@@ -1408,6 +1412,13 @@ impl<H: HopperSlot> Endpoint<H> {
         }
         self.save_taken = true;
         self.save_record.0.get(..self.save_len)
+    }
+
+    /// Why the board cannot write its flash now (the hardware watchdog
+    /// option, a supply below the erase's minimum), or `None`: a save
+    /// asked for meanwhile is refused with it.
+    pub fn set_save_refusal(&mut self, why: Option<Refusal>) {
+        self.save_refusal = why;
     }
 
     /// How the save went: written, failed, or to be written at the next
@@ -1941,6 +1952,9 @@ impl<H: HopperSlot> Endpoint<H> {
         }
         if self.save_state == SAVE_PENDING {
             return refused(Refusal::Busy);
+        }
+        if let Some(why) = self.save_refusal {
+            return refused(why);
         }
         self.save_len = hopper_control::persist::encode(&self.confirmed.0, &mut self.save_record.0);
         self.save_taken = false;
@@ -2562,6 +2576,36 @@ mod tests {
             "{msgs:?}"
         );
         assert!(r.ep.take_save().is_none());
+    }
+
+    /// A board that cannot write its flash safely (the hardware watchdog
+    /// option, a low supply) refuses the save with that reason when it is
+    /// asked, not after the restart; nothing is queued.
+    #[test]
+    fn a_save_the_board_cannot_write_is_refused_with_its_reason() {
+        let mut r = Robot::new();
+        r.runner.arming_mut().note_tared();
+        for (id, why) in [
+            (1, Refusal::HardwareWatchdogOption),
+            (2, Refusal::SupplyLow),
+        ] {
+            r.ep.set_save_refusal(Some(why));
+            r.request(id, Request::Save);
+            r.periods(1);
+            assert_eq!(
+                r.take(),
+                [RobotMsg::Response {
+                    id,
+                    resp: refused(why)
+                }]
+            );
+            assert!(r.ep.take_save().is_none());
+        }
+        r.ep.set_save_refusal(None);
+        r.request(3, Request::Save);
+        r.periods(1);
+        let _ = r.take();
+        assert!(r.ep.take_save().is_some());
     }
 
     /// A save needs a calibration (placeholders are none); once tared it is

@@ -23,7 +23,7 @@ pub(crate) fn run(c: &mut Client) -> Result<String> {
             Response::Refused(why) if why == Refusal::Busy && Instant::now() < deadline => {
                 std::thread::sleep(Duration::from_millis(10));
             }
-            Response::Refused(why) => bail!("save refused: {why}"),
+            Response::Refused(why) => bail!("save refused: {why}{}", hint(why.refusal())),
             r => bail!("unexpected answer {r:?}"),
         }
     }
@@ -50,5 +50,18 @@ pub(crate) fn run(c: &mut Client) -> Result<String> {
                 bail!("save failed: {}", stored_line(&s, require_tare))
             }
         }
+    }
+}
+
+/// What to do about a refusal only the board's flash gives.
+fn hint(why: Option<Refusal>) -> &'static str {
+    match why {
+        Some(Refusal::HardwareWatchdogOption) => {
+            ": the board's option bytes start its watchdog at reset (WDG_SW = 0), whose reset would cut the 1-2 s sector erase; set WDG_SW to 1 (docs/board.md, \"Saves\"), then save again"
+        }
+        Some(Refusal::SupplyLow) => {
+            ": the board's supply is below 2.8 V (its voltage detector); a sector erase needs 2.7-3.6 V: check the supply, then save again"
+        }
+        _ => "",
     }
 }

@@ -48,7 +48,7 @@ mod app {
     use heapless::spsc::{Consumer, Producer, Queue};
     use hopper_app::board::{self, HilPins};
     use hopper_app::control::{Bank, Capture, Locked, Slot, CONTROL_HZ, TIMING};
-    use hopper_app::serial::{LinkTx, RxQueue, Serial, TxQueue};
+    use hopper_app::serial::{LinkTx, RxOut, RxQueue, Serial, TxQueue};
     use hopper_app::ticks::{Control, Link, Ticks};
     use hopper_protocol::{HilActuate, HilSample};
     use hopper_robot_link::hil::{boot_config, HilIo};
@@ -79,7 +79,7 @@ mod app {
         link: Endpoint<Slot>,
         link_ticks: Link,
         link_queues: LinkEnds<'static, Slot>,
-        link_rx: Consumer<'static, u8>,
+        link_rx: RxOut<'static>,
         link_tx: LinkTx<'static>,
         samples_out: Producer<'static, HilSample>,
         answers_in: Consumer<'static, HilActuate>,

@@ -53,6 +53,9 @@ mod check {
     use defmt as _;
     // The interrupt vector table (cortex-m-rt's `device` feature wants one).
     use stm32f4::stm32f405 as pac;
+    // The image's critical section (BASEPRI), which `Peripherals::take`
+    // takes.
+    use hopper_app as _;
 
     use super::serial;
 

@@ -31,9 +31,8 @@ hopper_app::fault_handlers!(hopper_app::qemu::exit_failure);
 mod app {
     use cortex_m::peripheral::{SCB, SYST};
     use cortex_m_semihosting::debug;
-    use heapless::spsc::Consumer;
     use hopper_app::control::{Bank, Capture, Locked, Slot, CONTROL_HZ};
-    use hopper_app::serial::{LinkTx, RxQueue, Serial, TxQueue};
+    use hopper_app::serial::{LinkTx, RxOut, RxQueue, Serial, TxQueue};
     use hopper_app::virtual_robot::{self, Flash, START_APEX_M};
     use hopper_robot_link::{Endpoint, LinkEnds, PortEnds, Queues};
     use hopper_sil::robot::VirtualRobot;
@@ -65,7 +64,7 @@ mod app {
         link_counter: hopper_app::qemu::Instructions,
         link_queues: LinkEnds<'static, Slot>,
         flash: Flash,
-        link_rx: Consumer<'static, u8>,
+        link_rx: RxOut<'static>,
         link_tx: LinkTx<'static>,
         serial: Serial<'static>,
     }

@@ -21,22 +21,20 @@ hopper_app::fault_handlers!(hopper_app::qemu::exit_failure);
 
 /// The QEMU application: the same period runner on the simulated hopper.
 #[cfg(target_os = "none")]
-#[rtic::app(device = stm32f4::stm32f405, peripherals = true, dispatchers = [FSMC])]
+#[rtic::app(device = stm32f4::stm32f405, peripherals = true)]
 mod app {
     use cortex_m::peripheral::{SCB, SYST};
     use cortex_m_semihosting::debug;
-    use hopper_app::control::{
-        Capture, Locked, CONTROL_HZ, CONTROL_PERIOD_S, LOG_CAPACITY, TIMING,
-    };
+    use hopper_app::control::{Capture, Locked, CONTROL_HZ, CONTROL_PERIOD_S, TIMING};
     use hopper_app::log::{self, Log};
     use hopper_control::hopper::{ApexLoop, Strategy};
     use hopper_control::laws::shaped;
-    use hopper_control::runner::{LogItem, PeriodRunner};
+    use hopper_control::runner::PeriodRunner;
     use hopper_plant::metrics::{hops_to_converge, steady_apex};
     use hopper_plant::{Event, Params, Plant};
     use hopper_robot_link::{ControlLoop, Unlinked};
     use hopper_sil::sim_io::{firmware_config, SensorConfig, SimHal};
-    use rtic_sync::make_channel;
+    use stm32f4::stm32f405::Interrupt;
 
     // The scenario (`SCENARIO`, `SHAPED`, `START_APEX_M`, `TARGET_APEX_M`,
     // `DURATION_S`): `scenarios/qemu/$HOPPER_QEMU_SCENARIO.toml`, read by
@@ -75,9 +73,10 @@ mod app {
         counter: hopper_app::qemu::Instructions,
         syst: SYST,
         log: Log,
+        log_rx: log::Receiver,
     }
 
-    #[init(local = [capture: Capture = Capture::new()])]
+    #[init(local = [capture: Capture = Capture::new(), log_queue: log::LogQueue = log::LogQueue::new()])]
     fn init(cx: init::Context) -> (Shared, Local) {
         let dp = cx.device;
         let mut core = cx.core;
@@ -118,10 +117,7 @@ mod app {
         };
         runner.arming_mut().request_arm();
         let hal = SimHal::new(&cfg.calibration, &SensorConfig::DEFAULT);
-        let (tx, rx) = make_channel!(LogItem, LOG_CAPACITY);
-        if logger::spawn(rx).is_err() {
-            defmt::error!("logger did not start");
-        }
+        let (log_tx, log_rx) = cx.local.log_queue.split();
 
         hopper_app::qemu::start_systick(&mut core.SYST, hopper_app::qemu::PERIOD_TICKS);
         defmt::println!(
@@ -145,7 +141,8 @@ mod app {
                 },
                 counter,
                 syst: core.SYST,
-                log: Log::new(tx),
+                log: Log::new(log_tx, LOGGER_IRQ),
+                log_rx,
             },
         )
     }
@@ -154,6 +151,16 @@ mod app {
     #[idle]
     fn idle(_: idle::Context) -> ! {
         hopper_app::qemu::paint_stack();
+        // Does a critical section (what a log frame takes) hold off a task
+        // at the control task's priority? Pend one inside it and see.
+        critical_section::with(|_| {
+            cortex_m::peripheral::NVIC::pend(PROBE_IRQ);
+            cortex_m::asm::isb();
+            CS_MASKS_CONTROL.store(
+                !PROBE_RAN.load(core::sync::atomic::Ordering::Relaxed),
+                core::sync::atomic::Ordering::Relaxed,
+            );
+        });
         loop {
             cortex_m::asm::nop();
         }
@@ -184,7 +191,7 @@ mod app {
         };
         let runner = &mut firmware.runner;
         if let Some(item) = p.log {
-            cx.local.log.push(item);
+            cx.local.log.push(&item);
         }
 
         // The plant between this tick and the next (not part of the period).
@@ -231,7 +238,7 @@ mod app {
         let faults = runner.hopper().supervisor().faults();
         let cost = runner.step_cost();
         defmt::println!(
-            "summary steady_apex_m={=f64} hops_to_converge={=i32} step_instr_min={=u32} step_instr_mean={=u32} step_instr_max={=u32} missed={=u32} faults={=u16} periods={=u32} fault_period={=i64} amp_enabled={=bool} max_current_after_fault_a={=f32} log_dropped={=u32} stack_idle_b={=u32} stack_peak_b={=u32} log_frame_instr_max={=u32}",
+            "summary steady_apex_m={=f64} hops_to_converge={=i32} step_instr_min={=u32} step_instr_mean={=u32} step_instr_max={=u32} missed={=u32} faults={=u16} periods={=u32} fault_period={=i64} amp_enabled={=bool} max_current_after_fault_a={=f32} log_dropped={=u32} stack_idle_b={=u32} stack_peak_b={=u32} log_frame_instr_max={=u32} cs_masks_control={=bool}",
             steady.unwrap_or(-1.0),
             converged.map_or(-1, |k| i32::try_from(k).unwrap_or(i32::MAX)),
             cost.min,
@@ -246,7 +253,8 @@ mod app {
             log.dropped(),
             stack_idle_b,
             stack_peak_b,
-            LOG_FRAME_MAX.load(core::sync::atomic::Ordering::Relaxed)
+            LOG_FRAME_MAX.load(core::sync::atomic::Ordering::Relaxed),
+            CS_MASKS_CONTROL.load(core::sync::atomic::Ordering::Relaxed)
         );
         let ok = converged.is_some() && faults.is_empty() && runner.missed() == 0;
         debug::exit(if ok {
@@ -258,13 +266,31 @@ mod app {
         loop {}
     }
 
-    /// Logs hop ledgers and faults as they happen.
-    #[task(priority = 1)]
-    async fn logger(_: logger::Context, mut rx: log::Receiver) {
-        while let Ok(item) = rx.recv().await {
-            // Timed: a defmt frame holds its logger's critical section
-            // (interrupts masked) from start to end (docs/safety.md,
-            // "Logging").
+    /// The logger task's vector (a spare peripheral's).
+    const LOGGER_IRQ: Interrupt = Interrupt::FSMC;
+    /// The critical-section probe's vector (a spare peripheral's).
+    const PROBE_IRQ: Interrupt = Interrupt::CAN1_TX;
+    /// The probe ran.
+    static PROBE_RAN: core::sync::atomic::AtomicBool = core::sync::atomic::AtomicBool::new(false);
+    /// A critical section held off the probe at the control task's
+    /// priority (the summary's `cs_masks_control`).
+    static CS_MASKS_CONTROL: core::sync::atomic::AtomicBool =
+        core::sync::atomic::AtomicBool::new(true);
+
+    /// Runs once, pended by idle inside a critical section, at the
+    /// control task's priority.
+    #[task(binds = CAN1_TX, priority = 3)]
+    fn cs_probe(_: cs_probe::Context) {
+        PROBE_RAN.store(true, core::sync::atomic::Ordering::Relaxed);
+    }
+
+    /// Logs hop ledgers and faults as the control task queues them.
+    #[task(binds = FSMC, priority = 1, local = [log_rx])]
+    fn logger(cx: logger::Context) {
+        while let Some(item) = cx.local.log_rx.dequeue() {
+            // Timed: a defmt frame holds the image's critical section
+            // (the tasks at priorities 1-2 masked, not the control task)
+            // from start to end (docs/safety.md, "Logging").
             let t0 = hopper_app::qemu::tim5_now();
             log::print_always(&item);
             LOG_FRAME_MAX.fetch_max(

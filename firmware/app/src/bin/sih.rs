@@ -37,10 +37,9 @@ hopper_app::fault_handlers!(hopper_app::park);
 #[rtic::app(device = stm32f4::stm32f405, peripherals = true, dispatchers = [FSMC])]
 mod app {
     use cortex_m::peripheral::{SCB, SYST};
-    use heapless::spsc::Consumer;
     use hopper_app::board;
     use hopper_app::control::{Bank, Capture, Locked, Slot, CONTROL_HZ};
-    use hopper_app::serial::{LinkTx, RxQueue, Serial, TxQueue};
+    use hopper_app::serial::{LinkTx, RxOut, RxQueue, Serial, TxQueue};
     use hopper_app::ticks::{Control, Link, Ticks};
     use hopper_app::virtual_robot::{self, Flash, START_APEX_M};
     use hopper_robot_link::{Endpoint, LinkEnds, PortEnds, Queues};
@@ -70,7 +69,7 @@ mod app {
         link_ticks: Link,
         link_queues: LinkEnds<'static, Slot>,
         flash: Flash,
-        link_rx: Consumer<'static, u8>,
+        link_rx: RxOut<'static>,
         link_tx: LinkTx<'static>,
         #[cfg(not(feature = "feather"))]
         serial: Serial<'static>,

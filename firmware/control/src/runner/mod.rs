@@ -49,6 +49,7 @@ use crate::hopper::{ConfigError, Hopper, HopperConfig, StepOutput};
 use crate::supervisor::{Command, Fault, Faults, SupervisorInput};
 use crate::telemetry::HopLedger;
 use crate::watchdog::{Decision, FeedPolicy};
+use core::sync::atomic::{compiler_fence, Ordering};
 
 /// A free-running counter the runner times the control step with (cycles,
 /// or guest instructions under QEMU's `-icount`). Wraps at `u32::MAX`.
@@ -589,9 +590,13 @@ impl<H: HopperSlot> PeriodRunner<H> {
             self.finish_calibration();
         }
         let t0 = counter.now();
+        // The step alone between the two readings: no memory access of
+        // the period's other work moved into (or out of) the window.
+        compiler_fence(Ordering::SeqCst);
         let mut out =
             self.hopper
                 .step_with(raw.as_ref(), self.timing.period_s, Some(&mut self.cal));
+        compiler_fence(Ordering::SeqCst);
         let t1 = counter.now();
         // A motor-driving routine stops at a fault (the e-stop latches one)
         // or a lost link; the output below is then the safe one.
