@@ -72,10 +72,15 @@ impl std::error::Error for BadAddress {}
 
 type Writer = Arc<Mutex<Box<dyn Write + Send>>>;
 
+/// Request ids: [`Client::request`]'s below these, [`Urgent`]'s these
+/// (above them, `flood`'s own, from 40,000).
+const URGENT_IDS: std::ops::Range<u16> = 0x7000..0x8000;
+
 /// A connected robot.
 pub struct Client {
     writer: Writer,
     incoming: Receiver<RobotMsg>,
+    urgent: Urgent,
     /// Unsolicited messages received while waiting for a response.
     queued: VecDeque<RobotMsg>,
     next_id: u16,
@@ -138,6 +143,7 @@ impl Client {
         let heartbeats = Arc::new(AtomicBool::new(true));
         let stats = Arc::new(Mutex::new(LinkStats::default()));
         let (tx, incoming) = mpsc::channel();
+        let (urgent_tx, urgent_rx) = mpsc::channel();
         let mut threads = Vec::new();
         {
             let (stop, stats) = (stop.clone(), stats.clone());
@@ -150,9 +156,19 @@ impl Client {
                         Ok(0) => break,
                         Ok(n) => {
                             for &b in buf.get(..n).unwrap_or_default() {
-                                if let Some(m) = d.push::<RobotMsg>(b) {
-                                    if tx.send(m).is_err() {
-                                        return;
+                                let Some(m) = d.push::<RobotMsg>(b) else {
+                                    continue;
+                                };
+                                match m {
+                                    // An urgent request's answer goes to
+                                    // its own waiter, past the queue.
+                                    RobotMsg::Response { id, resp } if URGENT_IDS.contains(&id) => {
+                                        let _ = urgent_tx.send((id, resp));
+                                    }
+                                    m => {
+                                        if tx.send(m).is_err() {
+                                            return;
+                                        }
                                     }
                                 }
                             }
@@ -185,6 +201,11 @@ impl Client {
             }));
         }
         let mut c = Client {
+            urgent: Urgent {
+                writer: writer.clone(),
+                next: Arc::new(std::sync::atomic::AtomicU16::new(URGENT_IDS.start)),
+                answers: Arc::new(Mutex::new(urgent_rx)),
+            },
             writer,
             incoming,
             queued: VecDeque::new(),
@@ -223,6 +244,12 @@ impl Client {
                 ),
             }
         }
+    }
+
+    /// A handle for requests that must not wait behind this client's
+    /// (a Disarm): any thread may use it while another runs requests.
+    pub fn urgent(&self) -> Urgent {
+        self.urgent.clone()
     }
 
     /// Where this client is connected.
@@ -266,7 +293,8 @@ impl Client {
     /// come meanwhile are kept for [`next_event`](Self::next_event).
     pub fn request(&mut self, req: Request) -> Result<Response> {
         let id = self.next_id;
-        self.next_id = self.next_id.wrapping_add(1).max(1);
+        // 1 ..= 0x6fff: the ids above are the urgent requests'.
+        self.next_id = self.next_id % (URGENT_IDS.start - 1) + 1;
         let what = format!("{req:?}");
         self.send(&HostMsg::Request { id, req })?;
         let deadline = Instant::now() + RESPONSE_TIMEOUT;
@@ -317,6 +345,54 @@ impl Client {
     pub fn discard_events(&mut self) {
         self.queued.clear();
         while self.incoming.try_recv().is_ok() {}
+    }
+}
+
+/// Requests that go out at once, from any thread, whatever requests the
+/// [`Client`] has in flight: their frames share the line (each written
+/// whole), their answers come back past the client's queue by id. One
+/// at a time: a second caller waits for the first's answer.
+#[derive(Clone)]
+pub struct Urgent {
+    writer: Writer,
+    next: Arc<std::sync::atomic::AtomicU16>,
+    answers: Arc<Mutex<Receiver<(u16, Response)>>>,
+}
+
+impl Urgent {
+    /// Sends `req` now and waits up to `timeout` for its answer.
+    pub fn request(&self, req: Request, timeout: Duration) -> Result<Response> {
+        let answers = self
+            .answers
+            .lock()
+            .map_err(|_| anyhow!("urgent requests poisoned"))?;
+        let id = self
+            .next
+            .fetch_update(Ordering::Relaxed, Ordering::Relaxed, |i| {
+                Some(if i + 1 < URGENT_IDS.end {
+                    i + 1
+                } else {
+                    URGENT_IDS.start
+                })
+            })
+            .unwrap_or(URGENT_IDS.start);
+        let what = format!("{req:?}");
+        write_all(&self.writer, &frame(&HostMsg::Request { id, req })?)
+            .context("the link closed")?;
+        let deadline = Instant::now() + timeout;
+        loop {
+            let left = deadline.saturating_duration_since(Instant::now());
+            match answers.recv_timeout(left) {
+                Ok((got, resp)) if got == id => return Ok(resp),
+                // An earlier caller's that gave up waiting.
+                Ok(_) => {}
+                Err(RecvTimeoutError::Timeout) => bail!(
+                    "no response to {what} within {:.0} ms",
+                    timeout.as_secs_f64() * 1e3
+                ),
+                Err(RecvTimeoutError::Disconnected) => bail!("the link closed"),
+            }
+        }
     }
 }
 

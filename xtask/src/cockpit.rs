@@ -4,9 +4,14 @@
 //! through the Chrome DevTools protocol as an operator would: the page
 //! loads and shows the robot disarmed, the plotted values move between two
 //! reads, Arm shows armed, an out-of-range set shows the refusal, the
-//! Escape key disarms. Prints one line
-//! `cockpit: loaded=... moved=... arm=... refused=... disarm=...` and
-//! leaves a screenshot in `target/cockpit/cockpit.png`.
+//! Escape key disarms while a parameter box has the focus, a Disarm
+//! answers within 50 ms while five more tabs read and set parameters, a
+//! page closed while armed disarms the robot (the operator deadman), and
+//! a robot lost in the middle of a recording leaves the recording whole
+//! and the page up. Prints one line `cockpit: loaded=... moved=...
+//! arm=... refused=... disarm=... disarm_ms_p99=N escape_in_input=...
+//! page_closed=... robot_lost=...` and leaves a screenshot in
+//! `target/cockpit/cockpit.png`.
 
 use std::io::{BufRead, BufReader, Read};
 use std::net::TcpStream;
@@ -18,6 +23,43 @@ use crate::session::{free_addr, host_binaries, Reaped};
 
 /// How long each step may take to show on the page.
 const STEP_TIMEOUT: Duration = Duration::from_secs(20);
+
+/// A Disarm's answer under load, 99th percentile, ms at most.
+const DISARM_MS_P99_BOUND: f64 = 50.0;
+
+/// Run in the page: five more websockets (tabs) each read the parameter
+/// table and set `target_apex_m` again as soon as their last answer came;
+/// this one disarms 40 times, 25 ms apart, each timed from its send to
+/// its answer. Resolves to JSON `{p99, median, max, n, load}` (ms).
+const DISARM_UNDER_LOAD: &str = r#"(async () => {
+  const url = `ws://${location.host}/ws?token=${new URLSearchParams(location.search).get('token')}`;
+  const open = () => new Promise(r => { const w = new WebSocket(url); w.onopen = () => r(w); });
+  let load = 0, on = true;
+  const tabs = [];
+  for (let k = 0; k < 5; k++) {
+    const w = await open();
+    let i = 0;
+    const next = () => { if (!on) return; i++; load++;
+      w.send(JSON.stringify(i % 2 ? { cmd: 'params', id: 1000000 + i } : { cmd: 'set', name: 'target_apex_m', value: '0.10', id: 1000000 + i })); };
+    w.onmessage = ev => { const m = JSON.parse(ev.data); if (m.type === 'result') next(); };
+    next(); tabs.push(w);
+  }
+  const me = await open();
+  const waiting = {};
+  me.onmessage = ev => { const m = JSON.parse(ev.data); if (m.type === 'result' && waiting[m.id]) { waiting[m.id](); delete waiting[m.id]; } };
+  await new Promise(r => setTimeout(r, 500));
+  const times = [];
+  for (let i = 0; i < 40; i++) {
+    const id = 5000000 + i, t0 = performance.now();
+    await new Promise(r => { waiting[id] = r; me.send(JSON.stringify({ cmd: 'disarm', id })); });
+    times.push(performance.now() - t0);
+    await new Promise(r => setTimeout(r, 25));
+  }
+  on = false; for (const w of tabs) w.close(); me.close();
+  const raw = times.map(t => Math.round(t * 10) / 10);
+  times.sort((a, b) => a - b);
+  return JSON.stringify({ p99: times[Math.ceil(0.99 * times.length) - 1], median: times[times.length >> 1], max: times[times.length - 1], n: times.length, load, raw });
+})()"#;
 
 type Socket = tungstenite::WebSocket<TcpStream>;
 
@@ -78,6 +120,15 @@ impl Page {
         let r = self.call(
             "Runtime.evaluate",
             serde_json::json!({ "expression": expr, "returnByValue": true }),
+        )?;
+        Ok(r["result"]["value"].clone())
+    }
+
+    /// The value the page's JavaScript promise `expr` resolves to.
+    fn eval_async(&mut self, expr: &str) -> Result<serde_json::Value, String> {
+        let r = self.call(
+            "Runtime.evaluate",
+            serde_json::json!({ "expression": expr, "returnByValue": true, "awaitPromise": true }),
         )?;
         Ok(r["result"]["value"].clone())
     }
@@ -150,7 +201,7 @@ pub fn run(root: &Path) -> Result<(), String> {
     let robot = free_addr()?;
     let recordings = out_dir.join("recordings");
     let _ = std::fs::remove_dir_all(&recordings);
-    let _serve = Reaped(
+    let mut serve = Reaped(
         Command::new(&sim)
             .args(["serve", "--tcp", &robot, "--start-apex", "0.05"])
             .args(["--controller", "shaped", "--target-apex", "0.10"])
@@ -280,9 +331,23 @@ pub fn run(root: &Path) -> Result<(), String> {
     )?;
     let refused = page.until(message, |s| s.contains("refused"))?;
     page.screenshot(&out_dir.join("cockpit.png"))?;
-    // Disarm by its key.
-    page.eval("document.dispatchEvent(new KeyboardEvent('keydown', { key: 'Escape' })), ''")?;
-    let disarmed = page.until(state, |s| s.starts_with("disarmed"))?;
+    // Disarm by its key, typed into a parameter box that has the focus.
+    page.eval(
+        "(() => { const i = document.querySelector('input[data-name=\"target_apex_m\"]'); i.focus(); \
+         i.dispatchEvent(new KeyboardEvent('keydown', { key: 'Escape', bubbles: true })); return ''; })()",
+    )?;
+    let disarmed = page
+        .until(state, |s| s.starts_with("disarmed"))
+        .unwrap_or_else(|e| {
+            // (Disarmed by its button then, to go on.)
+            let _ = page.eval("document.getElementById('disarm').click(), ''");
+            format!("still armed: {e}")
+        });
+    let escape_in_input = if disarmed == "disarmed (command)" {
+        "disarmed"
+    } else {
+        "armed"
+    };
     // The capture of the latest periods, plotted on demand.
     page.eval("document.getElementById('capture-button').click(), ''")?;
     let captured = page.until(message, |s| s.starts_with("capture:"))?;
@@ -304,12 +369,81 @@ pub fn run(root: &Path) -> Result<(), String> {
     eprintln!("xtask: cockpit: {hoist}; {save} (only the sensors checked)");
     // The page with the capture, for a look.
     page.screenshot(&out_dir.join("cockpit-capture.png"))?;
+    // Disarm under load: five more tabs each read the table and set a
+    // parameter again as soon as the last answer came; meanwhile this one
+    // disarms 40 times, each timed from its send to its answer.
+    let load = page.eval_async(DISARM_UNDER_LOAD).unwrap_or_else(|e| {
+        eprintln!("xtask: cockpit: disarm under load: {e}");
+        serde_json::Value::Null
+    });
+    let load: serde_json::Value =
+        serde_json::from_str(load.as_str().unwrap_or_default()).unwrap_or_default();
+    let disarm_ms_p99 = load["p99"].as_f64().unwrap_or(f64::INFINITY);
+    eprintln!(
+        "xtask: cockpit: disarm under load: {} disarms, median {:.1} ms, p99 {disarm_ms_p99:.1} ms, max {:.1} ms, while five tabs made {} reads and sets",
+        load["n"], load["median"].as_f64().unwrap_or(f64::NAN), load["max"].as_f64().unwrap_or(f64::NAN), load["load"]
+    );
+    eprintln!("xtask: cockpit: each disarm, ms, in order: {}", load["raw"]);
+    // The operator deadman: armed, the page closed, opened again.
+    let closed = (|| -> Result<(String, String, String), String> {
+        page.eval("document.getElementById('arm').click(), ''")?;
+        page.until(message, |s| s == "armed" || s.starts_with("arm refused"))?;
+        let rearmed = page.until(state, |s| s == "armed")?;
+        page.call("Page.navigate", serde_json::json!({ "url": "about:blank" }))?;
+        std::thread::sleep(Duration::from_millis(1500));
+        page.call("Page.navigate", serde_json::json!({ "url": url }))?;
+        let after = page.until(state, |s| s.starts_with("disarmed") || s == "armed")?;
+        let note = page.until("document.getElementById('note').textContent", |_| true)?;
+        Ok((rearmed, after, note))
+    })();
+    let page_closed = match &closed {
+        Ok((rearmed, after, note))
+            if rearmed == "armed"
+                && after.starts_with("disarmed")
+                && note.contains("operator page closed") =>
+        {
+            "disarmed"
+        }
+        _ => "armed",
+    };
+    eprintln!("xtask: cockpit: armed, the page closed for 1.5 s, opened again: {closed:?}");
+    // The robot lost in the middle of a recording.
+    let lost = (|| -> Result<(String, String), String> {
+        page.eval("document.getElementById('record').click(), ''")?;
+        page.until("document.getElementById('recording').textContent", |s| {
+            s.contains("recording-2")
+        })?;
+        std::thread::sleep(Duration::from_secs(1));
+        let _ = serve.0.kill();
+        let _ = serve.0.wait();
+        let lost = page.until(message, |s| s.starts_with("the robot was lost;"))?;
+        let lost_state = page.eval(state)?.as_str().unwrap_or_default().to_string();
+        Ok((lost, lost_state))
+    })();
+    let (lost, lost_state) = lost.unwrap_or_else(|e| (e, String::new()));
+    let folder2 = recordings.join("recording-2");
+    let lost_files = ["telemetry.csv", "hops.csv", "telemetry.mcap", "hop.png"]
+        .iter()
+        .filter(|f| folder2.join(f).is_file())
+        .count();
+    let robot_lost = if lost_files == 4 && lost.contains("recorded") && lost_state == "robot lost" {
+        "recording_complete"
+    } else {
+        "recording_lost"
+    };
+    eprintln!(
+        "xtask: cockpit: the robot killed while recording: the page shows `{lost_state}`; {lost}"
+    );
     eprintln!(
         "xtask: cockpit: {:.1} s in chromium; the screenshot: {}",
         started.elapsed().as_secs_f64(),
         out_dir.join("cockpit.png").display()
     );
     let ok = loaded == "disarmed (boot)"
+        && disarm_ms_p99 <= DISARM_MS_P99_BOUND
+        && escape_in_input == "disarmed"
+        && page_closed == "disarmed"
+        && robot_lost == "recording_complete"
         && moved
         && ledger.parse::<u32>().is_ok_and(|n| n >= 3)
         && armed == "armed"
@@ -321,7 +455,7 @@ pub fn run(root: &Path) -> Result<(), String> {
         && hoist.starts_with("mount: hoist")
         && save == "save refused: not-calibrated";
     println!(
-        "cockpit: loaded=\"{loaded}\" moved={moved} arm=\"{armed}\" ledger_rows={ledger} refused=\"{refused}\" disarm=\"{disarmed}\" bringup=\"{bringup}\" recorded_files={files} capture_plotted={plotted}"
+        "cockpit: loaded=\"{loaded}\" moved={moved} arm=\"{armed}\" ledger_rows={ledger} refused=\"{refused}\" disarm=\"{disarmed}\" bringup=\"{bringup}\" recorded_files={files} capture_plotted={plotted} disarm_ms_p99={disarm_ms_p99:.1} escape_in_input={escape_in_input} page_closed={page_closed} robot_lost={robot_lost}"
     );
     eprintln!("xtask: cockpit: {recorded}");
     eprintln!("xtask: cockpit: {captured}");

@@ -578,14 +578,14 @@ fn run_session(link: &Path, addr: &str, out_dir: &Path, label: &str) -> Result<R
         problems.push("the record after the disarm does not command 0 A".into());
     }
     for expected in [
-        "failed as expected: arm refused: not-homed",
+        "failed as expected: arm refused: not-homed: home the nut first (`calibrate direction`, then `calibrate home`, on the hoist)",
         "failed as expected: calibrate home refused: check-direction-first",
         "failed as expected: calibrate height refused: not-on-ground: the toe is off the ground; stand the robot on its toe with the hoist slack (`mount release` on a simulated robot), then run it again",
         "failed as expected: calibrate tare refused: leg-loaded: the leg carries the robot; hang it on the hoist with the toe free (`mount hoist` on a simulated robot), then run it again",
         "failed as expected: calibrate spring refused: leg-loaded: the leg carries the robot; hang it on the hoist with the toe free (`mount hoist` on a simulated robot), then run it again",
         "failed as expected: calibrate weight refused: not-on-ground: the toe is off the ground; stand the robot on its toe with the hoist slack (`mount release` on a simulated robot), then run it again",
         "saved: 13 calibration parameters to flash (they load at the next boot)",
-        "failed as expected: arm refused: estop-pressed",
+        "failed as expected: arm refused: estop-pressed: release the e-stop",
         "failed as expected: set target_apex_m = 2.0 refused: out-of-range (unchanged: 0.12 m)",
         "target_apex_m = 0.12 m",
     ] {

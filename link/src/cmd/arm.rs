@@ -19,9 +19,30 @@ pub(crate) fn arm(c: &mut Client, retry: Option<f64>) -> Result<()> {
                 let _ = why;
                 std::thread::sleep(Duration::from_millis(50));
             }
-            Response::Refused(why) => bail!("arm refused: {why}"),
+            Response::Refused(why) => bail!("arm refused: {why}{}", next_step(why.refusal())),
             r => bail!("unexpected answer {r:?}"),
         }
+    }
+}
+
+/// What to do about an arm refusal, in the operator's terms (`""` when
+/// the reason says it all).
+pub(crate) fn next_step(why: Option<hopper_protocol::vocab::Refusal>) -> &'static str {
+    use hopper_protocol::vocab::Refusal as R;
+    match why {
+        Some(R::Faulted) => ": reset the faults once their cause is gone (`reset-faults`, the cockpit's Reset faults)",
+        Some(R::EstopPressed) => ": release the e-stop",
+        Some(R::LinkDown) => ": no frame from this host reached the robot in time: check the cable and the baud rate",
+        Some(R::SensorsImplausible) => ": a sensor reads out of range: `calibrate sensors` says which",
+        Some(R::NutNotHome) => ": drive the nut to its upper stop first (`calibrate home`)",
+        Some(R::Moving) => ": wait until the body and the nut are still",
+        Some(R::NotCalibrated) => ": tare first (`calibrate tare`, on the hoist with the toe free), or save a calibration and restart",
+        Some(R::NotHomed) => ": home the nut first (`calibrate direction`, then `calibrate home`, on the hoist)",
+        Some(R::DirectionReversed) => ": the direction check failed: swap the motor's leads or the encoder's A and B, then `calibrate direction` again",
+        Some(R::Calibrating) => ": a bring-up routine is running: wait until it ends",
+        Some(R::ClockFallback | R::CrystalMismatch) => ": the core clock is not the profile's (docs/board.md, \"Clock profiles\")",
+        Some(R::BrownOutResetOff) => ": set the brown-out reset in the option bytes (docs/board.md, \"What AMP_EN and the DAC do through each reset cause\")",
+        _ => "",
     }
 }
 

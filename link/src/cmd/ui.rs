@@ -13,20 +13,27 @@
 //! own) and the websocket checks `Origin` (another page open in the same
 //! browser is not this one). Nothing of a refused request reaches the
 //! robot. The robot still disarms by its link timeout when this client
-//! goes away.
+//! goes away, and by the operator deadman below when its pages do.
 //!
 //! One thread owns the link (the [`Client`]): it streams telemetry, polls
 //! the state, and runs the commands the pages send, one at a time; each
-//! connection has a thread of its own.
+//! connection has a thread of its own. A Disarm does not wait in that
+//! line: the page's thread sends it at once ([`Urgent`]), whatever the
+//! link's thread has in flight. An operator deadman disarms the robot
+//! when no page has been connected for [`OPERATOR_DEADMAN`]; pages
+//! reconnect by themselves. Losing the robot is an event, not an exit:
+//! a recording in progress is finished (every file, its plot), the pages
+//! say so, and the cockpit connects again when the robot comes back.
 
 use super::common::wire_name;
 use anyhow::{bail, Context, Result};
 use hopper_link::record::{Recording, Streamed};
-use hopper_link::{names, Client};
+use hopper_link::{names, Client, Urgent};
 use hopper_protocol::{ArmState, DumpInfo, Request, Response, RobotMsg};
 use std::io::{Read, Write};
 use std::net::{SocketAddr, TcpListener, TcpStream};
 use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::mpsc::{channel, Receiver, Sender};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
@@ -50,6 +57,102 @@ struct Command {
 
 /// The pages connected: each one's queue of messages.
 type Pages = Arc<Mutex<Vec<Sender<String>>>>;
+
+/// With no page connected for this long, the robot is disarmed: a closed
+/// page (or a browser that died) leaves no one to press Disarm.
+pub(crate) const OPERATOR_DEADMAN: Duration = Duration::from_millis(500);
+
+/// How long a page's Disarm waits for the robot's answer.
+const DISARM_TIMEOUT: Duration = Duration::from_secs(1);
+
+/// What the link's thread, the pages' threads and the deadman share.
+#[derive(Clone, Default)]
+struct Shared {
+    /// Each page's queue.
+    pages: Pages,
+    /// Pages with a live websocket.
+    live: Arc<AtomicUsize>,
+    /// The robot armed, as last seen (its state, or an arm just granted).
+    armed: Arc<AtomicBool>,
+    /// What the cockpit did on its own (the deadman's disarm, the robot's
+    /// loss), for every page's header until the next arm.
+    note: Arc<Mutex<Option<String>>>,
+    /// The link's urgent requests (replaced when the robot reconnects).
+    urgent: Arc<Mutex<Option<Urgent>>>,
+}
+
+impl Shared {
+    fn set_note(&self, text: Option<String>) {
+        if let Ok(mut n) = self.note.lock() {
+            *n = text;
+        }
+    }
+
+    fn note(&self) -> Option<String> {
+        self.note.lock().ok().and_then(|n| n.clone())
+    }
+
+    /// Disarms the robot now, past every queue.
+    fn disarm(&self) -> Result<()> {
+        let urgent = self
+            .urgent
+            .lock()
+            .ok()
+            .and_then(|u| u.clone())
+            .ok_or_else(|| anyhow::anyhow!("no robot connected"))?;
+        match urgent.request(Request::Disarm, DISARM_TIMEOUT)? {
+            Response::Ok => {
+                self.armed.store(false, Ordering::Relaxed);
+                Ok(())
+            }
+            r => bail!("disarm: unexpected answer {r:?}"),
+        }
+    }
+}
+
+/// Counts a page's websocket as live while it exists.
+struct Live(Arc<AtomicUsize>);
+
+impl Live {
+    fn new(n: &Arc<AtomicUsize>) -> Self {
+        n.fetch_add(1, Ordering::Relaxed);
+        Live(n.clone())
+    }
+}
+
+impl Drop for Live {
+    fn drop(&mut self) {
+        self.0.fetch_sub(1, Ordering::Relaxed);
+    }
+}
+
+/// The operator deadman: with no live page for [`OPERATOR_DEADMAN`], a
+/// Disarm, once per such gap (and the note, when the robot was armed).
+fn deadman(shared: &Shared) {
+    let mut gap: Option<Instant> = None;
+    let mut done = false;
+    loop {
+        std::thread::sleep(Duration::from_millis(20));
+        if shared.live.load(Ordering::Relaxed) > 0 {
+            (gap, done) = (None, false);
+            continue;
+        }
+        let since = *gap.get_or_insert_with(Instant::now);
+        if done || since.elapsed() < OPERATOR_DEADMAN {
+            continue;
+        }
+        let was_armed = shared.armed.load(Ordering::Relaxed);
+        if shared.disarm().is_ok() {
+            done = true;
+            if was_armed {
+                shared.set_note(Some(format!(
+                    "disarmed by the cockpit: operator page closed (no page for {:.1} s)",
+                    OPERATOR_DEADMAN.as_secs_f64()
+                )));
+            }
+        }
+    }
+}
 
 /// `hopper-link ui --http ADDR [--allow-remote]`: serves the cockpit until
 /// the link closes or the process is stopped.
@@ -77,28 +180,126 @@ pub(crate) fn ui(
         hosts.push(format!("localhost:{}", bound.port()));
     }
     println!("cockpit: http://{bound}/?token={token}");
-    println!("(open it in a browser; Ctrl-C stops; the robot disarms by its link timeout then)");
+    println!("(open it in a browser; the robot is disarmed when no page is open for 0.5 s; Ctrl-C stops, and the robot disarms by its link timeout then)");
     std::io::stdout().flush()?;
-    let pages: Pages = Arc::default();
+    let shared = Shared::default();
+    if let Ok(mut u) = shared.urgent.lock() {
+        *u = Some(c.urgent());
+    }
     let (commands, inbox) = channel::<Command>();
     {
-        let pages = pages.clone();
+        let shared = shared.clone();
         let token = token.clone();
         std::thread::spawn(move || {
             for stream in listener.incoming().flatten() {
-                let (pages, commands, token, hosts) = (
-                    pages.clone(),
+                let (shared, commands, token, hosts) = (
+                    shared.clone(),
                     commands.clone(),
                     token.clone(),
                     hosts.clone(),
                 );
                 std::thread::spawn(move || {
-                    let _ = connection(stream, &token, &hosts, &pages, &commands);
+                    let _ = connection(stream, &token, &hosts, &shared, &commands);
                 });
             }
         });
     }
-    robot(c, &pages, &inbox, record_dir)
+    {
+        let shared = shared.clone();
+        std::thread::spawn(move || deadman(&shared));
+    }
+    let mut session = Session {
+        period_s: 0.0,
+        record_dir: record_dir.to_path_buf(),
+        recording: None,
+        batch: Vec::new(),
+        calibrating: None,
+        capturing: None,
+        target_apex_m: None,
+    };
+    loop {
+        let Err(e) = robot(c, &shared, &inbox, &mut session) else {
+            return Ok(());
+        };
+        lost(c, &shared, &inbox, &mut session, &e);
+    }
+}
+
+/// The robot is gone (`e`): the pages told, a recording in progress
+/// finished with what it has (every file and its plot), the pages'
+/// commands answered with the loss until the robot answers again.
+fn lost(
+    c: &mut Client,
+    shared: &Shared,
+    inbox: &Receiver<Command>,
+    session: &mut Session,
+    e: &anyhow::Error,
+) {
+    let pages = &shared.pages;
+    let text = format!("robot lost: {e:#}; connecting again to {}", c.target());
+    shared.armed.store(false, Ordering::Relaxed);
+    shared.set_note(Some(text.clone()));
+    if let Ok(mut u) = shared.urgent.lock() {
+        *u = None;
+    }
+    broadcast(pages, &serde_json::json!({ "type": "lost", "text": text }));
+    // (The routine and the capture in progress end with the link.)
+    if let Some((_, cmd)) = session.calibrating.take() {
+        let _ = cmd
+            .reply
+            .send(answer(&cmd.json, Err(anyhow::anyhow!("{text}"))).to_string());
+    }
+    if let Some(cap) = session.capturing.take() {
+        let _ = cap
+            .cmd
+            .reply
+            .send(answer(&cap.cmd.json, Err(anyhow::anyhow!("{text}"))).to_string());
+    }
+    if let Some((rec, dir)) = session.recording.take() {
+        let pages = pages.clone();
+        finish_recording(
+            rec,
+            dir,
+            session.period_s,
+            session.target_apex_m,
+            c.target().to_string(),
+            move |r| {
+                let (ok, text) = match r {
+                    Ok(t) => (true, format!("the robot was lost; {t}")),
+                    Err(e) => (false, format!("the robot was lost; the recording: {e:#}")),
+                };
+                broadcast(
+                    &pages,
+                    &serde_json::json!({ "type": "notice", "ok": ok, "text": text, "recording_finished": true }),
+                );
+            },
+        );
+    }
+    let target = c.target().clone();
+    loop {
+        while let Ok(cmd) = inbox.try_recv() {
+            let _ = cmd
+                .reply
+                .send(answer(&cmd.json, Err(anyhow::anyhow!("{text}"))).to_string());
+        }
+        match Client::connect(&target) {
+            Ok(n) => {
+                *c = n;
+                if let Ok(mut u) = shared.urgent.lock() {
+                    *u = Some(c.urgent());
+                }
+                shared.set_note(Some(format!(
+                    "the robot answered again at {target} after it was lost"
+                )));
+                broadcast(
+                    pages,
+                    &serde_json::json!({ "type": "notice", "ok": true, "text": format!("connected to the robot again ({target})") }),
+                );
+                return;
+            }
+            Err(_) => std::thread::sleep(Duration::from_millis(500)),
+        }
+    }
 }
 
 /// A random token: 128 bits as hex.
@@ -134,6 +335,9 @@ struct Session {
     /// The fault capture being read, record by record, while the link's
     /// thread goes on (Disarm above all).
     capturing: Option<Capturing>,
+    /// The target apex as last read or set, for a recording's plot when
+    /// the robot is gone.
+    target_apex_m: Option<f64>,
 }
 
 /// A fault capture on its way from the robot.
@@ -227,10 +431,11 @@ impl Session {
 /// The link's thread: telemetry, the state, and the pages' commands.
 fn robot(
     c: &mut Client,
-    pages: &Pages,
+    shared: &Shared,
     inbox: &Receiver<Command>,
-    record_dir: &std::path::Path,
+    session: &mut Session,
 ) -> Result<()> {
+    let pages = &shared.pages;
     let t = match c.request(Request::Timing)? {
         Response::Timing(t) => t,
         r => bail!("unexpected answer {r:?}"),
@@ -238,14 +443,9 @@ fn robot(
     let period = f64::from(t.period_s);
     let every = (1.0 / (TELEMETRY_HZ * period)).round().clamp(1.0, 65535.0) as u16;
     c.expect_ok(Request::Telemetry { every })?;
-    let mut session = Session {
-        period_s: period,
-        record_dir: record_dir.to_path_buf(),
-        recording: None,
-        batch: Vec::new(),
-        calibrating: None,
-        capturing: None,
-    };
+    session.period_s = period;
+    session.target_apex_m = super::common::get(c, "target_apex_m").ok().map(f64::from);
+    let session = &mut *session;
     let mut last_poll = Instant::now();
     let mut last_send = Instant::now();
     let mut last_state = Instant::now() - Duration::from_secs(1);
@@ -253,15 +453,15 @@ fn robot(
     loop {
         while let Ok(cmd) = inbox.try_recv() {
             if cmd.json["cmd"] == "capture" {
-                start_capture(c, pages, cmd, &mut session);
+                start_capture(c, pages, cmd, session);
                 continue;
             }
             if cmd.json["cmd"] == "record-stop" {
-                stop_recording(c, cmd, &mut session);
+                stop_recording(c, cmd, session);
                 continue;
             }
             if cmd.json["cmd"] == "calibrate" {
-                match start_routine(c, &cmd.json, &session) {
+                match start_routine(c, &cmd.json, session) {
                     Ok(started) => session.calibrating = Some((started, cmd)),
                     Err(e) => {
                         let _ = cmd.reply.send(answer(&cmd.json, Err(e)).to_string());
@@ -269,10 +469,10 @@ fn robot(
                 }
                 continue;
             }
-            let answer = run(c, &cmd.json, pages, &mut session);
+            let answer = run(c, &cmd.json, shared, session);
             let _ = cmd.reply.send(answer.to_string());
         }
-        progress_capture(c, pages, &mut session);
+        progress_capture(c, pages, session);
         if session.calibrating.is_some() && last_poll.elapsed() >= Duration::from_millis(100) {
             last_poll = Instant::now();
             let mut out = String::new();
@@ -294,7 +494,7 @@ fn robot(
         if last_state.elapsed() >= Duration::from_millis(100) {
             last_state = Instant::now();
             let recording = session.recording.as_ref().map(|(_, d)| d.as_path());
-            broadcast(pages, &state(c, recording)?);
+            broadcast(pages, &state(c, recording, shared)?);
         }
         if last_thermal.elapsed() >= Duration::from_millis(500) {
             last_thermal = Instant::now();
@@ -336,11 +536,18 @@ fn robot(
 }
 
 /// The robot's state for the page.
-fn state(c: &mut Client, recording: Option<&std::path::Path>) -> Result<serde_json::Value> {
+fn state(
+    c: &mut Client,
+    recording: Option<&std::path::Path>,
+    shared: &Shared,
+) -> Result<serde_json::Value> {
     let s = match c.request(Request::Status)? {
         Response::Status(s) => s,
         r => bail!("unexpected answer {r:?}"),
     };
+    shared
+        .armed
+        .store(s.arm == ArmState::Armed, Ordering::Relaxed);
     let cost = match c.request(Request::Cost)? {
         Response::Cost(x) => Some(x),
         _ => None,
@@ -363,6 +570,7 @@ fn state(c: &mut Client, recording: Option<&std::path::Path>) -> Result<serde_js
         "isr_max": cost.map(|x| x.isr_max),
         "counter_hz": cost.map(|x| x.counter_hz),
         "recording": recording.map(|d| d.display().to_string()),
+        "note": shared.note(),
     }))
 }
 
@@ -397,18 +605,30 @@ fn parameters(c: &mut Client) -> Result<serde_json::Value> {
 fn run(
     c: &mut Client,
     cmd: &serde_json::Value,
-    pages: &Pages,
+    shared: &Shared,
     session: &mut Session,
 ) -> serde_json::Value {
+    let pages = &shared.pages;
     let what = cmd["cmd"].as_str().unwrap_or("");
     let result: Result<String> = (|| match what {
+        // An arm asked for by a page that has gone since (its command
+        // waited in line) arms a robot no one watches: refused.
+        "arm" if shared.live.load(Ordering::Relaxed) == 0 => {
+            bail!("arm refused: no operator page is connected to the cockpit")
+        }
         "arm" => match c.request(Request::Arm)? {
-            Response::Ok => Ok("armed".into()),
-            Response::Refused(why) => bail!("arm refused: {why}"),
+            Response::Ok => {
+                shared.armed.store(true, Ordering::Relaxed);
+                shared.set_note(None);
+                Ok("armed".into())
+            }
+            Response::Refused(why) => {
+                bail!("arm refused: {why}{}", super::arm::next_step(why.refusal()))
+            }
             r => bail!("unexpected answer {r:?}"),
         },
         "disarm" => {
-            c.expect_ok(Request::Disarm)?;
+            shared.disarm()?;
             Ok("disarmed".into())
         }
         "reset-faults" => match c.request(Request::ResetFaults)? {
@@ -432,6 +652,9 @@ fn run(
                 value,
             })? {
                 Response::Ok => {
+                    if name == "target_apex_m" {
+                        session.target_apex_m = Some(f64::from(value));
+                    }
                     let p = parameters(c)?;
                     broadcast(pages, &p);
                     Ok(format!("{name} = {text}"))
@@ -628,9 +851,33 @@ fn stop_recording(c: &mut Client, cmd: Command, session: &mut Session) {
             .send(answer(&cmd.json, Err(anyhow::anyhow!("not recording"))).to_string());
         return;
     };
-    let target = super::common::get(c, "target_apex_m").ok().map(f64::from);
-    let title = format!("recorded from the cockpit ({})", c.target());
-    let period_s = session.period_s;
+    let target = super::common::get(c, "target_apex_m")
+        .ok()
+        .map(f64::from)
+        .or(session.target_apex_m);
+    finish_recording(
+        rec,
+        dir,
+        session.period_s,
+        target,
+        c.target().to_string(),
+        move |result| {
+            let _ = cmd.reply.send(answer(&cmd.json, result).to_string());
+        },
+    );
+}
+
+/// Completes a recording's files and draws its plot on a thread of its
+/// own, then calls `done` with its summary.
+fn finish_recording(
+    rec: Streamed,
+    dir: PathBuf,
+    period_s: f64,
+    target: Option<f64>,
+    robot: String,
+    done: impl FnOnce(Result<String>) + Send + 'static,
+) {
+    let title = format!("recorded from the cockpit ({robot})");
     std::thread::spawn(move || {
         let result = rec.finish("hop.png", &title, target).map(|(rec, written)| {
             let span_s = rec
@@ -653,7 +900,7 @@ fn stop_recording(c: &mut Client, cmd: Command, session: &mut Session) {
                     .join(", ")
             )
         });
-        let _ = cmd.reply.send(answer(&cmd.json, result).to_string());
+        done(result);
     });
 }
 
@@ -721,10 +968,14 @@ fn connection(
     mut s: TcpStream,
     token: &str,
     hosts: &[String],
-    pages: &Pages,
+    shared: &Shared,
     commands: &Sender<Command>,
 ) -> Result<()> {
     s.set_read_timeout(Some(Duration::from_secs(5)))?;
+    // Small frames (a Disarm's answer) go out at once: with Nagle's
+    // algorithm one waited for the browser's delayed acknowledgement,
+    // about 40 ms, every few Disarms.
+    s.set_nodelay(true)?;
     // The request's head (a browser's fits in 8 KiB).
     let mut buf = vec![0u8; 8192];
     let mut n = 0;
@@ -785,18 +1036,20 @@ fn connection(
                 "HTTP/1.1 101 Switching Protocols\r\nUpgrade: websocket\r\nConnection: Upgrade\r\nSec-WebSocket-Accept: {}\r\n\r\n",
                 tungstenite::handshake::derive_accept_key(key.as_bytes())
             )?;
-            page(s, pages, commands)
+            page(s, shared, commands)
         }
         _ => respond(&mut s, "404 Not Found", "text/plain", "not found\n").map_err(Into::into),
     }
 }
 
-/// A page's websocket: the broadcasts out, its commands in.
-fn page(s: TcpStream, pages: &Pages, commands: &Sender<Command>) -> Result<()> {
+/// A page's websocket: the broadcasts out, its commands in; a Disarm
+/// sent to the robot from here, at once.
+fn page(s: TcpStream, shared: &Shared, commands: &Sender<Command>) -> Result<()> {
     s.set_read_timeout(Some(Duration::from_millis(10)))?;
     let mut ws = WebSocket::from_raw_socket(s, Role::Server, None);
+    let _live = Live::new(&shared.live);
     let (tx, rx) = channel::<String>();
-    if let Ok(mut p) = pages.lock() {
+    if let Ok(mut p) = shared.pages.lock() {
         p.push(tx.clone());
     }
     // The table first.
@@ -808,6 +1061,11 @@ fn page(s: TcpStream, pages: &Pages, commands: &Sender<Command>) -> Result<()> {
         match ws.read() {
             Ok(Message::Text(t)) => {
                 if let Ok(json) = serde_json::from_str::<serde_json::Value>(t.as_str()) {
+                    if json["cmd"] == "disarm" {
+                        let result = shared.disarm().map(|()| "disarmed".to_string());
+                        ws.send(Message::text(answer(&json, result).to_string()))?;
+                        continue;
+                    }
                     let _ = commands.send(Command {
                         json,
                         reply: tx.clone(),
