@@ -274,6 +274,32 @@ fn the_cockpit_lets_in_only_its_operator_and_drives_the_robot() {
             "{target} {host}"
         );
     }
+    // Two `Host` headers (the second someone else's), and a websocket
+    // handshake without its key: malformed, refused before anything else.
+    assert_eq!(
+        get(
+            &c.host,
+            &page,
+            &[("Host", &c.host), ("Host", "evil.example:8080")]
+        ),
+        "HTTP/1.1 400 Bad Request"
+    );
+    let ws_target = format!("/ws?token={}", c.token);
+    let own_origin = format!("http://{}", c.host);
+    assert_eq!(
+        get(
+            &c.host,
+            &ws_target,
+            &[
+                ("Host", &c.host),
+                ("Origin", &own_origin),
+                ("Upgrade", "websocket"),
+                ("Connection", "Upgrade"),
+                ("Sec-WebSocket-Version", "13"),
+            ]
+        ),
+        "HTTP/1.1 400 Bad Request"
+    );
     // A cross-origin websocket (another page in the same browser, with the
     // token even), and one without the token: refused, and none of their
     // commands reaches the robot.

@@ -174,11 +174,7 @@ pub(crate) fn ui(
     let listener = TcpListener::bind(addr).with_context(|| format!("cannot listen on {addr}"))?;
     let bound = listener.local_addr()?;
     let token = token()?;
-    // The names a browser may use for this server (its `Host`).
-    let mut hosts = vec![bound.to_string()];
-    if bound.ip().is_loopback() {
-        hosts.push(format!("localhost:{}", bound.port()));
-    }
+    let hosts = hosts_for(bound);
     println!("cockpit: http://{bound}/?token={token}");
     println!("(open it in a browser; the robot is disarmed when no page is open for 0.5 s; Ctrl-C stops, and the robot disarms by its link timeout then)");
     std::io::stdout().flush()?;
@@ -300,6 +296,30 @@ fn lost(
             Err(_) => std::thread::sleep(Duration::from_millis(500)),
         }
     }
+}
+
+/// The names a browser may use for this server (its `Host`): its
+/// address, `localhost` on loopback, each without the port too when the
+/// port is HTTP's default 80 (browsers leave `:80` out).
+pub(crate) fn hosts_for(bound: SocketAddr) -> Vec<String> {
+    let mut names = vec![bound.ip().to_string()];
+    if bound.ip().is_loopback() {
+        names.push("localhost".into());
+    }
+    let mut hosts: Vec<String> = names
+        .iter()
+        .map(|n| match bound {
+            SocketAddr::V6(_) if n != "localhost" => format!("[{n}]:{}", bound.port()),
+            _ => format!("{n}:{}", bound.port()),
+        })
+        .collect();
+    if bound.port() == 80 {
+        hosts.extend(names.iter().map(|n| match bound {
+            SocketAddr::V6(_) if n != "localhost" => format!("[{n}]"),
+            _ => n.clone(),
+        }));
+    }
+    hosts
 }
 
 /// A random token: 128 bits as hex.
@@ -1008,6 +1028,22 @@ fn connection(
     let target = req.path.unwrap_or("/");
     let path = target.split('?').next().unwrap_or("/");
     let websocket = header("Upgrade").is_some_and(|u| u.eq_ignore_ascii_case("websocket"));
+    // One `Host`, not a first one trusted and a second ignored; a
+    // websocket's handshake with its key (16 bytes in base64).
+    let hosts_given = req
+        .headers
+        .iter()
+        .filter(|h| h.name.eq_ignore_ascii_case("Host"))
+        .count();
+    let key_ok = header("Sec-WebSocket-Key").is_some_and(|k| {
+        data_encoding::BASE64
+            .decode(k.trim().as_bytes())
+            .is_ok_and(|b| b.len() == 16)
+    });
+    if hosts_given > 1 || (websocket && !key_ok) {
+        return respond(&mut s, "400 Bad Request", "text/plain", "bad request\n")
+            .map_err(Into::into);
+    }
     if let Some(why) = refusal(
         header("Host"),
         header("Origin"),
@@ -1030,7 +1066,7 @@ fn connection(
             Ok(())
         }
         (Some("GET"), "/ws", true) => {
-            let key = header("Sec-WebSocket-Key").unwrap_or("");
+            let key = header("Sec-WebSocket-Key").unwrap_or("").trim();
             write!(
                 s,
                 "HTTP/1.1 101 Switching Protocols\r\nUpgrade: websocket\r\nConnection: Upgrade\r\nSec-WebSocket-Accept: {}\r\n\r\n",
@@ -1090,6 +1126,18 @@ fn page(s: TcpStream, shared: &Shared, commands: &Sender<Command>) -> Result<()>
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_host_may_leave_out_the_default_port() {
+        let on = |a: &str| hosts_for(a.parse().unwrap_or_else(|e| panic!("{e}")));
+        assert_eq!(on("127.0.0.1:8080"), ["127.0.0.1:8080", "localhost:8080"]);
+        assert_eq!(
+            on("127.0.0.1:80"),
+            ["127.0.0.1:80", "localhost:80", "127.0.0.1", "localhost"]
+        );
+        assert_eq!(on("192.168.1.5:80"), ["192.168.1.5:80", "192.168.1.5"]);
+        assert_eq!(on("[::1]:8080"), ["[::1]:8080", "localhost:8080"]);
+    }
 
     #[test]
     fn only_this_pages_requests_with_the_token_pass() {
