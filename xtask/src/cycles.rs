@@ -501,28 +501,9 @@ impl Reader {
 /// is `f32` on the FPU; a window that called them would not match the
 /// firmware's own count).
 pub fn marks_for(elf: &std::path::Path, task: &str) -> Result<(Marks, String), String> {
-    let tools = crate::llvm_size()?;
-    let tool = |name: &str, args: &[&str]| -> Result<String, String> {
-        let t = tools.with_file_name(name);
-        let out = std::process::Command::new(&t)
-            .args(args)
-            .arg(elf)
-            .output()
-            .map_err(|e| format!("cannot run {}: {e}", t.display()))?;
-        if !out.status.success() {
-            return Err(format!(
-                "{name} failed: {}",
-                String::from_utf8_lossy(&out.stderr)
-            ));
-        }
-        Ok(String::from_utf8_lossy(&out.stdout).into_owned())
-    };
-    let dis = tool("llvm-objdump", &["-d", "--no-show-raw-insn"])?;
-    let funcs = crate::stack::parse(&dis);
-    let data = tool("llvm-objdump", &["-s", "-j", ".rodata", "-j", ".data"])?;
-    let taken = crate::stack::address_taken(&funcs, &data);
+    let crate::stack::Image { funcs, taken, dis } = crate::stack::Image::read(elf)?;
     // Sizes: "08003378 00005970 t name".
-    let nm = tool("llvm-nm", &["-S"])?;
+    let nm = crate::llvm_tool("llvm-nm", &["-S"], elf)?;
     let size: HashMap<&str, u64> = nm
         .lines()
         .filter_map(|l| {

@@ -457,19 +457,8 @@ fn hopper_fw_build() -> Command {
 
 fn size(root: &Path) -> Result<(), String> {
     let elf = board_image(root)?;
-    let tool = llvm_size()?;
-    let out = Command::new(&tool)
-        .arg(&elf)
-        .output()
-        .map_err(|e| format!("cannot run {}: {e}", tool.display()))?;
-    if !out.status.success() {
-        return Err(format!(
-            "llvm-size failed: {}",
-            String::from_utf8_lossy(&out.stderr)
-        ));
-    }
+    let text = llvm_tool("llvm-size", &[], &elf)?;
     // Berkeley format: "text data bss dec hex filename".
-    let text = String::from_utf8_lossy(&out.stdout);
     let nums: Vec<u64> = text
         .lines()
         .nth(1)
@@ -482,7 +471,7 @@ fn size(root: &Path) -> Result<(), String> {
         return Err(format!("cannot parse llvm-size output: {text}"));
     };
     let (flash, ram) = (t + d, d + b);
-    let capture = capture_bytes(&tool, &elf)?;
+    let capture = capture_bytes(&elf)?;
     let ok = flash <= FLASH_BUDGET_BYTES && ram <= RAM_BUDGET_BYTES + capture;
     eprintln!(
         "xtask: size budget: flash <= {FLASH_BUDGET_BYTES} B, ram <= {RAM_BUDGET_BYTES} B + capture (text={t} data={d} bss={b}){}",
@@ -492,7 +481,7 @@ fn size(root: &Path) -> Result<(), String> {
     if !ok {
         return Err("firmware exceeds its size budget".into());
     }
-    stack_bound(&tool, &elf, RAM_BYTES.saturating_sub(ram))
+    stack_bound(&elf, RAM_BYTES.saturating_sub(ram))
 }
 
 /// The board's RAM (memory.x: SRAM1 and SRAM2, 128 KiB); the stack has
@@ -509,26 +498,8 @@ const EXCEPTION_FRAME_BYTES: u64 = 104;
 /// the worst case (idle, then every priority level's task preempting the
 /// one below, each with an exception frame) or `init` exceeds the budget,
 /// or when a task's depth cannot be bounded (an indirect call, recursion).
-fn stack_bound(llvm_size: &Path, elf: &Path, budget: u64) -> Result<(), String> {
-    let objdump = llvm_size.with_file_name("llvm-objdump");
-    let out = Command::new(&objdump)
-        .args(["-d", "--no-show-raw-insn"])
-        .arg(elf)
-        .output()
-        .map_err(|e| format!("cannot run {}: {e}", objdump.display()))?;
-    if !out.status.success() {
-        return Err(format!(
-            "llvm-objdump failed: {}",
-            String::from_utf8_lossy(&out.stderr)
-        ));
-    }
-    let funcs = stack::parse(&String::from_utf8_lossy(&out.stdout));
-    let dump = Command::new(&objdump)
-        .args(["-s", "-j", ".rodata", "-j", ".data"])
-        .arg(elf)
-        .output()
-        .map_err(|e| format!("cannot run {}: {e}", objdump.display()))?;
-    let taken = stack::address_taken(&funcs, &String::from_utf8_lossy(&dump.stdout));
+fn stack_bound(elf: &Path, budget: u64) -> Result<(), String> {
+    let stack::Image { funcs, taken, .. } = stack::Image::read(elf)?;
     // The board image's handlers (src/main.rs): the control task on the
     // ADC's interrupt (priority 3), the link task on SDIO's (2), the
     // serial interrupt on USART1's (4), the logger and the dump on the
@@ -653,18 +624,30 @@ fn isolation(
 /// Size of the telemetry capture buffer, bytes: the board's `init` local
 /// `capture` (built in place; a shared resource named `capture` matches
 /// too).
-fn capture_bytes(llvm_size: &Path, elf: &Path) -> Result<u64, String> {
-    let nm = llvm_size.with_file_name("llvm-nm");
-    let out = Command::new(&nm)
-        .args(["-S", "-C"])
-        .arg(elf)
-        .output()
-        .map_err(|e| format!("cannot run {}: {e}", nm.display()))?;
-    String::from_utf8_lossy(&out.stdout)
+fn capture_bytes(elf: &Path) -> Result<u64, String> {
+    llvm_tool("llvm-nm", &["-S", "-C"], elf)?
         .lines()
         .find(|l| l.contains("local_init_capture") || l.contains("shared_resource_capture"))
         .and_then(|l| u64::from_str_radix(l.split_whitespace().nth(1)?, 16).ok())
         .ok_or_else(|| "no capture buffer symbol in the firmware".to_string())
+}
+
+/// What the LLVM tool `name` (of the `llvm-tools` component) prints for
+/// `args` and the image `elf`; its error output when it fails.
+pub(crate) fn llvm_tool(name: &str, args: &[&str], elf: &Path) -> Result<String, String> {
+    let tool = llvm_size()?.with_file_name(name);
+    let out = Command::new(&tool)
+        .args(args)
+        .arg(elf)
+        .output()
+        .map_err(|e| format!("cannot run {}: {e}", tool.display()))?;
+    if !out.status.success() {
+        return Err(format!(
+            "{name} failed: {}",
+            String::from_utf8_lossy(&out.stderr)
+        ));
+    }
+    Ok(String::from_utf8_lossy(&out.stdout).into_owned())
 }
 
 fn llvm_size() -> Result<PathBuf, String> {

@@ -57,6 +57,28 @@ pub struct Function {
     pub raises_basepri: bool,
 }
 
+/// An image's call graph: its functions, and the targets whose address is
+/// taken (what an indirect call may reach).
+pub struct Image {
+    /// The functions by name.
+    pub funcs: HashMap<String, Function>,
+    /// The address-taken targets ([`address_taken`]).
+    pub taken: Vec<u64>,
+    /// The disassembly itself (`llvm-objdump -d`).
+    pub dis: String,
+}
+
+impl Image {
+    /// Disassemble `elf` and read its data sections.
+    pub fn read(elf: &std::path::Path) -> Result<Self, String> {
+        let dis = crate::llvm_tool("llvm-objdump", &["-d", "--no-show-raw-insn"], elf)?;
+        let funcs = parse(&dis);
+        let data = crate::llvm_tool("llvm-objdump", &["-s", "-j", ".rodata", "-j", ".data"], elf)?;
+        let taken = address_taken(&funcs, &data);
+        Ok(Self { funcs, taken, dis })
+    }
+}
+
 /// The image's functions by name, from `llvm-objdump -d` output.
 pub fn parse(dis: &str) -> HashMap<String, Function> {
     let mut funcs: HashMap<String, Function> = HashMap::new();

@@ -290,52 +290,48 @@ impl AtBoot {
 /// IWDG running from reset (RM0090, option bytes).
 const OPTCR_WDG_SW: u32 = 1 << 5;
 
+/// Start the programmable voltage detector at level 6 (2.8 V rising,
+/// 2.7 V falling, DS8626), once, at boot, and leave it on: PVDO reads 1
+/// while VDD is below it ([`save_refusal`], [`save_refusal_now`]).
+fn pvd_start(pwr: &pac::PWR) {
+    pwr.cr().modify(|_, w| w.pls().set(6).pvde().set_bit());
+}
+
+/// Whether the PVD reads the supply below 2.8 V.
+fn supply_low(pwr: &pac::pwr::RegisterBlock) -> bool {
+    pwr.csr().read().pvdo().bit_is_set()
+}
+
 /// Why a pending save is not written, if it must not be: the hardware
 /// watchdog option (its reset, 0.5 s after boot at its reset prescaler,
 /// would cut the 1-2 s sector erase, and every later boot would try it
 /// again), or a supply below the erase's minimum for x32 parallelism
-/// (2.7 V, RM0090 Table 13), read through the programmable voltage
-/// detector at its 2.8 V level.
-pub fn save_refusal(flash: &pac::FLASH, pwr: &pac::PWR) -> Option<&'static str> {
+/// (2.7 V, RM0090 Table 13), read through the PVD ([`pvd_start`]).
+fn save_refusal(flash: &pac::FLASH, pwr: &pac::PWR) -> Option<&'static str> {
     if flash.optcr().read().bits() & OPTCR_WDG_SW == 0 {
         return Some("the hardware watchdog option (WDG_SW = 0) is set: its reset would cut the sector erase");
     }
-    // PVD at level 6 (2.8 V rising, 2.7 V falling, DS8626): PVDO reads 1
-    // while VDD is below it. It settles within 100 us (DS8626 t_PVD):
-    // about 17,000 cycles at 168 MHz, 1,600 on the HSI; wait 20,000 nops.
-    pwr.cr().modify(|_, w| w.pls().set(6).pvde().set_bit());
+    // The PVD, just started, settles within 100 us (DS8626 t_PVD): about
+    // 17,000 cycles at 168 MHz, 1,600 on the HSI; wait 20,000 nops.
     for _ in 0..20_000 {
         cortex_m::asm::nop();
     }
-    let low = pwr.csr().read().pvdo().bit_is_set();
-    pwr.cr().modify(|_, w| w.pvde().clear_bit());
-    low.then_some("the supply is below 2.8 V (the PVD): a sector erase at x32 needs 2.7-3.6 V")
+    supply_low(pwr)
+        .then_some("the supply is below 2.8 V (the PVD): a sector erase at x32 needs 2.7-3.6 V")
 }
 
 /// Why a save asked for now could not be written after the restart, read
 /// without waiting (the link task, before it answers a `save`): the
-/// hardware watchdog option, or the supply below the PVD's 2.8 V. The
-/// first call turns the PVD on at that level and leaves it on (it settles
-/// within 100 us, DS8626 t_PVD: a period; its output reads "not low"
-/// until then); `at_boot` checks both again before it erases.
-#[allow(unsafe_code)] // Reads of FLASH_OPTCR and PWR_CSR, and PWR_CR's PVD bits, owned by no task.
+/// hardware watchdog option, or the supply below the PVD's 2.8 V (the PVD
+/// runs from `at_boot` on); `at_boot` checks both again before it erases.
+#[allow(unsafe_code)] // Reads of FLASH_OPTCR and PWR_CSR, owned by no task.
 pub fn save_refusal_now() -> Option<hopper_robot_link::Refusal> {
-    // SAFETY: the registers' fixed addresses. OPTCR and CSR are read
-    // only; CR is written only here after `init` (its other bits, the
-    // voltage scaling `init` set, are kept by the read-modify-write, and
-    // no other task touches PWR).
+    // SAFETY: the registers' fixed addresses, read only.
     let (flash, pwr) = unsafe { (&*pac::FLASH::ptr(), &*pac::PWR::ptr()) };
     if flash.optcr().read().bits() & OPTCR_WDG_SW == 0 {
         return Some(hopper_robot_link::Refusal::HardwareWatchdogOption);
     }
-    if pwr.cr().read().pvde().bit_is_clear() {
-        pwr.cr().modify(|_, w| w.pls().set(6).pvde().set_bit());
-    }
-    pwr.csr()
-        .read()
-        .pvdo()
-        .bit_is_set()
-        .then_some(hopper_robot_link::Refusal::SupplyLow)
+    supply_low(pwr).then_some(hopper_robot_link::Refusal::SupplyLow)
 }
 
 /// In `init`, before the watchdog starts: writes a pending save, then
@@ -345,6 +341,7 @@ pub fn save_refusal_now() -> Option<hopper_robot_link::Refusal> {
 /// ([`save_refusal`]: it is dropped, and `init` says why).
 #[allow(unsafe_code)] // The slot is a `static mut` in `.uninit`.
 pub fn at_boot(flash: &pac::FLASH, pwr: &pac::PWR) -> AtBoot {
+    pvd_start(pwr);
     // SAFETY: `init` runs before every task: nothing else touches the slot;
     // read as words through a raw pointer (its bytes may be a power-on's
     // random RAM: every value is checked before use).
