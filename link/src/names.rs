@@ -210,6 +210,16 @@ fn described(
     }))
 }
 
+/// [`Described::number`] for any number.
+pub fn plain_number(v: f32) -> String {
+    let a = v.abs();
+    if a != 0.0 && a.is_finite() && !(1e-3..1e6).contains(&a) {
+        format!("{v:e}")
+    } else {
+        format!("{v}")
+    }
+}
+
 impl Described {
     /// A value as the operator types it: a choice by its name (`shaped`),
     /// anything else as the number (a choice index without a name stays
@@ -243,6 +253,17 @@ impl Described {
                     )
                 }),
             _ => bail!("`{value}` is not a number"),
+        }
+    }
+
+    /// A number for a person to read: the shortest decimal that is the
+    /// `f32` (not its `f64` widening, `0.00009999999747378752`), in
+    /// exponent form beyond a million or below a thousandth (`1e30`,
+    /// `1e-4`), a choice by its name.
+    pub fn number(&self, v: f32) -> String {
+        match self.kind {
+            Some(ParamKind::Choice) => self.value(v),
+            _ => plain_number(v),
         }
     }
 
@@ -310,6 +331,16 @@ impl Described {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn numbers_read_as_the_f32_they_are() {
+        assert_eq!(plain_number(1e-4), "1e-4");
+        assert_eq!(plain_number(1e30), "1e30");
+        assert_eq!(plain_number(0.15), "0.15");
+        assert_eq!(plain_number(-2.5), "-2.5");
+        assert_eq!(plain_number(0.0), "0");
+        assert_eq!(plain_number(200_000.0), "200000");
+    }
 
     #[test]
     fn names_come_from_the_firmware() {

@@ -80,7 +80,7 @@ impl TelemetryRow {
             armed: r.armed,
             faults: crate::names::faults(r.faults),
             body_height_m: r.body_height_m,
-            toe_height_m: f64::from(r.body_height_m) - LEG_LENGTH_M,
+            toe_height_m: toe_height_m(r),
             nut_position_m: r.nut_position_m,
             spring_force_n: r.spring_force_n,
             energy_j: r.energy_j,
@@ -154,8 +154,13 @@ pub struct Streamed {
     telemetry: csv::Writer<std::fs::File>,
     hops: csv::Writer<std::fs::File>,
     mcap: McapOut,
-    /// The parameters, logged with the first record's time.
-    parameters: Option<BTreeMap<String, Option<f32>>>,
+    /// Every parameter's value now.
+    parameters: BTreeMap<String, Option<f32>>,
+    /// Whether they are still to be logged (at the next record's time).
+    parameters_due: bool,
+    /// The target apex as it was: (time from the first record, s; m), from
+    /// the start's value on.
+    targets: Vec<(f64, f64)>,
 }
 
 impl Streamed {
@@ -193,12 +198,16 @@ impl Streamed {
             telemetry,
             hops,
             mcap,
-            parameters: Some(
-                parameters
-                    .iter()
-                    .map(|(n, v)| (n.clone(), v.is_finite().then_some(*v)))
-                    .collect(),
-            ),
+            parameters: parameters
+                .iter()
+                .map(|(n, v)| (n.clone(), v.is_finite().then_some(*v)))
+                .collect(),
+            parameters_due: true,
+            targets: parameters
+                .iter()
+                .filter(|(n, v)| n == "target_apex_m" && v.is_finite())
+                .map(|(_, v)| (0.0, f64::from(*v)))
+                .collect(),
         };
         s.flush()?;
         Ok(s)
@@ -218,9 +227,9 @@ impl Streamed {
         self.telemetry.write_record(row.csv())?;
         let time_s = self.robot_time_s(t.step);
         let m = &mut self.mcap;
-        if let Some(p) = self.parameters.take() {
+        if std::mem::take(&mut self.parameters_due) {
             m.file
-                .log(m.parameters, time_s, &p)
+                .log(m.parameters, time_s, &self.parameters)
                 .map_err(anyhow::Error::msg)?;
         }
         m.file
@@ -248,6 +257,31 @@ impl Streamed {
         Ok(())
     }
 
+    /// A parameter set while recording: the whole table logged again on
+    /// `/parameters` at the last record's time (with the first record, if
+    /// none came yet), and a change of the target apex kept for the plot.
+    pub fn set(&mut self, name: &str, value: f32) -> Result<()> {
+        self.parameters.insert(name.to_string(), Some(value));
+        let last = self.rec.records.last().copied();
+        if name == "target_apex_m" {
+            let t_s = last.map_or(0.0, |r| self.rec.t_s(&r));
+            self.targets.push((t_s, f64::from(value)));
+        }
+        match last {
+            Some(r) => {
+                let time_s = self.robot_time_s(r.step);
+                self.mcap
+                    .file
+                    .log(self.mcap.parameters, time_s, &self.parameters)
+                    .map_err(anyhow::Error::msg)
+            }
+            None => {
+                self.parameters_due = true;
+                Ok(())
+            }
+        }
+    }
+
     /// Faults latched at period `step`.
     pub fn fault(&mut self, step: u32, bits: u16) -> Result<()> {
         self.rec.faults.push((step, bits));
@@ -272,8 +306,9 @@ impl Streamed {
     }
 
     /// Flushes the files, completes the MCAP file and draws `plot` (PNG)
-    /// from what was saved (with at least two records); returns the paths
-    /// written.
+    /// from what was saved (with at least two records), the target apex as
+    /// it was over the recording (`target_apex_m` when the start's
+    /// parameters had none); returns the paths written.
     pub fn finish(
         mut self,
         plot: &str,
@@ -289,11 +324,28 @@ impl Streamed {
         ];
         if self.rec.records.len() >= 2 {
             let path = self.dir.join(plot);
-            hopper_plot::hop_plot(&self.rec.samples(), title, target_apex_m, &path)
+            // The target as it was while recording; else the one given.
+            let targets = if self.targets.is_empty() {
+                target_apex_m.map(|t| vec![(0.0, t)]).unwrap_or_default()
+            } else {
+                self.targets.clone()
+            };
+            hopper_plot::hop_plot_targets(&self.rec.samples(), title, &targets, &path)
                 .map_err(anyhow::Error::msg)?;
             written.push(path);
         }
         Ok((self.rec, written))
+    }
+}
+
+/// The toe's height above the ground as the thesis defines it: `z - l0`
+/// in flight, and on the ground (0) in stance, where the spring shortens
+/// the leg (`z - l0` there is the compression, below the ground).
+pub fn toe_height_m(r: &Telemetry) -> f64 {
+    if r.phase == 1 {
+        0.0
+    } else {
+        (f64::from(r.body_height_m) - LEG_LENGTH_M).max(0.0)
     }
 }
 
@@ -534,7 +586,7 @@ impl Recording {
                 zd_mps: f64::NAN,
                 p_m: f64::from(r.nut_position_m),
                 pd_mps: f64::NAN,
-                toe_height_m: f64::from(r.body_height_m) - LEG_LENGTH_M,
+                toe_height_m: toe_height_m(r),
                 spring_force_n: f64::from(r.spring_force_n),
                 torque_nm: f64::NAN,
                 energy_j: f64::from(r.energy_j),

@@ -230,3 +230,41 @@ fn ctrl_c_ends_a_recording_with_everything_saved() {
     assert!(dir.join("hop.png").exists());
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn a_set_while_recording_is_kept_at_its_time() {
+    let dir = out_dir("set");
+    let start = [
+        ("target_apex_m".to_string(), 0.1f32),
+        ("shaped.gain".to_string(), 1.0f32),
+    ];
+    let mut rec = hopper_link::record::Streamed::create(&dir, 1e-3, &start)
+        .unwrap_or_else(|e| panic!("{e:#}"));
+    for step in 0..1000 {
+        rec.record(record(step)).unwrap_or_else(|e| panic!("{e:#}"));
+        if step == 499 {
+            rec.set("target_apex_m", 0.12)
+                .unwrap_or_else(|e| panic!("{e:#}"));
+        }
+    }
+    // The target read at the end (0.15) is not what the plot draws.
+    let (_, written) = rec
+        .finish("hop.png", "a set while recording", Some(0.15))
+        .unwrap_or_else(|e| panic!("{e:#}"));
+    assert_eq!(written.len(), 4, "{written:?}");
+    let bytes = std::fs::read(dir.join("telemetry.mcap")).unwrap_or_default();
+    let msgs = hopper_mcap::read::messages(&bytes).unwrap_or_else(|e| panic!("{e}"));
+    let params: Vec<_> = msgs.iter().filter(|m| m.topic == "/parameters").collect();
+    let at = |i: usize| {
+        (
+            params[i].log_time_ns,
+            params[i].json["target_apex_m"]
+                .as_f64()
+                .map(|v| (v * 1e6).round()),
+            params[i].json["shaped.gain"].as_f64(),
+        )
+    };
+    assert_eq!(params.len(), 2, "{params:?}");
+    assert_eq!(at(0), (0, Some(100_000.0), Some(1.0)));
+    assert_eq!(at(1), (499_000_000, Some(120_000.0), Some(1.0)));
+}

@@ -212,6 +212,21 @@ type Socket = tungstenite::WebSocket<TcpStream>;
 
 fn websocket(c: &Cockpit, origin: &str, token: &str) -> Result<Socket, String> {
     let stream = TcpStream::connect(&c.host).map_err(|e| e.to_string())?;
+    handshake(c, origin, token, stream)
+}
+
+/// [`websocket`] with a small receive buffer: a page that does not read
+/// fills it, and the cockpit's own queue, within a second or two.
+fn small_websocket(c: &Cockpit, origin: &str, token: &str) -> Result<Socket, String> {
+    let addr: std::net::SocketAddr = c.host.parse().map_err(|e| format!("{e}"))?;
+    let s = socket2::Socket::new(socket2::Domain::IPV4, socket2::Type::STREAM, None)
+        .map_err(|e| e.to_string())?;
+    s.set_recv_buffer_size(4096).map_err(|e| e.to_string())?;
+    s.connect(&addr.into()).map_err(|e| e.to_string())?;
+    handshake(c, origin, token, s.into())
+}
+
+fn handshake(c: &Cockpit, origin: &str, token: &str, stream: TcpStream) -> Result<Socket, String> {
     let req = tungstenite::http::Request::builder()
         .uri(format!("ws://{}/ws?token={token}", c.host))
         .header("Host", &c.host)
@@ -466,4 +481,71 @@ fn screenshot_of_a_running_page() {
     );
     std::fs::write(out, shot["result"]["data"].as_str().unwrap_or_default())
         .unwrap_or_else(|e| panic!("{e}"));
+}
+
+/// The cockpit process's thread count (Linux).
+fn threads(pid: u32) -> u32 {
+    std::fs::read_to_string(format!("/proc/{pid}/status"))
+        .ok()
+        .and_then(|s| {
+            s.lines()
+                .find_map(|l| l.strip_prefix("Threads:")?.trim().parse().ok())
+        })
+        .unwrap_or(0)
+}
+
+#[test]
+fn held_trickled_and_unread_connections_are_bounded() {
+    let seen = Arc::new(Seen::default());
+    let c = cockpit(&robot(seen.clone()));
+    let own = format!("http://{}", c.host);
+    let page = format!("/?token={}", c.token);
+    // A page that never reads.
+    let mut lazy = small_websocket(&c, &own, &c.token).unwrap_or_else(|e| panic!("{e}"));
+    // 200 connections held open, saying nothing: no thread each, and the
+    // operator's page still loads.
+    let held: Vec<TcpStream> = (0..200)
+        .filter_map(|_| TcpStream::connect(&c.host).ok())
+        .collect();
+    std::thread::sleep(Duration::from_millis(500));
+    let n = threads(c.child.id());
+    eprintln!("{n} threads with {} connections held", held.len());
+    assert!(n <= 32, "{n} threads with {} connections held", held.len());
+    assert_eq!(get(&c.host, &page, &[("Host", &c.host)]), "HTTP/1.1 200 OK");
+    // A head trickled a byte every 0.5 s is cut off within its time.
+    let mut slow = TcpStream::connect(&c.host).unwrap_or_else(|e| panic!("{e}"));
+    let _ = slow.set_read_timeout(Some(Duration::from_millis(500)));
+    let start = Instant::now();
+    let mut byte = [0u8; 1];
+    let cut = loop {
+        if slow.write_all(b"G").is_err() {
+            break start.elapsed();
+        }
+        match slow.read(&mut byte) {
+            Ok(_) => break start.elapsed(),
+            Err(e) if e.kind() == std::io::ErrorKind::ConnectionReset => break start.elapsed(),
+            Err(_) if start.elapsed() > Duration::from_secs(12) => break start.elapsed(),
+            Err(_) => {}
+        }
+    };
+    eprintln!("a trickled head cut after {cut:?}");
+    assert!(
+        cut < Duration::from_secs(8),
+        "a trickled head held for {cut:?}"
+    );
+    drop(held);
+    // The page that did not read: told how much telemetry it skipped, and
+    // still connected (its state kept as the newest, not queued).
+    let _ = lazy
+        .get_mut()
+        .set_read_timeout(Some(Duration::from_millis(100)));
+    let told = next(&mut lazy, "page");
+    assert!(told["dropped"].as_u64().is_some_and(|n| n > 0), "{told}");
+    // A set sent as a JSON number is taken as that number.
+    let r = command(
+        &mut lazy,
+        serde_json::json!({ "cmd": "set", "name": "target_apex_m", "value": 0.12 }),
+    );
+    assert_eq!(r["ok"], true, "{r}");
+    assert_eq!(seen.sets.load(Ordering::Relaxed), 1);
 }

@@ -214,6 +214,17 @@ pub fn hop_plot(
     hop_plot_with_heat(samples, title, target_apex_m, None, path)
 }
 
+/// [`hop_plot`] with a target that changed: `targets` are (from time, s;
+/// target apex, m), each drawn until the next.
+pub fn hop_plot_targets(
+    samples: &[Sample],
+    title: &str,
+    targets: &[(f64, f64)],
+    path: &Path,
+) -> Result<(), String> {
+    draw(samples, title, targets, None, path)
+}
+
 /// [`hop_plot`], and when the samples carry the firmware's winding
 /// temperature a fourth panel with it and the protection's `heat` levels.
 /// Legends sit in a column right of the panels, clear of the data.
@@ -224,15 +235,45 @@ pub fn hop_plot_with_heat(
     heat: Option<HeatLevels>,
     path: &Path,
 ) -> Result<(), String> {
+    let targets: Vec<(f64, f64)> = target_apex_m.map(|t| (0.0, t)).into_iter().collect();
+    draw(samples, title, &targets, heat, path)
+}
+
+fn draw(
+    samples: &[Sample],
+    title: &str,
+    targets: &[(f64, f64)],
+    heat: Option<HeatLevels>,
+    path: &Path,
+) -> Result<(), String> {
     if samples.len() < 2 {
         return Err("not enough samples to plot (is the sample rate 0?)".into());
     }
     ensure_font()?;
-    // Each panel with its horizontal reference lines: (value, label, colour).
-    type Levels = Vec<(f64, String, RGBColor)>;
-    let target: Levels = target_apex_m
-        .map(|t| (t * 100.0, format!("target apex {:.1} cm", t * 100.0), RED))
-        .into_iter()
+    // Each panel with its horizontal reference lines: (from, to time, s;
+    // value, label, colour); an empty label adds no legend entry.
+    type Levels = Vec<(f64, f64, f64, String, RGBColor)>;
+    let cm: Vec<String> = targets
+        .iter()
+        .map(|(_, t)| format!("{:.1}", t * 100.0))
+        .collect();
+    let label = match &cm[..] {
+        [one] => format!("target apex {one} cm"),
+        more => format!("target apex {} cm", more.join(", ")),
+    };
+    let target: Levels = targets
+        .iter()
+        .enumerate()
+        .map(|(i, &(from, t))| {
+            let to = targets.get(i + 1).map_or(f64::INFINITY, |n| n.0);
+            (
+                from,
+                to,
+                t * 100.0,
+                if i == 0 { label.clone() } else { String::new() },
+                RED,
+            )
+        })
         .collect();
     let mut panels: Vec<(Series, Levels)> = vec![
         (
@@ -251,13 +292,22 @@ pub fn hop_plot_with_heat(
         let levels = heat
             .map(|h| {
                 let would = if h.protect { "" } else { " (off)" };
+                let all = (f64::NEG_INFINITY, f64::INFINITY);
                 vec![
                     (
+                        all.0,
+                        all.1,
                         h.derate_c,
                         format!("derating {:.0} C{would}", h.derate_c),
                         RGBColor(230, 140, 0),
                     ),
-                    (h.trip_c, format!("trip {:.0} C{would}", h.trip_c), RED),
+                    (
+                        all.0,
+                        all.1,
+                        h.trip_c,
+                        format!("trip {:.0} C{would}", h.trip_c),
+                        RED,
+                    ),
                 ]
             })
             .unwrap_or_default();
@@ -280,7 +330,7 @@ pub fn hop_plot_with_heat(
             let (area, key) = area.split_horizontally(1100 - SIDE_LEGEND_PX);
             let mut entries = vec![(ylabel.to_string(), LegendKey::Line(BLUE))];
             let (mut lo, mut hi) =
-                extent(samples.iter().map(get).chain(levels.iter().map(|l| l.0)));
+                extent(samples.iter().map(get).chain(levels.iter().map(|l| l.2)));
             let pad = ((hi - lo) * 0.05).max(0.5);
             lo -= pad;
             hi += pad;
@@ -300,14 +350,19 @@ pub fn hop_plot_with_heat(
                 samples.iter().map(|s| (s.t_s, get(s))),
                 BLUE.stroke_width(2),
             ))?;
-            for (v, label, colour) in levels {
-                chart.draw_series(DashedLineSeries::new(
-                    [(0.0, v), (t_end, v)],
-                    8,
-                    6,
-                    colour.stroke_width(2),
-                ))?;
-                entries.push((label, LegendKey::Dashed(colour)));
+            for (from, to, v, label, colour) in levels {
+                let (from, to) = (from.max(0.0), to.min(t_end));
+                if from < to {
+                    chart.draw_series(DashedLineSeries::new(
+                        [(from, v), (to, v)],
+                        8,
+                        6,
+                        colour.stroke_width(2),
+                    ))?;
+                }
+                if !label.is_empty() {
+                    entries.push((label, LegendKey::Dashed(colour)));
+                }
             }
             side_legend(&key, &entries)?;
         }

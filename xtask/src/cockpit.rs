@@ -28,21 +28,26 @@ const STEP_TIMEOUT: Duration = Duration::from_secs(20);
 const DISARM_MS_P99_BOUND: f64 = 50.0;
 
 /// Run in the page: five more websockets (tabs) each read the parameter
-/// table and set `target_apex_m` again as soon as their last answer came;
+/// table and set `target_apex_m` again as soon as their last answer came,
+/// and send bursts that wait for nothing (three commands every 100 ms:
+/// more than the link can serve, so the cockpit refuses some as busy);
 /// this one disarms 40 times, 25 ms apart, each timed from its send to
-/// its answer. Resolves to JSON `{p99, median, max, n, load}` (ms).
+/// its answer. Resolves to JSON `{p99, median, max, n, load, busy}` (ms).
 const DISARM_UNDER_LOAD: &str = r#"(async () => {
-  const url = `ws://${location.host}/ws?token=${new URLSearchParams(location.search).get('token')}`;
+  const url = `ws://${location.host}/ws`;
   const open = () => new Promise(r => { const w = new WebSocket(url); w.onopen = () => r(w); });
-  let load = 0, on = true;
+  let load = 0, busy = 0, on = true;
   const tabs = [];
   for (let k = 0; k < 5; k++) {
     const w = await open();
     let i = 0;
     const next = () => { if (!on) return; i++; load++;
       w.send(JSON.stringify(i % 2 ? { cmd: 'params', id: 1000000 + i } : { cmd: 'set', name: 'target_apex_m', value: '0.10', id: 1000000 + i })); };
-    w.onmessage = ev => { const m = JSON.parse(ev.data); if (m.type === 'result') next(); };
+    w.onmessage = ev => { const m = JSON.parse(ev.data); if (m.type === 'result') { if (m.text.startsWith('refused: the cockpit has')) busy++; else next(); } };
     next(); tabs.push(w);
+    // And bursts that wait for nothing: three commands every 100 ms.
+    const burst = setInterval(() => { if (!on) return clearInterval(burst);
+      for (let b = 0; b < 3; b++) { load++; w.send(JSON.stringify(b % 2 ? { cmd: 'params', id: 2000000 + b } : { cmd: 'set', name: 'target_apex_m', value: '0.10', id: 2000000 + b })); } }, 100);
   }
   const me = await open();
   const waiting = {};
@@ -58,7 +63,7 @@ const DISARM_UNDER_LOAD: &str = r#"(async () => {
   on = false; for (const w of tabs) w.close(); me.close();
   const raw = times.map(t => Math.round(t * 10) / 10);
   times.sort((a, b) => a - b);
-  return JSON.stringify({ p99: times[Math.ceil(0.99 * times.length) - 1], median: times[times.length >> 1], max: times[times.length - 1], n: times.length, load, raw });
+  return JSON.stringify({ p99: times[Math.ceil(0.99 * times.length) - 1], median: times[times.length >> 1], max: times[times.length - 1], n: times.length, load, busy, raw });
 })()"#;
 
 type Socket = tungstenite::WebSocket<TcpStream>;
@@ -370,8 +375,9 @@ pub fn run(root: &Path) -> Result<(), String> {
     // The page with the capture, for a look.
     page.screenshot(&out_dir.join("cockpit-capture.png"))?;
     // Disarm under load: five more tabs each read the table and set a
-    // parameter again as soon as the last answer came; meanwhile this one
-    // disarms 40 times, each timed from its send to its answer.
+    // parameter again as soon as the last answer came, and in bursts;
+    // meanwhile this one disarms 40 times, each timed from its send to
+    // its answer.
     let load = page.eval_async(DISARM_UNDER_LOAD).unwrap_or_else(|e| {
         eprintln!("xtask: cockpit: disarm under load: {e}");
         serde_json::Value::Null
@@ -380,8 +386,8 @@ pub fn run(root: &Path) -> Result<(), String> {
         serde_json::from_str(load.as_str().unwrap_or_default()).unwrap_or_default();
     let disarm_ms_p99 = load["p99"].as_f64().unwrap_or(f64::INFINITY);
     eprintln!(
-        "xtask: cockpit: disarm under load: {} disarms, median {:.1} ms, p99 {disarm_ms_p99:.1} ms, max {:.1} ms, while five tabs made {} reads and sets",
-        load["n"], load["median"].as_f64().unwrap_or(f64::NAN), load["max"].as_f64().unwrap_or(f64::NAN), load["load"]
+        "xtask: cockpit: disarm under load: {} disarms, median {:.1} ms, p99 {disarm_ms_p99:.1} ms, max {:.1} ms, while five tabs sent {} reads and sets ({} refused as busy)",
+        load["n"], load["median"].as_f64().unwrap_or(f64::NAN), load["max"].as_f64().unwrap_or(f64::NAN), load["load"], load["busy"]
     );
     eprintln!("xtask: cockpit: each disarm, ms, in order: {}", load["raw"]);
     // The operator deadman: armed, the page closed, opened again.

@@ -9,17 +9,19 @@
 //! The page can drive a real motor, so it lets in only its operator: it
 //! listens on loopback unless `--allow-remote` says otherwise; every
 //! request and the websocket need the random token printed in the URL at
-//! start; the HTTP server checks `Host` (a DNS-rebinding site names its
+//! start (then a session cookie); the HTTP server checks `Host` (a DNS-rebinding site names its
 //! own) and the websocket checks `Origin` (another page open in the same
 //! browser is not this one). Nothing of a refused request reaches the
 //! robot. The robot still disarms by its link timeout when this client
 //! goes away, and by the operator deadman below when its pages do.
 //!
 //! One thread owns the link (the [`Client`]): it streams telemetry, polls
-//! the state, and runs the commands the pages send, one at a time; each
-//! connection has a thread of its own. A Disarm does not wait in that
-//! line: the page's thread sends it at once ([`Urgent`]), whatever the
-//! link's thread has in flight. An operator deadman disarms the robot
+//! the state, and runs the commands the pages send, one at a time (a
+//! page's table reads and sets in a burst cost one table read); the
+//! pages are served by [`server`] (hyper and axum on tokio, every queue
+//! and limit bounded). A Disarm does not wait in that line: the page's
+//! task sends it at once ([`Urgent`]), whatever the link's thread has in
+//! flight. An operator deadman disarms the robot
 //! when no page has been connected for [`OPERATOR_DEADMAN`]; pages
 //! reconnect by themselves. Losing the robot is an event, not an exit:
 //! a recording in progress is finished (every file, its plot), the pages
@@ -30,15 +32,13 @@ use anyhow::{bail, Context, Result};
 use hopper_link::record::{Recording, Streamed};
 use hopper_link::{names, Client, Urgent};
 use hopper_protocol::{ArmState, DumpInfo, Request, Response, RobotMsg};
-use std::io::{Read, Write};
-use std::net::{SocketAddr, TcpListener, TcpStream};
+use std::io::Write;
+use std::net::{SocketAddr, TcpListener};
 use std::path::PathBuf;
-use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
-use std::sync::mpsc::{channel, Receiver, Sender};
+use std::sync::atomic::{AtomicBool, AtomicU32, AtomicUsize, Ordering};
+use std::sync::mpsc::{sync_channel, Receiver};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
-use tungstenite::protocol::Role;
-use tungstenite::{Message, WebSocket};
 
 /// The page (HTML, CSS and script in one file).
 const PAGE: &str = include_str!("ui.html");
@@ -47,16 +47,19 @@ const PAGE: &str = include_str!("ui.html");
 /// rate; the page draws at its frame rate).
 const TELEMETRY_HZ: f64 = 200.0;
 
+mod server;
+use server::Tab;
+
 /// A command from a page, with where its answer goes.
 struct Command {
     /// The page's JSON command.
     json: serde_json::Value,
     /// The answer's way back to that page.
-    reply: Sender<String>,
+    reply: Tab,
 }
 
 /// The pages connected: each one's queue of messages.
-type Pages = Arc<Mutex<Vec<Sender<String>>>>;
+type Pages = Arc<Mutex<Vec<Tab>>>;
 
 /// With no page connected for this long, the robot is disarmed: a closed
 /// page (or a browser that died) leaves no one to press Disarm.
@@ -79,6 +82,9 @@ struct Shared {
     note: Arc<Mutex<Option<String>>>,
     /// The link's urgent requests (replaced when the robot reconnects).
     urgent: Arc<Mutex<Option<Urgent>>>,
+    /// Arm sessions seen: one more each time the robot is seen armed
+    /// after it was not (the hop ledger and its plot are per session).
+    arm_session: Arc<AtomicU32>,
 }
 
 impl Shared {
@@ -90,6 +96,16 @@ impl Shared {
 
     fn note(&self) -> Option<String> {
         self.note.lock().ok().and_then(|n| n.clone())
+    }
+
+    /// The robot seen armed or not; a new arm session when it was not.
+    fn seen_armed(&self, armed: bool) {
+        if armed && !self.armed.swap(true, Ordering::Relaxed) {
+            self.arm_session.fetch_add(1, Ordering::Relaxed);
+        }
+        if !armed {
+            self.armed.store(false, Ordering::Relaxed);
+        }
     }
 
     /// Disarms the robot now, past every queue.
@@ -173,8 +189,7 @@ pub(crate) fn ui(
     }
     let listener = TcpListener::bind(addr).with_context(|| format!("cannot listen on {addr}"))?;
     let bound = listener.local_addr()?;
-    let token = token()?;
-    let hosts = hosts_for(bound);
+    let token = server::secret()?;
     println!("cockpit: http://{bound}/?token={token}");
     println!("(open it in a browser; the robot is disarmed when no page is open for 0.5 s; Ctrl-C stops, and the robot disarms by its link timeout then)");
     std::io::stdout().flush()?;
@@ -182,24 +197,17 @@ pub(crate) fn ui(
     if let Ok(mut u) = shared.urgent.lock() {
         *u = Some(c.urgent());
     }
-    let (commands, inbox) = channel::<Command>();
-    {
-        let shared = shared.clone();
-        let token = token.clone();
-        std::thread::spawn(move || {
-            for stream in listener.incoming().flatten() {
-                let (shared, commands, token, hosts) = (
-                    shared.clone(),
-                    commands.clone(),
-                    token.clone(),
-                    hosts.clone(),
-                );
-                std::thread::spawn(move || {
-                    let _ = connection(stream, &token, &hosts, &shared, &commands);
-                });
-            }
-        });
-    }
+    let (commands, inbox) = sync_channel::<Command>(server::COMMANDS_WAITING);
+    server::spawn(
+        listener,
+        server::Server {
+            token,
+            session: server::secret()?,
+            hosts: server::hosts_for(bound),
+            shared: shared.clone(),
+            commands,
+        },
+    )?;
     {
         let shared = shared.clone();
         std::thread::spawn(move || deadman(&shared));
@@ -212,6 +220,8 @@ pub(crate) fn ui(
         calibrating: None,
         capturing: None,
         target_apex_m: None,
+        arm_session: shared.arm_session.clone(),
+        table_due: false,
     };
     loop {
         let Err(e) = robot(c, &shared, &inbox, &mut session) else {
@@ -274,6 +284,7 @@ fn lost(
     let target = c.target().clone();
     loop {
         while let Ok(cmd) = inbox.try_recv() {
+            cmd.reply.taken();
             let _ = cmd
                 .reply
                 .send(answer(&cmd.json, Err(anyhow::anyhow!("{text}"))).to_string());
@@ -298,42 +309,11 @@ fn lost(
     }
 }
 
-/// The names a browser may use for this server (its `Host`): its
-/// address, `localhost` on loopback, each without the port too when the
-/// port is HTTP's default 80 (browsers leave `:80` out).
-pub(crate) fn hosts_for(bound: SocketAddr) -> Vec<String> {
-    let mut names = vec![bound.ip().to_string()];
-    if bound.ip().is_loopback() {
-        names.push("localhost".into());
-    }
-    let mut hosts: Vec<String> = names
-        .iter()
-        .map(|n| match bound {
-            SocketAddr::V6(_) if n != "localhost" => format!("[{n}]:{}", bound.port()),
-            _ => format!("{n}:{}", bound.port()),
-        })
-        .collect();
-    if bound.port() == 80 {
-        hosts.extend(names.iter().map(|n| match bound {
-            SocketAddr::V6(_) if n != "localhost" => format!("[{n}]"),
-            _ => n.clone(),
-        }));
-    }
-    hosts
-}
-
-/// A random token: 128 bits as hex.
-fn token() -> Result<String> {
-    let mut b = [0u8; 16];
-    getrandom::fill(&mut b).map_err(|e| anyhow::anyhow!("no random token: {e}"))?;
-    Ok(b.iter().map(|x| format!("{x:02x}")).collect())
-}
-
 /// Sends `msg` to every page (dropping those gone).
 fn broadcast(pages: &Pages, msg: &serde_json::Value) {
     let text = msg.to_string();
     if let Ok(mut p) = pages.lock() {
-        p.retain(|tx| tx.send(text.clone()).is_ok());
+        p.retain(|tab| tab.send(text.clone()).is_ok());
     }
 }
 
@@ -358,6 +338,10 @@ struct Session {
     /// The target apex as last read or set, for a recording's plot when
     /// the robot is gone.
     target_apex_m: Option<f64>,
+    /// The arm session (the shared count), for the hops.
+    arm_session: Arc<AtomicU32>,
+    /// The parameter table is to be read and sent to the pages.
+    table_due: bool,
 }
 
 /// A fault capture on its way from the robot.
@@ -385,10 +369,11 @@ impl Session {
     fn on(&mut self, pages: &Pages, msg: RobotMsg) {
         let written = match msg {
             RobotMsg::Telemetry(r) => {
+                let toe_m = hopper_link::record::toe_height_m(&r);
                 self.batch.push(serde_json::json!([
                     f64::from(r.step) * self.period_s,
                     r.body_height_m,
-                    f64::from(r.body_height_m) - hopper_model::design::LEG_LENGTH_M,
+                    toe_m,
                     r.nut_position_m,
                     r.spring_force_n,
                     r.command_a,
@@ -397,7 +382,10 @@ impl Session {
                 self.recording.as_mut().map(|(rec, _)| rec.record(r))
             }
             RobotMsg::Hop(h) => {
-                broadcast(pages, &serde_json::json!({ "type": "hop", "hop": h }));
+                broadcast(
+                    pages,
+                    &serde_json::json!({ "type": "hop", "hop": h, "session": self.arm_session.load(Ordering::Relaxed) }),
+                );
                 self.recording.as_mut().map(|(rec, _)| rec.hop(h))
             }
             RobotMsg::Faults { step, bits } => {
@@ -472,6 +460,7 @@ fn robot(
     let mut last_thermal = last_state;
     loop {
         while let Ok(cmd) = inbox.try_recv() {
+            cmd.reply.taken();
             if cmd.json["cmd"] == "capture" {
                 start_capture(c, pages, cmd, session);
                 continue;
@@ -491,6 +480,9 @@ fn robot(
             }
             let answer = run(c, &cmd.json, shared, session);
             let _ = cmd.reply.send(answer.to_string());
+        }
+        if std::mem::take(&mut session.table_due) {
+            broadcast(pages, &parameters(c)?);
         }
         progress_capture(c, pages, session);
         if session.calibrating.is_some() && last_poll.elapsed() >= Duration::from_millis(100) {
@@ -514,7 +506,7 @@ fn robot(
         if last_state.elapsed() >= Duration::from_millis(100) {
             last_state = Instant::now();
             let recording = session.recording.as_ref().map(|(_, d)| d.as_path());
-            broadcast(pages, &state(c, recording, shared)?);
+            broadcast(pages, &state(c, recording, session.target_apex_m, shared)?);
         }
         if last_thermal.elapsed() >= Duration::from_millis(500) {
             last_thermal = Instant::now();
@@ -528,6 +520,7 @@ fn robot(
                         "limit_scale": th.limit_scale,
                         "derate_c": th.derate_c,
                         "trip_c": th.trip_c,
+                        "protection": th.protect,
                     }),
                 );
             }
@@ -559,15 +552,14 @@ fn robot(
 fn state(
     c: &mut Client,
     recording: Option<&std::path::Path>,
+    target_apex_m: Option<f64>,
     shared: &Shared,
 ) -> Result<serde_json::Value> {
     let s = match c.request(Request::Status)? {
         Response::Status(s) => s,
         r => bail!("unexpected answer {r:?}"),
     };
-    shared
-        .armed
-        .store(s.arm == ArmState::Armed, Ordering::Relaxed);
+    shared.seen_armed(s.arm == ArmState::Armed);
     let cost = match c.request(Request::Cost)? {
         Response::Cost(x) => Some(x),
         _ => None,
@@ -591,6 +583,8 @@ fn state(
         "counter_hz": cost.map(|x| x.counter_hz),
         "recording": recording.map(|d| d.display().to_string()),
         "note": shared.note(),
+        "target_apex_m": target_apex_m,
+        "arm_session": shared.arm_session.load(Ordering::Relaxed),
     }))
 }
 
@@ -615,6 +609,12 @@ fn parameters(c: &mut Client) -> Result<serde_json::Value> {
                 "live": p.live,
                 "choices": d.choices,
                 "inactive": (!active).then(|| d.inactive_reason(selected.as_deref())),
+                "shown": {
+                    "value": d.number(if active { p.value } else { p.default }),
+                    "min": names::plain_number(p.min),
+                    "max": names::plain_number(p.max),
+                    "default": d.number(p.default),
+                },
             })
         })
         .collect();
@@ -638,7 +638,7 @@ fn run(
         }
         "arm" => match c.request(Request::Arm)? {
             Response::Ok => {
-                shared.armed.store(true, Ordering::Relaxed);
+                shared.seen_armed(true);
                 shared.set_note(None);
                 Ok("armed".into())
             }
@@ -656,14 +656,20 @@ fn run(
             Response::Refused(why) => bail!("reset-faults refused: {why}"),
             r => bail!("unexpected answer {r:?}"),
         },
+        // The table is read once the waiting commands ran: one read for
+        // every page's ask and every set in a burst.
         "params" => {
-            let p = parameters(c)?;
-            broadcast(pages, &p);
+            session.table_due = true;
             Ok(String::new())
         }
         "set" => {
             let name = cmd["name"].as_str().unwrap_or("");
-            let text = cmd["value"].as_str().unwrap_or("");
+            // A value as typed, or a JSON number.
+            let text = match &cmd["value"] {
+                serde_json::Value::Number(n) => n.to_string(),
+                v => v.as_str().unwrap_or("").to_string(),
+            };
+            let text = text.as_str();
             let d =
                 names::describe(c, name)?.ok_or_else(|| anyhow::anyhow!("no parameter {name}"))?;
             let value = d.parse(text)?;
@@ -675,8 +681,13 @@ fn run(
                     if name == "target_apex_m" {
                         session.target_apex_m = Some(f64::from(value));
                     }
-                    let p = parameters(c)?;
-                    broadcast(pages, &p);
+                    // The recording keeps every set at its time.
+                    let written = session
+                        .recording
+                        .as_mut()
+                        .map(|(rec, _)| rec.set(name, value));
+                    session.check(pages, written);
+                    session.table_due = true;
                     Ok(format!("{name} = {text}"))
                 }
                 Response::Refused(why) => {
@@ -941,245 +952,4 @@ fn start_routine(
         bail!("calibrate {routine}: another routine is still running");
     }
     super::calibrate::start(c, routine, 0.5)
-}
-
-/// The value of query parameter `key` in `target` (`/ws?token=...`).
-fn query<'a>(target: &'a str, key: &str) -> Option<&'a str> {
-    target
-        .split_once('?')?
-        .1
-        .split('&')
-        .find_map(|kv| kv.strip_prefix(key)?.strip_prefix('='))
-}
-
-fn respond(s: &mut TcpStream, status: &str, kind: &str, body: &str) -> std::io::Result<()> {
-    write!(
-        s,
-        "HTTP/1.1 {status}\r\nContent-Type: {kind}\r\nContent-Length: {}\r\nCache-Control: no-store\r\nConnection: close\r\n\r\n{body}",
-        body.len()
-    )
-}
-
-/// Why a request is refused, if it is: the `Host` is not this server's,
-/// the token is missing or wrong, or (a websocket) the `Origin` is not this
-/// page's.
-pub(crate) fn refusal(
-    host: Option<&str>,
-    origin: Option<&str>,
-    target: &str,
-    token: &str,
-    hosts: &[String],
-    websocket: bool,
-) -> Option<&'static str> {
-    let Some(host) = host.filter(|h| hosts.iter().any(|x| x == h)) else {
-        return Some("wrong Host");
-    };
-    if query(target, "token") != Some(token) {
-        return Some("no valid token");
-    }
-    if websocket && origin != Some(&format!("http://{host}")) {
-        return Some("wrong Origin");
-    }
-    None
-}
-
-/// One connection: the page, or its websocket.
-fn connection(
-    mut s: TcpStream,
-    token: &str,
-    hosts: &[String],
-    shared: &Shared,
-    commands: &Sender<Command>,
-) -> Result<()> {
-    s.set_read_timeout(Some(Duration::from_secs(5)))?;
-    // Small frames (a Disarm's answer) go out at once: with Nagle's
-    // algorithm one waited for the browser's delayed acknowledgement,
-    // about 40 ms, every few Disarms.
-    s.set_nodelay(true)?;
-    // The request's head (a browser's fits in 8 KiB).
-    let mut buf = vec![0u8; 8192];
-    let mut n = 0;
-    let head_len = loop {
-        let k = s.read(&mut buf[n..])?;
-        if k == 0 {
-            return Ok(());
-        }
-        n += k;
-        let mut headers = [httparse::EMPTY_HEADER; 32];
-        let mut req = httparse::Request::new(&mut headers);
-        match req.parse(&buf[..n]) {
-            Ok(httparse::Status::Complete(len)) => break len,
-            Ok(httparse::Status::Partial) if n < buf.len() => continue,
-            _ => {
-                return respond(&mut s, "400 Bad Request", "text/plain", "bad request\n")
-                    .map_err(Into::into)
-            }
-        }
-    };
-    let mut headers = [httparse::EMPTY_HEADER; 32];
-    let mut req = httparse::Request::new(&mut headers);
-    req.parse(&buf[..head_len])?;
-    let header = |name: &str| {
-        req.headers
-            .iter()
-            .find(|h| h.name.eq_ignore_ascii_case(name))
-            .and_then(|h| std::str::from_utf8(h.value).ok())
-    };
-    let target = req.path.unwrap_or("/");
-    let path = target.split('?').next().unwrap_or("/");
-    let websocket = header("Upgrade").is_some_and(|u| u.eq_ignore_ascii_case("websocket"));
-    // One `Host`, not a first one trusted and a second ignored; a
-    // websocket's handshake with its key (16 bytes in base64).
-    let hosts_given = req
-        .headers
-        .iter()
-        .filter(|h| h.name.eq_ignore_ascii_case("Host"))
-        .count();
-    let key_ok = header("Sec-WebSocket-Key").is_some_and(|k| {
-        data_encoding::BASE64
-            .decode(k.trim().as_bytes())
-            .is_ok_and(|b| b.len() == 16)
-    });
-    if hosts_given > 1 || (websocket && !key_ok) {
-        return respond(&mut s, "400 Bad Request", "text/plain", "bad request\n")
-            .map_err(Into::into);
-    }
-    if let Some(why) = refusal(
-        header("Host"),
-        header("Origin"),
-        target,
-        token,
-        hosts,
-        websocket,
-    ) {
-        return respond(
-            &mut s,
-            "403 Forbidden",
-            "text/plain",
-            &format!("refused: {why}\n"),
-        )
-        .map_err(Into::into);
-    }
-    match (req.method, path, websocket) {
-        (Some("GET"), "/", false) => {
-            respond(&mut s, "200 OK", "text/html; charset=utf-8", PAGE)?;
-            Ok(())
-        }
-        (Some("GET"), "/ws", true) => {
-            let key = header("Sec-WebSocket-Key").unwrap_or("").trim();
-            write!(
-                s,
-                "HTTP/1.1 101 Switching Protocols\r\nUpgrade: websocket\r\nConnection: Upgrade\r\nSec-WebSocket-Accept: {}\r\n\r\n",
-                tungstenite::handshake::derive_accept_key(key.as_bytes())
-            )?;
-            page(s, shared, commands)
-        }
-        _ => respond(&mut s, "404 Not Found", "text/plain", "not found\n").map_err(Into::into),
-    }
-}
-
-/// A page's websocket: the broadcasts out, its commands in; a Disarm
-/// sent to the robot from here, at once.
-fn page(s: TcpStream, shared: &Shared, commands: &Sender<Command>) -> Result<()> {
-    s.set_read_timeout(Some(Duration::from_millis(10)))?;
-    let mut ws = WebSocket::from_raw_socket(s, Role::Server, None);
-    let _live = Live::new(&shared.live);
-    let (tx, rx) = channel::<String>();
-    if let Ok(mut p) = shared.pages.lock() {
-        p.push(tx.clone());
-    }
-    // The table first.
-    let _ = commands.send(Command {
-        json: serde_json::json!({ "cmd": "params" }),
-        reply: tx.clone(),
-    });
-    loop {
-        match ws.read() {
-            Ok(Message::Text(t)) => {
-                if let Ok(json) = serde_json::from_str::<serde_json::Value>(t.as_str()) {
-                    if json["cmd"] == "disarm" {
-                        let result = shared.disarm().map(|()| "disarmed".to_string());
-                        ws.send(Message::text(answer(&json, result).to_string()))?;
-                        continue;
-                    }
-                    let _ = commands.send(Command {
-                        json,
-                        reply: tx.clone(),
-                    });
-                }
-            }
-            Ok(Message::Close(_)) => return Ok(()),
-            Ok(_) => {}
-            Err(tungstenite::Error::Io(e))
-                if matches!(
-                    e.kind(),
-                    std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
-                ) => {}
-            Err(_) => return Ok(()),
-        }
-        while let Ok(text) = rx.try_recv() {
-            ws.send(Message::text(text))?;
-        }
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn the_host_may_leave_out_the_default_port() {
-        let on = |a: &str| hosts_for(a.parse().unwrap_or_else(|e| panic!("{e}")));
-        assert_eq!(on("127.0.0.1:8080"), ["127.0.0.1:8080", "localhost:8080"]);
-        assert_eq!(
-            on("127.0.0.1:80"),
-            ["127.0.0.1:80", "localhost:80", "127.0.0.1", "localhost"]
-        );
-        assert_eq!(on("192.168.1.5:80"), ["192.168.1.5:80", "192.168.1.5"]);
-        assert_eq!(on("[::1]:8080"), ["[::1]:8080", "localhost:8080"]);
-    }
-
-    #[test]
-    fn only_this_pages_requests_with_the_token_pass() {
-        let hosts = vec!["127.0.0.1:8080".to_string(), "localhost:8080".to_string()];
-        let ok = |host, origin, target, ws| refusal(host, origin, target, "abc", &hosts, ws);
-        assert_eq!(ok(Some("127.0.0.1:8080"), None, "/?token=abc", false), None);
-        assert_eq!(
-            ok(
-                Some("localhost:8080"),
-                Some("http://localhost:8080"),
-                "/ws?token=abc",
-                true
-            ),
-            None
-        );
-        // DNS rebinding: the attacker's name in Host.
-        assert_eq!(
-            ok(Some("evil.example:8080"), None, "/?token=abc", false),
-            Some("wrong Host")
-        );
-        assert_eq!(ok(None, None, "/?token=abc", false), Some("wrong Host"));
-        assert_eq!(
-            ok(Some("127.0.0.1:8080"), None, "/", false),
-            Some("no valid token")
-        );
-        assert_eq!(
-            ok(Some("127.0.0.1:8080"), None, "/?token=abd", false),
-            Some("no valid token")
-        );
-        // Another page in the same browser (it knows the token, say).
-        assert_eq!(
-            ok(
-                Some("127.0.0.1:8080"),
-                Some("http://evil.example"),
-                "/ws?token=abc",
-                true
-            ),
-            Some("wrong Origin")
-        );
-        assert_eq!(
-            ok(Some("127.0.0.1:8080"), None, "/ws?token=abc", true),
-            Some("wrong Origin")
-        );
-    }
 }
