@@ -181,6 +181,11 @@ fn register(device: &str, offset: u32) -> String {
             0x14 => "OPTCR",
             _ => "",
         },
+        ("PWR", o) => match o {
+            0x00 => "CR",
+            0x04 => "CSR",
+            _ => "",
+        },
         ("DAC", o) => match o {
             0x00 => "CR",
             0x08 => "DHR12R1",
