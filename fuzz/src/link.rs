@@ -192,6 +192,7 @@ mod tests {
                     Request::SimulateEstop {
                         pressed: next() % 2 == 0,
                     },
+                    Request::LinkCounts,
                 ];
                 for (id, req) in reqs.into_iter().enumerate() {
                     if next() % 3 == 0 {

@@ -33,8 +33,61 @@ pub const HEARTBEAT: Duration = Duration::from_millis(20);
 /// How long a TCP connection may take to open.
 pub const CONNECT_TIMEOUT: Duration = Duration::from_secs(3);
 
-/// How long a request waits for its response.
+/// How long a request waits for its response, its retries included.
 pub const RESPONSE_TIMEOUT: Duration = Duration::from_secs(3);
+/// How many times a request is sent at most before it fails.
+pub const MAX_SENDS: u32 = 8;
+/// The shortest and longest wait for an answer before a request is sent
+/// again; between them, the link's round trip (its smoothed value and
+/// four times its variation, as TCP's retransmission timer).
+pub const RETRY_MIN: Duration = Duration::from_millis(100);
+/// See [`RETRY_MIN`].
+pub const RETRY_MAX: Duration = Duration::from_secs(1);
+/// The wait before the first round trip is measured.
+pub const RETRY_FIRST: Duration = Duration::from_millis(250);
+
+/// What the host counted besides its decoder's frames.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct HostCounts {
+    /// Requests sent (each once, however often it was sent).
+    pub requests: u64,
+    /// Sends again of a request whose answer did not come in time.
+    pub retries: u64,
+    /// Requests answered after being sent again.
+    pub answered_after_retry: u64,
+    /// Requests that got no answer at all.
+    pub failed: u64,
+    /// Telemetry records missing from the sequence (the robot's dropped
+    /// ones and the line's lost ones).
+    pub telemetry_gaps: u64,
+}
+
+/// The link's round trip, smoothed (RFC 6298's estimator): the wait
+/// before a request is sent again.
+#[derive(Debug, Clone, Copy, Default)]
+struct RoundTrip {
+    /// Smoothed round trip and its variation, s (`None`: not measured).
+    srtt_var_s: Option<(f64, f64)>,
+}
+
+impl RoundTrip {
+    /// A round trip measured on a request answered at its first send
+    /// (Karn: a retried one's answer may be the first send's).
+    fn sample(&mut self, rtt: Duration) {
+        let r = rtt.as_secs_f64();
+        self.srtt_var_s = Some(match self.srtt_var_s {
+            None => (r, r / 2.0),
+            Some((s, v)) => (0.875 * s + 0.125 * r, 0.75 * v + 0.25 * (s - r).abs()),
+        });
+    }
+
+    /// The wait for an answer before sending again.
+    fn timeout(&self) -> Duration {
+        self.srtt_var_s.map_or(RETRY_FIRST, |(s, v)| {
+            Duration::from_secs_f64(s + 4.0 * v).clamp(RETRY_MIN, RETRY_MAX)
+        })
+    }
+}
 /// How often the hello is repeated until the robot answers it.
 pub const HELLO_RETRY: Duration = Duration::from_millis(200);
 
@@ -72,6 +125,9 @@ impl std::error::Error for BadAddress {}
 
 type Writer = Arc<Mutex<Box<dyn Write + Send>>>;
 
+/// How often an urgent request is sent again until answered.
+const URGENT_RETRY: Duration = Duration::from_millis(50);
+
 /// Request ids: [`Client::request`]'s below these, [`Urgent`]'s these
 /// (above them, `flood`'s own, from 40,000).
 const URGENT_IDS: std::ops::Range<u16> = 0x7000..0x8000;
@@ -87,6 +143,8 @@ pub struct Client {
     heartbeats: Arc<AtomicBool>,
     stop: Arc<AtomicBool>,
     stats: Arc<Mutex<LinkStats>>,
+    counts: Arc<Mutex<HostCounts>>,
+    round_trip: RoundTrip,
     threads: Vec<JoinHandle<()>>,
     target: Target,
 }
@@ -142,14 +200,16 @@ impl Client {
         let stop = Arc::new(AtomicBool::new(false));
         let heartbeats = Arc::new(AtomicBool::new(true));
         let stats = Arc::new(Mutex::new(LinkStats::default()));
+        let counts = Arc::new(Mutex::new(HostCounts::default()));
         let (tx, incoming) = mpsc::channel();
         let (urgent_tx, urgent_rx) = mpsc::channel();
         let mut threads = Vec::new();
         {
-            let (stop, stats) = (stop.clone(), stats.clone());
+            let (stop, stats, counts) = (stop.clone(), stats.clone(), counts.clone());
             let mut reader = reader;
             threads.push(std::thread::spawn(move || {
                 let mut d = Decoder::new();
+                let mut last_seq: Option<u32> = None;
                 let mut buf = [0u8; 4096];
                 while !stop.load(Ordering::Relaxed) {
                     match reader.read(&mut buf) {
@@ -164,6 +224,21 @@ impl Client {
                                     // its own waiter, past the queue.
                                     RobotMsg::Response { id, resp } if URGENT_IDS.contains(&id) => {
                                         let _ = urgent_tx.send((id, resp));
+                                    }
+                                    RobotMsg::Telemetry(r) => {
+                                        let gap = last_seq
+                                            .map_or(0, |l| r.seq.wrapping_sub(l).wrapping_sub(1));
+                                        // (A sequence that went back: a
+                                        // restarted robot, no gap.)
+                                        if gap > 0 && gap < 1 << 30 {
+                                            if let Ok(mut c) = counts.lock() {
+                                                c.telemetry_gaps += u64::from(gap);
+                                            }
+                                        }
+                                        last_seq = Some(r.seq);
+                                        if tx.send(RobotMsg::Telemetry(r)).is_err() {
+                                            return;
+                                        }
                                     }
                                     m => {
                                         if tx.send(m).is_err() {
@@ -213,6 +288,8 @@ impl Client {
             heartbeats,
             stop,
             stats,
+            counts,
+            round_trip: RoundTrip::default(),
             threads,
             target: target.clone(),
         };
@@ -278,6 +355,17 @@ impl Client {
         self.stats.lock().map(|s| *s).unwrap_or_default()
     }
 
+    /// What the host counted besides (requests, retries, telemetry gaps).
+    pub fn counts(&self) -> HostCounts {
+        self.counts.lock().map(|c| *c).unwrap_or_default()
+    }
+
+    fn count(&self, f: impl FnOnce(&mut HostCounts)) {
+        if let Ok(mut c) = self.counts.lock() {
+            f(&mut c);
+        }
+    }
+
     fn recv_until(&mut self, deadline: Instant) -> Result<Option<RobotMsg>> {
         let left = deadline.saturating_duration_since(Instant::now());
         match self.incoming.recv_timeout(left) {
@@ -291,24 +379,75 @@ impl Client {
 
     /// Sends `req` and waits for its response; unsolicited messages that
     /// come meanwhile are kept for [`next_event`](Self::next_event).
+    ///
+    /// A request whose answer does not come within the link's round trip
+    /// (measured, [`RETRY_MIN`] to [`RETRY_MAX`]) is sent again with the
+    /// same id, up to [`MAX_SENDS`] times within [`RESPONSE_TIMEOUT`]: the
+    /// robot answers a repeat of a request that acts from its memory of
+    /// the id and never runs it twice. With no answer at all, one error
+    /// that says whether the request may have been carried out.
     pub fn request(&mut self, req: Request) -> Result<Response> {
+        self.exchange(req, MAX_SENDS)
+    }
+
+    /// [`request`](Self::request) sent once, never again: the robot's
+    /// answer then says in which period it received the host's last frame
+    /// (`silence` times the link timeout from there).
+    pub fn request_once(&mut self, req: Request) -> Result<Response> {
+        self.exchange(req, 1)
+    }
+
+    fn exchange(&mut self, req: Request, max_sends: u32) -> Result<Response> {
         let id = self.next_id;
         // 1 ..= 0x6fff: the ids above are the urgent requests'.
         self.next_id = self.next_id % (URGENT_IDS.start - 1) + 1;
         let what = format!("{req:?}");
-        self.send(&HostMsg::Request { id, req })?;
-        let deadline = Instant::now() + RESPONSE_TIMEOUT;
+        let acts = req.acts();
+        let bytes = frame(&HostMsg::Request { id, req })?;
+        self.count(|c| c.requests += 1);
+        let start = Instant::now();
+        let deadline = start + RESPONSE_TIMEOUT;
+        let mut sends = 0u32;
         loop {
-            match self.recv_until(deadline)? {
-                Some(RobotMsg::Response { id: got, resp }) if got == id => return Ok(resp),
-                Some(RobotMsg::Response { .. }) => {}
-                Some(m) => self.queued.push_back(m),
-                None => bail!(
-                    "no response to {what} from {} within {:.0} s",
-                    self.target,
-                    RESPONSE_TIMEOUT.as_secs_f64()
-                ),
+            write_all(&self.writer, &bytes).context("the link closed")?;
+            sends += 1;
+            let sent = Instant::now();
+            // The last send waits for the rest of the time.
+            let wait = if sends >= max_sends {
+                deadline
+            } else {
+                (sent + self.round_trip.timeout()).min(deadline)
+            };
+            loop {
+                match self.recv_until(wait)? {
+                    Some(RobotMsg::Response { id: got, resp }) if got == id => {
+                        if sends == 1 {
+                            self.round_trip.sample(sent.elapsed());
+                        } else {
+                            self.count(|c| c.answered_after_retry += 1);
+                        }
+                        return Ok(resp);
+                    }
+                    // A late answer to an earlier request sent again.
+                    Some(RobotMsg::Response { .. }) => {}
+                    Some(m) => self.queued.push_back(m),
+                    None => break,
+                }
             }
+            if Instant::now() >= deadline || sends >= max_sends {
+                self.count(|c| c.failed += 1);
+                let applied = if acts {
+                    "whether the robot carried it out is not known (`hopper-link status` and `params get` tell)"
+                } else {
+                    "it only reads: nothing on the robot changed"
+                };
+                bail!(
+                    "no response to {what} from {}: sent {sends} times over {:.1} s, no answer came back; {applied}",
+                    self.target,
+                    start.elapsed().as_secs_f64()
+                );
+            }
+            self.count(|c| c.retries += 1);
         }
     }
 
@@ -377,20 +516,31 @@ impl Urgent {
             })
             .unwrap_or(URGENT_IDS.start);
         let what = format!("{req:?}");
-        write_all(&self.writer, &frame(&HostMsg::Request { id, req })?)
-            .context("the link closed")?;
+        let bytes = frame(&HostMsg::Request { id, req })?;
         let deadline = Instant::now() + timeout;
+        // Sent again every [`URGENT_RETRY`] until answered (a repeat is
+        // answered from the robot's memory, never run twice).
+        let mut sends = 0;
         loop {
-            let left = deadline.saturating_duration_since(Instant::now());
-            match answers.recv_timeout(left) {
-                Ok((got, resp)) if got == id => return Ok(resp),
-                // An earlier caller's that gave up waiting.
-                Ok(_) => {}
-                Err(RecvTimeoutError::Timeout) => bail!(
-                    "no response to {what} within {:.0} ms",
+            write_all(&self.writer, &bytes).context("the link closed")?;
+            sends += 1;
+            let wait = (Instant::now() + URGENT_RETRY).min(deadline);
+            loop {
+                let left = wait.saturating_duration_since(Instant::now());
+                match answers.recv_timeout(left) {
+                    Ok((got, resp)) if got == id => return Ok(resp),
+                    // An earlier caller's that gave up waiting, or a
+                    // repeat's.
+                    Ok(_) => {}
+                    Err(RecvTimeoutError::Timeout) => break,
+                    Err(RecvTimeoutError::Disconnected) => bail!("the link closed"),
+                }
+            }
+            if Instant::now() >= deadline {
+                bail!(
+                    "no response to {what} within {:.0} ms (sent {sends} times)",
                     timeout.as_secs_f64() * 1e3
-                ),
-                Err(RecvTimeoutError::Disconnected) => bail!("the link closed"),
+                );
             }
         }
     }

@@ -29,7 +29,7 @@ pub mod vocab;
 use serde::{Deserialize, Serialize};
 
 /// The protocol version: a host and a robot talk only when theirs agree.
-pub const PROTOCOL_VERSION: u16 = 4;
+pub const PROTOCOL_VERSION: u16 = 5;
 
 /// Largest encoded message, bytes (postcard, before the CRC and COBS).
 pub const MAX_MESSAGE: usize = 120;
@@ -188,6 +188,28 @@ pub enum Request {
         /// The value (the choice's index).
         value: u8,
     },
+    /// Where the robot lost frames and bytes, and the requests it saw
+    /// again ([`Response::LinkCounts`]).
+    LinkCounts,
+}
+
+impl Request {
+    /// Whether it acts on the robot: a repeat (a host's retry) is then
+    /// answered from the robot's memory of its id, never run again; the
+    /// others only read, and a repeat is answered afresh.
+    pub fn acts(&self) -> bool {
+        matches!(
+            self,
+            Request::Arm
+                | Request::Disarm
+                | Request::ResetFaults
+                | Request::ParamSet { .. }
+                | Request::Calibrate { .. }
+                | Request::Save
+                | Request::SimulateEstop { .. }
+                | Request::SimulateMount { .. }
+        )
+    }
 }
 
 /// Robot to host.
@@ -334,6 +356,45 @@ pub enum Response {
     ParamMeta(ParamMeta),
     /// A name (a choice's value).
     Name(Name),
+    /// Answers [`Request::LinkCounts`].
+    LinkCounts(LinkCounts),
+}
+
+/// Every place the robot's end of the link can lose a frame or a byte,
+/// and what it did with requests it saw again ([`Request::LinkCounts`]).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct LinkCounts {
+    /// Frames received intact.
+    pub frames_ok: u32,
+    /// Frames longer than [`MAX_FRAME`].
+    pub too_long: u32,
+    /// Frames that are not valid COBS.
+    pub bad_cobs: u32,
+    /// Frames whose CRC does not match.
+    pub bad_crc: u32,
+    /// Frames with a good CRC that are no message this robot knows.
+    pub unknown_message: u32,
+    /// Bytes the UART received while the last was still unread (its
+    /// overrun flag); the board only.
+    pub serial_overrun: u32,
+    /// Bytes with a framing error (no stop bit where it belongs); the
+    /// board only.
+    pub serial_framing: u32,
+    /// Bytes received with noise (the UART's noise flag); the board only.
+    pub serial_noise: u32,
+    /// Bytes dropped because the receive queue was full.
+    pub serial_full: u32,
+    /// Requests that act, received again (a host's retry) after they were
+    /// answered: answered again from memory, not run again.
+    pub repeats_answered: u32,
+    /// Requests that act, received again while the first was still being
+    /// carried out: dropped (the first's answer answers both).
+    pub repeats_in_flight: u32,
+    /// Requests the control period applied a second time (same id): the
+    /// check that the two counts above hold; 0.
+    pub applied_twice: u32,
+    /// Telemetry records not sent (the transmit queue was full).
+    pub telemetry_dropped: u32,
 }
 
 /// What a parameter is beyond its table entry ([`ParamInfo`]): everything a
@@ -871,7 +932,25 @@ mod tests {
                 value: f32::MAX,
             },
         };
-        for f in [frame(&info), frame(&log), frame(&set)] {
+        let counts = RobotMsg::Response {
+            id: u16::MAX,
+            resp: Response::LinkCounts(LinkCounts {
+                frames_ok: u32::MAX,
+                too_long: u32::MAX,
+                bad_cobs: u32::MAX,
+                bad_crc: u32::MAX,
+                unknown_message: u32::MAX,
+                serial_overrun: u32::MAX,
+                serial_framing: u32::MAX,
+                serial_noise: u32::MAX,
+                serial_full: u32::MAX,
+                repeats_answered: u32::MAX,
+                repeats_in_flight: u32::MAX,
+                applied_twice: u32::MAX,
+                telemetry_dropped: u32::MAX,
+            }),
+        };
+        for f in [frame(&info), frame(&log), frame(&set), frame(&counts)] {
             assert!(f.len() <= MAX_FRAME, "{}", f.len());
             assert_eq!(f.iter().filter(|b| **b == 0).count(), 1);
             assert_eq!(f.last(), Some(&0));
@@ -955,6 +1034,7 @@ mod tests {
             Just(Request::Weighing),
             Just(Request::Cost),
             Just(Request::ThermalBoot),
+            Just(Request::LinkCounts),
             (any::<bool>(), any::<f32>())
                 .prop_map(|(hoisted, lift_m)| Request::SimulateMount { hoisted, lift_m }),
             (any::<u8>(), any::<f32>())

@@ -82,6 +82,7 @@ mod cockpit;
 mod cycles;
 mod docs;
 mod hil;
+mod noisy;
 mod qemu;
 mod session;
 mod slurm;
@@ -118,6 +119,7 @@ fn main() -> ExitCode {
         Some("size") => setup(&root).and_then(|_| size(&root)),
         Some("qemu") => setup(&root).and_then(|_| qemu::run(&root)),
         Some("link-session") => session::against_serve(&root),
+        Some("noisy-link") => setup(&root).and_then(|_| noisy::run(&root, true)),
         Some("cockpit") => setup(&root).and_then(|_| cockpit::run(&root)),
         Some("slurm") => slurm::run(&root),
         Some("speed") => speed::run(&root),
@@ -135,7 +137,7 @@ fn main() -> ExitCode {
         Some("docs") => docs_check(&root, &args[1..]),
         _ => {
             eprintln!(
-                "usage: cargo xtask <test|size|qemu|hil|link-session|cockpit|slurm|speed|board-init|docs>"
+                "usage: cargo xtask <test|size|qemu|hil|link-session|noisy-link|cockpit|slurm|speed|board-init|docs>"
             );
             return ExitCode::from(2);
         }
@@ -387,6 +389,7 @@ fn test(root: &Path) -> Result<(), String> {
     qemu::run(root)?;
     hil::run(root, None)?;
     session::against_serve(root)?;
+    noisy::run(root, true)?;
     cockpit::run(root)?;
     slurm::run(root)?;
     speed::run(root)?;

@@ -162,16 +162,21 @@ fn build_image(
 
 /// The link image (`hopper-qemu-link`) and the scripted session
 /// against it (the `qemu-link:` line).
-fn link_session(root: &Path, link: &Path) -> Result<(), String> {
+/// The QEMU link image, built (once: later calls find it built).
+pub fn link_image(root: &Path) -> Result<std::path::PathBuf, String> {
     // The scenario images' directory: the same dependencies, built once.
     let target_dir = crate::target_dir(root)?.join("qemu");
-    let elf = build_image(
+    build_image(
         root,
         "firmware build (QEMU link image)",
         "hopper-qemu-link",
         cargo(),
         &target_dir,
-    )?;
+    )
+}
+
+fn link_session(root: &Path, link: &Path) -> Result<(), String> {
+    let elf = link_image(root)?;
     // The main session runs traced (the control interrupt in cycles).
     let main = crate::session::against_qemu(root, link, &elf);
     let bringup = crate::session::bringup_against_qemu(root, link, &elf);

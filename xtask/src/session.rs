@@ -291,7 +291,7 @@ pub fn bringup_against_qemu(root: &Path, link: &Path, elf: &Path) -> Result<(), 
 /// The QEMU link image `elf` booted with its USART1 on a free TCP port,
 /// `session` run against it (given the address), then QEMU stopped and
 /// its log printed as `<label>| ...`.
-fn on_link_image<T>(
+pub(crate) fn on_link_image<T>(
     elf: &Path,
     label: &str,
     session: impl FnOnce(&str) -> Result<T, String>,

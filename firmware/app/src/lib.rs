@@ -91,6 +91,10 @@ pub mod serial_cost {
     static MAX: AtomicU32 = AtomicU32::new(0);
     static COUNT: AtomicU32 = AtomicU32::new(0);
     static LOST: AtomicU32 = AtomicU32::new(0);
+    static OVERRUN: AtomicU32 = AtomicU32::new(0);
+    static FRAMING: AtomicU32 = AtomicU32::new(0);
+    static NOISE: AtomicU32 = AtomicU32::new(0);
+    static FULL: AtomicU32 = AtomicU32::new(0);
 
     /// The serial interrupt's work on `serial`, timed with the image's
     /// counter `now` and recorded: what every image's USART task does.
@@ -99,6 +103,21 @@ pub mod serial_cost {
         serial.on_interrupt();
         record(now().wrapping_sub(t0));
         LOST.store(serial.lost(), Relaxed);
+        let c = serial.counts();
+        OVERRUN.store(c.overrun, Relaxed);
+        FRAMING.store(c.framing, Relaxed);
+        NOISE.store(c.noise, Relaxed);
+        FULL.store(c.full, Relaxed);
+    }
+
+    /// What the line lost so far, by cause (for the link's counts).
+    pub fn counts() -> hopper_robot_link::SerialCounts {
+        hopper_robot_link::SerialCounts {
+            overrun: OVERRUN.load(Relaxed),
+            framing: FRAMING.load(Relaxed),
+            noise: NOISE.load(Relaxed),
+            full: FULL.load(Relaxed),
+        }
     }
 
     /// One interrupt of `ticks`.

@@ -375,6 +375,7 @@ mod app {
         // A save the board could not write after its restart is refused
         // when asked, with the reason.
         link.set_save_refusal(hopper_app::flash::save_refusal_now());
+        link.set_serial_counts(hopper_app::serial_cost::counts());
         link.serve(
             cx.local.link_queues,
             core::iter::from_fn(|| rx.dequeue()),

@@ -83,8 +83,8 @@ pub struct Serial<'a> {
     usart: crate::pinmap::LinkUsart,
     rx: RxIn<'a>,
     tx: TxOut<'a>,
-    /// Received bytes dropped (receive queue full, or an overrun).
-    lost: u32,
+    /// What the line lost, by cause.
+    counts: hopper_robot_link::SerialCounts,
 }
 
 /// The USART divider for `baud` from its bus clock `bus_hz` (16x
@@ -122,13 +122,18 @@ impl<'a> Serial<'a> {
             usart,
             rx,
             tx,
-            lost: 0,
+            counts: hopper_robot_link::SerialCounts::default(),
         }
     }
 
-    /// Received bytes dropped so far.
+    /// Received bytes dropped so far (overruns and a full queue).
     pub fn lost(&self) -> u32 {
-        self.lost
+        self.counts.overrun.saturating_add(self.counts.full)
+    }
+
+    /// What the line lost so far, by cause.
+    pub fn counts(&self) -> hopper_robot_link::SerialCounts {
+        self.counts
     }
 
     /// The interrupt: received bytes into the receive queue, queued bytes
@@ -140,12 +145,14 @@ impl<'a> Serial<'a> {
             // On an overrun DR still holds the last good byte (RM0090): keep
             // it; the byte after it is the one lost.
             let b = (self.usart.dr().read().bits() & 0xFF) as u8;
-            if sr.ore().bit_is_set() {
-                self.lost = self.lost.saturating_add(1);
-            }
-            if self.rx.enqueue(b).is_err() {
-                self.lost = self.lost.saturating_add(1);
-            }
+            let c = &mut self.counts;
+            let count = |n: &mut u32, on: bool| *n = n.saturating_add(u32::from(on));
+            count(&mut c.overrun, sr.ore().bit_is_set());
+            // A framing error or noise: the byte is kept (the frame's CRC
+            // drops the frame), and counted.
+            count(&mut c.framing, sr.fe().bit_is_set());
+            count(&mut c.noise, sr.nf().bit_is_set());
+            count(&mut c.full, self.rx.enqueue(b).is_err());
         }
         while self.usart.sr().read().txe().bit_is_set() {
             match self.tx.dequeue() {

@@ -50,9 +50,9 @@ use hopper_control::runner::{
 use hopper_control::telemetry::{FaultCapture, StepRecord};
 pub use hopper_protocol::vocab::Refusal;
 use hopper_protocol::{
-    encode, ArmState, CostStats, Decoder, DumpInfo, HilActuate, HilSample, Hop, HostMsg, ParamInfo,
-    Request, Response, RobotMsg, Status, StoredInfo, Telemetry, ThermalStatus, TimingStats,
-    MAX_FRAME, PROTOCOL_VERSION,
+    encode, ArmState, CostStats, Decoder, DumpInfo, HilActuate, HilSample, Hop, HostMsg,
+    LinkCounts, ParamInfo, Request, Response, RobotMsg, Status, StoredInfo, Telemetry,
+    ThermalStatus, TimingStats, MAX_FRAME, PROTOCOL_VERSION,
 };
 
 pub mod hil;
@@ -1136,6 +1136,59 @@ pub struct Endpoint<H = Owned> {
     /// A hardware-in-the-loop sample received and not yet taken
     /// ([`take_hil_sample`](Self::take_hil_sample)).
     hil: Option<HilSample>,
+    /// The last requests that act, by id, and their answers: a host that
+    /// heard no answer sends the same request again, and a repeat is
+    /// answered from here, never run again (at most once). Cleared by a
+    /// new session's hello (its ids start again).
+    memo: heapless::Deque<(u16, Memo), MEMO>,
+    /// Repeats answered from [`memo`](Self::memo), and dropped while
+    /// their first was in flight; second answers from the control period
+    /// to one request ([`LinkCounts`]).
+    repeats: (u32, u32, u32),
+    /// The serial line's losses, as the application counts them.
+    serial: SerialCounts,
+}
+
+/// Requests that act remembered by their id ([`Endpoint`]'s `memo`): more
+/// than a host retries within one request's time, with the requests in
+/// between.
+const MEMO: usize = 16;
+
+/// A request that acts, as answered.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Memo {
+    /// Being carried out: its answer comes from the control period.
+    InFlight,
+    /// Done.
+    Ok,
+    /// Refused, with the reason.
+    Refused(hopper_protocol::vocab::RefusalCode),
+}
+
+impl Memo {
+    /// An answer as remembered (`None`: not one a request that acts gets).
+    fn of(resp: &Response) -> Option<Self> {
+        match resp {
+            Response::Ok => Some(Memo::Ok),
+            Response::Refused(why) => Some(Memo::Refused(*why)),
+            _ => None,
+        }
+    }
+}
+
+/// The serial line's losses on the board ([`LinkCounts`]): bytes
+/// received over one still unread (overrun), without their stop bit
+/// (framing), with noise, and dropped with the receive queue full.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct SerialCounts {
+    /// Overruns.
+    pub overrun: u32,
+    /// Framing errors.
+    pub framing: u32,
+    /// Noise.
+    pub noise: u32,
+    /// Receive queue full.
+    pub full: u32,
 }
 
 /// A calibration record's bytes (an array too long for a derived `Default`).
@@ -1380,6 +1433,9 @@ impl<H: HopperSlot> Endpoint<H> {
             spares: heapless::Vec::new(),
             carried_at: 0,
             hil: None,
+            memo: heapless::Deque::new(),
+            repeats: (0, 0, 0),
+            serial: SerialCounts::default(),
         }
     }
 
@@ -1576,6 +1632,14 @@ impl<H: HopperSlot> Endpoint<H> {
                 if let Response::Stored(s) = &mut resp {
                     s.save = self.save_state;
                 }
+                if let Some(slot) = self.memo.iter_mut().find(|(i, _)| *i == id) {
+                    if slot.1 == Memo::InFlight {
+                        slot.1 = Memo::of(&resp).unwrap_or(Memo::InFlight);
+                    } else {
+                        // The control period carried one request out twice.
+                        self.repeats.2 = self.repeats.2.saturating_add(1);
+                    }
+                }
                 send(tx, &RobotMsg::Response { id, resp }, false);
             }
             Answer::Spare(h) => {
@@ -1642,6 +1706,8 @@ impl<H: HopperSlot> Endpoint<H> {
     ) -> bool {
         let (id, req) = match msg {
             HostMsg::Hello { .. } => {
+                // A new session: its ids start again.
+                self.memo.clear();
                 send(
                     tx,
                     &RobotMsg::Hello {
@@ -1658,6 +1724,22 @@ impl<H: HopperSlot> Endpoint<H> {
             }
             HostMsg::Request { id, req } => (*id, req),
         };
+        let acting = req.acts();
+        if acting {
+            if let Some(&(_, memo)) = self.memo.iter().find(|(i, _)| *i == id) {
+                let resp = match memo {
+                    Memo::InFlight => {
+                        self.repeats.1 = self.repeats.1.saturating_add(1);
+                        return false;
+                    }
+                    Memo::Ok => Response::Ok,
+                    Memo::Refused(why) => Response::Refused(why),
+                };
+                self.repeats.0 = self.repeats.0.saturating_add(1);
+                send(tx, &RobotMsg::Response { id, resp }, false);
+                return false;
+            }
+        }
         let note = self.last;
         let calibrating = note.is_some_and(|n| n.calibrating);
         let command = |c: Command<H>| -> Result<Command<H>, Response> { Ok(c) };
@@ -1834,7 +1916,17 @@ impl<H: HopperSlot> Endpoint<H> {
             Request::Dump => Err(self.start_dump(capture)),
             Request::ParamMeta { name } => Err(param_meta(name.as_str())),
             Request::ParamChoice { name, value } => Err(param_choice(name.as_str(), *value)),
+            Request::LinkCounts => Err(Response::LinkCounts(self.link_counts())),
         };
+        if acting {
+            let memo = match &out {
+                Ok(_) => Some(Memo::InFlight),
+                Err(resp) => Memo::of(resp),
+            };
+            if let Some(m) = memo {
+                self.remember(id, m);
+            }
+        }
         match out {
             Ok(c) => {
                 let arm = matches!(c, Command::Arm { .. });
@@ -1862,6 +1954,9 @@ impl<H: HopperSlot> Endpoint<H> {
                             }
                         }
                         let resp = refused(Refusal::Busy);
+                        if acting {
+                            self.remember(id, Memo::of(&resp).unwrap_or(Memo::InFlight));
+                        }
                         send(tx, &RobotMsg::Response { id, resp }, false);
                         false
                     }
@@ -2057,6 +2152,44 @@ impl<H: HopperSlot> Endpoint<H> {
             if self.dump.is_none() {
                 capture.with(|c| c.hold(false));
             }
+        }
+    }
+
+    /// Remembers a request that acts and its answer (the oldest
+    /// forgotten when full).
+    fn remember(&mut self, id: u16, memo: Memo) {
+        if let Some(slot) = self.memo.iter_mut().find(|(i, _)| *i == id) {
+            slot.1 = memo;
+            return;
+        }
+        if self.memo.is_full() {
+            let _ = self.memo.pop_front();
+        }
+        let _ = self.memo.push_back((id, memo));
+    }
+
+    /// The serial line's losses, as the application counts them (the
+    /// board's USART), for [`Request::LinkCounts`].
+    pub fn set_serial_counts(&mut self, counts: SerialCounts) {
+        self.serial = counts;
+    }
+
+    fn link_counts(&self) -> LinkCounts {
+        let link = self.rx.stats();
+        LinkCounts {
+            frames_ok: link.ok,
+            too_long: link.too_long,
+            bad_cobs: link.bad_cobs,
+            bad_crc: link.bad_crc,
+            unknown_message: link.bad_message,
+            serial_overrun: self.serial.overrun,
+            serial_framing: self.serial.framing,
+            serial_noise: self.serial.noise,
+            serial_full: self.serial.full,
+            repeats_answered: self.repeats.0,
+            repeats_in_flight: self.repeats.1,
+            applied_twice: self.repeats.2,
+            telemetry_dropped: self.telemetry_dropped,
         }
     }
 
@@ -2606,6 +2739,125 @@ mod tests {
         r.periods(1);
         let _ = r.take();
         assert!(r.ep.take_save().is_some());
+    }
+
+    /// A request that acts, received again with its id (the host heard no
+    /// answer and sent it again), is answered from memory and not carried
+    /// out again: a late repeat of a set does not undo a later set, of an
+    /// arm does not arm again after a disarm, of a routine does not start
+    /// it again, of a save does not queue a second.
+    #[test]
+    fn a_repeated_request_is_answered_from_memory_and_not_run_again() {
+        let mut r = Robot::with(true);
+        let answer = |r: &mut Robot, id: u16| {
+            r.take().into_iter().find_map(|m| match m {
+                RobotMsg::Response { id: got, resp } if got == id => Some(resp),
+                _ => None,
+            })
+        };
+        let target =
+            |r: &Robot| hopper_control::params::get(r.runner.hopper().config(), "target_apex_m");
+        let counts = |r: &Robot| r.ep.link_counts();
+        let set = |v: f32| Request::ParamSet {
+            name: name("target_apex_m"),
+            value: v,
+        };
+        // A set, a later one, then the first again: the later value stays.
+        r.request(10, set(0.12));
+        r.periods(3);
+        assert_eq!(answer(&mut r, 10), Some(Response::Ok));
+        r.request(11, set(0.13));
+        r.periods(3);
+        assert_eq!(answer(&mut r, 11), Some(Response::Ok));
+        r.request(10, set(0.12));
+        r.periods(3);
+        assert_eq!(answer(&mut r, 10), Some(Response::Ok));
+        assert_eq!(target(&r), Ok(0.13));
+        assert_eq!(counts(&r).repeats_answered, 1);
+        // Arm, disarm, the arm again: stays disarmed; then arm, the disarm
+        // again: stays armed.
+        r.request(20, Request::Arm);
+        r.periods(3);
+        assert_eq!(answer(&mut r, 20), Some(Response::Ok));
+        r.request(21, Request::Disarm);
+        r.periods(3);
+        assert_eq!(answer(&mut r, 21), Some(Response::Ok));
+        r.request(20, Request::Arm);
+        r.periods(3);
+        assert_eq!(answer(&mut r, 20), Some(Response::Ok));
+        assert!(!r.runner.arming().is_armed());
+        r.request(22, Request::Arm);
+        r.periods(3);
+        assert!(r.runner.arming().is_armed());
+        r.request(21, Request::Disarm);
+        r.periods(3);
+        assert_eq!(answer(&mut r, 21), Some(Response::Ok));
+        assert!(r.runner.arming().is_armed());
+        r.request(23, Request::Disarm);
+        r.periods(3);
+        let _ = r.take();
+        // Reset faults, again: the first answer, from memory.
+        r.request(30, Request::ResetFaults);
+        r.periods(3);
+        let first = answer(&mut r, 30);
+        assert!(first.is_some());
+        r.request(30, Request::ResetFaults);
+        r.periods(3);
+        assert_eq!(answer(&mut r, 30), first);
+        // A routine that ended, asked again: not started again.
+        let routine = Request::Calibrate {
+            routine: hopper_control::bringup::Routine::SensorCheck as u8,
+            seconds: 0.05,
+        };
+        r.request(40, routine.clone());
+        r.periods(3);
+        assert_eq!(answer(&mut r, 40), Some(Response::Ok));
+        assert!(r.runner.calibrating());
+        let mut n = 0;
+        while r.runner.calibrating() && n < 20_000 {
+            r.periods(10);
+            n += 10;
+        }
+        let _ = r.take();
+        assert!(
+            !r.runner.calibrating(),
+            "the routine did not end in {n} periods"
+        );
+        r.request(40, routine);
+        r.periods(3);
+        assert_eq!(answer(&mut r, 40), Some(Response::Ok));
+        assert!(!r.runner.calibrating());
+        // A save taken, asked again: not queued again.
+        r.runner.arming_mut().note_tared();
+        r.request(50, Request::Save);
+        r.periods(1);
+        assert_eq!(answer(&mut r, 50), Some(Response::Ok));
+        assert!(r.ep.take_save().is_some());
+        r.request(50, Request::Save);
+        r.periods(1);
+        assert_eq!(answer(&mut r, 50), Some(Response::Ok));
+        assert!(r.ep.take_save().is_none());
+        let c = counts(&r);
+        assert_eq!((c.repeats_answered, c.applied_twice), (6, 0), "{c:?}");
+        // A repeat while the first is still being carried out: dropped,
+        // the first's answer answers both.
+        r.request(60, set(0.14));
+        r.request(60, set(0.14));
+        r.periods(3);
+        let msgs = r.take();
+        let answers = msgs
+            .iter()
+            .filter(|m| matches!(m, RobotMsg::Response { id: 60, .. }))
+            .count();
+        assert_eq!((answers, counts(&r).repeats_in_flight), (1, 1), "{msgs:?}");
+        // A new session (its hello) starts its ids again.
+        r.send(&HostMsg::Hello {
+            version: PROTOCOL_VERSION,
+        });
+        r.request(10, set(0.11));
+        r.periods(3);
+        assert_eq!(answer(&mut r, 10), Some(Response::Ok));
+        assert_eq!(target(&r), Ok(0.11));
     }
 
     /// A save needs a calibration (placeholders are none); once tared it is

@@ -21,7 +21,11 @@ pub(crate) fn silence(c: &mut Client, max_s: f64) -> Result<()> {
     // (the host's lag does not enter).
     c.set_heartbeats(false);
     std::thread::sleep(2 * hopper_link::HEARTBEAT);
-    let from = status_of(c)?.periods;
+    // Sent once: a repeat would be a later last frame than the answer's.
+    let from = match c.request_once(Request::Status)? {
+        hopper_protocol::Response::Status(s) => s.periods,
+        r => bail!("unexpected answer {r:?}"),
+    };
     c.discard_queued();
     let start = Instant::now();
     let mut disarmed_at = None;

@@ -42,6 +42,37 @@ pub(crate) fn status(c: &mut Client) -> Result<()> {
         c.stats().ok,
         c.stats().bad()
     );
+    let l = match c.request(Request::LinkCounts)? {
+        Response::LinkCounts(l) => l,
+        r => bail!("unexpected answer {r:?}"),
+    };
+    let (h, hc) = (c.stats(), c.counts());
+    println!(
+        "link losses: robot got {} bad CRC, {} bad COBS, {} too long, {} unknown message; serial overrun {}, framing {}, noise {}, queue full {}; repeated requests answered from memory {} ({} while in flight), applied twice {}",
+        l.bad_crc,
+        l.bad_cobs,
+        l.too_long,
+        l.unknown_message,
+        l.serial_overrun,
+        l.serial_framing,
+        l.serial_noise,
+        l.serial_full,
+        l.repeats_answered,
+        l.repeats_in_flight,
+        l.applied_twice
+    );
+    println!(
+        "link losses: host got {} bad CRC, {} bad COBS, {} too long, {} unknown message; {} requests, {} sent again ({} answered after), {} failed; {} telemetry records missing",
+        h.bad_crc,
+        h.bad_cobs,
+        h.too_long,
+        h.bad_message,
+        hc.requests,
+        hc.retries,
+        hc.answered_after_retry,
+        hc.failed,
+        hc.telemetry_gaps
+    );
     if s.last_apex_m.is_finite() {
         println!("last apex: {:.4} m", s.last_apex_m);
     } else {

@@ -565,6 +565,7 @@ fn state(
         _ => None,
     };
     let host = c.stats();
+    let counts = c.counts();
     Ok(serde_json::json!({
         "type": "state",
         "armed": s.arm == ArmState::Armed,
@@ -577,6 +578,9 @@ fn state(
         "host_frames_ok": host.ok,
         "host_frames_bad": host.too_long + host.bad_cobs + host.bad_crc + host.bad_message,
         "telemetry_dropped": s.telemetry_dropped,
+        "telemetry_missing": counts.telemetry_gaps,
+        "retries": counts.retries,
+        "requests_failed": counts.failed,
         "last_apex_m": s.last_apex_m,
         "isr_mean": cost.map(|x| x.isr_mean),
         "isr_max": cost.map(|x| x.isr_max),

@@ -221,6 +221,7 @@ mod app {
     fn link(cx: link::Context) {
         let link = &mut *cx.local.link;
         let rx = &mut *cx.local.link_rx;
+        link.set_serial_counts(hopper_app::serial_cost::counts());
         link.serve(
             cx.local.link_queues,
             core::iter::from_fn(|| rx.dequeue()),
