@@ -9,7 +9,7 @@
 //!
 //! Flight adds the unsprung mass riding with the body:
 //! `0.5 m_u zd^2 + m_u g (z - l0)`. This is the simulator's energy
-//! (`hal-sim/plant/src/plant/dynamics.rs`) with the spring term taken from the load cell.
+//! (`plant/src/plant/dynamics.rs`) with the spring term taken from the load cell.
 //! The load-cell force is clamped at `>= 0` (a spring cannot pull), so a
 //! noisy negative reading never adds energy.
 
