@@ -57,7 +57,8 @@ crate::params::config! {
     custom {
         // The selected controller is the strategy's variant.
         0 CONTROLLER |_s| Some(Slot::Controller), {
-            "controller", "-", Kind::Choice(crate::params::CONTROLLER_NAMES), [0.0, 8.0], 5.0,
+            "controller", "-", Kind::Choice(crate::params::CONTROLLER_NAMES),
+            [0.0, crate::params::CONTROLLER_MAX], crate::params::CONTROLLER_DEFAULT,
             DISARMED,
             "The controller that runs in stance and flight (selecting one starts it from its defaults)."
         }

@@ -398,6 +398,13 @@ const fn gather<const N: usize>(groups: &[&[&'static Param]]) -> [&'static Param
 /// value): [`ControllerKind::ALL`]'s names.
 pub const CONTROLLER_NAMES: &[&str] = <ControllerKind as strum::VariantNames>::VARIANTS;
 
+/// The top of [`CONTROLLER`]'s range: the last registered law's index (a
+/// law added to [`ControllerKind`] widens it).
+pub const CONTROLLER_MAX: f32 = (CONTROLLER_NAMES.len() - 1) as f32;
+
+/// [`CONTROLLER`]'s default: the apex-regulating energy law.
+pub const CONTROLLER_DEFAULT: f32 = ControllerKind::EnergyApex as usize as f32;
+
 /// The master switches of protections, each with its safe value: a real
 /// robot's link refuses any other value (a simulator keeps them, for
 /// control studies). The protections' thresholds (`thermal.*`, the link
@@ -669,6 +676,20 @@ pub fn owner(p: &Param) -> Option<Owner> {
 mod tests {
     extern crate std;
     use super::*;
+
+    /// The `controller` entry takes every registered law and no more, its
+    /// default the apex-regulating energy law: a law added to the registry
+    /// is selectable without another edit.
+    #[test]
+    fn the_controller_entry_spans_the_registered_laws() {
+        let c = find("controller").map(|p| (p.min, p.max, p.default));
+        assert_eq!(c, Some((0.0, (ControllerKind::ALL.len() - 1) as f32, 5.0)));
+        assert_eq!(
+            controller_default(CONTROLLER_DEFAULT as usize).map(|s| s.kind()),
+            Some(ControllerKind::EnergyApex)
+        );
+        assert_eq!(CONTROLLER_NAMES.len(), ControllerKind::ALL.len());
+    }
 
     #[test]
     fn parameters_belong_to_their_controllers() {

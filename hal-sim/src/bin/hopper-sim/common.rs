@@ -39,12 +39,8 @@ pub(crate) struct BaseArgs {
     /// motor unless --model-params says otherwise.
     #[arg(long, value_parser = parse_motor, value_name = "NAME")]
     motor: Option<&'static hal_sim::motors::CatalogueMotor>,
-    /// Controller: passive, step-open, step-closed, open-torque, energy,
-    /// energy-apex (apex-regulating energy law), velocity, modified-torque,
-    /// shaped (docs/beat-the-thesis.md).
-    /// Each is the firmware's control crate on the simulated sensors
-    /// [default: passive].
-    #[arg(long, value_parser = parse_controller)]
+    /// Controller: one of the firmware's laws, the list from its registry.
+    #[arg(long, value_parser = parse_controller, help = controller_help())]
     controller: Option<ControllerKind>,
     /// Desired apex (toe height) H_D, m; sets the energy target E_D
     /// [default: 0.05].
@@ -105,6 +101,14 @@ fn parse_motor(
 }
 
 /// `--controller NAME`: one of the firmware's controllers, by name.
+/// `--controller`'s help: the laws the firmware registers, by name.
+fn controller_help() -> String {
+    format!(
+        "Controller: {} (energy-apex: the apex-regulating energy law; shaped: docs/beat-the-thesis.md). Each is the firmware's control crate on the simulated sensors [default: passive]",
+        hal_sim::controller::CONTROLLER_NAMES.join(", ")
+    )
+}
+
 fn parse_controller(name: &str) -> std::result::Result<ControllerKind, String> {
     ControllerKind::from_name(name).ok_or_else(|| {
         format!(
