@@ -180,28 +180,13 @@ fn proxy(upstream: String, line: Line) -> Result<String, String> {
 
 /// `hopper-sim serve` on a free port, the robot held 5 cm up until armed.
 fn serve(sim: &Path) -> Result<(Reaped, String), String> {
-    let mut child = Command::new(sim)
-        .args(["serve", "--tcp", "127.0.0.1:0", "--start-apex", "0.05"])
-        .stdout(Stdio::piped())
-        .stderr(Stdio::inherit())
-        .spawn()
-        .map_err(|e| format!("cannot start hopper-sim serve: {e}"))?;
-    let out = child
-        .stdout
-        .take()
-        .ok_or("no stdout from hopper-sim serve")?;
-    let server = Reaped(child);
-    let mut first = String::new();
-    BufReader::new(out)
-        .read_line(&mut first)
-        .map_err(|e| format!("hopper-sim serve: {e}"))?;
-    let addr = first
-        .split("listening on ")
-        .nth(1)
-        .and_then(|r| r.split_whitespace().next())
-        .ok_or_else(|| format!("hopper-sim serve printed no address: {first}"))?
-        .to_string();
-    Ok((server, addr))
+    crate::session::spawn_serve(Command::new(sim).args([
+        "serve",
+        "--tcp",
+        "127.0.0.1:0",
+        "--start-apex",
+        "0.05",
+    ]))
 }
 
 /// `hopper-link --tcp addr shell` on `script`; each line of its output as

@@ -150,38 +150,45 @@ fn after_reboot(link: &Path, addr: &str) -> Result<String, String> {
 /// in `flash`; the server (killed when dropped) and its address.
 fn start_serve(sim: &Path, flash: &Path) -> Result<(Reaped, String), String> {
     eprintln!("xtask: starting hopper-sim serve (virtual robot, {SERVE_SPEED}x real time)");
-    let mut child = Command::new(sim)
-        .args([
-            "serve",
-            "--tcp",
-            "127.0.0.1:0",
-            "--speed",
-            SERVE_SPEED,
-            "--start-apex",
-            "0.05",
-            // As the board and the QEMU link image: no arming before a tare
-            // and homing.
-            "--set",
-            "arming.require_tare=1",
-            "--set",
-            "arming.require_home=1",
-        ])
-        // The mis-calibrated robot of the QEMU link image: the session's
-        // bring-up routines must find it.
-        .arg("--loadcell-bias-n")
-        .arg(MIS.loadcell_bias_n.to_string())
-        .arg("--pot-bias-m")
-        .arg(MIS.pot_bias_m.to_string())
-        .arg("--nut-start-m")
-        .arg(MIS.nut_start_m.to_string())
-        .arg("--spring-rate-error")
-        .arg(MIS.spring_rate_error.to_string())
-        .arg("--height-zero-error-m")
-        .arg(MIS.height_zero_error_m.to_string())
-        .arg("--loadcell-gain-error")
-        .arg(MIS.loadcell_gain_error.to_string())
-        .arg("--flash")
-        .arg(flash)
+    let mut cmd = Command::new(sim);
+    cmd.args([
+        "serve",
+        "--tcp",
+        "127.0.0.1:0",
+        "--speed",
+        SERVE_SPEED,
+        "--start-apex",
+        "0.05",
+        // As the board and the QEMU link image: no arming before a tare
+        // and homing.
+        "--set",
+        "arming.require_tare=1",
+        "--set",
+        "arming.require_home=1",
+    ])
+    // The mis-calibrated robot of the QEMU link image: the session's
+    // bring-up routines must find it.
+    .arg("--loadcell-bias-n")
+    .arg(MIS.loadcell_bias_n.to_string())
+    .arg("--pot-bias-m")
+    .arg(MIS.pot_bias_m.to_string())
+    .arg("--nut-start-m")
+    .arg(MIS.nut_start_m.to_string())
+    .arg("--spring-rate-error")
+    .arg(MIS.spring_rate_error.to_string())
+    .arg("--height-zero-error-m")
+    .arg(MIS.height_zero_error_m.to_string())
+    .arg("--loadcell-gain-error")
+    .arg(MIS.loadcell_gain_error.to_string())
+    .arg("--flash")
+    .arg(flash);
+    spawn_serve(&mut cmd)
+}
+
+/// Starts `hopper-sim serve` as `cmd` says; the server (killed when
+/// dropped) and the address its first line names.
+pub(crate) fn spawn_serve(cmd: &mut Command) -> Result<(Reaped, String), String> {
+    let mut child = cmd
         .stdout(Stdio::piped())
         .stderr(Stdio::inherit())
         .spawn()

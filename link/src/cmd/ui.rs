@@ -312,8 +312,9 @@ fn lost(
 /// Sends `msg` to every page (dropping those gone).
 fn broadcast(pages: &Pages, msg: &serde_json::Value) {
     let text = msg.to_string();
+    let kind = msg["type"].as_str().unwrap_or("");
     if let Ok(mut p) = pages.lock() {
-        p.retain(|tab| tab.send(text.clone()).is_ok());
+        p.retain(|tab| tab.push(kind, text.clone()).is_ok());
     }
 }
 

@@ -324,13 +324,15 @@ pub(crate) struct Tab {
 }
 
 impl Tab {
-    /// Queues `text` for the page (its `type` says how it is kept);
-    /// `Err` once the page is gone.
+    /// Queues an answer (an event) for the page; `Err` once the page is
+    /// gone.
     pub(crate) fn send(&self, text: String) -> Result<(), ()> {
-        let kind = serde_json::from_str::<serde_json::Value>(&text)
-            .ok()
-            .and_then(|v| v["type"].as_str().map(str::to_string))
-            .unwrap_or_default();
+        self.push("result", text)
+    }
+
+    /// Queues `text`, a message of type `kind`, for the page (the type
+    /// says how it is kept); `Err` once the page is gone.
+    pub(crate) fn push(&self, kind: &str, text: String) -> Result<(), ()> {
         {
             let Ok(mut o) = self.out.lock() else {
                 return Err(());
@@ -338,7 +340,7 @@ impl Tab {
             if o.closed {
                 return Err(());
             }
-            match kind.as_str() {
+            match kind {
                 "telemetry" => {
                     if o.telemetry.len() >= TAB_TELEMETRY {
                         o.telemetry.pop_front();
@@ -347,9 +349,9 @@ impl Tab {
                     o.telemetry.push_back(text);
                 }
                 "state" | "thermal" | "params" => {
-                    match o.latest.iter_mut().find(|(k, _)| *k == kind) {
+                    match o.latest.iter_mut().find(|(k, _)| k == kind) {
                         Some(slot) => slot.1 = text,
-                        None => o.latest.push((kind, text)),
+                        None => o.latest.push((kind.to_string(), text)),
                     }
                 }
                 _ if o.events.len() >= TAB_EVENTS => {
@@ -569,8 +571,8 @@ mod tests {
         let tab = Tab::default();
         let msg = |kind: &str, n: usize| serde_json::json!({ "type": kind, "n": n }).to_string();
         for n in 0..1000 {
-            assert!(tab.send(msg("telemetry", n)).is_ok());
-            assert!(tab.send(msg("state", n)).is_ok());
+            assert!(tab.push("telemetry", msg("telemetry", n)).is_ok());
+            assert!(tab.push("state", msg("state", n)).is_ok());
         }
         assert!(tab.send(msg("result", 0)).is_ok());
         let all = tab.take().unwrap_or_default();
@@ -585,8 +587,8 @@ mod tests {
         assert_eq!(all[all.len() - 1], msg("telemetry", 999));
         // Events pile up: the page is closed, and nothing more is kept.
         for n in 0..=TAB_EVENTS {
-            let _ = tab.send(msg("hop", n));
+            let _ = tab.push("hop", msg("hop", n));
         }
-        assert!(tab.closed() && tab.take().is_none() && tab.send(msg("hop", 0)).is_err());
+        assert!(tab.closed() && tab.take().is_none() && tab.push("hop", msg("hop", 0)).is_err());
     }
 }
