@@ -423,16 +423,16 @@ impl HilDriver {
     }
 
     /// Sets every parameter of `desired` that differs on the robot, in the
-    /// table's order (the controller first: selecting one starts it from
-    /// its defaults), then checks that what the link cannot set agrees.
+    /// order [`configure_check`] checks (which refuses, before anything is
+    /// sent, a configuration the link cannot reach).
     fn configure(
         &mut self,
         desired: &HopperConfig,
         held: &hopper_control::hal::RawSample,
     ) -> Result<(), String> {
+        configure_check(desired)?;
         let mut want_cfg = *desired;
-        let mut expected = hopper_robot_link::hil::boot_config();
-        for p in params::TABLE.iter().copied() {
+        for p in set_order() {
             let Ok(want) = params::read(&mut want_cfg, p) else {
                 continue;
             };
@@ -453,14 +453,6 @@ impl HilDriver {
                     other => return Err(format!("HIL: {} set answered {other:?}", p.name)),
                 }
             }
-            params::set(&mut expected, p.name, want)
-                .map_err(|e| format!("HIL: {} = {want}: {e:?}", p.name))?;
-        }
-        if expected != *desired {
-            return Err(format!(
-                "HIL: this run's firmware configuration differs from the HIL image's in what the link cannot set ({}): the HIL image runs the design machine's model",
-                differing_parts(&expected, desired)
-            ));
         }
         Ok(())
     }
@@ -823,4 +815,38 @@ impl Read for HilTarget {
         }
         Ok(n)
     }
+}
+
+/// The order a whole configuration is set in over the link: the machine's
+/// constants first (what follows from them, the supervisor's spring, the
+/// calibration's lead, is then set as the run wants it), then the table's
+/// order (the controller first: selecting one starts it from its defaults).
+fn set_order() -> impl Iterator<Item = &'static params::Param> {
+    let machine = |p: &&params::Param| params::MACHINE.iter().any(|m| m.number == p.number);
+    params::MACHINE
+        .iter()
+        .copied()
+        .chain(params::TABLE.iter().copied().filter(move |p| !machine(p)))
+}
+
+/// Whether the HIL image, from its boot configuration, becomes `desired`
+/// by the link's sets alone: the error names the parts the link cannot set
+/// (board facts: the counters' and converters' widths).
+pub fn configure_check(desired: &HopperConfig) -> Result<(), String> {
+    let mut want_cfg = *desired;
+    let mut expected = hopper_robot_link::hil::boot_config();
+    for p in set_order() {
+        let Ok(want) = params::read(&mut want_cfg, p) else {
+            continue;
+        };
+        params::set(&mut expected, p.name, want)
+            .map_err(|e| format!("HIL: {} = {want}: {e:?}", p.name))?;
+    }
+    if expected != *desired {
+        return Err(format!(
+            "HIL: this run's firmware configuration differs from the HIL image's in what the link cannot set ({}): the HIL image's board facts (counter and converter widths) are fixed",
+            differing_parts(&expected, desired)
+        ));
+    }
+    Ok(())
 }

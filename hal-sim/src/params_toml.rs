@@ -251,6 +251,13 @@ pub fn load_as(spec: &str, flag: &str) -> Result<PlantSet, ParamsFileError> {
         location: spec.to_string(),
         message: format!("cannot read parameter file: {e}"),
     })?;
+    if is_robot_file(&text) {
+        let robot = hopper_robot_file::parse(&text, spec).map_err(|e| ParamsFileError {
+            location: e.location,
+            message: e.message,
+        })?;
+        return plant_from_robot(&robot, spec);
+    }
     let params = from_toml_str(&text, spec)?;
     // Parsed already, so this cannot fail; only the `base` is wanted.
     let preset = toml::from_str::<toml::Table>(&text)
@@ -260,6 +267,173 @@ pub fn load_as(spec: &str, flag: &str) -> Result<PlantSet, ParamsFileError> {
         params,
         name: spec.to_string(),
         preset,
+    })
+}
+
+/// The plant's fields that are the machine's constants, each with its
+/// `model.*` entry in a robot file; the plant's other fields (friction,
+/// damping, the winding and the supply) are the simulator's alone, in a
+/// robot file's `[plant]` section.
+pub const FROM_MODEL: [(&str, &str); 13] = [
+    ("body_mass_kg", "model.body_mass_kg"),
+    ("unsprung_mass_kg", "model.unsprung_mass_kg"),
+    ("nut_mass_kg", "model.nut_mass_kg"),
+    ("rotor_inertia_kg_m2", "model.rotor_inertia_kg_m2"),
+    ("screw_lead_m", "model.screw_lead_m"),
+    ("spring_stiffness_n_per_m", "model.spring_stiffness_n_per_m"),
+    ("spring_preload_m", "model.preload_m"),
+    ("leg_length_m", "model.leg_length_m"),
+    ("efficiency", "model.efficiency"),
+    ("stroke_m", "model.stroke_m"),
+    ("gravity_mps2", "model.gravity_mps2"),
+    ("torque_constant_nm_per_a", "model.torque_constant_nm_per_a"),
+    ("current_limit_a", "model.current_limit_a"),
+];
+
+/// The `model.*` entry a plant field is, if it is one.
+fn model_entry(plant_field: &str) -> Option<&'static str> {
+    FROM_MODEL
+        .iter()
+        .find_map(|(f, m)| (*f == plant_field).then_some(*m))
+}
+
+/// Preset `name` as a robot file (`hopper-sim params show`): the
+/// firmware's entries for the machine (its model, the default calibration,
+/// the spring the supervisor checks) and the plant's own fields in
+/// `[plant]`. `--params` and `--robot` read it back as this plant.
+pub fn robot_toml(params: &Params, name: &str) -> String {
+    let cfg = hopper_sil::sim_io::firmware_config(
+        params,
+        params,
+        hopper_control::hopper::Strategy::default(),
+        0.05,
+        0.0,
+    );
+    let mut plant = String::new();
+    for f in FIELDS.iter().filter(|f| model_entry(f.name).is_none()) {
+        let _ = writeln!(
+            plant,
+            "# {} [{}], allowed {}\n{} = {:?}",
+            f.doc,
+            f.unit(),
+            f.range.without_unit(),
+            f.name,
+            (f.get)(params)
+        );
+    }
+    // The supervisor's spring is the model's here: left out, it follows
+    // the model's spring when the file's is edited (a bench-measured one
+    // is added under [supervisor]).
+    let values: Vec<_> = hopper_robot_file::of_config(&cfg)
+        .into_iter()
+        .filter(|(p, _)| !p.name.starts_with("supervisor."))
+        .collect();
+    hopper_robot_file::to_toml(
+        &values,
+        &format!("the {name} preset (hopper-sim params show {name})"),
+        Some(&plant),
+    )
+}
+
+/// The plant a robot file describes: its `[plant]` section's `base`
+/// preset (design when none) with the machine's constants from `[model]`
+/// and the plant's own fields from `[plant]`, each checked against its
+/// range.
+pub fn plant_from_robot(
+    robot: &hopper_robot_file::Robot,
+    origin: &str,
+) -> Result<PlantSet, ParamsFileError> {
+    let err = |line: Option<usize>, message: String| ParamsFileError {
+        location: match line {
+            Some(l) => format!("{origin}:{l}"),
+            None => origin.to_string(),
+        },
+        message,
+    };
+    let base = robot.plant.iter().find(|(k, _, _)| k == "base");
+    let preset = match base {
+        None => None,
+        Some((_, toml::Value::String(name), line)) => {
+            Some(Params::preset_name(name).ok_or_else(|| {
+                err(
+                    *line,
+                    format!(
+                        "unknown preset `plant.base = \"{name}\"`: expected one of {:?}",
+                        Params::PRESET_NAMES
+                    ),
+                )
+            })?)
+        }
+        Some((_, other, line)) => {
+            return Err(err(
+                *line,
+                format!("`plant.base` must be a preset name string, got {other}"),
+            ))
+        }
+    };
+    let mut p = Params::preset(preset.unwrap_or(DESIGN)).unwrap_or_else(Params::design);
+    for (field_name, entry) in FROM_MODEL {
+        if let (Some(v), Some(f)) = (robot.get(entry), field(field_name)) {
+            // The decimal the file wrote (the f32's shortest form), not the
+            // f32's binary value: `0.6` is 0.6 to the plant.
+            (f.set)(&mut p, v.to_string().parse().unwrap_or(f64::from(v)));
+        }
+    }
+    for (key, value, line) in robot.plant.iter().filter(|(k, _, _)| k != "base") {
+        if let Some(entry) = model_entry(key) {
+            return Err(err(
+                *line,
+                format!("`plant.{key}` is one of the machine's constants: give it as `{entry}` in [model], which the firmware reads too"),
+            ));
+        }
+        let f = field(key).ok_or_else(|| {
+            err(
+                *line,
+                format!("unknown parameter `plant.{key}` (see `hopper-sim params show design` for the fields)"),
+            )
+        })?;
+        let v = value
+            .as_float()
+            .or_else(|| value.as_integer().map(|i| i as f64))
+            .ok_or_else(|| {
+                err(
+                    *line,
+                    format!(
+                        "parameter `plant.{key}` must be a number in {}, got {value}",
+                        f.unit()
+                    ),
+                )
+            })?;
+        if !f.allows(v) {
+            return Err(err(
+                *line,
+                format!(
+                    "parameter `plant.{key}` = {v} is out of range: allowed {}",
+                    f.range
+                ),
+            ));
+        }
+        (f.set)(&mut p, v);
+    }
+    p.validate().map_err(|e| err(None, e.to_string()))?;
+    Ok(PlantSet {
+        params: p,
+        name: origin.to_string(),
+        preset,
+    })
+}
+
+/// The preset a robot file's plant starts from when it names none.
+const DESIGN: &str = "design";
+
+/// Whether TOML `text` is a robot file (it has a `[model]`,
+/// `[calibration]` or `[supervisor]` section) rather than a plant
+/// parameter file.
+pub fn is_robot_file(text: &str) -> bool {
+    toml::from_str::<toml::Table>(text).is_ok_and(|t| {
+        ["model", "calibration", "supervisor"]
+            .iter()
+            .any(|s| t.get(*s).is_some_and(toml::Value::is_table))
     })
 }
 

@@ -227,6 +227,10 @@ pub fn parse_param_setting(spec: &str) -> Result<(&'static Param, f32), String> 
 /// `None` means "not given here".
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Overrides {
+    /// A robot file (`--robot`) and the plant it describes: the plant
+    /// unless `plant` is given, the firmware's entries before any other
+    /// named parameter (its `model.*` ones unless `model` is given).
+    pub robot: Option<(hopper_robot_file::Robot, PlantSet)>,
     /// Plant parameters, the name they are reported under, their preset.
     pub plant: Option<PlantSet>,
     /// What the controller believes (default: the plant).
@@ -271,6 +275,7 @@ impl Overrides {
     /// `self` with every setting `over` gives replaced by `over`'s.
     pub fn overridden_by(&self, over: &Overrides) -> Overrides {
         Overrides {
+            robot: over.robot.clone().or_else(|| self.robot.clone()),
             plant: over.plant.clone().or_else(|| self.plant.clone()),
             model: over.model.or(self.model),
             motor: over.motor.or(self.motor),
@@ -342,7 +347,22 @@ impl Settings {
     pub fn resolve(file: Option<&Overrides>, cli: &Overrides) -> Settings {
         let o = file.cloned().unwrap_or_default().overridden_by(cli);
         let d = SensorConfig::DEFAULT;
-        let plant = o.plant.unwrap_or_else(|| PlantSet {
+        // A robot file's entries come first: the motor's and the named
+        // parameters override them. What the controller believes, when
+        // given apart (`model`), keeps the robot's `model.*` out.
+        let robot_params: Vec<(&'static Param, f32)> = o
+            .robot
+            .as_ref()
+            .map(|(r, _)| {
+                r.values
+                    .iter()
+                    .copied()
+                    .filter(|(p, _)| o.model.is_none() || !p.name.starts_with("model."))
+                    .collect()
+            })
+            .unwrap_or_default();
+        let plant = o.plant.or_else(|| o.robot.map(|(_, plant)| plant));
+        let plant = plant.unwrap_or_else(|| PlantSet {
             params: Params::design(),
             name: DEFAULT_PARAMS.to_string(),
             preset: Params::preset_name(DEFAULT_PARAMS),
@@ -363,9 +383,17 @@ impl Settings {
         let motor_from_flags_over_file_params =
             cli.motor.is_some() && cli.firmware_params.is_none();
         let firmware_params: Vec<_> = if motor_from_flags_over_file_params {
-            named.into_iter().chain(motor_settings).collect()
+            robot_params
+                .into_iter()
+                .chain(named)
+                .chain(motor_settings)
+                .collect()
         } else {
-            motor_settings.into_iter().chain(named).collect()
+            robot_params
+                .into_iter()
+                .chain(motor_settings)
+                .chain(named)
+                .collect()
         };
         Settings {
             params,

@@ -166,7 +166,7 @@ fn params_show_prints_toml_that_run_accepts() {
     assert!(o.status.success());
     let text = String::from_utf8(o.stdout).unwrap();
     assert!(text.contains("planarizer_friction_n = 13.0"));
-    assert!(text.contains("[N]") && text.contains("[kg]"));
+    assert!(text.contains("[model]\n") && text.contains("[plant]\n") && text.contains("kg."));
     let dir = tempfile::tempdir().unwrap();
     let f = dir.path().join("mine.toml");
     std::fs::write(&f, &text).unwrap();
@@ -179,7 +179,30 @@ fn params_show_prints_toml_that_run_accepts() {
         "--json",
     ]));
     let b = identified_passive_json();
-    assert_eq!(a["apex_heights_m"], b["apex_heights_m"]);
+    // The robot file holds the firmware's f32 values: the plant's current
+    // limit is 33.670033 A, not 33.67003367... A.
+    let apexes = |j: &serde_json::Value| -> Vec<f64> {
+        j["apex_heights_m"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_f64().unwrap())
+            .collect()
+    };
+    assert_eq!(apexes(&a).len(), apexes(b).len());
+    for (x, y) in apexes(&a).iter().zip(apexes(b)) {
+        assert!((x - y).abs() <= 1e-6 * y, "{x} {y}");
+    }
+    // `--robot` reads the same file as the same plant.
+    let r = json(&sim(&[
+        "run",
+        "--robot",
+        f.to_str().unwrap(),
+        "--duration",
+        "2",
+        "--json",
+    ]));
+    assert_eq!(apexes(&r), apexes(&a));
 }
 
 fn assert_clean_failure(args: &[&str], out_dir: &Path, needle: &str) {

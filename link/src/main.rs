@@ -8,7 +8,7 @@ mod cmd;
 use anyhow::{anyhow, bail, Context, Result};
 use clap::{Parser, Subcommand};
 use cmd::{
-    arm, calibrate, dump, flood, params, record, save, silence, sim, status, ui, wait, watch,
+    arm, calibrate, dump, flood, params, record, robot, save, silence, sim, status, ui, wait, watch,
 };
 use hopper_link::{Client, Target};
 use std::io::{BufRead, Write};
@@ -122,10 +122,19 @@ enum Cmd {
         #[arg(long, default_value_t = 0.05)]
         toe: f32,
     },
-    /// Save the calibration (the `calibration.*` parameters and the spring's
-    /// rate and preload: what the bring-up routines set) to the robot's
-    /// flash, to load at every boot; refused while armed.
+    /// Save the machine's constants and calibration (the `model.*` and
+    /// `calibration.*` parameters and the spring's rate and preload: what
+    /// a robot file and the bring-up routines set) to the robot's flash, to
+    /// load at every boot; refused while armed.
     Save,
+    /// The robot's constants and calibration as a robot file (TOML, the
+    /// parameter table's names): `show` writes the robot's, `load` gives it
+    /// a file (disarmed; every value checked before any is set; all or
+    /// nothing). `hopper-sim params show design` writes one to start from.
+    Robot {
+        #[command(subcommand)]
+        cmd: RobotCmd,
+    },
     /// Press or release the simulated e-stop (QEMU and `hopper-sim serve`
     /// only; a real robot refuses).
     Estop {
@@ -199,6 +208,21 @@ enum ParamsCmd {
         name: String,
         /// Value in the parameter's unit; a choice by name or index (controller shaped).
         value: String,
+    },
+}
+
+#[derive(Subcommand, Debug)]
+enum RobotCmd {
+    /// Print the robot's robot file (or write it to --out).
+    Show {
+        /// Write it to this file instead.
+        #[arg(long, value_name = "FILE.toml")]
+        out: Option<PathBuf>,
+    },
+    /// Set every entry of a robot file on the robot (disarmed), or none.
+    Load {
+        /// The robot file.
+        file: PathBuf,
     },
 }
 
@@ -331,6 +355,10 @@ fn run(c: &mut Client, cmd: &Cmd) -> Result<()> {
         Cmd::Dump { out } => dump::dump(c, out),
         Cmd::Calibrate { routine, seconds } => calibrate::calibrate(c, routine, *seconds),
         Cmd::Save => save::save(c),
+        Cmd::Robot { cmd } => match cmd {
+            RobotCmd::Show { out } => robot::show(c, out.as_deref()),
+            RobotCmd::Load { file } => robot::load(c, file),
+        },
         Cmd::Mount { action, toe } => sim::mount(c, action, *toe),
         Cmd::Estop { action } => sim::estop(c, action),
         Cmd::Silence { max } => silence::silence(c, *max),

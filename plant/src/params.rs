@@ -238,7 +238,7 @@ impl Range {
     /// The range of a field the controller's model shares, in `unit`.
     pub const fn of_model(field: ModelField, unit: &'static str) -> Self {
         let r = field.range();
-        Self::new(r.min, r.min_exclusive, r.max, unit)
+        Self::new(r.min, false, r.max, unit)
     }
 
     /// `min ..= max` (`min` itself refused if `min_exclusive`), in `unit`.
@@ -289,9 +289,8 @@ pub struct FieldSpec {
     pub name: &'static str,
     /// What it is, and where it comes from.
     pub doc: &'static str,
-    /// Allowed values and the unit. The masses of the lower leg and the
-    /// nut exclude their lower bound 0: they may be small but not zero (a
-    /// massless part is not a machine).
+    /// Allowed values and the unit (a field the controller's model has
+    /// too takes the model's range, `hopper_model::ModelField::range`).
     pub range: Range,
     /// Read the field.
     pub get: fn(&Params) -> f64,

@@ -130,17 +130,30 @@ fn a_lost_frame_stops_the_run() {
     assert!(e.contains("no answer from the robot for sample"), "{e}");
 }
 
-/// What the link cannot set (the machine's lead, here) is refused before
-/// the run, with the reason, instead of run on the image's machine.
+/// Another machine (here twice the lead) runs in the loop: its constants
+/// are parameters, set on the robot over the link before the run; what the
+/// link cannot set (a board fact: the motor counter's width) is refused
+/// before the run, with the reason, instead of run on the image's board.
 #[test]
-fn a_machine_the_link_cannot_configure_is_refused() {
+fn another_machine_is_set_over_the_link_and_a_board_fact_is_refused() {
     let cfg = config();
     let mut params = Params::design();
     params.screw_lead_m *= 2.0;
-    let e = match spec().build_hil(&params, cfg.start_apex_m, DT_S, connection(target())) {
-        Ok(_) => panic!("a HIL run on another lead was accepted"),
-        Err(e) => e,
-    };
+    if let Err(e) = spec().build_hil(&params, cfg.start_apex_m, DT_S, connection(target())) {
+        panic!("a HIL run on another lead was refused: {e}");
+    }
+    // `calibration.motor_counter_bits` is no parameter: the board's timer.
+    let mut desired = hal_sim::sim_io::firmware_config(
+        &Params::design(),
+        &Params::design(),
+        hopper_control::hopper::Strategy::default(),
+        0.05,
+        cfg.start_apex_m,
+    );
+    desired.calibration.motor_counter_bits = 32;
+    let e = hal_sim::hil::configure_check(&desired)
+        .err()
+        .unwrap_or_else(|| panic!("a 32-bit motor counter was accepted"));
     assert!(e.contains("what the link cannot set"), "{e}");
 }
 

@@ -84,6 +84,7 @@ mod docs;
 mod hil;
 mod noisy;
 mod qemu;
+mod robot_file;
 mod session;
 mod slurm;
 mod speed;
@@ -120,6 +121,7 @@ fn main() -> ExitCode {
         Some("qemu") => setup(&root).and_then(|_| qemu::run(&root)),
         Some("link-session") => session::against_serve(&root),
         Some("noisy-link") => setup(&root).and_then(|_| noisy::run(&root, true)),
+        Some("robot-file") => setup(&root).and_then(|_| robot_file::run(&root)),
         Some("cockpit") => setup(&root).and_then(|_| cockpit::run(&root)),
         Some("slurm") => slurm::run(&root),
         Some("speed") => speed::run(&root),
@@ -137,7 +139,7 @@ fn main() -> ExitCode {
         Some("docs") => docs_check(&root, &args[1..]),
         _ => {
             eprintln!(
-                "usage: cargo xtask <test|size|qemu|hil|link-session|noisy-link|cockpit|slurm|speed|board-init|docs>"
+                "usage: cargo xtask <test|size|qemu|hil|link-session|noisy-link|robot-file|cockpit|slurm|speed|board-init|docs>"
             );
             return ExitCode::from(2);
         }
@@ -390,6 +392,7 @@ fn test(root: &Path) -> Result<(), String> {
     hil::run(root, None)?;
     session::against_serve(root)?;
     noisy::run(root, true)?;
+    robot_file::run(root)?;
     cockpit::run(root)?;
     slurm::run(root)?;
     speed::run(root)?;

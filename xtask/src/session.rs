@@ -452,7 +452,7 @@ const GAIN_TOLERANCE: f64 = 0.005;
 const HEIGHT_TOLERANCE_MM: f64 = 0.1;
 
 /// The numbers of a line after `prefix` (`1,234` and `0.12` alike), in order.
-fn numbers_after(lines: &[String], prefix: &str) -> Option<Vec<f64>> {
+pub(crate) fn numbers_after(lines: &[String], prefix: &str) -> Option<Vec<f64>> {
     let l = lines.iter().rev().find_map(|l| l.strip_prefix(prefix))?;
     Some(numbers(l))
 }
@@ -467,7 +467,7 @@ fn numbers(l: &str) -> Vec<f64> {
 /// `hopper-link --tcp ADDR shell < SCRIPT` (its `OUT/` paths under
 /// `out_dir`), its output printed as `<label>| ...`: whether it succeeded,
 /// its stdout and its stderr.
-fn shell(
+pub(crate) fn shell(
     link: &Path,
     addr: &str,
     script_path: &Path,
@@ -591,7 +591,7 @@ fn run_session(link: &Path, addr: &str, out_dir: &Path, label: &str) -> Result<R
         "failed as expected: calibrate tare refused: leg-loaded: the leg carries the robot; hang it on the hoist with the toe free (`mount hoist` on a simulated robot), then run it again",
         "failed as expected: calibrate spring refused: leg-loaded: the leg carries the robot; hang it on the hoist with the toe free (`mount hoist` on a simulated robot), then run it again",
         "failed as expected: calibrate weight refused: not-on-ground: the toe is off the ground; stand the robot on its toe with the hoist slack (`mount release` on a simulated robot), then run it again",
-        "saved: 13 calibration parameters to flash (they load at the next boot)",
+        "saved: 27 calibration parameters to flash (they load at the next boot)",
         "failed as expected: arm refused: estop-pressed: release the e-stop",
         "failed as expected: set target_apex_m = 2.0 refused: out-of-range (unchanged: 0.12 m)",
         "target_apex_m = 0.12 m",

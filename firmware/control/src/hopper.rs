@@ -97,6 +97,35 @@ impl HopperConfig {
         }
     }
 
+    /// After the model changed from `old` to `self.model` (a `model.*`
+    /// set, a robot file, a saved record): every value derived from the
+    /// model ([`Self::for_model`]: the calibration's lead and torque
+    /// constant and start height, the supervisor's overcurrent trip, spring
+    /// rate and preload, stops and soft limits) that still holds what `old`
+    /// derived takes what the new model derives; one set apart (the spring
+    /// rate the bench sweep measured, say) stays.
+    pub fn follow_model(&mut self, old: &ModelParams) {
+        let (was, now) = (Self::for_model(*old), Self::for_model(self.model));
+        macro_rules! follow {
+            ($($part:ident . $field:ident),* $(,)?) => {$(
+                if self.$part.$field == was.$part.$field {
+                    self.$part.$field = now.$part.$field;
+                }
+            )*};
+        }
+        follow!(
+            calibration.torque_constant_nm_per_a,
+            calibration.lead_m_per_rev,
+            calibration.height_at_origin_m,
+            supervisor.overcurrent_trip_a,
+            supervisor.spring_rate_n_per_m,
+            supervisor.spring_preload_m,
+            supervisor.stroke_min_m,
+            supervisor.nut_stops_m,
+            supervisor.stroke_max_m,
+        );
+    }
+
     /// The supervisor's defaults for `model`: its current limit, spring and
     /// stroke limits follow the model.
     fn supervisor_for(model: &ModelParams) -> SupervisorConfig {
@@ -838,7 +867,7 @@ mod tests {
         /// a range a real build of this robot could plausibly have.
         fn any_model() -> impl Gen<Value = ModelParams> {
             (
-                (1.0f32..50.0, 0.0f32..5.0, 0.0f32..2.0, 1e-5f32..1e-3),
+                (1.0f32..50.0, 1e-3f32..5.0, 1e-3f32..2.0, 1e-5f32..1e-3),
                 (1e-3f32..0.02, 1e3f32..1e5, 0.3f32..1.5, 0.0f32..0.02),
                 (0.01f32..0.1, 0.3f32..=1.0, 1.0f32..20.0),
                 (0.1f32..5.0, 0.005f32..0.2, 1.0f32..100.0),

@@ -21,64 +21,102 @@ pub enum ModelError {
     BadArgument,
 }
 
-/// Physical parameters of the hopper, f32 SI, each in the range
-/// [`ModelField::range`] gives (the simulator's plant checks the same ranges).
-/// `Default` is the thesis's
-/// "design" set (Table 2.1) plus the motor of section 3.1, with no preload
-/// (the thesis gives none; see [`design::SPRING_PRELOAD_M`]).
-#[derive(Debug, Clone, Copy, PartialEq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct ModelParams {
-    /// Sprung (body) mass `M`, kg. Default 9.0.
-    pub body_mass_kg: f32,
-    /// Unsprung (lower leg + toe) mass `m_u`, kg. Default 0.6.
-    pub unsprung_mass_kg: f32,
-    /// Sliding (ball nut) mass `m_s`, kg. Default 0.25.
-    pub nut_mass_kg: f32,
-    /// Rotor + screw moment of inertia `J`, kg m^2. Default 2.7e-4.
-    pub rotor_inertia_kg_m2: f32,
-    /// Ball-screw lead, m per revolution. Default 0.005.
-    pub screw_lead_m: f32,
-    /// Leg spring stiffness `k`, N/m. Default 11 000.
-    pub spring_stiffness_n_per_m: f32,
-    /// Leg free length `l0`, m (body coordinate at touchdown). Default 0.61.
-    pub leg_length_m: f32,
-    /// Spring preload `delta0`, m. Default 0 (the thesis's design).
-    pub preload_m: f32,
-    /// Nut stroke, m (`p` in `0..stroke`). Default 0.05.
-    pub stroke_m: f32,
-    /// Motor + ball-screw efficiency `eta`, dimensionless. Default 0.9.
-    pub efficiency: f32,
-    /// Gravitational acceleration `g`, m/s^2. Default 9.81.
-    pub gravity_mps2: f32,
-    /// Motor torque limit, N m. Default 1.0 (Table 2.1).
-    pub torque_limit_nm: f32,
-    /// Motor torque constant `k_m`, N m/A. Default 0.0297.
-    pub torque_constant_nm_per_a: f32,
-    /// Amplifier current limit, A. Default 33.670 (= 1.0 N m / 0.0297 N m/A).
-    pub current_limit_a: f32,
+/// The least value of `field`'s range, in the table's `f32`.
+const fn lo(field: ModelField) -> f32 {
+    field.range().min as f32
 }
+
+/// The largest value of `field`'s range, in the table's `f32`.
+const fn hi(field: ModelField) -> f32 {
+    field.range().max as f32
+}
+
+/// The fields' names as the declarations below use them.
+use ModelField as F;
 
 pub use hopper_model::design;
 
-impl Default for ModelParams {
-    /// [`design`], in `f32`.
-    fn default() -> Self {
-        Self {
-            body_mass_kg: design::BODY_MASS_KG as f32,
-            unsprung_mass_kg: design::UNSPRUNG_MASS_KG as f32,
-            nut_mass_kg: design::NUT_MASS_KG as f32,
-            rotor_inertia_kg_m2: design::ROTOR_INERTIA_KG_M2 as f32,
-            screw_lead_m: design::SCREW_LEAD_M as f32,
-            spring_stiffness_n_per_m: design::SPRING_STIFFNESS_N_PER_M as f32,
-            leg_length_m: design::LEG_LENGTH_M as f32,
-            preload_m: design::SPRING_PRELOAD_M as f32,
-            stroke_m: design::STROKE_M as f32,
-            efficiency: design::EFFICIENCY as f32,
-            gravity_mps2: design::GRAVITY_MPS2 as f32,
-            torque_limit_nm: design::TORQUE_LIMIT_NM as f32,
-            torque_constant_nm_per_a: design::TORQUE_CONSTANT_NM_PER_A as f32,
-            current_limit_a: design::CURRENT_LIMIT_A as f32,
+crate::params::config! {
+    /// Physical parameters of the hopper, f32 SI, each a runtime parameter
+    /// (`model.*`: changed only disarmed, saved with the calibration) in
+    /// the range [`ModelField::range`] gives (the simulator's plant checks
+    /// the same ranges). `Default` is the thesis's "design" set (Table 2.1)
+    /// plus the motor of section 3.1, with no preload (the thesis gives
+    /// none; see [`design::SPRING_PRELOAD_M`]). Setting one re-derives what
+    /// follows from it ([`crate::hopper::HopperConfig::follow_model`]).
+    #[derive(Debug, Clone, Copy, PartialEq)]
+    #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+    pub struct ModelParams, reached |c| Some(&mut c.model);
+    params {
+        111 MODEL_BODY_MASS body_mass_kg: f32 {
+            "model.body_mass_kg", "kg", Real, [lo(F::BodyMass), hi(F::BodyMass)],
+            design::BODY_MASS_KG as f32, DISARMED,
+            "Sprung (body) mass M (Table 2.1: 9 kg)."
+        }
+        112 MODEL_UNSPRUNG_MASS unsprung_mass_kg: f32 {
+            "model.unsprung_mass_kg", "kg", Real, [lo(F::UnsprungMass), hi(F::UnsprungMass)],
+            design::UNSPRUNG_MASS_KG as f32, DISARMED,
+            "Unsprung (lower leg and toe) mass m_u (Table 2.1: 0.6 kg)."
+        }
+        113 MODEL_NUT_MASS nut_mass_kg: f32 {
+            "model.nut_mass_kg", "kg", Real, [lo(F::NutMass), hi(F::NutMass)],
+            design::NUT_MASS_KG as f32, DISARMED,
+            "Sliding (ball nut) mass m_s (Table 2.1: 0.25 kg)."
+        }
+        114 MODEL_ROTOR_INERTIA rotor_inertia_kg_m2: f32 {
+            "model.rotor_inertia_kg_m2", "kg m^2", Real, [lo(F::RotorInertia), hi(F::RotorInertia)],
+            design::ROTOR_INERTIA_KG_M2 as f32, DISARMED,
+            "Rotor and screw moment of inertia J (Table 2.1: 2.7e-4 kg m^2)."
+        }
+        115 MODEL_SCREW_LEAD screw_lead_m: f32 {
+            "model.screw_lead_m", "m", Real, [lo(F::ScrewLead), hi(F::ScrewLead)],
+            design::SCREW_LEAD_M as f32, DISARMED,
+            "Ball-screw lead, nut travel per motor revolution (Table 2.1: 5 mm); the calibration's lead follows it."
+        }
+        116 MODEL_SPRING_STIFFNESS spring_stiffness_n_per_m: f32 {
+            "model.spring_stiffness_n_per_m", "N/m", Real, [lo(F::SpringStiffness), hi(F::SpringStiffness)],
+            design::SPRING_STIFFNESS_N_PER_M as f32, DISARMED,
+            "Leg spring stiffness k the controller believes (Table 2.1: 11 000 N/m); supervisor.spring_rate_n_per_m follows it unless set apart."
+        }
+        117 MODEL_LEG_LENGTH leg_length_m: f32 {
+            "model.leg_length_m", "m", Real, [lo(F::LegLength), hi(F::LegLength)],
+            design::LEG_LENGTH_M as f32, DISARMED,
+            "Leg free length l0: the body coordinate z at touchdown (Table 2.1: 0.61 m)."
+        }
+        118 MODEL_PRELOAD preload_m: f32 {
+            "model.preload_m", "m", Real, [lo(F::Preload), hi(F::Preload)],
+            design::SPRING_PRELOAD_M as f32, DISARMED,
+            "Spring preload delta0 with the nut home and the leg extended (the design has none); supervisor.spring_preload_m follows it unless set apart."
+        }
+        119 MODEL_STROKE stroke_m: f32 {
+            "model.stroke_m", "m", Real, [lo(F::Stroke), hi(F::Stroke)],
+            design::STROKE_M as f32, DISARMED,
+            "Nut stroke between the mechanical stops (p in 0..stroke); the supervisor's stops and soft limits follow it."
+        }
+        120 MODEL_EFFICIENCY efficiency: f32 {
+            "model.efficiency", "1", Real, [lo(F::Efficiency), hi(F::Efficiency)],
+            design::EFFICIENCY as f32, DISARMED,
+            "Motor and ball-screw efficiency eta: the nut sees eta tau / r (Table 2.1: 0.9)."
+        }
+        121 MODEL_GRAVITY gravity_mps2: f32 {
+            "model.gravity_mps2", "m/s^2", Real, [lo(F::Gravity), hi(F::Gravity)],
+            design::GRAVITY_MPS2 as f32, DISARMED,
+            "Gravitational acceleration g."
+        }
+        122 MODEL_TORQUE_LIMIT torque_limit_nm: f32 {
+            "model.torque_limit_nm", "N m", Real, [lo(F::TorqueLimit), hi(F::TorqueLimit)],
+            design::TORQUE_LIMIT_NM as f32, DISARMED,
+            "Motor torque limit (Table 2.1: 1 N m); the usable current is the smaller of this over k_m and the current limit."
+        }
+        123 MODEL_TORQUE_CONSTANT torque_constant_nm_per_a: f32 {
+            "model.torque_constant_nm_per_a", "N m/A", Real, [lo(F::TorqueConstant), hi(F::TorqueConstant)],
+            design::TORQUE_CONSTANT_NM_PER_A as f32, DISARMED,
+            "Motor torque constant k_m (110 rad/s^2/A times J, eq 4.3: 0.0297 N m/A); the calibration's follows it."
+        }
+        124 MODEL_CURRENT_LIMIT current_limit_a: f32 {
+            "model.current_limit_a", "A", Real, [lo(F::CurrentLimit), hi(F::CurrentLimit)],
+            design::CURRENT_LIMIT_A as f32, DISARMED,
+            "Amplifier current limit (the torque limit over k_m: 33.67 A); the overcurrent trip follows it."
         }
     }
 }
@@ -87,9 +125,8 @@ impl Default for ModelParams {
 fn check(v: f32, field: ModelField) -> Result<(), ModelError> {
     let r = field.range();
     let (lo, hi) = (r.min as f32, r.max as f32);
-    let low_ok = if r.min_exclusive { v > lo } else { v >= lo };
     // NaN fails every comparison, so it is rejected here too.
-    if low_ok && v <= hi && v.is_finite() {
+    if v >= lo && v <= hi && v.is_finite() {
         Ok(())
     } else {
         Err(ModelError::OutOfRange(field))

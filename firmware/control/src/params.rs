@@ -344,6 +344,7 @@ groups!(
     crate::laws::velocity,
     crate::laws::energy_apex,
     crate::laws::shaped,
+    crate::model,
     crate::estimator,
     crate::arming,
     crate::bringup,
@@ -404,6 +405,12 @@ pub const CONTROLLER_MAX: f32 = (CONTROLLER_NAMES.len() - 1) as f32;
 
 /// [`CONTROLLER`]'s default: the apex-regulating energy law.
 pub const CONTROLLER_DEFAULT: f32 = ControllerKind::EnergyApex as usize as f32;
+
+/// The machine's constants (`model.*`): a configuration given whole (a
+/// robot file, a saved record, a hardware-in-the-loop run) sets them
+/// first, so that what follows from the model and is set apart afterwards
+/// stays as set ([`HopperConfig::follow_model`]).
+pub const MACHINE: &[&Param] = crate::model::PARAMS;
 
 /// The master switches of protections, each with its safe value: a real
 /// robot's link refuses any other value (a simulator keeps them, for
@@ -569,9 +576,21 @@ pub fn set(cfg: &mut HopperConfig, name: &str, value: f32) -> Result<(), ParamEr
     write(cfg, find(name).ok_or(ParamError::Unknown)?, value)
 }
 
-/// [`set`] by table entry.
+/// [`set`] by table entry. A `model.*` entry also re-derives what follows
+/// from the model ([`HopperConfig::follow_model`]).
 pub fn write(cfg: &mut HopperConfig, p: &Param, value: f32) -> Result<(), ParamError> {
     let v = p.check(value).map_err(|f| ParamError::OutOfRange(f.0))?;
+    if MACHINE.iter().any(|m| m.number == p.number) {
+        let old = cfg.model;
+        write_slot(cfg, p, v)?;
+        cfg.follow_model(&old);
+        return Ok(());
+    }
+    write_slot(cfg, p, v)
+}
+
+/// Puts `v`, already checked against `p`'s range, where `p` lives in `cfg`.
+fn write_slot(cfg: &mut HopperConfig, p: &Param, v: f32) -> Result<(), ParamError> {
     match (p.slot)(cfg).ok_or(ParamError::NotSelected(p.name))? {
         Slot::Real(x) => *x = v,
         Slot::Flag(b) => *b = v != 0.0,
@@ -689,6 +708,52 @@ mod tests {
             Some(ControllerKind::EnergyApex)
         );
         assert_eq!(CONTROLLER_NAMES.len(), ControllerKind::ALL.len());
+    }
+
+    /// The machine's constants are entries: a set changes the model, and
+    /// what the model derives follows it unless it was set apart.
+    #[test]
+    fn a_model_set_carries_what_follows_from_it() {
+        let mut cfg = HopperConfig::default();
+        assert_eq!(get(&cfg, "model.body_mass_kg"), Ok(9.0));
+        assert_eq!(set(&mut cfg, "model.body_mass_kg", 12.0), Ok(()));
+        assert_eq!(cfg.model.body_mass_kg, 12.0);
+        assert_eq!(
+            set(&mut cfg, "model.body_mass_kg", 0.0),
+            Err(ParamError::OutOfRange("model.body_mass_kg"))
+        );
+        assert!(
+            MACHINE.iter().all(|p| !p.live),
+            "a machine's constant changes disarmed"
+        );
+        // The lead, the torque constant, the stroke and the current limit
+        // reach the calibration and the supervisor.
+        set(&mut cfg, "model.screw_lead_m", 0.01).unwrap_or_else(|e| panic!("{e:?}"));
+        set(&mut cfg, "model.torque_constant_nm_per_a", 0.05).unwrap_or_else(|e| panic!("{e:?}"));
+        set(&mut cfg, "model.stroke_m", 0.08).unwrap_or_else(|e| panic!("{e:?}"));
+        assert_eq!(cfg.calibration.lead_m_per_rev, 0.01);
+        assert_eq!(cfg.calibration.torque_constant_nm_per_a, 0.05);
+        assert_eq!(cfg.supervisor.nut_stops_m.max, 0.08);
+        assert_eq!(
+            cfg.supervisor.overcurrent_trip_a,
+            10.0 * cfg.model.usable_current_limit_a()
+        );
+        assert!(cfg.supervisor.stroke_max_m > 0.08);
+        // The spring rate follows the model's spring until the bench sets
+        // its own; then the model's spring leaves it alone.
+        set(&mut cfg, "model.spring_stiffness_n_per_m", 15_000.0)
+            .unwrap_or_else(|e| panic!("{e:?}"));
+        assert_eq!(cfg.supervisor.spring_rate_n_per_m, 15_000.0);
+        set(&mut cfg, "supervisor.spring_rate_n_per_m", 14_200.0)
+            .unwrap_or_else(|e| panic!("{e:?}"));
+        set(&mut cfg, "model.spring_stiffness_n_per_m", 16_000.0)
+            .unwrap_or_else(|e| panic!("{e:?}"));
+        assert_eq!(cfg.supervisor.spring_rate_n_per_m, 14_200.0);
+        assert!(Hopper::new(cfg).is_ok());
+        // The same machine set at once is the same configuration.
+        let mut whole = HopperConfig::for_model(cfg.model);
+        whole.supervisor.spring_rate_n_per_m = 14_200.0;
+        assert_eq!(whole, cfg);
     }
 
     #[test]

@@ -2,9 +2,10 @@
 //! flash and the firmware loads at boot, as one self-checking record.
 //!
 //! What is saved is the machine's own constants, every parameter of
-//! [`SAVED`]: the `calibration.*` table entries (the tare's offsets, the
-//! sensors' gains and directions, the DAC's zero) and the spring's rate and
-//! preload the spring sweep finds. Not saved: the encoders' zeros (homing
+//! [`SAVED`]: the `model.*` table entries (masses, screw, spring, motor),
+//! the `calibration.*` ones (the tare's offsets, the sensors' gains and
+//! directions, the DAC's zero) and the spring's rate and preload the spring
+//! sweep finds. Not saved: the encoders' zeros (homing
 //! and the height zero are per boot: the encoders are incremental), the
 //! controller and its gains (chosen per run).
 //!
@@ -34,10 +35,30 @@ const MAGIC: [u8; 4] = *b"HCAL";
 const HEADER: usize = 4 + 2 + 1;
 const ENTRY: usize = 4 + 4;
 
-/// The saved parameters: every `calibration.*` entry of the table but the
-/// height encoder's origin (a zero, per boot), and the spring's rate and
-/// preload (a test checks the list against the table).
-pub const SAVED: [&Param; 13] = [
+/// How many parameters are saved.
+const SAVED_COUNT: usize = 27;
+
+/// The saved parameters: the machine's constants (every `model.*` entry,
+/// first, so an entry that follows the model and was set apart is applied
+/// after it), every `calibration.*` entry of the table but the height
+/// encoder's origin (a zero, per boot), and the spring's rate and preload
+/// (a test checks the list against the table). A robot file holds exactly
+/// these.
+pub const SAVED: [&Param; SAVED_COUNT] = [
+    &params::MODEL_BODY_MASS,
+    &params::MODEL_UNSPRUNG_MASS,
+    &params::MODEL_NUT_MASS,
+    &params::MODEL_ROTOR_INERTIA,
+    &params::MODEL_SCREW_LEAD,
+    &params::MODEL_SPRING_STIFFNESS,
+    &params::MODEL_LEG_LENGTH,
+    &params::MODEL_PRELOAD,
+    &params::MODEL_STROKE,
+    &params::MODEL_EFFICIENCY,
+    &params::MODEL_GRAVITY,
+    &params::MODEL_TORQUE_LIMIT,
+    &params::MODEL_TORQUE_CONSTANT,
+    &params::MODEL_CURRENT_LIMIT,
     &params::CAL_MOTOR_COUNTS_PER_REV,
     &params::CAL_MOTOR_POSITIVE_DOWN,
     &params::CAL_HEIGHT_COUNTS_PER_REV,
@@ -55,11 +76,11 @@ pub const SAVED: [&Param; 13] = [
 
 /// Their keys, computed at compile time ([`name_hash`]): a save in the
 /// control task's link service costs no hashing and no table search.
-#[allow(clippy::indexing_slicing)] // Evaluated at compile time: `i < 13`.
-const KEYS: [u32; 13] = {
-    let mut k = [0u32; 13];
+#[allow(clippy::indexing_slicing)] // Evaluated at compile time: `i < SAVED_COUNT`.
+const KEYS: [u32; SAVED_COUNT] = {
+    let mut k = [0u32; SAVED_COUNT];
     let mut i = 0;
-    while i < 13 {
+    while i < SAVED_COUNT {
         k[i] = name_hash(SAVED[i].name);
         i += 1;
     }
@@ -72,7 +93,11 @@ pub const fn saved_count() -> usize {
 }
 
 /// The largest record, bytes.
-pub const MAX_RECORD: usize = HEADER + 24 * ENTRY + 2;
+pub const MAX_RECORD: usize = HEADER + MAX_ENTRIES * ENTRY + 2;
+
+/// The most entries a record holds: room for a few more than are saved
+/// (a later firmware's record, read by this one, is refused by entry).
+const MAX_ENTRIES: usize = 32;
 
 /// The FNV-1a hash of a parameter's name: its key in the record.
 #[allow(clippy::indexing_slicing)] // `i < b.len()`; a const fn has no iterators.
@@ -178,7 +203,7 @@ pub fn encode(cfg: &HopperConfig, out: &mut [u8; MAX_RECORD]) -> usize {
         let Ok(v) = params::read(&mut c, p) else {
             continue;
         };
-        // Room for the entry and the CRC (MAX_RECORD holds 24 entries).
+        // Room for the entry and the CRC (MAX_RECORD holds MAX_ENTRIES).
         if at + ENTRY + 2 > MAX_RECORD {
             break;
         }
@@ -263,6 +288,11 @@ mod tests {
         let mut c = HopperConfig::default();
         params::set(&mut c, "calibration.loadcell_offset_code", 224.06).unwrap_or(());
         params::set(&mut c, "supervisor.spring_rate_n_per_m", 12_635.0).unwrap_or(());
+        // Another machine: heavier, a stiffer spring the bench measured
+        // apart from the model's, a longer screw lead.
+        params::set(&mut c, "model.body_mass_kg", 12.0).unwrap_or(());
+        params::set(&mut c, "model.spring_stiffness_n_per_m", 15_000.0).unwrap_or(());
+        params::set(&mut c, "model.screw_lead_m", 0.01).unwrap_or(());
         c
     }
 
@@ -271,9 +301,19 @@ mod tests {
         let mut buf = [0u8; MAX_RECORD];
         let n = encode(&tuned(), &mut buf);
         assert_eq!(n, HEADER + saved_count() * ENTRY + 2);
-        assert!(saved_count() >= 13, "{}", saved_count());
+        assert!(saved_count() >= 27, "{}", saved_count());
         let back = decode(&buf[..n], &HopperConfig::default());
         assert_eq!(back, Ok(tuned()));
+        let back = back.unwrap_or_default();
+        assert_eq!(back.model.body_mass_kg, 12.0);
+        assert_eq!(
+            back.calibration.lead_m_per_rev, 0.01,
+            "the lead follows the model"
+        );
+        assert_eq!(
+            back.supervisor.spring_rate_n_per_m, 12_635.0,
+            "set apart, kept"
+        );
         assert!(has_offsets(&buf[..n]));
         // A record without entries decodes (nothing to set) but is no tare.
         let mut empty = [0u8; MAX_RECORD];
@@ -294,7 +334,9 @@ mod tests {
         // The list is the table's calibration entries (but the height
         // encoder's origin: a zero, per boot) and the spring's two.
         let from_table = params::TABLE.iter().filter(|p| {
-            (p.name.starts_with("calibration.") && p.name != params::CAL_HEIGHT_AT_ORIGIN_M.name)
+            p.name.starts_with("model.")
+                || (p.name.starts_with("calibration.")
+                    && p.name != params::CAL_HEIGHT_AT_ORIGIN_M.name)
                 || p.name == params::SUP_SPRING_RATE.name
                 || p.name == params::SUP_SPRING_PRELOAD.name
         });

@@ -46,47 +46,45 @@ pub enum ModelField {
     CurrentLimit,
 }
 
-/// The allowed range of a physical parameter: `min ..= max`, `min` itself
-/// refused when `min_exclusive`. Written in `f64` so the simulator's `f64`
-/// plant parameters (`hopper-plant`'s `FIELDS`) share the one definition;
-/// `ModelParams::validate` compares in `f32`.
+/// The allowed range of a physical parameter: `min ..= max`. Written in
+/// `f64` so the simulator's `f64` plant parameters (`hopper-plant`'s
+/// `FIELDS`) share the one definition; the firmware's parameter table
+/// (`model.*` entries) and `ModelParams::validate` compare in `f32`.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct FieldRange {
-    /// Lower bound.
+    /// Lower bound (inclusive).
     pub min: f64,
-    /// Whether the lower bound itself is refused.
-    pub min_exclusive: bool,
     /// Upper bound (inclusive).
     pub max: f64,
 }
 
-const fn range(min: f64, min_exclusive: bool, max: f64) -> FieldRange {
-    FieldRange {
-        min,
-        min_exclusive,
-        max,
-    }
+const fn range(min: f64, max: f64) -> FieldRange {
+    FieldRange { min, max }
 }
 
 impl ModelField {
     /// The field's allowed range, the one definition the controller's model
-    /// and the simulator's plant both check.
+    /// and the simulator's plant both check. The lower leg's and the nut's
+    /// masses, the torque limit and the current limit may be small but not
+    /// zero (a massless part or a motor that cannot push is not a machine):
+    /// the masses down to a microgram (1e-9 kg, the plant's
+    /// energy-conservation test's lower leg), the limits to 1e-3.
     pub const fn range(self) -> FieldRange {
         match self {
-            ModelField::BodyMass => range(0.1, false, 1000.0),
-            ModelField::UnsprungMass => range(0.0, true, 100.0),
-            ModelField::NutMass => range(0.0, true, 100.0),
-            ModelField::RotorInertia => range(1e-7, false, 1.0),
-            ModelField::ScrewLead => range(1e-4, false, 0.1),
-            ModelField::SpringStiffness => range(10.0, false, 1e7),
-            ModelField::LegLength => range(0.05, false, 5.0),
-            ModelField::Preload => range(0.0, false, 0.5),
-            ModelField::Stroke => range(1e-3, false, 0.5),
-            ModelField::Efficiency => range(0.05, false, 1.0),
-            ModelField::Gravity => range(0.1, false, 100.0),
-            ModelField::TorqueLimit => range(0.0, true, 100.0),
-            ModelField::TorqueConstant => range(1e-4, false, 10.0),
-            ModelField::CurrentLimit => range(0.0, true, 1000.0),
+            ModelField::BodyMass => range(0.1, 1000.0),
+            ModelField::UnsprungMass => range(1e-9, 100.0),
+            ModelField::NutMass => range(1e-9, 100.0),
+            ModelField::RotorInertia => range(1e-7, 1.0),
+            ModelField::ScrewLead => range(1e-4, 0.1),
+            ModelField::SpringStiffness => range(10.0, 1e7),
+            ModelField::LegLength => range(0.05, 5.0),
+            ModelField::Preload => range(0.0, 0.5),
+            ModelField::Stroke => range(1e-3, 0.5),
+            ModelField::Efficiency => range(0.05, 1.0),
+            ModelField::Gravity => range(0.1, 100.0),
+            ModelField::TorqueLimit => range(1e-3, 100.0),
+            ModelField::TorqueConstant => range(1e-4, 10.0),
+            ModelField::CurrentLimit => range(1e-3, 1000.0),
         }
     }
 }

@@ -498,7 +498,7 @@ fn a_save_needs_a_tare_and_is_taken_once() {
     r.periods(1);
     let _ = r.take();
     let n = r.ep.take_save().map(<[u8]>::len);
-    assert_eq!(n, Some(7 + 13 * 8 + 2));
+    assert_eq!(n, Some(7 + 27 * 8 + 2));
     assert!(r.ep.take_save().is_none());
     r.ep.save_done(true, true);
     r.request(3, Request::Arm);

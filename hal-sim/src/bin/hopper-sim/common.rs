@@ -25,6 +25,13 @@ pub(crate) struct BaseArgs {
     /// too) [default: design].
     #[arg(long)]
     params: Option<String>,
+    /// A robot file (`hopper-sim params show design` writes one): the
+    /// machine's constants, its calibration and the plant's own fields.
+    /// The plant and the firmware both take it, unless --params gives the
+    /// plant or --model-params what the controller believes; --set
+    /// overrides its entries.
+    #[arg(long, value_name = "FILE.toml")]
+    robot: Option<PathBuf>,
     /// What the controller believes, separately from the plant (`--params`):
     /// a preset or a TOML file [default: the plant's parameters]. Try model
     /// error, e.g. a file with `base = "design"` and
@@ -121,7 +128,18 @@ fn parse_controller(name: &str) -> std::result::Result<ControllerKind, String> {
 impl BaseArgs {
     /// The flags that were given, as overrides.
     fn overrides(&self) -> Result<Overrides> {
+        let robot = match &self.robot {
+            Some(path) => {
+                let origin = path.display().to_string();
+                let robot = hopper_robot_file::load(path).map_err(anyhow::Error::msg)?;
+                let plant =
+                    params_toml::plant_from_robot(&robot, &origin).map_err(anyhow::Error::msg)?;
+                Some((robot, plant))
+            }
+            None => None,
+        };
         Ok(Overrides {
+            robot,
             plant: match &self.params {
                 Some(p) => Some(params_toml::load(p).map_err(anyhow::Error::msg)?),
                 None => None,

@@ -1,4 +1,4 @@
-//! `hopper-sim params`: print a parameter preset as TOML.
+//! `hopper-sim params`: print a parameter preset as a robot file.
 
 use anyhow::{bail, Result};
 use clap::Subcommand;
@@ -7,7 +7,10 @@ use hal_sim::params_toml;
 
 #[derive(Subcommand)]
 pub(crate) enum ParamsCmd {
-    /// Print a preset as TOML that `--params PATH.toml` accepts.
+    /// Print a preset as a robot file: the firmware's entries for the
+    /// machine (`[model]`, `[calibration]`, `[supervisor]`, by their names
+    /// in docs/parameters.md) and the plant's own fields (`[plant]`), which
+    /// `--robot`, `--params` and `hopper-link robot load` read.
     Show {
         /// Preset: design | identified
         preset: String,
@@ -21,6 +24,6 @@ pub(crate) fn cmd_params_show(preset: &str) -> Result<()> {
             Params::PRESET_NAMES
         );
     };
-    say_raw!("{}", params_toml::to_toml(&p, preset));
+    say_raw!("{}", params_toml::robot_toml(&p, preset));
     Ok(())
 }
