@@ -543,18 +543,12 @@ impl ControllerSpec {
     }
 }
 
-/// The controllers firmware parameter `p` applies to, for an error message.
-pub fn owner_of(p: &Param) -> &'static str {
-    match p.name.split_once('.').map(|(head, _)| head) {
-        Some("shaped") => "the shaped controller",
-        Some("energy_apex") => "the energy-apex controller",
-        Some("energy") => "the energy controller",
-        Some("constant_torque") => "the open-torque controller",
-        Some("modified_torque") => "the modified-torque controller",
-        Some("step_open") => "the step-open controller",
-        Some("step_closed") => "the step-closed controller",
-        Some("velocity") => "the velocity controller",
-        _ => "another controller",
+/// The controller firmware parameter `p` applies to, for an error message:
+/// the registry's owner ([`params::owner`]).
+pub fn owner_of(p: &Param) -> String {
+    match params::owner(p).and_then(|o| CONTROLLER_NAMES.get(o.controller)) {
+        Some(name) => format!("the {name} controller"),
+        None => "another controller".to_string(),
     }
 }
 

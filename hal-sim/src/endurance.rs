@@ -80,7 +80,9 @@ pub fn table(
     let params = Params::preset(preset).ok_or_else(|| format!("no preset {preset}"))?;
     let mut laws: Vec<(String, &'static str, Settings)> = ControllerKind::ALL
         .iter()
-        .filter(|k| **k != ControllerKind::Passive)
+        // The thesis's laws and this project's own (a law added to the
+        // registry is run by name: `hopper-sim run --controller`).
+        .filter(|k| **k != ControllerKind::Passive && k.is_builtin())
         .map(|k| (k.name().to_string(), k.name(), Vec::new()))
         .collect();
     laws.push((HEAT_AWARE.to_string(), "shaped", heat_aware_settings()));

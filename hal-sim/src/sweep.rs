@@ -131,21 +131,21 @@ impl Knob {
     }
 
     /// Why sweeping this knob would change nothing for `controller`, if so.
-    fn unused_by(&self, controller: ControllerKind) -> Option<&'static str> {
+    fn unused_by(&self, controller: ControllerKind) -> Option<String> {
         use ControllerKind as C;
         match self {
             Knob::Param(p) if !param_applies(p, controller) => Some(crate::controller::owner_of(p)),
             Knob::Torque if !matches!(controller, C::OpenTorque | C::ModifiedTorque) => {
-                Some("open-torque and modified-torque")
+                Some("open-torque and modified-torque".into())
             }
             Knob::EnergyGain if !matches!(controller, C::Energy | C::EnergyApex) => {
-                Some("energy and energy-apex")
+                Some("energy and energy-apex".into())
             }
             Knob::FlightKp | Knob::FlightKd if controller == C::Shaped => {
-                Some("the controllers with the flight PD (every one but passive and shaped)")
+                Some("the controllers with the flight PD (every one but passive and shaped)".into())
             }
             Knob::FlightKp | Knob::FlightKd | Knob::TargetApex if controller == C::Passive => {
-                Some("every controller but passive")
+                Some("every controller but passive".into())
             }
             _ => None,
         }

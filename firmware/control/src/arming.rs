@@ -23,15 +23,14 @@
 //! - Fault resets are the runner's ([`crate::runner::PeriodRunner::reset_faults`]),
 //!   allowed only while disarmed.
 
-use crate::laws::InvalidField;
-use crate::params as p;
+use crate::param::InvalidField;
 use crate::supervisor::Faults;
 
-crate::params::config! {
+crate::param::config! {
     /// Arming limits (the parameter table's `arming.*`).
     #[derive(Debug, Clone, Copy, PartialEq)]
     #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-    pub struct ArmingConfig, reached |c| Some(&mut c.arming);
+    pub struct ArmingConfig;
     params {
         52 ARM_LINK_TIMEOUT_S link_timeout_s: f32 {
             "arming.link_timeout_s", "s", Real, [1.0e-3, 60.0], 0.2, DISARMED,
@@ -73,7 +72,7 @@ crate::params::config! {
 impl ArmingConfig {
     /// Every field in its documented range, or the first one that is not.
     pub fn validate(&self) -> Result<(), InvalidField> {
-        p::validate_part(|c| c.arming = *self)
+        crate::param::validate_fields(&mut { *self }, FIELDS)
     }
 }
 

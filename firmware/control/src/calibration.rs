@@ -40,11 +40,11 @@ pub enum CalError {
     NonFinite(Channel),
 }
 
-crate::params::config! {
+crate::param::config! {
     /// Calibration of the hopper's sensors and current command. All fields SI unless stated.
     #[derive(Debug, Clone, Copy, PartialEq)]
     #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-    pub struct Calibration, reached |c| Some(&mut c.calibration);
+    pub struct Calibration;
     params {
         98 CAL_MOTOR_COUNTS_PER_REV motor_counts_per_rev: u32 {
             "calibration.motor_counts_per_rev", "counts", Count, [1.0, 1.0e6], 2000.0, DISARMED,

@@ -10,14 +10,13 @@
 //! neither arming nor a fault reset acts on a button still bouncing open.
 //! Times, not periods: the same at every control rate.
 
-use crate::laws::InvalidField;
-use crate::params as p;
+use crate::param::InvalidField;
 
-crate::params::config! {
+crate::param::config! {
     /// How long the input must hold a new level before it counts.
     #[derive(Debug, Clone, Copy, PartialEq)]
     #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-    pub struct DebounceConfig, reached |c| Some(&mut c.estop);
+    pub struct DebounceConfig;
     params {
         86 ESTOP_PRESS_S press_s: f32 {
             "estop.press_s", "s", Real, [0.0, 0.01], 2.0e-4, DISARMED,
@@ -33,7 +32,7 @@ crate::params::config! {
 impl DebounceConfig {
     /// Both times within their parameters' ranges, else the one that is not.
     pub fn validate(&self) -> Result<(), InvalidField> {
-        p::validate_part(|c| c.estop = *self)
+        crate::param::validate_fields(&mut { *self }, FIELDS)
     }
 }
 

@@ -108,11 +108,11 @@ pub struct Velocities {
     pub motor_rad_s: f32,
 }
 
-crate::params::config! {
+crate::param::config! {
     /// Estimator tuning.
     #[derive(Debug, Clone, Copy, PartialEq)]
     #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-    pub struct EstimatorConfig, reached |c| Some(&mut c.estimator);
+    pub struct EstimatorConfig;
     params {
         /// Must exceed `liftoff_force_n`. The default is 8 sigma of 5 N of noise.
         42 EST_TOUCHDOWN_FORCE_N touchdown_force_n: f32 {

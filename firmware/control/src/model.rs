@@ -36,17 +36,17 @@ use ModelField as F;
 
 pub use hopper_model::design;
 
-crate::params::config! {
+crate::param::config! {
     /// Physical parameters of the hopper, f32 SI, each a runtime parameter
     /// (`model.*`: changed only disarmed, saved with the calibration) in
     /// the range [`ModelField::range`] gives (the simulator's plant checks
     /// the same ranges). `Default` is the thesis's "design" set (Table 2.1)
     /// plus the motor of section 3.1, with no preload (the thesis gives
     /// none; see [`design::SPRING_PRELOAD_M`]). Setting one re-derives what
-    /// follows from it ([`crate::hopper::HopperConfig::follow_model`]).
+    /// follows from it ([`crate::config::HopperConfig::follow_model`]).
     #[derive(Debug, Clone, Copy, PartialEq)]
     #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-    pub struct ModelParams, reached |c| Some(&mut c.model);
+    pub struct ModelParams;
     params {
         111 MODEL_BODY_MASS body_mass_kg: f32 {
             "model.body_mass_kg", "kg", Real, [lo(F::BodyMass), hi(F::BodyMass)],

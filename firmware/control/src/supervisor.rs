@@ -25,7 +25,7 @@
 //! or lowers the count. The output-bound property runs proptest's default
 //! count (or `PROPTEST_CASES`).
 
-use crate::laws::{require, InvalidField};
+use crate::param::{require, InvalidField};
 
 /// One kind of fault the supervisor detects (its name: kebab-case, for logs
 /// and telemetry).
@@ -227,11 +227,11 @@ impl Range {
     }
 }
 
-crate::params::config! {
+crate::param::config! {
     /// Supervisor limits. Defaults are for the thesis hardware at a 10 kHz control rate.
     #[derive(Debug, Clone, Copy, PartialEq)]
     #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-    pub struct SupervisorConfig, reached |c| Some(&mut c.supervisor);
+    pub struct SupervisorConfig;
     params {
         /// Counted per [`REFERENCE_PERIOD_S`] (100 us); the limit scales with the control
         /// period (at least 2 counts). The default is 1000 rad/s (above the 808 rad/s

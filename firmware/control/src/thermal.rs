@@ -47,8 +47,7 @@
 //! At a power-on the motor is taken to be at the ambient temperature;
 //! after a warm reset the board calls [`MotorThermal::assume_warm`].
 
-use crate::laws::InvalidField;
-use crate::params as p;
+use crate::param::InvalidField;
 
 /// How much time the model integrates at once, s (see the module docs).
 pub const THERMAL_STEP_S: f32 = 0.01;
@@ -57,12 +56,12 @@ pub const THERMAL_STEP_S: f32 = 0.01;
 /// is stated at 25 C).
 pub const COPPER_TEMPCO_PER_K: f32 = 0.0039;
 
-crate::params::config! {
+crate::param::config! {
     /// The motor's thermal data and the protection's thresholds; every field
     /// is a `thermal.*` parameter ([`crate::params`]).
     #[derive(Debug, Clone, Copy, PartialEq)]
     #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-    pub struct ThermalConfig, reached |c| Some(&mut c.supervisor.thermal);
+    pub struct ThermalConfig;
     params {
         /// Whether the estimate derates the current limit and latches the
         /// fault (`false` only for control studies past the motor's thermal
@@ -118,13 +117,13 @@ impl ThermalConfig {
     /// above the ambient and below the trip; the first one that is not is
     /// named.
     pub fn validate(&self) -> Result<(), InvalidField> {
-        p::validate_part(|c| c.supervisor.thermal = *self)?;
+        crate::param::validate_fields(&mut { *self }, FIELDS)?;
         // Finite by the entries' ranges.
         if self.derate_winding_c <= self.ambient_c {
-            return Err(InvalidField(p::THERMAL_DERATE.name));
+            return Err(InvalidField(entries::THERMAL_DERATE.name));
         }
         if self.trip_winding_c <= self.derate_winding_c {
-            return Err(InvalidField(p::THERMAL_TRIP.name));
+            return Err(InvalidField(entries::THERMAL_TRIP.name));
         }
         Ok(())
     }

@@ -83,14 +83,13 @@ mod stats;
 pub use calibrator::{Calibrator, DriveInput, DriveParams, STALL_LAG_M};
 pub use stats::{Regression, Stats};
 
-use crate::laws::InvalidField;
-use crate::params as p;
+use crate::param::InvalidField;
 
-crate::params::config! {
+crate::param::config! {
     /// The motor-driving routines' limits (the parameter table's `bringup.*`).
     #[derive(Debug, Clone, Copy, PartialEq)]
     #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-    pub struct BringupConfig, reached |c| Some(&mut c.bringup);
+    pub struct BringupConfig;
     params {
         58 BRINGUP_CURRENT_LIMIT_A current_limit_a: f32 {
             "bringup.current_limit_a", "A", Real, [0.1, 10.0], 6.0, DISARMED,
@@ -110,7 +109,7 @@ crate::params::config! {
 impl BringupConfig {
     /// Every field within its parameter's range, else the first that is not.
     pub fn validate(&self) -> Result<(), InvalidField> {
-        p::validate_part(|c| c.bringup = *self)
+        crate::param::validate_fields(&mut { *self }, FIELDS)
     }
 }
 

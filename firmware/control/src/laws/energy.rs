@@ -11,15 +11,13 @@
 use super::{
     flight_pd::FlightPd, require, Actuator, ControlInput, ControlLaw, EventInput, InvalidField,
 };
-use super::{StanceLaw, Strategy};
 use crate::estimator::Phase;
-use crate::params;
 
-crate::params::config! {
+crate::param::config! {
     /// Configuration of the energy-feedback torque law.
     #[derive(Debug, Clone, Copy, PartialEq)]
     #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-    pub struct Config, reached |c| crate::params::energy(c);
+    pub struct Config;
     params {
         5 ENERGY_GAIN gain_nm_per_j: f32 {
             "energy.gain_nm_per_j", "N m/J", Real, [0.0, 100.0], 0.2, LIVE,
@@ -37,7 +35,7 @@ impl Config {
     /// one out of range (energy-apex checks its own copy against its
     /// `energy_apex.*` entries).
     pub fn validate(&self) -> Result<(), InvalidField> {
-        params::validate_part(|c| c.strategy = Strategy::Thesis(StanceLaw::Energy(*self)))
+        crate::param::validate_fields(&mut { *self }, FIELDS)
     }
 }
 

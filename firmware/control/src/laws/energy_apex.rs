@@ -8,7 +8,6 @@ use super::{
 use crate::energy::{EnergyInput, EnergyModel};
 use crate::estimator::{Phase, PhaseEvent};
 use crate::model::ModelParams;
-use crate::params;
 
 /// Which energy an apex-regulating law feeds back.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -20,10 +19,27 @@ pub enum EnergyMeasure {
     Body,
 }
 
-/// Names of [`crate::params::ENERGY_APEX_MEASURE`]'s choices.
+impl crate::param::Choice for EnergyMeasure {
+    fn index(&self) -> usize {
+        match self {
+            EnergyMeasure::Total => 0,
+            EnergyMeasure::Body => 1,
+        }
+    }
+
+    fn choose(&mut self, index: usize) {
+        *self = if index == 0 {
+            EnergyMeasure::Total
+        } else {
+            EnergyMeasure::Body
+        };
+    }
+}
+
+/// Names of [`entries::ENERGY_APEX_MEASURE`]'s choices.
 const ENERGY_MEASURES: [&str; 2] = ["total", "body"];
 
-crate::params::config! {
+crate::param::config! {
     /// The apex-regulating energy law (`energy-apex`): eq 2.52 in stance, with
     /// `E_D` corrected after every flight apex from the measured apex height.
     ///
@@ -41,7 +57,7 @@ crate::params::config! {
     /// an integral action on the apex error in energy units (J per J).
     #[derive(Debug, Clone, Copy, PartialEq)]
     #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-    pub struct ApexLoop, reached |c| crate::params::energy_apex(c);
+    pub struct ApexLoop;
     params {
         /// `K_p`: damps the slow outer loop.
         26 ENERGY_APEX_PROPORTIONAL proportional: f32 {
@@ -84,7 +100,7 @@ crate::params::config! {
         }
     }
     custom {
-        25 ENERGY_APEX_MEASURE |s| Some(Slot::Measure(&mut s.measure)), {
+        25 ENERGY_APEX_MEASURE |s| Some(Slot::Choice(&mut s.measure)), {
             "energy_apex.measure", "-", Kind::Choice(&ENERGY_MEASURES), [0.0, 1.0], 0.0, LIVE,
             "Energy fed back: total (eq 2.44) or body only."
         }
@@ -102,7 +118,7 @@ crate::params::config! {
         // Its gain and sign are the entries above, written after.
         pub law: energy::Config = energy::Config::default(),
         /// The energy fed back.
-        pub measure: EnergyMeasure = if params::ENERGY_APEX_MEASURE.default == 0.0 {
+        pub measure: EnergyMeasure = if entries::ENERGY_APEX_MEASURE.default == 0.0 {
                 EnergyMeasure::Total
             } else {
                 EnergyMeasure::Body
@@ -114,7 +130,7 @@ impl ApexLoop {
     /// Checks every field against [`params`], naming the first one out of
     /// range.
     pub fn validate(&self) -> Result<(), InvalidField> {
-        params::validate_part(|c| c.strategy = super::Strategy::EnergyApex(*self))
+        crate::param::validate_fields(&mut { *self }, FIELDS)
     }
 }
 

@@ -13,14 +13,13 @@
 //! gains along eq 4.18 (see [`crate::pd_design::kp_over_kd_at_eta_opt`]).
 
 use super::{require, Actuator, InvalidField};
-use crate::params;
 use crate::pd_design::PdGains;
 
-crate::params::config! {
+crate::param::config! {
     /// Configuration of the flight PD.
     #[derive(Debug, Clone, Copy, PartialEq)]
     #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-    pub struct Config, reached |c| Some(&mut c.flight);
+    pub struct Config;
     params {
         4 FLIGHT_START_M start_position_m: f32 {
             "flight.start_position_m", "m", Real, [0.0, 1.0], 0.0, LIVE,
@@ -60,10 +59,10 @@ impl FlightPd {
     /// stroke (a bad one is refused by name: with it the nut would not be
     /// driven home in flight).
     pub fn new(c: &Config, act: &Actuator) -> Result<Self, InvalidField> {
-        params::validate_part(|k| k.flight = *c)?;
+        crate::param::validate_fields(&mut { *c }, FIELDS)?;
         require(
             c.start_position_m <= act.stroke_m,
-            params::FLIGHT_START_M.name,
+            entries::FLIGHT_START_M.name,
         )?;
         let r = act.screw_m_per_rad;
         require(r > 0.0 && r.is_finite(), "model.screw_lead_m")?;

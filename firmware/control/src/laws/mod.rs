@@ -38,22 +38,9 @@ pub mod velocity;
 use crate::estimator::{Phase, PhaseEvent};
 use crate::model::ModelParams;
 
-/// A configuration field outside its documented range, named by its path
-/// in the configuration (e.g. `flight.kp_a_per_rad`): the controller is
-/// refused at construction rather than run with a silent 0 A.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct InvalidField(pub &'static str);
+pub use crate::param::InvalidField;
 
-/// `Ok(())` if `ok`, else the field named.
-#[inline]
-pub(crate) fn require(ok: bool, field: &'static str) -> Result<(), InvalidField> {
-    if ok {
-        Ok(())
-    } else {
-        Err(InvalidField(field))
-    }
-}
+pub(crate) use crate::param::require;
 
 /// Why a law refused to produce a command.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -181,12 +168,12 @@ pub struct NutPositionPd {
 
 impl Default for NutPositionPd {
     /// Table 2.1's loop: the open-loop step's defaults
-    /// ([`crate::params::STEP_OPEN_KP`] and the entries after it).
+    /// ([`step_open::entries::STEP_OPEN_KP`] and the entries after it).
     fn default() -> Self {
         Self {
-            kp_n_per_m: crate::params::STEP_OPEN_KP.default,
-            kd_n_s_per_m: crate::params::STEP_OPEN_KD.default,
-            spring_feedforward: crate::params::STEP_OPEN_FEEDFORWARD.default_flag(),
+            kp_n_per_m: step_open::entries::STEP_OPEN_KP.default,
+            kd_n_s_per_m: step_open::entries::STEP_OPEN_KD.default,
+            spring_feedforward: step_open::entries::STEP_OPEN_FEEDFORWARD.default_flag(),
         }
     }
 }
@@ -258,60 +245,289 @@ impl Default for StanceLaw {
     }
 }
 
-/// What runs in stance and in flight: the controller's configuration. Each
-/// variant is built into its [`Controller`] (validated once).
-#[derive(Debug, Clone, Copy, PartialEq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub enum Strategy {
-    /// Motor off: 0 A in every phase (thesis section 4.4.1, passive hopping).
-    Passive,
-    /// A thesis stance law, with the flight PD back-drive in flight.
-    Thesis(StanceLaw),
-    /// The apex-regulating energy law, with the flight PD in flight.
-    EnergyApex(energy_apex::ApexLoop),
-    /// Shaped torque with its own braking-curve back-drive in flight and a
-    /// per-hop loop on the torque level ([`shaped`]).
-    Shaped(shaped::Config),
+/// Declares the laws: the thesis's and this project's own (written out
+/// below), then the laws added to the registry ([`registry!`]'s one line
+/// each), and everything that lists them: [`ControllerKind`] (whose names
+/// are the `controller` parameter's choices, the command line's and the
+/// link's), [`Strategy`], [`Controller`] and its dispatch, each added
+/// law's parameters in the table and the reach of its configuration.
+macro_rules! laws {
+    ($( $(#[$doc:meta])* $variant:ident => $module:ident, )*) => {
+        $( pub mod $module; )*
+
+        /// What runs in stance and in flight: the controller's configuration. Each
+        /// variant is built into its [`Controller`] (validated once).
+        #[derive(Debug, Clone, Copy, PartialEq)]
+        #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+        pub enum Strategy {
+            /// Motor off: 0 A in every phase (thesis section 4.4.1, passive hopping).
+            Passive,
+            /// A thesis stance law, with the flight PD back-drive in flight.
+            Thesis(StanceLaw),
+            /// The apex-regulating energy law, with the flight PD in flight.
+            EnergyApex(energy_apex::ApexLoop),
+            /// Shaped torque with its own braking-curve back-drive in flight and a
+            /// per-hop loop on the torque level ([`shaped`]).
+            Shaped(shaped::Config),
+            $(
+                $(#[$doc])*
+                $variant($module::Config),
+            )*
+        }
+
+        /// Which controller, without its settings. The index in [`ControllerKind::ALL`]
+        /// is the value of the `controller` parameter ([`crate::params::CONTROLLER`]).
+        ///
+        /// The declaration order is that index (strum's [`strum::VariantArray`] and
+        /// [`strum::VariantNames`] list the variants in it), and each variant's name
+        /// is its kebab-case spelling ([`ControllerKind::name`]): a law added to the
+        /// registry comes after the others, so no other law's index changes.
+        #[derive(
+            Debug,
+            Clone,
+            Copy,
+            PartialEq,
+            Eq,
+            Hash,
+            strum::VariantArray,
+            strum::VariantNames,
+            strum::IntoStaticStr,
+        )]
+        #[strum(serialize_all = "kebab-case")]
+        #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+        pub enum ControllerKind {
+            /// `passive`: the motor off.
+            Passive,
+            /// `step-open`: eq 2.49.
+            StepOpen,
+            /// `step-closed`: eqs 2.50-2.51.
+            StepClosed,
+            /// `open-torque`: constant stance torque.
+            OpenTorque,
+            /// `energy`: eq 2.52.
+            Energy,
+            /// `energy-apex`: eq 2.52 with a per-hop loop on the apex.
+            EnergyApex,
+            /// `velocity`: eq 2.53.
+            Velocity,
+            /// `modified-torque`: section 4.4.3.
+            ModifiedTorque,
+            /// `shaped`: this project's shaped torque.
+            Shaped,
+            $(
+                $(#[$doc])*
+                $variant,
+            )*
+        }
+
+        impl ControllerKind {
+            /// This controller with its default settings.
+            pub fn default_strategy(self) -> Strategy {
+                match self {
+                    ControllerKind::Passive => Strategy::Passive,
+                    ControllerKind::StepOpen => {
+                        Strategy::Thesis(StanceLaw::StepOpen(step_open::Config::default()))
+                    }
+                    ControllerKind::StepClosed => {
+                        Strategy::Thesis(StanceLaw::StepClosed(step_closed::Config::default()))
+                    }
+                    ControllerKind::OpenTorque => {
+                        Strategy::Thesis(StanceLaw::OpenTorque(open_torque::Config::default()))
+                    }
+                    ControllerKind::Energy => {
+                        Strategy::Thesis(StanceLaw::Energy(energy::Config::default()))
+                    }
+                    ControllerKind::EnergyApex => {
+                        Strategy::EnergyApex(energy_apex::ApexLoop::default())
+                    }
+                    ControllerKind::Velocity => {
+                        Strategy::Thesis(StanceLaw::Velocity(velocity::Config::default()))
+                    }
+                    ControllerKind::ModifiedTorque => Strategy::Thesis(StanceLaw::ModifiedTorque(
+                        modified_torque::Config::default(),
+                    )),
+                    ControllerKind::Shaped => Strategy::Shaped(shaped::Config::default()),
+                    $(
+                        ControllerKind::$variant => Strategy::$variant($module::Config::default()),
+                    )*
+                }
+            }
+
+            /// Whether this is one of the thesis's laws or this project's own
+            /// (which the results pages study), not one added to the registry.
+            #[allow(clippy::match_single_binding, unreachable_patterns)]
+            pub const fn is_builtin(self) -> bool {
+                match self {
+                    $( ControllerKind::$variant => false, )*
+                    _ => true,
+                }
+            }
+        }
+
+        impl Strategy {
+            /// Which controller this is.
+            pub fn kind(&self) -> ControllerKind {
+                match self {
+                    Strategy::Passive => ControllerKind::Passive,
+                    Strategy::Thesis(StanceLaw::StepOpen(_)) => ControllerKind::StepOpen,
+                    Strategy::Thesis(StanceLaw::StepClosed(_)) => ControllerKind::StepClosed,
+                    Strategy::Thesis(StanceLaw::OpenTorque(_)) => ControllerKind::OpenTorque,
+                    Strategy::Thesis(StanceLaw::Energy(_)) => ControllerKind::Energy,
+                    Strategy::EnergyApex(_) => ControllerKind::EnergyApex,
+                    Strategy::Thesis(StanceLaw::Velocity(_)) => ControllerKind::Velocity,
+                    Strategy::Thesis(StanceLaw::ModifiedTorque(_)) => {
+                        ControllerKind::ModifiedTorque
+                    }
+                    Strategy::Shaped(_) => ControllerKind::Shaped,
+                    $( Strategy::$variant(_) => ControllerKind::$variant, )*
+                }
+            }
+        }
+
+        /// Every controller, with its own state; [`Strategy`] says which one.
+        #[derive(Debug, Clone, PartialEq)]
+        #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+        pub enum Controller {
+            /// [`passive::Passive`].
+            Passive(passive::Passive),
+            /// [`step_open::StepOpen`].
+            StepOpen(step_open::StepOpen),
+            /// [`step_closed::StepClosed`].
+            StepClosed(step_closed::StepClosed),
+            /// [`open_torque::OpenTorque`].
+            OpenTorque(open_torque::OpenTorque),
+            /// [`energy::Energy`].
+            Energy(energy::Energy),
+            /// [`velocity::Velocity`].
+            Velocity(velocity::Velocity),
+            /// [`modified_torque::ModifiedTorque`].
+            ModifiedTorque(modified_torque::ModifiedTorque),
+            /// [`energy_apex::EnergyApex`].
+            EnergyApex(energy_apex::EnergyApex),
+            /// [`shaped::Shaped`].
+            Shaped(shaped::Shaped),
+            $(
+                $(#[$doc])*
+                $variant($module::Law),
+            )*
+        }
+
+        impl Controller {
+            /// Builds the controller `strategy` names for `model`, with `flight` as
+            /// the thesis laws' flight back-drive. A field out of range is refused
+            /// by name.
+            pub fn new(
+                strategy: &Strategy,
+                model: &ModelParams,
+                flight: &flight_pd::Config,
+            ) -> Result<Self, InvalidField> {
+                let act = Actuator::from_model(model);
+                let pd = || flight_pd::FlightPd::new(flight, &act);
+                Ok(match strategy {
+                    Strategy::Passive => Controller::Passive(passive::Passive),
+                    Strategy::Thesis(law) => match law {
+                        StanceLaw::StepOpen(c) => {
+                            Controller::StepOpen(step_open::StepOpen::new(c, &act, pd()?)?)
+                        }
+                        StanceLaw::StepClosed(c) => {
+                            Controller::StepClosed(step_closed::StepClosed::new(c, &act, pd()?)?)
+                        }
+                        StanceLaw::OpenTorque(c) => {
+                            Controller::OpenTorque(open_torque::OpenTorque::new(c, &act, pd()?)?)
+                        }
+                        StanceLaw::Energy(c) => {
+                            Controller::Energy(energy::Energy::new(c, &act, pd()?)?)
+                        }
+                        StanceLaw::Velocity(c) => {
+                            Controller::Velocity(velocity::Velocity::new(c, &act, pd()?)?)
+                        }
+                        StanceLaw::ModifiedTorque(c) => Controller::ModifiedTorque(
+                            modified_torque::ModifiedTorque::new(c, &act, pd()?)?,
+                        ),
+                    },
+                    Strategy::EnergyApex(a) => Controller::EnergyApex(
+                        energy_apex::EnergyApex::new(a, &act, model, pd()?)?,
+                    ),
+                    Strategy::Shaped(c) => {
+                        Controller::Shaped(shaped::Shaped::new(c, &act, model)?)
+                    }
+                    $(
+                        Strategy::$variant(c) => {
+                            Controller::$variant($module::Law::new(c, &act, model, pd()?)?)
+                        }
+                    )*
+                })
+            }
+        }
+
+        impl ControlLaw for Controller {
+            #[inline]
+            fn on_event(&mut self, event: &EventInput) {
+                match self {
+                    Controller::Passive(c) => c.on_event(event),
+                    Controller::StepOpen(c) => c.on_event(event),
+                    Controller::StepClosed(c) => c.on_event(event),
+                    Controller::OpenTorque(c) => c.on_event(event),
+                    Controller::Energy(c) => c.on_event(event),
+                    Controller::Velocity(c) => c.on_event(event),
+                    Controller::ModifiedTorque(c) => c.on_event(event),
+                    Controller::EnergyApex(c) => c.on_event(event),
+                    Controller::Shaped(c) => c.on_event(event),
+                    $( Controller::$variant(c) => c.on_event(event), )*
+                }
+            }
+
+            #[inline]
+            fn current_a(&mut self, x: &ControlInput) -> f32 {
+                match self {
+                    Controller::Passive(c) => c.current_a(x),
+                    Controller::StepOpen(c) => c.current_a(x),
+                    Controller::StepClosed(c) => c.current_a(x),
+                    Controller::OpenTorque(c) => c.current_a(x),
+                    Controller::Energy(c) => c.current_a(x),
+                    Controller::Velocity(c) => c.current_a(x),
+                    Controller::ModifiedTorque(c) => c.current_a(x),
+                    Controller::EnergyApex(c) => c.current_a(x),
+                    Controller::Shaped(c) => c.current_a(x),
+                    $( Controller::$variant(c) => c.current_a(x), )*
+                }
+            }
+        }
+
+        /// The added laws' parameter entries, which the table gathers
+        /// ([`crate::params::TABLE`]) with everyone else's, in the
+        /// registry's order.
+        pub(crate) const ADDED_PARAMS: &[&[&crate::param::Param]] = &[$( $module::PARAMS, )*];
+
+        /// Each added law's entries' slots in a strategy: there while that
+        /// law is the selected one (in the registry's order).
+        const ADDED_SLOTS: &[for<'a> fn(&'a mut Strategy, usize) -> Option<crate::param::Slot<'a>>] = &[$(
+            |s, i| match s {
+                Strategy::$variant(c) => $module::FIELDS.get(i).and_then(|f| (f.slot)(c)),
+                _ => None,
+            },
+        )*];
+
+        /// Entry `index` of added law `law` in `strategy`, while that law is
+        /// selected.
+        pub(crate) fn added_slot(
+            strategy: &mut Strategy,
+            law: usize,
+            index: usize,
+        ) -> Option<crate::param::Slot<'_>> {
+            ADDED_SLOTS.get(law).and_then(|f| f(strategy, index))
+        }
+    };
 }
 
-/// Which controller, without its settings. The index in [`ControllerKind::ALL`]
-/// is the value of the `controller` parameter ([`crate::params::CONTROLLER`]).
-///
-/// The declaration order is that index (strum's [`strum::VariantArray`] and
-/// [`strum::VariantNames`] list the variants in it), and each variant's name
-/// is its kebab-case spelling ([`ControllerKind::name`]).
-#[derive(
-    Debug,
-    Clone,
-    Copy,
-    PartialEq,
-    Eq,
-    Hash,
-    strum::VariantArray,
-    strum::VariantNames,
-    strum::IntoStaticStr,
-)]
-#[strum(serialize_all = "kebab-case")]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub enum ControllerKind {
-    /// `passive`: the motor off.
-    Passive,
-    /// `step-open`: eq 2.49.
-    StepOpen,
-    /// `step-closed`: eqs 2.50-2.51.
-    StepClosed,
-    /// `open-torque`: constant stance torque.
-    OpenTorque,
-    /// `energy`: eq 2.52.
-    Energy,
-    /// `energy-apex`: eq 2.52 with a per-hop loop on the apex.
-    EnergyApex,
-    /// `velocity`: eq 2.53.
-    Velocity,
-    /// `modified-torque`: section 4.4.3.
-    ModifiedTorque,
-    /// `shaped`: this project's shaped torque.
-    Shaped,
+// The registry of laws added after the thesis's and this project's own:
+// one line each, `Variant => module,`, the law in `laws/module.rs` (its
+// `Config`, declared with `param::config!`, and its `Law`, a `ControlLaw`
+// built by `Law::new(&Config, &Actuator, &ModelParams, FlightPd)`).
+// `cargo xtask new-law NAME` writes a law from the template and adds its
+// line here (docs/laws.md).
+laws! {
+    // new laws: above this line
 }
 
 impl ControllerKind {
@@ -335,6 +551,20 @@ impl ControllerKind {
     /// Every controller, in the parameter table's order.
     pub const ALL: &'static [Self] = <Self as strum::VariantArray>::VARIANTS;
 
+    /// Every controller's name, by index (the `controller` parameter's
+    /// choices).
+    pub const NAMES: &'static [&'static str] = <Self as strum::VariantNames>::VARIANTS;
+
+    /// The `controller` parameter's largest value: the last registered
+    /// law's index (a law added to the registry widens it).
+    pub const MAX_INDEX: f32 = (Self::NAMES.len() - 1) as f32;
+
+    /// The default controller: the apex-regulating energy law.
+    pub const DEFAULT: Self = ControllerKind::EnergyApex;
+
+    /// [`Self::DEFAULT`]'s index, the `controller` parameter's default.
+    pub const DEFAULT_INDEX: f32 = Self::DEFAULT as usize as f32;
+
     /// The name the host tools and the link use (`energy-apex`).
     pub fn name(self) -> &'static str {
         self.into()
@@ -344,33 +574,6 @@ impl ControllerKind {
     pub fn from_name(name: &str) -> Option<Self> {
         Self::ALL.iter().copied().find(|k| k.name() == name)
     }
-
-    /// This controller with its default settings.
-    pub fn default_strategy(self) -> Strategy {
-        match self {
-            ControllerKind::Passive => Strategy::Passive,
-            ControllerKind::StepOpen => {
-                Strategy::Thesis(StanceLaw::StepOpen(step_open::Config::default()))
-            }
-            ControllerKind::StepClosed => {
-                Strategy::Thesis(StanceLaw::StepClosed(step_closed::Config::default()))
-            }
-            ControllerKind::OpenTorque => {
-                Strategy::Thesis(StanceLaw::OpenTorque(open_torque::Config::default()))
-            }
-            ControllerKind::Energy => {
-                Strategy::Thesis(StanceLaw::Energy(energy::Config::default()))
-            }
-            ControllerKind::EnergyApex => Strategy::EnergyApex(energy_apex::ApexLoop::default()),
-            ControllerKind::Velocity => {
-                Strategy::Thesis(StanceLaw::Velocity(velocity::Config::default()))
-            }
-            ControllerKind::ModifiedTorque => {
-                Strategy::Thesis(StanceLaw::ModifiedTorque(modified_torque::Config::default()))
-            }
-            ControllerKind::Shaped => Strategy::Shaped(shaped::Config::default()),
-        }
-    }
 }
 
 impl core::fmt::Display for ControllerKind {
@@ -379,28 +582,10 @@ impl core::fmt::Display for ControllerKind {
     }
 }
 
-impl Strategy {
-    /// Which controller this is.
-    pub fn kind(&self) -> ControllerKind {
-        match self {
-            Strategy::Passive => ControllerKind::Passive,
-            Strategy::Thesis(StanceLaw::StepOpen(_)) => ControllerKind::StepOpen,
-            Strategy::Thesis(StanceLaw::StepClosed(_)) => ControllerKind::StepClosed,
-            Strategy::Thesis(StanceLaw::OpenTorque(_)) => ControllerKind::OpenTorque,
-            Strategy::Thesis(StanceLaw::Energy(_)) => ControllerKind::Energy,
-            Strategy::EnergyApex(_) => ControllerKind::EnergyApex,
-            Strategy::Thesis(StanceLaw::Velocity(_)) => ControllerKind::Velocity,
-            Strategy::Thesis(StanceLaw::ModifiedTorque(_)) => ControllerKind::ModifiedTorque,
-            Strategy::Shaped(_) => ControllerKind::Shaped,
-        }
-    }
-}
-
 impl Default for Strategy {
-    /// [`crate::params::CONTROLLER`]'s default.
+    /// The default controller's ([`ControllerKind::DEFAULT`]).
     fn default() -> Self {
-        crate::params::controller_default(crate::params::CONTROLLER.default as usize)
-            .unwrap_or(Strategy::Passive)
+        ControllerKind::DEFAULT.default_strategy()
     }
 }
 
@@ -487,68 +672,7 @@ pub trait ControlLaw {
     fn current_a(&mut self, x: &ControlInput) -> f32;
 }
 
-/// Every controller, with its own state; [`Strategy`] says which one.
-#[derive(Debug, Clone, PartialEq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub enum Controller {
-    /// [`passive::Passive`].
-    Passive(passive::Passive),
-    /// [`step_open::StepOpen`].
-    StepOpen(step_open::StepOpen),
-    /// [`step_closed::StepClosed`].
-    StepClosed(step_closed::StepClosed),
-    /// [`open_torque::OpenTorque`].
-    OpenTorque(open_torque::OpenTorque),
-    /// [`energy::Energy`].
-    Energy(energy::Energy),
-    /// [`velocity::Velocity`].
-    Velocity(velocity::Velocity),
-    /// [`modified_torque::ModifiedTorque`].
-    ModifiedTorque(modified_torque::ModifiedTorque),
-    /// [`energy_apex::EnergyApex`].
-    EnergyApex(energy_apex::EnergyApex),
-    /// [`shaped::Shaped`].
-    Shaped(shaped::Shaped),
-}
-
 impl Controller {
-    /// Builds the controller `strategy` names for `model`, with `flight` as
-    /// the thesis laws' flight back-drive. A field out of range is refused
-    /// by name.
-    pub fn new(
-        strategy: &Strategy,
-        model: &ModelParams,
-        flight: &flight_pd::Config,
-    ) -> Result<Self, InvalidField> {
-        let act = Actuator::from_model(model);
-        let pd = || flight_pd::FlightPd::new(flight, &act);
-        Ok(match strategy {
-            Strategy::Passive => Controller::Passive(passive::Passive),
-            Strategy::Thesis(law) => match law {
-                StanceLaw::StepOpen(c) => {
-                    Controller::StepOpen(step_open::StepOpen::new(c, &act, pd()?)?)
-                }
-                StanceLaw::StepClosed(c) => {
-                    Controller::StepClosed(step_closed::StepClosed::new(c, &act, pd()?)?)
-                }
-                StanceLaw::OpenTorque(c) => {
-                    Controller::OpenTorque(open_torque::OpenTorque::new(c, &act, pd()?)?)
-                }
-                StanceLaw::Energy(c) => Controller::Energy(energy::Energy::new(c, &act, pd()?)?),
-                StanceLaw::Velocity(c) => {
-                    Controller::Velocity(velocity::Velocity::new(c, &act, pd()?)?)
-                }
-                StanceLaw::ModifiedTorque(c) => Controller::ModifiedTorque(
-                    modified_torque::ModifiedTorque::new(c, &act, pd()?)?,
-                ),
-            },
-            Strategy::EnergyApex(a) => {
-                Controller::EnergyApex(energy_apex::EnergyApex::new(a, &act, model, pd()?)?)
-            }
-            Strategy::Shaped(c) => Controller::Shaped(shaped::Shaped::new(c, &act, model)?),
-        })
-    }
-
     /// The energy-apex loop's current correction of `E_D`, J (0 for other controllers).
     pub fn apex_offset_j(&self) -> f32 {
         match self {
@@ -563,38 +687,6 @@ impl Controller {
         match self {
             Controller::Shaped(c) => c.level(),
             _ => 0.0,
-        }
-    }
-}
-
-impl ControlLaw for Controller {
-    #[inline]
-    fn on_event(&mut self, event: &EventInput) {
-        match self {
-            Controller::Passive(c) => c.on_event(event),
-            Controller::StepOpen(c) => c.on_event(event),
-            Controller::StepClosed(c) => c.on_event(event),
-            Controller::OpenTorque(c) => c.on_event(event),
-            Controller::Energy(c) => c.on_event(event),
-            Controller::Velocity(c) => c.on_event(event),
-            Controller::ModifiedTorque(c) => c.on_event(event),
-            Controller::EnergyApex(c) => c.on_event(event),
-            Controller::Shaped(c) => c.on_event(event),
-        }
-    }
-
-    #[inline]
-    fn current_a(&mut self, x: &ControlInput) -> f32 {
-        match self {
-            Controller::Passive(c) => c.current_a(x),
-            Controller::StepOpen(c) => c.current_a(x),
-            Controller::StepClosed(c) => c.current_a(x),
-            Controller::OpenTorque(c) => c.current_a(x),
-            Controller::Energy(c) => c.current_a(x),
-            Controller::Velocity(c) => c.current_a(x),
-            Controller::ModifiedTorque(c) => c.current_a(x),
-            Controller::EnergyApex(c) => c.current_a(x),
-            Controller::Shaped(c) => c.current_a(x),
         }
     }
 }
@@ -673,11 +765,14 @@ mod tests {
             "modified-torque",
             "shaped",
         ];
-        assert_eq!(<ControllerKind as strum::VariantNames>::VARIANTS, names);
-        assert_eq!(ControllerKind::ALL.len(), names.len());
-        for (k, n) in ControllerKind::ALL.iter().zip(names) {
-            assert_eq!(k.name(), n);
-            assert_eq!(ControllerKind::from_name(n), Some(*k));
+        // The thesis's and this project's own first; laws added to the
+        // registry after them.
+        let variants = <ControllerKind as strum::VariantNames>::VARIANTS;
+        assert_eq!(variants.get(..names.len()), Some(&names[..]));
+        assert_eq!(ControllerKind::ALL.len(), variants.len());
+        for (i, k) in ControllerKind::ALL.iter().enumerate() {
+            assert_eq!(k.is_builtin(), i < names.len(), "{k}");
+            assert_eq!(ControllerKind::from_name(k.name()), Some(*k));
             assert_eq!(k.default_strategy().kind(), *k);
         }
         assert_eq!(ControllerKind::from_name("constant-torque"), None);

@@ -9,13 +9,12 @@ use super::{
     InvalidField, LawError,
 };
 use crate::estimator::Phase;
-use crate::params;
 
-crate::params::config! {
+crate::param::config! {
     /// Configuration of the modified torque law.
     #[derive(Debug, Clone, Copy, PartialEq)]
     #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-    pub struct Config, reached |c| crate::params::modified_torque(c);
+    pub struct Config;
     params {
         /// Positive compresses the spring. The default is full torque.
         8 MODIFIED_TORQUE_NM torque_nm: f32 {
@@ -75,9 +74,7 @@ pub fn command(c: &Config, act: &Actuator) -> Result<f32, LawError> {
 impl Config {
     /// Checks every field, naming the first one out of range.
     pub fn validate(&self) -> Result<(), InvalidField> {
-        params::validate_part(|c| {
-            c.strategy = super::Strategy::Thesis(super::StanceLaw::ModifiedTorque(*self))
-        })
+        crate::param::validate_fields(&mut { *self }, FIELDS)
     }
 }
 

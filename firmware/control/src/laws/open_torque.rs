@@ -6,13 +6,12 @@ use super::{
     LawError,
 };
 use crate::estimator::Phase;
-use crate::params;
 
-crate::params::config! {
+crate::param::config! {
     /// Configuration of the constant-torque law.
     #[derive(Debug, Clone, Copy, PartialEq)]
     #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-    pub struct Config, reached |c| crate::params::open_torque(c);
+    pub struct Config;
     params {
         // The open-torque law's parameter keeps its `constant_torque.` name:
         // parameter names are a contract (scenario files, the link,
@@ -34,9 +33,7 @@ pub fn command(c: &Config, act: &Actuator) -> Result<f32, LawError> {
 impl Config {
     /// Checks every field, naming the first one out of range.
     pub fn validate(&self) -> Result<(), InvalidField> {
-        params::validate_part(|c| {
-            c.strategy = super::Strategy::Thesis(super::StanceLaw::OpenTorque(*self))
-        })
+        crate::param::validate_fields(&mut { *self }, FIELDS)
     }
 }
 

@@ -85,14 +85,13 @@
 use super::{require, Actuator, ControlInput, ControlLaw, EventInput, InvalidField};
 use crate::estimator::{Phase, PhaseEvent};
 use crate::model::ModelParams;
-use crate::params;
 
-crate::params::config! {
+crate::param::config! {
     /// Configuration of the shaped-torque law. Times are fractions of the
     /// model's stance time, levels fractions of the current limit.
     #[derive(Debug, Clone, Copy, PartialEq)]
     #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-    pub struct Config, reached |c| crate::params::shaped(c);
+    pub struct Config;
     params {
         /// On the way down, the push starts once the toe is below this fraction of the
         /// present flight's apex (its highest point). The default is tuned in simulation
@@ -202,7 +201,7 @@ impl Config {
     /// Checks every field (finite and in its documented range), naming the
     /// first one out of range.
     pub fn validate(&self) -> Result<(), InvalidField> {
-        params::validate_part(|c| c.strategy = super::Strategy::Shaped(*self))
+        crate::param::validate_fields(&mut { *self }, FIELDS)
     }
 }
 

@@ -21,7 +21,6 @@ use super::{
     EventInput, InvalidField, LawError, NutPositionPd, StanceInput,
 };
 use crate::estimator::{Phase, PhaseEvent};
-use crate::params;
 
 /// How `k_p` of eq 2.50 is chosen.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -41,14 +40,40 @@ pub enum Gain {
     },
 }
 
-/// Names of [`crate::params::STEP_CLOSED_GAIN`]'s choices.
+impl crate::param::Choice for Gain {
+    fn index(&self) -> usize {
+        match self {
+            Gain::Fixed { .. } => 0,
+            Gain::Normalised { .. } => 1,
+        }
+    }
+
+    /// The other gain starts from its entry's default; the same one keeps
+    /// its value.
+    fn choose(&mut self, index: usize) {
+        if self.index() == index {
+            return;
+        }
+        *self = if index == 0 {
+            Gain::Fixed {
+                kp_m_per_j: entries::STEP_CLOSED_KP_M_PER_J.default,
+            }
+        } else {
+            Gain::Normalised {
+                min_compression_m: entries::STEP_CLOSED_MIN_COMPRESSION_M.default,
+            }
+        };
+    }
+}
+
+/// Names of [`entries::STEP_CLOSED_GAIN`]'s choices.
 const STEP_CLOSED_GAINS: [&str; 2] = ["fixed", "normalised"];
 
-crate::params::config! {
+crate::param::config! {
     /// Configuration of the closed-loop step.
     #[derive(Debug, Clone, Copy, PartialEq)]
     #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-    pub struct Config, reached |c| crate::params::step_closed(c);
+    pub struct Config;
     nested {
         17 STEP_CLOSED_KP at pd.kp_n_per_m {
             "step_closed.kp_n_per_m", "N/m", Real, [0.0, 1.0e7], 8.0e4, LIVE,
@@ -64,7 +89,7 @@ crate::params::config! {
         }
     }
     custom {
-        14 STEP_CLOSED_GAIN |s| Some(Slot::StepClosedGain(&mut s.gain)), {
+        14 STEP_CLOSED_GAIN |s| Some(Slot::Choice(&mut s.gain)), {
             "step_closed.gain", "-", Kind::Choice(&STEP_CLOSED_GAINS), [0.0, 1.0], 0.0, LIVE,
             "k_p of eq 2.50: fixed (step_closed.kp_m_per_j) or eq 2.51 normalised by the compression."
         }
@@ -85,13 +110,13 @@ crate::params::config! {
     }
     plain {
         /// Gain choice. Default `Fixed { kp_m_per_j: 2e-3 }` (Table 2.1's 0.2 in cm/J).
-        pub gain: Gain = if params::STEP_CLOSED_GAIN.default == 0.0 {
+        pub gain: Gain = if entries::STEP_CLOSED_GAIN.default == 0.0 {
                 Gain::Fixed {
-                    kp_m_per_j: params::STEP_CLOSED_KP_M_PER_J.default,
+                    kp_m_per_j: entries::STEP_CLOSED_KP_M_PER_J.default,
                 }
             } else {
                 Gain::Normalised {
-                    min_compression_m: params::STEP_CLOSED_MIN_COMPRESSION_M.default,
+                    min_compression_m: entries::STEP_CLOSED_MIN_COMPRESSION_M.default,
                 }
             },
         /// Position loop tracking the reference (gains in N/m and N s/m on the nut).
@@ -181,9 +206,7 @@ impl Latch {
 impl Config {
     /// Checks every field, naming the first one out of range.
     pub fn validate(&self) -> Result<(), InvalidField> {
-        params::validate_part(|c| {
-            c.strategy = super::Strategy::Thesis(super::StanceLaw::StepClosed(*self))
-        })
+        crate::param::validate_fields(&mut { *self }, FIELDS)
     }
 }
 

@@ -8,13 +8,12 @@ use super::{
     EventInput, InvalidField, LawError, NutPositionPd, StanceInput,
 };
 use crate::estimator::Phase;
-use crate::params;
 
-crate::params::config! {
+crate::param::config! {
     /// Configuration of the open-loop step.
     #[derive(Debug, Clone, Copy, PartialEq)]
     #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-    pub struct Config, reached |c| crate::params::step_open(c);
+    pub struct Config;
     params {
         10 STEP_OPEN_M step_m: f32 {
             "step_open.step_m", "m", Real, [0.0, 1.0], 0.01, LIVE,
@@ -67,9 +66,7 @@ pub fn command(c: &Config, act: &Actuator, x: &StanceInput) -> Result<f32, LawEr
 impl Config {
     /// Checks every field, naming the first one out of range.
     pub fn validate(&self) -> Result<(), InvalidField> {
-        params::validate_part(|c| {
-            c.strategy = super::Strategy::Thesis(super::StanceLaw::StepOpen(*self))
-        })
+        crate::param::validate_fields(&mut { *self }, FIELDS)
     }
 }
 

@@ -20,13 +20,12 @@ use super::{
     InvalidField, LawError, StanceInput,
 };
 use crate::estimator::Phase;
-use crate::params;
 
-crate::params::config! {
+crate::param::config! {
     /// Configuration of the velocity law.
     #[derive(Debug, Clone, Copy, PartialEq)]
     #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-    pub struct Config, reached |c| crate::params::velocity(c);
+    pub struct Config;
     params {
         20 VELOCITY_GAIN gain_mps_per_j: f32 {
             "velocity.gain_mps_per_j", "m/(s J)", Real, [0.0, 10.0], 0.03, LIVE,
@@ -73,9 +72,7 @@ pub fn command(c: &Config, act: &Actuator, x: &StanceInput) -> Result<f32, LawEr
 impl Config {
     /// Checks every field, naming the first one out of range.
     pub fn validate(&self) -> Result<(), InvalidField> {
-        params::validate_part(|c| {
-            c.strategy = super::Strategy::Thesis(super::StanceLaw::Velocity(*self))
-        })
+        crate::param::validate_fields(&mut { *self }, FIELDS)
     }
 }
 

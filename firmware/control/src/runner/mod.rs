@@ -256,7 +256,7 @@ pub enum RunnerError {
     /// `timing.max_jitter_s` is not finite and positive.
     MaxJitter,
     /// The arming configuration (`arming.*`, by name).
-    Arming(crate::laws::InvalidField),
+    Arming(crate::param::InvalidField),
 }
 
 /// Where a period runner keeps its controller: owned ([`Owned`], the host
