@@ -121,9 +121,8 @@ pub fn run(root: &Path, name: &str) -> Result<(), String> {
     std::fs::write(&registry, new_mod).map_err(|e| format!("{}: {e}", registry.display()))?;
     println!("new-law: wrote {}", file.display());
     println!(
-        "new-law: registered `{variant} => {module},` in {} (controller index {}; parameter {module}.thrust_nm is number {number})",
-        registry.display(),
-        mod_text.matches(" => ").count()
+        "new-law: registered `{variant} => {module},` in {} (the last controller; parameter {module}.thrust_nm is number {number} on the link)",
+        registry.display()
     );
     // The generated page of the parameter table.
     let status = crate::cargo()

@@ -10,7 +10,7 @@
 //! scenario key for the settings that have one, a sweep axis's short name
 //! and its CSV column. They are all here, as aliases of that one name;
 //! [`crate::scenario::Dedicated`] (which settings have a flag of their
-//! own) and the sweep's axes ([`crate::sweep::Knob`]) read them from here.
+//! own) and the sweep's axes (`hopper_study::sweep::Knob`) read them from here.
 //! The flags and keys themselves are clap's and serde's (literals in
 //! `hopper-sim` and `scenario.rs`); tests check that each one named here
 //! exists.

@@ -8,10 +8,112 @@
 //! Where a sheet lacks a figure the two-body model needs, the stand-in's
 //! (the maxon RE 40's) is taken and the motor's `source` says so.
 
-use crate::design::{Motor, CATALOGUE, DESIGN_MOTOR};
 use crate::params::Params;
 use hopper_control::params as p;
 use serde::Serialize;
+
+/// A candidate motor (datasheet values at its nominal voltage).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct Motor {
+    /// The thesis's name (Table 3.1).
+    pub thesis_name: &'static str,
+    /// The catalogue motor taken for it.
+    pub model: &'static str,
+    /// Torque constant, N m/A.
+    pub torque_constant_nm_per_a: f64,
+    /// Terminal resistance, ohm.
+    pub resistance_ohm: f64,
+    /// Rotor inertia, kg m^2.
+    pub rotor_inertia_kg_m2: f64,
+    /// Supply (nominal) voltage, V.
+    pub supply_v: f64,
+    /// Table 3.1's stall torque, N m.
+    pub thesis_stall_nm: f64,
+    /// Table 3.1's energy added in the first stance, J.
+    pub thesis_energy_j: f64,
+}
+
+impl Motor {
+    /// Stall current `V / R`, A.
+    pub fn stall_current_a(&self) -> f64 {
+        self.supply_v / self.resistance_ohm
+    }
+
+    /// Stall torque `k_t V / R`, N m.
+    pub fn stall_torque_nm(&self) -> f64 {
+        self.torque_constant_nm_per_a * self.stall_current_a()
+    }
+
+    /// No-load speed `V / k_e`, rad/s.
+    pub fn no_load_speed_rad_s(&self) -> f64 {
+        self.supply_v / self.torque_constant_nm_per_a
+    }
+}
+
+/// The design machine's motor (`Params::design`: the 80 W class of Table
+/// 3.1, 2.0 N m stall at 24 V, Table 2.1's inertia for rotor and screw).
+pub const DESIGN_MOTOR: Motor = Motor {
+    thesis_name: "Maxon 80",
+    model: "the design preset's motor (Table 2.1, 2.0 N m stall at 24 V)",
+    torque_constant_nm_per_a: hopper_control::model::design::TORQUE_CONSTANT_NM_PER_A,
+    resistance_ohm: hopper_control::model::design::TORQUE_CONSTANT_NM_PER_A * 24.0 / 2.0,
+    rotor_inertia_kg_m2: hopper_control::model::design::ROTOR_INERTIA_KG_M2,
+    supply_v: 24.0,
+    thesis_stall_nm: 2.0,
+    thesis_energy_j: 15.0,
+};
+
+/// Table 3.1's four motors as the table defines them: its stall torque on
+/// the design motor's torque constant and 24 V (the resistance set for that
+/// stall torque, so each runs on the straight line from its stall torque to
+/// the design's 808 rad/s no-load speed) and Table 2.1's inertia.
+pub fn table_3_1() -> [Motor; 4] {
+    let at = |thesis_name: &'static str, stall_nm: f64, energy_j: f64| Motor {
+        thesis_name,
+        model: "Table 3.1's stall torque on the design motor's k_t and 24 V",
+        resistance_ohm: DESIGN_MOTOR.torque_constant_nm_per_a * DESIGN_MOTOR.supply_v / stall_nm,
+        thesis_stall_nm: stall_nm,
+        thesis_energy_j: energy_j,
+        ..DESIGN_MOTOR
+    };
+    [
+        at("Maxon 100 WEC", 0.382, 1.8),
+        at("Maxon 100 EC", 0.470, 1.5),
+        at("Maxon 80", 2.0, 15.0),
+        at("Pittman 14006", 2.0, 14.8),
+    ]
+}
+
+/// Table 2.1's rotor-and-screw inertia less the Maxon RE 40's rotor: what
+/// the transmission adds to a catalogue motor's rotor, kg m^2.
+pub const TRANSMISSION_INERTIA_KG_M2: f64 =
+    hopper_control::model::design::ROTOR_INERTIA_KG_M2 - 142.0e-7;
+
+/// The catalogue motors found for two of Table 3.1's (docs/design.md
+/// gives the sources; none was found for the two brushless Maxons): 24 V
+/// windings, the rotor plus [`TRANSMISSION_INERTIA_KG_M2`].
+pub const CATALOGUE: [Motor; 2] = [
+    Motor {
+        thesis_name: "Maxon 80",
+        model: "Maxon RE 40 (148867, 24 V)",
+        torque_constant_nm_per_a: 0.0302,
+        resistance_ohm: 0.299,
+        rotor_inertia_kg_m2: 142.0e-7 + TRANSMISSION_INERTIA_KG_M2,
+        supply_v: 24.0,
+        thesis_stall_nm: 2.0,
+        thesis_energy_j: 15.0,
+    },
+    Motor {
+        thesis_name: "Pittman 14006",
+        model: "Pittman 14204S006 (24 V)",
+        torque_constant_nm_per_a: 0.0612,
+        resistance_ohm: 1.01,
+        rotor_inertia_kg_m2: 260.0e-7 + TRANSMISSION_INERTIA_KG_M2,
+        supply_v: 24.0,
+        thesis_stall_nm: 2.0,
+        thesis_energy_j: 14.8,
+    },
+];
 
 /// A motor's thermal data, the two-body model of `hopper_control::thermal`.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
