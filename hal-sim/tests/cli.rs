@@ -630,3 +630,21 @@ fn every_alias_flag_and_key_exists() {
         }
     }
 }
+
+/// `serve --help` says what `serve` does with `--start-apex`: it starts
+/// standing unless given (the run's help says 0.15 m, `run`'s default).
+#[test]
+fn serve_help_says_the_real_start() {
+    let o = sim(&["serve", "--help"]);
+    let text = String::from_utf8_lossy(&o.stdout);
+    let line = text
+        .lines()
+        .skip_while(|l| !l.contains("--start-apex"))
+        .take(3)
+        .collect::<Vec<_>>()
+        .join(" ");
+    assert!(line.contains("standing"), "{line}");
+    assert!(!line.contains("0.15"), "{line}");
+    let o = sim(&["run", "--help"]);
+    assert!(String::from_utf8_lossy(&o.stdout).contains("[default: 0.15]"));
+}

@@ -189,8 +189,15 @@ enum Cmd {
     },
     /// Commands from standard input, one per line, on one connection (the
     /// link and the arming survive between them). `#` starts a comment; a
-    /// line starting with `!` must fail (e.g. a refused set).
-    Shell,
+    /// line starting with `!` must fail (e.g. a refused set). A command that
+    /// does not go as written is reported and the session goes on, then
+    /// exits with an error; with --stop-on-error it stops there (nothing
+    /// after it is sent: no `save` after a refused routine, no `arm`).
+    Shell {
+        /// Stop at the first command that does not go as written.
+        #[arg(long)]
+        stop_on_error: bool,
+    },
 }
 
 #[derive(Subcommand, Debug)]
@@ -287,7 +294,7 @@ fn main() {
             }
         })
         .and_then(|mut c| match cli.cmd {
-            Cmd::Shell => shell(&mut c),
+            Cmd::Shell { stop_on_error } => shell(&mut c, stop_on_error),
             cmd => run(&mut c, &cmd),
         });
     if let Err(e) = result {
@@ -296,7 +303,7 @@ fn main() {
     }
 }
 
-fn shell(c: &mut Client) -> Result<()> {
+fn shell(c: &mut Client, stop_on_error: bool) -> Result<()> {
     let mut failures = 0;
     for (n, line) in std::io::stdin().lock().lines().enumerate() {
         let line = line.context("reading standard input")?;
@@ -312,7 +319,7 @@ fn shell(c: &mut Client) -> Result<()> {
         let outcome = ShellLine::try_parse_from(text.split_whitespace())
             .map_err(|e| anyhow!("line {}: {}", n + 1, e.render().to_string().trim()))
             .and_then(|l| match l.cmd {
-                Cmd::Shell => bail!("already in a shell"),
+                Cmd::Shell { .. } => bail!("already in a shell"),
                 cmd => run(c, &cmd),
             });
         match (outcome, must_fail) {
@@ -328,6 +335,12 @@ fn shell(c: &mut Client) -> Result<()> {
             }
         }
         let _ = std::io::stdout().flush();
+        if stop_on_error && failures > 0 {
+            bail!(
+                "stopped at line {}: it did not go as written (--stop-on-error: nothing after it was sent)",
+                n + 1
+            );
+        }
     }
     if failures > 0 {
         bail!("{failures} command(s) of the session did not go as written");
@@ -370,7 +383,7 @@ fn run(c: &mut Client, cmd: &Cmd) -> Result<()> {
             allow_remote,
             record_dir,
         } => ui::ui(c, http, *allow_remote, record_dir),
-        Cmd::Shell => bail!("shell is a top-level command"),
+        Cmd::Shell { .. } => bail!("shell is a top-level command"),
     }
 }
 

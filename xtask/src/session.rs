@@ -484,7 +484,7 @@ pub(crate) fn shell(
     );
     let started = Instant::now();
     let mut child = Command::new(link)
-        .args(["--tcp", addr, "shell"])
+        .args(["--tcp", addr, "shell", "--stop-on-error"])
         .stdin(Stdio::piped())
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())

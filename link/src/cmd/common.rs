@@ -65,24 +65,37 @@ pub(crate) fn stored_line(s: &hopper_protocol::StoredInfo, require_tare: Option<
         Some(false) => "the defaults",
         None => "the defaults (tare before arming if arming.require_tare is 1)",
     };
+    let refused = || {
+        hopper_protocol::vocab::LoadError::from_code(s.boot_error)
+            .map_or("unknown", hopper_protocol::vocab::LoadError::name)
+    };
+    // What this boot loaded, said alone when nothing was saved since.
     let boot = match s.boot {
         0 => "no flash store on this robot".to_string(),
         1 => format!("nothing saved: {defaults}"),
         2 => format!("loaded from flash at boot ({} parameters)", s.entries),
         _ => format!(
             "the saved record was refused at boot ({}): {defaults}",
-            hopper_protocol::vocab::LoadError::from_code(s.boot_error)
-                .map_or("unknown", hopper_protocol::vocab::LoadError::name)
+            refused()
         ),
     };
-    let save = match s.save {
-        0 => "",
-        1 => "; a save is pending",
-        2 => "; saved since boot",
-        3 => "; the last save FAILED",
-        _ => "; saved: written to flash at the next restart",
+    // A save since boot is the state now; the boot's record comes after.
+    let at_boot = match s.boot {
+        0 => "no flash store on this robot".to_string(),
+        1 => "nothing was saved at boot".to_string(),
+        2 => format!("{} parameters were loaded at boot", s.entries),
+        _ => format!("the record was refused at boot ({})", refused()),
     };
-    format!("{boot}{save}")
+    match s.save {
+        0 => boot,
+        1 => format!("a save is pending; {at_boot}"),
+        2 => format!(
+            "saved since boot ({} parameters: they load at the next boot); {at_boot}",
+            s.saved_count
+        ),
+        3 => format!("the last save FAILED; {boot}"),
+        _ => format!("saved: written to flash at the next restart; {at_boot}"),
+    }
 }
 
 /// What the robot's real-time work cost, if its firmware reports it.
@@ -202,5 +215,17 @@ mod tests {
             stored_line(&nothing, Some(true)),
             "nothing saved: the defaults (tare before arming: arming.require_tare is 1)"
         );
+        // After a save the line says that, not also "nothing saved".
+        let saved = hopper_protocol::StoredInfo {
+            save: 2,
+            saved_count: 27,
+            ..nothing
+        };
+        let line = stored_line(&saved, Some(true));
+        assert_eq!(
+            line,
+            "saved since boot (27 parameters: they load at the next boot); nothing was saved at boot"
+        );
+        assert!(!line.contains("nothing saved:"), "{line}");
     }
 }

@@ -6,6 +6,11 @@ use anyhow::{bail, Context, Result};
 use clap::Parser;
 
 #[derive(Parser)]
+// The run's --start-apex means something else here: the robot starts
+// standing unless it is given.
+#[command(mut_arg("start_apex", |a| a.help(
+    "Hold the body with the toe this high above the ground (m) until armed, then release it [default: standing on its toe, released 1 mm up]"
+)))]
 pub(crate) struct ServeArgs {
     #[command(flatten)]
     base: BaseArgs,
