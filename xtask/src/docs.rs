@@ -395,6 +395,57 @@ mod tests {
         assert!(examples("X.md", bad).is_err_and(|e| e.contains("X.md:2")));
     }
 
+    /// The words `issue N` (a tracker number a reader cannot open) in `text`.
+    fn issue_numbers(text: &str) -> Vec<String> {
+        let lower = text.to_ascii_lowercase();
+        let mut found = Vec::new();
+        for (i, _) in lower.match_indices("issue") {
+            let before = lower[..i].chars().next_back();
+            if before.is_some_and(|c| c.is_ascii_alphanumeric()) {
+                continue;
+            }
+            let rest = lower[i + 5..].trim_start_matches('s');
+            let rest = rest.strip_prefix(' ').unwrap_or("x");
+            let rest = rest.strip_prefix('#').unwrap_or(rest);
+            if rest.starts_with(|c: char| c.is_ascii_digit()) {
+                let end = (i + 16).min(text.len());
+                found.push(text.get(i..end).unwrap_or("").to_string());
+            }
+        }
+        found
+    }
+
+    /// The pages a reader reads carry no tracker numbers: what happened
+    /// when is the history page's (docs/history.md).
+    #[test]
+    fn no_issue_numbers_outside_the_history_page() {
+        assert_eq!(
+            issue_numbers("since issue 16 and Issue #5, issues 15").len(),
+            3
+        );
+        assert!(issue_numbers("the issue is 5 mm; tissue 3").is_empty());
+        let root = crate::workspace_root();
+        let mut pages = vec![root.join("README.md"), root.join("tests/link-session.txt")];
+        for e in std::fs::read_dir(root.join("docs"))
+            .into_iter()
+            .flatten()
+            .flatten()
+        {
+            let p = e.path();
+            if p.extension().is_some_and(|x| x == "md") && !p.ends_with("history.md") {
+                pages.push(p);
+            }
+        }
+        let mut stale = Vec::new();
+        for p in &pages {
+            let text = std::fs::read_to_string(p).unwrap_or_default();
+            for n in issue_numbers(&text) {
+                stale.push(format!("{}: {n}", p.display()));
+            }
+        }
+        assert!(stale.is_empty(), "{stale:#?}");
+    }
+
     #[test]
     fn commands_map_to_hopper_sim_or_are_refused() {
         let a =
