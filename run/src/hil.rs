@@ -822,11 +822,12 @@ impl Read for HilTarget {
 /// calibration's lead, is then set as the run wants it), then the table's
 /// order (the controller first: selecting one starts it from its defaults).
 fn set_order() -> impl Iterator<Item = &'static params::Param> {
-    let machine = |p: &&params::Param| params::MACHINE.iter().any(|m| m.number == p.number);
-    params::MACHINE
-        .iter()
-        .copied()
-        .chain(params::TABLE.iter().copied().filter(move |p| !machine(p)))
+    params::MACHINE.iter().copied().chain(
+        params::TABLE
+            .iter()
+            .copied()
+            .filter(|p| !params::is_machine(p)),
+    )
 }
 
 /// Whether the HIL image, from its boot configuration, becomes `desired`

@@ -35,30 +35,10 @@ const MAGIC: [u8; 4] = *b"HCAL";
 const HEADER: usize = 4 + 2 + 1;
 const ENTRY: usize = 4 + 4;
 
-/// How many parameters are saved.
-const SAVED_COUNT: usize = 27;
-
-/// The saved parameters: the machine's constants (every `model.*` entry,
-/// first, so an entry that follows the model and was set apart is applied
-/// after it), every `calibration.*` entry of the table but the height
-/// encoder's origin (a zero, per boot), and the spring's rate and preload
-/// (a test checks the list against the table). A robot file holds exactly
-/// these.
-pub const SAVED: [&Param; SAVED_COUNT] = [
-    &params::MODEL_BODY_MASS,
-    &params::MODEL_UNSPRUNG_MASS,
-    &params::MODEL_NUT_MASS,
-    &params::MODEL_ROTOR_INERTIA,
-    &params::MODEL_SCREW_LEAD,
-    &params::MODEL_SPRING_STIFFNESS,
-    &params::MODEL_LEG_LENGTH,
-    &params::MODEL_PRELOAD,
-    &params::MODEL_STROKE,
-    &params::MODEL_EFFICIENCY,
-    &params::MODEL_GRAVITY,
-    &params::MODEL_TORQUE_LIMIT,
-    &params::MODEL_TORQUE_CONSTANT,
-    &params::MODEL_CURRENT_LIMIT,
+/// The saved parameters besides the machine's constants: every
+/// `calibration.*` entry of the table but the height encoder's origin (a
+/// zero, per boot), and the spring's rate and preload.
+const CALIBRATION: [&Param; 13] = [
     &params::CAL_MOTOR_COUNTS_PER_REV,
     &params::CAL_MOTOR_POSITIVE_DOWN,
     &params::CAL_HEIGHT_COUNTS_PER_REV,
@@ -73,6 +53,29 @@ pub const SAVED: [&Param; SAVED_COUNT] = [
     &params::SUP_SPRING_RATE,
     &params::SUP_SPRING_PRELOAD,
 ];
+
+/// How many parameters are saved.
+const SAVED_COUNT: usize = params::MACHINE.len() + CALIBRATION.len();
+
+/// The saved parameters: the machine's constants ([`params::MACHINE`],
+/// first, so an entry that follows the model and was set apart is applied
+/// after it), then [`CALIBRATION`] (a test checks the list against the
+/// table). A robot file holds exactly these.
+#[allow(clippy::indexing_slicing)] // Evaluated at compile time: in bounds.
+pub const SAVED: [&Param; SAVED_COUNT] = {
+    let mut out = [CALIBRATION[0]; SAVED_COUNT];
+    let mut i = 0;
+    while i < params::MACHINE.len() {
+        out[i] = params::MACHINE[i];
+        i += 1;
+    }
+    let mut j = 0;
+    while j < CALIBRATION.len() {
+        out[i + j] = CALIBRATION[j];
+        j += 1;
+    }
+    out
+};
 
 /// Their keys, computed at compile time ([`name_hash`]): a save in the
 /// control task's link service costs no hashing and no table search.

@@ -191,6 +191,11 @@ pub const CONTROLLER_DEFAULT: f32 = ControllerKind::DEFAULT_INDEX;
 /// stays as set ([`HopperConfig::follow_model`]).
 pub const MACHINE: &[&Param] = crate::model::PARAMS;
 
+/// Whether `p` is one of the machine's constants ([`MACHINE`]).
+pub fn is_machine(p: &Param) -> bool {
+    MACHINE.iter().any(|m| m.number == p.number)
+}
+
 /// The master switches of protections, each with its safe value: a real
 /// robot's link refuses any other value (a simulator keeps them, for
 /// control studies). The protections' thresholds (`thermal.*`, the link
@@ -303,7 +308,7 @@ pub fn set(cfg: &mut HopperConfig, name: &str, value: f32) -> Result<(), ParamEr
 /// from the model ([`HopperConfig::follow_model`]).
 pub fn write(cfg: &mut HopperConfig, p: &Param, value: f32) -> Result<(), ParamError> {
     let v = p.check(value).map_err(|f| ParamError::OutOfRange(f.0))?;
-    if MACHINE.iter().any(|m| m.number == p.number) {
+    if is_machine(p) {
         let old = cfg.model;
         write_slot(cfg, p, v)?;
         cfg.follow_model(&old);
