@@ -1,6 +1,6 @@
 //! `hopper-link`: operate the hopper from a host. One client for
 //! the board (`--serial PORT`), the QEMU image and the simulator's virtual
-//! robot (`--tcp ADDR`). See the README's "Operating the robot" and
+//! robot (`--tcp ADDR`). See docs/operate.md and
 //! docs/link.md.
 
 mod cmd;
@@ -90,17 +90,18 @@ enum Cmd {
         #[arg(long)]
         out: PathBuf,
     },
-    /// Run a bring-up routine on the robot, disarmed (in this order on a
-    /// new robot; docs/board.md): `sensors` (raw codes, noise,
-    /// still encoders), `height` (standing: the height encoder's zero),
-    /// then on the hoist with the toe free `direction` (a current pulse:
-    /// motor, encoder and load cell the right way round), `home` (the nut
-    /// to its upper stop, the motor encoder zeroed there), `spring` (a
-    /// nut sweep: the spring rate by least squares), `tare` (load-cell
-    /// tare and potentiometer zero), then standing again `weight` (a nut
-    /// sweep lifting and lowering the body: the weight, hence the load
-    /// cell's gain, and the stance friction). `direction`, `home`, `spring`
-    /// and `weight` drive the motor at up to `bringup.current_limit_a`.
+    /// Run a bring-up routine on the robot, disarmed. On a new robot, in
+    /// this order (the book's Bring-up page): `sensors` (raw codes, noise,
+    /// still encoders), then on the hoist with the toe free `direction` (a
+    /// current pulse: motor, encoder and load cell the right way round),
+    /// `home` (the nut to its upper stop, the motor encoder zeroed there),
+    /// `tare` (load-cell tare and potentiometer zero), `spring` (a nut
+    /// sweep: the spring rate by least squares) and `tare` again; then
+    /// standing on the toe `weight` (a nut sweep lifting and lowering the
+    /// body: the weight, hence the load cell's gain, and the stance
+    /// friction) and `height` (the height encoder's zero); then `save`.
+    /// `direction`, `home`, `spring` and `weight` drive the motor at up to
+    /// `bringup.current_limit_a`.
     Calibrate {
         /// sensors | tare | direction | home | spring | height | weight
         #[arg(value_parser = clap::builder::PossibleValuesParser::new(

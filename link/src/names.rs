@@ -30,7 +30,7 @@ pub fn arm_state(s: ArmState) -> String {
     }
 }
 
-/// What a disarm reason means and what to do about it (the README's table).
+/// What a disarm reason means and what to do about it (the book's troubleshooting page).
 pub fn advice(s: ArmState) -> &'static str {
     use DisarmReason as R;
     match s {

@@ -405,7 +405,11 @@ mod tests {
                 continue;
             }
             let rest = lower[i + 5..].trim_start_matches('s');
-            let rest = rest.strip_prefix(' ').unwrap_or("x");
+            // A line break is a space in the rendered page.
+            let rest = rest
+                .strip_prefix(' ')
+                .or_else(|| rest.strip_prefix('\n'))
+                .unwrap_or("x");
             let rest = rest.strip_prefix('#').unwrap_or(rest);
             if rest.starts_with(|c: char| c.is_ascii_digit()) {
                 let end = (i + 16).min(text.len());
@@ -420,8 +424,8 @@ mod tests {
     #[test]
     fn no_issue_numbers_outside_the_history_page() {
         assert_eq!(
-            issue_numbers("since issue 16 and Issue #5, issues 15").len(),
-            3
+            issue_numbers("since issue 16 and Issue #5, issues 15, after issue\n17").len(),
+            4
         );
         assert!(issue_numbers("the issue is 5 mm; tissue 3").is_empty());
         let root = crate::workspace_root();

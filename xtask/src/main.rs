@@ -52,6 +52,13 @@
 //!   regenerate compared with the committed ones ([`docs`]): `docs: N
 //!   commands checked, M stale` (`cargo xtask test` runs it after clippy;
 //!   `cargo xtask docs FILE.md...` checks only those files).
+//! * `cargo xtask bring-up-page`: the book's bring-up page followed as
+//!   written against the virtual robot it starts ([`bringup_page`]):
+//!   `bring-up-page: commands=N save=accepted steady_apex_m=A target_m=T`.
+//! * `cargo xtask book`: the user guide built as a book (`mdbook build
+//!   docs`, mdBook installed when missing) and every link inside it
+//!   followed ([`book`]): `book: N pages, M internal links checked, K
+//!   broken`.
 //! * `cargo xtask robot-file`: one robot file (tests/robots/heavy.toml)
 //!   on `hopper-sim run --robot` and on `serve --robot` driven by
 //!   `hopper-link` (sets, a refused file, the round trip, the hops
@@ -85,6 +92,8 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, ExitCode, Stdio};
 
 mod board_init;
+mod book;
+mod bringup_page;
 mod cockpit;
 mod cycles;
 mod docs;
@@ -152,6 +161,8 @@ fn main() -> ExitCode {
             serial.and_then(|s| setup(&root).and_then(|_| hil::run(&root, s)))
         }
         Some("docs") => docs_check(&root, &args[1..]),
+        Some("book") => book::run_check(&root),
+        Some("bring-up-page") => bringup_page::run(&root),
         _ => {
             eprintln!(
                 "usage: cargo xtask <test|size|qemu|hil|link-session|noisy-link|robot-file|new-law NAME|cockpit|slurm|speed|board-init|docs>"
@@ -326,6 +337,7 @@ fn test(root: &Path) -> Result<(), String> {
         ]),
     )?;
     docs_check(root, &[])?;
+    book::run_check(root)?;
     mcu_clippy(
         root,
         "clippy (MCU target)",
@@ -406,6 +418,7 @@ fn test(root: &Path) -> Result<(), String> {
     qemu::run(root)?;
     hil::run(root, None)?;
     session::against_serve(root)?;
+    bringup_page::run(root)?;
     noisy::run(root, true)?;
     robot_file::run(root)?;
     cockpit::run(root)?;

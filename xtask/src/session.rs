@@ -241,7 +241,7 @@ pub fn against_qemu(root: &Path, link: &Path, elf: &Path) -> Result<(), String> 
     Ok(())
 }
 
-/// The bring-up order of docs/board.md (`tests/link-session-bringup.txt`:
+/// The bring-up order (`tests/link-session-bringup.txt`:
 /// every routine, the weighing, the height, a target and the shaped law,
 /// arming, then `params list` and `status` while armed) against a fresh
 /// QEMU link image: it must end armed with `faults: none` and `missed
@@ -478,6 +478,8 @@ pub(crate) fn shell(
         .map_err(|e| format!("{}: {e}", script_path.display()))?
         .replace("OUT/", &format!("{}/", out_dir.display()));
     let _ = std::fs::remove_dir_all(out_dir);
+    // The script's relative paths land in `out_dir`.
+    std::fs::create_dir_all(out_dir).map_err(|e| format!("{}: {e}", out_dir.display()))?;
     eprintln!(
         "xtask: {label}: hopper-link --tcp {addr} shell < {}",
         script_path.display()
@@ -485,6 +487,7 @@ pub(crate) fn shell(
     let started = Instant::now();
     let mut child = Command::new(link)
         .args(["--tcp", addr, "shell", "--stop-on-error"])
+        .current_dir(out_dir)
         .stdin(Stdio::piped())
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())

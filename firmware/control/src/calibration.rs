@@ -119,7 +119,7 @@ crate::param::config! {
         pub adc_bits: u8 = 12,
         /// DAC resolution, bits. Default 12. `1..=16`.
         pub dac_bits: u8 = 12,
-        /// Motor torque constant, N m/A. Default 0.0297 (README). Finite, `> 0`.
+        /// Motor torque constant, N m/A. Default 0.0297 (eq 4.3). Finite, `> 0`.
         pub torque_constant_nm_per_a: f32 = 0.0297,
     }
 }

@@ -57,7 +57,7 @@ pub(crate) fn run(c: &mut Client) -> Result<String> {
 fn hint(why: Option<Refusal>) -> &'static str {
     match why {
         Some(Refusal::HardwareWatchdogOption) => {
-            ": the board's option bytes start its watchdog at reset (WDG_SW = 0), whose reset would cut the 1-2 s sector erase; set WDG_SW to 1 (docs/board.md, \"Saves\"), then save again"
+            ": the board's option bytes start its watchdog at reset (WDG_SW = 0), whose reset would cut the 1-2 s sector erase; set WDG_SW to 1 (docs/board.md, \"Saving to flash\"), then save again"
         }
         Some(Refusal::SupplyLow) => {
             ": the board's supply is below 2.8 V (its voltage detector); a sector erase needs 2.7-3.6 V: check the supply, then save again"

@@ -206,8 +206,8 @@ async fn handle(State(server): State<Arc<Server>>, req: Request) -> Response {
     }
 }
 
-/// The page with the plotting library inlined (nothing loaded from
-/// elsewhere).
+/// The page with the plotting library and the bring-up order inlined
+/// (nothing loaded from elsewhere).
 fn page_html() -> &'static str {
     static HTML: std::sync::OnceLock<String> = std::sync::OnceLock::new();
     HTML.get_or_init(|| {
@@ -218,6 +218,10 @@ fn page_html() -> &'static str {
         .replace(
             "/*UPLOT_JS*/",
             include_str!("../vendor/uplot/uPlot.iife.min.js"),
+        )
+        .replace(
+            "/*BRINGUP_STEPS*/[]",
+            &hopper_link::bringup::cockpit_steps_js(),
         )
     })
 }
