@@ -648,3 +648,32 @@ fn serve_help_says_the_real_start() {
     let o = sim(&["run", "--help"]);
     assert!(String::from_utf8_lossy(&o.stdout).contains("[default: 0.15]"));
 }
+
+/// What serve does not do it refuses, with the way to do it, instead of
+/// ignoring: run's duration and fault injections, from the flags or a
+/// scenario file.
+#[test]
+fn serve_refuses_what_only_run_does() {
+    let dir = std::env::temp_dir().join(format!("serve-refuses-{}", std::process::id()));
+    let _ = std::fs::create_dir_all(&dir);
+    let scenario = dir.join("s.toml");
+    std::fs::write(&scenario, "start_apex_m = 0.1\n").unwrap_or_default();
+    let scenario = scenario.display().to_string();
+    for (args, says) in [
+        (vec!["--duration", "0.5"], "--duration is not for serve"),
+        (vec!["--inject", "estop@0.3"], "estop press"),
+        (
+            vec!["--scenario", scenario.as_str()],
+            "`start_apex_m` is not for serve",
+        ),
+    ] {
+        let mut all = vec!["serve", "--tcp", "127.0.0.1:0", "--for", "0.01"];
+        all.extend(args);
+        let o = sim(&all);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success(), "{all:?}");
+        assert!(err.contains(says), "{all:?}: {err}");
+        assert_eq!(err.trim().lines().count(), 1, "{err}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}

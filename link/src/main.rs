@@ -61,10 +61,13 @@ enum Cmd {
     },
     /// 0 A and the amplifier off; prints the next telemetry record.
     Disarm,
-    /// Clear the latched faults whose cause is gone (only while disarmed).
+    /// Clear the latched faults, only while disarmed and only when every
+    /// one's cause is gone (otherwise nothing is cleared and the faults
+    /// whose cause remains are named).
     ResetFaults,
     /// Record telemetry and hop ledgers: telemetry.csv (units in the
-    /// headers), hops.csv and hop.png in DIR.
+    /// headers), hops.csv, telemetry.mcap and hop.png (from two records on)
+    /// in DIR.
     Record {
         /// Robot time to record, s.
         #[arg(long)]
@@ -108,7 +111,9 @@ enum Cmd {
             hopper_protocol::vocab::Routine::ALL.iter().map(|r| r.name())
         ))]
         routine: String,
-        /// How long it measures, s of robot time.
+        /// How long `sensors`, `tare` and `height` measure, s of robot time
+        /// (0.01 to 10); the routines that drive the motor end with their
+        /// moves.
         #[arg(long, default_value_t = 0.5)]
         seconds: f32,
     },
@@ -124,9 +129,10 @@ enum Cmd {
         toe: f32,
     },
     /// Save the machine's constants and calibration (the `model.*` and
-    /// `calibration.*` parameters and the spring's rate and preload: what
-    /// a robot file and the bring-up routines set) to the robot's flash, to
-    /// load at every boot; refused while armed.
+    /// `calibration.*` parameters but the height zero, which is per boot,
+    /// and the spring's rate and preload: what a robot file and the
+    /// bring-up routines set) to the robot's flash, to load at every boot;
+    /// refused while armed.
     Save,
     /// The robot's constants and calibration as a robot file (TOML, the
     /// parameter table's names): `show` writes the robot's, `load` gives it

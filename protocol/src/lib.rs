@@ -92,7 +92,8 @@ pub enum Request {
     Arm,
     /// Disarm.
     Disarm,
-    /// Clear the latched faults whose cause is gone (only while disarmed).
+    /// Clear the latched faults (only while disarmed, and only when every
+    /// one's cause is gone).
     ResetFaults,
     /// The number of parameters in the table.
     ParamCount,
@@ -1072,7 +1073,7 @@ mod tests {
     /// A hardware-in-the-loop period's frames at their largest (every
     /// counter and code at its widest varint, a hop ending): what the
     /// line carries per period, which bounds the periods per second a
-    /// baud rate allows (docs/board.md, "Hardware in the loop").
+    /// baud rate allows (docs/hil.md).
     #[test]
     fn hil_frames_fit_and_their_size_is_known() {
         let sample = HostMsg::HilSample(HilSample {

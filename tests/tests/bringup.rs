@@ -154,7 +154,7 @@ fn offsets(r: &VirtualRobot) -> (f32, f32) {
     )
 }
 
-/// The whole bring-up of docs/board.md, then the shaped controller: with
+/// The whole bring-up of docs/bring-up.md, then the shaped controller: with
 /// the spring 15% stiffer and the load cell 5% low, and the spring 15%
 /// softer and the load cell 5% high, the routines recover every constant
 /// within its tolerance (the CI sessions' figures) and the robot then hops

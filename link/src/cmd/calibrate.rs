@@ -8,7 +8,7 @@ use std::fmt::Write as _;
 use std::time::{Duration, Instant};
 
 /// What to do about a routine's refusal, where the reason alone does not
-/// say (the bring-up order of docs/board.md).
+/// say (the bring-up order of docs/bring-up.md).
 fn next_step(r: hopper_protocol::vocab::Refusal) -> Option<&'static str> {
     use hopper_protocol::vocab::Refusal as R;
     Some(match r {

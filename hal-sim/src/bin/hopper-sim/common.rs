@@ -63,12 +63,13 @@ pub(crate) struct BaseArgs {
     /// Flight PD proportional gain, A/rad (default: eq 4.13, 20.3152; with
     /// the design preset the Chapter 2 laws (step-open, step-closed,
     /// open-torque, energy, velocity) run Table 2.1's 8e4 N/m on the nut,
-    /// 1.8953 A/rad).
+    /// 1.8953 A/rad with the design motor; another motor's torque constant
+    /// converts them).
     #[arg(long, allow_negative_numbers = true)]
     flight_kp: Option<f64>,
     /// Flight PD derivative gain, A s/rad (default: eq 4.13, 0.6077; the
     /// Chapter 2 laws on the design preset: Table 2.1's 300 N s/m on the
-    /// nut, 0.0071073 A s/rad).
+    /// nut, 0.0071073 A s/rad with the design motor).
     #[arg(long, allow_negative_numbers = true)]
     flight_kd: Option<f64>,
     /// Sensor noise: default (load cell 2 N, potentiometer 0.1 mm, 1 sigma)
@@ -83,7 +84,7 @@ pub(crate) struct BaseArgs {
     pub(crate) start_apex: Option<f64>,
     /// Simulated time, s [default: 5].
     #[arg(long, allow_negative_numbers = true)]
-    duration: Option<f64>,
+    pub(crate) duration: Option<f64>,
     /// Control rate, Hz [default: 10000].
     #[arg(long)]
     control_hz: Option<f64>,
@@ -92,7 +93,7 @@ pub(crate) struct BaseArgs {
     /// noise-burst, estop, amp-fault, dac-error, overrun (docs/safety.md).
     /// Replaces the scenario file's `inject` list.
     #[arg(long = "inject", value_name = "KIND@TIME")]
-    inject: Vec<String>,
+    pub(crate) inject: Vec<String>,
     /// Set a firmware parameter by its name in the parameter table
     /// (docs/parameters.md), e.g. `--set shaped.switch_fraction=0.5`;
     /// repeatable, applied after every other setting.

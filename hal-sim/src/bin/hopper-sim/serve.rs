@@ -11,6 +11,18 @@ use clap::Parser;
 #[command(mut_arg("start_apex", |a| a.help(
     "Hold the body with the toe this high above the ground (m) until armed, then release it [default: standing on its toe, released 1 mm up]"
 )))]
+// The virtual robot runs until stopped and takes its faults from the
+// operator (the simulated e-stop), so run's time and injections are
+// refused here rather than ignored.
+#[command(mut_arg("duration", |a| a.help(
+    "Not for serve (refused): it runs until killed, or for --for SECONDS of robot time"
+)))]
+#[command(mut_arg("inject", |a| a.help(
+    "Not for serve (refused): press the simulated e-stop with `hopper-link ... estop press`; `hopper-sim run --inject` injects faults"
+)))]
+#[command(mut_arg("scenario", |a| a.help(
+    "Scenario file (TOML: plant, controller, sensors; see scenarios/). Flags given as well override it. Its start apex, duration and inject list are run's: serve refuses a file that sets them"
+)))]
 pub(crate) struct ServeArgs {
     #[command(flatten)]
     base: BaseArgs,
@@ -66,6 +78,27 @@ pub(crate) struct ServeArgs {
 
 pub(crate) fn cmd_serve(a: ServeArgs) -> Result<()> {
     let file = a.base.scenario()?;
+    if a.base.duration.is_some() {
+        bail!("--duration is not for serve: the virtual robot runs until killed, or for --for SECONDS of robot time");
+    }
+    if !a.base.inject.is_empty() {
+        bail!("--inject is not for serve: press the simulated e-stop with `hopper-link --tcp ADDR estop press`; `hopper-sim run --inject KIND@TIME` injects faults");
+    }
+    if let Some(f) = &file {
+        let o = &f.settings;
+        for (set, key) in [
+            (o.start_apex_m.is_some(), "start_apex_m"),
+            (o.duration_s.is_some(), "duration_s"),
+            (o.inject.as_ref().is_some_and(|l| !l.is_empty()), "inject"),
+        ] {
+            if set {
+                bail!(
+                    "{}: `{key}` is not for serve (the virtual robot starts standing, or held up by --start-apex, runs until killed and takes no injections)",
+                    f.origin
+                );
+            }
+        }
+    }
     let settings = resolve(file.as_ref(), &a.base)?;
     settings.check().map_err(anyhow::Error::msg)?;
     if !(a.speed.is_finite() && a.speed > 0.0 && a.speed <= 100.0) {
