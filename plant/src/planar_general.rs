@@ -308,6 +308,23 @@ pub struct GeneralRunner {
     s: [f64; 8],
     t_s: f64,
     stabiliser: Stabiliser,
+    actuation: Actuation,
+}
+
+/// What the machine's actuators apply, held until set again (zero: the
+/// passive runner).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Actuation {
+    /// The hip motor's torque on the leg, the body taking the reaction
+    /// (leg forward positive, as `theta`), N m.
+    pub hip_torque_nm: f64,
+    /// The leg actuator's force along the leg in stance, pushing the hip
+    /// away from the toe, N (in flight the leg rests on its stop and the
+    /// actuator has nothing to push against).
+    pub leg_thrust_n: f64,
+    /// A push on the body at the hip, forward positive (a disturbance: an
+    /// impulse is this force held for a while), N.
+    pub push_n: f64,
 }
 
 /// Solves `a x = b` by Gaussian elimination with partial pivoting; `None`
@@ -362,7 +379,19 @@ impl GeneralRunner {
             s: apex.flight_state(),
             t_s: 0.0,
             stabiliser: Stabiliser::PASSIVE,
+            actuation: Actuation::default(),
         })
+    }
+
+    /// Applies `a` from now on (a zero-order hold: the controller's
+    /// output between two of its periods).
+    pub fn set_actuation(&mut self, a: Actuation) {
+        self.actuation = a;
+    }
+
+    /// What the actuators apply.
+    pub fn actuation(&self) -> Actuation {
+        self.actuation
     }
 
     /// With the forward-speed stabiliser of eqs 2.79-2.80: in stance the
@@ -565,7 +594,8 @@ impl GeneralRunner {
         let (rel, reld) = (s[it] - s[ip], s[it + 4] - s[ip + 4]);
         let hip_torque = -p.hip_stiffness_nm_per_rad * (rel - p.hip_rest_angle_rad)
             - p.hip_damping_nms_per_rad * reld
-            + dry(p.hip_friction_nm, reld);
+            + dry(p.hip_friction_nm, reld)
+            + self.actuation.hip_torque_nm;
         q[it] += hip_torque;
         q[ip] -= hip_torque;
         // The planarizer on the hip's velocity.
@@ -575,7 +605,7 @@ impl GeneralRunner {
             (0..4).map(|a| hip.jac[1][a] * v[a]).sum::<f64>(),
         ];
         let fp = [
-            dry(p.planarizer_friction_n, hv[0]),
+            dry(p.planarizer_friction_n, hv[0]) + self.actuation.push_n,
             dry(p.planarizer_friction_n, hv[1]),
         ];
         for (a, q) in q.iter_mut().enumerate() {
@@ -599,6 +629,7 @@ impl GeneralRunner {
         p.leg_stiffness_n_per_m * (p.leg_length_m - l) - p.leg_damping_ns_per_m * ld
             + dry(p.leg_friction_n, ld)
             - self.stabiliser.force_n(x_dot_mps)
+            + self.actuation.leg_thrust_n
     }
 
     /// The leg's force along it (spring, damper, friction, less the

@@ -81,6 +81,7 @@ pub mod param;
 pub mod params;
 pub mod pd_design;
 pub mod persist;
+pub mod planar;
 pub mod runner;
 pub mod selftest;
 pub mod supervisor;

@@ -131,6 +131,8 @@ impl AppendixArgs {
     }
 }
 
+// Parsed once per process: the variants' sizes cost nothing.
+#[allow(clippy::large_enum_variant)]
 #[derive(Subcommand)]
 pub(crate) enum PlanarCmd {
     /// Run from the passive design's apex (T_step 0.5 s, rho 0.125): the
@@ -163,6 +165,24 @@ pub(crate) enum PlanarCmd {
         /// Print JSON instead of text.
         #[arg(long)]
         json: bool,
+        /// The controller: passive (the thesis's runner, its hip spring and
+        /// the stabiliser) or raibert (the hip actuated: Raibert's thrust,
+        /// foot placement and attitude control on the Appendix A machine
+        /// with Table 2.2's masses; --speed-profile, --target-apex and
+        /// --inject apply).
+        #[arg(long, value_parser = ["passive", "raibert"], default_value = "passive")]
+        controller: String,
+        /// raibert: the speed command, TIME:SPEED,... (s, m/s) from time 0
+        /// [default: 0:SPEED, the --speed given].
+        #[arg(long, value_name = "T:V,...")]
+        speed_profile: Option<String>,
+        /// raibert: the toe's apex to hold, m.
+        #[arg(long, default_value_t = 0.15)]
+        target_apex: f64,
+        /// raibert: push the body, push@TIME:IMPULSE (s, N s, forward
+        /// positive; held for 0.05 s); repeatable.
+        #[arg(long = "inject", value_name = "push@T:N")]
+        inject: Vec<String>,
     },
     /// Figures 2.18-2.22 (fig-2-18.png/.svg ...) into DIR.
     Figures {
@@ -354,6 +374,92 @@ fn cmd_planar_stability(
     Ok(())
 }
 
+/// `planar run --controller raibert`: the run, its strides and its
+/// figures against their bounds.
+fn cmd_planar_raibert(
+    speed: f64,
+    profile: Option<&str>,
+    target_apex: f64,
+    inject: &[String],
+    duration: f64,
+    json: bool,
+) -> Result<()> {
+    use hal_sim::planar_raibert::{self as pr, Push, SpeedProfile};
+    let profile = SpeedProfile::parse(profile.unwrap_or(&format!("0:{speed}")))
+        .map_err(anyhow::Error::msg)?;
+    let pushes = inject
+        .iter()
+        .map(|i| Push::parse(i))
+        .collect::<std::result::Result<Vec<_>, _>>()
+        .map_err(anyhow::Error::msg)?;
+    if !(target_apex.is_finite() && (0.02..=0.5).contains(&target_apex)) {
+        bail!("--target-apex {target_apex} must be within 0.02 ..= 0.5 m");
+    }
+    let mut cfg = hopper_control::planar::raibert::RaibertConfig::table_2_2();
+    cfg.target_apex_m = target_apex as f32;
+    let r = pr::simulate(&profile, &pushes, duration, cfg).map_err(anyhow::Error::msg)?;
+    if json {
+        say!("{}", serde_json::to_string_pretty(&r)?);
+        return Ok(());
+    }
+    let settle = |s: &pr::Settling| {
+        format!(
+            "{:>6.2} s  {:>5.2} m/s  {}  {}",
+            s.at_s,
+            s.command_mps,
+            s.hops.map_or("never".into(), |h| format!("{h:>2} hops")),
+            s.steady_mps
+                .map_or("-".into(), |v| format!("steady {v:.3} m/s"))
+        )
+    };
+    say!(
+        "planar (Appendix A, hip actuated): raibert controller, {:.1} s simulated, {} strides",
+        r.duration_s,
+        r.strides.len()
+    );
+    say!(
+        "  speed steps (within 10% of the command, or 0.05 m/s at standstill, within {} hops):",
+        pr::SETTLE_HOPS
+    );
+    for s in &r.steps {
+        say!("    {}", settle(s));
+    }
+    for s in &r.pushes {
+        say!(
+            "  push at {:.2} s      speed back within the band: {}; largest pitch after it {:.2} deg",
+            s.at_s,
+            s.hops.map_or("never".into(), |h| format!("{h} hops")),
+            s.max_pitch_deg
+        );
+    }
+    say!(
+        "  pitch              largest {:.2} deg (bound {} deg; the strides after a push left out)",
+        r.max_pitch_deg,
+        pr::PITCH_BOUND_DEG
+    );
+    say!(
+        "  apex               target {:.3} m; largest error from stride {} on {:.1}% (bound {:.0}%)",
+        r.target_apex_m,
+        pr::APEX_FROM_HOP + 1,
+        100.0 * r.apex_max_error,
+        100.0 * pr::APEX_BAND
+    );
+    say!(
+        "  fall               {}",
+        r.fell_at_s
+            .map_or("none".into(), |t| format!("fell at {t:.2} s"))
+    );
+    say!(
+        "  verdict            {}",
+        if r.passes() {
+            "every figure within its bound"
+        } else {
+            "OUT OF BOUNDS"
+        }
+    );
+    Ok(())
+}
+
 pub(crate) fn cmd_planar(cmd: &PlanarCmd) -> Result<()> {
     match cmd {
         PlanarCmd::Run {
@@ -365,7 +471,24 @@ pub(crate) fn cmd_planar(cmd: &PlanarCmd) -> Result<()> {
             appendix,
             out,
             json,
+            controller,
+            speed_profile,
+            target_apex,
+            inject,
         } => {
+            if controller == "raibert" {
+                return cmd_planar_raibert(
+                    *speed,
+                    speed_profile.as_deref(),
+                    *target_apex,
+                    inject,
+                    *duration,
+                    *json,
+                );
+            }
+            if speed_profile.is_some() || !inject.is_empty() {
+                bail!("--speed-profile and --inject need --controller raibert (the passive runner runs at --speed)");
+            }
             use hal_sim::planar_sim::{simulate_model, Start};
             let start = if start == "fixed-point" {
                 Start::FixedPoint
