@@ -10,7 +10,8 @@
 //!   scenario image runs from `scenarios/qemu/NAME.toml`
 //!   (`HOPPER_QEMU_SCENARIO`, default `energy-apex`; the file the xtask's
 //!   golden check runs on the host too) into `$OUT_DIR/qemu_scenario.rs`,
-//!   its `[params]` included.
+//!   its `[params]` included; and the planar image's run from
+//!   `scenarios/qemu/planar.toml` into `$OUT_DIR/planar_scenario.rs`.
 //!
 //! A bad value stops the build with one error naming it.
 
@@ -46,6 +47,8 @@ fn main() -> Result<(), Box<dyn Error>> {
     if env::var_os("CARGO_FEATURE_QEMU_SIM").is_some() {
         let scenario = qemu_scenario(&root)?;
         fs::write(out_dir.join("qemu_scenario.rs"), scenario)?;
+        let planar = planar_scenario(&root)?;
+        fs::write(out_dir.join("planar_scenario.rs"), planar)?;
     }
     Ok(())
 }
@@ -169,4 +172,60 @@ fn qemu_scenario(root: &std::path::Path) -> Result<String, Box<dyn Error>> {
          pub const PARAMS: &[(&str, f32)] = &[{params}];"
     )?;
     Ok(s)
+}
+
+/// The QEMU planar image's constants from `scenarios/qemu/planar.toml`:
+/// the speed profile (`T:V,...` from time 0, times increasing), the apex
+/// target and the whole seconds it runs.
+fn planar_scenario(root: &std::path::Path) -> Result<String, Box<dyn Error>> {
+    let path = root.join("scenarios/qemu/planar.toml");
+    println!("cargo:rerun-if-changed={}", path.display());
+    let text = fs::read_to_string(&path).map_err(|e| format!("{}: {e}", path.display()))?;
+    let t: toml::Table = text
+        .parse()
+        .map_err(|e| format!("{}: {e}", path.display()))?;
+    let bad = |what: &str| format!("{}: {what}", path.display());
+    let profile = t
+        .get("speed_profile")
+        .and_then(toml::Value::as_str)
+        .ok_or_else(|| bad("`speed_profile` must be a string `T:V,...`"))?;
+    let mut steps = String::new();
+    let mut last = -1.0;
+    for item in profile.split(',') {
+        let (a, b) = item
+            .split_once(':')
+            .ok_or_else(|| bad(&format!("`speed_profile` item `{item}` is not T:V")))?;
+        let (time, speed): (f64, f64) = (
+            a.trim()
+                .parse()
+                .map_err(|_| bad(&format!("`{a}` is not a time")))?,
+            b.trim()
+                .parse()
+                .map_err(|_| bad(&format!("`{b}` is not a speed")))?,
+        );
+        if (last < 0.0 && time != 0.0) || time <= last || speed.abs() > 3.0 {
+            return Err(bad(
+                "`speed_profile` starts at 0 s, its times increase, speeds within +-3 m/s",
+            )
+            .into());
+        }
+        last = time;
+        write!(steps, "({time:?}, {speed:?}), ")?;
+    }
+    let target = match t.get("target_apex_m") {
+        Some(toml::Value::Float(v)) if (0.02..=0.5).contains(v) => *v,
+        _ => return Err(bad("`target_apex_m` must be a number in 0.02..=0.5").into()),
+    };
+    let duration = match t.get("duration_s") {
+        Some(toml::Value::Integer(v)) if (1..=600).contains(v) => *v,
+        _ => return Err(bad("`duration_s` must be whole seconds in 1..=600").into()),
+    };
+    Ok(format!(
+        "/// The speed command's steps `(from s, m/s)`.\n\
+         pub const PLANAR_PROFILE: &[(f64, f64)] = &[{steps}];\n\
+         /// The toe's apex to hold, m.\n\
+         pub const PLANAR_TARGET_APEX_M: f32 = {target:?};\n\
+         /// Simulated time, s.\n\
+         pub const PLANAR_DURATION_S: u32 = {duration};\n"
+    ))
 }

@@ -245,6 +245,23 @@ impl GeneralParams {
         self.trunk_mass_kg + self.leg_mass_kg + self.toe_mass_kg
     }
 
+    /// The runner with its hip actuated: Table 2.2's masses, the passive
+    /// design's hip spring replaced by a motor (no spring), and the losses
+    /// Appendix A lists that the machine would have: a 0.3 kg toe, the
+    /// leg's centre 0.1 m below the hip, a 20 N s/m leg damper, 5 N of dry
+    /// friction on the planarizer and on the leg, 0.2 N m at the hip.
+    pub fn actuated_table_2_2() -> Self {
+        let mut p = Self::from_section_2_2(&PlanarParams::table_2_2());
+        p.hip_stiffness_nm_per_rad = 0.0;
+        p.toe_mass_kg = 0.3;
+        p.leg_com_from_hip_m = 0.1;
+        p.leg_damping_ns_per_m = 20.0;
+        p.planarizer_friction_n = 5.0;
+        p.leg_friction_n = 5.0;
+        p.hip_friction_nm = 0.2;
+        p
+    }
+
     /// Masses, inertias, the leg and its spring and gravity positive; the
     /// other terms within [`TERM_LIMITS`]; the leg's centre on the leg.
     /// Else the first field that is not.
@@ -622,7 +639,7 @@ impl GeneralRunner {
 
     /// In stance at `s`, the leg's force along it (the spring, its damper,
     /// the leg's friction, less the stabiliser's `F_c` at the hip's speed
-    /// `x_dot_mps`), N.
+    /// `x_dot_mps`, plus the leg actuator's thrust), N.
     fn leg_force_at(&self, s: &[f64; 8], x_dot_mps: f64) -> f64 {
         let p = &self.p;
         let (l, ld) = (s[0], s[4]);
@@ -633,7 +650,7 @@ impl GeneralRunner {
     }
 
     /// The leg's force along it (spring, damper, friction, less the
-    /// stabiliser), N (0 in flight).
+    /// stabiliser, plus the leg actuator's thrust), N (0 in flight).
     pub fn leg_force_n(&self) -> f64 {
         match self.phase {
             GeneralPhase::Flight => 0.0,

@@ -4,15 +4,13 @@
 //! pushes; per stride (apex to apex) its mean speed, the toe's apex and
 //! the largest pitch, and the figures the controller is judged by.
 
-use hopper_control::planar::raibert::{Raibert, RaibertConfig};
-use hopper_control::planar::{PlanarCommand, PlanarEstimate};
-use hopper_plant::planar::{ApexState, PlanarEvent, PlanarParams};
-use hopper_plant::planar_general::{Actuation, GeneralParams, GeneralRunner};
+use hopper_control::planar::raibert::RaibertConfig;
+use hopper_plant::planar::PlanarEvent;
+use hopper_plant::planar_general::GeneralParams;
+use hopper_sil::planar::PlanarLoop;
+pub use hopper_sil::planar::DT_S;
 use serde::Serialize;
 
-/// The plant's integration step and the controller's period, s (the
-/// firmware's 10 kHz).
-pub const DT_S: f64 = 1e-4;
 /// How close a stride's speed must come to its command: a tenth of it,
 /// or this much for a command near standstill, m/s.
 pub const SPEED_FLOOR_MPS: f64 = 0.05;
@@ -27,21 +25,9 @@ pub const APEX_FROM_HOP: usize = 5;
 /// A push lasts this long (its force is the impulse over it), s.
 pub const PUSH_S: f64 = 0.05;
 
-/// The Appendix A runner with Table 2.2's masses, its hip driven by a
-/// motor instead of the passive design's spring, and Appendix A's losses
-/// the machine would have: a 0.3 kg toe, the leg's centre 0.1 m below the
-/// hip, a leg damper, and dry friction on the planarizer, the leg and the
-/// hip.
+/// The machine the runs are on: [`GeneralParams::actuated_table_2_2`].
 pub fn actuated_machine() -> GeneralParams {
-    let mut p = GeneralParams::from_section_2_2(&PlanarParams::table_2_2());
-    p.hip_stiffness_nm_per_rad = 0.0;
-    p.toe_mass_kg = 0.3;
-    p.leg_com_from_hip_m = 0.1;
-    p.leg_damping_ns_per_m = 20.0;
-    p.planarizer_friction_n = 5.0;
-    p.leg_friction_n = 5.0;
-    p.hip_friction_nm = 0.2;
-    p
+    GeneralParams::actuated_table_2_2()
 }
 
 /// A speed command that steps at given times: `T:V,T:V,...` (s, m/s),
@@ -242,16 +228,7 @@ pub fn simulate(
         return Err(format!("--duration {duration_s} must be in (0, 600] s"));
     }
     let p = actuated_machine();
-    let mut ctl = Raibert::new(cfg).map_err(|e| format!("raibert: {} is out of range", e.0))?;
-    let start = ApexState {
-        z_m: p.leg_length_m + f64::from(cfg.target_apex_m),
-        x_dot_mps: profile.at(0.0),
-        phi_rad: 0.0,
-        theta_rad: 0.0,
-        phi_dot_rad_s: 0.0,
-        theta_dot_rad_s: 0.0,
-    };
-    let mut plant = GeneralRunner::from_apex(p, &start).map_err(|e| format!("{e:?}"))?;
+    let mut lp = PlanarLoop::new(p, cfg, profile.at(0.0)).map_err(|e| format!("{e:?}"))?;
     let mut strides = Vec::new();
     let mut frames = Vec::new();
     let mut last_apex: Option<(f64, f64)> = None;
@@ -259,39 +236,17 @@ pub fn simulate(
     let mut first_pitch: f64 = 0.0;
     let mut fell_at_s = None;
     let mut foot_ahead = 0.0;
-    let mut prev_leg = p.leg_length_m;
     let steps = (duration_s / DT_S).round() as usize;
     for k in 0..steps {
         let t = k as f64 * DT_S;
-        let st = plant.state();
-        let leg_rate = (st.leg_length_m - prev_leg) / DT_S;
-        prev_leg = st.leg_length_m;
-        let est = PlanarEstimate {
-            stance: st.stance,
-            x_dot_mps: st.x_dot_mps as f32,
-            z_m: st.z_m as f32,
-            z_dot_mps: st.z_dot_mps as f32,
-            phi_rad: st.phi_rad as f32,
-            phi_dot_rad_s: st.phi_dot_rad_s as f32,
-            theta_rad: st.theta_rad as f32,
-            theta_dot_rad_s: st.theta_dot_rad_s as f32,
-            leg_rate_mps: if st.stance { leg_rate as f32 } else { 0.0 },
-        };
-        let command = profile.at(t);
-        let PlanarCommand {
-            hip_torque_nm,
-            leg_thrust_n,
-        } = ctl.step(&est, command as f32, DT_S as f32);
+        let st = lp.state();
+        let est = lp.estimate();
+        let cmd = lp.control(&est, profile.at(t));
         let push_n = pushes
             .iter()
             .filter(|p| t >= p.at_s && t < p.at_s + PUSH_S)
             .map(|p| p.impulse_ns / PUSH_S)
             .sum();
-        plant.set_actuation(Actuation {
-            hip_torque_nm: f64::from(hip_torque_nm),
-            leg_thrust_n: f64::from(leg_thrust_n),
-            push_n,
-        });
         let pitch = st.phi_rad.abs().to_degrees();
         stride_pitch = stride_pitch.max(pitch);
         if k % 100 == 0 {
@@ -301,20 +256,19 @@ pub fn simulate(
             fell_at_s = Some(t);
             break;
         }
-        let x_before = st.x_m;
         let mut apex = None;
         let mut touchdown = false;
-        plant.step(DT_S, &mut |e| match e {
+        lp.advance(cmd, push_n, &mut |e| match e {
             PlanarEvent::Apex { t_s, apex: a } => apex = Some((t_s, a)),
             PlanarEvent::Touchdown { .. } => touchdown = true,
             PlanarEvent::Liftoff { .. } => {}
         });
         if touchdown {
-            let s = plant.state();
+            let s = lp.state();
             foot_ahead = s.leg_length_m * s.theta_rad.sin();
         }
         if let Some((t_s, a)) = apex {
-            let x = plant.state().x_m.max(x_before);
+            let x = lp.state().x_m;
             if let Some((t0, x0)) = last_apex {
                 strides.push(Stride {
                     t_s,

@@ -39,7 +39,10 @@
 //!   terminated=... golden=...`, and the same for the Feather's pin map
 //!   against `tests/board-init-feather.trace`: `board-init-feather: ...`;
 //!   then the HardFault entry on both maps: `fault-test: ...`,
-//!   `fault-test-feather: ...`.
+//!   `fault-test-feather: ...`; then the planar machine's controller on
+//!   its image against the host's run of the same loop: `qemu-planar:
+//!   strides=N golden_max_diff=D step_instr_min=.. step_instr_mean=..
+//!   step_instr_max=.. missed=0` (`cargo xtask qemu-planar` alone).
 //! * `cargo xtask board-init`: the board image's init check alone.
 //! * `cargo xtask hil [--serial PORT]`: the hardware-in-the-loop image
 //!   (`hopper-hil`) on QEMU (or a board on PORT) against `hopper-sim run
@@ -139,6 +142,7 @@ fn main() -> ExitCode {
         Some("test") => test(&root),
         Some("size") => setup(&root).and_then(|_| size(&root)),
         Some("qemu") => setup(&root).and_then(|_| qemu::run(&root)),
+        Some("qemu-planar") => setup(&root).and_then(|_| qemu::planar(&root)),
         Some("link-session") => session::against_serve(&root),
         Some("noisy-link") => setup(&root).and_then(|_| noisy::run(&root, true)),
         Some("robot-file") => setup(&root).and_then(|_| robot_file::run(&root)),

@@ -110,6 +110,12 @@ pub fn run(root: &Path) -> Result<(), String> {
         }
         failed.push(e);
     }
+    if let Err(e) = run_planar(root, &sim) {
+        if !e.starts_with("qemu planar scenario failed") {
+            println!("qemu-planar: error (see above)");
+        }
+        failed.push(e);
+    }
     for s in &SCENARIOS {
         if let Err(e) = run_scenario(root, s, &sim) {
             // A failure before the summary (build, QEMU, decoding, the host
@@ -313,6 +319,151 @@ fn run_scenario(root: &Path, scenario: &Scenario, sim: &Path) -> Result<(), Stri
         Err(format!(
             "qemu {} scenario failed: {}",
             scenario.name,
+            problems.join("; ")
+        ))
+    }
+}
+
+/// `cargo xtask qemu-planar`: the planar image alone ([`run_planar`]).
+pub fn planar(root: &Path) -> Result<(), String> {
+    crate::ensure_flip_link(root)?;
+    ensure_qemu()?;
+    let (_, sim) = crate::session::host_binaries(root)?;
+    run_planar(root, &sim)
+}
+
+/// Largest |host - QEMU| of a stride's apex or speed in the planar run
+/// (no sensor noise there: the same code on both, in IEEE arithmetic and
+/// `libm`), m or m/s.
+const PLANAR_GOLDEN_TOLERANCE: f64 = 1e-9;
+
+/// The planar machine's controller on the target (`hopper-qemu-planar`,
+/// `scenarios/qemu/planar.toml`): its strides against the host's run of
+/// the same loop (`hopper-sim planar run --controller raibert`), its step
+/// within the vertical laws' budgets. Prints `qemu-planar: strides=N
+/// golden_max_diff=D step_instr_min=.. step_instr_mean=.. step_instr_max=..
+/// missed=N`.
+fn run_planar(root: &Path, sim: &Path) -> Result<(), String> {
+    let file = root.join("scenarios/qemu/planar.toml");
+    let text = std::fs::read_to_string(&file).map_err(|e| format!("{}: {e}", file.display()))?;
+    let t: toml::Table = text
+        .parse()
+        .map_err(|e| format!("{}: {e}", file.display()))?;
+    let get = |k: &str| {
+        t.get(k)
+            .map(|v| v.as_str().map_or_else(|| v.to_string(), str::to_string))
+            .ok_or(format!("{}: no `{k}`", file.display()))
+    };
+    let (profile, target, duration) = (
+        get("speed_profile")?,
+        get("target_apex_m")?,
+        get("duration_s")?,
+    );
+    let target_dir = crate::target_dir(root)?.join("qemu");
+    let elf = build_image(
+        root,
+        "firmware build (QEMU planar image)",
+        "hopper-qemu-planar",
+        cargo(),
+        &target_dir,
+    )?;
+    let (bytes, status) = run_qemu(&elf, 0)?;
+    let lines = decode(&elf, &bytes)?;
+    for l in lines.iter().filter(|l| !l.starts_with("stride ")) {
+        println!("qemu-planar| {l}");
+    }
+    let (summary, kv) = parse_summary(&lines)
+        .ok_or("the QEMU planar run printed no summary (see the log above)")?;
+    let num = |k: &str| -> Result<f64, String> {
+        kv.get(k)
+            .and_then(|v| v.parse::<f64>().ok())
+            .ok_or(format!("summary lacks {k}: {summary}"))
+    };
+    let (imin, imean, imax, missed) = (
+        num("step_instr_min")? as u64,
+        num("step_instr_mean")? as u64,
+        num("step_instr_max")? as u64,
+        num("missed")? as u64,
+    );
+    let qemu: Vec<(f64, f64)> = lines
+        .iter()
+        .filter_map(|l| l.strip_prefix("stride "))
+        .filter_map(|r| {
+            let v: Vec<f64> = r
+                .split_whitespace()
+                .filter_map(|x| x.parse().ok())
+                .collect();
+            Some((*v.get(1)?, *v.get(2)?))
+        })
+        .collect();
+    let out = Command::new(sim)
+        .args([
+            "planar",
+            "run",
+            "--controller",
+            "raibert",
+            "--speed-profile",
+            &profile,
+            "--target-apex",
+            &target,
+            "--duration",
+            &duration,
+            "--json",
+        ])
+        .output()
+        .map_err(|e| format!("hopper-sim: {e}"))?;
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout)
+        .map_err(|e| format!("hopper-sim planar run --json: {e}"))?;
+    let host: Vec<(f64, f64)> = json["strides"]
+        .as_array()
+        .map(|a| {
+            a.iter()
+                .filter_map(|s| Some((s["apex_m"].as_f64()?, s["speed_mps"].as_f64()?)))
+                .collect()
+        })
+        .unwrap_or_default();
+    let mut problems = Vec::new();
+    let diff = host
+        .iter()
+        .zip(&qemu)
+        .map(|(h, q)| (h.0 - q.0).abs().max((h.1 - q.1).abs()))
+        .fold(0.0, f64::max);
+    if host.len() != qemu.len() || host.is_empty() {
+        problems.push(format!(
+            "golden check: {} strides on the host, {} on QEMU",
+            host.len(),
+            qemu.len()
+        ));
+    } else if diff > PLANAR_GOLDEN_TOLERANCE {
+        problems.push(format!(
+            "golden check: a stride differs by {diff:.2e} (tolerance {PLANAR_GOLDEN_TOLERANCE:.0e})"
+        ));
+    }
+    if !status {
+        problems.push("the image exited with failure (a fall or a missed deadline)".into());
+    }
+    if missed != 0 {
+        problems.push(format!("{missed} missed deadlines"));
+    }
+    if imax > STEP_MAX_CEILING {
+        problems.push(format!(
+            "control step max {imax} instructions exceeds the ceiling {STEP_MAX_CEILING}"
+        ));
+    }
+    if imean > STEP_MEAN_BUDGET {
+        problems.push(format!(
+            "control step mean {imean} instructions exceeds the budget {STEP_MEAN_BUDGET}"
+        ));
+    }
+    println!(
+        "qemu-planar: strides={} golden_max_diff={diff:.2e} step_instr_min={imin} step_instr_mean={imean} step_instr_max={imax} missed={missed}",
+        qemu.len()
+    );
+    if problems.is_empty() {
+        Ok(())
+    } else {
+        Err(format!(
+            "qemu planar scenario failed: {}",
             problems.join("; ")
         ))
     }

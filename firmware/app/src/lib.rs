@@ -12,6 +12,7 @@
 //! | `hopper-sih` | `src/bin/sih.rs` | the simulated hopper on a board (the plant on the chip, the link on its USART) | `sih` |
 //! | `hopper-qemu` | `src/bin/qemu.rs` | the QEMU scenario | `qemu-sim` |
 //! | `hopper-qemu-link` | `src/bin/qemu-link.rs` | the QEMU link image | `qemu-sim` |
+//! | `hopper-qemu-planar` | `src/bin/qemu-planar.rs` | the planar machine's controller on QEMU | `qemu-sim` |
 //! | `panic-check` | `src/bin/panic-check.rs` | the panic-never link check | |
 //!
 //! Features are additive: `board` brings the RTT logger, `qemu-sim` the

@@ -11,5 +11,6 @@
 //! `no_std` and allocation-free: the QEMU images link it.
 #![cfg_attr(not(test), no_std)]
 
+pub mod planar;
 pub mod robot;
 pub mod sim_io;
