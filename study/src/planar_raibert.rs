@@ -10,6 +10,7 @@ use hopper_plant::planar_general::GeneralParams;
 use hopper_sil::planar::PlanarLoop;
 pub use hopper_sil::planar::DT_S;
 use serde::Serialize;
+use std::path::{Path, PathBuf};
 
 /// How close a stride's speed must come to its command: a tenth of it,
 /// or this much for a command near standstill, m/s.
@@ -166,8 +167,11 @@ pub struct RaibertRun {
     /// The largest apex error from [`APEX_FROM_HOP`] on, the strides after
     /// a push left out, fraction of the target.
     pub apex_max_error: f64,
-    /// When it fell (hip below half the leg or |pitch| beyond 45 deg), s.
+    /// When it fell (hip below half the leg or |pitch| beyond 45 deg) or
+    /// the guard stopped it, s.
     pub fell_at_s: Option<f64>,
+    /// Which of the guard's limits stopped it, if one did.
+    pub stopped_by: Option<String>,
     /// Simulated time, s.
     pub duration_s: f64,
     /// Hip position, height, pitch and leg angle every 10 ms, for the
@@ -235,6 +239,7 @@ pub fn simulate(
     let mut stride_pitch: f64 = 0.0;
     let mut first_pitch: f64 = 0.0;
     let mut fell_at_s = None;
+    let mut stopped_by = None;
     let mut foot_ahead = 0.0;
     let steps = (duration_s / DT_S).round() as usize;
     for k in 0..steps {
@@ -254,6 +259,12 @@ pub fn simulate(
         }
         if st.z_m < 0.5 * p.leg_length_m || pitch > 45.0 || !st.z_m.is_finite() {
             fell_at_s = Some(t);
+            break;
+        }
+        if let Some(f) = lp.fault() {
+            // The guard stopped both actuators: the run is over.
+            fell_at_s = Some(t);
+            stopped_by = Some(format!("{f:?}"));
             break;
         }
         let mut apex = None;
@@ -335,10 +346,289 @@ pub fn simulate(
         target_apex_m: target,
         apex_max_error,
         fell_at_s,
+        stopped_by,
         duration_s: end,
         frames,
     })
 }
+
+/// The plot's size, pixels.
+const FIGURE_SIZE: (u32, u32) = (1000, 1000);
+
+/// `strides.csv` (each stride: its end, the toe's apex, the mean speed,
+/// the command, the largest pitch, where the foot landed), `run.png` and
+/// `run.svg` (speed against its command, pitch, apex against its target,
+/// foot placement, against time) and `run.html` (the machine drawn from
+/// the trajectory, played back in a browser: no network needed) into
+/// `dir`, whole or not at all.
+pub fn write_run(
+    dir: &Path,
+    run: &RaibertRun,
+    profile: &SpeedProfile,
+) -> Result<Vec<PathBuf>, String> {
+    crate::plot::ensure_font()?;
+    crate::out_dir::write_whole(dir, |staging| {
+        let mut w = csv::Writer::from_path(staging.join("strides.csv"))
+            .map_err(|e| format!("cannot write strides.csv: {e}"))?;
+        w.write_record([
+            "t_s",
+            "apex_m",
+            "speed_mps",
+            "command_mps",
+            "max_pitch_deg",
+            "foot_ahead_m",
+        ])
+        .map_err(|e| format!("cannot write strides.csv: {e}"))?;
+        for s in &run.strides {
+            w.write_record([
+                format!("{:.4}", s.t_s),
+                format!("{:.5}", s.apex_m),
+                format!("{:.5}", s.speed_mps),
+                format!("{:.3}", s.command_mps),
+                format!("{:.3}", s.max_pitch_deg),
+                format!("{:.5}", s.foot_ahead_m),
+            ])
+            .map_err(|e| format!("cannot write strides.csv: {e}"))?;
+        }
+        w.flush()
+            .map_err(|e| format!("cannot write strides.csv: {e}"))?;
+        let mut names = vec!["strides.csv".to_string()];
+        names.extend(crate::plot::png_and_svg(
+            staging,
+            "run",
+            FIGURE_SIZE,
+            "the run's plot",
+            |a| run_plot(a, run, profile),
+            |a| run_plot(a, run, profile),
+        )?);
+        std::fs::write(staging.join("run.html"), animation(run))
+            .map_err(|e| format!("cannot write run.html: {e}"))?;
+        names.push("run.html".to_string());
+        Ok(names)
+    })
+}
+
+/// Speed against its command, pitch, apex against its target and the
+/// foot's placement, against time.
+fn run_plot<DB: plotters::prelude::DrawingBackend>(
+    root: plotters::prelude::DrawingArea<DB, plotters::coord::Shift>,
+    run: &RaibertRun,
+    profile: &SpeedProfile,
+) -> Result<(), Box<dyn std::error::Error>>
+where
+    DB::ErrorType: 'static,
+{
+    use plotters::prelude::*;
+    root.fill(&WHITE)?;
+    let title = format!(
+        "planar machine, hip actuated, Raibert's controller: {:.0} s, {} strides{}",
+        run.duration_s,
+        run.strides.len(),
+        run.fell_at_s
+            .map_or(String::new(), |t| format!(", fell at {t:.2} s"))
+    );
+    let root = root.titled(&title, ("sans-serif", 18))?;
+    let panels = root.split_evenly((4, 1));
+    let t_hi = run.duration_s.max(0.1);
+    let grey = RGBColor(120, 120, 120);
+    // The command as steps, to the end.
+    let mut command: Vec<(f64, f64)> = Vec::new();
+    for (k, &(t, v)) in profile.steps.iter().enumerate() {
+        let end = profile
+            .steps
+            .get(k + 1)
+            .map_or(t_hi, |&(t1, _)| t1)
+            .min(t_hi);
+        if t < t_hi {
+            command.push((t, v));
+            command.push((end, v));
+        }
+    }
+    let pad = |lo: f64, hi: f64| {
+        let p = ((hi - lo) * 0.1).max(1e-3);
+        (lo - p)..(hi + p)
+    };
+    // Speed.
+    let (lo, hi) = crate::plot::extent(
+        run.strides
+            .iter()
+            .map(|s| s.speed_mps)
+            .chain(command.iter().map(|c| c.1)),
+    );
+    let mut c = ChartBuilder::on(&panels[0])
+        .margin(8)
+        .x_label_area_size(30)
+        .y_label_area_size(70)
+        .build_cartesian_2d(0.0..t_hi, pad(lo, hi))?;
+    c.configure_mesh()
+        .x_desc("time [s]")
+        .y_desc("forward speed [m/s]")
+        .draw()?;
+    c.draw_series(LineSeries::new(
+        command.iter().copied(),
+        grey.stroke_width(2),
+    ))?
+    .label("command")
+    .legend(move |(x, y)| PathElement::new([(x, y), (x + 18, y)], grey.stroke_width(2)));
+    c.draw_series(
+        run.strides
+            .iter()
+            .map(|s| Circle::new((s.t_s, s.speed_mps), 3, BLUE.filled())),
+    )?
+    .label("stride's mean speed")
+    .legend(|(x, y)| Circle::new((x + 9, y), 3, BLUE.filled()));
+    c.configure_series_labels()
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .position(SeriesLabelPosition::UpperRight)
+        .draw()?;
+    // Pitch, every 10 ms, with its bound.
+    let pitch: Vec<(f64, f64)> = run
+        .frames
+        .iter()
+        .map(|f| (f[0], f[3].to_degrees()))
+        .collect();
+    let (lo, hi) = crate::plot::extent(
+        pitch
+            .iter()
+            .map(|p| p.1)
+            .chain([-PITCH_BOUND_DEG, PITCH_BOUND_DEG]),
+    );
+    let mut c = ChartBuilder::on(&panels[1])
+        .margin(8)
+        .x_label_area_size(30)
+        .y_label_area_size(70)
+        .build_cartesian_2d(0.0..t_hi, pad(lo, hi))?;
+    c.configure_mesh()
+        .x_desc("time [s]")
+        .y_desc("body pitch [deg]")
+        .draw()?;
+    for b in [-PITCH_BOUND_DEG, PITCH_BOUND_DEG] {
+        c.draw_series(DashedLineSeries::new(
+            [(0.0, b), (t_hi, b)],
+            6,
+            4,
+            grey.stroke_width(1),
+        ))?;
+    }
+    c.draw_series(LineSeries::new(pitch, RED.stroke_width(1)))?;
+    // Apex, with its target.
+    let (lo, hi) = crate::plot::extent(
+        run.strides
+            .iter()
+            .map(|s| s.apex_m)
+            .chain([run.target_apex_m]),
+    );
+    let mut c = ChartBuilder::on(&panels[2])
+        .margin(8)
+        .x_label_area_size(30)
+        .y_label_area_size(70)
+        .build_cartesian_2d(0.0..t_hi, pad(lo, hi))?;
+    c.configure_mesh()
+        .x_desc("time [s]")
+        .y_desc("toe apex [m]")
+        .draw()?;
+    c.draw_series(DashedLineSeries::new(
+        [(0.0, run.target_apex_m), (t_hi, run.target_apex_m)],
+        6,
+        4,
+        grey.stroke_width(1),
+    ))?;
+    c.draw_series(
+        run.strides
+            .iter()
+            .map(|s| Circle::new((s.t_s, s.apex_m), 3, GREEN.filled())),
+    )?;
+    // Foot placement.
+    let (lo, hi) = crate::plot::extent(run.strides.iter().map(|s| s.foot_ahead_m));
+    let mut c = ChartBuilder::on(&panels[3])
+        .margin(8)
+        .x_label_area_size(30)
+        .y_label_area_size(70)
+        .build_cartesian_2d(0.0..t_hi, pad(lo, hi))?;
+    c.configure_mesh()
+        .x_desc("time [s]")
+        .y_desc("foot ahead of hip [m]")
+        .draw()?;
+    c.draw_series(
+        run.strides
+            .iter()
+            .map(|s| Circle::new((s.t_s, s.foot_ahead_m), 3, MAGENTA.filled())),
+    )?;
+    root.present()?;
+    Ok(())
+}
+
+/// The machine drawn from the trajectory (every 10 ms) as one HTML file:
+/// the body (a bar pitched by `phi`), the leg from the hip to the toe, the
+/// ground, the time and speed, a play/pause button and a slider. The
+/// view follows the hip.
+fn animation(run: &RaibertRun) -> String {
+    let mut frames = String::from("[");
+    for (k, f) in run.frames.iter().enumerate() {
+        if k > 0 {
+            frames.push(',');
+        }
+        frames.push_str(&format!(
+            "[{:.2},{:.4},{:.4},{:.4},{:.4},{:.4}]",
+            f[0], f[1], f[2], f[3], f[4], f[5]
+        ));
+    }
+    frames.push(']');
+    ANIMATION_PAGE.replace("/*FRAMES*/[]", &frames)
+}
+
+/// The animation's page; `/*FRAMES*/[]` is replaced by the frames.
+const ANIMATION_PAGE: &str = r##"<!doctype html>
+<html lang="en"><head><meta charset="utf-8"><title>planar machine: Raibert's controller</title>
+<style>body{font-family:sans-serif;margin:16px}svg{border:1px solid #ccc;background:#fafafa}#info{margin:6px 0}</style>
+</head><body>
+<h3>The planar machine, hip actuated, run by Raibert's controller</h3>
+<div id="info"></div>
+<svg id="v" width="800" height="420" viewBox="0 0 800 420"></svg>
+<div><button id="play">pause</button> <input id="t" type="range" min="0" value="0" style="width:640px"></div>
+<p>Body: the bar, pitched by its angle; leg: hip to toe (thicker in stance). The view follows the hip; ground marks every 0.5 m. Frames every 10 ms of simulated time, played at real time.</p>
+<script>
+const F = /*FRAMES*/[];
+const S = 400; // px per m
+const v = document.getElementById("v"), info = document.getElementById("info");
+const slider = document.getElementById("t"); slider.max = F.length - 1;
+let k = 0, playing = true;
+document.getElementById("play").onclick = e => { playing = !playing; e.target.textContent = playing ? "pause" : "play"; };
+slider.oninput = () => { k = +slider.value; draw(); };
+function line(x1, y1, x2, y2, w, c) { return `<line x1="${x1}" y1="${y1}" x2="${x2}" y2="${y2}" stroke="${c}" stroke-width="${w}" stroke-linecap="round"/>`; }
+function draw() {
+  const [t, x, z, phi, th, l] = F[k];
+  const gy = 380, cx = 400;
+  const X = q => cx + (q - x) * S, Y = q => gy - q * S;
+  let s = line(0, gy, 800, gy, 2, "#555");
+  for (let m = Math.floor((x - 1) * 2) / 2; m < x + 1; m += 0.5) s += line(X(m), gy, X(m), gy + 10, 1, "#555") + `<text x="${X(m) + 2}" y="${gy + 24}" font-size="11">${m.toFixed(1)} m</text>`;
+  const hx = X(x), hy = Y(z);
+  const tx = X(x + l * Math.sin(th)), ty = Y(z - l * Math.cos(th));
+  const stance = l < 0.6499;
+  s += line(hx, hy, tx, ty, stance ? 7 : 5, stance ? "#c62828" : "#1565c0");
+  s += `<circle cx="${tx}" cy="${ty}" r="6" fill="#333"/>`;
+  const bw = 0.5 * S, bx = Math.cos(phi) * bw / 2, by = Math.sin(phi) * bw / 2;
+  s += line(hx - bx, hy + by, hx + bx, hy - by, 18, "#455a64");
+  s += `<circle cx="${hx}" cy="${hy}" r="5" fill="#fff" stroke="#000"/>`;
+  v.innerHTML = s;
+  const kb = Math.max(0, k - 10), sp = k > 0 ? (x - F[kb][1]) / Math.max(t - F[kb][0], 1e-6) : 0;
+  info.textContent = `t = ${t.toFixed(2)} s   speed ${sp.toFixed(2)} m/s   pitch ${(phi * 180 / Math.PI).toFixed(1)} deg   leg ${(th * 180 / Math.PI).toFixed(1)} deg`;
+  slider.value = k;
+}
+let last = performance.now(), acc = 0;
+function tick(now) {
+  if (playing && F.length) {
+    acc += (now - last) / 1000;
+    while (acc >= 0.01 && k < F.length - 1) { k++; acc -= 0.01; }
+    if (k === F.length - 1) playing = false;
+    draw();
+  }
+  last = now; requestAnimationFrame(tick);
+}
+if (F.length) { draw(); requestAnimationFrame(tick); } else info.textContent = "no frames";
+</script></body></html>
+"##;
 
 #[cfg(test)]
 mod tests {
@@ -415,5 +705,26 @@ mod tests {
             "{:?}",
             r.strides
         );
+    }
+
+    /// A push no stride can catch (120 N s, over 7 m/s): the guard stops
+    /// both actuators when the body pitches past its limit, before the
+    /// machine lies on the ground.
+    #[test]
+    fn a_push_beyond_recovery_is_stopped_by_the_guard() {
+        let profile = SpeedProfile::parse("0:0").unwrap_or_else(|e| panic!("{e}"));
+        let push = Push {
+            at_s: 5.0,
+            impulse_ns: 120.0,
+        };
+        let r = simulate(&profile, &[push], 10.0, RaibertConfig::table_2_2())
+            .unwrap_or_else(|e| panic!("{e}"));
+        assert!(
+            r.stopped_by.is_some(),
+            "{:?} {:?}",
+            r.fell_at_s,
+            r.stopped_by
+        );
+        assert!(r.fell_at_s.is_some_and(|t| t > push.at_s));
     }
 }

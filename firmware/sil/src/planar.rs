@@ -8,6 +8,7 @@
 //! boom's and the hip's measurements as a planar machine would have them,
 //! without their noise), and its command holds over the period.
 
+use hopper_control::planar::guard::{Guard, GuardConfig, PlanarFault};
 use hopper_control::planar::raibert::{Raibert, RaibertConfig};
 use hopper_control::planar::{PlanarCommand, PlanarEstimate};
 use hopper_plant::planar::{ApexState, PlanarError, PlanarEvent, PlanarState};
@@ -23,6 +24,8 @@ pub struct PlanarLoop {
     plant: GeneralRunner,
     /// The controller.
     pub controller: Raibert,
+    /// The pitch, leg-angle and fall limits over its command.
+    guard: Guard,
     /// The leg's length at the last period, m (for its rate).
     prev_leg_m: f64,
 }
@@ -32,6 +35,8 @@ impl PlanarLoop {
     /// moving at `speed_mps`, run by Raibert's controller with `cfg`.
     pub fn new(p: GeneralParams, cfg: RaibertConfig, speed_mps: f64) -> Result<Self, PlanarError> {
         let controller = Raibert::new(cfg).map_err(|e| PlanarError::OutOfRange(e.0))?;
+        let guard =
+            Guard::new(GuardConfig::table_2_2()).map_err(|e| PlanarError::OutOfRange(e.0))?;
         let start = ApexState {
             z_m: p.leg_length_m + f64::from(cfg.target_apex_m),
             x_dot_mps: speed_mps,
@@ -43,6 +48,7 @@ impl PlanarLoop {
         Ok(PlanarLoop {
             plant: GeneralRunner::from_apex(p, &start)?,
             controller,
+            guard,
             prev_leg_m: p.leg_length_m,
         })
     }
@@ -77,10 +83,18 @@ impl PlanarLoop {
     }
 
     /// The controller's period: its command for `est` at the commanded
-    /// speed.
+    /// speed, through the guard (zero on both actuators once a limit
+    /// latched).
     pub fn control(&mut self, est: &PlanarEstimate, speed_command_mps: f64) -> PlanarCommand {
-        self.controller
-            .step(est, speed_command_mps as f32, DT_S as f32)
+        let cmd = self
+            .controller
+            .step(est, speed_command_mps as f32, DT_S as f32);
+        self.guard.filter(est, cmd)
+    }
+
+    /// What the guard latched, if anything.
+    pub fn fault(&self) -> Option<PlanarFault> {
+        self.guard.fault()
     }
 
     /// Applies `cmd` (and a push on the body of `push_n`) and integrates

@@ -173,7 +173,7 @@ mod app {
             run.missed += 1;
         }
         run.period += 1;
-        run.fell |= fell;
+        run.fell |= fell || run.lp.fault().is_some();
         if run.fell || run.period >= PLANAR_DURATION_S * CONTROL_HZ {
             finish(run);
         }

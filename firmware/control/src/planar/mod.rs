@@ -5,6 +5,7 @@
 //! each period ([`PlanarEstimate`]) and command ([`PlanarCommand`]); each
 //! controller is one type in its own file.
 
+pub mod guard;
 pub mod raibert;
 
 /// What a planar controller knows of the machine each period, SI. Angles

@@ -159,7 +159,9 @@ pub(crate) enum PlanarCmd {
         #[command(flatten)]
         appendix: AppendixArgs,
         /// Directory for trajectory.csv (every millisecond) and
-        /// run.png/.svg (created if missing).
+        /// run.png/.svg (created if missing); with raibert strides.csv,
+        /// run.png/.svg (speed, pitch, apex, foot placement) and run.html
+        /// (the machine drawn from the trajectory, played in a browser).
         #[arg(long, value_name = "DIR")]
         out: Option<PathBuf>,
         /// Print JSON instead of text.
@@ -382,6 +384,7 @@ fn cmd_planar_raibert(
     target_apex: f64,
     inject: &[String],
     duration: f64,
+    out: Option<&std::path::Path>,
     json: bool,
 ) -> Result<()> {
     use hal_sim::planar_raibert::{self as pr, Push, SpeedProfile};
@@ -398,6 +401,10 @@ fn cmd_planar_raibert(
     let mut cfg = hopper_control::planar::raibert::RaibertConfig::table_2_2();
     cfg.target_apex_m = target_apex as f32;
     let r = pr::simulate(&profile, &pushes, duration, cfg).map_err(anyhow::Error::msg)?;
+    let written = match out {
+        Some(dir) => pr::write_run(dir, &r, &profile).map_err(anyhow::Error::msg)?,
+        None => Vec::new(),
+    };
     if json {
         say!("{}", serde_json::to_string_pretty(&r)?);
         return Ok(());
@@ -446,8 +453,12 @@ fn cmd_planar_raibert(
     );
     say!(
         "  fall               {}",
-        r.fell_at_s
-            .map_or("none".into(), |t| format!("fell at {t:.2} s"))
+        match (r.fell_at_s, &r.stopped_by) {
+            (None, _) => "none".to_string(),
+            (Some(t), None) => format!("fell at {t:.2} s"),
+            (Some(t), Some(why)) =>
+                format!("stopped at {t:.2} s by the guard ({why}): both actuators at zero"),
+        }
     );
     say!(
         "  verdict            {}",
@@ -457,6 +468,9 @@ fn cmd_planar_raibert(
             "OUT OF BOUNDS"
         }
     );
+    for p in &written {
+        say!("  wrote {}", p.display());
+    }
     Ok(())
 }
 
@@ -483,6 +497,7 @@ pub(crate) fn cmd_planar(cmd: &PlanarCmd) -> Result<()> {
                     *target_apex,
                     inject,
                     *duration,
+                    out.as_deref(),
                     *json,
                 );
             }
