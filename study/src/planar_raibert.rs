@@ -231,8 +231,11 @@ pub fn simulate(
     if !(duration_s.is_finite() && duration_s > 0.0 && duration_s <= 600.0) {
         return Err(format!("--duration {duration_s} must be in (0, 600] s"));
     }
+    cfg.validate()
+        .map_err(|e| format!("the controller's `{}` is out of its range", e.0))?;
     let p = actuated_machine();
-    let mut lp = PlanarLoop::new(p, cfg, profile.at(0.0)).map_err(|e| format!("{e:?}"))?;
+    let mut lp = PlanarLoop::new(p, cfg, profile.at(0.0))
+        .map_err(|e| format!("the planar machine cannot start: {e:?}"))?;
     let mut strides = Vec::new();
     let mut frames = Vec::new();
     let mut last_apex: Option<(f64, f64)> = None;

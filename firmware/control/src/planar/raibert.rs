@@ -73,6 +73,9 @@ pub struct RaibertConfig {
     pub max_thrust_n: f32,
     /// The stance time assumed before one is measured, s.
     pub initial_stance_s: f32,
+    /// The thesis's forward-speed stabiliser (eqs 2.79-2.80) on top: in
+    /// stance the leg's force less `K_c (x'_d - x')`, N s/m (0: off).
+    pub stabiliser_gain_ns_per_m: f32,
 }
 
 impl RaibertConfig {
@@ -99,6 +102,7 @@ impl RaibertConfig {
             thrust_trim_gain_n_per_m: 800.0,
             max_thrust_n: 1_500.0,
             initial_stance_s: 0.07,
+            stabiliser_gain_ns_per_m: 0.0,
         }
     }
 
@@ -139,7 +143,11 @@ impl RaibertConfig {
             "initial_thrust_n",
         )?;
         require(nonneg(self.thrust_gain_n_per_m), "thrust_gain_n_per_m")?;
-        require(pos(self.initial_stance_s), "initial_stance_s")
+        require(pos(self.initial_stance_s), "initial_stance_s")?;
+        require(
+            self.stabiliser_gain_ns_per_m.is_finite() && self.stabiliser_gain_ns_per_m.abs() <= 1e4,
+            "stabiliser_gain_ns_per_m",
+        )
     }
 }
 
@@ -270,11 +278,15 @@ impl Raibert {
             let target = self.pitch_target_rad + c.swing_ratio * next;
             let hip = c.pitch_kp_nm_per_rad * (est.phi_rad - target)
                 + c.pitch_kd_nms_per_rad * est.phi_dot_rad_s;
-            let thrust = if est.leg_rate_mps > 0.0 {
+            let push = if est.leg_rate_mps > 0.0 {
                 self.thrust_n
             } else {
                 0.0
             };
+            // Eq 2.80's stabiliser: the leg's force less `K_c (x'_d - x')`
+            // (the actuator may pull as well as push here).
+            let stabiliser = c.stabiliser_gain_ns_per_m * (speed_command_mps - est.x_dot_mps);
+            let thrust = (push - stabiliser).clamp(-c.max_thrust_n, c.max_thrust_n);
             PlanarCommand {
                 hip_torque_nm: torque_limit(hip),
                 leg_thrust_n: thrust,
@@ -405,7 +417,7 @@ mod tests {
             for _ in 0..steps {
                 let c = r.step(&est, v[8], 1e-3);
                 prop_assert!(c.hip_torque_nm.abs() <= 100.0);
-                prop_assert!((0.0..=1_500.0).contains(&c.leg_thrust_n));
+                prop_assert!(c.leg_thrust_n.abs() <= 1_500.0);
             }
         }
     }

@@ -141,7 +141,8 @@ pub(crate) enum PlanarCmd {
         /// Running speed, m/s.
         #[arg(long, default_value_t = 2.0)]
         speed: f64,
-        /// The stabiliser's gain K_c (eq 2.79), N s/m; 0: passive.
+        /// The stabiliser's gain K_c (eq 2.79), N s/m; 0: passive (with
+        /// raibert: on top of its thrust, toward the commanded speed).
         #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
         kc: f64,
         /// Simulated time, s.
@@ -379,27 +380,21 @@ fn cmd_planar_stability(
 /// `planar run --controller raibert`: the run, its strides and its
 /// figures against their bounds.
 fn cmd_planar_raibert(
-    speed: f64,
-    profile: Option<&str>,
-    target_apex: f64,
+    cfg: hopper_control::planar::raibert::RaibertConfig,
+    profile: &str,
     inject: &[String],
     duration: f64,
     out: Option<&std::path::Path>,
     json: bool,
 ) -> Result<()> {
     use hal_sim::planar_raibert::{self as pr, Push, SpeedProfile};
-    let profile = SpeedProfile::parse(profile.unwrap_or(&format!("0:{speed}")))
-        .map_err(anyhow::Error::msg)?;
+    let kc = f64::from(cfg.stabiliser_gain_ns_per_m);
+    let profile = SpeedProfile::parse(profile).map_err(anyhow::Error::msg)?;
     let pushes = inject
         .iter()
         .map(|i| Push::parse(i))
         .collect::<std::result::Result<Vec<_>, _>>()
         .map_err(anyhow::Error::msg)?;
-    if !(target_apex.is_finite() && (0.02..=0.5).contains(&target_apex)) {
-        bail!("--target-apex {target_apex} must be within 0.02 ..= 0.5 m");
-    }
-    let mut cfg = hopper_control::planar::raibert::RaibertConfig::table_2_2();
-    cfg.target_apex_m = target_apex as f32;
     let r = pr::simulate(&profile, &pushes, duration, cfg).map_err(anyhow::Error::msg)?;
     let written = match out {
         Some(dir) => pr::write_run(dir, &r, &profile).map_err(anyhow::Error::msg)?,
@@ -420,7 +415,12 @@ fn cmd_planar_raibert(
         )
     };
     say!(
-        "planar (Appendix A, hip actuated): raibert controller, {:.1} s simulated, {} strides",
+        "planar (Appendix A, hip actuated): raibert controller{}, {:.1} s simulated, {} strides",
+        if kc == 0.0 {
+            String::new()
+        } else {
+            format!(" with the stabiliser K_c {kc} N s/m")
+        },
         r.duration_s,
         r.strides.len()
     );
@@ -491,10 +491,19 @@ pub(crate) fn cmd_planar(cmd: &PlanarCmd) -> Result<()> {
             inject,
         } => {
             if controller == "raibert" {
+                let (kc, target_apex) = (*kc, *target_apex);
+                if !(target_apex.is_finite() && (0.02..=0.5).contains(&target_apex)) {
+                    bail!("--target-apex {target_apex} must be within 0.02 ..= 0.5 m");
+                }
+                if !(kc.is_finite() && kc.abs() <= 1e4) {
+                    bail!("--kc {kc} must be within -10000 ..= 10000 N s/m");
+                }
+                let mut cfg = hopper_control::planar::raibert::RaibertConfig::table_2_2();
+                cfg.target_apex_m = target_apex as f32;
+                cfg.stabiliser_gain_ns_per_m = kc as f32;
                 return cmd_planar_raibert(
-                    *speed,
-                    speed_profile.as_deref(),
-                    *target_apex,
+                    cfg,
+                    speed_profile.as_deref().unwrap_or(&format!("0:{speed}")),
                     inject,
                     *duration,
                     out.as_deref(),
