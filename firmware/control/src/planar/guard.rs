@@ -76,19 +76,7 @@ impl Guard {
     /// [`PlanarFault`]).
     pub fn violation(&self, est: &PlanarEstimate) -> Option<PlanarFault> {
         let c = &self.cfg;
-        let finite = [
-            est.x_dot_mps,
-            est.z_m,
-            est.z_dot_mps,
-            est.phi_rad,
-            est.phi_dot_rad_s,
-            est.theta_rad,
-            est.theta_dot_rad_s,
-            est.leg_rate_mps,
-        ]
-        .iter()
-        .all(|v| v.is_finite());
-        if !finite {
+        if !est.is_finite() {
             Some(PlanarFault::NonFinite)
         } else if est.phi_rad.abs() > c.max_pitch_rad {
             Some(PlanarFault::Pitch)

@@ -33,6 +33,24 @@ pub struct PlanarEstimate {
     pub leg_rate_mps: f32,
 }
 
+impl PlanarEstimate {
+    /// Whether every measurement is finite.
+    pub fn is_finite(&self) -> bool {
+        [
+            self.x_dot_mps,
+            self.z_m,
+            self.z_dot_mps,
+            self.phi_rad,
+            self.phi_dot_rad_s,
+            self.theta_rad,
+            self.theta_dot_rad_s,
+            self.leg_rate_mps,
+        ]
+        .iter()
+        .all(|v| v.is_finite())
+    }
+}
+
 /// What a planar controller commands for the next period.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct PlanarCommand {

@@ -246,20 +246,7 @@ impl Raibert {
         speed_command_in: f32,
         dt_s: f32,
     ) -> PlanarCommand {
-        let finite = [
-            est.x_dot_mps,
-            est.z_m,
-            est.z_dot_mps,
-            est.phi_rad,
-            est.phi_dot_rad_s,
-            est.theta_rad,
-            est.theta_dot_rad_s,
-            est.leg_rate_mps,
-            speed_command_in,
-            dt_s,
-        ]
-        .iter()
-        .all(|v| v.is_finite());
+        let finite = est.is_finite() && speed_command_in.is_finite() && dt_s.is_finite();
         if !finite || dt_s <= 0.0 {
             return PlanarCommand::default();
         }
