@@ -114,6 +114,35 @@ pub struct ServeOptions {
     pub dt_s: f64,
 }
 
+/// How long the end of a session waits for the client to take the last
+/// bytes and close its side.
+const CLOSE_WAIT: Duration = Duration::from_secs(2);
+
+/// Ends a connection without losing what was sent: writes `pending`, says
+/// end-of-stream (FIN), then reads and discards until the peer closes or
+/// `wait` passes. Dropping a socket whose peer's bytes (heartbeats) are
+/// still unread makes the kernel send a reset instead, and a reset throws
+/// away the telemetry still queued for the peer.
+pub fn close_after(mut s: TcpStream, pending: &[u8], wait: Duration) {
+    let end = Instant::now() + wait;
+    let _ = s.set_nonblocking(false);
+    let _ = s.set_write_timeout(Some(wait));
+    let _ = s.write_all(pending);
+    let _ = s.shutdown(std::net::Shutdown::Write);
+    let mut buf = [0u8; 4096];
+    while let Some(left) = end.checked_duration_since(Instant::now()) {
+        if left.is_zero() || s.set_read_timeout(Some(left)).is_err() {
+            break;
+        }
+        match s.read(&mut buf) {
+            Ok(0) => break,
+            Ok(_) => {}
+            Err(e) if e.kind() == ErrorKind::Interrupted => {}
+            Err(_) => break,
+        }
+    }
+}
+
 /// Serves `robot` on `listener` until the time limit (or forever).
 /// Messages about clients go to stderr.
 pub fn serve(
@@ -220,10 +249,64 @@ pub fn serve(
             tx.bytes.clear();
         }
         if limit.is_some_and(|l| done >= l) {
+            // The client gets everything the robot queued before the end.
+            if let Some(s) = client.take() {
+                close_after(s, &tx.bytes, CLOSE_WAIT);
+            }
             return Ok(());
         }
         if batch < MAX_BATCH {
             std::thread::sleep(Duration::from_micros(500));
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A peer that has sent bytes the robot never read, and that reads
+    /// slowly, still receives every byte sent before the close.
+    #[test]
+    fn a_close_loses_nothing_that_was_sent() {
+        for graceful in [false, true] {
+            let l = TcpListener::bind("127.0.0.1:0").unwrap_or_else(|e| panic!("{e}"));
+            let addr = l.local_addr().unwrap_or_else(|e| panic!("{e}"));
+            let client = std::thread::spawn(move || {
+                let mut c = TcpStream::connect(addr).unwrap_or_else(|e| panic!("{e}"));
+                // Heartbeats the robot will not read.
+                let _ = c.write_all(&[0u8; 64]);
+                // A slow reader: the robot's queue fills meanwhile.
+                std::thread::sleep(Duration::from_millis(300));
+                let mut got = Vec::new();
+                let _ = c.set_read_timeout(Some(Duration::from_secs(5)));
+                let _ = c.read_to_end(&mut got);
+                got.len()
+            });
+            let (mut s, _) = l.accept().unwrap_or_else(|e| panic!("{e}"));
+            std::thread::sleep(Duration::from_millis(50));
+            // As much as the kernel takes without the peer reading, and a
+            // queue of bytes still to write.
+            let _ = s.set_nonblocking(true);
+            let chunk = [7u8; 4096];
+            let mut sent = 0usize;
+            while let Ok(n) = s.write(&chunk) {
+                sent += n;
+            }
+            let pending = vec![9u8; 10_000];
+            if graceful {
+                close_after(s, &pending, Duration::from_secs(5));
+                sent += pending.len();
+            } else {
+                drop(s);
+            }
+            let got = client.join().unwrap_or_default();
+            if graceful {
+                assert_eq!(got, sent, "a graceful close lost bytes");
+            } else {
+                // What the fixed close prevents: a reset drops the queue.
+                assert!(got < sent, "dropped: {got} of {sent} bytes arrived");
+            }
         }
     }
 }

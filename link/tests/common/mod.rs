@@ -75,6 +75,12 @@ pub fn robot(
                 send(&mut s, &reply);
             }
             if streaming && !stream(&mut s) {
+                // A robot's end of the link closes gracefully: dropping a
+                // socket with the host's heartbeats unread resets it, and
+                // the reset throws away telemetry not yet delivered.
+                let _ = s.shutdown(std::net::Shutdown::Write);
+                let _ = s.set_read_timeout(Some(Duration::from_secs(5)));
+                while matches!(s.read(&mut buf), Ok(n) if n > 0) {}
                 return;
             }
         }
