@@ -149,6 +149,17 @@ pub struct Settling {
     pub max_pitch_deg: f64,
 }
 
+/// What the hip motor did over a run.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct HipFigures {
+    /// The largest current, A.
+    pub peak_current_a: f64,
+    /// The heat in its winding, J.
+    pub copper_loss_j: f64,
+    /// The hottest the firmware estimated its winding, C.
+    pub max_winding_c: f64,
+}
+
 /// A run and its figures.
 #[derive(Clone, Debug, Serialize)]
 pub struct RaibertRun {
@@ -174,6 +185,8 @@ pub struct RaibertRun {
     pub stopped_by: Option<String>,
     /// Simulated time, s.
     pub duration_s: f64,
+    /// The hip motor's figures.
+    pub hip: HipFigures,
     /// Hip position, height, pitch and leg angle every 10 ms, for the
     /// drawing: `[t, x, z, phi, theta, leg length]`.
     #[serde(skip)]
@@ -244,12 +257,14 @@ pub fn simulate(
     let mut fell_at_s = None;
     let mut stopped_by = None;
     let mut foot_ahead = 0.0;
+    let mut hip_winding_c: f64 = 0.0;
     let steps = (duration_s / DT_S).round() as usize;
     for k in 0..steps {
         let t = k as f64 * DT_S;
         let st = lp.state();
         let est = lp.estimate();
         let cmd = lp.control(&est, profile.at(t));
+        hip_winding_c = hip_winding_c.max(f64::from(lp.hip_winding_c()));
         let push_n = pushes
             .iter()
             .filter(|p| t >= p.at_s && t < p.at_s + PUSH_S)
@@ -351,6 +366,11 @@ pub fn simulate(
         fell_at_s,
         stopped_by,
         duration_s: end,
+        hip: HipFigures {
+            peak_current_a: f64::from(lp.hip_peak_current_a()),
+            copper_loss_j: lp.hip_copper_loss_j(),
+            max_winding_c: hip_winding_c,
+        },
         frames,
     })
 }
@@ -681,6 +701,15 @@ mod tests {
             );
         }
         assert!(r.passes());
+        // The hip motor: within its amplifier's limit, its winding far
+        // from derating (2 W of copper loss on average: 117 J in 60 s).
+        let limit = f64::from(hopper_control::planar::HipDrive::design().current_limit_a);
+        assert!(r.hip.peak_current_a <= limit + 1e-3, "{:?}", r.hip);
+        assert!(
+            (100.0..140.0).contains(&r.hip.copper_loss_j) && r.hip.max_winding_c < 40.0,
+            "{:?}",
+            r.hip
+        );
     }
 
     /// A 20 N s push on the body mid-stride, standing still: the speed is

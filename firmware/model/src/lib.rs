@@ -128,6 +128,21 @@ pub mod design {
     pub const TORQUE_LIMIT_NM: f64 = 1.0;
     /// Amplifier current limit, A: the torque limit at the torque constant.
     pub const CURRENT_LIMIT_A: f64 = TORQUE_LIMIT_NM / TORQUE_CONSTANT_NM_PER_A;
+    /// The actuated planar machine's hip drive (section 5.2's "trunk
+    /// actuation system", which the thesis leaves to design): the leg's
+    /// motor and amplifier through a 60:1 gearhead. Its 45 N m at the
+    /// amplifier's limit covers the largest torque Raibert's controller
+    /// asks for running 0 to 1 m/s (48 N m, briefly); its demand there,
+    /// 3 to 4.5 N m RMS, is 2.3 to 3.3 A, below the motor's continuous
+    /// current.
+    pub const HIP_GEAR_RATIO: f64 = 60.0;
+    /// The hip gearhead's efficiency (a planetary head's, three stages).
+    pub const HIP_GEAR_EFFICIENCY: f64 = 0.75;
+    /// The hip's torque per ampere of motor current, N m/A.
+    pub const HIP_TORQUE_PER_AMP_NM_PER_A: f64 =
+        TORQUE_CONSTANT_NM_PER_A * HIP_GEAR_RATIO * HIP_GEAR_EFFICIENCY;
+    /// The hip's torque at the amplifier's current limit, N m.
+    pub const HIP_TORQUE_LIMIT_NM: f64 = CURRENT_LIMIT_A * HIP_TORQUE_PER_AMP_NM_PER_A;
     /// Flight-law position gain `k_pf` of Table 2.1, N/m: the force the nut
     /// sees (`eta tau / r`) per metre of nut error. The thesis states no
     /// unit; with N/m the Chapter 2 flight returns the nut within the

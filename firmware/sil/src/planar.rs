@@ -4,19 +4,69 @@
 //! --controller raibert` and the QEMU planar image both run this, so the
 //! golden check compares the same computation on two instruction sets.
 //!
-//! The controller reads the plant's state ([`PlanarLoop::estimate`]: the
-//! boom's and the hip's measurements as a planar machine would have them,
-//! without their noise), and its command holds over the period.
+//! The controller reads what a boom-mounted machine's sensors measure
+//! ([`PlanarSensors`]: the plant's state quantised to each encoder's and
+//! the potentiometer's resolution) through the control crate's planar
+//! estimator, and its command holds over the period.
 
+use hopper_control::planar::estimator::{PlanarEstimator, PlanarEstimatorConfig, PlanarReadings};
 use hopper_control::planar::guard::{Guard, GuardConfig, PlanarFault};
 use hopper_control::planar::raibert::{Raibert, RaibertConfig};
-use hopper_control::planar::{PlanarCommand, PlanarEstimate};
+use hopper_control::planar::{HipDrive, PlanarCommand, PlanarEstimate};
+use hopper_control::thermal::{MotorThermal, ThermalConfig};
 use hopper_plant::planar::{ApexState, PlanarError, PlanarEvent, PlanarState};
 use hopper_plant::planar_general::{Actuation, GeneralParams, GeneralRunner};
 
 /// The plant's integration step and the controller's period, s (the
 /// firmware's 10 kHz).
 pub const DT_S: f64 = 1e-4;
+
+/// The hip motor's winding resistance, ohm: the leg's motor's.
+const HIP_WINDING_OHM: f64 = hopper_plant::params::Params::design().winding_resistance_ohm;
+
+/// The sensors of a planar hopper on a boom, by their resolution.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PlanarSensors {
+    /// The hip's forward position, m a count.
+    pub boom_x_m: f64,
+    /// The hip's height, m a count.
+    pub boom_z_m: f64,
+    /// The body's pitch, rad a count.
+    pub pitch_rad: f64,
+    /// The hip's angle (the leg against the body), rad a count.
+    pub hip_rad: f64,
+    /// The leg's length, m a step of the potentiometer's converter.
+    pub leg_m: f64,
+}
+
+impl PlanarSensors {
+    /// A 1.5 m boom with 20,000-line encoders read in quadrature (80,000
+    /// counts a turn: 118 um at the hip), 16,384-line encoders on the
+    /// pitch and the hip (65,536 counts: 96 urad), and the leg's
+    /// potentiometer read by a 12-bit converter over 0.1 m (24 um).
+    pub const fn boom() -> Self {
+        const TURN: f64 = 2.0 * core::f64::consts::PI;
+        PlanarSensors {
+            boom_x_m: TURN * 1.5 / 80_000.0,
+            boom_z_m: TURN * 1.5 / 80_000.0,
+            pitch_rad: TURN / 65_536.0,
+            hip_rad: TURN / 65_536.0,
+            leg_m: 0.1 / 4096.0,
+        }
+    }
+
+    /// What they read of `st`.
+    pub fn read(&self, st: &PlanarState) -> PlanarReadings {
+        let q = |v: f64, step: f64| (libm::round(v / step) * step) as f32;
+        PlanarReadings {
+            boom_x_m: q(st.x_m, self.boom_x_m),
+            boom_z_m: q(st.z_m, self.boom_z_m),
+            pitch_rad: q(st.phi_rad, self.pitch_rad),
+            hip_angle_rad: q(st.theta_rad - st.phi_rad, self.hip_rad),
+            leg_length_m: q(st.leg_length_m, self.leg_m),
+        }
+    }
+}
 
 /// The plant and the controller.
 #[derive(Clone, Copy, Debug)]
@@ -26,8 +76,19 @@ pub struct PlanarLoop {
     pub controller: Raibert,
     /// The pitch, leg-angle and fall limits over its command.
     guard: Guard,
-    /// The leg's length at the last period, m (for its rate).
-    prev_leg_m: f64,
+    /// The sensors.
+    sensors: PlanarSensors,
+    /// The estimator.
+    estimator: PlanarEstimator,
+    /// The hip's drive: torque to current, within the amplifier's limit.
+    hip: HipDrive,
+    /// The hip motor's winding temperature, as the firmware estimates it
+    /// (the leg motor's model and data: derated, then off, when hot).
+    hip_thermal: MotorThermal,
+    /// The hip's copper loss so far, by the plant's winding, J.
+    hip_copper_loss_j: f64,
+    /// The largest hip current so far, A.
+    hip_peak_current_a: f32,
 }
 
 impl PlanarLoop {
@@ -45,11 +106,25 @@ impl PlanarLoop {
             phi_dot_rad_s: 0.0,
             theta_dot_rad_s: 0.0,
         };
+        let estimator = PlanarEstimator::new(PlanarEstimatorConfig {
+            leg_length_m: p.leg_length_m as f32,
+            ..PlanarEstimatorConfig::table_2_2()
+        })
+        .map_err(|e| PlanarError::OutOfRange(e.0))?;
+        let hip = HipDrive::design();
+        hip.validate().map_err(|e| PlanarError::OutOfRange(e.0))?;
+        let hip_thermal = MotorThermal::new(ThermalConfig::default())
+            .map_err(|e| PlanarError::OutOfRange(e.0))?;
         Ok(PlanarLoop {
             plant: GeneralRunner::from_apex(p, &start)?,
             controller,
             guard,
-            prev_leg_m: p.leg_length_m,
+            sensors: PlanarSensors::boom(),
+            estimator,
+            hip,
+            hip_thermal,
+            hip_copper_loss_j: 0.0,
+            hip_peak_current_a: 0.0,
         })
     }
 
@@ -63,33 +138,56 @@ impl PlanarLoop {
         self.plant.params()
     }
 
-    /// What the controller reads this period: the plant's state, the
-    /// leg's rate from its length a period ago.
+    /// What the sensors read of the plant this period.
+    pub fn sense(&self) -> PlanarReadings {
+        self.sensors.read(&self.plant.state())
+    }
+
+    /// The estimator's period: the estimate from this period's readings.
+    pub fn estimate_from(&mut self, r: &PlanarReadings) -> PlanarEstimate {
+        self.estimator.update(r, DT_S as f32)
+    }
+
+    /// What the controller reads this period: the sensors' readings of
+    /// the plant, through the estimator.
     pub fn estimate(&mut self) -> PlanarEstimate {
-        let st = self.plant.state();
-        let leg_rate = (st.leg_length_m - self.prev_leg_m) / DT_S;
-        self.prev_leg_m = st.leg_length_m;
-        PlanarEstimate {
-            stance: st.stance,
-            x_dot_mps: st.x_dot_mps as f32,
-            z_m: st.z_m as f32,
-            z_dot_mps: st.z_dot_mps as f32,
-            phi_rad: st.phi_rad as f32,
-            phi_dot_rad_s: st.phi_dot_rad_s as f32,
-            theta_rad: st.theta_rad as f32,
-            theta_dot_rad_s: st.theta_dot_rad_s as f32,
-            leg_rate_mps: if st.stance { leg_rate as f32 } else { 0.0 },
-        }
+        let r = self.sense();
+        self.estimate_from(&r)
     }
 
     /// The controller's period: its command for `est` at the commanded
     /// speed, through the guard (zero on both actuators once a limit
-    /// latched).
+    /// latched), the hip's torque as the current its amplifier is told to
+    /// drive gives it (within the current limit, derated when the winding
+    /// is hot).
     pub fn control(&mut self, est: &PlanarEstimate, speed_command_mps: f64) -> PlanarCommand {
         let cmd = self
             .controller
             .step(est, speed_command_mps as f32, DT_S as f32);
-        self.guard.filter(est, cmd)
+        let cmd = self.guard.filter(est, cmd);
+        let current_a = self
+            .hip
+            .current_a(cmd.hip_torque_nm, self.hip_thermal.limit_scale());
+        self.hip_thermal.add(current_a, DT_S as f32);
+        PlanarCommand {
+            hip_torque_nm: current_a * self.hip.torque_per_amp_nm_per_a,
+            ..cmd
+        }
+    }
+
+    /// The hip motor's winding temperature as the firmware estimates it, C.
+    pub fn hip_winding_c(&self) -> f32 {
+        self.hip_thermal.winding_c()
+    }
+
+    /// The hip's copper loss so far, J.
+    pub fn hip_copper_loss_j(&self) -> f64 {
+        self.hip_copper_loss_j
+    }
+
+    /// The largest hip current so far, A.
+    pub fn hip_peak_current_a(&self) -> f32 {
+        self.hip_peak_current_a
     }
 
     /// What the guard latched, if anything.
@@ -105,8 +203,20 @@ impl PlanarLoop {
         push_n: f64,
         on_event: &mut impl FnMut(PlanarEvent),
     ) {
+        // The hip's amplifier drives the current the torque was made of,
+        // within its own limit; its winding turns it to heat.
+        use hopper_model::design as d;
+        let current_a = (f64::from(cmd.hip_torque_nm) / d::HIP_TORQUE_PER_AMP_NM_PER_A)
+            .clamp(-d::CURRENT_LIMIT_A, d::CURRENT_LIMIT_A);
+        let current_a = if current_a.is_finite() {
+            current_a
+        } else {
+            0.0
+        };
+        self.hip_peak_current_a = self.hip_peak_current_a.max(libm::fabs(current_a) as f32);
+        self.hip_copper_loss_j += current_a * current_a * HIP_WINDING_OHM * DT_S;
         self.plant.set_actuation(Actuation {
-            hip_torque_nm: f64::from(cmd.hip_torque_nm),
+            hip_torque_nm: current_a * d::HIP_TORQUE_PER_AMP_NM_PER_A,
             leg_thrust_n: f64::from(cmd.leg_thrust_n),
             push_n,
         });

@@ -2,7 +2,8 @@
 //! control crate's `planar::raibert`) on QEMU's `netduinoplus2`, closing
 //! the loop on Appendix A's actuated runner (`hopper_sil::planar`, the
 //! same loop `hopper-sim planar run --controller raibert` runs on the
-//! host). SysTick paces the control task; the controller's step is counted
+//! host). SysTick paces the control task; the estimator's and the
+//! controller's step is counted
 //! in instructions (TIM5 under `-icount shift=0`); the plant is integrated
 //! with SysTick stopped. The run (`scenarios/qemu/planar.toml`) ends with
 //! a semihosting exit; `cargo xtask qemu` runs it and checks its strides
@@ -124,7 +125,9 @@ mod app {
         }
     }
 
-    /// One control period: the controller's step (counted), then the plant
+    /// One control period: the estimator's and the controller's step
+    /// (counted: the estimate, the law, the guard, the hip's current and
+    /// its winding's heat), then the plant
     /// over the period with SysTick stopped.
     #[task(binds = SysTick, priority = 3, local = [run, syst])]
     fn control(cx: control::Context) {
@@ -132,10 +135,11 @@ mod app {
         let t = f64::from(run.period) * DT_S;
         let speed = speed_at(t);
         let lp = &mut run.lp;
-        // What the machine's sensors give (the plant's state in f32): the
-        // board's estimator's work, not counted here.
-        let est = hopper_app::qemu::with_systick_stopped(cx.local.syst, || lp.estimate());
+        // What the machine's sensors read (the plant's state quantised to
+        // each sensor's resolution): the plant's side, not counted.
+        let readings = hopper_app::qemu::with_systick_stopped(cx.local.syst, || lp.sense());
         let t0 = hopper_app::qemu::tim5_now();
+        let est = lp.estimate_from(&readings);
         let cmd = lp.control(&est, speed);
         let spent = hopper_app::qemu::tim5_now()
             .wrapping_sub(t0)

@@ -5,8 +5,11 @@
 //! each period ([`PlanarEstimate`]) and command ([`PlanarCommand`]); each
 //! controller is one type in its own file.
 
+pub mod estimator;
 pub mod guard;
 pub mod raibert;
+
+use crate::param::{require, InvalidField};
 
 /// What a planar controller knows of the machine each period, SI. Angles
 /// from the vertical: the body's pitch `phi` (nose up positive, as the
@@ -31,6 +34,9 @@ pub struct PlanarEstimate {
     pub theta_dot_rad_s: f32,
     /// The leg's lengthening rate, m/s (0 in flight: the leg on its stop).
     pub leg_rate_mps: f32,
+    /// The toe's forward position, m: in stance where it stands, in flight
+    /// where it is over the ground.
+    pub toe_x_m: f32,
 }
 
 impl PlanarEstimate {
@@ -45,6 +51,7 @@ impl PlanarEstimate {
             self.theta_rad,
             self.theta_dot_rad_s,
             self.leg_rate_mps,
+            self.toe_x_m,
         ]
         .iter()
         .all(|v| v.is_finite())
@@ -59,4 +66,72 @@ pub struct PlanarCommand {
     pub hip_torque_nm: f32,
     /// The leg actuator's push along the leg in stance, N.
     pub leg_thrust_n: f32,
+}
+
+/// The hip's drive as the firmware commands it: the torque a controller
+/// asks for becomes the current the amplifier is told to drive.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct HipDrive {
+    /// The hip's torque per ampere (motor constant, gear ratio and
+    /// efficiency), N m/A.
+    pub torque_per_amp_nm_per_a: f32,
+    /// The amplifier's current limit, A.
+    pub current_limit_a: f32,
+}
+
+impl HipDrive {
+    /// The design machine's hip: the leg's motor through its gearhead
+    /// ([`hopper_model::design::HIP_TORQUE_PER_AMP_NM_PER_A`]).
+    pub const fn design() -> Self {
+        use hopper_model::design as d;
+        HipDrive {
+            torque_per_amp_nm_per_a: d::HIP_TORQUE_PER_AMP_NM_PER_A as f32,
+            current_limit_a: d::CURRENT_LIMIT_A as f32,
+        }
+    }
+
+    /// Both positive and finite; else the first that is not.
+    pub fn validate(&self) -> Result<(), InvalidField> {
+        let pos = |v: f32| v.is_finite() && v > 0.0;
+        require(pos(self.torque_per_amp_nm_per_a), "torque_per_amp_nm_per_a")?;
+        require(pos(self.current_limit_a), "current_limit_a")
+    }
+
+    /// The current for `torque_nm`, within the limit scaled by
+    /// `limit_scale` (the winding's derating, in `[0, 1]`); 0 for a
+    /// non-finite torque.
+    pub fn current_a(&self, torque_nm: f32, limit_scale: f32) -> f32 {
+        // (NaN fails the test: no current. `clamp` would panic on it.)
+        let scale = if limit_scale >= 0.0 {
+            limit_scale.min(1.0)
+        } else {
+            0.0
+        };
+        let limit = self.current_limit_a * scale;
+        let i = torque_nm / self.torque_per_amp_nm_per_a;
+        if i.is_finite() {
+            i.clamp(-limit, limit)
+        } else {
+            0.0
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_hip_current_is_limited_and_derated() {
+        let d = HipDrive::design();
+        assert!(d.validate().is_ok());
+        let k = d.torque_per_amp_nm_per_a;
+        assert!((d.current_a(10.0, 1.0) - 10.0 / k).abs() < 1e-5);
+        // 45 N m at the limit: 60 N m is clamped to it, or to half derated.
+        assert!((d.current_limit_a * k - 45.0).abs() < 0.01);
+        assert_eq!(d.current_a(-60.0, 1.0), -d.current_limit_a);
+        assert_eq!(d.current_a(60.0, 0.5), 0.5 * d.current_limit_a);
+        assert_eq!(d.current_a(f32::NAN, 1.0), 0.0);
+        assert_eq!(d.current_a(60.0, f32::NAN), 0.0);
+    }
 }

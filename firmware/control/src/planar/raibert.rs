@@ -94,7 +94,7 @@ impl RaibertConfig {
             pitch_kd_nms_per_rad: 60.0,
             pitch_trim_gain: 0.5,
             swing_ratio: 0.3,
-            max_hip_torque_nm: 100.0,
+            max_hip_torque_nm: hopper_model::design::HIP_TORQUE_LIMIT_NM as f32,
             max_leg_angle_rad: 0.4,
             target_apex_m: 0.15,
             initial_thrust_n: 100.0,
@@ -150,6 +150,11 @@ impl RaibertConfig {
         )
     }
 }
+
+/// The speed's integral learns only from errors smaller than this, m/s:
+/// it is there for a steady bias (the swing's, the friction's), and a push
+/// winds it up, turning one disturbance into a slow undershoot.
+const TRIM_BAND_MPS: f32 = 0.2;
 
 /// Raibert's controller (module docs).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -301,9 +306,11 @@ impl Raibert {
                 self.speed_target_mps =
                     Some(speed_command_mps + (commanded - speed_command_mps).clamp(-step, step));
                 let limit = 0.5 * c.leg_length_m;
-                self.speed_trim_m = (self.speed_trim_m
-                    + c.speed_trim_gain_s * (est.x_dot_mps - speed_command_mps))
-                    .clamp(-limit, limit);
+                let speed_error = est.x_dot_mps - speed_command_mps;
+                if speed_error.abs() < TRIM_BAND_MPS {
+                    self.speed_trim_m = (self.speed_trim_m + c.speed_trim_gain_s * speed_error)
+                        .clamp(-limit, limit);
+                }
                 self.pitch_target_rad =
                     (self.pitch_target_rad - c.pitch_trim_gain * est.phi_rad).clamp(-0.3, 0.3);
             }
@@ -400,6 +407,7 @@ mod tests {
                 theta_rad: v[5],
                 theta_dot_rad_s: v[6],
                 leg_rate_mps: v[7],
+                toe_x_m: 0.0,
             };
             for _ in 0..steps {
                 let c = r.step(&est, v[8], 1e-3);

@@ -461,6 +461,15 @@ fn cmd_planar_raibert(
         }
     );
     say!(
+        "  hip motor          peak {:.1} A (limit {:.1} A); copper loss {:.0} J ({:.1} W mean); winding at most {:.1} C (derates from {:.0} C)",
+        r.hip.peak_current_a,
+        hopper_control::planar::HipDrive::design().current_limit_a,
+        r.hip.copper_loss_j,
+        r.hip.copper_loss_j / r.duration_s.max(1e-9),
+        r.hip.max_winding_c,
+        hopper_control::thermal::ThermalConfig::default().derate_winding_c
+    );
+    say!(
         "  verdict            {}",
         if r.passes() {
             "every figure within its bound"
