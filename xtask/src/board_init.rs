@@ -92,6 +92,8 @@ const H405: Map = Map {
         ("GPIOA.AFRL", 0, 2, "PA0 TIM5_CH1"),
         ("GPIOA.AFRL", 1, 2, "PA1 TIM5_CH2"),
         ("GPIOB.AFRL", 0, 2, "PB0 TIM3_CH3 (AMP_EN)"),
+        ("GPIOC.AFRL", 6, 3, "PC6 TIM8_CH1 (hip encoder)"),
+        ("GPIOC.AFRL", 7, 3, "PC7 TIM8_CH2 (hip encoder)"),
     ],
     deadman_forced_low: None,
     fault_line: "fault-test",
@@ -118,6 +120,8 @@ const FEATHER: Map = Map {
         ("GPIOA.AFRL", 6, 2, "PA6 TIM3_CH1"),
         ("GPIOA.AFRL", 7, 2, "PA7 TIM3_CH2"),
         ("GPIOB.AFRH", 14, 9, "PB14 TIM12_CH1 (AMP_EN)"),
+        ("GPIOB.AFRL", 6, 2, "PB6 TIM4_CH1 (hip encoder)"),
+        ("GPIOB.AFRL", 7, 2, "PB7 TIM4_CH2 (hip encoder)"),
     ],
     // OC1M = 100 (force inactive), CC1S = 00 (output).
     deadman_forced_low: Some(("TIM12.CCMR1", 0x0000_0040)),
@@ -189,6 +193,7 @@ fn register(device: &str, offset: u32) -> String {
         ("DAC", o) => match o {
             0x00 => "CR",
             0x08 => "DHR12R1",
+            0x14 => "DHR12R2",
             _ => "",
         },
         (d, o) if d.starts_with("TIM") => match o {
@@ -347,16 +352,19 @@ fn check(lines: &[String], map: &Map) -> Vec<String> {
             )),
         }
     }
-    // The DAC: DHR12R1 = 0x800 (the zero-current code) before CR.EN1.
-    let zero = position(lines, |l| l == "DAC.DHR12R1 = 0x00000800");
-    let enable = position(lines, |l| {
-        l.starts_with("DAC.CR = ") && value_of(l).is_some_and(|v| v & 1 != 0)
-    });
-    match (zero, enable) {
-        (Some(z), Some(e)) if z < e => {}
-        _ => problems.push(format!(
-            "the DAC's zero code is not written before the DAC is enabled (DHR12R1 at {zero:?}, EN1 at {enable:?})"
-        )),
+    // The DAC: each channel's DHR12Rn = 0x800 (the zero-current code)
+    // before its CR.ENn (bit 0 for the leg's, 16 for the hip's).
+    for (channel, bit) in [(1, 0), (2, 16)] {
+        let zero = position(lines, |l| l == format!("DAC.DHR12R{channel} = 0x00000800"));
+        let enable = position(lines, |l| {
+            l.starts_with("DAC.CR = ") && value_of(l).is_some_and(|v| v & (1 << bit) != 0)
+        });
+        match (zero, enable) {
+            (Some(z), Some(e)) if z < e => {}
+            _ => problems.push(format!(
+                "the DAC's zero code is not written before the DAC is enabled (DHR12R{channel} at {zero:?}, EN{channel} at {enable:?})"
+            )),
+        }
     }
     // Alternate functions: the map's link, encoder and deadman pins. An
     // unmodelled register reads 0, so each read-modify-write shows only

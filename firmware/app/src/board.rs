@@ -44,6 +44,9 @@
 //! | PA1  | TIM5_CH2, AF2, pull-up    | height encoder B                    | input            | — |
 //! | PA9  | USART1_TX, AF7            | host link, to the USB-UART adapter's RX, 921,600 baud 8N1 | output | idle high |
 //! | PA10 | USART1_RX, AF7, pull-up   | host link, from the adapter's TX    | input            | idle high when unplugged |
+//! | PA5  | DAC channel 2, analog     | the planar machine's hip current command (its amplifier enabled by AMP_EN) | analog output | zero-current code before the channel is enabled |
+//! | PC6  | TIM8_CH1, AF3, pull-up    | the planar machine's hip encoder A  | input            | — |
+//! | PC7  | TIM8_CH2, AF3, pull-up    | the planar machine's hip encoder B  | input            | — |
 //!
 //! PA15, PB3 and PB4 are JTAG pins at reset (JTDI, JTDO/SWO, NJTRST): on
 //! this map, after [`init`] the board is debuggable over SWD only (PA13/PA14, untouched) and
@@ -56,7 +59,8 @@
 //! wiring is the one that fails safe).
 //!
 //! # Control timing
-//! TIM4 (on APB1, 84 MHz) overflows at `control_hz`; its update event is its
+//! The control timer (the map's: TIM4 on the H405, TIM2 on the Feather; on
+//! APB1, 84 MHz) overflows at `control_hz`; its update event is its
 //! TRGO, which starts ADC1's *injected* group (PA2 then PA3, 56-cycle sample
 //! time at ADCCLK = PCLK2 / 4 = 21 MHz: (56 + 12) / 21 MHz = 3.2 µs each,
 //! 6.5 µs for both). The end of the group (JEOC) raises the `ADC` interrupt,
@@ -274,6 +278,30 @@ struct Clocks {
     pclk2_hz: u32,
 }
 
+/// The control timer's update (and TRGO) at `control_hz` from a
+/// `timer_hz` clock, left stopped; the rate it will run at, rounded to the
+/// nearest Hz. A macro: the maps' control timers (TIM4, TIM2) are
+/// different register blocks with the same fields.
+macro_rules! configure_control_timer {
+    ($tim:expr, $timer_hz:expr, $control_hz:expr) => {{
+        let tim = $tim;
+        let (psc, arr, actual_hz) = control_timer_setup($timer_hz, $control_hz);
+        tim.cr1().modify(|_, w| w.cen().disabled());
+        tim.psc().write(|w| w.psc().set(psc));
+        tim.arr().write(|w| w.arr().set(arr.into()));
+        tim.cnt().write(|w| w.cnt().set(0));
+        // URS: only overflows set the update flag, not the UG below.
+        tim.cr1()
+            .modify(|_, w| w.urs().counter_only().arpe().enabled());
+        // UG loads the prescaler now (it is otherwise only loaded at the
+        // first overflow, which would make the first period 1/(PSC+1) too
+        // short).
+        tim.egr().write(|w| w.ug().update());
+        tim.cr2().modify(|_, w| w.mms().update());
+        actual_hz
+    }};
+}
+
 /// Configures the board; the amplifier is disabled (AMP_EN low) and the DAC at
 /// the zero-current code before anything else is touched.
 ///
@@ -322,6 +350,24 @@ pub fn init(
             .enabled()
     });
     dp.DAC.dhr12r1().write(|w| w.daccdhr().set(zero_code));
+    // Channel 2 (PA5), the planar machine's hip amplifier, the same way.
+    // Its amplifier's enable is AMP_EN too (the pin map's note).
+    dp.GPIOA.pupdr().modify(|_, w| w.pupdr5().floating());
+    dp.GPIOA.moder().modify(|_, w| w.moder5().analog());
+    dp.DAC.dhr12r2().write(|w| w.daccdhr().set(zero_code));
+    dp.DAC.cr().modify(|_, w| {
+        w.ten2()
+            .disabled()
+            .wave2()
+            .disabled()
+            .dmaen2()
+            .disabled()
+            .boff2()
+            .enabled()
+            .en2()
+            .enabled()
+    });
+    dp.DAC.dhr12r2().write(|w| w.daccdhr().set(zero_code));
 
     // 3. The other pins.
     pinmap::configure_inputs(&dp.GPIOB, &dp.GPIOC);
@@ -332,13 +378,14 @@ pub fn init(
 
     // 5. Encoders.
     pinmap::enable_clocks(&dp.RCC);
-    let (motor_counter, height_counter) = pinmap::take_counters!(dp);
+    let (motor_counter, height_counter, hip_counter, control_timer) = pinmap::take_counters!(dp);
     let (deadman_timer, link_usart) = pinmap::take_deadman_and_link!(dp);
-    pinmap::configure_encoders(&motor_counter, &height_counter);
+    pinmap::configure_encoders(&motor_counter, &height_counter, &hip_counter);
 
-    // 6. TIM4 at the control rate, stopped; configured while the ADC's
-    //    trigger input is still disabled, so loading it cannot trigger.
-    let control_hz = configure_control_timer(&dp.TIM4, clocks.apb1_timer_hz, control_hz);
+    // 6. The control timer (the map's: TIM4 on the H405) at the control
+    //    rate, stopped; configured while the ADC's trigger input is still
+    //    disabled, so loading it cannot trigger.
+    let control_hz = configure_control_timer!(&control_timer, clocks.apb1_timer_hz, control_hz);
 
     // 6b. The hardware deadman: AMP_EN becomes the deadman timer's
     //     output, forced low until the first enabled period retriggers it.
@@ -350,12 +397,13 @@ pub fn init(
         control_hz,
     );
 
-    // 7. ADC1 injected group, triggered by TIM4 TRGO, interrupt at its end.
+    // 7. ADC1 injected group, triggered by the control timer's TRGO,
+    //    interrupt at its end.
     configure_adc(&dp.ADC_COMMON, &dp.ADC1);
 
-    // 8. Start TIM4: the first trigger comes one period later and finds the
-    //    ADC powered and settled.
-    dp.TIM4.cr1().modify(|_, w| w.cen().enabled());
+    // 8. Start the control timer: the first trigger comes one period later
+    //    and finds the ADC powered and settled.
+    control_timer.cr1().modify(|_, w| w.cen().enabled());
 
     // 9. The host link: the pin map's USART.
     let serial = crate::serial::Serial::new(
@@ -815,16 +863,8 @@ fn configure_adc(common: &pac::ADC_COMMON, adc: &pac::ADC1) {
             .enabled()
     });
     adc.cr2().modify(|_, w| {
-        w.align()
-            .right()
-            .cont()
-            .single()
-            .exten()
-            .disabled()
-            .jextsel()
-            .tim4trgo()
-            .jexten()
-            .rising_edge()
+        w.align().right().cont().single().exten().disabled();
+        pinmap::adc_trigger(w).jexten().rising_edge()
     });
     // A flag left set would fire the interrupt as soon as it is unmasked.
     adc.sr().write(|w| w.jeoc().clear().jstrt().clear());
@@ -851,24 +891,6 @@ fn set_injected_sequence(adc: &pac::ADC1) {
         .jl()
         .set(1)
     });
-}
-
-/// TIM4 update (and TRGO) at `control_hz` from a `timer_hz` clock, left
-/// stopped; returns the rate it will run at, rounded to the nearest Hz.
-fn configure_control_timer(tim: &pac::TIM4, timer_hz: u32, control_hz: u32) -> u32 {
-    let (psc, arr, actual_hz) = control_timer_setup(timer_hz, control_hz);
-    tim.cr1().modify(|_, w| w.cen().disabled());
-    tim.psc().write(|w| w.psc().set(psc));
-    tim.arr().write(|w| w.arr().set(arr));
-    tim.cnt().write(|w| w.cnt().set(0));
-    // URS: only overflows set the update flag, not the UG below.
-    tim.cr1()
-        .modify(|_, w| w.urs().counter_only().arpe().enabled());
-    // UG loads the prescaler now (it is otherwise only loaded at the first
-    // overflow, which would make the first period 1/(PSC+1) too short).
-    tim.egr().write(|w| w.ug().update());
-    tim.cr2().modify(|_, w| w.mms().update());
-    actual_hz
 }
 
 /// Prescaler, auto-reload and resulting rate for a 16-bit timer: the smallest

@@ -16,10 +16,20 @@
 //! | amplifier fault input | PB4 | PC2 (D12) |
 //! | dump button | PC13 | PC3 (D11) |
 //! | DAC | PA4 | PA4 (A0) |
+//! | hip amplifier's DAC (the planar machine) | PA5 (DAC channel 2) | PA5 (A1) |
 //! | load cell, potentiometer | PA2, PA3 (ADC IN2, IN3) | PC4, PC5 (IN14, IN15) (A4, A5) |
 //! | motor encoder | PA15, PB3 (TIM2, 32-bit, AF1) | PC6, PC7 (TIM8, 16-bit, AF3) (D6, D5) |
 //! | height encoder | PA0, PA1 (TIM5, 32-bit, AF2) | PA6, PA7 (TIM3, 16-bit, AF2) (A2, A3) |
+//! | hip encoder (the planar machine) | PC6, PC7 (TIM8, 16-bit, AF3) | PB6, PB7 (TIM4, 16-bit, AF2) (SCL, SDA) |
+//! | control timer (no pin: its TRGO starts the ADC) | TIM4 | TIM2 |
 //! | host link | PA9, PA10 (USART1, AF7, APB2) | PB10, PB11 (USART3, AF7, APB1) (TX, RX) |
+//!
+//! The hip's amplifier takes its enable from AMP_EN too (both amplifiers'
+//! enable inputs on the one deadman output): the hip can no more be
+//! enabled without the deadman, the e-stop's hardware break or the fault
+//! paths' [`amp_en_low`] than the leg. The Feather's three encoder pin
+//! pairs are TIM3's, TIM8's and TIM4's, so its control timer is TIM2 (its
+//! TRGO is one of the ADC's injected triggers too).
 //!
 //! Both maps keep AMP_EN on GPIOB, so the fault paths' stack-free entry
 //! (`fault_handlers!`) and [`amp_en_low`] are one piece of code with the
@@ -132,7 +142,7 @@ pub(crate) fn amp_en_reads_low() -> bool {
 #[macro_export]
 macro_rules! take_counters {
     ($dp:ident) => {
-        ($dp.TIM2, $dp.TIM5)
+        ($dp.TIM2, $dp.TIM5, $dp.TIM8, $dp.TIM4)
     };
 }
 /// The same on the Feather's map.
@@ -140,11 +150,13 @@ macro_rules! take_counters {
 #[macro_export]
 macro_rules! take_counters {
     ($dp:ident) => {
-        ($dp.TIM8, $dp.TIM3)
+        ($dp.TIM8, $dp.TIM3, $dp.TIM4, $dp.TIM2)
     };
 }
 pub use take_counters;
 
+/// (`take_counters!` moves `(motor, height, hip, control timer)`.)
+///
 /// Moves the map's deadman timer and link USART out of the device
 /// peripherals: `(deadman, link)`.
 #[cfg(not(feature = "feather"))]
@@ -366,6 +378,10 @@ pub mod h405 {
     pub type MotorCounter = pac::TIM2;
     /// The height encoder's counter: TIM5 (32-bit).
     pub type HeightCounter = pac::TIM5;
+    /// The hip encoder's counter: TIM8 (16-bit, an APB2 timer), PC6, PC7.
+    pub type HipCounter = pac::TIM8;
+    /// The control timer: TIM4 (its update is its TRGO, the ADC's trigger).
+    pub type ControlTimer = pac::TIM4;
     /// Width of both encoder counters in bits.
     pub const ENCODER_COUNTER_BITS: u8 = 32;
     /// ADC channel of the load cell (PA2).
@@ -394,13 +410,14 @@ pub mod h405 {
         gpioc.moder().modify(|_, w| w.moder13().input());
     }
 
-    /// ADC inputs (PA2, PA3) analog; encoder inputs (PA0, PA1, PA15, PB3)
-    /// in their alternate functions with pull-ups. The AF number is written
-    /// before the mode, so a pin never sits in the wrong alternate function.
+    /// ADC inputs (PA2, PA3) analog; encoder inputs (PA0, PA1, PA15, PB3,
+    /// and the hip's PC6, PC7) in their alternate functions with pull-ups.
+    /// The AF number is written before the mode, so a pin never sits in
+    /// the wrong alternate function.
     pub fn configure_analog_and_encoder_pins(
         gpioa: &pac::GPIOA,
         gpiob: &pac::GPIOB,
-        _gpioc: &pac::GPIOC,
+        gpioc: &pac::GPIOC,
     ) {
         gpioa.pupdr().modify(|_, w| {
             w.pupdr2()
@@ -430,10 +447,18 @@ pub mod h405 {
         gpiob.pupdr().modify(|_, w| w.pupdr3().pull_up());
         gpiob.afrl().modify(|_, w| w.afrl3().af1());
         gpiob.moder().modify(|_, w| w.moder3().alternate());
+        // The hip encoder: PC6, PC7 (TIM8, AF3).
+        gpioc
+            .pupdr()
+            .modify(|_, w| w.pupdr6().pull_up().pupdr7().pull_up());
+        gpioc.afrl().modify(|_, w| w.afrl6().af3().afrl7().af3());
+        gpioc
+            .moder()
+            .modify(|_, w| w.moder6().alternate().moder7().alternate());
     }
 
-    /// The clocks of the encoders' timers (TIM2, TIM5), the deadman's
-    /// (TIM3), the control timer (TIM4) and ADC1.
+    /// The clocks of the encoders' timers (TIM2, TIM5, the hip's TIM8),
+    /// the deadman's (TIM3), the control timer (TIM4) and ADC1.
     pub fn enable_clocks(rcc: &pac::RCC) {
         rcc.apb1enr().modify(|_, w| {
             w.tim2en()
@@ -445,7 +470,8 @@ pub mod h405 {
                 .tim5en()
                 .enabled()
         });
-        rcc.apb2enr().modify(|_, w| w.adc1en().enabled());
+        rcc.apb2enr()
+            .modify(|_, w| w.adc1en().enabled().tim8en().enabled());
         let _ = rcc.apb2enr().read();
     }
 
@@ -456,10 +482,16 @@ pub mod h405 {
         let _ = rcc.apb1enr().read();
     }
 
-    /// Both encoders counting, wrapping at 32 bits.
-    pub fn configure_encoders(motor: &MotorCounter, height: &HeightCounter) {
+    /// Both encoders counting, wrapping at 32 bits, and the hip's at 16.
+    pub fn configure_encoders(motor: &MotorCounter, height: &HeightCounter, hip: &HipCounter) {
         configure_encoder!(motor, u32::MAX);
         configure_encoder!(height, u32::MAX);
+        configure_encoder!(hip, u16::MAX);
+    }
+
+    /// ADC1's injected group started by the control timer's TRGO.
+    pub fn adc_trigger(w: &mut pac::adc1::cr2::W) -> &mut pac::adc1::cr2::W {
+        w.jextsel().tim4trgo()
     }
 
     /// 56-cycle sample time on both converter channels.
@@ -519,6 +551,10 @@ pub mod feather {
     pub type MotorCounter = pac::TIM8;
     /// The height encoder's counter: TIM3 (16-bit).
     pub type HeightCounter = pac::TIM3;
+    /// The hip encoder's counter: TIM4 (16-bit), PB6, PB7 (SCL, SDA).
+    pub type HipCounter = pac::TIM4;
+    /// The control timer: TIM2 (TIM4's pins count the hip).
+    pub type ControlTimer = pac::TIM2;
     /// Width of both encoder counters in bits.
     pub const ENCODER_COUNTER_BITS: u8 = 16;
     /// ADC channel of the load cell (PC4, A4).
@@ -548,11 +584,12 @@ pub mod feather {
     }
 
     /// ADC inputs (PC4, PC5) analog; encoder inputs (PC6, PC7 AF3 for
-    /// TIM8; PA6, PA7 AF2 for TIM3) in their alternate functions with
-    /// pull-ups, the AF number before the mode.
+    /// TIM8; PA6, PA7 AF2 for TIM3; the hip's PB6, PB7 AF2 for TIM4) in
+    /// their alternate functions with pull-ups, the AF number before the
+    /// mode.
     pub fn configure_analog_and_encoder_pins(
         gpioa: &pac::GPIOA,
-        _gpiob: &pac::GPIOB,
+        gpiob: &pac::GPIOB,
         gpioc: &pac::GPIOC,
     ) {
         gpioc.pupdr().modify(|_, w| {
@@ -579,13 +616,28 @@ pub mod feather {
         gpioa
             .moder()
             .modify(|_, w| w.moder6().alternate().moder7().alternate());
+        gpiob
+            .pupdr()
+            .modify(|_, w| w.pupdr6().pull_up().pupdr7().pull_up());
+        gpiob.afrl().modify(|_, w| w.afrl6().af2().afrl7().af2());
+        gpiob
+            .moder()
+            .modify(|_, w| w.moder6().alternate().moder7().alternate());
     }
 
-    /// The clocks of the encoders' timers (TIM8 on APB2, TIM3), the
-    /// deadman's (TIM12), the control timer (TIM4) and ADC1.
+    /// The clocks of the encoders' timers (TIM8 on APB2, TIM3, the hip's
+    /// TIM4), the deadman's (TIM12), the control timer (TIM2) and ADC1.
     pub fn enable_clocks(rcc: &pac::RCC) {
-        rcc.apb1enr()
-            .modify(|_, w| w.tim3en().enabled().tim4en().enabled().tim12en().enabled());
+        rcc.apb1enr().modify(|_, w| {
+            w.tim2en()
+                .enabled()
+                .tim3en()
+                .enabled()
+                .tim4en()
+                .enabled()
+                .tim12en()
+                .enabled()
+        });
         rcc.apb2enr()
             .modify(|_, w| w.adc1en().enabled().tim8en().enabled());
         let _ = rcc.apb2enr().read();
@@ -598,10 +650,16 @@ pub mod feather {
         let _ = rcc.apb1enr().read();
     }
 
-    /// Both encoders counting, wrapping at 16 bits.
-    pub fn configure_encoders(motor: &MotorCounter, height: &HeightCounter) {
+    /// The three encoders counting, wrapping at 16 bits.
+    pub fn configure_encoders(motor: &MotorCounter, height: &HeightCounter, hip: &HipCounter) {
         configure_encoder!(motor, u16::MAX);
         configure_encoder!(height, u16::MAX);
+        configure_encoder!(hip, u16::MAX);
+    }
+
+    /// ADC1's injected group started by the control timer's TRGO.
+    pub fn adc_trigger(w: &mut pac::adc1::cr2::W) -> &mut pac::adc1::cr2::W {
+        w.jextsel().tim2trgo()
     }
 
     /// 56-cycle sample time on both converter channels.
