@@ -11,6 +11,6 @@
 
 pub use hopper_run::*;
 pub use hopper_study::{
-    design, endurance, figures, heat_bound, identify, planar_raibert, planar_sim, planar_stability,
-    slurm, spring, sweep,
+    design, endurance, figures, heat_bound, identify, planar_raibert, planar_robot, planar_sim,
+    planar_stability, slurm, spring, sweep,
 };

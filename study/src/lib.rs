@@ -20,6 +20,7 @@ pub mod figures;
 pub mod heat_bound;
 pub mod identify;
 pub mod planar_raibert;
+pub mod planar_robot;
 pub mod planar_sim;
 pub mod planar_stability;
 pub mod slurm;

@@ -6,9 +6,8 @@
 
 use hopper_control::planar::raibert::RaibertConfig;
 use hopper_plant::planar::PlanarEvent;
-use hopper_plant::planar_general::GeneralParams;
-use hopper_sil::planar::PlanarLoop;
 pub use hopper_sil::planar::DT_S;
+use hopper_sil::planar::{PlanarLoop, PlanarMachine};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 
@@ -25,11 +24,6 @@ pub const APEX_BAND: f64 = 0.10;
 pub const APEX_FROM_HOP: usize = 5;
 /// A push lasts this long (its force is the impulse over it), s.
 pub const PUSH_S: f64 = 0.05;
-
-/// The machine the runs are on: [`GeneralParams::actuated_table_2_2`].
-pub fn actuated_machine() -> GeneralParams {
-    GeneralParams::actuated_table_2_2()
-}
 
 /// A speed command that steps at given times: `T:V,T:V,...` (s, m/s),
 /// the first at 0.
@@ -233,9 +227,11 @@ fn settling(strides: &[Stride], at_s: f64, until_s: f64, command: f64) -> Settli
     }
 }
 
-/// Runs the actuated machine for `duration_s` along `profile` with
-/// `pushes`, from an apex 0.8 m up at the profile's first speed.
+/// Runs `machine` for `duration_s` along `profile` with
+/// `pushes`, from an apex with the toe at the target, at the profile's
+/// first speed.
 pub fn simulate(
+    machine: &PlanarMachine,
     profile: &SpeedProfile,
     pushes: &[Push],
     duration_s: f64,
@@ -246,8 +242,8 @@ pub fn simulate(
     }
     cfg.validate()
         .map_err(|e| format!("the controller's `{}` is out of its range", e.0))?;
-    let p = actuated_machine();
-    let mut lp = PlanarLoop::new(p, cfg, profile.at(0.0))
+    let p = machine.params;
+    let mut lp = PlanarLoop::of(machine, cfg, profile.at(0.0))
         .map_err(|e| format!("the planar machine cannot start: {e:?}"))?;
     let mut strides = Vec::new();
     let mut frames = Vec::new();
@@ -681,8 +677,14 @@ mod tests {
     #[test]
     fn raibert_tracks_the_speed_profile() {
         let profile = SpeedProfile::parse("0:0,3:0.5,8:1.0,13:0").unwrap_or_else(|e| panic!("{e}"));
-        let r = simulate(&profile, &[], 60.0, RaibertConfig::table_2_2())
-            .unwrap_or_else(|e| panic!("{e}"));
+        let r = simulate(
+            &PlanarMachine::design(),
+            &profile,
+            &[],
+            60.0,
+            RaibertConfig::table_2_2(),
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
         assert_eq!(r.fell_at_s, None, "{:?}", r.steps);
         assert!(
             r.max_pitch_deg <= PITCH_BOUND_DEG,
@@ -721,8 +723,14 @@ mod tests {
             at_s: 10.0,
             impulse_ns: 20.0,
         };
-        let r = simulate(&profile, &[push], 25.0, RaibertConfig::table_2_2())
-            .unwrap_or_else(|e| panic!("{e}"));
+        let r = simulate(
+            &PlanarMachine::design(),
+            &profile,
+            &[push],
+            25.0,
+            RaibertConfig::table_2_2(),
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
         assert_eq!(r.fell_at_s, None);
         let p = r.pushes[0];
         assert!(p.hops.is_some_and(|h| h <= SETTLE_HOPS), "{p:?}");
@@ -746,8 +754,14 @@ mod tests {
             at_s: 5.0,
             impulse_ns: 120.0,
         };
-        let r = simulate(&profile, &[push], 10.0, RaibertConfig::table_2_2())
-            .unwrap_or_else(|e| panic!("{e}"));
+        let r = simulate(
+            &PlanarMachine::design(),
+            &profile,
+            &[push],
+            10.0,
+            RaibertConfig::table_2_2(),
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
         assert!(
             r.stopped_by.is_some(),
             "{:?} {:?}",

@@ -21,8 +21,46 @@ use hopper_plant::planar_general::{Actuation, GeneralParams, GeneralRunner};
 /// firmware's 10 kHz).
 pub const DT_S: f64 = 1e-4;
 
-/// The hip motor's winding resistance, ohm: the leg's motor's.
-const HIP_WINDING_OHM: f64 = hopper_plant::params::Params::design().winding_resistance_ohm;
+/// A planar machine: Appendix A's runner, its hip's drive and its
+/// sensors (what a robot file describes).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PlanarMachine {
+    /// The runner.
+    pub params: GeneralParams,
+    /// The hip's drive: torque per ampere and the amplifier's limit.
+    pub hip: HipDrive,
+    /// The hip motor's winding resistance, ohm.
+    pub hip_winding_ohm: f64,
+    /// The sensors.
+    pub sensors: PlanarSensors,
+}
+
+impl PlanarMachine {
+    /// Table 2.2's machine with its hip actuated
+    /// ([`GeneralParams::actuated_table_2_2`]), the leg's motor through
+    /// the design's gearhead at the hip ([`HipDrive::design`], the leg
+    /// motor's winding), on a boom ([`PlanarSensors::boom`]).
+    pub fn design() -> Self {
+        PlanarMachine {
+            params: GeneralParams::actuated_table_2_2(),
+            hip: HipDrive::design(),
+            hip_winding_ohm: hopper_plant::params::Params::design().winding_resistance_ohm,
+            sensors: PlanarSensors::boom(),
+        }
+    }
+
+    /// Every part within its ranges; else the first field that is not.
+    pub fn validate(&self) -> Result<(), PlanarError> {
+        self.params.validate()?;
+        self.hip
+            .validate()
+            .map_err(|e| PlanarError::OutOfRange(e.0))?;
+        if !(self.hip_winding_ohm.is_finite() && self.hip_winding_ohm > 0.0) {
+            return Err(PlanarError::NotPositive("hip_winding_ohm"));
+        }
+        self.sensors.validate()
+    }
+}
 
 /// The sensors of a planar hopper on a boom, by their resolution.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -53,6 +91,22 @@ impl PlanarSensors {
             hip_rad: TURN / 65_536.0,
             leg_m: 0.1 / 4096.0,
         }
+    }
+
+    /// Every resolution finite and positive; else the first that is not.
+    pub fn validate(&self) -> Result<(), PlanarError> {
+        for (name, v) in [
+            ("boom_x_m", self.boom_x_m),
+            ("boom_z_m", self.boom_z_m),
+            ("pitch_rad", self.pitch_rad),
+            ("hip_rad", self.hip_rad),
+            ("leg_m", self.leg_m),
+        ] {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(PlanarError::NotPositive(name));
+            }
+        }
+        Ok(())
     }
 
     /// What they read of `st`.
@@ -87,14 +141,34 @@ pub struct PlanarLoop {
     hip_thermal: MotorThermal,
     /// The hip's copper loss so far, by the plant's winding, J.
     hip_copper_loss_j: f64,
+    /// The hip motor's winding resistance, ohm.
+    hip_winding_ohm: f64,
     /// The largest hip current so far, A.
     hip_peak_current_a: f32,
 }
 
 impl PlanarLoop {
-    /// The machine `p` at an apex with the toe `cfg.target_apex_m` up,
-    /// moving at `speed_mps`, run by Raibert's controller with `cfg`.
-    pub fn new(p: GeneralParams, cfg: RaibertConfig, speed_mps: f64) -> Result<Self, PlanarError> {
+    /// The design machine ([`PlanarMachine::design`]) at an apex with the
+    /// toe `cfg.target_apex_m` up, moving at `speed_mps`, run by Raibert's
+    /// controller with `cfg`.
+    pub fn new(cfg: RaibertConfig, speed_mps: f64) -> Result<Self, PlanarError> {
+        Self::of(&PlanarMachine::design(), cfg, speed_mps)
+    }
+
+    /// The machine `m` at an apex with the toe `cfg.target_apex_m` up,
+    /// moving at `speed_mps`, run by Raibert's controller with `cfg` (its
+    /// leg's length and the estimator's taken from the machine's, its
+    /// torque limit at most the hip drive's).
+    pub fn of(m: &PlanarMachine, cfg: RaibertConfig, speed_mps: f64) -> Result<Self, PlanarError> {
+        m.validate()?;
+        let p = m.params;
+        let cfg = RaibertConfig {
+            leg_length_m: p.leg_length_m as f32,
+            max_hip_torque_nm: cfg
+                .max_hip_torque_nm
+                .min(m.hip.current_limit_a * m.hip.torque_per_amp_nm_per_a),
+            ..cfg
+        };
         let controller = Raibert::new(cfg).map_err(|e| PlanarError::OutOfRange(e.0))?;
         let guard =
             Guard::new(GuardConfig::table_2_2()).map_err(|e| PlanarError::OutOfRange(e.0))?;
@@ -111,19 +185,18 @@ impl PlanarLoop {
             ..PlanarEstimatorConfig::table_2_2()
         })
         .map_err(|e| PlanarError::OutOfRange(e.0))?;
-        let hip = HipDrive::design();
-        hip.validate().map_err(|e| PlanarError::OutOfRange(e.0))?;
         let hip_thermal = MotorThermal::new(ThermalConfig::default())
             .map_err(|e| PlanarError::OutOfRange(e.0))?;
         Ok(PlanarLoop {
             plant: GeneralRunner::from_apex(p, &start)?,
             controller,
             guard,
-            sensors: PlanarSensors::boom(),
+            sensors: m.sensors,
             estimator,
-            hip,
+            hip: m.hip,
             hip_thermal,
             hip_copper_loss_j: 0.0,
+            hip_winding_ohm: m.hip_winding_ohm,
             hip_peak_current_a: 0.0,
         })
     }
@@ -205,18 +278,18 @@ impl PlanarLoop {
     ) {
         // The hip's amplifier drives the current the torque was made of,
         // within its own limit; its winding turns it to heat.
-        use hopper_model::design as d;
-        let current_a = (f64::from(cmd.hip_torque_nm) / d::HIP_TORQUE_PER_AMP_NM_PER_A)
-            .clamp(-d::CURRENT_LIMIT_A, d::CURRENT_LIMIT_A);
+        let per_amp = f64::from(self.hip.torque_per_amp_nm_per_a);
+        let limit = f64::from(self.hip.current_limit_a);
+        let current_a = (f64::from(cmd.hip_torque_nm) / per_amp).clamp(-limit, limit);
         let current_a = if current_a.is_finite() {
             current_a
         } else {
             0.0
         };
         self.hip_peak_current_a = self.hip_peak_current_a.max(libm::fabs(current_a) as f32);
-        self.hip_copper_loss_j += current_a * current_a * HIP_WINDING_OHM * DT_S;
+        self.hip_copper_loss_j += current_a * current_a * self.hip_winding_ohm * DT_S;
         self.plant.set_actuation(Actuation {
-            hip_torque_nm: current_a * d::HIP_TORQUE_PER_AMP_NM_PER_A,
+            hip_torque_nm: current_a * per_amp,
             leg_thrust_n: f64::from(cmd.leg_thrust_n),
             push_n,
         });

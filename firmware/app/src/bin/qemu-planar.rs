@@ -32,7 +32,6 @@ mod app {
     use hopper_app::control::CONTROL_HZ;
     use hopper_control::planar::raibert::RaibertConfig;
     use hopper_plant::planar::PlanarEvent;
-    use hopper_plant::planar_general::GeneralParams;
     use hopper_sil::planar::{PlanarLoop, DT_S};
 
     // `PLANAR_PROFILE`, `PLANAR_TARGET_APEX_M`, `PLANAR_DURATION_S`:
@@ -75,8 +74,7 @@ mod app {
         let b = hopper_app::qemu::tim5_now();
         let mut cfg = RaibertConfig::table_2_2();
         cfg.target_apex_m = PLANAR_TARGET_APEX_M;
-        let Ok(lp) = PlanarLoop::new(GeneralParams::actuated_table_2_2(), cfg, speed_at(0.0))
-        else {
+        let Ok(lp) = PlanarLoop::new(cfg, speed_at(0.0)) else {
             defmt::error!("planar set-up failed");
             debug::exit(debug::EXIT_FAILURE);
             #[allow(clippy::empty_loop)]

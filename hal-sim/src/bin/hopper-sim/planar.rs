@@ -186,7 +186,16 @@ pub(crate) enum PlanarCmd {
         /// positive; held for 0.05 s); repeatable.
         #[arg(long = "inject", value_name = "push@T:N")]
         inject: Vec<String>,
+        /// raibert: the machine from a planar robot file (TOML: [machine],
+        /// [hip], [sensors]; an entry left out keeps the design's; see
+        /// `planar robot-template`).
+        #[arg(long, value_name = "FILE")]
+        robot: Option<PathBuf>,
     },
+    /// Print the design machine as a planar robot file (every entry with
+    /// its unit, range and meaning), to edit and run with `planar run
+    /// --controller raibert --robot FILE`.
+    RobotTemplate,
     /// Figures 2.18-2.22 (fig-2-18.png/.svg ...) into DIR.
     Figures {
         /// Directory (created if missing).
@@ -380,6 +389,7 @@ fn cmd_planar_stability(
 /// `planar run --controller raibert`: the run, its strides and its
 /// figures against their bounds.
 fn cmd_planar_raibert(
+    robot: Option<&std::path::Path>,
     cfg: hopper_control::planar::raibert::RaibertConfig,
     profile: &str,
     inject: &[String],
@@ -389,13 +399,17 @@ fn cmd_planar_raibert(
 ) -> Result<()> {
     use hal_sim::planar_raibert::{self as pr, Push, SpeedProfile};
     let kc = f64::from(cfg.stabiliser_gain_ns_per_m);
+    let machine = &match robot {
+        Some(path) => hal_sim::planar_robot::load(path).map_err(anyhow::Error::msg)?,
+        None => hopper_sil::planar::PlanarMachine::design(),
+    };
     let profile = SpeedProfile::parse(profile).map_err(anyhow::Error::msg)?;
     let pushes = inject
         .iter()
         .map(|i| Push::parse(i))
         .collect::<std::result::Result<Vec<_>, _>>()
         .map_err(anyhow::Error::msg)?;
-    let r = pr::simulate(&profile, &pushes, duration, cfg).map_err(anyhow::Error::msg)?;
+    let r = pr::simulate(machine, &profile, &pushes, duration, cfg).map_err(anyhow::Error::msg)?;
     let written = match out {
         Some(dir) => pr::write_run(dir, &r, &profile).map_err(anyhow::Error::msg)?,
         None => Vec::new(),
@@ -424,6 +438,18 @@ fn cmd_planar_raibert(
         r.duration_s,
         r.strides.len()
     );
+    if let Some(path) = robot {
+        let p = &machine.params;
+        say!(
+            "  machine            {}: body {} kg, leg {} kg, l0 {} m; hip {:.1} N m at {:.1} A",
+            path.display(),
+            p.trunk_mass_kg,
+            p.leg_mass_kg,
+            p.leg_length_m,
+            machine.hip.torque_per_amp_nm_per_a * machine.hip.current_limit_a,
+            machine.hip.current_limit_a
+        );
+    }
     say!(
         "  speed steps (within 10% of the command, or 0.05 m/s at standstill, within {} hops):",
         pr::SETTLE_HOPS
@@ -498,6 +524,7 @@ pub(crate) fn cmd_planar(cmd: &PlanarCmd) -> Result<()> {
             speed_profile,
             target_apex,
             inject,
+            robot,
         } => {
             if controller == "raibert" {
                 let (kc, target_apex) = (*kc, *target_apex);
@@ -511,6 +538,7 @@ pub(crate) fn cmd_planar(cmd: &PlanarCmd) -> Result<()> {
                 cfg.target_apex_m = target_apex as f32;
                 cfg.stabiliser_gain_ns_per_m = kc as f32;
                 return cmd_planar_raibert(
+                    robot.as_deref(),
                     cfg,
                     speed_profile.as_deref().unwrap_or(&format!("0:{speed}")),
                     inject,
@@ -519,8 +547,8 @@ pub(crate) fn cmd_planar(cmd: &PlanarCmd) -> Result<()> {
                     *json,
                 );
             }
-            if speed_profile.is_some() || !inject.is_empty() {
-                bail!("--speed-profile and --inject need --controller raibert (the passive runner runs at --speed)");
+            if speed_profile.is_some() || !inject.is_empty() || robot.is_some() {
+                bail!("--speed-profile, --inject and --robot need --controller raibert (the passive runner runs at --speed)");
             }
             use hal_sim::planar_sim::{simulate_model, Start};
             let start = if start == "fixed-point" {
@@ -550,6 +578,7 @@ pub(crate) fn cmd_planar(cmd: &PlanarCmd) -> Result<()> {
             out,
             json,
         } => cmd_planar_stability(speeds, kc, out.as_deref(), *json)?,
+        PlanarCmd::RobotTemplate => say!("{}", hal_sim::planar_robot::template().trim_end()),
         PlanarCmd::Figures { out } => {
             let (written, runs) =
                 hal_sim::planar_sim::write_figures(out).map_err(anyhow::Error::msg)?;
