@@ -211,4 +211,32 @@ mod tests {
         );
         assert!(read("no server\n```text session\n> x\n```\n").is_err());
     }
+
+    /// The page's server is mis-calibrated as the CI's session robot is
+    /// (`Miscalibration::SESSION`, which `cargo xtask link-session` and the
+    /// QEMU link image use), so the page's figures and CI's agree.
+    #[test]
+    fn the_pages_miscalibration_is_the_sessions() {
+        let text =
+            std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("..").join(PAGE))
+                .unwrap_or_else(|e| panic!("{PAGE}: {e}"));
+        let page = read(&text).unwrap_or_else(|e| panic!("{e}"));
+        let flag = |name: &str| {
+            let at = page.serve.iter().position(|a| a == name);
+            at.and_then(|i| page.serve.get(i + 1))
+                .and_then(|v| v.parse::<f64>().ok())
+                .unwrap_or_else(|| panic!("{PAGE}: no {name} N on the serve line"))
+        };
+        let m = hopper_sil::robot::Miscalibration::SESSION;
+        for (name, want) in [
+            ("--loadcell-bias-n", m.loadcell_bias_n),
+            ("--pot-bias-m", m.pot_bias_m),
+            ("--nut-start-m", m.nut_start_m),
+            ("--spring-rate-error", m.spring_rate_error),
+            ("--height-zero-error-m", m.height_zero_error_m),
+            ("--loadcell-gain-error", m.loadcell_gain_error),
+        ] {
+            assert_eq!(flag(name), want, "{name}");
+        }
+    }
 }

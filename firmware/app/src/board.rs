@@ -309,7 +309,7 @@ macro_rules! configure_control_timer {
 /// rate the timer actually runs at. `dac_zero_code` above 4095 (which a
 /// validated calibration never has) is replaced by mid-scale, 2048.
 ///
-/// Starts TIM4 (the ADC interrupt then fires every period once the
+/// Starts the control timer (the ADC interrupt then fires every period once the
 /// application unmasks it) and, last, the watchdog: the first
 /// [`Watchdog::feed`] must come within ~5 ms of this function returning.
 pub fn init(
@@ -378,7 +378,14 @@ pub fn init(
 
     // 5. Encoders.
     pinmap::enable_clocks(&dp.RCC);
-    let (motor_counter, height_counter, hip_counter, control_timer) = pinmap::take_counters!(dp);
+    // Typed by the map's names: a map whose macro and names disagree does
+    // not compile (its `adc_trigger` sits beside its `ControlTimer`).
+    let (motor_counter, height_counter, hip_counter, control_timer): (
+        pinmap::MotorCounter,
+        pinmap::HeightCounter,
+        pinmap::HipCounter,
+        pinmap::ControlTimer,
+    ) = pinmap::take_counters!(dp);
     let (deadman_timer, link_usart) = pinmap::take_deadman_and_link!(dp);
     pinmap::configure_encoders(&motor_counter, &height_counter, &hip_counter);
 
@@ -840,7 +847,7 @@ fn write_pll_config(rcc: &pac::RCC) {
 
 /// ADC1: 12 bit, right aligned, injected group load cell → JDR1,
 /// potentiometer → JDR2 (the pin map's channels: PA2 and PA3 on the H405),
-/// triggered by TIM4 TRGO (rising edge), interrupt at the group's end.
+/// triggered by the control timer's TRGO (rising edge), interrupt at the group's end.
 fn configure_adc(common: &pac::ADC_COMMON, adc: &pac::ADC1) {
     adc.cr2().modify(|_, w| w.adon().disabled());
     // ADCCLK = PCLK2 / 4: 21 MHz at 168 MHz (the F405's maximum is 36 MHz).
@@ -922,7 +929,7 @@ pub struct BoardIo {
     io: PinnedIo<BoardConverters, pinmap::Estop, pinmap::AmpFault, Deadman>,
     /// Core clock that `init` achieved.
     sysclk_hz: u32,
-    /// Control (TIM4 update) rate that `init` achieved.
+    /// Control (control timer update) rate that `init` achieved.
     control_hz: u32,
 }
 

@@ -187,8 +187,10 @@ pub static HOPPER_DAC_ZERO_CODE: core::sync::atomic::AtomicU16 =
 #[cfg(target_os = "none")]
 pub use HOPPER_DAC_ZERO_CODE as DAC_ZERO_CODE;
 
-/// The DAC's channel 1 at the zero-current code, from any context (one
-/// store to DHR12R1; ignored while the DAC is not clocked).
+/// Both DAC channels (the leg's amplifier's, the hip's) at the zero-current
+/// code, from any context (one store each to DHR12R1 and DHR12R2; ignored
+/// while the DAC is not clocked). Both amplifiers are already off by then:
+/// their enable is AMP_EN.
 #[cfg(target_os = "none")]
 pub fn zero_dac() {
     let code = DAC_ZERO_CODE.load(core::sync::atomic::Ordering::Relaxed);
@@ -199,6 +201,7 @@ pub fn zero_dac() {
     #[allow(unsafe_code)] // Needed to reach the DAC without owning it (fault path).
     let dac = unsafe { &*stm32f4::stm32f405::DAC::ptr() };
     dac.dhr12r1().write(|w| w.daccdhr().set(code & 0x0FFF));
+    dac.dhr12r2().write(|w| w.daccdhr().set(code & 0x0FFF));
 }
 
 /// What both QEMU images share: the amplifier pin and the instruction
@@ -820,12 +823,14 @@ macro_rules! fault_handlers {
                 "str r1, [r0, #0x00]",
                 "mov r1, #0",
                 "str r1, [r0, #0x24]",
-                // DAC (0x4000_7400): DHR12R1 = the zero code.
+                // DAC (0x4000_7400): DHR12R1 and DHR12R2 (the hip's
+                // channel) = the zero code.
                 "ldr r0, =HOPPER_DAC_ZERO_CODE",
                 "ldrh r1, [r0]",
                 "ubfx r1, r1, #0, #12",
                 "ldr r0, =0x40007400",
                 "str r1, [r0, #0x08]",
+                "str r1, [r0, #0x14]",
                 // A fresh main stack, then the Rust part (it does not return).
                 "ldr r0, =_stack_start",
                 "msr msp, r0",

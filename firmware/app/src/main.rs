@@ -1,7 +1,7 @@
 //! `hopper-fw`: the RTIC 2 controller firmware for the hopper on an
 //! STM32F405 board. It runs the control period
 //! ([`hopper_control::runner::PeriodRunner`], which the host simulator and
-//! the QEMU images run too). A hardware timer (TIM4) triggers the ADC's
+//! the QEMU images run too). A hardware timer (the pin map's control timer) triggers the ADC's
 //! injected conversions at `CONTROL_HZ`; their end-of-conversion interrupt
 //! runs the control task with fresh samples; the host link on USART1; the
 //! saved calibration in flash ([`hopper_app::flash`]). See
@@ -16,7 +16,7 @@
 //! | Task      | Priority | Trigger |
 //! |-----------|----------|---------|
 //! | `usart1`  | 4        | USART1 (the host link's bytes; board; 3 in the QEMU link image, whose USART has no baud rate) |
-//! | `control` | 3        | board: ADC injected end of conversion (TIM4 at `CONTROL_HZ`); QEMU: SysTick at `CONTROL_HZ` |
+//! | `control` | 3        | board: ADC injected end of conversion (the control timer at `CONTROL_HZ`); QEMU: SysTick at `CONTROL_HZ` |
 //! | `link`    | 2        | SDIO (spare), pended by `control` every period: decode, answer, encode, build sets (board and QEMU link image) |
 //! | `logger`  | 1        | CAN2_RX1 (spare), pended by `control` when it queues a log item (hop ledgers, faults) or the dump button asks for the capture; its log frames' critical section masks priorities 1-2 only (BASEPRI) |
 //! | `idle`    | 0        | busy loop (no `wfi`: QEMU 7.2 loses SysTick ticks while sleeping) |

@@ -135,8 +135,10 @@ pub(crate) fn amp_en_reads_low() -> bool {
     PortPin::<'B', { AMP_EN }>::idr() & (1 << AMP_EN) == 0
 }
 
-/// Moves the map's encoder counters out of the device peripherals: `(motor,
-/// height)`. A macro: the fields moved depend on the map, and a function
+/// Moves the map's encoder counters and its control timer out of the
+/// device peripherals: `(motor, height, hip, control timer)`, of the
+/// types [`MotorCounter`], [`HeightCounter`], [`HipCounter`] and
+/// [`ControlTimer`] (the board's `init` names them). A macro: the fields moved depend on the map, and a function
 /// cannot move fields out of its caller's `Peripherals`.
 #[cfg(not(feature = "feather"))]
 #[macro_export]
@@ -155,8 +157,6 @@ macro_rules! take_counters {
 }
 pub use take_counters;
 
-/// (`take_counters!` moves `(motor, height, hip, control timer)`.)
-///
 /// Moves the map's deadman timer and link USART out of the device
 /// peripherals: `(deadman, link)`.
 #[cfg(not(feature = "feather"))]
@@ -382,7 +382,8 @@ pub mod h405 {
     pub type HipCounter = pac::TIM8;
     /// The control timer: TIM4 (its update is its TRGO, the ADC's trigger).
     pub type ControlTimer = pac::TIM4;
-    /// Width of both encoder counters in bits.
+    /// Width of the motor's and the height's encoder counters in bits
+    /// (the hip's, TIM8, is 16-bit).
     pub const ENCODER_COUNTER_BITS: u8 = 32;
     /// ADC channel of the load cell (PA2).
     pub const LOADCELL_CHANNEL: u8 = 2;
@@ -555,7 +556,7 @@ pub mod feather {
     pub type HipCounter = pac::TIM4;
     /// The control timer: TIM2 (TIM4's pins count the hip).
     pub type ControlTimer = pac::TIM2;
-    /// Width of both encoder counters in bits.
+    /// Width of every encoder counter in bits.
     pub const ENCODER_COUNTER_BITS: u8 = 16;
     /// ADC channel of the load cell (PC4, A4).
     pub const LOADCELL_CHANNEL: u8 = 14;

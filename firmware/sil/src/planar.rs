@@ -161,12 +161,11 @@ impl PlanarLoop {
     /// torque limit at most the hip drive's).
     pub fn of(m: &PlanarMachine, cfg: RaibertConfig, speed_mps: f64) -> Result<Self, PlanarError> {
         m.validate()?;
+        cfg.validate().map_err(|e| PlanarError::OutOfRange(e.0))?;
         let p = m.params;
         let cfg = RaibertConfig {
             leg_length_m: p.leg_length_m as f32,
-            max_hip_torque_nm: cfg
-                .max_hip_torque_nm
-                .min(m.hip.current_limit_a * m.hip.torque_per_amp_nm_per_a),
+            max_hip_torque_nm: cfg.max_hip_torque_nm.min(m.hip.torque_limit_nm()),
             ..cfg
         };
         let controller = Raibert::new(cfg).map_err(|e| PlanarError::OutOfRange(e.0))?;
@@ -237,6 +236,11 @@ impl PlanarLoop {
         let cmd = self
             .controller
             .step(est, speed_command_mps as f32, DT_S as f32);
+        // A winding at its trip temperature stops the machine, as the leg
+        // motor's stops the vertical hopper.
+        if self.hip_thermal.tripped() {
+            self.guard.latch(PlanarFault::HipOvertemperature);
+        }
         let cmd = self.guard.filter(est, cmd);
         let current_a = self
             .hip
@@ -278,14 +282,10 @@ impl PlanarLoop {
     ) {
         // The hip's amplifier drives the current the torque was made of,
         // within its own limit; its winding turns it to heat.
+        // (The plant's amplifier limits it as the firmware does: the same
+        // drive, at the full limit.)
         let per_amp = f64::from(self.hip.torque_per_amp_nm_per_a);
-        let limit = f64::from(self.hip.current_limit_a);
-        let current_a = (f64::from(cmd.hip_torque_nm) / per_amp).clamp(-limit, limit);
-        let current_a = if current_a.is_finite() {
-            current_a
-        } else {
-            0.0
-        };
+        let current_a = f64::from(self.hip.current_a(cmd.hip_torque_nm, 1.0));
         self.hip_peak_current_a = self.hip_peak_current_a.max(libm::fabs(current_a) as f32);
         self.hip_copper_loss_j += current_a * current_a * self.hip_winding_ohm * DT_S;
         self.plant.set_actuation(Actuation {

@@ -84,10 +84,12 @@ mod app {
     /// PC6..PC10 push-pull outputs, low (quadrature for both encoders, the
     /// probe); PC11, PC12 inputs with pull-downs (the probe's and AMP_EN's
     /// loopbacks: an open harness reads low).
-    #[allow(unsafe_code)] // GPIOC belongs to the board (PC13); these pins are free.
+    #[allow(unsafe_code)] // GPIOC belongs to the board (PC13, the hip encoder's PC6/PC7); the self-test takes these pins.
     fn harness_pins() {
-        // SAFETY: GPIOC's other pins are only PC13 (an input the self-test
-        // does not use); the writes below touch PC6..PC12 alone.
+        // SAFETY: GPIOC's other users are PC13 (an input the self-test
+        // does not use) and the hip encoder's PC6/PC7 (TIM8 inputs the
+        // self-test never reads; it makes them outputs, as the harness
+        // wires them); the writes below touch PC6..PC12 alone.
         let gpioc = unsafe { &*pac::GPIOC::ptr() };
         gpioc
             .bsrr()

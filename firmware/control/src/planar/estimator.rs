@@ -52,11 +52,13 @@ pub struct PlanarEstimatorConfig {
 
 impl PlanarEstimatorConfig {
     /// For the thesis's planar runner (a 0.65 m leg): touchdown at 1.0 mm
-    /// of compression, liftoff below 0.5 mm (above the potentiometer's
-    /// 10 um resolution), and `G = 0.9` (a lag of 0.9 ms at 10 kHz).
+    /// of compression, liftoff below 0.5 mm (many steps of a 12-bit
+    /// potentiometer reading), and `G = 0.95` (a lag of `G dt / (1 - G)`,
+    /// 1.9 ms at 10 kHz: the boom encoder's count in one period is 1.2 m/s
+    /// of finite difference, and this is the gain the runs settled on).
     pub const fn table_2_2() -> Self {
         PlanarEstimatorConfig {
-            leg_length_m: 0.65,
+            leg_length_m: super::TABLE_2_2_LEG_LENGTH_M,
             touchdown_compression_m: 1.0e-3,
             liftoff_compression_m: 0.5e-3,
             rate_filter_gain: 0.95,

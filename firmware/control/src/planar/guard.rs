@@ -56,6 +56,9 @@ pub enum PlanarFault {
     LegAngle,
     /// The hip fell below its height.
     Fall,
+    /// The hip motor's winding reached its trip temperature (the leg
+    /// motor's thermal model, run on the hip's current).
+    HipOvertemperature,
 }
 
 /// The guard (module docs).
@@ -102,6 +105,14 @@ impl Guard {
         }
     }
 
+    /// Latches `fault`, found outside the guard's own checks (the hip
+    /// winding's trip), unless another latched first.
+    pub fn latch(&mut self, fault: PlanarFault) {
+        if self.latched.is_none() {
+            self.latched = Some(fault);
+        }
+    }
+
     /// What latched, if anything.
     pub fn fault(&self) -> Option<PlanarFault> {
         self.latched
@@ -136,6 +147,17 @@ mod tests {
         hip_torque_nm: 10.0,
         leg_thrust_n: 200.0,
     };
+
+    #[test]
+    fn a_fault_found_elsewhere_latches_and_zeroes_both() {
+        let mut g = Guard::new(GuardConfig::table_2_2()).unwrap_or_else(|e| panic!("{e:?}"));
+        assert_eq!(g.filter(&upright(), PUSH), PUSH);
+        g.latch(PlanarFault::HipOvertemperature);
+        // The first latched stays: a later one does not replace it.
+        g.latch(PlanarFault::Fall);
+        assert_eq!(g.fault(), Some(PlanarFault::HipOvertemperature));
+        assert_eq!(g.filter(&upright(), PUSH), PlanarCommand::default());
+    }
 
     #[test]
     fn each_limit_latches_and_zeroes_both_actuators_until_reset() {

@@ -11,6 +11,10 @@ pub mod raibert;
 
 use crate::param::{require, InvalidField};
 
+/// Table 2.2's leg, hip to toe on its stop, m: the planar defaults'
+/// (the machine a run builds gives its own).
+pub const TABLE_2_2_LEG_LENGTH_M: f32 = 0.65;
+
 /// What a planar controller knows of the machine each period, SI. Angles
 /// from the vertical: the body's pitch `phi` (nose up positive, as the
 /// plant's), the leg's `theta` (toe ahead positive).
@@ -101,19 +105,20 @@ impl HipDrive {
     /// `limit_scale` (the winding's derating, in `[0, 1]`); 0 for a
     /// non-finite torque.
     pub fn current_a(&self, torque_nm: f32, limit_scale: f32) -> f32 {
-        // (NaN fails the test: no current. `clamp` would panic on it.)
-        let scale = if limit_scale >= 0.0 {
-            limit_scale.min(1.0)
-        } else {
-            0.0
-        };
-        let limit = self.current_limit_a * scale;
+        let limit = self.current_limit_a * crate::num::clamp(limit_scale, 0.0, 1.0);
         let i = torque_nm / self.torque_per_amp_nm_per_a;
-        if i.is_finite() {
-            i.clamp(-limit, limit)
+        // A NaN or negative limit (an unvalidated drive, a NaN scale), or
+        // a current that is not finite: no current.
+        if i.is_finite() && limit >= 0.0 {
+            crate::num::clamp(i, -limit, limit)
         } else {
             0.0
         }
+    }
+
+    /// The hip's torque at the current limit, N m.
+    pub fn torque_limit_nm(&self) -> f32 {
+        self.current_limit_a * self.torque_per_amp_nm_per_a
     }
 }
 
@@ -133,5 +138,23 @@ mod tests {
         assert_eq!(d.current_a(60.0, 0.5), 0.5 * d.current_limit_a);
         assert_eq!(d.current_a(f32::NAN, 1.0), 0.0);
         assert_eq!(d.current_a(60.0, f32::NAN), 0.0);
+        assert!((d.torque_limit_nm() - 45.0).abs() < 0.01);
+    }
+
+    proptest::proptest! {
+        /// Any drive, torque and scale: no panic, and a current within the
+        /// limit (none when the limit is not a number).
+        #[test]
+        fn the_current_is_within_the_limit(
+            per_amp in proptest::prop_oneof![-10.0f32..10.0, proptest::prelude::Just(f32::NAN)],
+            limit in proptest::prop_oneof![-10.0f32..100.0, proptest::prelude::Just(f32::NAN), proptest::prelude::Just(f32::INFINITY)],
+            torque in proptest::prop_oneof![-1e6f32..1e6, proptest::prelude::Just(f32::NAN), proptest::prelude::Just(f32::NEG_INFINITY)],
+            scale in proptest::prop_oneof![-1.0f32..2.0, proptest::prelude::Just(f32::NAN)],
+        ) {
+            let d = HipDrive { torque_per_amp_nm_per_a: per_amp, current_limit_a: limit };
+            let i = d.current_a(torque, scale);
+            proptest::prop_assert!(i.is_finite());
+            proptest::prop_assert!(i == 0.0 || i.abs() <= limit);
+        }
     }
 }

@@ -446,7 +446,7 @@ fn cmd_planar_raibert(
             p.trunk_mass_kg,
             p.leg_mass_kg,
             p.leg_length_m,
-            machine.hip.torque_per_amp_nm_per_a * machine.hip.current_limit_a,
+            machine.hip.torque_limit_nm(),
             machine.hip.current_limit_a
         );
     }
@@ -489,7 +489,7 @@ fn cmd_planar_raibert(
     say!(
         "  hip motor          peak {:.1} A (limit {:.1} A); copper loss {:.0} J ({:.1} W mean); winding at most {:.1} C (derates from {:.0} C)",
         r.hip.peak_current_a,
-        hopper_control::planar::HipDrive::design().current_limit_a,
+        machine.hip.current_limit_a,
         r.hip.copper_loss_j,
         r.hip.copper_loss_j / r.duration_s.max(1e-9),
         r.hip.max_winding_c,
