@@ -3,7 +3,8 @@
 //! headless (installed when missing), against `hopper-sim serve`. Driven
 //! through the Chrome DevTools protocol as an operator would: the page
 //! loads and shows the robot disarmed, the plotted values move between two
-//! reads, Arm shows armed, an out-of-range set shows the refusal, the
+//! reads, Arm shows armed, the machine's drawing follows the hops (its
+//! body at many heights, its leg on the ground and off it), an out-of-range set shows the refusal, the
 //! Escape key disarms while a parameter box has the focus, a Disarm
 //! answers within 50 ms while five more tabs read and set parameters, a
 //! page closed while armed disarms the robot (the operator deadman), and
@@ -316,6 +317,28 @@ pub fn run(root: &Path) -> Result<(), String> {
         "String(document.querySelectorAll('#ledger tr').length)",
         |s| s.parse::<u32>().is_ok_and(|n| n >= 3),
     )?;
+    // The machine drawn as it hops: over a second, the body's box at many
+    // heights, and the leg drawn on the ground (red) and off it.
+    let mut heights = std::collections::BTreeSet::new();
+    let mut phases = std::collections::BTreeSet::new();
+    for _ in 0..40 {
+        let v = page.eval(
+            "document.getElementById('m-body').getAttribute('y') + ' ' + \
+             (document.getElementById('m-leg').getAttribute('class') || 'flight')",
+        )?;
+        let v = v.as_str().unwrap_or_default().to_string();
+        if let Some((y, phase)) = v.split_once(' ') {
+            heights.insert(y.to_string());
+            phases.insert(phase.to_string());
+        }
+        std::thread::sleep(Duration::from_millis(25));
+    }
+    let drawn = format!(
+        "drawn_heights={} drawn_phases={}",
+        heights.len(),
+        phases.len()
+    );
+    let drawn_ok = heights.len() >= 10 && phases.len() == 2;
     // Record a second of it into a folder.
     page.eval("document.getElementById('record').click(), ''")?;
     page.until("document.getElementById('recording').textContent", |s| {
@@ -451,6 +474,7 @@ pub fn run(root: &Path) -> Result<(), String> {
         && page_closed == "disarmed"
         && robot_lost == "recording_complete"
         && moved
+        && drawn_ok
         && ledger.parse::<u32>().is_ok_and(|n| n >= 3)
         && armed == "armed"
         && refused.contains("refused: out-of-range")
@@ -461,7 +485,7 @@ pub fn run(root: &Path) -> Result<(), String> {
         && hoist.starts_with("mount: hoist")
         && save == "save refused: not-calibrated";
     println!(
-        "cockpit: loaded=\"{loaded}\" moved={moved} arm=\"{armed}\" ledger_rows={ledger} refused=\"{refused}\" disarm=\"{disarmed}\" bringup=\"{bringup}\" recorded_files={files} capture_plotted={plotted} disarm_ms_p99={disarm_ms_p99:.1} escape_in_input={escape_in_input} page_closed={page_closed} robot_lost={robot_lost}"
+        "cockpit: loaded=\"{loaded}\" moved={moved} arm=\"{armed}\" ledger_rows={ledger} refused=\"{refused}\" disarm=\"{disarmed}\" bringup=\"{bringup}\" recorded_files={files} capture_plotted={plotted} disarm_ms_p99={disarm_ms_p99:.1} escape_in_input={escape_in_input} page_closed={page_closed} robot_lost={robot_lost} {drawn}"
     );
     eprintln!("xtask: cockpit: {recorded}");
     eprintln!("xtask: cockpit: {captured}");
