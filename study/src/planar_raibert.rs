@@ -714,6 +714,29 @@ mod tests {
         );
     }
 
+    /// Without the boom's forward encoder the speed comes from the leg's
+    /// kinematics: the profile is followed (each step settles, steady
+    /// within 5% of its command), if later than with the encoder.
+    #[test]
+    fn raibert_runs_on_the_legs_speed_without_a_forward_encoder() {
+        let profile = SpeedProfile::parse("0:0,3:0.5,8:1.0,13:0").unwrap_or_else(|e| panic!("{e}"));
+        let mut m = PlanarMachine::design();
+        m.sensors.boom_x_m = 0.0;
+        let r = simulate(&m, &profile, &[], 60.0, RaibertConfig::table_2_2())
+            .unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(r.fell_at_s, None);
+        for s in &r.steps {
+            assert!(s.hops.is_some_and(|h| h <= 12), "{s:?}");
+            let band = (0.05 * s.command_mps).max(SPEED_FLOOR_MPS);
+            assert!(
+                s.steady_mps
+                    .is_some_and(|v| (v - s.command_mps).abs() <= band),
+                "{s:?}"
+            );
+        }
+        assert!(r.max_pitch_deg <= PITCH_BOUND_DEG, "{}", r.max_pitch_deg);
+    }
+
     /// A 20 N s push on the body mid-stride, standing still: the speed is
     /// back within the band within 10 hops, and it does not fall.
     #[test]

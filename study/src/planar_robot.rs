@@ -69,7 +69,7 @@ pub const FIELDS: &[Field] = &[
     field!("hip", hip.torque_per_amp_nm_per_a as "torque_per_amp_nm_per_a", "N m/A", [1e-3, 100.0], "The hip's torque per ampere of motor current: the motor's constant times the gear's ratio and efficiency (the design: 29.7 mN m/A x 60 x 0.75)."),
     field!("hip", hip.current_limit_a as "current_limit_a", "A", [0.01, 1000.0], "The hip amplifier's current limit (the design: the leg's, 33.67 A); the controller's torque limit follows it."),
     field!("hip", hip_winding_ohm as "winding_resistance_ohm", "ohm", [1e-3, 100.0], "The hip motor's winding resistance, for its copper loss (the leg motor's: 0.356 ohm)."),
-    field!("sensors", sensors.boom_x_m as "boom_x_m", "m", [1e-9, 0.1], "The boom's forward encoder, metres at the hip a count."),
+    field!("sensors", sensors.boom_x_m as "boom_x_m", "m", [0.0, 0.1], "The boom's forward encoder, metres at the hip a count; 0: none, the forward speed taken from the leg's kinematics in stance (the pitch and hip encoders and the potentiometer) and held through the flight."),
     field!("sensors", sensors.boom_z_m as "boom_z_m", "m", [1e-9, 0.1], "The boom's height encoder, metres at the hip a count."),
     field!("sensors", sensors.pitch_rad as "pitch_rad", "rad", [1e-9, 0.1], "The body's pitch encoder, radians a count."),
     field!("sensors", sensors.hip_rad as "hip_rad", "rad", [1e-9, 0.1], "The hip encoder (the leg against the body), radians a count."),

@@ -65,7 +65,9 @@ impl PlanarMachine {
 /// The sensors of a planar hopper on a boom, by their resolution.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PlanarSensors {
-    /// The hip's forward position, m a count.
+    /// The hip's forward position, m a count; 0: the machine has no
+    /// forward encoder, and the estimator takes the speed from the leg's
+    /// kinematics in stance.
     pub boom_x_m: f64,
     /// The hip's height, m a count.
     pub boom_z_m: f64,
@@ -95,8 +97,10 @@ impl PlanarSensors {
 
     /// Every resolution finite and positive; else the first that is not.
     pub fn validate(&self) -> Result<(), PlanarError> {
+        if !(self.boom_x_m.is_finite() && self.boom_x_m >= 0.0) {
+            return Err(PlanarError::OutOfRange("boom_x_m"));
+        }
         for (name, v) in [
-            ("boom_x_m", self.boom_x_m),
             ("boom_z_m", self.boom_z_m),
             ("pitch_rad", self.pitch_rad),
             ("hip_rad", self.hip_rad),
@@ -111,7 +115,14 @@ impl PlanarSensors {
 
     /// What they read of `st`.
     pub fn read(&self, st: &PlanarState) -> PlanarReadings {
-        let q = |v: f64, step: f64| (libm::round(v / step) * step) as f32;
+        // (No encoder, step 0: it reads 0.)
+        let q = |v: f64, step: f64| {
+            if step > 0.0 {
+                (libm::round(v / step) * step) as f32
+            } else {
+                0.0
+            }
+        };
         PlanarReadings {
             boom_x_m: q(st.x_m, self.boom_x_m),
             boom_z_m: q(st.z_m, self.boom_z_m),
@@ -181,6 +192,7 @@ impl PlanarLoop {
         };
         let estimator = PlanarEstimator::new(PlanarEstimatorConfig {
             leg_length_m: p.leg_length_m as f32,
+            speed_from_leg: m.sensors.boom_x_m == 0.0,
             ..PlanarEstimatorConfig::table_2_2()
         })
         .map_err(|e| PlanarError::OutOfRange(e.0))?;

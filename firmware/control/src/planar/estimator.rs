@@ -48,6 +48,13 @@ pub struct PlanarEstimatorConfig {
     pub liftoff_compression_m: f32,
     /// Eq 4.1's `G` for every rate, in `[0, 1)`.
     pub rate_filter_gain: f32,
+    /// The forward speed from the leg's kinematics rather than the boom's
+    /// forward encoder (a machine without one): in stance the toe stands,
+    /// so the hip moves at `-(l' sin(theta) + l theta' cos(theta))`; in
+    /// flight, the stance's mean, the hip's travel over the toe
+    /// (`-l sin(theta)` from touchdown to liftoff) over the stance's time
+    /// (the speed the neutral point needs, free of the rates' lag).
+    pub speed_from_leg: bool,
 }
 
 impl PlanarEstimatorConfig {
@@ -62,6 +69,7 @@ impl PlanarEstimatorConfig {
             touchdown_compression_m: 1.0e-3,
             liftoff_compression_m: 0.5e-3,
             rate_filter_gain: 0.95,
+            speed_from_leg: false,
         }
     }
 
@@ -95,6 +103,14 @@ pub struct PlanarEstimator {
     phi: FilteredDerivative,
     theta: FilteredDerivative,
     leg: FilteredDerivative,
+    /// The hip's speed by the leg's kinematics, m/s: in stance this
+    /// period's, in flight the last stance's mean.
+    leg_speed_mps: f32,
+    /// The hip's position over the toe at touchdown and now, m, and the
+    /// stance's time so far, s.
+    stance_from_m: f32,
+    stance_at_m: f32,
+    stance_s: f32,
 }
 
 impl PlanarEstimator {
@@ -111,6 +127,10 @@ impl PlanarEstimator {
             phi: f,
             theta: f,
             leg: f,
+            leg_speed_mps: 0.0,
+            stance_from_m: 0.0,
+            stance_at_m: 0.0,
+            stance_s: 0.0,
         })
     }
 
@@ -130,10 +150,23 @@ impl PlanarEstimator {
         let theta_dot = rate(&mut self.theta, theta);
         let leg_rate = rate(&mut self.leg, r.leg_length_m);
         let compression = self.cfg.leg_length_m - r.leg_length_m;
+        let (sine, cosine) = leg_sine_cosine(theta);
+        let over_toe_m = -r.leg_length_m * sine;
         if self.stance && compression < self.cfg.liftoff_compression_m {
             self.stance = false;
+            if self.stance_s > 0.0 {
+                self.leg_speed_mps = (self.stance_at_m - self.stance_from_m) / self.stance_s;
+            }
         } else if !self.stance && compression > self.cfg.touchdown_compression_m {
             self.stance = true;
+            self.stance_from_m = over_toe_m;
+            self.stance_s = 0.0;
+        } else if self.stance {
+            self.stance_s += dt_s;
+        }
+        if self.stance {
+            self.stance_at_m = over_toe_m;
+            self.leg_speed_mps = -(leg_rate * sine + r.leg_length_m * theta_dot * cosine);
         }
         // A NaN compression keeps the phase; the NaN rate reports it.
         // In stance the toe stands where the leg reaches; in flight it is
@@ -145,7 +178,11 @@ impl PlanarEstimator {
         };
         PlanarEstimate {
             stance: self.stance,
-            x_dot_mps: x_dot,
+            x_dot_mps: if self.cfg.speed_from_leg {
+                self.leg_speed_mps
+            } else {
+                x_dot
+            },
             z_m: r.boom_z_m,
             z_dot_mps: z_dot,
             phi_rad: r.pitch_rad,
@@ -158,19 +195,20 @@ impl PlanarEstimator {
             } else {
                 0.0
             },
-            toe_x_m: r.boom_x_m + reach_m * leg_sine(theta),
+            toe_x_m: r.boom_x_m + reach_m * sine,
         }
     }
 }
 
-/// `sin(theta)` for a leg angle: the sine's series on `[-pi/2, pi/2]`
-/// (a leg beyond the horizontal is taken at it; the guard stops the
-/// machine long before). libm's `sinf` reduces in `f64`, which the
+/// `(sin(theta), cos(theta))` for a leg angle: their series on `[-pi/2,
+/// pi/2]` (a leg beyond the horizontal is taken at it; the guard stops the
+/// machine long before; both series are even or odd, so the quadrant's
+/// serve its mirror). libm's `sinf` reduces in `f64`, which the
 /// Cortex-M4F does in software: a thousand instructions a period.
-fn leg_sine(theta: f32) -> f32 {
+fn leg_sine_cosine(theta: f32) -> (f32, f32) {
     const HALF_PI: f32 = core::f32::consts::FRAC_PI_2;
-    // (NaN passes through: `clamp` keeps it.)
-    crate::laws::shaped::sin_cos_quadrant(theta.clamp(-HALF_PI, HALF_PI)).0
+    // (NaN passes through the comparisons.)
+    crate::laws::shaped::sin_cos_quadrant(crate::num::clamp(theta, -HALF_PI, HALF_PI))
 }
 
 #[cfg(test)]
@@ -228,8 +266,45 @@ mod tests {
         let est = e.update(&reading(0.0, 0.6), DT);
         assert!(est.stance);
         let toe = 0.6 * libm::sinf(0.1);
-        assert!((leg_sine(-0.6) + libm::sinf(0.6)).abs() < 1e-6);
+        let (s, c) = leg_sine_cosine(-0.6);
+        assert!((s + libm::sinf(0.6)).abs() < 1e-6 && (c - libm::cosf(0.6)).abs() < 1e-6);
         assert!((est.toe_x_m - toe).abs() < 1e-6, "{est:?}");
+    }
+
+    /// In stance the hip's speed is the leg's kinematics about the toe;
+    /// in flight the liftoff's holds.
+    #[test]
+    fn the_speed_from_the_leg() {
+        let cfg = PlanarEstimatorConfig {
+            speed_from_leg: true,
+            ..PlanarEstimatorConfig::table_2_2()
+        };
+        let mut e = PlanarEstimator::new(cfg).unwrap_or_else(|f| panic!("{f:?}"));
+        // The toe at x = 0.1 m, the leg 0.6 m long and shortening at
+        // 0.1 m/s, the hip moving at 0.8 m/s: theta = asin((0.1 - x) / l).
+        let at = |t: f32| {
+            let x = 0.8 * t;
+            let l = 0.6 - 0.1 * t;
+            PlanarReadings {
+                boom_x_m: 0.0,
+                boom_z_m: 0.6,
+                pitch_rad: 0.0,
+                hip_angle_rad: libm::asinf((0.1 - x) / l),
+                leg_length_m: l,
+            }
+        };
+        let mut est = PlanarEstimate::default();
+        for k in 0..300 {
+            est = e.update(&at(k as f32 * DT), DT);
+        }
+        assert!(est.stance);
+        assert!((est.x_dot_mps - 0.8).abs() < 0.01, "{est:?}");
+        // Liftoff: the leg back on its stop, the speed held.
+        let mut flight = at(300.0 * DT);
+        flight.leg_length_m = 0.65;
+        let est = e.update(&flight, DT);
+        assert!(!est.stance);
+        assert!((est.x_dot_mps - 0.8).abs() < 0.01, "{est:?}");
     }
 
     #[test]
