@@ -299,6 +299,20 @@ deadman_regs!(ccmr1_output, oc1m, oc1pe, cc1s, ccr1, cc1e, cc1p);
 /// width (`$max`), counter at 0 and running. A macro because the
 /// encoder timers are different PAC types with the same registers.
 ///
+/// An encoder's two inputs on pins 6 and 7 of a port: pulled up, in
+/// alternate function `$af` (written before the mode, so neither pin sits
+/// in another function). A macro: the ports are different register blocks.
+macro_rules! encoder_pins_6_7 {
+    ($port:expr, $af:ident) => {{
+        let port = $port;
+        port.pupdr()
+            .modify(|_, w| w.pupdr6().pull_up().pupdr7().pull_up());
+        port.afrl().modify(|_, w| w.afrl6().$af().afrl7().$af());
+        port.moder()
+            .modify(|_, w| w.moder6().alternate().moder7().alternate());
+    }};
+}
+
 /// Filter f_DTS/2, N = 8: an edge must be stable 8 samples at 42 MHz (190 ns;
 /// 1 µs on the HSI fallback; 95 ns on the Feather's TIM8, an APB2 timer) to
 /// count. The motor encoder's fastest edges (500 lines ×4 at 10 000 rpm)
@@ -449,13 +463,7 @@ pub mod h405 {
         gpiob.afrl().modify(|_, w| w.afrl3().af1());
         gpiob.moder().modify(|_, w| w.moder3().alternate());
         // The hip encoder: PC6, PC7 (TIM8, AF3).
-        gpioc
-            .pupdr()
-            .modify(|_, w| w.pupdr6().pull_up().pupdr7().pull_up());
-        gpioc.afrl().modify(|_, w| w.afrl6().af3().afrl7().af3());
-        gpioc
-            .moder()
-            .modify(|_, w| w.moder6().alternate().moder7().alternate());
+        encoder_pins_6_7!(gpioc, af3);
     }
 
     /// The clocks of the encoders' timers (TIM2, TIM5, the hip's TIM8),
@@ -593,37 +601,15 @@ pub mod feather {
         gpiob: &pac::GPIOB,
         gpioc: &pac::GPIOC,
     ) {
-        gpioc.pupdr().modify(|_, w| {
-            w.pupdr4()
-                .floating()
-                .pupdr5()
-                .floating()
-                .pupdr6()
-                .pull_up()
-                .pupdr7()
-                .pull_up()
-        });
+        gpioc
+            .pupdr()
+            .modify(|_, w| w.pupdr4().floating().pupdr5().floating());
         gpioc
             .moder()
             .modify(|_, w| w.moder4().analog().moder5().analog());
-        gpioc.afrl().modify(|_, w| w.afrl6().af3().afrl7().af3());
-        gpioc
-            .moder()
-            .modify(|_, w| w.moder6().alternate().moder7().alternate());
-        gpioa
-            .pupdr()
-            .modify(|_, w| w.pupdr6().pull_up().pupdr7().pull_up());
-        gpioa.afrl().modify(|_, w| w.afrl6().af2().afrl7().af2());
-        gpioa
-            .moder()
-            .modify(|_, w| w.moder6().alternate().moder7().alternate());
-        gpiob
-            .pupdr()
-            .modify(|_, w| w.pupdr6().pull_up().pupdr7().pull_up());
-        gpiob.afrl().modify(|_, w| w.afrl6().af2().afrl7().af2());
-        gpiob
-            .moder()
-            .modify(|_, w| w.moder6().alternate().moder7().alternate());
+        encoder_pins_6_7!(gpioc, af3);
+        encoder_pins_6_7!(gpioa, af2);
+        encoder_pins_6_7!(gpiob, af2);
     }
 
     /// The clocks of the encoders' timers (TIM8 on APB2, TIM3, the hip's
