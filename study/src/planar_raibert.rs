@@ -152,6 +152,8 @@ pub struct HipFigures {
     pub copper_loss_j: f64,
     /// The hottest the firmware estimated its winding, C.
     pub max_winding_c: f64,
+    /// Its amplifier's current limit, A.
+    pub current_limit_a: f64,
 }
 
 /// A run and its figures.
@@ -185,6 +187,10 @@ pub struct RaibertRun {
     /// drawing: `[t, x, z, phi, theta, leg length]`.
     #[serde(skip)]
     pub frames: Vec<[f64; 6]>,
+    /// The hip current of largest size in each 10 ms, `(t, A)`, for the
+    /// plot.
+    #[serde(skip)]
+    pub hip_current: Vec<(f64, f64)>,
 }
 
 impl RaibertRun {
@@ -254,6 +260,8 @@ pub fn simulate(
     let mut stopped_by = None;
     let mut foot_ahead = 0.0;
     let mut hip_winding_c: f64 = 0.0;
+    let mut hip_current = Vec::new();
+    let mut window_a: f64 = 0.0;
     let steps = (duration_s / DT_S).round() as usize;
     for k in 0..steps {
         let t = k as f64 * DT_S;
@@ -261,6 +269,14 @@ pub fn simulate(
         let est = lp.estimate();
         let cmd = lp.control(&est, profile.at(t));
         hip_winding_c = hip_winding_c.max(f64::from(lp.hip_winding_c()));
+        let i = f64::from(lp.hip_current_a());
+        if i.abs() > window_a.abs() {
+            window_a = i;
+        }
+        if k % 100 == 99 {
+            hip_current.push((t, window_a));
+            window_a = 0.0;
+        }
         let push_n = pushes
             .iter()
             .filter(|p| t >= p.at_s && t < p.at_s + PUSH_S)
@@ -366,18 +382,20 @@ pub fn simulate(
             peak_current_a: f64::from(lp.hip_peak_current_a()),
             copper_loss_j: lp.hip_copper_loss_j(),
             max_winding_c: hip_winding_c,
+            current_limit_a: f64::from(machine.hip.current_limit_a),
         },
+        hip_current,
         frames,
     })
 }
 
 /// The plot's size, pixels.
-const FIGURE_SIZE: (u32, u32) = (1000, 1000);
+const FIGURE_SIZE: (u32, u32) = (1000, 1250);
 
 /// `strides.csv` (each stride: its end, the toe's apex, the mean speed,
 /// the command, the largest pitch, where the foot landed), `run.png` and
 /// `run.svg` (speed against its command, pitch, apex against its target,
-/// foot placement, against time) and `run.html` (the machine drawn from
+/// foot placement, the hip's current against its limit, against time) and `run.html` (the machine drawn from
 /// the trajectory, played back in a browser: no network needed) into
 /// `dir`, whole or not at all.
 pub fn write_run(
@@ -447,7 +465,7 @@ where
             .map_or(String::new(), |t| format!(", fell at {t:.2} s"))
     );
     let root = root.titled(&title, ("sans-serif", 18))?;
-    let panels = root.split_evenly((4, 1));
+    let panels = root.split_evenly((5, 1));
     let t_hi = run.duration_s.max(0.1);
     let grey = RGBColor(120, 120, 120);
     // The command as steps, to the end.
@@ -538,6 +556,22 @@ where
             .iter()
             .map(|s| Circle::new((s.t_s, s.foot_ahead_m), 3, MAGENTA.filled())),
     )?;
+    // The hip motor's current, with its amplifier's limit.
+    let limit = run.hip.current_limit_a;
+    let (lo, hi) = crate::plot::extent(run.hip_current.iter().map(|p| p.1).chain([-limit, limit]));
+    let mut c = time_chart(&panels[4], t_hi, lo, hi, "hip current [A]")?;
+    for b in [-limit, limit] {
+        c.draw_series(DashedLineSeries::new(
+            [(0.0, b), (t_hi, b)],
+            6,
+            4,
+            grey.stroke_width(1),
+        ))?;
+    }
+    c.draw_series(LineSeries::new(
+        run.hip_current.iter().copied(),
+        RGBColor(120, 40, 160).stroke_width(1),
+    ))?;
     root.present()?;
     Ok(())
 }

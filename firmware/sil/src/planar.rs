@@ -156,6 +156,8 @@ pub struct PlanarLoop {
     hip_winding_ohm: f64,
     /// The largest hip current so far, A.
     hip_peak_current_a: f32,
+    /// The hip current commanded this period, A.
+    hip_current_a: f32,
 }
 
 impl PlanarLoop {
@@ -209,6 +211,7 @@ impl PlanarLoop {
             hip_copper_loss_j: 0.0,
             hip_winding_ohm: m.hip_winding_ohm,
             hip_peak_current_a: 0.0,
+            hip_current_a: 0.0,
         })
     }
 
@@ -258,6 +261,7 @@ impl PlanarLoop {
             .hip
             .current_a(cmd.hip_torque_nm, self.hip_thermal.limit_scale());
         self.hip_thermal.add(current_a, DT_S as f32);
+        self.hip_current_a = current_a;
         PlanarCommand {
             hip_torque_nm: current_a * self.hip.torque_per_amp_nm_per_a,
             ..cmd
@@ -272,6 +276,11 @@ impl PlanarLoop {
     /// The hip's copper loss so far, J.
     pub fn hip_copper_loss_j(&self) -> f64 {
         self.hip_copper_loss_j
+    }
+
+    /// The hip current commanded this period, A.
+    pub fn hip_current_a(&self) -> f32 {
+        self.hip_current_a
     }
 
     /// The largest hip current so far, A.

@@ -161,7 +161,7 @@ pub(crate) enum PlanarCmd {
         appendix: AppendixArgs,
         /// Directory for trajectory.csv (every millisecond) and
         /// run.png/.svg (created if missing); with raibert strides.csv,
-        /// run.png/.svg (speed, pitch, apex, foot placement) and run.html
+        /// run.png/.svg (speed, pitch, apex, foot placement, hip current) and run.html
         /// (the machine drawn from the trajectory, played in a browser).
         #[arg(long, value_name = "DIR")]
         out: Option<PathBuf>,
