@@ -30,6 +30,54 @@ const FONT_CANDIDATES: [&str; 4] = [
     "/usr/share/fonts/truetype/liberation/LiberationSans-Regular.ttf",
 ];
 
+/// A chart on `panel` against time: `0..t_hi` s across, `lo..hi` (padded
+/// by a tenth, at least 1e-3) up, labelled `label`, its mesh drawn (the
+/// planar runner's plots stack these, one quantity a panel).
+pub fn time_chart<'a, DB: DrawingBackend>(
+    panel: &'a DrawingArea<DB, plotters::coord::Shift>,
+    t_hi: f64,
+    lo: f64,
+    hi: f64,
+    label: &str,
+) -> Result<
+    ChartContext<'a, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>,
+    Box<dyn std::error::Error>,
+>
+where
+    DB::ErrorType: 'static,
+{
+    let pad = ((hi - lo) * 0.1).max(1e-3);
+    let mut c = ChartBuilder::on(panel)
+        .margin(8)
+        .x_label_area_size(30)
+        .y_label_area_size(70)
+        .build_cartesian_2d(0.0..t_hi, (lo - pad)..(hi + pad))?;
+    c.configure_mesh().x_desc("time [s]").y_desc(label).draw()?;
+    Ok(c)
+}
+
+/// A grey dashed line across a [`time_chart`] (to `t_hi`) at each of
+/// `levels`: a bound or a target.
+pub fn dashed_levels<DB: DrawingBackend>(
+    c: &mut ChartContext<'_, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>,
+    t_hi: f64,
+    levels: &[f64],
+) -> Result<(), Box<dyn std::error::Error>>
+where
+    DB::ErrorType: 'static,
+{
+    let grey = RGBColor(120, 120, 120);
+    for &y in levels {
+        c.draw_series(DashedLineSeries::new(
+            [(0.0, y), (t_hi, y)],
+            6,
+            4,
+            grey.stroke_width(1),
+        ))?;
+    }
+    Ok(())
+}
+
 /// The least and the greatest of `values` (`(inf, -inf)` when empty).
 pub fn extent(values: impl Iterator<Item = f64> + Clone) -> (f64, f64) {
     (

@@ -488,7 +488,7 @@ where
             .map(|s| s.speed_mps)
             .chain(command.iter().map(|c| c.1)),
     );
-    let mut c = time_chart(&panels[0], t_hi, lo, hi, "forward speed [m/s]")?;
+    let mut c = crate::plot::time_chart(&panels[0], t_hi, lo, hi, "forward speed [m/s]")?;
     c.draw_series(LineSeries::new(
         command.iter().copied(),
         grey.stroke_width(2),
@@ -519,15 +519,8 @@ where
             .map(|p| p.1)
             .chain([-PITCH_BOUND_DEG, PITCH_BOUND_DEG]),
     );
-    let mut c = time_chart(&panels[1], t_hi, lo, hi, "body pitch [deg]")?;
-    for b in [-PITCH_BOUND_DEG, PITCH_BOUND_DEG] {
-        c.draw_series(DashedLineSeries::new(
-            [(0.0, b), (t_hi, b)],
-            6,
-            4,
-            grey.stroke_width(1),
-        ))?;
-    }
+    let mut c = crate::plot::time_chart(&panels[1], t_hi, lo, hi, "body pitch [deg]")?;
+    crate::plot::dashed_levels(&mut c, t_hi, &[-PITCH_BOUND_DEG, PITCH_BOUND_DEG])?;
     c.draw_series(LineSeries::new(pitch, RED.stroke_width(1)))?;
     // Apex, with its target.
     let (lo, hi) = crate::plot::extent(
@@ -536,13 +529,8 @@ where
             .map(|s| s.apex_m)
             .chain([run.target_apex_m]),
     );
-    let mut c = time_chart(&panels[2], t_hi, lo, hi, "toe apex [m]")?;
-    c.draw_series(DashedLineSeries::new(
-        [(0.0, run.target_apex_m), (t_hi, run.target_apex_m)],
-        6,
-        4,
-        grey.stroke_width(1),
-    ))?;
+    let mut c = crate::plot::time_chart(&panels[2], t_hi, lo, hi, "toe apex [m]")?;
+    crate::plot::dashed_levels(&mut c, t_hi, &[run.target_apex_m])?;
     c.draw_series(
         run.strides
             .iter()
@@ -550,7 +538,7 @@ where
     )?;
     // Foot placement.
     let (lo, hi) = crate::plot::extent(run.strides.iter().map(|s| s.foot_ahead_m));
-    let mut c = time_chart(&panels[3], t_hi, lo, hi, "foot ahead of hip [m]")?;
+    let mut c = crate::plot::time_chart(&panels[3], t_hi, lo, hi, "foot ahead of hip [m]")?;
     c.draw_series(
         run.strides
             .iter()
@@ -559,54 +547,14 @@ where
     // The hip motor's current, with its amplifier's limit.
     let limit = run.hip.current_limit_a;
     let (lo, hi) = crate::plot::extent(run.hip_current.iter().map(|p| p.1).chain([-limit, limit]));
-    let mut c = time_chart(&panels[4], t_hi, lo, hi, "hip current [A]")?;
-    for b in [-limit, limit] {
-        c.draw_series(DashedLineSeries::new(
-            [(0.0, b), (t_hi, b)],
-            6,
-            4,
-            grey.stroke_width(1),
-        ))?;
-    }
+    let mut c = crate::plot::time_chart(&panels[4], t_hi, lo, hi, "hip current [A]")?;
+    crate::plot::dashed_levels(&mut c, t_hi, &[-limit, limit])?;
     c.draw_series(LineSeries::new(
         run.hip_current.iter().copied(),
         RGBColor(120, 40, 160).stroke_width(1),
     ))?;
     root.present()?;
     Ok(())
-}
-
-/// One panel of [`run_plot`]: time to `t_hi` across, `lo..hi` (padded by
-/// a tenth) up, labelled `label`, its mesh drawn.
-fn time_chart<'a, DB: plotters::prelude::DrawingBackend>(
-    panel: &'a plotters::prelude::DrawingArea<DB, plotters::coord::Shift>,
-    t_hi: f64,
-    lo: f64,
-    hi: f64,
-    label: &str,
-) -> Result<
-    plotters::prelude::ChartContext<
-        'a,
-        DB,
-        plotters::prelude::Cartesian2d<
-            plotters::coord::types::RangedCoordf64,
-            plotters::coord::types::RangedCoordf64,
-        >,
-    >,
-    Box<dyn std::error::Error>,
->
-where
-    DB::ErrorType: 'static,
-{
-    use plotters::prelude::*;
-    let pad = ((hi - lo) * 0.1).max(1e-3);
-    let mut c = ChartBuilder::on(panel)
-        .margin(8)
-        .x_label_area_size(30)
-        .y_label_area_size(70)
-        .build_cartesian_2d(0.0..t_hi, (lo - pad)..(hi + pad))?;
-    c.configure_mesh().x_desc("time [s]").y_desc(label).draw()?;
-    Ok(c)
 }
 
 /// The machine drawn from the trajectory (every 10 ms) as one HTML file:

@@ -281,16 +281,7 @@ where
     ];
     for ((label, get), panel) in series.iter().zip(panels.iter()) {
         let (lo, hi) = crate::plot::extent(run.samples.iter().map(get));
-        let pad = ((hi - lo) * 0.1).max(1e-3);
-        let mut c = ChartBuilder::on(panel)
-            .margin(8)
-            .x_label_area_size(30)
-            .y_label_area_size(70)
-            .build_cartesian_2d(0.0..t_hi, (lo - pad)..(hi + pad))?;
-        c.configure_mesh()
-            .x_desc("time [s]")
-            .y_desc(*label)
-            .draw()?;
+        let mut c = crate::plot::time_chart(panel, t_hi, lo, hi, label)?;
         c.draw_series(LineSeries::new(
             run.samples.iter().map(|q| (q.t_s, get(q))),
             BLUE.stroke_width(2),

@@ -134,11 +134,6 @@ impl PlanarEstimator {
         })
     }
 
-    /// Whether the toe is down.
-    pub fn stance(&self) -> bool {
-        self.stance
-    }
-
     /// The estimate from this period's readings `r`, taken `dt_s` after
     /// the last.
     pub fn update(&mut self, r: &PlanarReadings, dt_s: f32) -> PlanarEstimate {
