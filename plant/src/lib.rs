@@ -16,6 +16,7 @@
 pub mod params;
 pub mod planar;
 pub mod planar_general;
+pub mod planar_screw;
 pub mod plant;
 pub mod sensors;
 

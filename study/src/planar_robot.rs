@@ -1,6 +1,7 @@
 //! A planar robot file: the machine `hopper-sim planar run --robot FILE`
-//! runs, in TOML. Three tables: `[machine]` (Appendix A's runner),
-//! `[hip]` (the hip's motor, gear and amplifier) and `[sensors]` (each
+//! runs, in TOML. Four tables: `[machine]` (Appendix A's runner),
+//! `[hip]` (the hip's motor, gear and amplifier), `[leg]` (the leg's
+//! motor and ball screw, for `--thrust LAW`) and `[sensors]` (each
 //! sensor's resolution). An entry left out keeps the design machine's
 //! value ([`PlanarMachine::design`]); an unknown table or entry, a value
 //! that is not a number, or one outside its range is refused with its
@@ -69,11 +70,19 @@ pub const FIELDS: &[Field] = &[
     field!("hip", hip.torque_per_amp_nm_per_a as "torque_per_amp_nm_per_a", "N m/A", [1e-3, 100.0], "The hip's torque per ampere of motor current: the motor's constant times the gear's ratio and efficiency (the design: 29.7 mN m/A x 60 x 0.75)."),
     field!("hip", hip.current_limit_a as "current_limit_a", "A", [0.01, 1000.0], "The hip amplifier's current limit (the design: the leg's, 33.67 A); the controller's torque limit follows it."),
     field!("hip", hip_winding_ohm as "winding_resistance_ohm", "ohm", [1e-3, 100.0], "The hip motor's winding resistance, for its copper loss (the leg motor's: 0.356 ohm)."),
+    field!("leg", leg.rotor_inertia_kg_m2 as "rotor_inertia_kg_m2", "kg m^2", [1e-7, 1.0], "The leg motor's rotor and screw inertia J, when the leg is driven through its ball screw (`--thrust LAW`; the design: four of the vertical hopper's, 1.08e-3 kg m^2)."),
+    field!("leg", leg.screw_lead_m as "screw_lead_m", "m", [1e-4, 0.1], "The ball screw's lead, nut travel a motor turn (the design: 10 mm)."),
+    field!("leg", leg.efficiency as "efficiency", "1", [0.05, 1.0], "Motor and screw efficiency eta: the nut sees eta tau / r (0.9)."),
+    field!("leg", leg.torque_constant_nm_per_a as "torque_constant_nm_per_a", "N m/A", [1e-4, 10.0], "The leg motor's torque constant (the design: four of the vertical hopper's 29.7 mN m/A)."),
+    field!("leg", leg.current_limit_a as "current_limit_a", "A", [1e-3, 1000.0], "The leg amplifier's current limit (33.67 A: 4 N m with the design's motor)."),
+    field!("leg", leg.stroke_m as "stroke_m", "m", [1e-3, 0.5], "The nut's stroke between its stops (50 mm)."),
+    field!("leg", leg.winding_ohm as "winding_resistance_ohm", "ohm", [1e-3, 100.0], "The leg motor's winding resistance, for its copper loss (0.356 ohm)."),
     field!("sensors", sensors.boom_x_m as "boom_x_m", "m", [0.0, 0.1], "The boom's forward encoder, metres at the hip a count; 0: none, the forward speed taken from the leg's kinematics in stance (the pitch and hip encoders and the potentiometer) and held through the flight."),
     field!("sensors", sensors.boom_z_m as "boom_z_m", "m", [1e-9, 0.1], "The boom's height encoder, metres at the hip a count."),
     field!("sensors", sensors.pitch_rad as "pitch_rad", "rad", [1e-9, 0.1], "The body's pitch encoder, radians a count."),
     field!("sensors", sensors.hip_rad as "hip_rad", "rad", [1e-9, 0.1], "The hip encoder (the leg against the body), radians a count."),
     field!("sensors", sensors.leg_m as "leg_m", "m", [1e-9, 0.01], "The leg potentiometer, metres a converter step."),
+    field!("sensors", sensors.leg_motor_rad as "leg_motor_rad", "rad", [1e-9, 0.1], "The leg motor's encoder, radians a count (2,000 counts a turn), when the leg is driven through its screw."),
 ];
 
 /// The machine `text` describes (`origin` names it in errors).
@@ -85,12 +94,12 @@ pub fn from_toml_str(text: &str, origin: &str) -> Result<PlanarMachine, String> 
     for (table, entries) in &doc {
         let Some(entries) = entries.as_table() else {
             return Err(format!(
-                "{origin}: `{table}` is not a table (the file has [machine], [hip] and [sensors])"
+                "{origin}: `{table}` is not a table (the file has [machine], [hip], [leg] and [sensors])"
             ));
         };
         if !FIELDS.iter().any(|f| f.table == table) {
             return Err(format!(
-                "{origin}: unknown table [{table}] (the file has [machine], [hip] and [sensors])"
+                "{origin}: unknown table [{table}] (the file has [machine], [hip], [leg] and [sensors])"
             ));
         }
         for (key, value) in entries {

@@ -143,6 +143,19 @@ pub mod design {
         TORQUE_CONSTANT_NM_PER_A * HIP_GEAR_RATIO * HIP_GEAR_EFFICIENCY;
     /// The hip's torque at the amplifier's current limit, N m.
     pub const HIP_TORQUE_LIMIT_NM: f64 = CURRENT_LIMIT_A * HIP_TORQUE_PER_AMP_NM_PER_A;
+    /// The actuated planar machine's leg drive, as the vertical hopper's (a
+    /// motor on a ball screw in series with the leg spring), scaled to its
+    /// 16.3 kg and 40 kN/m spring: this many times the vertical motor's
+    /// torque constant and rotor inertia, at the same amplifier limit (4 N
+    /// m). On the vertical drive (1 N m on a 5 mm lead) the energy-apex
+    /// law holds this machine's hop at 0.114 m in place, 24% short of 0.15
+    /// m, the motor at its limit; on this one at 0.150 m, and within 8% of
+    /// it running 0 to 1 m/s.
+    pub const PLANAR_LEG_MOTOR_SCALE: f64 = 4.0;
+    /// The planar leg drive's screw lead, m per revolution: twice the
+    /// vertical's, so that the rotor seen at the nut (`J / r^2`, 426 kg)
+    /// is the vertical drive's, four times the torque behind it.
+    pub const PLANAR_SCREW_LEAD_M: f64 = 0.01;
     /// Flight-law position gain `k_pf` of Table 2.1, N/m: the force the nut
     /// sees (`eta tau / r`) per metre of nut error. The thesis states no
     /// unit; with N/m the Chapter 2 flight returns the nut within the

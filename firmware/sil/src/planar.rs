@@ -8,14 +8,26 @@
 //! ([`PlanarSensors`]: the plant's state quantised to each encoder's and
 //! the potentiometer's resolution) through the control crate's planar
 //! estimator, and its command holds over the period.
+//!
+//! The leg is driven one of two ways: by a force along it in stance (the
+//! controller's own thrust, [`PlanarLoop::of`]), or as on the vertical
+//! hopper, a motor turning a ball screw in series with the leg spring
+//! ([`hopper_plant::planar_screw`]), run by a vertical law
+//! ([`PlanarLoop::with_screw`], [`ScrewThrust`]). Which one is the loop's
+//! type ([`LegLaw`]), so that a loop driving its leg by force carries
+//! nothing of the other.
 
+use hopper_control::laws::Strategy;
+use hopper_control::model::ModelParams;
 use hopper_control::planar::estimator::{PlanarEstimator, PlanarEstimatorConfig, PlanarReadings};
 use hopper_control::planar::guard::{Guard, GuardConfig, PlanarFault};
 use hopper_control::planar::raibert::{Raibert, RaibertConfig};
+use hopper_control::planar::thrust::ScrewThrust;
 use hopper_control::planar::{HipDrive, PlanarCommand, PlanarEstimate};
 use hopper_control::thermal::{MotorThermal, ThermalConfig};
 use hopper_plant::planar::{ApexState, PlanarError, PlanarEvent, PlanarState};
 use hopper_plant::planar_general::{Actuation, GeneralParams, GeneralRunner};
+use hopper_plant::planar_screw::{LegScrew, Nut};
 
 /// The plant's integration step and the controller's period, s (the
 /// firmware's 10 kHz).
@@ -31,6 +43,8 @@ pub struct PlanarMachine {
     pub hip: HipDrive,
     /// The hip motor's winding resistance, ohm.
     pub hip_winding_ohm: f64,
+    /// The leg's motor and ball screw (when the leg is driven through it).
+    pub leg: LegScrew,
     /// The sensors.
     pub sensors: PlanarSensors,
 }
@@ -45,6 +59,7 @@ impl PlanarMachine {
             params: GeneralParams::actuated_table_2_2(),
             hip: HipDrive::design(),
             hip_winding_ohm: hopper_plant::params::Params::design().winding_resistance_ohm,
+            leg: LegScrew::design(),
             sensors: PlanarSensors::boom(),
         }
     }
@@ -58,7 +73,32 @@ impl PlanarMachine {
         if !(self.hip_winding_ohm.is_finite() && self.hip_winding_ohm > 0.0) {
             return Err(PlanarError::NotPositive("hip_winding_ohm"));
         }
+        self.leg.validate()?;
         self.sensors.validate()
+    }
+
+    /// The leg as the vertical laws' model reads it: the trunk's and the
+    /// leg's masses as the body's (the nut's among them), the toe's as the
+    /// unsprung mass, the leg spring, the leg's length and its drive.
+    pub fn leg_model(&self) -> ModelParams {
+        let (p, d) = (&self.params, &self.leg);
+        let design = hopper_plant::params::Params::design();
+        crate::sim_io::model_params(&hopper_plant::params::Params {
+            body_mass_kg: p.trunk_mass_kg + p.leg_mass_kg - design.nut_mass_kg,
+            unsprung_mass_kg: p.toe_mass_kg.max(1e-9),
+            spring_stiffness_n_per_m: p.leg_stiffness_n_per_m,
+            spring_preload_m: 0.0,
+            leg_length_m: p.leg_length_m,
+            gravity_mps2: p.gravity_mps2,
+            rotor_inertia_kg_m2: d.rotor_inertia_kg_m2,
+            screw_lead_m: d.screw_lead_m,
+            efficiency: d.efficiency,
+            stroke_m: d.stroke_m,
+            torque_constant_nm_per_a: d.torque_constant_nm_per_a,
+            current_limit_a: d.current_limit_a,
+            winding_resistance_ohm: d.winding_ohm,
+            ..design
+        })
     }
 }
 
@@ -77,13 +117,16 @@ pub struct PlanarSensors {
     pub hip_rad: f64,
     /// The leg's length, m a step of the potentiometer's converter.
     pub leg_m: f64,
+    /// The leg motor's angle, rad a count (its encoder).
+    pub leg_motor_rad: f64,
 }
 
 impl PlanarSensors {
     /// A 1.5 m boom with 20,000-line encoders read in quadrature (80,000
     /// counts a turn: 118 um at the hip), 16,384-line encoders on the
-    /// pitch and the hip (65,536 counts: 96 urad), and the leg's
-    /// potentiometer read by a 12-bit converter over 0.1 m (24 um).
+    /// pitch and the hip (65,536 counts: 96 urad), the leg's potentiometer
+    /// read by a 12-bit converter over 0.1 m (24 um), and the leg motor's
+    /// encoder as the vertical hopper's (2,000 counts a turn).
     pub const fn boom() -> Self {
         const TURN: f64 = 2.0 * core::f64::consts::PI;
         PlanarSensors {
@@ -92,6 +135,7 @@ impl PlanarSensors {
             pitch_rad: TURN / 65_536.0,
             hip_rad: TURN / 65_536.0,
             leg_m: 0.1 / 4096.0,
+            leg_motor_rad: TURN / 2000.0,
         }
     }
 
@@ -105,6 +149,7 @@ impl PlanarSensors {
             ("pitch_rad", self.pitch_rad),
             ("hip_rad", self.hip_rad),
             ("leg_m", self.leg_m),
+            ("leg_motor_rad", self.leg_motor_rad),
         ] {
             if !(v.is_finite() && v > 0.0) {
                 return Err(PlanarError::NotPositive(name));
@@ -113,8 +158,8 @@ impl PlanarSensors {
         Ok(())
     }
 
-    /// What they read of `st`.
-    pub fn read(&self, st: &PlanarState) -> PlanarReadings {
+    /// What they read of `st`, the leg motor at `leg_motor_rad`.
+    pub fn read(&self, st: &PlanarState, leg_motor_rad: f64) -> PlanarReadings {
         // (No encoder, step 0: it reads 0.)
         let q = |v: f64, step: f64| {
             if step > 0.0 {
@@ -129,20 +174,30 @@ impl PlanarSensors {
             pitch_rad: q(st.phi_rad, self.pitch_rad),
             hip_angle_rad: q(st.theta_rad - st.phi_rad, self.hip_rad),
             leg_length_m: q(st.leg_length_m, self.leg_m),
+            leg_motor_rad: q(leg_motor_rad, self.leg_motor_rad),
         }
     }
 }
 
-/// The plant and the controller.
-#[derive(Clone, Copy, Debug)]
-pub struct PlanarLoop {
-    plant: GeneralRunner,
+/// The plant and the controller, their leg driven as `L` says.
+#[derive(Clone, Debug)]
+pub struct PlanarLoop<L: LegLaw = ForceLeg> {
+    /// All but what drives the leg.
+    core: Core,
+    /// What drives the leg.
+    leg: L,
+}
+
+/// A planar loop but for what drives its leg. In this order, the period's
+/// fields first: the Cortex-M4's floating-point loads and stores reach
+/// 1,020 bytes from a base.
+#[derive(Clone, Debug)]
+#[repr(C)]
+struct Core {
     /// The controller.
-    pub controller: Raibert,
+    controller: Raibert,
     /// The pitch, leg-angle and fall limits over its command.
     guard: Guard,
-    /// The sensors.
-    sensors: PlanarSensors,
     /// The estimator.
     estimator: PlanarEstimator,
     /// The hip's drive: torque to current, within the amplifier's limit.
@@ -158,6 +213,49 @@ pub struct PlanarLoop {
     hip_peak_current_a: f32,
     /// The hip current commanded this period, A.
     hip_current_a: f32,
+    /// The sensors.
+    sensors: PlanarSensors,
+    plant: GeneralRunner,
+    /// The leg's nut, when the leg is driven through its screw.
+    nut: Nut,
+    /// This period's readings.
+    readings: PlanarReadings,
+    /// The largest leg-motor current so far, A.
+    leg_peak_current_a: f32,
+    /// The leg's model, as the vertical laws read it.
+    leg_model: ModelParams,
+}
+
+/// What drives a planar loop's leg.
+pub trait LegLaw: Clone + core::fmt::Debug {
+    /// Whether the leg is driven through its ball screw (the loop keeps
+    /// the readings and runs the nut), or by the controller's force.
+    const SCREW: bool;
+
+    /// The leg motor's current this period for `est` and the readings
+    /// `r`, A (0 for a leg driven by force).
+    fn leg_current_a(&mut self, est: &PlanarEstimate, r: &PlanarReadings) -> f32;
+}
+
+/// The leg driven by the controller's force along it.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct ForceLeg;
+
+impl LegLaw for ForceLeg {
+    const SCREW: bool = false;
+
+    #[inline(always)]
+    fn leg_current_a(&mut self, _: &PlanarEstimate, _: &PlanarReadings) -> f32 {
+        0.0
+    }
+}
+
+impl LegLaw for ScrewThrust {
+    const SCREW: bool = true;
+
+    fn leg_current_a(&mut self, est: &PlanarEstimate, r: &PlanarReadings) -> f32 {
+        self.current_a(est, r.leg_length_m, r.leg_motor_rad, DT_S as f32)
+    }
 }
 
 impl PlanarLoop {
@@ -201,38 +299,83 @@ impl PlanarLoop {
         let hip_thermal = MotorThermal::new(ThermalConfig::default())
             .map_err(|e| PlanarError::OutOfRange(e.0))?;
         Ok(PlanarLoop {
-            plant: GeneralRunner::from_apex(p, &start)?,
-            controller,
-            guard,
-            sensors: m.sensors,
-            estimator,
-            hip: m.hip,
-            hip_thermal,
-            hip_copper_loss_j: 0.0,
-            hip_winding_ohm: m.hip_winding_ohm,
-            hip_peak_current_a: 0.0,
-            hip_current_a: 0.0,
+            core: Core {
+                plant: GeneralRunner::from_apex(p, &start)?,
+                controller,
+                guard,
+                sensors: m.sensors,
+                estimator,
+                hip: m.hip,
+                hip_thermal,
+                hip_copper_loss_j: 0.0,
+                hip_winding_ohm: m.hip_winding_ohm,
+                hip_peak_current_a: 0.0,
+                hip_current_a: 0.0,
+                nut: Nut::new(m.leg)?,
+                leg_model: m.leg_model(),
+                readings: PlanarReadings::default(),
+                leg_peak_current_a: 0.0,
+            },
+            leg: ForceLeg,
         })
+    }
+
+    /// The leg driven as on the vertical hopper: its motor turns the ball
+    /// screw, run by the vertical law `strategy` holding the controller's
+    /// apex target (the controller's own thrust unused).
+    pub fn with_screw(self, strategy: &Strategy) -> Result<PlanarLoop<ScrewThrust>, PlanarError> {
+        let target = self.core.controller.config().target_apex_m;
+        let gain = self.core.estimator.config().rate_filter_gain;
+        let leg = ScrewThrust::new(strategy, &self.core.leg_model, target, gain)
+            .map_err(|e| PlanarError::OutOfRange(e.0))?;
+        Ok(PlanarLoop {
+            core: self.core,
+            leg,
+        })
+    }
+}
+
+impl PlanarLoop<ScrewThrust> {
+    /// The vertical law driving the leg's screw.
+    pub fn screw(&self) -> &ScrewThrust {
+        &self.leg
+    }
+}
+
+impl<L: LegLaw> PlanarLoop<L> {
+    /// The leg's nut.
+    pub fn nut(&self) -> &Nut {
+        &self.core.nut
+    }
+
+    /// The largest leg-motor current so far, A.
+    pub fn leg_peak_current_a(&self) -> f32 {
+        self.core.leg_peak_current_a
     }
 
     /// The plant's state.
     pub fn state(&self) -> PlanarState {
-        self.plant.state()
+        self.core.plant.state()
     }
 
     /// The machine's parameters.
     pub fn params(&self) -> &GeneralParams {
-        self.plant.params()
+        self.core.plant.params()
     }
 
     /// What the sensors read of the plant this period.
     pub fn sense(&self) -> PlanarReadings {
-        self.sensors.read(&self.plant.state())
+        self.core
+            .sensors
+            .read(&self.core.plant.state(), self.core.nut.motor_angle_rad())
     }
 
     /// The estimator's period: the estimate from this period's readings.
     pub fn estimate_from(&mut self, r: &PlanarReadings) -> PlanarEstimate {
-        self.estimator.update(r, DT_S as f32)
+        if L::SCREW {
+            self.core.readings = *r;
+        }
+        self.core.estimator.update(r, DT_S as f32)
     }
 
     /// What the controller reads this period: the sensors' readings of
@@ -248,49 +391,55 @@ impl PlanarLoop {
     /// drive gives it (within the current limit, derated when the winding
     /// is hot).
     pub fn control(&mut self, est: &PlanarEstimate, speed_command_mps: f64) -> PlanarCommand {
-        let cmd = self
+        let mut cmd = self
+            .core
             .controller
             .step(est, speed_command_mps as f32, DT_S as f32);
+        if L::SCREW {
+            cmd.leg_current_a = self.leg.leg_current_a(est, &self.core.readings);
+            cmd.leg_thrust_n = 0.0;
+        }
         // A winding at its trip temperature stops the machine, as the leg
         // motor's stops the vertical hopper.
-        if self.hip_thermal.tripped() {
-            self.guard.latch(PlanarFault::HipOvertemperature);
+        if self.core.hip_thermal.tripped() {
+            self.core.guard.latch(PlanarFault::HipOvertemperature);
         }
-        let cmd = self.guard.filter(est, cmd);
+        let cmd = self.core.guard.filter(est, cmd);
         let current_a = self
+            .core
             .hip
-            .current_a(cmd.hip_torque_nm, self.hip_thermal.limit_scale());
-        self.hip_thermal.add(current_a, DT_S as f32);
-        self.hip_current_a = current_a;
+            .current_a(cmd.hip_torque_nm, self.core.hip_thermal.limit_scale());
+        self.core.hip_thermal.add(current_a, DT_S as f32);
+        self.core.hip_current_a = current_a;
         PlanarCommand {
-            hip_torque_nm: current_a * self.hip.torque_per_amp_nm_per_a,
+            hip_torque_nm: current_a * self.core.hip.torque_per_amp_nm_per_a,
             ..cmd
         }
     }
 
     /// The hip motor's winding temperature as the firmware estimates it, C.
     pub fn hip_winding_c(&self) -> f32 {
-        self.hip_thermal.winding_c()
+        self.core.hip_thermal.winding_c()
     }
 
     /// The hip's copper loss so far, J.
     pub fn hip_copper_loss_j(&self) -> f64 {
-        self.hip_copper_loss_j
+        self.core.hip_copper_loss_j
     }
 
     /// The hip current commanded this period, A.
     pub fn hip_current_a(&self) -> f32 {
-        self.hip_current_a
+        self.core.hip_current_a
     }
 
     /// The largest hip current so far, A.
     pub fn hip_peak_current_a(&self) -> f32 {
-        self.hip_peak_current_a
+        self.core.hip_peak_current_a
     }
 
     /// What the guard latched, if anything.
     pub fn fault(&self) -> Option<PlanarFault> {
-        self.guard.fault()
+        self.core.guard.fault()
     }
 
     /// Applies `cmd` (and a push on the body of `push_n`) and integrates
@@ -305,15 +454,33 @@ impl PlanarLoop {
         // within its own limit; its winding turns it to heat.
         // (The plant's amplifier limits it as the firmware does: the same
         // drive, at the full limit.)
-        let per_amp = f64::from(self.hip.torque_per_amp_nm_per_a);
-        let current_a = f64::from(self.hip.current_a(cmd.hip_torque_nm, 1.0));
-        self.hip_peak_current_a = self.hip_peak_current_a.max(libm::fabs(current_a) as f32);
-        self.hip_copper_loss_j += current_a * current_a * self.hip_winding_ohm * DT_S;
-        self.plant.set_actuation(Actuation {
+        let per_amp = f64::from(self.core.hip.torque_per_amp_nm_per_a);
+        let current_a = f64::from(self.core.hip.current_a(cmd.hip_torque_nm, 1.0));
+        self.core.hip_peak_current_a = self
+            .core
+            .hip_peak_current_a
+            .max(libm::fabs(current_a) as f32);
+        self.core.hip_copper_loss_j += current_a * current_a * self.core.hip_winding_ohm * DT_S;
+        let leg_thrust_n = if L::SCREW {
+            // The nut against the spring: its compression is the leg's
+            // and the nut's (the lower leg on its stop in flight).
+            let st = self.core.plant.state();
+            let p = self.core.plant.params();
+            let k = p.leg_stiffness_n_per_m;
+            let compression_m = p.leg_length_m - st.leg_length_m;
+            let i = self.core.nut.amplifier_a(f64::from(cmd.leg_current_a));
+            self.core.leg_peak_current_a = self.core.leg_peak_current_a.max(libm::fabs(i) as f32);
+            let spring_n = k * (compression_m + self.core.nut.position_m());
+            self.core.nut.step(DT_S, i, spring_n, 0.0);
+            self.core.nut.thrust_n(k)
+        } else {
+            f64::from(cmd.leg_thrust_n)
+        };
+        self.core.plant.set_actuation(Actuation {
             hip_torque_nm: current_a * per_amp,
-            leg_thrust_n: f64::from(cmd.leg_thrust_n),
+            leg_thrust_n,
             push_n,
         });
-        self.plant.step(DT_S, on_event);
+        self.core.plant.step(DT_S, on_event);
     }
 }

@@ -34,6 +34,9 @@ pub struct PlanarReadings {
     pub hip_angle_rad: f32,
     /// The leg's length, m.
     pub leg_length_m: f32,
+    /// The leg motor's angle, rad (0 with its ball screw's nut on the
+    /// upper stop; a machine whose leg is driven through its screw).
+    pub leg_motor_rad: f32,
 }
 
 /// The estimator's settings.
@@ -134,6 +137,11 @@ impl PlanarEstimator {
         })
     }
 
+    /// Its settings.
+    pub fn config(&self) -> &PlanarEstimatorConfig {
+        &self.cfg
+    }
+
     /// The estimate from this period's readings `r`, taken `dt_s` after
     /// the last.
     pub fn update(&mut self, r: &PlanarReadings, dt_s: f32) -> PlanarEstimate {
@@ -200,7 +208,7 @@ impl PlanarEstimator {
 /// machine long before; both series are even or odd, so the quadrant's
 /// serve its mirror). libm's `sinf` reduces in `f64`, which the
 /// Cortex-M4F does in software: a thousand instructions a period.
-fn leg_sine_cosine(theta: f32) -> (f32, f32) {
+pub(crate) fn leg_sine_cosine(theta: f32) -> (f32, f32) {
     const HALF_PI: f32 = core::f32::consts::FRAC_PI_2;
     // (NaN passes through the comparisons.)
     crate::laws::shaped::sin_cos_quadrant(crate::num::clamp(theta, -HALF_PI, HALF_PI))
@@ -220,6 +228,7 @@ mod tests {
             pitch_rad: 0.1 + 0.2 * t,
             hip_angle_rad: -0.3 * t,
             leg_length_m: leg_m,
+            leg_motor_rad: 0.0,
         }
     }
 
@@ -286,6 +295,7 @@ mod tests {
                 pitch_rad: 0.0,
                 hip_angle_rad: libm::asinf((0.1 - x) / l),
                 leg_length_m: l,
+                leg_motor_rad: 0.0,
             }
         };
         let mut est = PlanarEstimate::default();
@@ -340,6 +350,7 @@ mod tests {
                 pitch_rad: v[2],
                 hip_angle_rad: v[3],
                 leg_length_m: v[4],
+                leg_motor_rad: 0.0,
             };
             let est = e.update(&r, DT);
             prop_assert_eq!(est.is_finite(), v.iter().all(|x| x.is_finite()));

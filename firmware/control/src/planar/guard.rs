@@ -146,6 +146,7 @@ mod tests {
     const PUSH: PlanarCommand = PlanarCommand {
         hip_torque_nm: 10.0,
         leg_thrust_n: 200.0,
+        leg_current_a: 5.0,
     };
 
     #[test]

@@ -8,6 +8,7 @@
 pub mod estimator;
 pub mod guard;
 pub mod raibert;
+pub mod thrust;
 
 use crate::param::{require, InvalidField};
 
@@ -68,8 +69,13 @@ pub struct PlanarCommand {
     /// The hip motor's torque on the leg (the body takes the reaction),
     /// leg forward positive, N m.
     pub hip_torque_nm: f32,
-    /// The leg actuator's push along the leg in stance, N.
+    /// The leg actuator's push along the leg in stance, N (a machine
+    /// whose leg is driven by a force).
     pub leg_thrust_n: f32,
+    /// The leg motor's current, A, positive compressing the spring (a
+    /// machine whose leg is driven through its ball screw,
+    /// [`thrust::ScrewThrust`]).
+    pub leg_current_a: f32,
 }
 
 /// The hip's drive as the firmware commands it: the torque a controller

@@ -285,6 +285,7 @@ impl Raibert {
             PlanarCommand {
                 hip_torque_nm: torque_limit(hip),
                 leg_thrust_n: thrust,
+                leg_current_a: 0.0,
             }
         } else {
             if self.was_stance {
@@ -323,6 +324,7 @@ impl Raibert {
             PlanarCommand {
                 hip_torque_nm: torque_limit(hip),
                 leg_thrust_n: 0.0,
+                leg_current_a: 0.0,
             }
         };
         self.was_stance = est.stance;

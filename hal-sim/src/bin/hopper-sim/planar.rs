@@ -187,10 +187,16 @@ pub(crate) enum PlanarCmd {
         #[arg(long = "inject", value_name = "push@T:N")]
         inject: Vec<String>,
         /// raibert: the machine from a planar robot file (TOML: [machine],
-        /// [hip], [sensors]; an entry left out keeps the design's; see
+        /// [hip], [leg], [sensors]; an entry left out keeps the design's; see
         /// `planar robot-template`).
         #[arg(long, value_name = "FILE")]
         robot: Option<PathBuf>,
+        /// raibert: how the leg is driven: `force` (Raibert's thrust, a
+        /// force along the leg in stance) or a vertical controller's name
+        /// (`energy-apex`, `shaped`, ...: the leg's motor turns its ball
+        /// screw as on the vertical hopper, and that law runs it).
+        #[arg(long, value_name = "LAW", default_value = "force")]
+        thrust: String,
     },
     /// Print the design machine as a planar robot file (every entry with
     /// its unit, range and meaning), to edit and run with `planar run
@@ -386,18 +392,50 @@ fn cmd_planar_stability(
     Ok(())
 }
 
+/// What `planar run --controller raibert` runs: the flags as given.
+struct RaibertPlan<'a> {
+    /// `--speed-profile` (or the `--speed` held).
+    profile: &'a str,
+    /// `--inject`.
+    inject: &'a [String],
+    /// `--duration`, s.
+    duration: f64,
+    /// `--thrust`.
+    thrust: &'a str,
+}
+
 /// `planar run --controller raibert`: the run, its strides and its
 /// figures against their bounds.
 fn cmd_planar_raibert(
     robot: Option<&std::path::Path>,
     cfg: hopper_control::planar::raibert::RaibertConfig,
-    profile: &str,
-    inject: &[String],
-    duration: f64,
+    plan: &RaibertPlan<'_>,
     out: Option<&std::path::Path>,
     json: bool,
 ) -> Result<()> {
-    use hal_sim::planar_raibert::{self as pr, Push, SpeedProfile};
+    let RaibertPlan {
+        profile,
+        inject,
+        duration,
+        thrust,
+    } = *plan;
+    use hal_sim::planar_raibert::{self as pr, Push, SpeedProfile, Thrust};
+    use hopper_control::laws::ControllerKind;
+    use hopper_control::planar::thrust::ScrewThrust;
+    let thrust = match thrust {
+        "force" => Thrust::Force,
+        name => match ControllerKind::from_name(name) {
+            Some(k) => Thrust::Screw(ScrewThrust::planar_strategy(k)),
+            None => bail!(
+                "--thrust {name}: not `force` nor a vertical controller ({})",
+                ControllerKind::ALL
+                    .iter()
+                    .map(|k| k.name())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+        },
+    };
     let kc = f64::from(cfg.stabiliser_gain_ns_per_m);
     let machine = &match robot {
         Some(path) => hal_sim::planar_robot::load(path).map_err(anyhow::Error::msg)?,
@@ -409,7 +447,8 @@ fn cmd_planar_raibert(
         .map(|i| Push::parse(i))
         .collect::<std::result::Result<Vec<_>, _>>()
         .map_err(anyhow::Error::msg)?;
-    let r = pr::simulate(machine, &profile, &pushes, duration, cfg).map_err(anyhow::Error::msg)?;
+    let r = pr::simulate_with(machine, &profile, &pushes, duration, cfg, thrust)
+        .map_err(anyhow::Error::msg)?;
     let written = match out {
         Some(dir) => pr::write_run(dir, &r, &profile).map_err(anyhow::Error::msg)?,
         None => Vec::new(),
@@ -495,6 +534,16 @@ fn cmd_planar_raibert(
         r.hip.max_winding_c,
         hopper_control::thermal::ThermalConfig::default().derate_winding_c
     );
+    if let Some(l) = &r.leg {
+        say!(
+            "  leg motor          {} through the ball screw: peak {:.1} A (limit {:.1} A); work on the screw {:.0} J, copper loss {:.0} J",
+            l.law,
+            l.peak_current_a,
+            l.current_limit_a,
+            l.motor_work_j,
+            l.copper_loss_j
+        );
+    }
     say!(
         "  verdict            {}",
         if r.passes() {
@@ -525,6 +574,7 @@ pub(crate) fn cmd_planar(cmd: &PlanarCmd) -> Result<()> {
             target_apex,
             inject,
             robot,
+            thrust,
         } => {
             if controller == "raibert" {
                 let (kc, target_apex) = (*kc, *target_apex);
@@ -537,15 +587,14 @@ pub(crate) fn cmd_planar(cmd: &PlanarCmd) -> Result<()> {
                 let mut cfg = hopper_control::planar::raibert::RaibertConfig::table_2_2();
                 cfg.target_apex_m = target_apex as f32;
                 cfg.stabiliser_gain_ns_per_m = kc as f32;
-                return cmd_planar_raibert(
-                    robot.as_deref(),
-                    cfg,
-                    speed_profile.as_deref().unwrap_or(&format!("0:{speed}")),
+                let held = format!("0:{speed}");
+                let plan = RaibertPlan {
+                    profile: speed_profile.as_deref().unwrap_or(&held),
                     inject,
-                    *duration,
-                    out.as_deref(),
-                    *json,
-                );
+                    duration: *duration,
+                    thrust,
+                };
+                return cmd_planar_raibert(robot.as_deref(), cfg, &plan, out.as_deref(), *json);
             }
             if speed_profile.is_some() || !inject.is_empty() || robot.is_some() {
                 bail!("--speed-profile, --inject and --robot need --controller raibert (the passive runner runs at --speed)");
