@@ -146,7 +146,20 @@ impl PlanarEstimator {
     /// the last.
     pub fn update(&mut self, r: &PlanarReadings, dt_s: f32) -> PlanarEstimate {
         let theta = r.pitch_rad + r.hip_angle_rad;
-        let rate = |f: &mut FilteredDerivative, v: f32| f.update(v, dt_s).unwrap_or(f32::NAN);
+        // Every reading and the period checked at once (a sum of finite
+        // numbers that does not overflow is finite); a reading that fails
+        // goes through the filters' own checks, and shows as a NaN rate.
+        let checked = (r.boom_x_m + r.boom_z_m + theta + r.leg_length_m).is_finite()
+            && dt_s > 0.0
+            && dt_s.is_finite();
+        let rate = |f: &mut FilteredDerivative, v: f32| {
+            if checked {
+                f.advance(v, dt_s)
+            } else {
+                f.update(v, dt_s).ok()
+            }
+            .unwrap_or(f32::NAN)
+        };
         let x_dot = rate(&mut self.x, r.boom_x_m);
         let z_dot = rate(&mut self.z, r.boom_z_m);
         let phi_dot = rate(&mut self.phi, r.pitch_rad);

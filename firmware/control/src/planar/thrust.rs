@@ -210,7 +210,11 @@ impl ScrewThrust {
             0.0
         };
         let spring_force_n = self.model.spring_stiffness_n_per_m * (compression_m + nut_position_m);
-        let (_, cosine) = super::estimator::leg_sine_cosine(est.theta_rad);
+        // The cosine's series to the fourth power: within 6 um of the
+        // toe's height at the leg's 0.4 rad, a few instructions against
+        // the full series' tens.
+        let t2 = est.theta_rad * est.theta_rad;
+        let cosine = 1.0 + t2 * (-0.5 + t2 * (1.0 / 24.0));
         let toe_height_m = est.z_m - self.model.leg_length_m * cosine;
         let phase = if est.stance {
             Phase::Stance
