@@ -303,13 +303,17 @@ pub(crate) fn secret() -> Result<String> {
 
 /// What waits to go to one page, bounded: telemetry (the oldest dropped,
 /// counted), the newest of each state message (`state`, `thermal`,
-/// `params`: each replaces the last), and events in order (answers,
-/// hops, faults, notices; too many and the page is closed).
+/// `params`: each replaces the last), and events (answers, hops, faults,
+/// notices; too many and the page is closed). Events and state messages
+/// go in the order they came (a state from before the robot was lost must
+/// not follow the `lost` that supersedes it), each numbered as it comes.
 #[derive(Default)]
 struct Outbox {
     telemetry: VecDeque<String>,
-    latest: Vec<(String, String)>,
-    events: VecDeque<String>,
+    latest: Vec<(String, u64, String)>,
+    events: VecDeque<(u64, String)>,
+    /// The next message's number.
+    seq: u64,
     /// Telemetry messages dropped, and how many the page was told of.
     dropped: u64,
     told: u64,
@@ -353,9 +357,11 @@ impl Tab {
                     o.telemetry.push_back(text);
                 }
                 "state" | "thermal" | "params" => {
-                    match o.latest.iter_mut().find(|(k, _)| k == kind) {
-                        Some(slot) => slot.1 = text,
-                        None => o.latest.push((kind.to_string(), text)),
+                    let seq = o.seq;
+                    o.seq += 1;
+                    match o.latest.iter_mut().find(|(k, _, _)| k == kind) {
+                        Some(slot) => (slot.1, slot.2) = (seq, text),
+                        None => o.latest.push((kind.to_string(), seq, text)),
                     }
                 }
                 _ if o.events.len() >= TAB_EVENTS => {
@@ -364,23 +370,29 @@ impl Tab {
                         ..Outbox::default()
                     };
                 }
-                _ => o.events.push_back(text),
+                _ => {
+                    let seq = o.seq;
+                    o.seq += 1;
+                    o.events.push_back((seq, text));
+                }
             }
         }
         self.wake.notify_one();
         Ok(())
     }
 
-    /// Everything waiting, in the order to send it (events, then the
-    /// state, then telemetry), with a note of newly dropped telemetry;
-    /// `None` once the page is to be closed.
+    /// Everything waiting, in the order to send it (events and the state
+    /// messages in the order they came, then telemetry), with a note of
+    /// newly dropped telemetry; `None` once the page is to be closed.
     fn take(&self) -> Option<Vec<String>> {
         let mut o = self.out.lock().ok()?;
         if o.closed {
             return None;
         }
-        let mut all: Vec<String> = o.events.drain(..).collect();
-        all.extend(o.latest.drain(..).map(|(_, t)| t));
+        let mut ordered: Vec<(u64, String)> = o.events.drain(..).collect();
+        ordered.extend(o.latest.drain(..).map(|(_, seq, t)| (seq, t)));
+        ordered.sort_by_key(|(seq, _)| *seq);
+        let mut all: Vec<String> = ordered.into_iter().map(|(_, t)| t).collect();
         if o.dropped != o.told {
             o.told = o.dropped;
             all.push(serde_json::json!({ "type": "page", "dropped": o.dropped }).to_string());
@@ -580,10 +592,11 @@ mod tests {
         }
         assert!(tab.send(msg("result", 0)).is_ok());
         let all = tab.take().unwrap_or_default();
-        // The answer, the newest state, the drop count, the newest telemetry.
+        // The newest state, the answer after it, the drop count, the
+        // newest telemetry.
         assert_eq!(all.len(), 1 + 1 + 1 + TAB_TELEMETRY);
-        assert_eq!(all[0], msg("result", 0));
-        assert_eq!(all[1], msg("state", 999));
+        assert_eq!(all[0], msg("state", 999));
+        assert_eq!(all[1], msg("result", 0));
         assert_eq!(
             all[2],
             serde_json::json!({ "type": "page", "dropped": 1000 - TAB_TELEMETRY }).to_string()
@@ -594,5 +607,28 @@ mod tests {
             let _ = tab.push("hop", msg("hop", n));
         }
         assert!(tab.closed() && tab.take().is_none() && tab.push("hop", msg("hop", 0)).is_err());
+    }
+
+    /// A state from before the robot was lost must not be sent after the
+    /// `lost` that came later: the page would show the stale state over
+    /// "robot lost". Events and state messages go in the order they came.
+    #[test]
+    fn a_state_queued_before_an_event_is_sent_before_it() {
+        let tab = Tab::default();
+        let msg = |kind: &str, n: usize| serde_json::json!({ "type": kind, "n": n }).to_string();
+        assert!(tab.push("state", msg("state", 1)).is_ok());
+        assert!(tab.push("lost", msg("lost", 2)).is_ok());
+        assert_eq!(
+            tab.take().unwrap_or_default(),
+            [msg("state", 1), msg("lost", 2)]
+        );
+        // A state that comes after an event follows it, the newest only.
+        assert!(tab.push("notice", msg("notice", 3)).is_ok());
+        assert!(tab.push("state", msg("state", 4)).is_ok());
+        assert!(tab.push("state", msg("state", 5)).is_ok());
+        assert_eq!(
+            tab.take().unwrap_or_default(),
+            [msg("notice", 3), msg("state", 5)]
+        );
     }
 }
