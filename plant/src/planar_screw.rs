@@ -13,7 +13,10 @@
 //!
 //! The nut's own dynamics are the vertical model's second equation (eqs
 //! 2.13, 2.33) with the nut's sliding mass lumped into the hip: `J / r^2
-//! p'' = eta tau / r - k_l c - c_l p'` (`c` the compression). What that
+//! p'' = eta tau / r - k_l c` (`c` the compression; the leg's damper is
+//! Appendix A's, on the leg's sliding in the runner, rather than MODEL.md's
+//! across the spring: at the design's 20 N s/m against the nut's 426 kg
+//! the difference is small). What that
 //! drops is `m_s` times the hip's acceleration along the leg, against a
 //! reflected inertia of hundreds of kilograms (0.6 kg against 430 kg for
 //! the design's drive: a part in 700). The nut is advanced beside the
@@ -42,6 +45,9 @@ pub struct LegScrew {
     pub stroke_m: f64,
     /// The motor's winding resistance, ohm.
     pub winding_ohm: f64,
+    /// The amplifier's supply, V: it drives at most `(V - k_e w) / R`
+    /// into the turning motor (`k_e` the torque constant in V s/rad).
+    pub supply_voltage_v: f64,
 }
 
 impl LegScrew {
@@ -64,6 +70,7 @@ impl LegScrew {
             // current: the design winding (the thermal model is the leg
             // motor's).
             winding_ohm: crate::params::Params::design().winding_resistance_ohm,
+            supply_voltage_v: crate::params::Params::design().supply_voltage_v,
         }
     }
 
@@ -96,6 +103,7 @@ impl LegScrew {
             ("leg_current_limit_a", self.current_limit_a),
             ("leg_stroke_m", self.stroke_m),
             ("leg_winding_ohm", self.winding_ohm),
+            ("leg_supply_voltage_v", self.supply_voltage_v),
         ] {
             if !(v.is_finite() && v > 0.0) {
                 return Err(PlanarError::NotPositive(name));
@@ -185,20 +193,25 @@ impl Nut {
         self.copper_loss_j
     }
 
-    /// The current the amplifier drives for `command_a`: within its
-    /// limit; 0 for a command that is not a number.
+    /// The current the amplifier drives for `command_a` into the motor
+    /// turning at the nut's speed: within its limit and what its supply
+    /// can push against the motor's back-EMF (the vertical plant's
+    /// amplifier, MODEL.md); 0 for a command that is not a number.
     pub fn amplifier_a(&self, command_a: f64) -> f64 {
-        let l = self.drive.current_limit_a;
-        if command_a.is_finite() {
-            command_a.clamp(-l, l)
-        } else {
-            0.0
+        let d = &self.drive;
+        let l = d.current_limit_a;
+        if !command_a.is_finite() {
+            return 0.0;
         }
+        let back_emf_v = d.torque_constant_nm_per_a * self.pd_mps / d.screw_m_per_rad();
+        let hi = (d.supply_voltage_v - back_emf_v) / d.winding_ohm;
+        let lo = (-d.supply_voltage_v - back_emf_v) / d.winding_ohm;
+        command_a.clamp(-l, l).max(lo).min(hi)
     }
 
     /// Advances `dt_s` with the motor at `command_a` (through the
     /// amplifier) against the spring's force `spring_n` on the nut and the
-    /// leg damper's `damping_n` (both up positive, as they act on it).
+    /// a damper's `damping_n` (both up positive, as they act on it).
     pub fn step(&mut self, dt_s: f64, command_a: f64, spring_n: f64, damping_n: f64) {
         let d = &self.drive;
         let i = self.amplifier_a(command_a);
@@ -287,8 +300,18 @@ mod tests {
         assert_eq!(n.velocity_mps(), 0.0);
         // Free of the spring, everything the motor did went to the stop.
         assert!((n.stop_loss_j() - n.motor_work_j()).abs() < 1e-6 * n.motor_work_j());
-        assert_eq!(n.amplifier_a(1e3), d.current_limit_a);
         assert_eq!(n.amplifier_a(f64::NAN), 0.0);
+        // At rest the limit; turning, what the supply drives against the
+        // back-EMF.
+        let at_rest = Nut::new(d).unwrap_or_else(|e| panic!("{e:?}"));
+        assert_eq!(at_rest.amplifier_a(1e3), d.current_limit_a);
+        let mut turning = at_rest;
+        turning.pd_mps = 0.2;
+        let w = 0.2 / d.screw_m_per_rad();
+        let hi = (d.supply_voltage_v - d.torque_constant_nm_per_a * w) / d.winding_ohm;
+        assert!((turning.amplifier_a(1e3) - hi).abs() < 1e-9, "{hi}");
+        // 0.2 m/s is 126 rad/s: 14.9 V of back-EMF, 9.1 V left, 25.4 A.
+        assert!((hi - 25.45).abs() < 0.05, "{hi}");
     }
 
     #[test]

@@ -77,6 +77,7 @@ pub const FIELDS: &[Field] = &[
     field!("leg", leg.current_limit_a as "current_limit_a", "A", [1e-3, 1000.0], "The leg amplifier's current limit (33.67 A: 4 N m with the design's motor)."),
     field!("leg", leg.stroke_m as "stroke_m", "m", [1e-3, 0.5], "The nut's stroke between its stops (50 mm)."),
     field!("leg", leg.winding_ohm as "winding_resistance_ohm", "ohm", [1e-3, 100.0], "The leg motor's winding resistance, for its copper loss (0.356 ohm)."),
+    field!("leg", leg.supply_voltage_v as "supply_voltage_v", "V", [1.0, 1000.0], "The leg amplifier's supply: the current it drives falls as the motor's back-EMF rises (24 V)."),
     field!("sensors", sensors.boom_x_m as "boom_x_m", "m", [0.0, 0.1], "The boom's forward encoder, metres at the hip a count; 0: none, the forward speed taken from the leg's kinematics in stance (the pitch and hip encoders and the potentiometer) and held through the flight."),
     field!("sensors", sensors.boom_z_m as "boom_z_m", "m", [1e-9, 0.1], "The boom's height encoder, metres at the hip a count."),
     field!("sensors", sensors.pitch_rad as "pitch_rad", "rad", [1e-9, 0.1], "The body's pitch encoder, radians a count."),

@@ -14,8 +14,8 @@
 //! hopper, a motor turning a ball screw in series with the leg spring
 //! ([`hopper_plant::planar_screw`]), run by a vertical law
 //! ([`PlanarLoop::with_screw`], [`ScrewThrust`]). Which one is the loop's
-//! type ([`LegLaw`]), so that a loop driving its leg by force carries
-//! nothing of the other.
+//! type ([`LegLaw`]), so that a loop driving its leg by force runs
+//! nothing of the other in its period.
 
 use hopper_control::laws::Strategy;
 use hopper_control::model::ModelParams;
@@ -205,6 +205,9 @@ struct Core {
     /// The hip motor's winding temperature, as the firmware estimates it
     /// (the leg motor's model and data: derated, then off, when hot).
     hip_thermal: MotorThermal,
+    /// The leg motor's, when the leg is driven through its screw (the same
+    /// model and data: derated, then off, when hot).
+    leg_thermal: MotorThermal,
     /// The hip's copper loss so far, by the plant's winding, J.
     hip_copper_loss_j: f64,
     /// The hip motor's winding resistance, ohm.
@@ -233,8 +236,9 @@ pub trait LegLaw: Clone + core::fmt::Debug {
     const SCREW: bool;
 
     /// The leg motor's current this period for `est` and the readings
-    /// `r`, A (0 for a leg driven by force).
-    fn leg_current_a(&mut self, est: &PlanarEstimate, r: &PlanarReadings) -> f32;
+    /// `r`, A (0 for a leg driven by force); `faulted` when the guard has
+    /// latched.
+    fn leg_current_a(&mut self, est: &PlanarEstimate, r: &PlanarReadings, faulted: bool) -> f32;
 }
 
 /// The leg driven by the controller's force along it.
@@ -245,7 +249,7 @@ impl LegLaw for ForceLeg {
     const SCREW: bool = false;
 
     #[inline(always)]
-    fn leg_current_a(&mut self, _: &PlanarEstimate, _: &PlanarReadings) -> f32 {
+    fn leg_current_a(&mut self, _: &PlanarEstimate, _: &PlanarReadings, _: bool) -> f32 {
         0.0
     }
 }
@@ -253,8 +257,8 @@ impl LegLaw for ForceLeg {
 impl LegLaw for ScrewThrust {
     const SCREW: bool = true;
 
-    fn leg_current_a(&mut self, est: &PlanarEstimate, r: &PlanarReadings) -> f32 {
-        self.current_a(est, r.leg_length_m, r.leg_motor_rad, DT_S as f32)
+    fn leg_current_a(&mut self, est: &PlanarEstimate, r: &PlanarReadings, faulted: bool) -> f32 {
+        self.current_a(est, r.leg_length_m, r.leg_motor_rad, faulted, DT_S as f32)
     }
 }
 
@@ -307,6 +311,7 @@ impl PlanarLoop {
                 estimator,
                 hip: m.hip,
                 hip_thermal,
+                leg_thermal: hip_thermal,
                 hip_copper_loss_j: 0.0,
                 hip_winding_ohm: m.hip_winding_ohm,
                 hip_peak_current_a: 0.0,
@@ -396,7 +401,17 @@ impl<L: LegLaw> PlanarLoop<L> {
             .controller
             .step(est, speed_command_mps as f32, DT_S as f32);
         if L::SCREW {
-            cmd.leg_current_a = self.leg.leg_current_a(est, &self.core.readings);
+            // The leg motor's encoder is read here, not by the estimator:
+            // a reading that is not a number stops the machine; so does
+            // its winding at the trip temperature.
+            if !self.core.readings.leg_motor_rad.is_finite() {
+                self.core.guard.latch(PlanarFault::NonFinite);
+            }
+            if self.core.leg_thermal.tripped() {
+                self.core.guard.latch(PlanarFault::LegOvertemperature);
+            }
+            let faulted = self.core.guard.fault().is_some();
+            cmd.leg_current_a = self.leg.leg_current_a(est, &self.core.readings, faulted);
             cmd.leg_thrust_n = 0.0;
         }
         // A winding at its trip temperature stops the machine, as the leg
@@ -411,10 +426,27 @@ impl<L: LegLaw> PlanarLoop<L> {
             .current_a(cmd.hip_torque_nm, self.core.hip_thermal.limit_scale());
         self.core.hip_thermal.add(current_a, DT_S as f32);
         self.core.hip_current_a = current_a;
+        let leg_current_a = if L::SCREW {
+            // Within the amplifier's limit, derated when the winding is
+            // hot (the vertical hopper's leg motor's model).
+            let limit = self.core.leg_model.current_limit_a * self.core.leg_thermal.limit_scale();
+            let i = cmd.leg_current_a.max(-limit).min(limit);
+            self.core.leg_thermal.add(i, DT_S as f32);
+            i
+        } else {
+            0.0
+        };
         PlanarCommand {
             hip_torque_nm: current_a * self.core.hip.torque_per_amp_nm_per_a,
+            leg_current_a,
             ..cmd
         }
+    }
+
+    /// The leg motor's winding temperature as the firmware estimates it,
+    /// C (a leg driven through its screw).
+    pub fn leg_winding_c(&self) -> f32 {
+        self.core.leg_thermal.winding_c()
     }
 
     /// The hip motor's winding temperature as the firmware estimates it, C.

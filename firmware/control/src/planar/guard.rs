@@ -59,6 +59,9 @@ pub enum PlanarFault {
     /// The hip motor's winding reached its trip temperature (the leg
     /// motor's thermal model, run on the hip's current).
     HipOvertemperature,
+    /// The leg motor's winding reached its trip temperature (a leg driven
+    /// through its ball screw).
+    LegOvertemperature,
 }
 
 /// The guard (module docs).

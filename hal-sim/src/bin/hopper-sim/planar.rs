@@ -536,12 +536,15 @@ fn cmd_planar_raibert(
     );
     if let Some(l) = &r.leg {
         say!(
-            "  leg motor          {} through the ball screw: peak {:.1} A (limit {:.1} A); work on the screw {:.0} J, copper loss {:.0} J",
+            "  leg motor          {} through the ball screw: peak {:.1} A (limit {:.1} A); work on the screw {:.0} J, copper loss {:.0} J ({:.1} W mean); winding at most {:.1} C (derates from {:.0} C)",
             l.law,
             l.peak_current_a,
             l.current_limit_a,
             l.motor_work_j,
-            l.copper_loss_j
+            l.copper_loss_j,
+            l.copper_loss_j / r.duration_s.max(1e-9),
+            l.max_winding_c,
+            hopper_control::thermal::ThermalConfig::default().derate_winding_c
         );
     }
     say!(
@@ -596,8 +599,9 @@ pub(crate) fn cmd_planar(cmd: &PlanarCmd) -> Result<()> {
                 };
                 return cmd_planar_raibert(robot.as_deref(), cfg, &plan, out.as_deref(), *json);
             }
-            if speed_profile.is_some() || !inject.is_empty() || robot.is_some() {
-                bail!("--speed-profile, --inject and --robot need --controller raibert (the passive runner runs at --speed)");
+            if speed_profile.is_some() || !inject.is_empty() || robot.is_some() || thrust != "force"
+            {
+                bail!("--speed-profile, --inject, --robot and --thrust need --controller raibert (the passive runner runs at --speed)");
             }
             use hal_sim::planar_sim::{simulate_model, Start};
             let start = if start == "fixed-point" {
