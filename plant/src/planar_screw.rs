@@ -314,6 +314,68 @@ mod tests {
         assert!((hi - 25.45).abs() < 0.05, "{hi}");
     }
 
+    /// The nut on Appendix A's runner without friction or dampers
+    /// (section 2.2's machine, hopping forward): over two seconds of a
+    /// stance push and a flight return, the machine's energy (the
+    /// runner's, the spring's share the nut holds, the rotor's) gains what
+    /// the motor did on the screw less what the stops and the touchdowns'
+    /// impacts took, to 0.5% of the motor's work.
+    #[test]
+    fn the_nut_and_the_runner_keep_the_energy_ledger() {
+        use crate::planar::{ApexState, PlanarParams};
+        use crate::planar_general::{Actuation, GeneralParams, GeneralRunner};
+        let p = GeneralParams::from_section_2_2(&PlanarParams::table_2_2());
+        let start = ApexState {
+            z_m: p.leg_length_m + 0.15,
+            x_dot_mps: 0.5,
+            phi_rad: 0.0,
+            theta_rad: 0.05,
+            phi_dot_rad_s: 0.0,
+            theta_dot_rad_s: 0.0,
+        };
+        let mut run = GeneralRunner::from_apex(p, &start).unwrap_or_else(|e| panic!("{e:?}"));
+        let mut nut = Nut::new(LegScrew::design()).unwrap_or_else(|e| panic!("{e:?}"));
+        let k = p.leg_stiffness_n_per_m;
+        // The runner counts its spring as `0.5 k c^2`; with the nut it is
+        // `0.5 k (c + p)^2`.
+        let total = |run: &GeneralRunner, nut: &Nut| {
+            let c = p.leg_length_m - run.state().leg_length_m;
+            let q = c + nut.position_m();
+            run.energy_j() + 0.5 * k * (q * q - c * c) + nut.rotor_energy_j()
+        };
+        let e0 = total(&run, &nut);
+        let dt = 1e-4;
+        let mut stances = 0;
+        let mut impacts_j = 0.0;
+        for _ in 0..20_000 {
+            let st = run.state();
+            let command_a = if st.stance { 20.0 } else { -20.0 };
+            let c = p.leg_length_m - st.leg_length_m;
+            let i = nut.amplifier_a(command_a);
+            nut.step(dt, i, k * (c + nut.position_m()), 0.0);
+            run.set_actuation(Actuation {
+                leg_thrust_n: nut.thrust_n(k),
+                ..Actuation::default()
+            });
+            run.step(dt, &mut |e| match e {
+                crate::planar::PlanarEvent::Touchdown { loss_j, .. } => {
+                    stances += 1;
+                    impacts_j += loss_j;
+                }
+                crate::planar::PlanarEvent::Liftoff { loss_j, .. } => impacts_j += loss_j,
+                crate::planar::PlanarEvent::Apex { .. } => {}
+            });
+        }
+        let booked = nut.motor_work_j() - nut.stop_loss_j() - impacts_j;
+        let gained = total(&run, &nut) - e0;
+        assert!(stances >= 3, "{stances}");
+        assert!(nut.motor_work_j().abs() > 5.0, "{}", nut.motor_work_j());
+        assert!(
+            (gained - booked).abs() < 0.005 * nut.motor_work_j().abs(),
+            "gained {gained} J, booked {booked} J"
+        );
+    }
+
     #[test]
     fn a_bad_drive_is_refused_by_name() {
         let mut d = LegScrew::design();

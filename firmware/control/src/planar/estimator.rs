@@ -221,7 +221,7 @@ impl PlanarEstimator {
 /// machine long before; both series are even or odd, so the quadrant's
 /// serve its mirror). libm's `sinf` reduces in `f64`, which the
 /// Cortex-M4F does in software: a thousand instructions a period.
-pub(crate) fn leg_sine_cosine(theta: f32) -> (f32, f32) {
+fn leg_sine_cosine(theta: f32) -> (f32, f32) {
     const HALF_PI: f32 = core::f32::consts::FRAC_PI_2;
     // (NaN passes through the comparisons.)
     crate::laws::shaped::sin_cos_quadrant(crate::num::clamp(theta, -HALF_PI, HALF_PI))

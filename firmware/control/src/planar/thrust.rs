@@ -278,17 +278,22 @@ impl ScrewThrust {
 mod tests {
     use super::*;
 
+    /// Table 2.2's leg (16.3 kg, 0.3 of it at the toe, on 40,425 N/m)
+    /// and the design's planar leg drive.
     fn model() -> ModelParams {
+        use crate::model::design as d;
+        let scale = d::PLANAR_LEG_MOTOR_SCALE as f32;
+        let m = ModelParams::default();
         ModelParams {
-            body_mass_kg: 15.75,
+            body_mass_kg: 16.0 - m.nut_mass_kg,
             unsprung_mass_kg: 0.3,
             spring_stiffness_n_per_m: 40_425.0,
-            leg_length_m: 0.65,
-            rotor_inertia_kg_m2: 1.08e-3,
-            screw_lead_m: 0.01,
-            torque_constant_nm_per_a: 4.0 * 0.0297,
-            torque_limit_nm: 4.0,
-            ..ModelParams::default()
+            leg_length_m: super::super::TABLE_2_2_LEG_LENGTH_M,
+            rotor_inertia_kg_m2: scale * m.rotor_inertia_kg_m2,
+            screw_lead_m: d::PLANAR_SCREW_LEAD_M as f32,
+            torque_constant_nm_per_a: scale * m.torque_constant_nm_per_a,
+            torque_limit_nm: scale * m.torque_limit_nm,
+            ..m
         }
     }
 
