@@ -775,9 +775,9 @@ mod tests {
 
     /// The leg driven as on the vertical hopper, its motor turning the
     /// ball screw under the energy-apex law: the profile within every
-    /// bound over 30 s, the apex within 8.8% of its target (8.4%
+    /// bound over 30 s, the apex within 8.8% of its target (8.5%
     /// measured), and the motor's work on the screw what the hop's losses
-    /// take (428 J, 4.4 J a stride).
+    /// take (438 J, 4.5 J a stride).
     #[test]
     fn the_energy_apex_law_runs_the_leg_through_its_ball_screw() {
         let profile = SpeedProfile::parse("0:0,3:0.5,8:1.0,13:0").unwrap_or_else(|e| panic!("{e}"));
@@ -787,28 +787,25 @@ mod tests {
         let leg = r.leg.unwrap_or_else(|| panic!("no leg figures"));
         assert_eq!(leg.law, "energy-apex");
         assert!(leg.peak_current_a <= leg.current_limit_a + 1e-6, "{leg:?}");
-        assert!((leg.motor_work_j - 428.3).abs() < 0.03 * 428.3, "{leg:?}");
+        assert!((leg.motor_work_j - 438.2).abs() < 0.03 * 438.2, "{leg:?}");
     }
 
-    /// The leg motor's copper (about 95 W: the law holds the full current
-    /// through most of each stance) heats its winding, on the vertical
-    /// motor's thermal model, to the trip in 47.4 s of the profile: the
-    /// guard latches and both actuators stop.
+    /// The leg motor's copper heats its winding on the vertical motor's
+    /// thermal model. The profile with its push runs the 60 s to 97 C
+    /// (the flight PD settling in 0.5 s; eq 4.13's 0.1 s tripped it at
+    /// 47.4 s); running at 1 m/s without a stop it reaches the trip in
+    /// 159.4 s, and the guard latches and stops both actuators.
     #[test]
-    fn the_leg_winding_trips_and_stops_the_machine() {
+    fn the_leg_winding_holds_the_profile_and_trips_running_on() {
         let profile = SpeedProfile::parse("0:0,3:0.5,8:1.0,13:0").unwrap_or_else(|e| panic!("{e}"));
         let push = [Push {
             at_s: 30.0,
             impulse_ns: 20.0,
         }];
         let r = screw_run(&profile, &push, 60.0);
-        assert_eq!(r.stopped_by.as_deref(), Some("LegOvertemperature"));
-        let at = r.fell_at_s.unwrap_or(f64::NAN);
-        assert!((at - 47.4).abs() < 0.03 * 47.4, "{at}");
+        assert!(r.passes(), "{:?} {:?}", r.steps, r.stopped_by);
         let leg = r.leg.unwrap_or_else(|| panic!("no leg figures"));
-        let trip = f64::from(hopper_control::thermal::ThermalConfig::default().trip_winding_c);
-        assert!((leg.max_winding_c - trip).abs() < 0.5, "{leg:?}");
-        // Until then the push was caught within its bound.
+        assert!((leg.max_winding_c - 97.0).abs() < 0.03 * 97.0, "{leg:?}");
         assert!(
             r.pushes
                 .iter()
@@ -816,6 +813,14 @@ mod tests {
             "{:?}",
             r.pushes
         );
+        let running = SpeedProfile::parse("0:0,3:0.5,8:1.0").unwrap_or_else(|e| panic!("{e}"));
+        let r = screw_run(&running, &[], 200.0);
+        assert_eq!(r.stopped_by.as_deref(), Some("LegOvertemperature"));
+        let at = r.fell_at_s.unwrap_or(f64::NAN);
+        assert!((at - 159.4).abs() < 0.03 * 159.4, "{at}");
+        let leg = r.leg.unwrap_or_else(|| panic!("no leg figures"));
+        let trip = f64::from(hopper_control::thermal::ThermalConfig::default().trip_winding_c);
+        assert!((leg.max_winding_c - trip).abs() < 0.5, "{leg:?}");
     }
 
     /// The design machine run with its leg through the screw under the
