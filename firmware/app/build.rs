@@ -176,7 +176,8 @@ fn qemu_scenario(root: &std::path::Path) -> Result<String, Box<dyn Error>> {
 
 /// The QEMU planar image's constants from `scenarios/qemu/planar.toml`:
 /// the speed profile (`T:V,...` from time 0, times increasing), the apex
-/// target and the whole seconds it runs.
+/// target, the whole seconds it runs and the leg's drive (`thrust`:
+/// `force` when left out).
 fn planar_scenario(root: &std::path::Path) -> Result<String, Box<dyn Error>> {
     let path = root.join("scenarios/qemu/planar.toml");
     println!("cargo:rerun-if-changed={}", path.display());
@@ -220,8 +221,30 @@ fn planar_scenario(root: &std::path::Path) -> Result<String, Box<dyn Error>> {
         Some(toml::Value::Integer(v)) if (1..=600).contains(v) => *v,
         _ => return Err(bad("`duration_s` must be whole seconds in 1..=600").into()),
     };
+    // The leg's drive: a force along it, or its motor and ball screw run
+    // by a vertical law (its name checked against the laws at `init`).
+    let thrust = match t.get("thrust") {
+        None => "force",
+        Some(toml::Value::String(v))
+            if !v.is_empty() && v.bytes().all(|b| b.is_ascii_lowercase() || b == b'-') =>
+        {
+            v.as_str()
+        }
+        Some(_) => {
+            return Err(bad("`thrust` must be `force` or a vertical controller's name").into())
+        }
+    };
+    let leg = if thrust == "force" {
+        "hopper_sil::planar::ForceLeg"
+    } else {
+        "hopper_control::planar::thrust::ScrewThrust"
+    };
     Ok(format!(
-        "/// The speed command's steps `(from s, m/s)`.\n\
+        "/// How the leg is driven: `force` or a vertical law's name.\n\
+         pub const PLANAR_THRUST: &str = {thrust:?};\n\
+         /// The loop's leg law for [`PLANAR_THRUST`].\n\
+         pub type PlanarLeg = {leg};\n\
+         /// The speed command's steps `(from s, m/s)`.\n\
          pub const PLANAR_PROFILE: &[(f64, f64)] = &[{steps}];\n\
          /// The toe's apex to hold, m.\n\
          pub const PLANAR_TARGET_APEX_M: f32 = {target:?};\n\

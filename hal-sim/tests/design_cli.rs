@@ -460,3 +460,51 @@ fn planar_run_writes_its_trajectory() {
     assert!((rows[1000][0] - 1.0).abs() < 1e-9);
     assert!(out.join("run.png").is_file() && out.join("run.svg").is_file());
 }
+
+/// `planar run --controller raibert` drives the leg by default as on the
+/// vertical hopper, through its ball screw under the energy-apex law (the
+/// JSON's `leg` says so); `--thrust force` is Raibert's own thrust (no
+/// `leg`); `--thrust` without raibert, or an unknown law, is refused.
+#[test]
+fn planar_raibert_drives_the_leg_through_its_screw_by_default() {
+    let run = |extra: &[&str]| -> serde_json::Value {
+        let mut a = vec![
+            "planar",
+            "run",
+            "--controller",
+            "raibert",
+            "--duration",
+            "5",
+            "--json",
+        ];
+        a.extend_from_slice(extra);
+        let o = sim(&a);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        serde_json::from_slice(&o.stdout).unwrap()
+    };
+    let default = run(&[]);
+    assert_eq!(default["leg"]["law"], "energy-apex", "{default}");
+    assert!(default["leg"]["motor_work_j"].as_f64().unwrap() > 0.0);
+    assert_eq!(run(&["--thrust", "energy-apex"]), default);
+    let force = run(&["--thrust", "force"]);
+    assert!(force["leg"].is_null(), "{force}");
+    for bad in [
+        &["planar", "run", "--thrust", "force"][..],
+        &[
+            "planar",
+            "run",
+            "--controller",
+            "raibert",
+            "--thrust",
+            "jump",
+        ][..],
+    ] {
+        let o = sim(bad);
+        assert!(!o.status.success(), "{bad:?}");
+        assert!(
+            String::from_utf8_lossy(&o.stderr).contains("--thrust"),
+            "{}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+    }
+}

@@ -359,6 +359,8 @@ fn run_planar(root: &Path, sim: &Path) -> Result<(), String> {
         get("target_apex_m")?,
         get("duration_s")?,
     );
+    // The leg's drive, as the image's build script reads it.
+    let thrust = get("thrust").unwrap_or_else(|_| "force".into());
     let target_dir = crate::target_dir(root)?.join("qemu");
     let elf = build_image(
         root,
@@ -408,6 +410,8 @@ fn run_planar(root: &Path, sim: &Path) -> Result<(), String> {
             &target,
             "--duration",
             &duration,
+            "--thrust",
+            &thrust,
             "--json",
         ])
         .output()

@@ -17,13 +17,13 @@
 //! type ([`LegLaw`]), so that a loop driving its leg by force runs
 //! nothing of the other in its period.
 
-use hopper_control::laws::Strategy;
+use hopper_control::laws::{ControllerKind, Strategy};
 use hopper_control::model::ModelParams;
 use hopper_control::planar::estimator::{PlanarEstimator, PlanarEstimatorConfig, PlanarReadings};
 use hopper_control::planar::guard::{Guard, GuardConfig, PlanarFault};
 use hopper_control::planar::raibert::{Raibert, RaibertConfig};
 use hopper_control::planar::thrust::ScrewThrust;
-use hopper_control::planar::{HipDrive, PlanarCommand, PlanarEstimate};
+use hopper_control::planar::{limited_current_a, HipDrive, PlanarCommand, PlanarEstimate};
 use hopper_control::thermal::{MotorThermal, ThermalConfig};
 use hopper_plant::planar::{ApexState, PlanarError, PlanarEvent, PlanarState};
 use hopper_plant::planar_general::{Actuation, GeneralParams, GeneralRunner};
@@ -239,6 +239,11 @@ pub trait LegLaw: Clone + core::fmt::Debug {
     /// `r`, A (0 for a leg driven by force); `faulted` when the guard has
     /// latched.
     fn leg_current_a(&mut self, est: &PlanarEstimate, r: &PlanarReadings, faulted: bool) -> f32;
+
+    /// The loop `lp` with its leg driven as `thrust` names it (`force`,
+    /// or a vertical law's name for the screw), where that is this law;
+    /// else refused.
+    fn drive(lp: PlanarLoop<ForceLeg>, thrust: &str) -> Result<PlanarLoop<Self>, PlanarError>;
 }
 
 /// The leg driven by the controller's force along it.
@@ -252,6 +257,14 @@ impl LegLaw for ForceLeg {
     fn leg_current_a(&mut self, _: &PlanarEstimate, _: &PlanarReadings, _: bool) -> f32 {
         0.0
     }
+
+    fn drive(lp: PlanarLoop<ForceLeg>, thrust: &str) -> Result<PlanarLoop<Self>, PlanarError> {
+        if thrust == "force" {
+            Ok(lp)
+        } else {
+            Err(PlanarError::OutOfRange("thrust"))
+        }
+    }
 }
 
 impl LegLaw for ScrewThrust {
@@ -259,6 +272,11 @@ impl LegLaw for ScrewThrust {
 
     fn leg_current_a(&mut self, est: &PlanarEstimate, r: &PlanarReadings, faulted: bool) -> f32 {
         self.current_a(est, r.leg_length_m, r.leg_motor_rad, faulted, DT_S as f32)
+    }
+
+    fn drive(lp: PlanarLoop<ForceLeg>, thrust: &str) -> Result<PlanarLoop<Self>, PlanarError> {
+        let kind = ControllerKind::from_name(thrust).ok_or(PlanarError::OutOfRange("thrust"))?;
+        lp.with_screw(&ScrewThrust::planar_strategy(kind))
     }
 }
 
@@ -429,8 +447,11 @@ impl<L: LegLaw> PlanarLoop<L> {
         let leg_current_a = if L::SCREW {
             // Within the amplifier's limit, derated when the winding is
             // hot (the vertical hopper's leg motor's model).
-            let limit = self.core.leg_model.current_limit_a * self.core.leg_thermal.limit_scale();
-            let i = cmd.leg_current_a.max(-limit).min(limit);
+            let i = limited_current_a(
+                cmd.leg_current_a,
+                self.core.leg_model.current_limit_a,
+                self.core.leg_thermal.limit_scale(),
+            );
             self.core.leg_thermal.add(i, DT_S as f32);
             i
         } else {

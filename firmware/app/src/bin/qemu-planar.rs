@@ -32,10 +32,11 @@ mod app {
     use hopper_app::control::CONTROL_HZ;
     use hopper_control::planar::raibert::RaibertConfig;
     use hopper_plant::planar::PlanarEvent;
-    use hopper_sil::planar::{PlanarLoop, DT_S};
+    use hopper_sil::planar::{LegLaw, PlanarLoop, DT_S};
 
-    // `PLANAR_PROFILE`, `PLANAR_TARGET_APEX_M`, `PLANAR_DURATION_S`:
-    // `scenarios/qemu/planar.toml`, read by the build script.
+    // `PLANAR_PROFILE`, `PLANAR_TARGET_APEX_M`, `PLANAR_DURATION_S`,
+    // `PLANAR_THRUST` and its `PlanarLeg`: `scenarios/qemu/planar.toml`,
+    // read by the build script.
     include!(concat!(env!("OUT_DIR"), "/planar_scenario.rs"));
 
     /// The controller's period must be the plant's step.
@@ -43,7 +44,7 @@ mod app {
 
     /// The run and what the summary reports.
     pub struct Run {
-        lp: PlanarLoop,
+        lp: PlanarLoop<PlanarLeg>,
         period: u32,
         /// The last apex's time and hip position.
         last_apex: Option<(f64, f64)>,
@@ -74,7 +75,9 @@ mod app {
         let b = hopper_app::qemu::tim5_now();
         let mut cfg = RaibertConfig::table_2_2();
         cfg.target_apex_m = PLANAR_TARGET_APEX_M;
-        let Ok(lp) = PlanarLoop::new(cfg, speed_at(0.0)) else {
+        let Ok(lp) =
+            PlanarLoop::new(cfg, speed_at(0.0)).and_then(|lp| PlanarLeg::drive(lp, PLANAR_THRUST))
+        else {
             defmt::error!("planar set-up failed");
             debug::exit(debug::EXIT_FAILURE);
             #[allow(clippy::empty_loop)]
@@ -82,9 +85,10 @@ mod app {
         };
         hopper_app::qemu::start_systick(&mut core.SYST, hopper_app::qemu::PERIOD_TICKS);
         defmt::println!(
-            "hopper-fw: QEMU build, planar raibert scenario, {=u32} Hz, {=u32} s",
+            "hopper-fw: QEMU build, planar raibert scenario, {=u32} Hz, {=u32} s, thrust {=str}",
             CONTROL_HZ,
-            PLANAR_DURATION_S
+            PLANAR_DURATION_S,
+            PLANAR_THRUST
         );
         (
             Shared {},

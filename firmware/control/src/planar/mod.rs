@@ -47,6 +47,9 @@ pub struct PlanarEstimate {
 impl PlanarEstimate {
     /// Whether every measurement is finite.
     pub fn is_finite(&self) -> bool {
+        // A finite value times zero is zero, an infinite one or a NaN
+        // gives a NaN: the sum is zero exactly when every field is finite
+        // (one test in the control period, not nine).
         [
             self.x_dot_mps,
             self.z_m,
@@ -59,7 +62,22 @@ impl PlanarEstimate {
             self.toe_x_m,
         ]
         .iter()
-        .all(|v| v.is_finite())
+        .fold(0.0, |sum, v| sum + v * 0.0)
+            == 0.0
+    }
+}
+
+/// What an amplifier of limit `limit_a` drives for `current_a`, its limit
+/// scaled by `limit_scale` (the winding's derating, in `[0, 1]`): within
+/// the scaled limit, and 0 for a current that is not finite or a NaN or
+/// negative limit (an unvalidated drive, a NaN scale). The hip's and the
+/// leg's motors both.
+pub fn limited_current_a(current_a: f32, limit_a: f32, limit_scale: f32) -> f32 {
+    let limit = limit_a * crate::num::clamp(limit_scale, 0.0, 1.0);
+    if current_a.is_finite() && limit >= 0.0 {
+        crate::num::clamp(current_a, -limit, limit)
+    } else {
+        0.0
     }
 }
 
@@ -111,15 +129,11 @@ impl HipDrive {
     /// `limit_scale` (the winding's derating, in `[0, 1]`); 0 for a
     /// non-finite torque.
     pub fn current_a(&self, torque_nm: f32, limit_scale: f32) -> f32 {
-        let limit = self.current_limit_a * crate::num::clamp(limit_scale, 0.0, 1.0);
-        let i = torque_nm / self.torque_per_amp_nm_per_a;
-        // A NaN or negative limit (an unvalidated drive, a NaN scale), or
-        // a current that is not finite: no current.
-        if i.is_finite() && limit >= 0.0 {
-            crate::num::clamp(i, -limit, limit)
-        } else {
-            0.0
-        }
+        limited_current_a(
+            torque_nm / self.torque_per_amp_nm_per_a,
+            self.current_limit_a,
+            limit_scale,
+        )
     }
 
     /// The hip's torque at the current limit, N m.

@@ -191,12 +191,13 @@ pub(crate) enum PlanarCmd {
         /// `planar robot-template`).
         #[arg(long, value_name = "FILE")]
         robot: Option<PathBuf>,
-        /// raibert: how the leg is driven: `force` (Raibert's thrust, a
-        /// force along the leg in stance) or a vertical controller's name
+        /// raibert: how the leg is driven: a vertical controller's name
         /// (`energy-apex`, `shaped`, ...: the leg's motor turns its ball
-        /// screw as on the vertical hopper, and that law runs it).
-        #[arg(long, value_name = "LAW", default_value = "force")]
-        thrust: String,
+        /// screw as on the vertical hopper, and that law runs it) or
+        /// `force` (Raibert's thrust, a force along the leg in stance)
+        /// [default: energy-apex].
+        #[arg(long, value_name = "LAW")]
+        thrust: Option<String>,
     },
     /// Print the design machine as a planar robot file (every entry with
     /// its unit, range and meaning), to edit and run with `planar run
@@ -595,11 +596,11 @@ pub(crate) fn cmd_planar(cmd: &PlanarCmd) -> Result<()> {
                     profile: speed_profile.as_deref().unwrap_or(&held),
                     inject,
                     duration: *duration,
-                    thrust,
+                    thrust: thrust.as_deref().unwrap_or("energy-apex"),
                 };
                 return cmd_planar_raibert(robot.as_deref(), cfg, &plan, out.as_deref(), *json);
             }
-            if speed_profile.is_some() || !inject.is_empty() || robot.is_some() || thrust != "force"
+            if speed_profile.is_some() || !inject.is_empty() || robot.is_some() || thrust.is_some()
             {
                 bail!("--speed-profile, --inject, --robot and --thrust need --controller raibert (the passive runner runs at --speed)");
             }
