@@ -64,7 +64,12 @@ enum Cmd {
     /// Clear the latched faults, only while disarmed and only when every
     /// one's cause is gone (otherwise nothing is cleared and the faults
     /// whose cause remains are named).
-    ResetFaults,
+    ResetFaults {
+        /// Ask again until accepted or this many wall seconds passed (e.g.
+        /// while the e-stop's release is debounced on a slow robot).
+        #[arg(long, value_name = "SECONDS")]
+        retry: Option<f64>,
+    },
     /// Record telemetry and hop ledgers: telemetry.csv (units in the
     /// headers), hops.csv, telemetry.mcap and hop.png (from two records on)
     /// in DIR.
@@ -365,7 +370,7 @@ fn run(c: &mut Client, cmd: &Cmd) -> Result<()> {
         },
         Cmd::Arm { retry } => arm::arm(c, *retry),
         Cmd::Disarm => arm::disarm(c),
-        Cmd::ResetFaults => arm::reset_faults(c),
+        Cmd::ResetFaults { retry } => arm::reset_faults(c, *retry),
         Cmd::Record {
             duration,
             rate,

@@ -183,3 +183,53 @@ fn reading_or_setting_an_inactive_parameter_says_how_to_activate_it() {
         );
     }
 }
+
+/// A robot whose e-stop was just released: its debounce (50 ms of robot
+/// time, which a slow robot such as QEMU takes seconds of wall time to
+/// run) refuses the first three resets, then clears the latch.
+fn releasing_robot() -> (String, std::thread::JoinHandle<()>) {
+    let mut refusals = 3;
+    common::robot(
+        10,
+        Duration::from_millis(20),
+        move |req| match req {
+            Request::ResetFaults if refusals > 0 => {
+                refusals -= 1;
+                refused(Refusal::FaultsRemain)
+            }
+            Request::ResetFaults => Response::Ok,
+            Request::Status => Response::Status(hopper_protocol::Status {
+                arm: hopper_protocol::ArmState::Disarmed(0),
+                faults: if refusals > 0 { 1 } else { 0 },
+                periods: 1,
+                frames_ok: 1,
+                frames_bad: 0,
+                telemetry_dropped: 0,
+                last_apex_m: f32::NAN,
+            }),
+            _ => Response::Ok,
+        },
+        |_| true,
+    )
+}
+
+/// `reset-faults` asks once: a latch still held is refused and named.
+/// `reset-faults --retry S` asks again until the robot clears it (or S
+/// wall seconds passed), as `arm --retry` does.
+#[test]
+fn reset_faults_retries_while_a_cause_is_still_going() {
+    let (addr, robot) = releasing_robot();
+    let o = hopper_link(&["--tcp", &addr, "reset-faults"]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("faults-remain"), "{}", stderr(&o));
+    let _ = robot.join();
+    let (addr, robot) = releasing_robot();
+    let o = hopper_link(&["--tcp", &addr, "reset-faults", "--retry", "5"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(
+        String::from_utf8_lossy(&o.stdout).contains("faults reset; latched now: none"),
+        "{}",
+        String::from_utf8_lossy(&o.stdout)
+    );
+    let _ = robot.join();
+}

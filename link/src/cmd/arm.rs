@@ -70,19 +70,31 @@ pub(crate) fn disarm(c: &mut Client) -> Result<()> {
     Ok(())
 }
 
-/// `reset-faults`: clear the latched faults whose cause is gone.
-pub(crate) fn reset_faults(c: &mut Client) -> Result<()> {
-    let r = c.request(Request::ResetFaults)?;
-    let st = status_of(c)?;
-    match r {
-        Response::Ok => {
-            println!("faults reset; latched now: {}", names::faults(st.faults));
-            Ok(())
+/// `reset-faults`: clear the latched faults whose cause is gone, asked
+/// again until accepted or `retry` wall seconds passed (a cause ends in
+/// the robot's time: an e-stop's release is debounced there).
+pub(crate) fn reset_faults(c: &mut Client, retry: Option<f64>) -> Result<()> {
+    let start = Instant::now();
+    loop {
+        let r = c.request(Request::ResetFaults)?;
+        match r {
+            Response::Refused(_) if start.elapsed().as_secs_f64() < retry.unwrap_or(0.0) => {
+                std::thread::sleep(Duration::from_millis(50));
+                continue;
+            }
+            _ => {}
         }
-        Response::Refused(why) => bail!(
-            "reset refused: {why}; still latched: {}",
-            names::faults(st.faults)
-        ),
-        r => bail!("unexpected answer {r:?}"),
+        let st = status_of(c)?;
+        return match r {
+            Response::Ok => {
+                println!("faults reset; latched now: {}", names::faults(st.faults));
+                Ok(())
+            }
+            Response::Refused(why) => bail!(
+                "reset refused: {why}; still latched: {}",
+                names::faults(st.faults)
+            ),
+            r => bail!("unexpected answer {r:?}"),
+        };
     }
 }
