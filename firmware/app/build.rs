@@ -226,7 +226,9 @@ fn planar_scenario(root: &std::path::Path) -> Result<String, Box<dyn Error>> {
     let thrust = match t.get("thrust") {
         None => "force",
         Some(toml::Value::String(v))
-            if !v.is_empty() && v.bytes().all(|b| b.is_ascii_lowercase() || b == b'-') =>
+            if !v.is_empty()
+                && v.bytes()
+                    .all(|b| b.is_ascii_lowercase() || b.is_ascii_digit() || b == b'-') =>
         {
             v.as_str()
         }

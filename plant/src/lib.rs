@@ -13,6 +13,7 @@
 //! `hopper-sim` CLI) builds on it.
 #![cfg_attr(not(test), no_std)]
 
+pub mod amplifier;
 pub mod params;
 pub mod planar;
 pub mod planar_general;

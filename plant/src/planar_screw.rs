@@ -26,6 +26,7 @@
 //! mechanical stops bound the stroke `[0, stroke]`; a stop takes the nut's
 //! speed (a plastic impact on the rotor, its loss booked).
 
+use crate::amplifier::SupplyWindow;
 use crate::planar::PlanarError;
 
 /// The leg's drive: motor, screw and amplifier (SI).
@@ -120,6 +121,8 @@ impl LegScrew {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Nut {
     drive: LegScrew,
+    /// The amplifier's supply window on the drive.
+    window: SupplyWindow,
     /// Position `p`, m (down positive, 0 on the upper stop).
     p_m: f64,
     /// Velocity `p'`, m/s.
@@ -138,6 +141,12 @@ impl Nut {
         drive.validate()?;
         Ok(Nut {
             drive,
+            window: SupplyWindow::new(
+                drive.torque_constant_nm_per_a,
+                drive.screw_m_per_rad(),
+                drive.winding_ohm,
+                drive.supply_voltage_v,
+            ),
             p_m: 0.0,
             pd_mps: 0.0,
             motor_work_j: 0.0,
@@ -198,15 +207,11 @@ impl Nut {
     /// can push against the motor's back-EMF (the vertical plant's
     /// amplifier, MODEL.md); 0 for a command that is not a number.
     pub fn amplifier_a(&self, command_a: f64) -> f64 {
-        let d = &self.drive;
-        let l = d.current_limit_a;
+        let l = self.drive.current_limit_a;
         if !command_a.is_finite() {
             return 0.0;
         }
-        let back_emf_v = d.torque_constant_nm_per_a * self.pd_mps / d.screw_m_per_rad();
-        let hi = (d.supply_voltage_v - back_emf_v) / d.winding_ohm;
-        let lo = (-d.supply_voltage_v - back_emf_v) / d.winding_ohm;
-        command_a.clamp(-l, l).max(lo).min(hi)
+        self.window.current_a(command_a.clamp(-l, l), self.pd_mps)
     }
 
     /// Advances `dt_s` with the motor at `command_a` (through the

@@ -149,7 +149,7 @@ pub mod design {
     /// torque constant and rotor inertia, at the same amplifier limit (4 N
     /// m). On the vertical drive (1 N m on a 5 mm lead) the energy-apex
     /// law holds this machine's hop at 0.114 m in place, 24% short of 0.15
-    /// m, the motor at its limit; on this one at 0.150 m, and within 8% of
+    /// m, the motor at its limit; on this one at 0.150 m, and within 9% of
     /// it running 0 to 1 m/s.
     pub const PLANAR_LEG_MOTOR_SCALE: f64 = 4.0;
     /// The planar leg drive's screw lead, m per revolution: twice the

@@ -3,6 +3,7 @@
 //! the accelerations and the RK4 step through them.
 
 use super::{Mode, NutStop, Plant, State};
+use crate::amplifier::SupplyWindow;
 use crate::params::Params;
 
 /// Constants derived once from [`Params`].
@@ -29,12 +30,10 @@ pub(super) struct Coef {
     // Derived once, so that the derivative evaluation (four per RK4 step)
     // has no divisions: products with reciprocals instead of quotients
     // (results differ from the quotients by float rounding only).
-    /// `k_t / r`: back-EMF torque per unit nut speed.
-    pub(super) kt_over_r: f64,
+    /// The amplifier's supply window.
+    pub(super) window: SupplyWindow,
     /// `eta / r`.
     pub(super) eta_over_r: f64,
-    /// `1 / R`.
-    pub(super) inv_resistance: f64,
     /// `m_s g`.
     pub(super) nut_weight: f64,
     /// `-(M + m_s) g`.
@@ -142,9 +141,13 @@ impl Coef {
         let m_total = p.body_mass_kg + p.nut_mass_kg + p.unsprung_mass_kg;
         let g = p.gravity_mps2;
         Coef {
-            kt_over_r: p.torque_constant_nm_per_a / r,
+            window: SupplyWindow::new(
+                p.torque_constant_nm_per_a,
+                r,
+                p.winding_resistance_ohm,
+                p.supply_voltage_v,
+            ),
             eta_over_r: p.efficiency / r,
-            inv_resistance: 1.0 / p.winding_resistance_ohm,
             nut_weight: p.nut_mass_kg * g,
             neg_weight_stance: -m_body_nut * g,
             neg_weight_flight: -m_total * g,
@@ -175,31 +178,12 @@ impl Coef {
     }
 
     /// Motor current the amplifier delivers, A, for a command already
-    /// clipped to the amplifier's current limit: clipped further to what the
-    /// supply voltage can drive against the back-EMF at nut speed `pd_mps`
-    /// (`|R i + k_e omega| <= V`, `omega = pd / r`), the motor's torque-speed
-    /// limit.
+    /// clipped to the amplifier's current limit, the nut at `pd_mps`: its
+    /// supply window ([`SupplyWindow::current_a`]).
     #[inline(always)]
     pub(super) fn motor_current_from_pd(&self, cmd_limited_a: f64, pd_mps: f64) -> f64 {
-        let back_emf = self.kt_over_r * pd_mps;
-        let hi = (self.supply - back_emf) * self.inv_resistance;
-        let lo = (-self.supply - back_emf) * self.inv_resistance;
-        // `clamp(lo, hi)` (lo < hi: R > 0, V > 0), as a branch rather than
-        // min/max: the supply limit is rarely reached, so the processor
-        // predicts the command and does not wait for the nut speed.
-        if cmd_limited_a > hi || cmd_limited_a < lo {
-            supply_limited(cmd_limited_a, lo, hi)
-        } else {
-            cmd_limited_a
-        }
+        self.window.current_a(cmd_limited_a, pd_mps)
     }
-}
-
-/// The current the supply voltage allows when it limits the command, A.
-#[cold]
-#[inline(never)]
-fn supply_limited(cmd_a: f64, lo: f64, hi: f64) -> f64 {
-    cmd_a.max(lo).min(hi)
 }
 
 /// Which equations hold: the dynamics formulation and the constraints.

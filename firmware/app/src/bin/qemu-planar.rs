@@ -78,7 +78,10 @@ mod app {
         let Ok(lp) =
             PlanarLoop::new(cfg, speed_at(0.0)).and_then(|lp| PlanarLeg::drive(lp, PLANAR_THRUST))
         else {
-            defmt::error!("planar set-up failed");
+            defmt::error!(
+                "planar set-up failed (scenarios/qemu/planar.toml: thrust `{=str}`)",
+                PLANAR_THRUST
+            );
             debug::exit(debug::EXIT_FAILURE);
             #[allow(clippy::empty_loop)]
             loop {}
@@ -128,8 +131,8 @@ mod app {
     }
 
     /// One control period: the estimator's and the controller's step
-    /// (counted: the estimate, the law, the guard, the hip's current and
-    /// its winding's heat), then the plant
+    /// (counted: the estimate, the hip's and the leg's laws, the guard,
+    /// both motors' currents and their windings' heat), then the plant
     /// over the period with SysTick stopped.
     #[task(binds = SysTick, priority = 3, local = [run, syst])]
     fn control(cx: control::Context) {

@@ -146,6 +146,42 @@ impl HipDrive {
 mod tests {
     use super::*;
 
+    /// Finite is every field finite, whatever its size or sign: the
+    /// largest, the subnormal and both zeros count, an infinity or a NaN
+    /// in any field does not.
+    #[test]
+    fn an_estimate_is_finite_when_every_field_is() {
+        let tiny = f32::from_bits(1);
+        for v in [0.0, -0.0, tiny, -tiny, f32::MAX, f32::MIN, 1.0] {
+            let e = PlanarEstimate {
+                x_dot_mps: v,
+                z_m: f32::MAX,
+                toe_x_m: f32::MIN,
+                ..PlanarEstimate::default()
+            };
+            assert!(e.is_finite(), "{v}");
+        }
+        for bad in [f32::INFINITY, f32::NEG_INFINITY, f32::NAN] {
+            for k in 0..9 {
+                let mut f = [1.0_f32; 9];
+                f[k] = bad;
+                let e = PlanarEstimate {
+                    x_dot_mps: f[0],
+                    z_m: f[1],
+                    z_dot_mps: f[2],
+                    phi_rad: f[3],
+                    phi_dot_rad_s: f[4],
+                    theta_rad: f[5],
+                    theta_dot_rad_s: f[6],
+                    leg_rate_mps: f[7],
+                    toe_x_m: f[8],
+                    ..PlanarEstimate::default()
+                };
+                assert!(!e.is_finite(), "{bad} in field {k}");
+            }
+        }
+    }
+
     #[test]
     fn the_hip_current_is_limited_and_derated() {
         let d = HipDrive::design();

@@ -169,8 +169,8 @@ pub(crate) enum PlanarCmd {
         #[arg(long)]
         json: bool,
         /// The controller: passive (the thesis's runner, its hip spring and
-        /// the stabiliser) or raibert (the hip actuated: Raibert's thrust,
-        /// foot placement and attitude control on the Appendix A machine
+        /// the stabiliser) or raibert (the hip actuated: the leg's thrust
+        /// (--thrust), foot placement and attitude control on the Appendix A machine
         /// with Table 2.2's masses; --speed-profile, --target-apex and
         /// --inject apply).
         #[arg(long, value_parser = ["passive", "raibert"], default_value = "passive")]
