@@ -229,6 +229,18 @@ struct Core {
     leg_model: ModelParams,
 }
 
+/// The leg's drive named `name`: `force` (`None`: Raibert's thrust, a
+/// force along the leg), or a vertical law's name (its strategy for the
+/// leg's ball screw, [`ScrewThrust::planar_strategy`]); else refused,
+/// naming `thrust`.
+pub fn thrust_named(name: &str) -> Result<Option<Strategy>, PlanarError> {
+    if name == "force" {
+        return Ok(None);
+    }
+    let kind = ControllerKind::from_name(name).ok_or(PlanarError::OutOfRange("thrust"))?;
+    Ok(Some(ScrewThrust::planar_strategy(kind)))
+}
+
 /// What drives a planar loop's leg.
 pub trait LegLaw: Clone + core::fmt::Debug {
     /// Whether the leg is driven through its ball screw (the loop keeps
@@ -259,10 +271,9 @@ impl LegLaw for ForceLeg {
     }
 
     fn drive(lp: PlanarLoop<ForceLeg>, thrust: &str) -> Result<PlanarLoop<Self>, PlanarError> {
-        if thrust == "force" {
-            Ok(lp)
-        } else {
-            Err(PlanarError::OutOfRange("thrust"))
+        match thrust_named(thrust)? {
+            None => Ok(lp),
+            Some(_) => Err(PlanarError::OutOfRange("thrust")),
         }
     }
 }
@@ -275,8 +286,10 @@ impl LegLaw for ScrewThrust {
     }
 
     fn drive(lp: PlanarLoop<ForceLeg>, thrust: &str) -> Result<PlanarLoop<Self>, PlanarError> {
-        let kind = ControllerKind::from_name(thrust).ok_or(PlanarError::OutOfRange("thrust"))?;
-        lp.with_screw(&ScrewThrust::planar_strategy(kind))
+        match thrust_named(thrust)? {
+            Some(strategy) => lp.with_screw(&strategy),
+            None => Err(PlanarError::OutOfRange("thrust")),
+        }
     }
 }
 

@@ -6,22 +6,34 @@ use hopper_link::{names, Client};
 use hopper_protocol::{Request, Response, RobotMsg};
 use std::time::{Duration, Instant};
 
-/// `arm`: asked again until accepted or `retry` wall seconds passed.
-pub(crate) fn arm(c: &mut Client, retry: Option<f64>) -> Result<()> {
+/// `request`, asked again every 50 ms while the robot refuses it and
+/// fewer than `retry` wall seconds have passed (none: asked once). The
+/// robot's last answer.
+fn request_until_accepted(
+    c: &mut Client,
+    request: Request,
+    retry: Option<f64>,
+) -> Result<Response> {
     let start = Instant::now();
     loop {
-        match c.request(Request::Arm)? {
-            Response::Ok => {
-                println!("armed");
-                return Ok(());
-            }
-            Response::Refused(why) if start.elapsed().as_secs_f64() < retry.unwrap_or(0.0) => {
-                let _ = why;
+        match c.request(request.clone())? {
+            Response::Refused(_) if start.elapsed().as_secs_f64() < retry.unwrap_or(0.0) => {
                 std::thread::sleep(Duration::from_millis(50));
             }
-            Response::Refused(why) => bail!("arm refused: {why}{}", next_step(why.refusal())),
-            r => bail!("unexpected answer {r:?}"),
+            r => return Ok(r),
         }
+    }
+}
+
+/// `arm`: asked again until accepted or `retry` wall seconds passed.
+pub(crate) fn arm(c: &mut Client, retry: Option<f64>) -> Result<()> {
+    match request_until_accepted(c, Request::Arm, retry)? {
+        Response::Ok => {
+            println!("armed");
+            Ok(())
+        }
+        Response::Refused(why) => bail!("arm refused: {why}{}", next_step(why.refusal())),
+        r => bail!("unexpected answer {r:?}"),
     }
 }
 
@@ -74,27 +86,17 @@ pub(crate) fn disarm(c: &mut Client) -> Result<()> {
 /// again until accepted or `retry` wall seconds passed (a cause ends in
 /// the robot's time: an e-stop's release is debounced there).
 pub(crate) fn reset_faults(c: &mut Client, retry: Option<f64>) -> Result<()> {
-    let start = Instant::now();
-    loop {
-        let r = c.request(Request::ResetFaults)?;
-        match r {
-            Response::Refused(_) if start.elapsed().as_secs_f64() < retry.unwrap_or(0.0) => {
-                std::thread::sleep(Duration::from_millis(50));
-                continue;
-            }
-            _ => {}
+    let r = request_until_accepted(c, Request::ResetFaults, retry)?;
+    let st = status_of(c)?;
+    match r {
+        Response::Ok => {
+            println!("faults reset; latched now: {}", names::faults(st.faults));
+            Ok(())
         }
-        let st = status_of(c)?;
-        return match r {
-            Response::Ok => {
-                println!("faults reset; latched now: {}", names::faults(st.faults));
-                Ok(())
-            }
-            Response::Refused(why) => bail!(
-                "reset refused: {why}; still latched: {}",
-                names::faults(st.faults)
-            ),
-            r => bail!("unexpected answer {r:?}"),
-        };
+        Response::Refused(why) => bail!(
+            "reset refused: {why}; still latched: {}",
+            names::faults(st.faults)
+        ),
+        r => bail!("unexpected answer {r:?}"),
     }
 }

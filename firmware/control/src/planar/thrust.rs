@@ -89,7 +89,7 @@ impl ScrewThrust {
         rate_filter_gain: f32,
     ) -> Result<Self, InvalidField> {
         crate::param::validate_fields(&mut { *model }, crate::model::FIELDS)?;
-        let controller = Controller::new(strategy, model, &Self::planar_flight(model)?)?;
+        let controller = Controller::new(strategy, model, &Self::flight_of(model)?)?;
         let energy =
             EnergyModel::new(model).map_err(|_| InvalidField("model.spring_stiffness_n_per_m"))?;
         let desired_energy_j = model
@@ -146,6 +146,11 @@ impl ScrewThrust {
     /// rather than eq 4.13's 0.1 s.
     pub fn planar_flight(model: &ModelParams) -> Result<flight_pd::Config, InvalidField> {
         crate::param::validate_fields(&mut { *model }, crate::model::FIELDS)?;
+        Self::flight_of(model)
+    }
+
+    /// [`Self::planar_flight`] for a model already validated.
+    fn flight_of(model: &ModelParams) -> Result<flight_pd::Config, InvalidField> {
         let plant_gain_rad_per_s2_a = model.torque_constant_nm_per_a / model.rotor_inertia_kg_m2;
         // Eq 4.13's damping.
         let gains =

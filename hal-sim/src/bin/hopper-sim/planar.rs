@@ -422,20 +422,17 @@ fn cmd_planar_raibert(
     } = *plan;
     use hal_sim::planar_raibert::{self as pr, Push, SpeedProfile, Thrust};
     use hopper_control::laws::ControllerKind;
-    use hopper_control::planar::thrust::ScrewThrust;
-    let thrust = match thrust {
-        "force" => Thrust::Force,
-        name => match ControllerKind::from_name(name) {
-            Some(k) => Thrust::Screw(ScrewThrust::planar_strategy(k)),
-            None => bail!(
-                "--thrust {name}: not `force` nor a vertical controller ({})",
-                ControllerKind::ALL
-                    .iter()
-                    .map(|k| k.name())
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            ),
-        },
+    let thrust = match hopper_sil::planar::thrust_named(thrust) {
+        Ok(None) => Thrust::Force,
+        Ok(Some(strategy)) => Thrust::Screw(strategy),
+        Err(_) => bail!(
+            "--thrust {thrust}: not `force` nor a vertical controller ({})",
+            ControllerKind::ALL
+                .iter()
+                .map(|k| k.name())
+                .collect::<Vec<_>>()
+                .join(", ")
+        ),
     };
     let kc = f64::from(cfg.stabiliser_gain_ns_per_m);
     let machine = &match robot {
