@@ -44,10 +44,10 @@ struct Map {
     line: &'static str,
     /// The image's cargo feature (`None`: the default map).
     feature: Option<&'static str>,
-    /// Its own target directory under cargo's (`None`: cargo's own),
-    /// so that the default image at cargo's usual path stays the default
+    /// Built in [`crate::images_dir`] (else cargo's own directory), so
+    /// that the default image at cargo's usual path stays the default
     /// map's (the one the docs tell a user to flash).
-    target_dir: Option<&'static str>,
+    own_dir: bool,
     /// The golden trace, relative to the workspace root.
     golden: &'static str,
     /// AMP_EN's pin number on GPIOB.
@@ -59,10 +59,9 @@ struct Map {
     /// in the trace): the channel must be forced low before AMP_EN becomes
     /// the timer's pin.
     deadman_forced_low: Option<(&'static str, u32)>,
-    /// The fault test's summary line prefix.
+    /// The fault test's summary line prefix (its image is built in
+    /// [`crate::images_dir`]).
     fault_line: &'static str,
-    /// Its target directory under cargo's.
-    fault_target_dir: &'static str,
     /// The fault test's writes after init that enable the deadman (its
     /// counter running, its channel in PWM mode 2), where QEMU does not
     /// model the timer.
@@ -81,7 +80,7 @@ struct Map {
 const H405: Map = Map {
     line: "board-init",
     feature: None,
-    target_dir: None,
+    own_dir: false,
     golden: "tests/board-init.trace",
     amp_en: 0,
     alternate: &[
@@ -97,7 +96,6 @@ const H405: Map = Map {
     ],
     deadman_forced_low: None,
     fault_line: "fault-test",
-    fault_target_dir: "fault-test",
     fault_enable: &[],
     fault_entry: &["GPIOB.BSRR = 0x00010000", "GPIOB.MODER = 0x00000001"],
     // TIM3's CR1, CCMR2 and CNT.
@@ -109,7 +107,7 @@ const H405: Map = Map {
 const FEATHER: Map = Map {
     line: "board-init-feather",
     feature: Some("feather"),
-    target_dir: Some("feather"),
+    own_dir: true,
     golden: "tests/board-init-feather.trace",
     amp_en: 14,
     alternate: &[
@@ -126,7 +124,6 @@ const FEATHER: Map = Map {
     // OC1M = 100 (force inactive), CC1S = 00 (output).
     deadman_forced_low: Some(("TIM12.CCMR1", 0x0000_0040)),
     fault_line: "fault-test-feather",
-    fault_target_dir: "feather",
     // CR1 = OPM | CEN, CNT = 1, CCMR1's OC1M = 111 (PWM mode 2).
     fault_enable: &[
         "TIM12.CR1 = 0x00000009",
@@ -458,9 +455,8 @@ fn map_image(root: &Path, map: &Map) -> Result<std::path::PathBuf, String> {
     if let Some(f) = map.feature {
         cmd.args(["--features", f]);
     }
-    if let Some(d) = map.target_dir {
-        cmd.arg("--target-dir")
-            .arg(crate::target_dir(root)?.join(d));
+    if map.own_dir {
+        cmd.arg("--target-dir").arg(crate::images_dir(root)?);
     }
     crate::build_executable(
         root,
@@ -576,7 +572,7 @@ fn run_map(root: &Path, map: &Map, elf: &Path, dir: &Path) -> Result<(), String>
 /// handler on its fresh stack. Prints `fault-test: ...` (the default map)
 /// or `fault-test-feather: ...`.
 fn fault_test(root: &Path, map: &Map) -> Result<(), String> {
-    let target_dir = crate::target_dir(root)?.join(map.fault_target_dir);
+    let target_dir = crate::images_dir(root)?;
     let features = match map.feature {
         Some(f) => format!("{f},fault-test"),
         None => "fault-test".to_string(),

@@ -141,7 +141,9 @@ fn main() -> ExitCode {
     let result = match args.first().map(String::as_str) {
         Some("test") => test(&root),
         Some("size") => setup(&root).and_then(|_| size(&root)),
-        Some("qemu") => setup(&root).and_then(|_| qemu::run(&root)),
+        Some("qemu") => setup(&root)
+            .and_then(|_| qemu::start(&root))
+            .and_then(|ahead| qemu::run(&root, ahead)),
         Some("qemu-planar") => setup(&root).and_then(|_| qemu::planar(&root)),
         Some("link-session") => session::against_serve(&root),
         Some("noisy-link") => setup(&root).and_then(|_| noisy::run(&root, true)),
@@ -267,6 +269,15 @@ fn build_executables<const N: usize>(
         .map_err(|_| format!("{what}: executables missing"))
 }
 
+/// The target directory of every firmware image but the default board
+/// image: QEMU's, the other pin map's and the fault tests'. They share
+/// their dependencies' builds (each image is used before the next build
+/// replaces a binary of the same name); the default board image keeps
+/// cargo's usual path, the one the docs tell a user to flash.
+fn images_dir(root: &Path) -> Result<PathBuf, String> {
+    Ok(target_dir(root)?.join("images"))
+}
+
 /// The workspace's target directory as cargo resolves it (CARGO_TARGET_DIR,
 /// `build.target-dir`, else `ROOT/target`), for builds that pass their own
 /// `--target-dir` under it. A relative CARGO_TARGET_DIR is taken from `root`,
@@ -328,6 +339,9 @@ fn test(root: &Path) -> Result<(), String> {
         "cargo fmt --check",
         cargo().args(["fmt", "--all", "--", "--check"]),
     )?;
+    // The QEMU scenarios run on one core while the steps below compile
+    // and check on the others; `qemu::run` reports them in their place.
+    let ahead = qemu::start(root)?;
     run(
         root,
         "clippy (host)",
@@ -419,7 +433,7 @@ fn test(root: &Path) -> Result<(), String> {
         ]),
     )?;
     size(root)?;
-    qemu::run(root)?;
+    qemu::run(root, ahead)?;
     hil::run(root, None)?;
     session::against_serve(root)?;
     bringup_page::run(root)?;

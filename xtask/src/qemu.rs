@@ -78,7 +78,50 @@ const STEP_MAX_CEILING: u64 = 1_680;
 /// Wall-clock limit for the QEMU run.
 const QEMU_TIMEOUT: Duration = Duration::from_secs(900);
 
-pub fn run(root: &Path) -> Result<(), String> {
+/// The planar and scenario images' QEMU runs, started by [`start`].
+pub struct Ahead(std::thread::JoinHandle<Runs>);
+
+/// What [`Ahead`]'s thread ran: each image with its run, or why not.
+struct Runs {
+    planar: Result<(PlanarScenario, PathBuf, Ran), String>,
+    scenarios: Vec<Result<(PathBuf, Ran), String>>,
+}
+
+/// Builds the planar and scenario images and starts their QEMU runs, one
+/// after the other in a thread of their own, while the caller goes on
+/// (`cargo xtask test` compiles and checks meanwhile: a QEMU run takes
+/// one core, and `-icount` makes its guest time its instruction count,
+/// whatever else the machine does). [`run`] reports them.
+pub fn start(root: &Path) -> Result<Ahead, String> {
+    crate::ensure_flip_link(root)?;
+    ensure_qemu()?;
+    let planar = planar_image(root);
+    let images: Vec<Result<PathBuf, String>> =
+        SCENARIOS.iter().map(|s| scenario_image(root, s)).collect();
+    Ok(Ahead(std::thread::spawn(move || {
+        let planar = planar.and_then(|(cfg, elf)| {
+            let ran = run_qemu(&elf, 0)?;
+            Ok((cfg, elf, ran))
+        });
+        let scenarios = images
+            .into_iter()
+            .map(|image| {
+                let elf = image?;
+                // Traced: QEMU's log of the firmware's code, weighed in
+                // cycles.
+                let trace = crate::cycles::marks_for(&elf, "SysTick")?;
+                let ran = run_qemu_traced(&elf, 0, Some(trace))?;
+                Ok((elf, ran))
+            })
+            .collect();
+        Runs { planar, scenarios }
+    })))
+}
+
+/// The link sessions and the board's init on QEMU, then the reports of
+/// the runs `ahead` started (waited for first: nothing else runs on QEMU
+/// while a session's host keeps its wall-clock timeouts).
+pub fn run(root: &Path, ahead: Ahead) -> Result<(), String> {
     crate::ensure_flip_link(root)?;
     ensure_qemu()?;
     // `hopper-link` for the link session, `hopper-sim` for the golden
@@ -96,6 +139,11 @@ pub fn run(root: &Path) -> Result<(), String> {
             return Err(e);
         }
     };
+    // Done before the link sessions, whose host runs on the wall clock.
+    let runs = ahead
+        .0
+        .join()
+        .map_err(|_| "the thread running the QEMU images panicked".to_string())?;
     let mut failed = Vec::new();
     if let Err(e) = link_session(root, &link) {
         if !e.starts_with("qemu-link session failed") && !e.starts_with("qemu-link-bringup failed")
@@ -110,14 +158,18 @@ pub fn run(root: &Path) -> Result<(), String> {
         }
         failed.push(e);
     }
-    if let Err(e) = run_planar(root, &sim) {
+    let planar_result = runs
+        .planar
+        .and_then(|(cfg, elf, ran)| report_planar(&cfg, &elf, &sim, ran));
+    if let Err(e) = planar_result {
         if !e.starts_with("qemu planar scenario failed") {
             println!("qemu-planar: error (see above)");
         }
         failed.push(e);
     }
-    for s in &SCENARIOS {
-        if let Err(e) = run_scenario(root, s, &sim) {
+    for (s, run) in SCENARIOS.iter().zip(runs.scenarios) {
+        let result = run.and_then(|(elf, ran)| report_scenario(root, s, &sim, &elf, ran));
+        if let Err(e) = result {
             // A failure before the summary (build, QEMU, decoding, the host
             // run) printed no summary line: print one, so the last line is
             // still the `qemu:` line whatever happened.
@@ -170,8 +222,7 @@ fn build_image(
 /// against it (the `qemu-link:` line).
 /// The QEMU link image, built (once: later calls find it built).
 pub fn link_image(root: &Path) -> Result<std::path::PathBuf, String> {
-    // The scenario images' directory: the same dependencies, built once.
-    let target_dir = crate::target_dir(root)?.join("qemu");
+    let target_dir = crate::images_dir(root)?;
     build_image(
         root,
         "firmware build (QEMU link image)",
@@ -189,24 +240,44 @@ fn link_session(root: &Path, link: &Path) -> Result<(), String> {
     main.and(bringup)
 }
 
-fn run_scenario(root: &Path, scenario: &Scenario, sim: &Path) -> Result<(), String> {
-    // One target directory for both images: the second build recompiles
-    // only the application crate (the scenario is an `option_env!`), and the
-    // scenarios run one after the other.
-    let target_dir = crate::target_dir(root)?.join("qemu");
+/// The scenario's image, built and copied to a name of its own (the
+/// scenarios build the same binary, and run side by side).
+fn scenario_image(root: &Path, scenario: &Scenario) -> Result<PathBuf, String> {
+    // The second scenario's build recompiles only the application crate
+    // (the scenario is an `option_env!`).
+    let target_dir = crate::images_dir(root)?;
     let mut build = cargo();
     build.env("HOPPER_QEMU_SCENARIO", scenario.name);
-    let elf = build_image(
+    let built = build_image(
         root,
         &format!("firmware build (QEMU variant, {} scenario)", scenario.name),
         "hopper-qemu",
         build,
         &target_dir,
     )?;
-    // Traced: QEMU's log of the firmware's code, weighed in cycles.
-    let trace = crate::cycles::marks_for(&elf, "SysTick")?;
-    let (bytes, status, traced) = run_qemu_traced(&elf, 0, Some(trace))?;
-    let lines = decode(&elf, &bytes)?;
+    let elf = target_dir.join(format!("hopper-qemu-{}.elf", scenario.name));
+    std::fs::copy(&built, &elf).map_err(|e| format!("{}: {e}", elf.display()))?;
+    Ok(elf)
+}
+
+/// The scenario's QEMU run (`ran`, of `elf`) checked and reported: its
+/// log, the golden check against the host, the budgets and the summary
+/// line.
+fn report_scenario(
+    root: &Path,
+    scenario: &Scenario,
+    sim: &Path,
+    elf: &Path,
+    ran: Ran,
+) -> Result<(), String> {
+    ran.print_notes();
+    let Ran {
+        bytes,
+        ok: status,
+        traced,
+        ..
+    } = ran;
+    let lines = decode(elf, &bytes)?;
     for l in &lines {
         println!("qemu| {l}");
     }
@@ -269,7 +340,7 @@ fn run_scenario(root: &Path, scenario: &Scenario, sim: &Path) -> Result<(), Stri
         ));
     }
     if scenario.overrun_check {
-        if let Err(e) = overrun_check(&elf) {
+        if let Err(e) = overrun_check(elf) {
             problems.push(format!("overrun check: {e}"));
         }
     }
@@ -324,12 +395,14 @@ fn run_scenario(root: &Path, scenario: &Scenario, sim: &Path) -> Result<(), Stri
     }
 }
 
-/// `cargo xtask qemu-planar`: the planar image alone ([`run_planar`]).
+/// `cargo xtask qemu-planar`: the planar image alone ([`report_planar`]).
 pub fn planar(root: &Path) -> Result<(), String> {
     crate::ensure_flip_link(root)?;
     ensure_qemu()?;
     let (_, sim) = crate::session::host_binaries(root)?;
-    run_planar(root, &sim)
+    let (cfg, elf) = planar_image(root)?;
+    let ran = run_qemu(&elf, 0)?;
+    report_planar(&cfg, &elf, &sim, ran)
 }
 
 /// Largest |host - QEMU| of a stride's apex or speed in the planar run
@@ -337,13 +410,18 @@ pub fn planar(root: &Path) -> Result<(), String> {
 /// `libm`), m or m/s.
 const PLANAR_GOLDEN_TOLERANCE: f64 = 1e-9;
 
-/// The planar machine's controller on the target (`hopper-qemu-planar`,
-/// `scenarios/qemu/planar.toml`): its strides against the host's run of
-/// the same loop (`hopper-sim planar run --controller raibert`), its step
-/// within the vertical laws' budgets. Prints `qemu-planar: strides=N
-/// golden_max_diff=D step_instr_min=.. step_instr_mean=.. step_instr_max=..
-/// missed=N`.
-fn run_planar(root: &Path, sim: &Path) -> Result<(), String> {
+/// What the host's golden run of the planar scenario needs from
+/// `scenarios/qemu/planar.toml`.
+struct PlanarScenario {
+    profile: String,
+    target: String,
+    duration: String,
+    /// The leg's drive, as the image's build script reads it.
+    thrust: String,
+}
+
+/// The planar image (`hopper-qemu-planar`) built, and its scenario read.
+fn planar_image(root: &Path) -> Result<(PlanarScenario, PathBuf), String> {
     let file = root.join("scenarios/qemu/planar.toml");
     let text = std::fs::read_to_string(&file).map_err(|e| format!("{}: {e}", file.display()))?;
     let t: toml::Table = text
@@ -354,14 +432,13 @@ fn run_planar(root: &Path, sim: &Path) -> Result<(), String> {
             .map(|v| v.as_str().map_or_else(|| v.to_string(), str::to_string))
             .ok_or(format!("{}: no `{k}`", file.display()))
     };
-    let (profile, target, duration) = (
-        get("speed_profile")?,
-        get("target_apex_m")?,
-        get("duration_s")?,
-    );
-    // The leg's drive, as the image's build script reads it.
-    let thrust = get("thrust").unwrap_or_else(|_| "force".into());
-    let target_dir = crate::target_dir(root)?.join("qemu");
+    let cfg = PlanarScenario {
+        profile: get("speed_profile")?,
+        target: get("target_apex_m")?,
+        duration: get("duration_s")?,
+        thrust: get("thrust").unwrap_or_else(|_| "force".into()),
+    };
+    let target_dir = crate::images_dir(root)?;
     let elf = build_image(
         root,
         "firmware build (QEMU planar image)",
@@ -369,8 +446,19 @@ fn run_planar(root: &Path, sim: &Path) -> Result<(), String> {
         cargo(),
         &target_dir,
     )?;
-    let (bytes, status) = run_qemu(&elf, 0)?;
-    let lines = decode(&elf, &bytes)?;
+    Ok((cfg, elf))
+}
+
+/// The planar machine's controller on the target (`hopper-qemu-planar`,
+/// `scenarios/qemu/planar.toml`), its run `ran` checked: its strides
+/// against the host's run of the same loop (`hopper-sim planar run
+/// --controller raibert`), its step within the vertical laws' budgets.
+/// Prints `qemu-planar: strides=N golden_max_diff=D step_instr_min=..
+/// step_instr_mean=.. step_instr_max=.. missed=N`.
+fn report_planar(cfg: &PlanarScenario, elf: &Path, sim: &Path, ran: Ran) -> Result<(), String> {
+    ran.print_notes();
+    let (bytes, status) = (ran.bytes, ran.ok);
+    let lines = decode(elf, &bytes)?;
     for l in lines.iter().filter(|l| !l.starts_with("stride ")) {
         println!("qemu-planar| {l}");
     }
@@ -405,13 +493,13 @@ fn run_planar(root: &Path, sim: &Path) -> Result<(), String> {
             "--controller",
             "raibert",
             "--speed-profile",
-            &profile,
+            &cfg.profile,
             "--target-apex",
-            &target,
+            &cfg.target,
             "--duration",
-            &duration,
+            &cfg.duration,
             "--thrust",
-            &thrust,
+            &cfg.thrust,
             "--json",
         ])
         .output()
@@ -569,7 +657,9 @@ const OVERRUN_SHIFT: u32 = 5;
 /// `overrun` after `OVERRUN_LIMIT` in a row, disable the amplifier and
 /// command 0 A from then on, and exit with failure.
 fn overrun_check(elf: &Path) -> Result<(), String> {
-    let (bytes, ok) = run_qemu(elf, OVERRUN_SHIFT)?;
+    let ran = run_qemu(elf, OVERRUN_SHIFT)?;
+    ran.print_notes();
+    let (bytes, ok) = (ran.bytes, ran.ok);
     let lines = decode(elf, &bytes)?;
     let (summary, kv) = parse_summary(&lines).ok_or("the slowed-down run printed no summary")?;
     let get = |k: &str| kv.get(k).copied().unwrap_or("");
@@ -616,10 +706,27 @@ pub(crate) fn qemu_command(elf: &Path, shift: u32, serial: &str) -> Command {
     c
 }
 
-/// Runs the image with `-icount shift=SHIFT`; returns its stdout (the defmt
-/// stream) and whether it exited with success.
-fn run_qemu(elf: &Path, shift: u32) -> Result<(Vec<u8>, bool), String> {
-    run_qemu_traced(elf, shift, None).map(|(b, ok, _)| (b, ok))
+/// One QEMU run: the guest's stdout (the defmt stream), whether it exited
+/// with success, the trace read when asked, and xtask's lines about the
+/// run, kept to be printed with its report (runs go side by side).
+struct Ran {
+    bytes: Vec<u8>,
+    ok: bool,
+    traced: Option<crate::cycles::Reader>,
+    notes: Vec<String>,
+}
+
+impl Ran {
+    fn print_notes(&self) {
+        for n in &self.notes {
+            eprintln!("xtask: {n}");
+        }
+    }
+}
+
+/// Runs the image with `-icount shift=SHIFT`.
+fn run_qemu(elf: &Path, shift: u32) -> Result<Ran, String> {
+    run_qemu_traced(elf, shift, None)
 }
 
 /// [`run_qemu`], and with `trace` (marks and `-dfilter`) QEMU's execution
@@ -628,16 +735,16 @@ fn run_qemu_traced(
     elf: &Path,
     shift: u32,
     trace: Option<(crate::cycles::Marks, String)>,
-) -> Result<(Vec<u8>, bool, Option<crate::cycles::Reader>), String> {
-    eprintln!(
-        "xtask: running {} on qemu-system-arm (netduinoplus2, -icount shift={shift}{})",
+) -> Result<Ran, String> {
+    let mut notes = vec![format!(
+        "running {} on qemu-system-arm (netduinoplus2, -icount shift={shift}{})",
         elf.display(),
         if trace.is_some() {
             ", execution traced"
         } else {
             ""
         }
-    );
+    )];
     let started = Instant::now();
     let mut cmd = qemu_command(elf, shift, "none");
     if let Some((_, dfilter)) = &trace {
@@ -677,14 +784,22 @@ fn run_qemu_traced(
         Some(t) => Some(t.join().map_err(|_| "reading qemu's trace failed")?),
         None => None,
     };
-    for l in traced.iter().flat_map(|t| &t.other) {
-        eprintln!("xtask: qemu: {l}");
-    }
-    eprintln!(
-        "xtask: QEMU finished in {:.1} s ({status})",
-        started.elapsed().as_secs_f64()
+    notes.extend(
+        traced
+            .iter()
+            .flat_map(|t| &t.other)
+            .map(|l| format!("qemu: {l}")),
     );
-    Ok((bytes, status.success(), traced))
+    notes.push(format!(
+        "QEMU finished in {:.1} s ({status})",
+        started.elapsed().as_secs_f64()
+    ));
+    Ok(Ran {
+        bytes,
+        ok: status.success(),
+        traced,
+        notes,
+    })
 }
 
 /// Decodes a defmt byte stream with the ELF's format table.

@@ -748,7 +748,7 @@ fn run_session(link: &Path, addr: &str, out_dir: &Path, label: &str) -> Result<R
     }) {
         problems.push("no boot report in the status".into());
     }
-    // The motor heated while it hopped (8 s recorded, 2 s flooded, and
+    // The motor heated while it hopped (8 s recorded, 1 s flooded, and
     // as long as the host's commands between take: at 0.12 m the winding
     // reaches the 135 C derating after about 11 s of hopping, so it may
     // have begun to derate) and never tripped (150 C):
