@@ -186,10 +186,10 @@ pub struct RaibertRun {
     pub hip: HipFigures,
     /// The leg motor's, when the leg is driven through its screw.
     pub leg: Option<LegFigures>,
-    /// Hip position, height, pitch and leg angle every 10 ms, for the
-    /// drawing: `[t, x, z, phi, theta, leg length]`.
+    /// Hip position, height, pitch, leg angle and length, and whether
+    /// the toe is on the ground, every 10 ms, for the drawing.
     #[serde(skip)]
-    pub frames: Vec<[f64; 6]>,
+    pub frames: Vec<Frame>,
     /// The hip current of largest size in each 10 ms, `(t, A)`, for the
     /// plot.
     #[serde(skip)]
@@ -286,6 +286,39 @@ pub fn simulate_with(
     cfg: RaibertConfig,
     thrust: Thrust,
 ) -> Result<RaibertRun, String> {
+    simulate_each(
+        machine,
+        profile,
+        pushes,
+        duration_s,
+        cfg,
+        thrust,
+        &mut |_| {},
+    )
+}
+
+/// The run so far, as [`simulate_each`] shows it after each period.
+#[derive(Clone, Copy, Debug)]
+pub struct Progress<'a> {
+    /// Simulated time, s.
+    pub t_s: f64,
+    /// The frames so far, one every 10 ms.
+    pub frames: &'a [Frame],
+    /// The strides so far.
+    pub strides: &'a [Stride],
+}
+
+/// [`simulate_with`], calling `each` after every period with the run so
+/// far (a live run paces itself and shows it there).
+pub fn simulate_each(
+    machine: &PlanarMachine,
+    profile: &SpeedProfile,
+    pushes: &[Push],
+    duration_s: f64,
+    cfg: RaibertConfig,
+    thrust: Thrust,
+    each: &mut dyn FnMut(Progress<'_>),
+) -> Result<RaibertRun, String> {
     if !(duration_s.is_finite() && duration_s > 0.0 && duration_s <= 600.0) {
         return Err(format!("--duration {duration_s} must be in (0, 600] s"));
     }
@@ -294,12 +327,13 @@ pub fn simulate_with(
     let lp = PlanarLoop::of(machine, cfg, profile.at(0.0))
         .map_err(|e| format!("the planar machine cannot start: {e:?}"))?;
     Ok(match thrust {
-        Thrust::Force => run(machine, profile, pushes, duration_s, cfg, lp).0,
+        Thrust::Force => run(machine, profile, pushes, duration_s, cfg, lp, each).0,
         Thrust::Screw(strategy) => {
             let lp = lp
                 .with_screw(&strategy)
                 .map_err(|e| format!("the leg's law cannot start: {e:?}"))?;
-            let (mut r, lp, max_winding_c) = run(machine, profile, pushes, duration_s, cfg, lp);
+            let (mut r, lp, max_winding_c) =
+                run(machine, profile, pushes, duration_s, cfg, lp, each);
             r.leg = Some(LegFigures {
                 law: strategy.kind().name(),
                 peak_current_a: f64::from(lp.leg_peak_current_a()),
@@ -313,64 +347,130 @@ pub fn simulate_with(
     })
 }
 
-/// [`simulate_with`]'s run of the loop `lp`, the loop at its end and the
-/// leg winding's highest temperature, C.
-fn run<L: LegLaw>(
-    machine: &PlanarMachine,
-    profile: &SpeedProfile,
-    pushes: &[Push],
+/// One drawn frame, every 10 ms: `[t, x, z, phi, theta, leg length,
+/// stance]` (s, m, m, rad, rad, m, 1 on the ground else 0).
+pub type Frame = [f64; 7];
+
+/// A run of the loop, one period at a time.
+struct Runner<'a, L: LegLaw> {
+    leg_length_m: f64,
+    profile: &'a SpeedProfile,
+    pushes: &'a [Push],
     duration_s: f64,
-    cfg: RaibertConfig,
-    mut lp: PlanarLoop<L>,
-) -> (RaibertRun, PlanarLoop<L>, f64) {
-    let p = machine.params;
-    let mut strides = Vec::new();
-    let mut frames = Vec::new();
-    let mut last_apex: Option<(f64, f64)> = None;
-    let mut stride_pitch: f64 = 0.0;
-    let mut first_pitch: f64 = 0.0;
-    let mut fell_at_s = None;
-    let mut stopped_by = None;
-    let mut foot_ahead = 0.0;
-    let mut hip_winding_c: f64 = 0.0;
-    let mut leg_winding_c: f64 = 0.0;
-    let mut hip_current = Vec::new();
-    let mut window_a: f64 = 0.0;
-    let steps = (duration_s / DT_S).round() as usize;
-    for k in 0..steps {
+    steps: usize,
+    k: usize,
+    over: bool,
+    lp: PlanarLoop<L>,
+    strides: Vec<Stride>,
+    frames: Vec<Frame>,
+    last_apex: Option<(f64, f64)>,
+    stride_pitch: f64,
+    first_pitch: f64,
+    fell_at_s: Option<f64>,
+    stopped_by: Option<String>,
+    foot_ahead: f64,
+    hip_winding_c: f64,
+    leg_winding_c: f64,
+    hip_current: Vec<(f64, f64)>,
+    window_a: f64,
+}
+
+impl<'a, L: LegLaw> Runner<'a, L> {
+    /// The loop `lp` on `machine`, to run for `duration_s` along
+    /// `profile` with `pushes`.
+    fn new(
+        machine: &PlanarMachine,
+        profile: &'a SpeedProfile,
+        pushes: &'a [Push],
+        duration_s: f64,
+        lp: PlanarLoop<L>,
+    ) -> Self {
+        Self {
+            leg_length_m: machine.params.leg_length_m,
+            profile,
+            pushes,
+            duration_s,
+            steps: (duration_s / DT_S).round() as usize,
+            k: 0,
+            over: false,
+            lp,
+            strides: Vec::new(),
+            frames: Vec::new(),
+            last_apex: None,
+            stride_pitch: 0.0,
+            first_pitch: 0.0,
+            fell_at_s: None,
+            stopped_by: None,
+            foot_ahead: 0.0,
+            hip_winding_c: 0.0,
+            leg_winding_c: 0.0,
+            hip_current: Vec::new(),
+            window_a: 0.0,
+        }
+    }
+
+    /// The run so far.
+    fn progress(&self) -> Progress<'_> {
+        Progress {
+            t_s: self.k as f64 * DT_S,
+            frames: &self.frames,
+            strides: &self.strides,
+        }
+    }
+
+    /// Runs one period; `false` (and nothing run) once the run is over:
+    /// its duration reached, the body fallen or the guard's fault latched.
+    fn period(&mut self) -> bool {
+        if self.over || self.k >= self.steps {
+            self.over = true;
+            return false;
+        }
+        let k = self.k;
         let t = k as f64 * DT_S;
+        let lp = &mut self.lp;
         let st = lp.state();
         let est = lp.estimate();
-        let cmd = lp.control(&est, profile.at(t));
-        hip_winding_c = hip_winding_c.max(f64::from(lp.hip_winding_c()));
-        leg_winding_c = leg_winding_c.max(f64::from(lp.leg_winding_c()));
+        let cmd = lp.control(&est, self.profile.at(t));
+        self.hip_winding_c = self.hip_winding_c.max(f64::from(lp.hip_winding_c()));
+        self.leg_winding_c = self.leg_winding_c.max(f64::from(lp.leg_winding_c()));
         let i = f64::from(lp.hip_current_a());
-        if i.abs() > window_a.abs() {
-            window_a = i;
+        if i.abs() > self.window_a.abs() {
+            self.window_a = i;
         }
         if k % 100 == 99 {
-            hip_current.push((t, window_a));
-            window_a = 0.0;
+            self.hip_current.push((t, self.window_a));
+            self.window_a = 0.0;
         }
-        let push_n = pushes
+        let push_n = self
+            .pushes
             .iter()
             .filter(|p| t >= p.at_s && t < p.at_s + PUSH_S)
             .map(|p| p.impulse_ns / PUSH_S)
             .sum();
         let pitch = st.phi_rad.abs().to_degrees();
-        stride_pitch = stride_pitch.max(pitch);
-        if k % 100 == 0 {
-            frames.push([t, st.x_m, st.z_m, st.phi_rad, st.theta_rad, st.leg_length_m]);
+        self.stride_pitch = self.stride_pitch.max(pitch);
+        if k.is_multiple_of(100) {
+            self.frames.push([
+                t,
+                st.x_m,
+                st.z_m,
+                st.phi_rad,
+                st.theta_rad,
+                st.leg_length_m,
+                if st.stance { 1.0 } else { 0.0 },
+            ]);
         }
-        if st.z_m < 0.5 * p.leg_length_m || pitch > 45.0 || !st.z_m.is_finite() {
-            fell_at_s = Some(t);
-            break;
+        if st.z_m < 0.5 * self.leg_length_m || pitch > 45.0 || !st.z_m.is_finite() {
+            self.fell_at_s = Some(t);
+            self.over = true;
+            return false;
         }
         if let Some(f) = lp.fault() {
             // The guard stopped both actuators: the run is over.
-            fell_at_s = Some(t);
-            stopped_by = Some(format!("{f:?}"));
-            break;
+            self.fell_at_s = Some(t);
+            self.stopped_by = Some(format!("{f:?}"));
+            self.over = true;
+            return false;
         }
         let mut apex = None;
         let mut touchdown = false;
@@ -381,89 +481,135 @@ fn run<L: LegLaw>(
         });
         if touchdown {
             let s = lp.state();
-            foot_ahead = s.leg_length_m * s.theta_rad.sin();
+            self.foot_ahead = s.leg_length_m * s.theta_rad.sin();
         }
         if let Some((t_s, a)) = apex {
             let x = lp.state().x_m;
-            if let Some((t0, x0)) = last_apex {
-                strides.push(Stride {
+            if let Some((t0, x0)) = self.last_apex {
+                self.strides.push(Stride {
                     t_s,
-                    apex_m: a.z_m - p.leg_length_m,
+                    apex_m: a.z_m - self.leg_length_m,
                     speed_mps: (x - x0) / (t_s - t0),
-                    command_mps: profile.at(t_s),
-                    max_pitch_deg: stride_pitch,
-                    foot_ahead_m: foot_ahead,
+                    command_mps: self.profile.at(t_s),
+                    max_pitch_deg: self.stride_pitch,
+                    foot_ahead_m: self.foot_ahead,
                 });
             }
-            if last_apex.is_none() {
-                first_pitch = stride_pitch;
+            if self.last_apex.is_none() {
+                self.first_pitch = self.stride_pitch;
             }
-            last_apex = Some((t_s, x));
-            stride_pitch = 0.0;
+            self.last_apex = Some((t_s, x));
+            self.stride_pitch = 0.0;
         }
+        self.k += 1;
+        true
     }
-    let end = fell_at_s.unwrap_or(duration_s);
-    let bounds: Vec<f64> = profile
-        .steps
-        .iter()
-        .map(|&(t, _)| t)
-        .chain(pushes.iter().map(|p| p.at_s))
-        .chain([end])
-        .collect();
-    let next_after = |t: f64| {
-        bounds
+}
+
+/// [`simulate_with`]'s run of the loop `lp`, the loop at its end and the
+/// leg winding's highest temperature, C.
+fn run<L: LegLaw>(
+    machine: &PlanarMachine,
+    profile: &SpeedProfile,
+    pushes: &[Push],
+    duration_s: f64,
+    cfg: RaibertConfig,
+    lp: PlanarLoop<L>,
+    each: &mut dyn FnMut(Progress<'_>),
+) -> (RaibertRun, PlanarLoop<L>, f64) {
+    let mut runner = Runner::new(machine, profile, pushes, duration_s, lp);
+    while runner.period() {
+        each(runner.progress());
+    }
+    runner.finish(machine, cfg)
+}
+
+impl<L: LegLaw> Runner<'_, L> {
+    /// The run's figures, the loop at its end and the leg winding's
+    /// highest temperature, C.
+    fn finish(
+        self,
+        machine: &PlanarMachine,
+        cfg: RaibertConfig,
+    ) -> (RaibertRun, PlanarLoop<L>, f64) {
+        let Runner {
+            profile,
+            pushes,
+            duration_s,
+            lp,
+            strides,
+            frames,
+            first_pitch,
+            fell_at_s,
+            stopped_by,
+            hip_winding_c,
+            leg_winding_c,
+            hip_current,
+            ..
+        } = self;
+        let end = fell_at_s.unwrap_or(duration_s);
+        let bounds: Vec<f64> = profile
+            .steps
             .iter()
-            .copied()
-            .filter(|&b| b > t)
-            .fold(end, f64::min)
-    };
-    let steps_settled = profile
-        .steps
-        .iter()
-        .filter(|(t, _)| *t < end)
-        .map(|&(t, v)| settling(&strides, t, next_after(t), v))
-        .collect();
-    let pushes_settled = pushes
-        .iter()
-        .filter(|p| p.at_s < end)
-        .map(|p| settling(&strides, p.at_s, next_after(p.at_s), profile.at(p.at_s)))
-        .collect();
-    // The pitch before the first apex, then each stride's but those from a
-    // push to the next change.
-    let pushed = |t: f64| pushes.iter().any(|p| t > p.at_s && t <= next_after(p.at_s));
-    let undisturbed_pitch = strides
-        .iter()
-        .filter(|s| !pushed(s.t_s))
-        .map(|s| s.max_pitch_deg)
-        .fold(first_pitch, f64::max);
-    let target = f64::from(cfg.target_apex_m);
-    let apex_max_error = strides
-        .iter()
-        .skip(APEX_FROM_HOP)
-        .filter(|s| !pushed(s.t_s))
-        .map(|s| (s.apex_m - target).abs() / target)
-        .fold(0.0, f64::max);
-    let r = RaibertRun {
-        strides,
-        steps: steps_settled,
-        pushes: pushes_settled,
-        max_pitch_deg: undisturbed_pitch,
-        target_apex_m: target,
-        apex_max_error,
-        fell_at_s,
-        stopped_by,
-        duration_s: end,
-        hip: HipFigures {
-            peak_current_a: f64::from(lp.hip_peak_current_a()),
-            copper_loss_j: lp.hip_copper_loss_j(),
-            max_winding_c: hip_winding_c,
-            current_limit_a: f64::from(machine.hip.current_limit_a),
-        },
-        leg: None,
-        hip_current,
-        frames,
-    };
-    (r, lp, leg_winding_c)
+            .map(|&(t, _)| t)
+            .chain(pushes.iter().map(|p| p.at_s))
+            .chain([end])
+            .collect();
+        let next_after = |t: f64| {
+            bounds
+                .iter()
+                .copied()
+                .filter(|&b| b > t)
+                .fold(end, f64::min)
+        };
+        let steps_settled = profile
+            .steps
+            .iter()
+            .filter(|(t, _)| *t < end)
+            .map(|&(t, v)| settling(&strides, t, next_after(t), v))
+            .collect();
+        let pushes_settled = pushes
+            .iter()
+            .filter(|p| p.at_s < end)
+            .map(|p| settling(&strides, p.at_s, next_after(p.at_s), profile.at(p.at_s)))
+            .collect();
+        // The pitch before the first apex, then each stride's but those from a
+        // push to the next change.
+        let pushed = |t: f64| pushes.iter().any(|p| t > p.at_s && t <= next_after(p.at_s));
+        let undisturbed_pitch = strides
+            .iter()
+            .filter(|s| !pushed(s.t_s))
+            .map(|s| s.max_pitch_deg)
+            .fold(first_pitch, f64::max);
+        let target = f64::from(cfg.target_apex_m);
+        let apex_max_error = strides
+            .iter()
+            .skip(APEX_FROM_HOP)
+            .filter(|s| !pushed(s.t_s))
+            .map(|s| (s.apex_m - target).abs() / target)
+            .fold(0.0, f64::max);
+        let r = RaibertRun {
+            strides,
+            steps: steps_settled,
+            pushes: pushes_settled,
+            max_pitch_deg: undisturbed_pitch,
+            target_apex_m: target,
+            apex_max_error,
+            fell_at_s,
+            stopped_by,
+            duration_s: end,
+            hip: HipFigures {
+                peak_current_a: f64::from(lp.hip_peak_current_a()),
+                copper_loss_j: lp.hip_copper_loss_j(),
+                max_winding_c: hip_winding_c,
+                current_limit_a: f64::from(machine.hip.current_limit_a),
+            },
+            leg: None,
+            hip_current,
+            frames,
+        };
+        (r, lp, leg_winding_c)
+    }
 }
 
 /// The plot's size, pixels.
@@ -644,16 +790,28 @@ fn animation(run: &RaibertRun) -> String {
         if k > 0 {
             frames.push(',');
         }
-        frames.push_str(&format!(
-            "[{:.2},{:.4},{:.4},{:.4},{:.4},{:.4}]",
-            f[0], f[1], f[2], f[3], f[4], f[5]
-        ));
+        frames.push_str(&frame_json(f));
     }
     frames.push(']');
-    ANIMATION_PAGE.replace("/*FRAMES*/[]", &frames)
+    ANIMATION_PAGE
+        .replace("/*DRAW*/", PLANAR_DRAW_JS)
+        .replace("/*FRAMES*/[]", &frames)
 }
 
-/// The animation's page; `/*FRAMES*/[]` is replaced by the frames.
+/// A frame as the pages read it, to the drawing's precision.
+pub fn frame_json(f: &Frame) -> String {
+    format!(
+        "[{:.2},{:.4},{:.4},{:.4},{:.4},{:.4},{}]",
+        f[0], f[1], f[2], f[3], f[4], f[5], f[6]
+    )
+}
+
+/// The machine's drawing (`drawPlanar(svg, frame)`), for this crate's
+/// recorded page and the live one.
+pub const PLANAR_DRAW_JS: &str = include_str!("planar_draw.js");
+
+/// The animation's page; `/*DRAW*/` is replaced by the drawing and
+/// `/*FRAMES*/[]` by the frames.
 const ANIMATION_PAGE: &str = r##"<!doctype html>
 <html lang="en"><head><meta charset="utf-8"><title>planar machine: Raibert's controller</title>
 <style>body{font-family:sans-serif;margin:16px}svg{border:1px solid #ccc;background:#fafafa}#info{margin:6px 0}</style>
@@ -665,28 +823,15 @@ const ANIMATION_PAGE: &str = r##"<!doctype html>
 <p>Body: the bar, pitched by its angle; leg: hip to toe (thicker in stance). The view follows the hip; ground marks every 0.5 m. Frames every 10 ms of simulated time, played at real time.</p>
 <script>
 const F = /*FRAMES*/[];
-const S = 400; // px per m
 const v = document.getElementById("v"), info = document.getElementById("info");
 const slider = document.getElementById("t"); slider.max = F.length - 1;
 let k = 0, playing = true;
 document.getElementById("play").onclick = e => { playing = !playing; e.target.textContent = playing ? "pause" : "play"; };
 slider.oninput = () => { k = +slider.value; draw(); };
-function line(x1, y1, x2, y2, w, c) { return `<line x1="${x1}" y1="${y1}" x2="${x2}" y2="${y2}" stroke="${c}" stroke-width="${w}" stroke-linecap="round"/>`; }
+/*DRAW*/
 function draw() {
-  const [t, x, z, phi, th, l] = F[k];
-  const gy = 380, cx = 400;
-  const X = q => cx + (q - x) * S, Y = q => gy - q * S;
-  let s = line(0, gy, 800, gy, 2, "#555");
-  for (let m = Math.floor((x - 1) * 2) / 2; m < x + 1; m += 0.5) s += line(X(m), gy, X(m), gy + 10, 1, "#555") + `<text x="${X(m) + 2}" y="${gy + 24}" font-size="11">${m.toFixed(1)} m</text>`;
-  const hx = X(x), hy = Y(z);
-  const tx = X(x + l * Math.sin(th)), ty = Y(z - l * Math.cos(th));
-  const stance = l < 0.6499;
-  s += line(hx, hy, tx, ty, stance ? 7 : 5, stance ? "#c62828" : "#1565c0");
-  s += `<circle cx="${tx}" cy="${ty}" r="6" fill="#333"/>`;
-  const bw = 0.5 * S, bx = Math.cos(phi) * bw / 2, by = Math.sin(phi) * bw / 2;
-  s += line(hx - bx, hy + by, hx + bx, hy - by, 18, "#455a64");
-  s += `<circle cx="${hx}" cy="${hy}" r="5" fill="#fff" stroke="#000"/>`;
-  v.innerHTML = s;
+  const [t, x, z, phi, th] = F[k];
+  drawPlanar(v, F[k]);
   const kb = Math.max(0, k - 10), sp = k > 0 ? (x - F[kb][1]) / Math.max(t - F[kb][0], 1e-6) : 0;
   info.textContent = `t = ${t.toFixed(2)} s   speed ${sp.toFixed(2)} m/s   pitch ${(phi * 180 / Math.PI).toFixed(1)} deg   leg ${(th * 180 / Math.PI).toFixed(1)} deg`;
   slider.value = k;

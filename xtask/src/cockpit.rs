@@ -12,7 +12,11 @@
 //! and the page up. Prints one line `cockpit: loaded=... moved=...
 //! arm=... refused=... disarm=... disarm_ms_p99=N escape_in_input=...
 //! page_closed=... robot_lost=...` and leaves a screenshot in
-//! `target/cockpit/cockpit.png`.
+//! `target/cockpit/cockpit.png`. Then, in the same browser, the planar
+//! machine drawn live (`hopper-sim planar serve`): its hip at many heights
+//! and its leg on the ground and off it within a second; prints
+//! `cockpit-planar: drawn_heights=N drawn_phases=2` and leaves
+//! `target/cockpit/planar.png`.
 
 use std::io::{BufRead, BufReader, Read};
 use std::net::TcpStream;
@@ -463,6 +467,9 @@ pub fn run(root: &Path) -> Result<(), String> {
     eprintln!(
         "xtask: cockpit: the robot killed while recording: the page shows `{lost_state}`; {lost}"
     );
+    // The planar machine drawn live, in the same browser.
+    let (planar, planar_ok) = planar_drawn(&mut page, &sim, &out_dir)
+        .unwrap_or_else(|e| (format!("cockpit-planar: error: {e}"), false));
     eprintln!(
         "xtask: cockpit: {:.1} s in chromium; the screenshot: {}",
         started.elapsed().as_secs_f64(),
@@ -487,11 +494,70 @@ pub fn run(root: &Path) -> Result<(), String> {
     println!(
         "cockpit: loaded=\"{loaded}\" moved={moved} arm=\"{armed}\" ledger_rows={ledger} refused=\"{refused}\" disarm=\"{disarmed}\" bringup=\"{bringup}\" recorded_files={files} capture_plotted={plotted} disarm_ms_p99={disarm_ms_p99:.1} escape_in_input={escape_in_input} page_closed={page_closed} robot_lost={robot_lost} {drawn}"
     );
+    println!("{planar}");
     eprintln!("xtask: cockpit: {recorded}");
     eprintln!("xtask: cockpit: {captured}");
-    if ok {
+    if ok && planar_ok {
         Ok(())
     } else {
         Err("the cockpit did not show what it should (the line above)".into())
     }
+}
+
+/// `hopper-sim planar serve` opened in `page`: within a second, the hip
+/// drawn at many heights and the leg on the ground and off it; the page
+/// saved as `planar.png` in `out_dir`. The summary line
+/// `cockpit-planar: drawn_heights=N drawn_phases=N` and whether it passes.
+fn planar_drawn(page: &mut Page, sim: &Path, out_dir: &Path) -> Result<(String, bool), String> {
+    let mut child = Command::new(sim)
+        .args(["planar", "serve", "--http", "127.0.0.1:0"])
+        .args(["--speed-profile", "0:0.5", "--duration", "60"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::inherit())
+        .spawn()
+        .map_err(|e| format!("cannot start hopper-sim planar serve: {e}"))?;
+    let mut stdout = BufReader::new(child.stdout.take().ok_or("no stdout")?);
+    let _served = Reaped(child);
+    let mut line = String::new();
+    stdout
+        .read_line(&mut line)
+        .map_err(|e| format!("hopper-sim planar serve: {e}"))?;
+    // "planar: http://ADDR/ (...)"
+    let url = line
+        .strip_prefix("planar: ")
+        .and_then(|r| r.split_whitespace().next())
+        .ok_or_else(|| format!("hopper-sim planar serve printed `{}`", line.trim()))?
+        .to_string();
+    page.call("Page.navigate", serde_json::json!({ "url": url }))?;
+    page.until(
+        "document.getElementById('p-hip') ? 'drawn' : 'not yet'",
+        |s| s == "drawn",
+    )?;
+    let mut heights = std::collections::BTreeSet::new();
+    let mut phases = std::collections::BTreeSet::new();
+    for _ in 0..40 {
+        let v = page.eval(
+            "document.getElementById('p-hip').getAttribute('cy') + ' ' + \
+             document.getElementById('p-leg').getAttribute('class')",
+        )?;
+        if let Some((y, phase)) = v.as_str().unwrap_or_default().split_once(' ') {
+            heights.insert(y.to_string());
+            phases.insert(phase.to_string());
+        }
+        std::thread::sleep(Duration::from_millis(25));
+    }
+    let info = page.eval("document.getElementById('info').textContent")?;
+    eprintln!(
+        "xtask: cockpit: the planar machine live at {url}: {}",
+        info.as_str().unwrap_or_default()
+    );
+    page.screenshot(&out_dir.join("planar.png"))?;
+    Ok((
+        format!(
+            "cockpit-planar: drawn_heights={} drawn_phases={}",
+            heights.len(),
+            phases.len()
+        ),
+        heights.len() >= 10 && phases.len() == 2,
+    ))
 }

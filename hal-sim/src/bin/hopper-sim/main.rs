@@ -39,6 +39,7 @@ mod figures;
 mod identify;
 mod params;
 mod planar;
+mod planar_serve;
 mod run;
 mod serve;
 mod spring;

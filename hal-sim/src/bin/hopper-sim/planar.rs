@@ -199,6 +199,41 @@ pub(crate) enum PlanarCmd {
         #[arg(long, value_name = "LAW")]
         thrust: Option<String>,
     },
+    /// Run the hip-actuated machine under Raibert's controller live, paced
+    /// by the wall clock, and serve a page that draws it as it runs (the
+    /// drawing of `planar run --out`'s run.html), with its speed against
+    /// the command, its pitch and its strides. Prints the page's address.
+    Serve {
+        /// Where the page listens, ADDR:PORT (port 0: any free one).
+        #[arg(long, default_value = "127.0.0.1:8090")]
+        http: String,
+        /// How many times faster than real time the run goes.
+        #[arg(long, default_value_t = 1.0)]
+        time_scale: f64,
+        /// The speed command, TIME:SPEED,... (s, m/s) from time 0.
+        #[arg(long, value_name = "T:V,...", default_value = "0:0,3:0.5,8:1.0,13:0")]
+        speed_profile: String,
+        /// The toe's apex to hold, m.
+        #[arg(long, default_value_t = 0.15)]
+        target_apex: f64,
+        /// The stabiliser's gain K_c (eq 2.79) on top of the thrust, N s/m.
+        #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+        kc: f64,
+        /// Push the body, push@TIME:IMPULSE (s, N s, forward positive;
+        /// held for 0.05 s); repeatable.
+        #[arg(long = "inject", value_name = "push@T:N")]
+        inject: Vec<String>,
+        /// The machine from a planar robot file (`planar robot-template`).
+        #[arg(long, value_name = "FILE")]
+        robot: Option<PathBuf>,
+        /// How the leg is driven: a vertical controller's name through its
+        /// ball screw, or `force`.
+        #[arg(long, value_name = "LAW", default_value = "energy-apex")]
+        thrust: String,
+        /// Simulated time, s (at most 600).
+        #[arg(long, default_value_t = 60.0)]
+        duration: f64,
+    },
     /// Print the design machine as a planar robot file (every entry with
     /// its unit, range and meaning), to edit and run with `planar run
     /// --controller raibert --robot FILE`.
@@ -405,6 +440,71 @@ struct RaibertPlan<'a> {
     thrust: &'a str,
 }
 
+/// What `planar run --controller raibert` and `planar serve` run, from
+/// their flags.
+struct Raibert {
+    machine: hopper_sil::planar::PlanarMachine,
+    profile: hal_sim::planar_raibert::SpeedProfile,
+    pushes: Vec<hal_sim::planar_raibert::Push>,
+    thrust: hal_sim::planar_raibert::Thrust,
+}
+
+/// The machine (the design's, or `robot`'s file), the command, the
+/// pushes and the leg's drive that `plan` names; one clear error for a
+/// bad one.
+fn raibert_setup(robot: Option<&std::path::Path>, plan: &RaibertPlan<'_>) -> Result<Raibert> {
+    use hal_sim::planar_raibert::{Push, SpeedProfile, Thrust};
+    use hopper_control::laws::ControllerKind;
+    let thrust = match hopper_sil::planar::thrust_named(plan.thrust) {
+        Ok(None) => Thrust::Force,
+        Ok(Some(strategy)) => Thrust::Screw(strategy),
+        Err(_) => bail!(
+            "--thrust {}: not `force` nor a vertical controller ({})",
+            plan.thrust,
+            ControllerKind::ALL
+                .iter()
+                .map(|k| k.name())
+                .collect::<Vec<_>>()
+                .join(", ")
+        ),
+    };
+    let machine = match robot {
+        Some(path) => hal_sim::planar_robot::load(path).map_err(anyhow::Error::msg)?,
+        None => hopper_sil::planar::PlanarMachine::design(),
+    };
+    let profile = SpeedProfile::parse(plan.profile).map_err(anyhow::Error::msg)?;
+    let pushes = plan
+        .inject
+        .iter()
+        .map(|i| Push::parse(i))
+        .collect::<std::result::Result<Vec<_>, _>>()
+        .map_err(anyhow::Error::msg)?;
+    Ok(Raibert {
+        machine,
+        profile,
+        pushes,
+        thrust,
+    })
+}
+
+/// Raibert's controller for `planar run` and `planar serve`, from
+/// `--target-apex` and `--kc`; one clear error for a bad one.
+fn raibert_config(
+    target_apex: f64,
+    kc: f64,
+) -> Result<hopper_control::planar::raibert::RaibertConfig> {
+    if !(target_apex.is_finite() && (0.02..=0.5).contains(&target_apex)) {
+        bail!("--target-apex {target_apex} must be within 0.02 ..= 0.5 m");
+    }
+    if !(kc.is_finite() && kc.abs() <= 1e4) {
+        bail!("--kc {kc} must be within -10000 ..= 10000 N s/m");
+    }
+    let mut cfg = hopper_control::planar::raibert::RaibertConfig::table_2_2();
+    cfg.target_apex_m = target_apex as f32;
+    cfg.stabiliser_gain_ns_per_m = kc as f32;
+    Ok(cfg)
+}
+
 /// `planar run --controller raibert`: the run, its strides and its
 /// figures against their bounds.
 fn cmd_planar_raibert(
@@ -414,37 +514,16 @@ fn cmd_planar_raibert(
     out: Option<&std::path::Path>,
     json: bool,
 ) -> Result<()> {
-    let RaibertPlan {
-        profile,
-        inject,
-        duration,
-        thrust,
-    } = *plan;
-    use hal_sim::planar_raibert::{self as pr, Push, SpeedProfile, Thrust};
-    use hopper_control::laws::ControllerKind;
-    let thrust = match hopper_sil::planar::thrust_named(thrust) {
-        Ok(None) => Thrust::Force,
-        Ok(Some(strategy)) => Thrust::Screw(strategy),
-        Err(_) => bail!(
-            "--thrust {thrust}: not `force` nor a vertical controller ({})",
-            ControllerKind::ALL
-                .iter()
-                .map(|k| k.name())
-                .collect::<Vec<_>>()
-                .join(", ")
-        ),
-    };
+    use hal_sim::planar_raibert as pr;
+    let duration = plan.duration;
     let kc = f64::from(cfg.stabiliser_gain_ns_per_m);
-    let machine = &match robot {
-        Some(path) => hal_sim::planar_robot::load(path).map_err(anyhow::Error::msg)?,
-        None => hopper_sil::planar::PlanarMachine::design(),
-    };
-    let profile = SpeedProfile::parse(profile).map_err(anyhow::Error::msg)?;
-    let pushes = inject
-        .iter()
-        .map(|i| Push::parse(i))
-        .collect::<std::result::Result<Vec<_>, _>>()
-        .map_err(anyhow::Error::msg)?;
+    let Raibert {
+        machine,
+        profile,
+        pushes,
+        thrust,
+    } = raibert_setup(robot, plan)?;
+    let machine = &machine;
     let r = pr::simulate_with(machine, &profile, &pushes, duration, cfg, thrust)
         .map_err(anyhow::Error::msg)?;
     let written = match out {
@@ -561,6 +640,46 @@ fn cmd_planar_raibert(
 
 pub(crate) fn cmd_planar(cmd: &PlanarCmd) -> Result<()> {
     match cmd {
+        PlanarCmd::Serve {
+            http,
+            time_scale,
+            speed_profile,
+            target_apex,
+            kc,
+            inject,
+            robot,
+            thrust,
+            duration,
+        } => {
+            let cfg = raibert_config(*target_apex, *kc)?;
+            let plan = RaibertPlan {
+                profile: speed_profile,
+                inject,
+                duration: *duration,
+                thrust,
+            };
+            let Raibert {
+                machine,
+                profile,
+                pushes,
+                thrust,
+            } = raibert_setup(robot.as_deref(), &plan)?;
+            if !(duration.is_finite() && *duration > 0.0 && *duration <= 600.0) {
+                bail!("--duration {duration} must be in (0, 600] s");
+            }
+            crate::planar_serve::serve(
+                http,
+                *time_scale,
+                crate::planar_serve::LiveRun {
+                    machine,
+                    profile,
+                    pushes,
+                    duration_s: *duration,
+                    cfg,
+                    thrust,
+                },
+            )?;
+        }
         PlanarCmd::Run {
             speed,
             kc,
@@ -578,16 +697,7 @@ pub(crate) fn cmd_planar(cmd: &PlanarCmd) -> Result<()> {
             thrust,
         } => {
             if controller == "raibert" {
-                let (kc, target_apex) = (*kc, *target_apex);
-                if !(target_apex.is_finite() && (0.02..=0.5).contains(&target_apex)) {
-                    bail!("--target-apex {target_apex} must be within 0.02 ..= 0.5 m");
-                }
-                if !(kc.is_finite() && kc.abs() <= 1e4) {
-                    bail!("--kc {kc} must be within -10000 ..= 10000 N s/m");
-                }
-                let mut cfg = hopper_control::planar::raibert::RaibertConfig::table_2_2();
-                cfg.target_apex_m = target_apex as f32;
-                cfg.stabiliser_gain_ns_per_m = kc as f32;
+                let cfg = raibert_config(*target_apex, *kc)?;
                 let held = format!("0:{speed}");
                 let plan = RaibertPlan {
                     profile: speed_profile.as_deref().unwrap_or(&held),
