@@ -434,6 +434,7 @@ fn test(root: &Path) -> Result<(), String> {
         ]),
     )?;
     size(root)?;
+    let prebuilt = prebuild(root);
     qemu::run(root, ahead)?;
     hil::run(root, None)?;
     session::against_serve(root)?;
@@ -443,7 +444,46 @@ fn test(root: &Path) -> Result<(), String> {
     cockpit::run(root)?;
     slurm::run(root)?;
     speed::run(root)?;
+    if let Some(mut child) = prebuilt {
+        let started = std::time::Instant::now();
+        // Its outcome is the tests' to report: they build what it did not.
+        let _ = child.wait();
+        took("waiting for the tests built at low priority", started);
+    }
     cargo_test(root)
+}
+
+/// The control crate's test build on its own features and the fuzz
+/// crate's, started at the lowest priority (`nice -n 19`) to take what
+/// the QEMU sessions and the steps after them leave of the cores (a
+/// session's QEMU keeps about one and a half busy): the tests then only
+/// run. Each builds in a target directory no step before the tests
+/// uses, so cargo's lock on the workspace's stays free. Its output goes
+/// to `prebuild.log` in the target directory; `None` when it cannot start
+/// (the tests then build as before).
+fn prebuild(root: &Path) -> Option<std::process::Child> {
+    let target = target_dir(root).ok()?;
+    let log = std::fs::File::create(target.join("prebuild.log")).ok()?;
+    let err = log.try_clone().ok()?;
+    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+    Command::new("nice")
+        .args(["-n", "19", "sh", "-c"])
+        .arg(
+            "\"$0\" test -p hopper-control --target-dir \"$1\" --no-run; \
+             \"$0\" test --manifest-path fuzz/Cargo.toml --no-run",
+        )
+        .arg(cargo)
+        .arg(control_target_dir(&target))
+        .current_dir(root)
+        .stdout(log)
+        .stderr(err)
+        .spawn()
+        .ok()
+}
+
+/// The control crate's own-feature test build's target directory.
+fn control_target_dir(target: &Path) -> PathBuf {
+    target.join("control")
 }
 
 /// The docs' examples against the release `hopper-sim` they name; `only`
@@ -725,7 +765,19 @@ fn llvm_size() -> Result<PathBuf, String> {
 /// built with the features hal-sim turns on (`fault-injection`, `serde`),
 /// so only this run tests it as the firmware builds it.
 fn cargo_test(root: &Path) -> Result<(), String> {
-    let control = counted_cargo_test(root, &["test", "-p", "hopper-control"])?;
+    // In a target directory of its own: built there at low priority
+    // while the QEMU sessions ran ([`prebuild`]).
+    let control_dir = control_target_dir(&target_dir(root)?);
+    let control = counted_cargo_test(
+        root,
+        &[
+            "test",
+            "-p",
+            "hopper-control",
+            "--target-dir",
+            &control_dir.to_string_lossy(),
+        ],
+    )?;
     let workspace = counted_cargo_test(root, &["test", "--workspace"])?;
     // The fuzz target's logic on stable, over seeded inputs and the kept
     // regressions (the fuzz crate is outside the workspace: it needs
