@@ -494,13 +494,24 @@ fn docs_check(root: &Path, only: &[String]) -> Result<(), String> {
 }
 
 /// The release `hopper-sim` (the docs' examples, the Slurm run and the
-/// speed figures run it), built if it is not current.
+/// speed figures run it), built if it is not current: without the
+/// `live-page` feature (`planar serve`, which none of them runs and whose
+/// web stack's fat-LTO build cost CI about 50 s); the test build's
+/// `hopper-sim` has it.
 fn release_sim(root: &Path, what: &str) -> Result<PathBuf, String> {
     build_executable(
         root,
         what,
         "hopper-sim",
-        cargo().args(["build", "--release", "-p", "hal-sim", "--bin", "hopper-sim"]),
+        cargo().args([
+            "build",
+            "--release",
+            "-p",
+            "hal-sim",
+            "--bin",
+            "hopper-sim",
+            "--no-default-features",
+        ]),
     )
 }
 

@@ -39,6 +39,7 @@ mod figures;
 mod identify;
 mod params;
 mod planar;
+#[cfg(feature = "live-page")]
 mod planar_serve;
 mod run;
 mod serve;

@@ -199,6 +199,7 @@ pub(crate) enum PlanarCmd {
         #[arg(long, value_name = "LAW")]
         thrust: Option<String>,
     },
+    #[cfg(feature = "live-page")]
     /// Run the hip-actuated machine under Raibert's controller live, paced
     /// by the wall clock, and serve a page that draws it as it runs (the
     /// drawing of `planar run --out`'s run.html), with its speed against
@@ -640,6 +641,7 @@ fn cmd_planar_raibert(
 
 pub(crate) fn cmd_planar(cmd: &PlanarCmd) -> Result<()> {
     match cmd {
+        #[cfg(feature = "live-page")]
         PlanarCmd::Serve {
             http,
             time_scale,
