@@ -434,6 +434,11 @@ fn test(root: &Path) -> Result<(), String> {
         ]),
     )?;
     size(root)?;
+    // The workspace's test build first (it is `qemu::run`'s first step,
+    // which then finds it done; a failure is reported there): the
+    // low-priority builds must not slow it, only fill what the QEMU
+    // sessions leave of the cores.
+    let _ = session::host_binaries(root);
     let prebuilt = prebuild(root);
     qemu::run(root, ahead)?;
     hil::run(root, None)?;
