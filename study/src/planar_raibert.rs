@@ -351,106 +351,55 @@ pub fn simulate_each(
 /// stance]` (s, m, m, rad, rad, m, 1 on the ground else 0).
 pub type Frame = [f64; 7];
 
-/// A run of the loop, one period at a time.
-struct Runner<'a, L: LegLaw> {
-    leg_length_m: f64,
-    profile: &'a SpeedProfile,
-    pushes: &'a [Push],
+/// [`simulate_with`]'s run of the loop `lp`, the loop at its end and the
+/// leg winding's highest temperature, C.
+fn run<L: LegLaw>(
+    machine: &PlanarMachine,
+    profile: &SpeedProfile,
+    pushes: &[Push],
     duration_s: f64,
-    steps: usize,
-    k: usize,
-    over: bool,
-    lp: PlanarLoop<L>,
-    strides: Vec<Stride>,
-    frames: Vec<Frame>,
-    last_apex: Option<(f64, f64)>,
-    stride_pitch: f64,
-    first_pitch: f64,
-    fell_at_s: Option<f64>,
-    stopped_by: Option<String>,
-    foot_ahead: f64,
-    hip_winding_c: f64,
-    leg_winding_c: f64,
-    hip_current: Vec<(f64, f64)>,
-    window_a: f64,
-}
-
-impl<'a, L: LegLaw> Runner<'a, L> {
-    /// The loop `lp` on `machine`, to run for `duration_s` along
-    /// `profile` with `pushes`.
-    fn new(
-        machine: &PlanarMachine,
-        profile: &'a SpeedProfile,
-        pushes: &'a [Push],
-        duration_s: f64,
-        lp: PlanarLoop<L>,
-    ) -> Self {
-        Self {
-            leg_length_m: machine.params.leg_length_m,
-            profile,
-            pushes,
-            duration_s,
-            steps: (duration_s / DT_S).round() as usize,
-            k: 0,
-            over: false,
-            lp,
-            strides: Vec::new(),
-            frames: Vec::new(),
-            last_apex: None,
-            stride_pitch: 0.0,
-            first_pitch: 0.0,
-            fell_at_s: None,
-            stopped_by: None,
-            foot_ahead: 0.0,
-            hip_winding_c: 0.0,
-            leg_winding_c: 0.0,
-            hip_current: Vec::new(),
-            window_a: 0.0,
-        }
-    }
-
-    /// The run so far.
-    fn progress(&self) -> Progress<'_> {
-        Progress {
-            t_s: self.k as f64 * DT_S,
-            frames: &self.frames,
-            strides: &self.strides,
-        }
-    }
-
-    /// Runs one period; `false` (and nothing run) once the run is over:
-    /// its duration reached, the body fallen or the guard's fault latched.
-    fn period(&mut self) -> bool {
-        if self.over || self.k >= self.steps {
-            self.over = true;
-            return false;
-        }
-        let k = self.k;
+    cfg: RaibertConfig,
+    mut lp: PlanarLoop<L>,
+    each: &mut dyn FnMut(Progress<'_>),
+) -> (RaibertRun, PlanarLoop<L>, f64) {
+    let p = machine.params;
+    let mut strides = Vec::new();
+    let mut frames = Vec::new();
+    let mut last_apex: Option<(f64, f64)> = None;
+    let mut stride_pitch: f64 = 0.0;
+    let mut first_pitch: f64 = 0.0;
+    let mut fell_at_s = None;
+    let mut stopped_by = None;
+    let mut foot_ahead = 0.0;
+    let mut hip_winding_c: f64 = 0.0;
+    let mut leg_winding_c: f64 = 0.0;
+    let mut hip_current = Vec::new();
+    let mut window_a: f64 = 0.0;
+    let steps = (duration_s / DT_S).round() as usize;
+    for k in 0..steps {
         let t = k as f64 * DT_S;
-        let lp = &mut self.lp;
         let st = lp.state();
         let est = lp.estimate();
-        let cmd = lp.control(&est, self.profile.at(t));
-        self.hip_winding_c = self.hip_winding_c.max(f64::from(lp.hip_winding_c()));
-        self.leg_winding_c = self.leg_winding_c.max(f64::from(lp.leg_winding_c()));
+        let cmd = lp.control(&est, profile.at(t));
+        hip_winding_c = hip_winding_c.max(f64::from(lp.hip_winding_c()));
+        leg_winding_c = leg_winding_c.max(f64::from(lp.leg_winding_c()));
         let i = f64::from(lp.hip_current_a());
-        if i.abs() > self.window_a.abs() {
-            self.window_a = i;
+        if i.abs() > window_a.abs() {
+            window_a = i;
         }
         if k % 100 == 99 {
-            self.hip_current.push((t, self.window_a));
-            self.window_a = 0.0;
+            hip_current.push((t, window_a));
+            window_a = 0.0;
         }
-        let push_n = self
-            .pushes
+        let push_n = pushes
             .iter()
             .filter(|p| t >= p.at_s && t < p.at_s + PUSH_S)
             .map(|p| p.impulse_ns / PUSH_S)
             .sum();
         let pitch = st.phi_rad.abs().to_degrees();
-        self.stride_pitch = self.stride_pitch.max(pitch);
+        stride_pitch = stride_pitch.max(pitch);
         if k.is_multiple_of(100) {
-            self.frames.push([
+            frames.push([
                 t,
                 st.x_m,
                 st.z_m,
@@ -460,17 +409,15 @@ impl<'a, L: LegLaw> Runner<'a, L> {
                 if st.stance { 1.0 } else { 0.0 },
             ]);
         }
-        if st.z_m < 0.5 * self.leg_length_m || pitch > 45.0 || !st.z_m.is_finite() {
-            self.fell_at_s = Some(t);
-            self.over = true;
-            return false;
+        if st.z_m < 0.5 * p.leg_length_m || pitch > 45.0 || !st.z_m.is_finite() {
+            fell_at_s = Some(t);
+            break;
         }
         if let Some(f) = lp.fault() {
             // The guard stopped both actuators: the run is over.
-            self.fell_at_s = Some(t);
-            self.stopped_by = Some(format!("{f:?}"));
-            self.over = true;
-            return false;
+            fell_at_s = Some(t);
+            stopped_by = Some(format!("{f:?}"));
+            break;
         }
         let mut apex = None;
         let mut touchdown = false;
@@ -481,135 +428,94 @@ impl<'a, L: LegLaw> Runner<'a, L> {
         });
         if touchdown {
             let s = lp.state();
-            self.foot_ahead = s.leg_length_m * s.theta_rad.sin();
+            foot_ahead = s.leg_length_m * s.theta_rad.sin();
         }
         if let Some((t_s, a)) = apex {
             let x = lp.state().x_m;
-            if let Some((t0, x0)) = self.last_apex {
-                self.strides.push(Stride {
+            if let Some((t0, x0)) = last_apex {
+                strides.push(Stride {
                     t_s,
-                    apex_m: a.z_m - self.leg_length_m,
+                    apex_m: a.z_m - p.leg_length_m,
                     speed_mps: (x - x0) / (t_s - t0),
-                    command_mps: self.profile.at(t_s),
-                    max_pitch_deg: self.stride_pitch,
-                    foot_ahead_m: self.foot_ahead,
+                    command_mps: profile.at(t_s),
+                    max_pitch_deg: stride_pitch,
+                    foot_ahead_m: foot_ahead,
                 });
             }
-            if self.last_apex.is_none() {
-                self.first_pitch = self.stride_pitch;
+            if last_apex.is_none() {
+                first_pitch = stride_pitch;
             }
-            self.last_apex = Some((t_s, x));
-            self.stride_pitch = 0.0;
+            last_apex = Some((t_s, x));
+            stride_pitch = 0.0;
         }
-        self.k += 1;
-        true
+        each(Progress {
+            t_s: (k + 1) as f64 * DT_S,
+            frames: &frames,
+            strides: &strides,
+        });
     }
-}
-
-/// [`simulate_with`]'s run of the loop `lp`, the loop at its end and the
-/// leg winding's highest temperature, C.
-fn run<L: LegLaw>(
-    machine: &PlanarMachine,
-    profile: &SpeedProfile,
-    pushes: &[Push],
-    duration_s: f64,
-    cfg: RaibertConfig,
-    lp: PlanarLoop<L>,
-    each: &mut dyn FnMut(Progress<'_>),
-) -> (RaibertRun, PlanarLoop<L>, f64) {
-    let mut runner = Runner::new(machine, profile, pushes, duration_s, lp);
-    while runner.period() {
-        each(runner.progress());
-    }
-    runner.finish(machine, cfg)
-}
-
-impl<L: LegLaw> Runner<'_, L> {
-    /// The run's figures, the loop at its end and the leg winding's
-    /// highest temperature, C.
-    fn finish(
-        self,
-        machine: &PlanarMachine,
-        cfg: RaibertConfig,
-    ) -> (RaibertRun, PlanarLoop<L>, f64) {
-        let Runner {
-            profile,
-            pushes,
-            duration_s,
-            lp,
-            strides,
-            frames,
-            first_pitch,
-            fell_at_s,
-            stopped_by,
-            hip_winding_c,
-            leg_winding_c,
-            hip_current,
-            ..
-        } = self;
-        let end = fell_at_s.unwrap_or(duration_s);
-        let bounds: Vec<f64> = profile
-            .steps
+    let end = fell_at_s.unwrap_or(duration_s);
+    let bounds: Vec<f64> = profile
+        .steps
+        .iter()
+        .map(|&(t, _)| t)
+        .chain(pushes.iter().map(|p| p.at_s))
+        .chain([end])
+        .collect();
+    let next_after = |t: f64| {
+        bounds
             .iter()
-            .map(|&(t, _)| t)
-            .chain(pushes.iter().map(|p| p.at_s))
-            .chain([end])
-            .collect();
-        let next_after = |t: f64| {
-            bounds
-                .iter()
-                .copied()
-                .filter(|&b| b > t)
-                .fold(end, f64::min)
-        };
-        let steps_settled = profile
-            .steps
-            .iter()
-            .filter(|(t, _)| *t < end)
-            .map(|&(t, v)| settling(&strides, t, next_after(t), v))
-            .collect();
-        let pushes_settled = pushes
-            .iter()
-            .filter(|p| p.at_s < end)
-            .map(|p| settling(&strides, p.at_s, next_after(p.at_s), profile.at(p.at_s)))
-            .collect();
-        // The pitch before the first apex, then each stride's but those from a
-        // push to the next change.
-        let pushed = |t: f64| pushes.iter().any(|p| t > p.at_s && t <= next_after(p.at_s));
-        let undisturbed_pitch = strides
-            .iter()
-            .filter(|s| !pushed(s.t_s))
-            .map(|s| s.max_pitch_deg)
-            .fold(first_pitch, f64::max);
-        let target = f64::from(cfg.target_apex_m);
-        let apex_max_error = strides
-            .iter()
-            .skip(APEX_FROM_HOP)
-            .filter(|s| !pushed(s.t_s))
-            .map(|s| (s.apex_m - target).abs() / target)
-            .fold(0.0, f64::max);
-        let r = RaibertRun {
-            strides,
-            steps: steps_settled,
-            pushes: pushes_settled,
-            max_pitch_deg: undisturbed_pitch,
-            target_apex_m: target,
-            apex_max_error,
-            fell_at_s,
-            stopped_by,
-            duration_s: end,
-            hip: HipFigures {
-                peak_current_a: f64::from(lp.hip_peak_current_a()),
-                copper_loss_j: lp.hip_copper_loss_j(),
-                max_winding_c: hip_winding_c,
-                current_limit_a: f64::from(machine.hip.current_limit_a),
-            },
-            leg: None,
-            hip_current,
-            frames,
-        };
-        (r, lp, leg_winding_c)
-    }
+            .copied()
+            .filter(|&b| b > t)
+            .fold(end, f64::min)
+    };
+    let steps_settled = profile
+        .steps
+        .iter()
+        .filter(|(t, _)| *t < end)
+        .map(|&(t, v)| settling(&strides, t, next_after(t), v))
+        .collect();
+    let pushes_settled = pushes
+        .iter()
+        .filter(|p| p.at_s < end)
+        .map(|p| settling(&strides, p.at_s, next_after(p.at_s), profile.at(p.at_s)))
+        .collect();
+    // The pitch before the first apex, then each stride's but those from a
+    // push to the next change.
+    let pushed = |t: f64| pushes.iter().any(|p| t > p.at_s && t <= next_after(p.at_s));
+    let undisturbed_pitch = strides
+        .iter()
+        .filter(|s| !pushed(s.t_s))
+        .map(|s| s.max_pitch_deg)
+        .fold(first_pitch, f64::max);
+    let target = f64::from(cfg.target_apex_m);
+    let apex_max_error = strides
+        .iter()
+        .skip(APEX_FROM_HOP)
+        .filter(|s| !pushed(s.t_s))
+        .map(|s| (s.apex_m - target).abs() / target)
+        .fold(0.0, f64::max);
+    let r = RaibertRun {
+        strides,
+        steps: steps_settled,
+        pushes: pushes_settled,
+        max_pitch_deg: undisturbed_pitch,
+        target_apex_m: target,
+        apex_max_error,
+        fell_at_s,
+        stopped_by,
+        duration_s: end,
+        hip: HipFigures {
+            peak_current_a: f64::from(lp.hip_peak_current_a()),
+            copper_loss_j: lp.hip_copper_loss_j(),
+            max_winding_c: hip_winding_c,
+            current_limit_a: f64::from(machine.hip.current_limit_a),
+        },
+        leg: None,
+        hip_current,
+        frames,
+    };
+    (r, lp, leg_winding_c)
 }
 
 /// The plot's size, pixels.
