@@ -233,3 +233,105 @@ fn reset_faults_retries_while_a_cause_is_still_going() {
     );
     let _ = robot.join();
 }
+
+/// A robot whose control periods run `robot_per_wall` robot seconds per
+/// wall second (a traced QEMU image runs about 1/8 of real time) and
+/// whose `sensors` routine ends after `routine_s` of its own time (never,
+/// for infinity).
+fn slow_robot(robot_per_wall: f64, routine_s: f64) -> (String, std::thread::JoinHandle<()>) {
+    use hopper_protocol::vocab::CalState;
+    use hopper_protocol::{BringupResults, CalibrationInfo, TimingStats};
+    use std::time::Instant;
+    let boot = Instant::now();
+    let period_s = 0.001;
+    let periods = move || (boot.elapsed().as_secs_f64() * robot_per_wall / period_s) as u32;
+    let mut started = None;
+    common::robot(
+        20,
+        Duration::from_millis(20),
+        move |req| match req {
+            Request::ParamGet { .. } => Response::Value(1.0),
+            Request::Calibrate { .. } => {
+                started = Some(periods());
+                Response::Ok
+            }
+            Request::Timing => Response::Timing(TimingStats {
+                period_s: period_s as f32,
+                periods: periods(),
+                missed: 0,
+                step_mean: 0,
+                step_max: 0,
+                link_mean: 0,
+                link_max: 0,
+            }),
+            Request::CalibrationReport => {
+                let ran_s = started.map_or(0.0, |p| f64::from(periods() - p) * period_s);
+                let state = if ran_s >= routine_s {
+                    CalState::Done
+                } else {
+                    CalState::Running
+                };
+                Response::Calibration(CalibrationInfo {
+                    routine: 0,
+                    state: state.code(),
+                    samples: (ran_s / period_s) as u32,
+                    loadcell_mean_code: 2048.0,
+                    loadcell_std_code: 1.0,
+                    pot_mean_code: 2048.0,
+                    pot_std_code: 1.0,
+                    motor_span_counts: 0,
+                    height_span_counts: 0,
+                    loadcell_offset_code: f32::NAN,
+                    pot_offset_code: f32::NAN,
+                })
+            }
+            Request::BringupResults => Response::BringupResults(BringupResults {
+                routine: 0,
+                state: CalState::Done.code(),
+                nut_travel_m: f32::NAN,
+                force_change_n: f32::NAN,
+                nut_offset_m: f32::NAN,
+                spring_rate_n_per_m: f32::NAN,
+                spring_intercept_n: f32::NAN,
+                fit_rms_n: f32::NAN,
+                fit_points: 0,
+                fit_span_m: f32::NAN,
+                height_offset_m: f32::NAN,
+                peak_current_a: 0.0,
+            }),
+            _ => Response::Refused(RefusalCode(250)),
+        },
+        |_| true,
+    )
+}
+
+/// A routine's time limit is robot time: a robot running at 1/200 of
+/// real time (a loaded machine's traced QEMU image, slower still) takes
+/// 6 s of wall time for 0.03 s of measuring, past the 5.2 s the limit
+/// (`--seconds 0.01`: 20 times it plus 5 s) would be in wall time, and
+/// its routine still ends as it should.
+#[test]
+fn a_routine_on_a_slow_robot_is_timed_by_the_robots_clock() {
+    let (addr, robot) = slow_robot(1.0 / 200.0, 0.03);
+    let o = hopper_link(&["--tcp", &addr, "calibrate", "sensors", "--seconds", "0.01"]);
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{}{out}", stderr(&o));
+    assert!(out.contains("calibrate sensors: done: 30 samples"), "{out}");
+    let _ = robot.join();
+}
+
+/// A robot whose periods stopped (its control interrupt no longer runs,
+/// though the link still answers) does not keep the host waiting: the
+/// routine is given up with the period it stopped at.
+#[test]
+fn a_routine_on_a_robot_whose_clock_stopped_is_given_up() {
+    let (addr, robot) = slow_robot(0.0, f64::INFINITY);
+    let o = hopper_link(&["--tcp", &addr, "calibrate", "sensors", "--seconds", "0.01"]);
+    let e = stderr(&o);
+    assert!(!o.status.success());
+    assert!(
+        e.contains("the robot's control periods stopped at period 0"),
+        "{e}"
+    );
+    let _ = robot.join();
+}

@@ -1,6 +1,6 @@
 //! `calibrate ROUTINE`: a bring-up routine on the robot and what it found.
 
-use super::common::get;
+use super::common::{get, timing_of};
 use anyhow::{bail, Result};
 use hopper_link::Client;
 use hopper_protocol::{Request, Response};
@@ -52,7 +52,47 @@ pub(crate) struct Started {
     pot_gain: f32,
     rate: f32,
     limit_s: f32,
-    deadline: Instant,
+    clock: RobotClock,
+}
+
+/// How long a routine has run on the robot's own clock, its control
+/// periods: a robot may run slower than the wall (a traced QEMU image
+/// runs about 1/8 of real time, slower still on a loaded machine), and a
+/// routine's length is robot time.
+struct RobotClock {
+    period_s: f64,
+    start: u32,
+    /// The last period count read and when it was read.
+    last: std::cell::Cell<(u32, Instant)>,
+}
+
+/// Wall time without one control period before the host gives up on a
+/// robot that answers but no longer runs its periods.
+const STALL_S: f64 = 5.0;
+
+impl RobotClock {
+    fn start(c: &mut Client) -> Result<Self> {
+        let t = timing_of(c)?;
+        Ok(Self {
+            period_s: f64::from(t.period_s),
+            start: t.periods,
+            last: std::cell::Cell::new((t.periods, Instant::now())),
+        })
+    }
+
+    /// Robot seconds since the start; an error when the periods stopped.
+    fn elapsed_s(&self, c: &mut Client) -> Result<f64> {
+        let now = timing_of(c)?.periods;
+        let (last, at) = self.last.get();
+        if now != last {
+            self.last.set((now, Instant::now()));
+        } else if at.elapsed().as_secs_f64() > STALL_S {
+            bail!(
+                "the robot's control periods stopped at period {now} ({STALL_S:.0} s without one): read `status`"
+            );
+        }
+        Ok(f64::from(now.wrapping_sub(self.start)) * self.period_s)
+    }
 }
 
 /// Starts `routine` on the robot (refused with the reason and the step to
@@ -72,6 +112,7 @@ pub(crate) fn start(c: &mut Client, routine: &str, seconds: f32) -> Result<Start
     let lc_gain = get(c, "calibration.loadcell_gain_n_per_code")?;
     let pot_gain = get(c, "calibration.pot_gain_m_per_code")?;
     let rate = get(c, "supervisor.spring_rate_n_per_m")?;
+    let clock = RobotClock::start(c)?;
     match c.request(Request::Calibrate {
         routine: code,
         seconds,
@@ -84,7 +125,8 @@ pub(crate) fn start(c: &mut Client, routine: &str, seconds: f32) -> Result<Start
         r => bail!("unexpected answer {r:?}"),
     }
     // The measuring routines take `seconds` of robot time; the driving ones
-    // as long as their moves (homing across the whole stroke: 12 s).
+    // as long as their moves (homing across the whole stroke: 12 s of
+    // robot time).
     let limit_s = if r.drives_motor() {
         60.0
     } else {
@@ -97,7 +139,7 @@ pub(crate) fn start(c: &mut Client, routine: &str, seconds: f32) -> Result<Start
         pot_gain,
         rate,
         limit_s,
-        deadline: Instant::now() + Duration::from_secs_f32(limit_s),
+        clock,
     })
 }
 
@@ -112,7 +154,7 @@ pub(crate) fn poll(c: &mut Client, s: &Started, out: &mut String) -> Result<Opti
         pot_gain,
         rate,
         limit_s,
-        deadline,
+        clock,
     } = s;
     let (routine, was, lc_gain, pot_gain, rate) =
         (routine.as_str(), *was, *lc_gain, *pot_gain, *rate);
@@ -121,8 +163,8 @@ pub(crate) fn poll(c: &mut Client, s: &Started, out: &mut String) -> Result<Opti
         r => bail!("unexpected answer {r:?}"),
     };
     if r.state == CalState::Running.code() {
-        if Instant::now() > *deadline {
-            bail!("calibrate {routine}: still running after {limit_s:.0} s");
+        if clock.elapsed_s(c)? > f64::from(*limit_s) {
+            bail!("calibrate {routine}: still running after {limit_s:.0} s of robot time");
         }
         return Ok(None);
     }
