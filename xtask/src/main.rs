@@ -355,8 +355,6 @@ fn test(root: &Path) -> Result<(), String> {
             "warnings",
         ]),
     )?;
-    docs_check(root, &[])?;
-    book::run_check(root)?;
     mcu_clippy(
         root,
         "clippy (MCU target)",
@@ -447,6 +445,10 @@ fn test(root: &Path) -> Result<(), String> {
     noisy::run(root, true)?;
     robot_file::run(root)?;
     cockpit::run(root)?;
+    // The release simulator they run was built at low priority beside the
+    // QEMU sessions (`prebuild`); cargo finishes it here if it is not done.
+    docs_check(root, &[])?;
+    book::run_check(root)?;
     slurm::run(root)?;
     speed::run(root)?;
     if let Some(mut child) = prebuilt {
@@ -458,12 +460,13 @@ fn test(root: &Path) -> Result<(), String> {
     cargo_test(root)
 }
 
-/// The control crate's test build on its own features and the fuzz
-/// crate's, started at the lowest priority (`nice -n 19`) to take what
-/// the QEMU sessions and the steps after them leave of the cores (a
-/// session's QEMU keeps about one and a half busy): the tests then only
-/// run. Each builds in a target directory no step before the tests
-/// uses, so cargo's lock on the workspace's stays free. Its output goes
+/// The release simulator (for the docs' examples, the Slurm run and the
+/// speed figure), then the control crate's test build on its own
+/// features and the fuzz crate's, started at the lowest priority (`nice
+/// -n 19`) to take what the QEMU sessions and the steps after them leave
+/// of the cores (a session's QEMU keeps about one and a half busy): the
+/// steps after them then only run. Each builds in a target directory of
+/// its own, so cargo's lock on the workspace's stays free. Its output goes
 /// to `prebuild.log` in the target directory; `None` when it cannot start
 /// (the tests then build as before).
 fn prebuild(root: &Path) -> Option<std::process::Child> {
@@ -474,11 +477,14 @@ fn prebuild(root: &Path) -> Option<std::process::Child> {
     Command::new("nice")
         .args(["-n", "19", "sh", "-c"])
         .arg(
-            "\"$0\" test -p hopper-control --target-dir \"$1\" --no-run; \
+            "\"$0\" build $3 --target-dir \"$2\"; \
+             \"$0\" test -p hopper-control --target-dir \"$1\" --no-run; \
              \"$0\" test --manifest-path fuzz/Cargo.toml --no-run",
         )
         .arg(cargo)
         .arg(control_target_dir(&target))
+        .arg(sim_target_dir(&target))
+        .arg(RELEASE_SIM.join(" "))
         .current_dir(root)
         .stdout(log)
         .stderr(err)
@@ -498,25 +504,38 @@ fn docs_check(root: &Path, only: &[String]) -> Result<(), String> {
     docs::check(root, &sim, only)
 }
 
+/// The release `hopper-sim`'s build arguments after `cargo build`:
+/// without the `live-page` feature (`planar serve`, which none of the
+/// steps running this build runs and whose web stack's fat-LTO build
+/// cost CI about 50 s); the test build's `hopper-sim` has it.
+const RELEASE_SIM: [&str; 6] = [
+    "--release",
+    "-p",
+    "hal-sim",
+    "--bin",
+    "hopper-sim",
+    "--no-default-features",
+];
+
+/// The release `hopper-sim`'s target directory (of its own: `prebuild`
+/// builds it at low priority while other steps build in the workspace's).
+fn sim_target_dir(target: &Path) -> PathBuf {
+    target.join("sim")
+}
+
 /// The release `hopper-sim` (the docs' examples, the Slurm run and the
-/// speed figures run it), built if it is not current: without the
-/// `live-page` feature (`planar serve`, which none of them runs and whose
-/// web stack's fat-LTO build cost CI about 50 s); the test build's
-/// `hopper-sim` has it.
+/// speed figures run it), built if it is not current.
 fn release_sim(root: &Path, what: &str) -> Result<PathBuf, String> {
+    let target = target_dir(root)?;
     build_executable(
         root,
         what,
         "hopper-sim",
-        cargo().args([
-            "build",
-            "--release",
-            "-p",
-            "hal-sim",
-            "--bin",
-            "hopper-sim",
-            "--no-default-features",
-        ]),
+        cargo()
+            .arg("build")
+            .args(RELEASE_SIM)
+            .arg("--target-dir")
+            .arg(sim_target_dir(&target)),
     )
 }
 
