@@ -264,40 +264,26 @@ pub struct LegFigures {
     pub max_winding_c: f64,
 }
 
-/// Runs `machine` for `duration_s` along `profile` with
-/// `pushes`, from an apex with the toe at the target, at the profile's
-/// first speed, its leg driven by Raibert's thrust.
-pub fn simulate(
-    machine: &PlanarMachine,
-    profile: &SpeedProfile,
-    pushes: &[Push],
-    duration_s: f64,
-    cfg: RaibertConfig,
-) -> Result<RaibertRun, String> {
-    simulate_with(machine, profile, pushes, duration_s, cfg, Thrust::Force)
+/// What a planar run is: the machine, its speed command and the pushes on
+/// its body, how long, Raibert's controller and the leg's drive.
+#[derive(Clone, Debug)]
+pub struct PlanarRunSpec {
+    /// The machine.
+    pub machine: PlanarMachine,
+    /// The commanded forward speed over time.
+    pub profile: SpeedProfile,
+    /// The pushes on the body.
+    pub pushes: Vec<Push>,
+    /// How long, s (at most 600).
+    pub duration_s: f64,
+    /// Raibert's controller.
+    pub cfg: RaibertConfig,
+    /// How the leg is driven.
+    pub thrust: Thrust,
 }
 
-/// [`simulate`] with the leg driven as `thrust` says.
-pub fn simulate_with(
-    machine: &PlanarMachine,
-    profile: &SpeedProfile,
-    pushes: &[Push],
-    duration_s: f64,
-    cfg: RaibertConfig,
-    thrust: Thrust,
-) -> Result<RaibertRun, String> {
-    simulate_each(
-        machine,
-        profile,
-        pushes,
-        duration_s,
-        cfg,
-        thrust,
-        &mut |_| {},
-    )
-}
-
-/// The run so far, as [`simulate_each`] shows it after each period.
+/// The run so far, as [`PlanarRunSpec::simulate_each`] shows it after each
+/// period.
 #[derive(Clone, Copy, Debug)]
 pub struct Progress<'a> {
     /// Simulated time, s.
@@ -308,60 +294,90 @@ pub struct Progress<'a> {
     pub strides: &'a [Stride],
 }
 
-/// [`simulate_with`], calling `each` after every period with the run so
-/// far (a live run paces itself and shows it there).
-pub fn simulate_each(
-    machine: &PlanarMachine,
-    profile: &SpeedProfile,
-    pushes: &[Push],
-    duration_s: f64,
-    cfg: RaibertConfig,
-    thrust: Thrust,
-    each: &mut dyn FnMut(Progress<'_>),
-) -> Result<RaibertRun, String> {
-    if !(duration_s.is_finite() && duration_s > 0.0 && duration_s <= 600.0) {
-        return Err(format!("--duration {duration_s} must be in (0, 600] s"));
-    }
-    cfg.validate()
-        .map_err(|e| format!("the controller's `{}` is out of its range", e.0))?;
-    let lp = PlanarLoop::of(machine, cfg, profile.at(0.0))
-        .map_err(|e| format!("the planar machine cannot start: {e:?}"))?;
-    Ok(match thrust {
-        Thrust::Force => run(machine, profile, pushes, duration_s, cfg, lp, each).0,
-        Thrust::Screw(strategy) => {
-            let lp = lp
-                .with_screw(&strategy)
-                .map_err(|e| format!("the leg's law cannot start: {e:?}"))?;
-            let (mut r, lp, max_winding_c) =
-                run(machine, profile, pushes, duration_s, cfg, lp, each);
-            r.leg = Some(LegFigures {
-                law: strategy.kind().name(),
-                peak_current_a: f64::from(lp.leg_peak_current_a()),
-                current_limit_a: machine.leg.current_limit_a,
-                motor_work_j: lp.nut().motor_work_j(),
-                copper_loss_j: lp.nut().copper_loss_j(),
-                max_winding_c,
-            });
-            r
+impl PlanarRunSpec {
+    /// `machine` for `duration_s` along `profile` under `cfg`, unpushed,
+    /// its leg driven by Raibert's thrust.
+    pub fn new(
+        machine: PlanarMachine,
+        profile: SpeedProfile,
+        duration_s: f64,
+        cfg: RaibertConfig,
+    ) -> Self {
+        Self {
+            machine,
+            profile,
+            pushes: Vec::new(),
+            duration_s,
+            cfg,
+            thrust: Thrust::Force,
         }
-    })
+    }
+
+    /// Whether it can run: one clear error naming the flag or the
+    /// controller's field.
+    pub fn check(&self) -> Result<(), String> {
+        let d = self.duration_s;
+        if !(d.is_finite() && d > 0.0 && d <= 600.0) {
+            return Err(format!("--duration {d} must be in (0, 600] s"));
+        }
+        self.cfg
+            .validate()
+            .map_err(|e| format!("the controller's `{}` is out of its range", e.0))
+    }
+
+    /// The run, from an apex with the toe at the target, at the
+    /// profile's first speed.
+    pub fn simulate(&self) -> Result<RaibertRun, String> {
+        self.simulate_each(&mut |_| {})
+    }
+
+    /// [`simulate`](Self::simulate), calling `each` after every period
+    /// with the run so far (a live run paces itself and shows it there).
+    pub fn simulate_each(&self, each: &mut dyn FnMut(Progress<'_>)) -> Result<RaibertRun, String> {
+        self.check()?;
+        let lp = PlanarLoop::of(&self.machine, self.cfg, self.profile.at(0.0))
+            .map_err(|e| format!("the planar machine cannot start: {e:?}"))?;
+        Ok(match self.thrust {
+            Thrust::Force => run(self, lp, each).0,
+            Thrust::Screw(strategy) => {
+                let lp = lp
+                    .with_screw(&strategy)
+                    .map_err(|e| format!("the leg's law cannot start: {e:?}"))?;
+                let (mut r, lp, max_winding_c) = run(self, lp, each);
+                r.leg = Some(LegFigures {
+                    law: strategy.kind().name(),
+                    peak_current_a: f64::from(lp.leg_peak_current_a()),
+                    current_limit_a: self.machine.leg.current_limit_a,
+                    motor_work_j: lp.nut().motor_work_j(),
+                    copper_loss_j: lp.nut().copper_loss_j(),
+                    max_winding_c,
+                });
+                r
+            }
+        })
+    }
 }
 
 /// One drawn frame, every 10 ms: `[t, x, z, phi, theta, leg length,
 /// stance]` (s, m, m, rad, rad, m, 1 on the ground else 0).
 pub type Frame = [f64; 7];
 
-/// [`simulate_with`]'s run of the loop `lp`, the loop at its end and the
-/// leg winding's highest temperature, C.
+/// `spec`'s run of the loop `lp`, the loop at its end and the leg
+/// winding's highest temperature, C.
 fn run<L: LegLaw>(
-    machine: &PlanarMachine,
-    profile: &SpeedProfile,
-    pushes: &[Push],
-    duration_s: f64,
-    cfg: RaibertConfig,
+    spec: &PlanarRunSpec,
     mut lp: PlanarLoop<L>,
     each: &mut dyn FnMut(Progress<'_>),
 ) -> (RaibertRun, PlanarLoop<L>, f64) {
+    let PlanarRunSpec {
+        machine,
+        profile,
+        pushes,
+        duration_s,
+        cfg,
+        ..
+    } = spec;
+    let (duration_s, cfg) = (*duration_s, *cfg);
     let p = machine.params;
     let mut strides = Vec::new();
     let mut frames = Vec::new();
@@ -787,13 +803,13 @@ mod tests {
     #[test]
     fn raibert_tracks_the_speed_profile() {
         let profile = SpeedProfile::parse("0:0,3:0.5,8:1.0,13:0").unwrap_or_else(|e| panic!("{e}"));
-        let r = simulate(
-            &PlanarMachine::design(),
-            &profile,
-            &[],
+        let r = PlanarRunSpec::new(
+            PlanarMachine::design(),
+            profile,
             60.0,
             RaibertConfig::table_2_2(),
         )
+        .simulate()
         .unwrap_or_else(|e| panic!("{e}"));
         assert_eq!(r.fell_at_s, None, "{:?}", r.steps);
         assert!(
@@ -880,14 +896,17 @@ mod tests {
         use hopper_control::laws::ControllerKind;
         use hopper_control::planar::thrust::ScrewThrust;
         let law = ScrewThrust::planar_strategy(ControllerKind::EnergyApex);
-        simulate_with(
-            &PlanarMachine::design(),
-            profile,
-            pushes,
-            duration_s,
-            RaibertConfig::table_2_2(),
-            Thrust::Screw(law),
-        )
+        PlanarRunSpec {
+            pushes: pushes.to_vec(),
+            thrust: Thrust::Screw(law),
+            ..PlanarRunSpec::new(
+                PlanarMachine::design(),
+                profile.clone(),
+                duration_s,
+                RaibertConfig::table_2_2(),
+            )
+        }
+        .simulate()
         .unwrap_or_else(|e| panic!("{e}"))
     }
 
@@ -901,14 +920,11 @@ mod tests {
         let law = ScrewThrust::planar_strategy(ControllerKind::EnergyApex);
         let still = SpeedProfile::parse("0:0").unwrap_or_else(|e| panic!("{e}"));
         let run = |m: &PlanarMachine| {
-            simulate_with(
-                m,
-                &still,
-                &[],
-                10.0,
-                RaibertConfig::table_2_2(),
-                Thrust::Screw(law),
-            )
+            PlanarRunSpec {
+                thrust: Thrust::Screw(law),
+                ..PlanarRunSpec::new(*m, still.clone(), 10.0, RaibertConfig::table_2_2())
+            }
+            .simulate()
             .unwrap_or_else(|e| panic!("{e}"))
         };
         let last = |r: &RaibertRun| r.strides.last().map_or(0.0, |s| s.apex_m);
@@ -933,7 +949,8 @@ mod tests {
         let profile = SpeedProfile::parse("0:0,3:0.5,8:1.0,13:0").unwrap_or_else(|e| panic!("{e}"));
         let mut m = PlanarMachine::design();
         m.sensors.boom_x_m = 0.0;
-        let r = simulate(&m, &profile, &[], 60.0, RaibertConfig::table_2_2())
+        let r = PlanarRunSpec::new(m, profile, 60.0, RaibertConfig::table_2_2())
+            .simulate()
             .unwrap_or_else(|e| panic!("{e}"));
         assert_eq!(r.fell_at_s, None);
         for s in &r.steps {
@@ -957,13 +974,16 @@ mod tests {
             at_s: 10.0,
             impulse_ns: 20.0,
         };
-        let r = simulate(
-            &PlanarMachine::design(),
-            &profile,
-            &[push],
-            25.0,
-            RaibertConfig::table_2_2(),
-        )
+        let r = PlanarRunSpec {
+            pushes: vec![push],
+            ..PlanarRunSpec::new(
+                PlanarMachine::design(),
+                profile,
+                25.0,
+                RaibertConfig::table_2_2(),
+            )
+        }
+        .simulate()
         .unwrap_or_else(|e| panic!("{e}"));
         assert_eq!(r.fell_at_s, None);
         let p = r.pushes[0];
@@ -988,13 +1008,16 @@ mod tests {
             at_s: 5.0,
             impulse_ns: 120.0,
         };
-        let r = simulate(
-            &PlanarMachine::design(),
-            &profile,
-            &[push],
-            10.0,
-            RaibertConfig::table_2_2(),
-        )
+        let r = PlanarRunSpec {
+            pushes: vec![push],
+            ..PlanarRunSpec::new(
+                PlanarMachine::design(),
+                profile,
+                10.0,
+                RaibertConfig::table_2_2(),
+            )
+        }
+        .simulate()
         .unwrap_or_else(|e| panic!("{e}"));
         assert!(
             r.stopped_by.is_some(),

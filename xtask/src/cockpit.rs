@@ -18,7 +18,7 @@
 //! `cockpit-planar: drawn_heights=N drawn_phases=2` and leaves
 //! `target/cockpit/planar.png`.
 
-use std::io::{BufRead, BufReader, Read};
+use std::io::Read;
 use std::net::TcpStream;
 use std::path::Path;
 use std::process::{Command, Stdio};
@@ -221,38 +221,17 @@ pub fn run(root: &Path) -> Result<(), String> {
             .map_err(|e| format!("cannot start hopper-sim serve: {e}"))?,
     );
     crate::session::wait_listening(&robot)?;
-    let mut ui = Command::new(&link)
-        .args([
-            "--tcp",
-            &robot,
-            "ui",
-            "--http",
-            "127.0.0.1:0",
-            "--record-dir",
-        ])
-        .arg(&recordings)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::inherit())
-        .spawn()
-        .map_err(|e| format!("cannot start hopper-link ui: {e}"))?;
-    let mut stdout = BufReader::new(ui.stdout.take().ok_or("no stdout")?);
-    let _ui = Reaped(ui);
-    let mut line = String::new();
-    stdout
-        .read_line(&mut line)
-        .map_err(|e| format!("hopper-link ui: {e}"))?;
-    let url = line
-        .trim()
-        .strip_prefix("cockpit: ")
-        .ok_or_else(|| format!("hopper-link ui printed `{}`", line.trim()))?
-        .to_string();
-    // (Read on, so the pipe stays open.)
-    std::thread::spawn(move || {
-        let mut sink = String::new();
-        while stdout.read_line(&mut sink).is_ok_and(|n| n > 0) {
-            sink.clear();
-        }
-    });
+    let mut ui = Command::new(&link);
+    ui.args([
+        "--tcp",
+        &robot,
+        "ui",
+        "--http",
+        "127.0.0.1:0",
+        "--record-dir",
+    ])
+    .arg(&recordings);
+    let (_ui, url) = crate::session::spawn_server(&mut ui, "hopper-link ui", "cockpit: ")?;
     let port = free_addr()?
         .rsplit(':')
         .next()
@@ -509,25 +488,13 @@ pub fn run(root: &Path) -> Result<(), String> {
 /// saved as `planar.png` in `out_dir`. The summary line
 /// `cockpit-planar: drawn_heights=N drawn_phases=N` and whether it passes.
 fn planar_drawn(page: &mut Page, sim: &Path, out_dir: &Path) -> Result<(String, bool), String> {
-    let mut child = Command::new(sim)
-        .args(["planar", "serve", "--http", "127.0.0.1:0"])
-        .args(["--speed-profile", "0:0.5", "--duration", "60"])
-        .stdout(Stdio::piped())
-        .stderr(Stdio::inherit())
-        .spawn()
-        .map_err(|e| format!("cannot start hopper-sim planar serve: {e}"))?;
-    let mut stdout = BufReader::new(child.stdout.take().ok_or("no stdout")?);
-    let _served = Reaped(child);
-    let mut line = String::new();
-    stdout
-        .read_line(&mut line)
-        .map_err(|e| format!("hopper-sim planar serve: {e}"))?;
-    // "planar: http://ADDR/ (...)"
-    let url = line
-        .strip_prefix("planar: ")
-        .and_then(|r| r.split_whitespace().next())
-        .ok_or_else(|| format!("hopper-sim planar serve printed `{}`", line.trim()))?
-        .to_string();
+    let (_served, url) = crate::session::spawn_server(
+        Command::new(sim)
+            .args(["planar", "serve", "--http", "127.0.0.1:0"])
+            .args(["--speed-profile", "0:0.5", "--duration", "60"]),
+        "hopper-sim planar serve",
+        "planar: ",
+    )?;
     page.call("Page.navigate", serde_json::json!({ "url": url }))?;
     page.until(
         "document.getElementById('p-hip') ? 'drawn' : 'not yet'",

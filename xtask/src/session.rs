@@ -188,26 +188,44 @@ fn start_serve(sim: &Path, flash: &Path) -> Result<(Reaped, String), String> {
 /// Starts `hopper-sim serve` as `cmd` says; the server (killed when
 /// dropped) and the address its first line names.
 pub(crate) fn spawn_serve(cmd: &mut Command) -> Result<(Reaped, String), String> {
+    spawn_server(cmd, "hopper-sim serve", "listening on ")
+}
+
+/// Starts the server `cmd` (`what`, for errors), which prints where it
+/// listens on its first line, right after `after`: the server (killed
+/// when dropped) and that address. The rest of its output is read and
+/// dropped, so the pipe neither closes nor fills.
+pub(crate) fn spawn_server(
+    cmd: &mut Command,
+    what: &str,
+    after: &str,
+) -> Result<(Reaped, String), String> {
     let mut child = cmd
         .stdout(Stdio::piped())
         .stderr(Stdio::inherit())
         .spawn()
-        .map_err(|e| format!("cannot start hopper-sim serve: {e}"))?;
+        .map_err(|e| format!("cannot start {what}: {e}"))?;
     let out = child
         .stdout
         .take()
-        .ok_or("no stdout from hopper-sim serve")?;
+        .ok_or_else(|| format!("no stdout from {what}"))?;
     let server = Reaped(child);
+    let mut out = BufReader::new(out);
     let mut first = String::new();
-    BufReader::new(out)
-        .read_line(&mut first)
-        .map_err(|e| format!("hopper-sim serve: {e}"))?;
+    out.read_line(&mut first)
+        .map_err(|e| format!("{what}: {e}"))?;
     let addr = first
-        .split("listening on ")
+        .split(after)
         .nth(1)
         .and_then(|r| r.split_whitespace().next())
-        .ok_or_else(|| format!("hopper-sim serve printed no address: {first}"))?
+        .ok_or_else(|| format!("{what} printed no address: {}", first.trim()))?
         .to_string();
+    std::thread::spawn(move || {
+        let mut sink = String::new();
+        while out.read_line(&mut sink).is_ok_and(|n| n > 0) {
+            sink.clear();
+        }
+    });
     Ok((server, addr))
 }
 

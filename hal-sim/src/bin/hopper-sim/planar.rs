@@ -441,20 +441,15 @@ struct RaibertPlan<'a> {
     thrust: &'a str,
 }
 
-/// What `planar run --controller raibert` and `planar serve` run, from
-/// their flags.
-struct Raibert {
-    machine: hopper_sil::planar::PlanarMachine,
-    profile: hal_sim::planar_raibert::SpeedProfile,
-    pushes: Vec<hal_sim::planar_raibert::Push>,
-    thrust: hal_sim::planar_raibert::Thrust,
-}
-
-/// The machine (the design's, or `robot`'s file), the command, the
-/// pushes and the leg's drive that `plan` names; one clear error for a
-/// bad one.
-fn raibert_setup(robot: Option<&std::path::Path>, plan: &RaibertPlan<'_>) -> Result<Raibert> {
-    use hal_sim::planar_raibert::{Push, SpeedProfile, Thrust};
+/// What `plan` and `cfg` run on the machine (the design's, or `robot`'s
+/// file): the command, the pushes and the leg's drive its flags name;
+/// one clear error for a bad one.
+fn raibert_setup(
+    robot: Option<&std::path::Path>,
+    plan: &RaibertPlan<'_>,
+    cfg: hopper_control::planar::raibert::RaibertConfig,
+) -> Result<hal_sim::planar_raibert::PlanarRunSpec> {
+    use hal_sim::planar_raibert::{PlanarRunSpec, Push, SpeedProfile, Thrust};
     use hopper_control::laws::ControllerKind;
     let thrust = match hopper_sil::planar::thrust_named(plan.thrust) {
         Ok(None) => Thrust::Force,
@@ -480,12 +475,13 @@ fn raibert_setup(robot: Option<&std::path::Path>, plan: &RaibertPlan<'_>) -> Res
         .map(|i| Push::parse(i))
         .collect::<std::result::Result<Vec<_>, _>>()
         .map_err(anyhow::Error::msg)?;
-    Ok(Raibert {
-        machine,
-        profile,
+    let spec = PlanarRunSpec {
         pushes,
         thrust,
-    })
+        ..PlanarRunSpec::new(machine, profile, plan.duration, cfg)
+    };
+    spec.check().map_err(anyhow::Error::msg)?;
+    Ok(spec)
 }
 
 /// Raibert's controller for `planar run` and `planar serve`, from
@@ -516,19 +512,12 @@ fn cmd_planar_raibert(
     json: bool,
 ) -> Result<()> {
     use hal_sim::planar_raibert as pr;
-    let duration = plan.duration;
     let kc = f64::from(cfg.stabiliser_gain_ns_per_m);
-    let Raibert {
-        machine,
-        profile,
-        pushes,
-        thrust,
-    } = raibert_setup(robot, plan)?;
-    let machine = &machine;
-    let r = pr::simulate_with(machine, &profile, &pushes, duration, cfg, thrust)
-        .map_err(anyhow::Error::msg)?;
+    let spec = raibert_setup(robot, plan, cfg)?;
+    let r = spec.simulate().map_err(anyhow::Error::msg)?;
+    let (machine, profile) = (&spec.machine, &spec.profile);
     let written = match out {
-        Some(dir) => pr::write_run(dir, &r, &profile).map_err(anyhow::Error::msg)?,
+        Some(dir) => pr::write_run(dir, &r, profile).map_err(anyhow::Error::msg)?,
         None => Vec::new(),
     };
     if json {
@@ -660,27 +649,8 @@ pub(crate) fn cmd_planar(cmd: &PlanarCmd) -> Result<()> {
                 duration: *duration,
                 thrust,
             };
-            let Raibert {
-                machine,
-                profile,
-                pushes,
-                thrust,
-            } = raibert_setup(robot.as_deref(), &plan)?;
-            if !(duration.is_finite() && *duration > 0.0 && *duration <= 600.0) {
-                bail!("--duration {duration} must be in (0, 600] s");
-            }
-            crate::planar_serve::serve(
-                http,
-                *time_scale,
-                crate::planar_serve::LiveRun {
-                    machine,
-                    profile,
-                    pushes,
-                    duration_s: *duration,
-                    cfg,
-                    thrust,
-                },
-            )?;
+            let spec = raibert_setup(robot.as_deref(), &plan, cfg)?;
+            crate::planar_serve::serve(http, *time_scale, spec)?;
         }
         PlanarCmd::Run {
             speed,

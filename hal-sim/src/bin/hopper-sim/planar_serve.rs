@@ -12,9 +12,7 @@ use axum::http::{header, Uri};
 use axum::response::{Html, IntoResponse};
 use axum::routing::get;
 use axum::Router;
-use hal_sim::planar_raibert::{self as pr, Push, SpeedProfile, Stride, Thrust};
-use hopper_control::planar::raibert::RaibertConfig;
-use hopper_sil::planar::PlanarMachine;
+use hal_sim::planar_raibert::{self as pr, PlanarRunSpec, Stride};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
@@ -32,19 +30,9 @@ struct Live {
     done: Option<String>,
 }
 
-/// What runs: the machine, its command and pushes, the law.
-pub(crate) struct LiveRun {
-    pub(crate) machine: PlanarMachine,
-    pub(crate) profile: SpeedProfile,
-    pub(crate) pushes: Vec<Push>,
-    pub(crate) duration_s: f64,
-    pub(crate) cfg: RaibertConfig,
-    pub(crate) thrust: Thrust,
-}
-
 /// Serves the page on `addr` and runs `run` at `time_scale` times real
 /// time; serves on after the run ends, until stopped.
-pub(crate) fn serve(addr: &str, time_scale: f64, run: LiveRun) -> Result<()> {
+pub(crate) fn serve(addr: &str, time_scale: f64, run: PlanarRunSpec) -> Result<()> {
     if !(time_scale.is_finite() && (0.01..=100.0).contains(&time_scale)) {
         bail!("--time-scale {time_scale} must be within 0.01 ..= 100");
     }
@@ -74,46 +62,31 @@ pub(crate) fn serve(addr: &str, time_scale: f64, run: LiveRun) -> Result<()> {
 
 /// Runs the machine, each frame shown when the wall clock reaches its
 /// time (over `time_scale`).
-fn simulate(run: LiveRun, time_scale: f64, live: &Mutex<Live>) {
-    let LiveRun {
-        machine,
-        profile,
-        pushes,
-        duration_s,
-        cfg,
-        thrust,
-    } = run;
+fn simulate(run: PlanarRunSpec, time_scale: f64, live: &Mutex<Live>) {
     let started = Instant::now();
     let (mut frames, mut strides) = (0, 0);
-    let r = pr::simulate_each(
-        &machine,
-        &profile,
-        &pushes,
-        duration_s,
-        cfg,
-        thrust,
-        &mut |p| {
-            if p.frames.len() == frames && p.strides.len() == strides {
-                return;
+    let profile = &run.profile;
+    let r = run.simulate_each(&mut |p| {
+        if p.frames.len() == frames && p.strides.len() == strides {
+            return;
+        }
+        if let Ok(mut l) = live.lock() {
+            for f in &p.frames[frames..] {
+                let drawn = pr::frame_json(f);
+                l.frames.push(format!(
+                    "{},{:.3}]",
+                    drawn.trim_end_matches(']'),
+                    profile.at(f[0])
+                ));
             }
-            if let Ok(mut l) = live.lock() {
-                for f in &p.frames[frames..] {
-                    let drawn = pr::frame_json(f);
-                    l.frames.push(format!(
-                        "{},{:.3}]",
-                        drawn.trim_end_matches(']'),
-                        profile.at(f[0])
-                    ));
-                }
-                l.strides.extend_from_slice(&p.strides[strides..]);
-            }
-            (frames, strides) = (p.frames.len(), p.strides.len());
-            let due = Duration::from_secs_f64(p.t_s / time_scale);
-            if let Some(wait) = due.checked_sub(started.elapsed()) {
-                std::thread::sleep(wait);
-            }
-        },
-    );
+            l.strides.extend_from_slice(&p.strides[strides..]);
+        }
+        (frames, strides) = (p.frames.len(), p.strides.len());
+        let due = Duration::from_secs_f64(p.t_s / time_scale);
+        if let Some(wait) = due.checked_sub(started.elapsed()) {
+            std::thread::sleep(wait);
+        }
+    });
     let done = match r {
         Ok(r) => match (&r.stopped_by, r.fell_at_s) {
             (Some(f), _) => format!("stopped at {:.2} s by the guard: {f}", r.duration_s),
