@@ -100,7 +100,7 @@ pub fn start(root: &Path) -> Result<Ahead, String> {
         SCENARIOS.iter().map(|s| scenario_image(root, s)).collect();
     Ok(Ahead(std::thread::spawn(move || {
         let planar = planar.and_then(|(cfg, elf)| {
-            let ran = run_qemu(&elf, 0)?;
+            let ran = run_planar(&elf)?;
             Ok((cfg, elf, ran))
         });
         let scenarios = images
@@ -119,11 +119,10 @@ pub fn start(root: &Path) -> Result<Ahead, String> {
 }
 
 /// The link sessions and the board's init on QEMU, then the reports of
-/// the runs `ahead` started (waited for first: nothing else runs on QEMU
-/// while a session's host keeps its wall-clock timeouts).
+/// the runs `ahead` started (waited for first: no two QEMU runs share the
+/// machine). flip-link and QEMU were checked by [`start`], the only way
+/// to an [`Ahead`].
 pub fn run(root: &Path, ahead: Ahead) -> Result<(), String> {
-    crate::ensure_flip_link(root)?;
-    ensure_qemu()?;
     // `hopper-link` for the link session, `hopper-sim` for the golden
     // checks: one workspace test build for both.
     let (link, sim) = match crate::session::host_binaries(root) {
@@ -346,7 +345,7 @@ fn report_scenario(
     }
     // The step in cycles: the traced window between the two clock
     // readings around it.
-    let cycles_txt = match step_cycles(scenario, traced, (imean, imax)) {
+    let cycles_txt = match step_cycles(scenario.label, traced, (imean, imax)) {
         Ok(c) => c.to_string(),
         Err(e) => {
             problems.push(format!("cycle estimate: {e}"));
@@ -401,7 +400,7 @@ pub fn planar(root: &Path) -> Result<(), String> {
     ensure_qemu()?;
     let (_, sim) = crate::session::host_binaries(root)?;
     let (cfg, elf) = planar_image(root)?;
-    let ran = run_qemu(&elf, 0)?;
+    let ran = run_planar(&elf)?;
     report_planar(&cfg, &elf, &sim, ran)
 }
 
@@ -457,7 +456,12 @@ fn planar_image(root: &Path) -> Result<(PlanarScenario, PathBuf), String> {
 /// step_instr_mean=.. step_instr_max=.. missed=N`.
 fn report_planar(cfg: &PlanarScenario, elf: &Path, sim: &Path, ran: Ran) -> Result<(), String> {
     ran.print_notes();
-    let (bytes, status) = (ran.bytes, ran.ok);
+    let Ran {
+        bytes,
+        ok: status,
+        traced,
+        ..
+    } = ran;
     let lines = decode(elf, &bytes)?;
     for l in lines.iter().filter(|l| !l.starts_with("stride ")) {
         println!("qemu-planar| {l}");
@@ -547,8 +551,17 @@ fn report_planar(cfg: &PlanarScenario, elf: &Path, sim: &Path, ran: Ran) -> Resu
             "control step mean {imean} instructions exceeds the budget {STEP_MEAN_BUDGET}"
         ));
     }
+    // The period in cycles: the traced window between the two clock
+    // readings around it.
+    let cycles_txt = match step_cycles("qemu-planar", traced, (imean, imax)) {
+        Ok(c) => c.to_string(),
+        Err(e) => {
+            problems.push(format!("cycle estimate: {e}"));
+            "-".to_string()
+        }
+    };
     println!(
-        "qemu-planar: strides={} golden_max_diff={diff:.2e} step_instr_min={imin} step_instr_mean={imean} step_instr_max={imax} missed={missed}",
+        "qemu-planar: strides={} golden_max_diff={diff:.2e} step_instr_min={imin} step_instr_mean={imean} step_instr_max={imax} missed={missed} step_cycles_est_max={cycles_txt}",
         qemu.len()
     );
     if problems.is_empty() {
@@ -566,7 +579,7 @@ fn report_planar(cfg: &PlanarScenario, elf: &Path, sim: &Path, ran: Ran) -> Resu
 /// the run's own step `(mean, max)` plus the reading's overhead), its
 /// largest.
 fn step_cycles(
-    scenario: &Scenario,
+    label: &str,
     traced: Option<crate::cycles::Reader>,
     (mean, max): (u64, u64),
 ) -> Result<u64, String> {
@@ -574,7 +587,7 @@ fn step_cycles(
     let s = traced.segment_like(mean as f64, max)?;
     eprintln!(
         "xtask: {}: the step traced over {} periods: the window's instructions mean {:.1} max {} (the step's {mean}/{max} plus the reading's), cycles max {} ({:.2} a instruction), {} with every 16-byte flash line a miss once (5 wait states)",
-        scenario.label,
+        label,
         s.count,
         s.mean_instructions(),
         s.max_instructions,
@@ -722,6 +735,13 @@ impl Ran {
             eprintln!("xtask: {n}");
         }
     }
+}
+
+/// Runs the planar image, traced: its period weighed in cycles as the
+/// vertical scenarios' step is.
+fn run_planar(elf: &Path) -> Result<Ran, String> {
+    let trace = crate::cycles::marks_for(elf, "SysTick")?;
+    run_qemu_traced(elf, 0, Some(trace))
 }
 
 /// Runs the image with `-icount shift=SHIFT`.

@@ -19,12 +19,13 @@
 
 use hopper_control::laws::{ControllerKind, Strategy};
 use hopper_control::model::ModelParams;
-use hopper_control::planar::estimator::{PlanarEstimator, PlanarEstimatorConfig, PlanarReadings};
-use hopper_control::planar::guard::{Guard, GuardConfig, PlanarFault};
-use hopper_control::planar::raibert::{Raibert, RaibertConfig};
+use hopper_control::planar::estimator::PlanarReadings;
+use hopper_control::planar::guard::PlanarFault;
+pub use hopper_control::planar::period::ForceLeg;
+use hopper_control::planar::period::{LegDrive, PlanarPeriod};
+use hopper_control::planar::raibert::RaibertConfig;
 use hopper_control::planar::thrust::ScrewThrust;
-use hopper_control::planar::{limited_current_a, HipDrive, PlanarCommand, PlanarEstimate};
-use hopper_control::thermal::{MotorThermal, ThermalConfig};
+use hopper_control::planar::{HipDrive, PlanarCommand, PlanarEstimate};
 use hopper_plant::planar::{ApexState, PlanarError, PlanarEvent, PlanarState};
 use hopper_plant::planar_general::{Actuation, GeneralParams, GeneralRunner};
 use hopper_plant::planar_screw::{LegScrew, Nut};
@@ -179,50 +180,23 @@ impl PlanarSensors {
     }
 }
 
-/// The plant and the controller, their leg driven as `L` says.
+/// The plant and the firmware's planar period, their leg driven as `L`
+/// says.
 #[derive(Clone, Debug)]
 pub struct PlanarLoop<L: LegLaw = ForceLeg> {
-    /// All but what drives the leg.
-    core: Core,
-    /// What drives the leg.
-    leg: L,
-}
-
-/// A planar loop but for what drives its leg. In this order, the period's
-/// fields first: the Cortex-M4's floating-point loads and stores reach
-/// 1,020 bytes from a base.
-#[derive(Clone, Debug)]
-#[repr(C)]
-struct Core {
-    /// The controller.
-    controller: Raibert,
-    /// The pitch, leg-angle and fall limits over its command.
-    guard: Guard,
-    /// The estimator.
-    estimator: PlanarEstimator,
-    /// The hip's drive: torque to current, within the amplifier's limit.
-    hip: HipDrive,
-    /// The hip motor's winding temperature, as the firmware estimates it
-    /// (the leg motor's model and data: derated, then off, when hot).
-    hip_thermal: MotorThermal,
-    /// The leg motor's, when the leg is driven through its screw (the same
-    /// model and data: derated, then off, when hot).
-    leg_thermal: MotorThermal,
+    /// The firmware's period.
+    period: PlanarPeriod<L>,
     /// The hip's copper loss so far, by the plant's winding, J.
     hip_copper_loss_j: f64,
     /// The hip motor's winding resistance, ohm.
     hip_winding_ohm: f64,
     /// The largest hip current so far, A.
     hip_peak_current_a: f32,
-    /// The hip current commanded this period, A.
-    hip_current_a: f32,
     /// The sensors.
     sensors: PlanarSensors,
     plant: GeneralRunner,
     /// The leg's nut, when the leg is driven through its screw.
     nut: Nut,
-    /// This period's readings.
-    readings: PlanarReadings,
     /// The largest leg-motor current so far, A.
     leg_peak_current_a: f32,
     /// The leg's model, as the vertical laws read it.
@@ -241,35 +215,15 @@ pub fn thrust_named(name: &str) -> Result<Option<Strategy>, PlanarError> {
     Ok(Some(ScrewThrust::planar_strategy(kind)))
 }
 
-/// What drives a planar loop's leg.
-pub trait LegLaw: Clone + core::fmt::Debug {
-    /// Whether the leg is driven through its ball screw (the loop keeps
-    /// the readings and runs the nut), or by the controller's force.
-    const SCREW: bool;
-
-    /// The leg motor's current this period for `est` and the readings
-    /// `r`, A (0 for a leg driven by force); `faulted` when the guard has
-    /// latched.
-    fn leg_current_a(&mut self, est: &PlanarEstimate, r: &PlanarReadings, faulted: bool) -> f32;
-
+/// What drives a planar loop's leg, by the name a run gives it.
+pub trait LegLaw: LegDrive {
     /// The loop `lp` with its leg driven as `thrust` names it (`force`,
     /// or a vertical law's name for the screw), where that is this law;
     /// else refused.
     fn drive(lp: PlanarLoop<ForceLeg>, thrust: &str) -> Result<PlanarLoop<Self>, PlanarError>;
 }
 
-/// The leg driven by the controller's force along it.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct ForceLeg;
-
 impl LegLaw for ForceLeg {
-    const SCREW: bool = false;
-
-    #[inline(always)]
-    fn leg_current_a(&mut self, _: &PlanarEstimate, _: &PlanarReadings, _: bool) -> f32 {
-        0.0
-    }
-
     fn drive(lp: PlanarLoop<ForceLeg>, thrust: &str) -> Result<PlanarLoop<Self>, PlanarError> {
         match thrust_named(thrust)? {
             None => Ok(lp),
@@ -279,12 +233,6 @@ impl LegLaw for ForceLeg {
 }
 
 impl LegLaw for ScrewThrust {
-    const SCREW: bool = true;
-
-    fn leg_current_a(&mut self, est: &PlanarEstimate, r: &PlanarReadings, faulted: bool) -> f32 {
-        self.current_a(est, r.leg_length_m, r.leg_motor_rad, faulted, DT_S as f32)
-    }
-
     fn drive(lp: PlanarLoop<ForceLeg>, thrust: &str) -> Result<PlanarLoop<Self>, PlanarError> {
         match thrust_named(thrust)? {
             Some(strategy) => lp.with_screw(&strategy),
@@ -307,16 +255,10 @@ impl PlanarLoop {
     /// torque limit at most the hip drive's).
     pub fn of(m: &PlanarMachine, cfg: RaibertConfig, speed_mps: f64) -> Result<Self, PlanarError> {
         m.validate()?;
-        cfg.validate().map_err(|e| PlanarError::OutOfRange(e.0))?;
         let p = m.params;
-        let cfg = RaibertConfig {
-            leg_length_m: p.leg_length_m as f32,
-            max_hip_torque_nm: cfg.max_hip_torque_nm.min(m.hip.torque_limit_nm()),
-            ..cfg
-        };
-        let controller = Raibert::new(cfg).map_err(|e| PlanarError::OutOfRange(e.0))?;
-        let guard =
-            Guard::new(GuardConfig::table_2_2()).map_err(|e| PlanarError::OutOfRange(e.0))?;
+        let period =
+            PlanarPeriod::new(cfg, p.leg_length_m as f32, m.hip, m.sensors.boom_x_m == 0.0)
+                .map_err(|e| PlanarError::OutOfRange(e.0))?;
         let start = ApexState {
             z_m: p.leg_length_m + f64::from(cfg.target_apex_m),
             x_dot_mps: speed_mps,
@@ -325,34 +267,16 @@ impl PlanarLoop {
             phi_dot_rad_s: 0.0,
             theta_dot_rad_s: 0.0,
         };
-        let estimator = PlanarEstimator::new(PlanarEstimatorConfig {
-            leg_length_m: p.leg_length_m as f32,
-            speed_from_leg: m.sensors.boom_x_m == 0.0,
-            ..PlanarEstimatorConfig::table_2_2()
-        })
-        .map_err(|e| PlanarError::OutOfRange(e.0))?;
-        let hip_thermal = MotorThermal::new(ThermalConfig::default())
-            .map_err(|e| PlanarError::OutOfRange(e.0))?;
         Ok(PlanarLoop {
-            core: Core {
-                plant: GeneralRunner::from_apex(p, &start)?,
-                controller,
-                guard,
-                sensors: m.sensors,
-                estimator,
-                hip: m.hip,
-                hip_thermal,
-                leg_thermal: hip_thermal,
-                hip_copper_loss_j: 0.0,
-                hip_winding_ohm: m.hip_winding_ohm,
-                hip_peak_current_a: 0.0,
-                hip_current_a: 0.0,
-                nut: Nut::new(m.leg)?,
-                leg_model: m.leg_model(),
-                readings: PlanarReadings::default(),
-                leg_peak_current_a: 0.0,
-            },
-            leg: ForceLeg,
+            period,
+            plant: GeneralRunner::from_apex(p, &start)?,
+            sensors: m.sensors,
+            hip_copper_loss_j: 0.0,
+            hip_winding_ohm: m.hip_winding_ohm,
+            hip_peak_current_a: 0.0,
+            nut: Nut::new(m.leg)?,
+            leg_model: m.leg_model(),
+            leg_peak_current_a: 0.0,
         })
     }
 
@@ -360,13 +284,20 @@ impl PlanarLoop {
     /// screw, run by the vertical law `strategy` holding the controller's
     /// apex target (the controller's own thrust unused).
     pub fn with_screw(self, strategy: &Strategy) -> Result<PlanarLoop<ScrewThrust>, PlanarError> {
-        let target = self.core.controller.config().target_apex_m;
-        let gain = self.core.estimator.config().rate_filter_gain;
-        let leg = ScrewThrust::new(strategy, &self.core.leg_model, target, gain)
+        let period = self
+            .period
+            .with_screw(strategy, &self.leg_model)
             .map_err(|e| PlanarError::OutOfRange(e.0))?;
         Ok(PlanarLoop {
-            core: self.core,
-            leg,
+            period,
+            hip_copper_loss_j: self.hip_copper_loss_j,
+            hip_winding_ohm: self.hip_winding_ohm,
+            hip_peak_current_a: self.hip_peak_current_a,
+            sensors: self.sensors,
+            plant: self.plant,
+            nut: self.nut,
+            leg_peak_current_a: self.leg_peak_current_a,
+            leg_model: self.leg_model,
         })
     }
 }
@@ -374,44 +305,45 @@ impl PlanarLoop {
 impl PlanarLoop<ScrewThrust> {
     /// The vertical law driving the leg's screw.
     pub fn screw(&self) -> &ScrewThrust {
-        &self.leg
+        self.period.leg()
     }
 }
 
 impl<L: LegLaw> PlanarLoop<L> {
+    /// The firmware's period (what a control interrupt runs).
+    pub fn period_mut(&mut self) -> &mut PlanarPeriod<L> {
+        &mut self.period
+    }
+
     /// The leg's nut.
     pub fn nut(&self) -> &Nut {
-        &self.core.nut
+        &self.nut
     }
 
     /// The largest leg-motor current so far, A.
     pub fn leg_peak_current_a(&self) -> f32 {
-        self.core.leg_peak_current_a
+        self.leg_peak_current_a
     }
 
     /// The plant's state.
     pub fn state(&self) -> PlanarState {
-        self.core.plant.state()
+        self.plant.state()
     }
 
     /// The machine's parameters.
     pub fn params(&self) -> &GeneralParams {
-        self.core.plant.params()
+        self.plant.params()
     }
 
     /// What the sensors read of the plant this period.
     pub fn sense(&self) -> PlanarReadings {
-        self.core
-            .sensors
-            .read(&self.core.plant.state(), self.core.nut.motor_angle_rad())
+        self.sensors
+            .read(&self.plant.state(), self.nut.motor_angle_rad())
     }
 
     /// The estimator's period: the estimate from this period's readings.
     pub fn estimate_from(&mut self, r: &PlanarReadings) -> PlanarEstimate {
-        if L::SCREW {
-            self.core.readings = *r;
-        }
-        self.core.estimator.update(r, DT_S as f32)
+        self.period.estimate_from(r, DT_S as f32)
     }
 
     /// What the controller reads this period: the sensors' readings of
@@ -421,91 +353,42 @@ impl<L: LegLaw> PlanarLoop<L> {
         self.estimate_from(&r)
     }
 
-    /// The controller's period: its command for `est` at the commanded
-    /// speed, through the guard (zero on both actuators once a limit
-    /// latched), the hip's torque as the current its amplifier is told to
-    /// drive gives it (within the current limit, derated when the winding
-    /// is hot).
+    /// The controller's period ([`PlanarPeriod::control`]) at the
+    /// commanded speed.
     pub fn control(&mut self, est: &PlanarEstimate, speed_command_mps: f64) -> PlanarCommand {
-        let mut cmd = self
-            .core
-            .controller
-            .step(est, speed_command_mps as f32, DT_S as f32);
-        if L::SCREW {
-            // The leg motor's encoder is read here, not by the estimator:
-            // a reading that is not a number stops the machine; so does
-            // its winding at the trip temperature.
-            if !self.core.readings.leg_motor_rad.is_finite() {
-                self.core.guard.latch(PlanarFault::NonFinite);
-            }
-            if self.core.leg_thermal.tripped() {
-                self.core.guard.latch(PlanarFault::LegOvertemperature);
-            }
-            let faulted = self.core.guard.fault().is_some();
-            cmd.leg_current_a = self.leg.leg_current_a(est, &self.core.readings, faulted);
-            cmd.leg_thrust_n = 0.0;
-        }
-        // A winding at its trip temperature stops the machine, as the leg
-        // motor's stops the vertical hopper.
-        if self.core.hip_thermal.tripped() {
-            self.core.guard.latch(PlanarFault::HipOvertemperature);
-        }
-        let cmd = self.core.guard.filter(est, cmd);
-        let current_a = self
-            .core
-            .hip
-            .current_a(cmd.hip_torque_nm, self.core.hip_thermal.limit_scale());
-        self.core.hip_thermal.add(current_a, DT_S as f32);
-        self.core.hip_current_a = current_a;
-        let leg_current_a = if L::SCREW {
-            // Within the amplifier's limit, derated when the winding is
-            // hot (the vertical hopper's leg motor's model).
-            let i = limited_current_a(
-                cmd.leg_current_a,
-                self.core.leg_model.current_limit_a,
-                self.core.leg_thermal.limit_scale(),
-            );
-            self.core.leg_thermal.add(i, DT_S as f32);
-            i
-        } else {
-            0.0
-        };
-        PlanarCommand {
-            hip_torque_nm: current_a * self.core.hip.torque_per_amp_nm_per_a,
-            leg_current_a,
-            ..cmd
-        }
+        self.period
+            .control(est, speed_command_mps as f32, DT_S as f32)
     }
 
     /// The leg motor's winding temperature as the firmware estimates it,
     /// C (a leg driven through its screw).
     pub fn leg_winding_c(&self) -> f32 {
-        self.core.leg_thermal.winding_c()
+        self.period.leg_winding_c()
     }
 
     /// The hip motor's winding temperature as the firmware estimates it, C.
     pub fn hip_winding_c(&self) -> f32 {
-        self.core.hip_thermal.winding_c()
+        self.period.hip_winding_c()
     }
 
     /// The hip's copper loss so far, J.
     pub fn hip_copper_loss_j(&self) -> f64 {
-        self.core.hip_copper_loss_j
+        self.hip_copper_loss_j
     }
 
     /// The hip current commanded this period, A.
     pub fn hip_current_a(&self) -> f32 {
-        self.core.hip_current_a
+        self.period.hip_current_a()
     }
 
     /// The largest hip current so far, A.
     pub fn hip_peak_current_a(&self) -> f32 {
-        self.core.hip_peak_current_a
+        self.hip_peak_current_a
     }
 
     /// What the guard latched, if anything.
     pub fn fault(&self) -> Option<PlanarFault> {
-        self.core.guard.fault()
+        self.period.fault()
     }
 
     /// Applies `cmd` (and a push on the body of `push_n`) and integrates
@@ -520,33 +403,30 @@ impl<L: LegLaw> PlanarLoop<L> {
         // within its own limit; its winding turns it to heat.
         // (The plant's amplifier limits it as the firmware does: the same
         // drive, at the full limit.)
-        let per_amp = f64::from(self.core.hip.torque_per_amp_nm_per_a);
-        let current_a = f64::from(self.core.hip.current_a(cmd.hip_torque_nm, 1.0));
-        self.core.hip_peak_current_a = self
-            .core
-            .hip_peak_current_a
-            .max(libm::fabs(current_a) as f32);
-        self.core.hip_copper_loss_j += current_a * current_a * self.core.hip_winding_ohm * DT_S;
+        let per_amp = f64::from(self.period.hip().torque_per_amp_nm_per_a);
+        let current_a = f64::from(self.period.hip().current_a(cmd.hip_torque_nm, 1.0));
+        self.hip_peak_current_a = self.hip_peak_current_a.max(libm::fabs(current_a) as f32);
+        self.hip_copper_loss_j += current_a * current_a * self.hip_winding_ohm * DT_S;
         let leg_thrust_n = if L::SCREW {
             // The nut against the spring: its compression is the leg's
             // and the nut's (the lower leg on its stop in flight).
-            let st = self.core.plant.state();
-            let p = self.core.plant.params();
+            let st = self.plant.state();
+            let p = self.plant.params();
             let k = p.leg_stiffness_n_per_m;
             let compression_m = p.leg_length_m - st.leg_length_m;
-            let i = self.core.nut.amplifier_a(f64::from(cmd.leg_current_a));
-            self.core.leg_peak_current_a = self.core.leg_peak_current_a.max(libm::fabs(i) as f32);
-            let spring_n = k * (compression_m + self.core.nut.position_m());
-            self.core.nut.step(DT_S, i, spring_n, 0.0);
-            self.core.nut.thrust_n(k)
+            let i = self.nut.amplifier_a(f64::from(cmd.leg_current_a));
+            self.leg_peak_current_a = self.leg_peak_current_a.max(libm::fabs(i) as f32);
+            let spring_n = k * (compression_m + self.nut.position_m());
+            self.nut.step(DT_S, i, spring_n, 0.0);
+            self.nut.thrust_n(k)
         } else {
             f64::from(cmd.leg_thrust_n)
         };
-        self.core.plant.set_actuation(Actuation {
+        self.plant.set_actuation(Actuation {
             hip_torque_nm: current_a * per_amp,
             leg_thrust_n,
             push_n,
         });
-        self.core.plant.step(DT_S, on_event);
+        self.plant.step(DT_S, on_event);
     }
 }

@@ -7,6 +7,7 @@
 
 pub mod estimator;
 pub mod guard;
+pub mod period;
 pub mod raibert;
 pub mod thrust;
 

@@ -313,12 +313,12 @@ impl ScrewThrust {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
     /// Table 2.2's leg (16.3 kg, 0.3 of it at the toe, on 40,425 N/m)
     /// and the design's planar leg drive.
-    fn model() -> ModelParams {
+    pub(crate) fn model() -> ModelParams {
         use crate::model::design as d;
         let scale = d::PLANAR_LEG_MOTOR_SCALE as f32;
         let m = ModelParams::default();
