@@ -4,10 +4,12 @@
 //! --controller raibert` and the QEMU planar image both run this, so the
 //! golden check compares the same computation on two instruction sets.
 //!
-//! The controller reads what a boom-mounted machine's sensors measure
-//! ([`PlanarSensors`]: the plant's state quantised to each encoder's and
-//! the potentiometer's resolution) through the control crate's planar
-//! estimator, and its command holds over the period.
+//! The firmware's side is the control crate's planar period
+//! ([`PlanarPeriod`]: the estimator, the controller, the leg's drive, the
+//! guard and both windings); this module is the world's: it reads what a
+//! boom-mounted machine's sensors measure ([`PlanarSensors`]: the plant's
+//! state quantised to each encoder's and the potentiometer's resolution),
+//! and the period's command holds over the period.
 //!
 //! The leg is driven one of two ways: by a force along it in stance (the
 //! controller's own thrust, [`PlanarLoop::of`]), or as on the vertical
