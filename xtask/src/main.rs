@@ -42,7 +42,8 @@
 //!   `fault-test-feather: ...`; then the planar machine's controller on
 //!   its image against the host's run of the same loop: `qemu-planar:
 //!   strides=N golden_max_diff=D step_instr_min=.. step_instr_mean=..
-//!   step_instr_max=.. missed=0` (`cargo xtask qemu-planar` alone).
+//!   step_instr_max=.. missed=0 step_cycles_est_max=-` (untraced; `cargo
+//!   xtask qemu-planar` runs it alone, traced, the period in cycles).
 //! * `cargo xtask board-init`: the board image's init check alone.
 //! * `cargo xtask hil [--serial PORT]`: the hardware-in-the-loop image
 //!   (`hopper-hil`) on QEMU (or a board on PORT) against `hopper-sim run
@@ -53,7 +54,8 @@
 //! * `cargo xtask docs`: every `console` example in README.md and docs/
 //!   run and compared with the output the doc shows, and the figures they
 //!   regenerate compared with the committed ones ([`docs`]): `docs: N
-//!   commands checked, M stale` (`cargo xtask test` runs it after clippy;
+//!   commands checked, M stale` (`cargo xtask test` runs it after the
+//!   cockpit, its release simulator built beside the link sessions;
 //!   `cargo xtask docs FILE.md...` checks only those files).
 //! * `cargo xtask bring-up-page`: the book's bring-up page followed as
 //!   written against the virtual robot it starts ([`bringup_page`]):

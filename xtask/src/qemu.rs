@@ -455,7 +455,8 @@ fn planar_image(root: &Path) -> Result<(PlanarScenario, PathBuf), String> {
 /// against the host's run of the same loop (`hopper-sim planar run
 /// --controller raibert`), its step within the vertical laws' budgets.
 /// Prints `qemu-planar: strides=N golden_max_diff=D step_instr_min=..
-/// step_instr_mean=.. step_instr_max=.. missed=N`.
+/// step_instr_mean=.. step_instr_max=.. missed=N step_cycles_est_max=C`
+/// (C: the period's cycles when `ran` was traced, else `-`).
 fn report_planar(cfg: &PlanarScenario, elf: &Path, sim: &Path, ran: Ran) -> Result<(), String> {
     ran.print_notes();
     let Ran {
