@@ -144,6 +144,15 @@ fn a_bad_time_scale_or_address_is_refused_naming_it() {
             &["--http", "127.0.0.1:0", "--duration", "700"][..],
             "--duration",
         ),
+        (&["--tcp", "nowhere"][..], "--tcp"),
+        (
+            &["--tcp", "127.0.0.1:0", "--inject", "push@1:20"][..],
+            "--inject",
+        ),
+        (
+            &["--tcp", "127.0.0.1:0", "--time-scale", "0"][..],
+            "--time-scale",
+        ),
     ] {
         let o = Command::new(env!("CARGO_BIN_EXE_hopper-sim"))
             .args(["planar", "serve"])
@@ -154,4 +163,137 @@ fn a_bad_time_scale_or_address_is_refused_naming_it() {
         let err = String::from_utf8_lossy(&o.stderr);
         assert!(err.contains(flag), "{args:?}: {err}");
     }
+}
+
+/// A host on the link to `hopper-sim planar serve --tcp`: frames out,
+/// messages in.
+struct Host {
+    s: TcpStream,
+    rx: hopper_protocol::Decoder,
+    next_id: u16,
+}
+
+impl Host {
+    fn send(&mut self, m: &hopper_protocol::HostMsg) {
+        let mut f = [0u8; hopper_protocol::MAX_FRAME];
+        let n = hopper_protocol::encode(m, &mut f).unwrap();
+        self.s.write_all(&f[..n]).unwrap();
+    }
+
+    /// What came within `wait` (a heartbeat every 20 ms meanwhile, when
+    /// `beat`).
+    fn read(&mut self, wait: Duration, beat: bool) -> Vec<hopper_protocol::RobotMsg> {
+        let end = Instant::now() + wait;
+        let mut got = Vec::new();
+        let mut buf = [0u8; 4096];
+        while Instant::now() < end {
+            if beat {
+                self.send(&hopper_protocol::HostMsg::Heartbeat);
+            }
+            if let Ok(n) = self.s.read(&mut buf) {
+                got.extend(buf[..n].iter().filter_map(|&b| self.rx.push(b)));
+            }
+        }
+        got
+    }
+
+    /// The robot's answer to `req`.
+    fn ask(&mut self, req: hopper_protocol::Request) -> hopper_protocol::Response {
+        self.next_id += 1;
+        let id = self.next_id;
+        self.send(&hopper_protocol::HostMsg::Request { id, req });
+        let end = Instant::now() + Duration::from_secs(5);
+        while Instant::now() < end {
+            for m in self.read(Duration::from_millis(20), true) {
+                if let hopper_protocol::RobotMsg::Response { id: i, resp } = m {
+                    if i == id {
+                        return resp;
+                    }
+                }
+            }
+        }
+        panic!("no answer to request {id}");
+    }
+}
+
+fn planar(msgs: &[hopper_protocol::RobotMsg]) -> Vec<hopper_protocol::PlanarTelemetry> {
+    msgs.iter()
+        .filter_map(|m| match m {
+            hopper_protocol::RobotMsg::Planar(t) => Some(*t),
+            _ => None,
+        })
+        .collect()
+}
+
+/// The machine behind the link is disarmed and held on the boom at
+/// first (both amplifiers at 0 A, the hip still); armed, it is let go and
+/// hops (stance and flight, the hip at many heights); when the host goes
+/// quiet it disarms for a lost link and both amplifiers get 0 A. What it
+/// has not is refused by name.
+#[test]
+fn the_planar_robot_on_the_link_moves_only_while_armed() {
+    use hopper_protocol::vocab::Refusal;
+    use hopper_protocol::{ArmState, HostMsg, Request, Response, RobotMsg};
+    let mut child = Command::new(env!("CARGO_BIN_EXE_hopper-sim"))
+        .args(["planar", "serve", "--tcp", "127.0.0.1:0"])
+        .args(["--speed-profile", "0:0.5", "--duration", "60"])
+        .stdout(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut line = String::new();
+    BufReader::new(child.stdout.take().unwrap())
+        .read_line(&mut line)
+        .unwrap();
+    let _served = Served(child);
+    let addr = line
+        .split("listening on ")
+        .nth(1)
+        .and_then(|r| r.split_whitespace().next())
+        .unwrap_or_else(|| panic!("no address in {line:?}"))
+        .to_string();
+    let s = TcpStream::connect(&addr).unwrap();
+    s.set_read_timeout(Some(Duration::from_millis(5))).unwrap();
+    let mut h = Host {
+        s,
+        rx: hopper_protocol::Decoder::new(),
+        next_id: 0,
+    };
+    h.send(&HostMsg::Hello {
+        version: hopper_protocol::PROTOCOL_VERSION,
+    });
+    assert!(h
+        .read(Duration::from_millis(300), false)
+        .contains(&RobotMsg::Hello {
+            version: hopper_protocol::PROTOCOL_VERSION
+        }));
+    assert_eq!(
+        h.ask(Request::Dump),
+        Response::Refused(Refusal::NotThisMachine.into())
+    );
+    // Held, disarmed: a record every 10 ms.
+    assert_eq!(h.ask(Request::Telemetry { every: 100 }), Response::Ok);
+    let held = planar(&h.read(Duration::from_millis(500), true));
+    assert!(held.len() >= 20, "{} records", held.len());
+    assert!(held.iter().all(|t| !t.armed
+        && t.hip_current_a == 0.0
+        && t.leg_current_a == 0.0
+        && t.z_m == held[0].z_m
+        && !t.stance));
+    assert_eq!(h.ask(Request::Arm), Response::Ok);
+    let hopping = planar(&h.read(Duration::from_millis(1500), true));
+    assert!(hopping.iter().all(|t| t.armed && t.fault == 0));
+    assert!(hopping.iter().any(|t| t.stance) && hopping.iter().any(|t| !t.stance));
+    let mut heights: Vec<i64> = hopping.iter().map(|t| (t.z_m * 1e3) as i64).collect();
+    heights.dedup();
+    assert!(heights.len() >= 20, "{heights:?}");
+    assert!(hopping.iter().any(|t| t.leg_current_a != 0.0));
+    // Quiet: the link is lost after its 0.2 s.
+    let quiet = h.read(Duration::from_millis(800), false);
+    assert!(
+        quiet.contains(&RobotMsg::State(ArmState::Disarmed(5))),
+        "{quiet:?}"
+    );
+    let after = planar(&quiet);
+    let last = after.last().unwrap();
+    assert!(!last.armed && last.hip_current_a == 0.0 && last.leg_current_a == 0.0);
 }

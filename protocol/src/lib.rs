@@ -249,6 +249,45 @@ pub enum RobotMsg {
     /// Hardware in the loop: what one period did with a
     /// [`HostMsg::HilSample`].
     HilActuate(HilActuate),
+    /// One telemetry record of the planar machine (unsolicited, while
+    /// streaming: a planar robot sends these in place of
+    /// [`RobotMsg::Telemetry`]).
+    Planar(PlanarTelemetry),
+}
+
+/// One period of the planar machine as its firmware sees it: what the
+/// cockpit draws (the hip, the body pitched, the leg to its toe) and the
+/// speed against its command.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct PlanarTelemetry {
+    /// Sequence number of the record (consecutive; a gap is a drop).
+    pub seq: u32,
+    /// Control period number.
+    pub step: u32,
+    /// Armed.
+    pub armed: bool,
+    /// The toe is on the ground.
+    pub stance: bool,
+    /// What the guard latched ([`vocab::PlanarFault`]'s code; 0: nothing).
+    pub fault: u8,
+    /// The hip's forward position along the boom, m.
+    pub x_m: f32,
+    /// The hip's height above the ground, m.
+    pub z_m: f32,
+    /// Body pitch, nose up positive, rad.
+    pub pitch_rad: f32,
+    /// Leg angle from the vertical, toe ahead positive, rad.
+    pub leg_angle_rad: f32,
+    /// Leg length, m.
+    pub leg_length_m: f32,
+    /// The hip's forward speed as the estimator has it, m/s.
+    pub speed_mps: f32,
+    /// The commanded forward speed, m/s.
+    pub speed_command_mps: f32,
+    /// The hip amplifier's commanded current, A.
+    pub hip_current_a: f32,
+    /// The leg amplifier's commanded current, A.
+    pub leg_current_a: f32,
 }
 
 /// One period's raw sensor reading (`hopper_control::hal::RawSample`), for
@@ -1121,6 +1160,34 @@ mod tests {
             let got: Vec<RobotMsg> = decode_all(&mut d, &frame(&m));
             assert_eq!(got, [m]);
         }
+    }
+
+    /// A planar record at its widest (every counter at its widest varint)
+    /// fits a frame and comes back as it went: at the cockpit's 100
+    /// records a second it is 5.4 kB/s of the line.
+    #[test]
+    fn planar_records_fit_and_their_size_is_known() {
+        let m = RobotMsg::Planar(PlanarTelemetry {
+            seq: u32::MAX,
+            step: u32::MAX,
+            armed: true,
+            stance: true,
+            fault: 6,
+            x_m: 12.5,
+            z_m: 0.71,
+            pitch_rad: -0.05,
+            leg_angle_rad: 0.2,
+            leg_length_m: 0.6,
+            speed_mps: 1.0,
+            speed_command_mps: 1.0,
+            hip_current_a: -4.0,
+            leg_current_a: 20.0,
+        });
+        let bytes = frame(&m);
+        assert_eq!(bytes.len(), 54);
+        assert!(bytes.len() <= MAX_FRAME);
+        let mut d = Decoder::new();
+        assert_eq!(decode_all::<RobotMsg>(&mut d, &bytes), [m]);
     }
 
     proptest! {

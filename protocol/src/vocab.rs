@@ -35,6 +35,7 @@ macro_rules! vocabulary {
 
 vocabulary!(
     Fault,
+    PlanarFault,
     DisarmReason,
     ResetCause,
     Routine,
@@ -416,6 +417,30 @@ pub enum Refusal {
     /// minimum (the PVD at 2.8 V).
     #[strum(serialize = "supply-too-low-to-erase-flash")]
     SupplyLow = 37,
+    /// The robot is another machine (the planar one): it has no such
+    /// table, routine or figure.
+    #[strum(serialize = "not-on-this-machine")]
+    NotThisMachine = 38,
+}
+
+/// What the planar machine's guard latched (`PlanarTelemetry::fault`'s
+/// code; 0 is nothing): both amplifiers are off until it is reset.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, IntoStaticStr, VariantArray, FromRepr)]
+#[strum(serialize_all = "kebab-case")]
+#[repr(u8)]
+pub enum PlanarFault {
+    /// A measurement was not finite.
+    Nonfinite = 1,
+    /// The body pitched beyond its limit.
+    Pitch = 2,
+    /// The leg swung beyond its limit.
+    LegAngle = 3,
+    /// The hip fell below its height.
+    Fall = 4,
+    /// The hip motor's winding reached its trip temperature.
+    HipOvertemperature = 5,
+    /// The leg motor's winding reached its trip temperature.
+    LegOvertemperature = 6,
 }
 
 /// What kind of value a parameter holds (`ParamMeta::kind`).
@@ -530,6 +555,12 @@ mod tests {
             ParamKind::code,
             ParamKind::from_code,
             ParamKind::name,
+        );
+        check(
+            PlanarFault::ALL,
+            PlanarFault::code,
+            PlanarFault::from_code,
+            PlanarFault::name,
         );
         check(
             Refusal::ALL,

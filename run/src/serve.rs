@@ -1,6 +1,7 @@
 //! `hopper-sim serve --tcp ADDR`: the virtual robot on a TCP socket, in
 //! real time (or `--speed N` times it), so `hopper-link` can be learned and
-//! tested without hardware.
+//! tested without hardware. `hopper-sim planar serve --tcp` serves the
+//! planar machine through the same loop ([`Served`]).
 //!
 //! One client at a time. The loop runs the periods that are due by the
 //! wall clock, hands the bytes that arrived since the last batch to its
@@ -27,7 +28,7 @@ const MAX_BATCH: u64 = 1000;
 
 /// The robot's side of the socket: a bounded byte queue.
 #[derive(Debug, Default)]
-struct Queue {
+pub struct Queue {
     bytes: Vec<u8>,
 }
 
@@ -143,11 +144,78 @@ pub fn close_after(mut s: TcpStream, pending: &[u8], wait: Duration) {
     }
 }
 
+/// A robot the serve loop runs, one period at a time.
+pub trait Served {
+    /// One period, given the bytes `rx` that came since the last; what it
+    /// sends goes into `tx`. An error ends the serving.
+    fn period(&mut self, rx: Vec<u8>, tx: &mut Queue) -> Result<(), String>;
+}
+
+/// The vertical hopper's virtual robot with its link's two ends, its
+/// capture and its flash.
+struct Vertical {
+    robot: VirtualRobot,
+    flash: Flash,
+    /// The robot's capture, frozen around a fault (32 KiB: on the heap).
+    capture: Box<FaultCapture<CAPTURE_LEN>>,
+    queues: Box<hopper_robot_link::Queues>,
+    link: hopper_robot_link::Endpoint,
+}
+
+impl Served for Vertical {
+    fn period(&mut self, rx: Vec<u8>, tx: &mut Queue) -> Result<(), String> {
+        let Vertical {
+            robot,
+            flash,
+            capture,
+            queues,
+            link,
+        } = self;
+        robot.control(link, rx.into_iter(), tx, capture, queues, &mut NoCounter);
+        robot.firmware.runner.end_period(false);
+        // A save: written between two periods, as the host's clock
+        // allows (a board defers it to its next boot).
+        if let Some(record) = link.take_save().map(<[u8]>::to_vec) {
+            let ok = flash.save(&record);
+            if let Err(e) = &ok {
+                eprintln!("hopper-sim: save failed: {e}");
+            }
+            link.save_done(ok.is_ok(), false);
+        }
+        robot
+            .advance(&mut |_| {})
+            .map_err(|e| format!("plant integration failed: {e:?}"))
+    }
+}
+
+/// Serves the vertical hopper's `robot` on `listener` until the time
+/// limit (or forever). Messages about clients go to stderr.
+pub fn serve(
+    robot: VirtualRobot,
+    flash: Flash,
+    listener: &TcpListener,
+    opts: ServeOptions,
+) -> Result<(), String> {
+    // The link task's end, built from the configuration as loaded (as the
+    // board builds its endpoint after loading the saved calibration).
+    let link = hopper_robot_link::Endpoint::simulated(&robot.firmware.runner);
+    serve_robot(
+        &mut Vertical {
+            robot,
+            flash,
+            capture: Box::new(FaultCapture::<CAPTURE_LEN>::new()),
+            queues: Box::default(),
+            link,
+        },
+        listener,
+        opts,
+    )
+}
+
 /// Serves `robot` on `listener` until the time limit (or forever).
 /// Messages about clients go to stderr.
-pub fn serve(
-    mut robot: VirtualRobot,
-    mut flash: Flash,
+pub fn serve_robot(
+    robot: &mut dyn Served,
     listener: &TcpListener,
     opts: ServeOptions,
 ) -> Result<(), String> {
@@ -156,12 +224,6 @@ pub fn serve(
         .map_err(|e| format!("socket: {e}"))?;
     let mut client: Option<TcpStream> = None;
     let mut tx = Queue::default();
-    // The robot's capture, frozen around a fault (32 KiB: on the heap).
-    let mut capture = Box::new(FaultCapture::<CAPTURE_LEN>::new());
-    let mut queues = Box::<hopper_robot_link::Queues>::default();
-    // The link task's end, built from the configuration as loaded (as the
-    // board builds its endpoint after loading the saved calibration).
-    let mut link = hopper_robot_link::Endpoint::simulated(&robot.firmware.runner);
     let mut inbox: Vec<u8> = Vec::new();
     let mut buf = [0u8; 4096];
     let start = Instant::now();
@@ -210,28 +272,7 @@ pub fn serve(
         let due = limit.map_or(due, |l| due.min(l));
         let batch = due.saturating_sub(done).min(MAX_BATCH);
         for _ in 0..batch {
-            let rx = std::mem::take(&mut inbox);
-            robot.control(
-                &mut link,
-                rx.into_iter(),
-                &mut tx,
-                &mut capture,
-                &mut queues,
-                &mut NoCounter,
-            );
-            robot.firmware.runner.end_period(false);
-            // A save: written between two periods, as the host's clock
-            // allows (a board defers it to its next boot).
-            if let Some(record) = link.take_save().map(<[u8]>::to_vec) {
-                let ok = flash.save(&record);
-                if let Err(e) = &ok {
-                    eprintln!("hopper-sim: save failed: {e}");
-                }
-                link.save_done(ok.is_ok(), false);
-            }
-            robot
-                .advance(&mut |_| {})
-                .map_err(|e| format!("plant integration failed: {e:?}"))?;
+            robot.period(std::mem::take(&mut inbox), &mut tx)?;
             done += 1;
         }
         if let Some(s) = client.as_mut() {

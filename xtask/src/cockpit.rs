@@ -13,11 +13,13 @@
 //! arm=... refused=... disarm=... disarm_ms_p99=N escape_in_input=...
 //! page_closed=... robot_lost=...` and leaves a screenshot in
 //! `target/cockpit/cockpit.png`. Then, in the same browser, the planar
-//! machine drawn live (`hopper-sim planar serve`): its hip at many heights
-//! and its leg on the ground and off it within a second; prints
-//! `cockpit-planar: drawn_heights=N drawn_phases=2` and leaves
-//! `target/cockpit/planar.png`.
+//! machine behind the link (`hopper-sim planar serve --tcp`) in the
+//! cockpit: disarmed, Arm lets it go, its hip drawn at many heights and its
+//! leg on the ground and off it within a second, Disarm stops it; prints
+//! `cockpit-planar: drawn_heights=N drawn_phases=2 armed="armed"
+//! disarmed="disarmed (command)"` and leaves `target/cockpit/planar.png`.
 
+use std::collections::BTreeSet;
 use std::io::Read;
 use std::net::TcpStream;
 use std::path::Path;
@@ -302,20 +304,11 @@ pub fn run(root: &Path) -> Result<(), String> {
     )?;
     // The machine drawn as it hops: over a second, the body's box at many
     // heights, and the leg drawn on the ground (red) and off it.
-    let mut heights = std::collections::BTreeSet::new();
-    let mut phases = std::collections::BTreeSet::new();
-    for _ in 0..40 {
-        let v = page.eval(
-            "document.getElementById('m-body').getAttribute('y') + ' ' + \
-             (document.getElementById('m-leg').getAttribute('class') || 'flight')",
-        )?;
-        let v = v.as_str().unwrap_or_default().to_string();
-        if let Some((y, phase)) = v.split_once(' ') {
-            heights.insert(y.to_string());
-            phases.insert(phase.to_string());
-        }
-        std::thread::sleep(Duration::from_millis(25));
-    }
+    let (heights, phases) = sample_drawing(
+        &mut page,
+        "document.getElementById('m-body').getAttribute('y') + ' ' + \
+         (document.getElementById('m-leg').getAttribute('class') || 'flight')",
+    )?;
     let drawn = format!(
         "drawn_heights={} drawn_phases={}",
         heights.len(),
@@ -447,7 +440,7 @@ pub fn run(root: &Path) -> Result<(), String> {
         "xtask: cockpit: the robot killed while recording: the page shows `{lost_state}`; {lost}"
     );
     // The planar machine drawn live, in the same browser.
-    let (planar, planar_ok) = planar_drawn(&mut page, &sim, &out_dir)
+    let (planar, planar_ok) = planar_drawn(&mut page, &sim, &link, &out_dir)
         .unwrap_or_else(|e| (format!("cockpit-planar: error: {e}"), false));
     eprintln!(
         "xtask: cockpit: {:.1} s in chromium; the screenshot: {}",
@@ -483,48 +476,92 @@ pub fn run(root: &Path) -> Result<(), String> {
     }
 }
 
-/// `hopper-sim planar serve` opened in `page`: within a second, the hip
-/// drawn at many heights and the leg on the ground and off it; the page
-/// saved as `planar.png` in `out_dir`. The summary line
-/// `cockpit-planar: drawn_heights=N drawn_phases=N` and whether it passes.
-fn planar_drawn(page: &mut Page, sim: &Path, out_dir: &Path) -> Result<(String, bool), String> {
-    let (_served, url) = crate::session::spawn_server(
-        Command::new(sim)
-            .args(["planar", "serve", "--http", "127.0.0.1:0"])
-            .args(["--speed-profile", "0:0.5", "--duration", "60"]),
-        "hopper-sim planar serve",
-        "planar: ",
-    )?;
-    page.call("Page.navigate", serde_json::json!({ "url": url }))?;
-    page.until(
-        "document.getElementById('p-hip') ? 'drawn' : 'not yet'",
-        |s| s == "drawn",
-    )?;
-    let mut heights = std::collections::BTreeSet::new();
-    let mut phases = std::collections::BTreeSet::new();
+/// Over a second, `expr` (the drawing's `HEIGHT PHASE`) read 40 times
+/// in `page`: the heights and the phases it showed.
+fn sample_drawing(
+    page: &mut Page,
+    expr: &str,
+) -> Result<(BTreeSet<String>, BTreeSet<String>), String> {
+    let mut heights = BTreeSet::new();
+    let mut phases = BTreeSet::new();
     for _ in 0..40 {
-        let v = page.eval(
-            "document.getElementById('p-hip').getAttribute('cy') + ' ' + \
-             document.getElementById('p-leg').getAttribute('class')",
-        )?;
+        let v = page.eval(expr)?;
         if let Some((y, phase)) = v.as_str().unwrap_or_default().split_once(' ') {
             heights.insert(y.to_string());
             phases.insert(phase.to_string());
         }
         std::thread::sleep(Duration::from_millis(25));
     }
-    let info = page.eval("document.getElementById('info').textContent")?;
+    Ok((heights, phases))
+}
+
+/// The planar machine behind the link (`hopper-sim planar serve --tcp`)
+/// in the cockpit (`hopper-link ui`), opened in `page`: disarmed at first,
+/// armed as the operator clicks it, then within a second the hip drawn at
+/// many heights and the leg on the ground and off it, and disarmed again
+/// by the Disarm button; the page saved as `planar.png` in `out_dir`.
+/// The summary line `cockpit-planar: drawn_heights=N drawn_phases=N
+/// armed=".." disarmed=".."` and whether it passes.
+fn planar_drawn(
+    page: &mut Page,
+    sim: &Path,
+    link: &Path,
+    out_dir: &Path,
+) -> Result<(String, bool), String> {
+    let (_served, robot) = crate::session::spawn_server(
+        Command::new(sim)
+            .args(["planar", "serve", "--tcp", "127.0.0.1:0"])
+            .args(["--speed-profile", "0:0.5", "--duration", "120"]),
+        "hopper-sim planar serve --tcp",
+        "listening on ",
+    )?;
+    let (_ui, url) = crate::session::spawn_server(
+        Command::new(link)
+            .args([
+                "--tcp",
+                &robot,
+                "ui",
+                "--http",
+                "127.0.0.1:0",
+                "--record-dir",
+            ])
+            .arg(out_dir.join("planar-recordings")),
+        "hopper-link ui (planar)",
+        "cockpit: ",
+    )?;
+    page.call("Page.navigate", serde_json::json!({ "url": url }))?;
+    let state = "document.getElementById('armstate').textContent";
+    page.until(state, |s| s.starts_with("disarmed"))?;
+    page.until(
+        "document.querySelector('#planar #p-hip') ? 'drawn' : 'not yet'",
+        |s| s == "drawn",
+    )?;
+    page.eval("document.getElementById('arm').click(), ''")?;
+    let armed = page.until(state, |s| s == "armed")?;
+    // Let go, it lands and hops: the first stance comes within 0.3 s.
+    std::thread::sleep(Duration::from_millis(500));
+    let (heights, phases) = sample_drawing(
+        page,
+        "document.querySelector('#planar #p-hip').getAttribute('cy') + ' ' + \
+         document.querySelector('#planar #p-leg').getAttribute('class')",
+    )?;
+    let info = page.eval("document.getElementById('m-text').textContent")?;
     eprintln!(
-        "xtask: cockpit: the planar machine live at {url}: {}",
+        "xtask: cockpit: the planar machine at {robot} in the cockpit {url}: {}",
         info.as_str().unwrap_or_default()
     );
     page.screenshot(&out_dir.join("planar.png"))?;
+    page.eval("document.getElementById('disarm').click(), ''")?;
+    let disarmed = page.until(state, |s| s.starts_with("disarmed ("))?;
     Ok((
         format!(
-            "cockpit-planar: drawn_heights={} drawn_phases={}",
+            "cockpit-planar: drawn_heights={} drawn_phases={} armed=\"{armed}\" disarmed=\"{disarmed}\"",
             heights.len(),
             phases.len()
         ),
-        heights.len() >= 10 && phases.len() == 2,
+        heights.len() >= 10
+            && phases.len() == 2
+            && armed == "armed"
+            && disarmed == "disarmed (command)",
     ))
 }

@@ -77,9 +77,11 @@
 //! * `cargo xtask cockpit`: `hopper-link ui` in headless chromium
 //!   (installed when missing) against `hopper-sim serve`, driven through
 //!   the DevTools protocol: `cockpit: loaded=... moved=... arm=...
-//!   refused=... disarm=...`, then `hopper-sim planar serve`'s page in the
-//!   same browser: `cockpit-planar: drawn_heights=N drawn_phases=2`
-//!   (`cargo xtask test` runs it after the session).
+//!   refused=... disarm=...`, then the planar machine behind the link
+//!   (`hopper-sim planar serve --tcp`) in the same cockpit and browser:
+//!   `cockpit-planar: drawn_heights=N drawn_phases=2 armed="armed"
+//!   disarmed="disarmed (command)"` (`cargo xtask test` runs it after the
+//!   session).
 //! * `cargo xtask slurm`: a sharded sweep on a one-node Slurm cluster
 //!   (Debian's slurmctld, slurmd and MUNGE, installed when missing and
 //!   started by hand): the job array `hopper-sim sweep --slurm` writes,

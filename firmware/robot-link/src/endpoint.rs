@@ -141,7 +141,7 @@ fn unsafe_value(name: &str, value: f32) -> bool {
 
 /// Frames `msg` into `tx` if it has room for it (plus one more frame when
 /// `bulk`); whether it went.
-fn send<T: Tx>(tx: &mut T, msg: &RobotMsg, bulk: bool) -> bool {
+pub(crate) fn send<T: Tx>(tx: &mut T, msg: &RobotMsg, bulk: bool) -> bool {
     let mut f = [0u8; MAX_FRAME];
     let Ok(n) = encode(msg, &mut f) else {
         return false;

@@ -57,6 +57,7 @@ use hopper_protocol::{
 
 mod endpoint;
 pub mod hil;
+pub mod planar;
 mod port;
 #[cfg(test)]
 mod tests;

@@ -19,6 +19,7 @@
 //! type ([`LegLaw`]), so that a loop driving its leg by force runs
 //! nothing of the other in its period.
 
+use hopper_control::arming::ArmingConfig;
 use hopper_control::laws::{ControllerKind, Strategy};
 use hopper_control::model::ModelParams;
 use hopper_control::planar::estimator::PlanarReadings;
@@ -31,6 +32,8 @@ use hopper_control::planar::{HipDrive, PlanarCommand, PlanarEstimate};
 use hopper_plant::planar::{ApexState, PlanarError, PlanarEvent, PlanarState};
 use hopper_plant::planar_general::{Actuation, GeneralParams, GeneralRunner};
 use hopper_plant::planar_screw::{LegScrew, Nut};
+use hopper_robot_link::planar::{Mount, Output, PlanarPort};
+use hopper_robot_link::Tx;
 
 /// The plant's integration step and the controller's period, s (the
 /// firmware's 10 kHz).
@@ -430,5 +433,105 @@ impl<L: LegLaw> PlanarLoop<L> {
             push_n,
         });
         self.plant.step(DT_S, on_event);
+    }
+}
+
+impl<L: LegLaw> PlanarLoop<L> {
+    /// The body taken back up and held upright, the leg vertical, the toe
+    /// `toe_m` above the ground at the boom's origin, at rest (the
+    /// firmware's period keeps what it has: a hoist moves the machine,
+    /// not its firmware).
+    pub fn remount(&mut self, toe_m: f64) -> Result<(), PlanarError> {
+        let p = *self.plant.params();
+        let start = ApexState {
+            z_m: p.leg_length_m + toe_m,
+            x_dot_mps: 0.0,
+            phi_rad: 0.0,
+            theta_rad: 0.0,
+            phi_dot_rad_s: 0.0,
+            theta_dot_rad_s: 0.0,
+        };
+        self.plant = GeneralRunner::from_apex(p, &start)?;
+        Ok(())
+    }
+}
+
+/// The planar machine behind the host link, as `hopper-sim planar serve
+/// --tcp` runs it: the plant, the firmware's period and the link's port
+/// ([`PlanarPort`]). The body starts held upright on the boom, the toe
+/// off the ground, and is let go when the machine arms (a hoist through
+/// the link holds it again); disarmed, both amplifiers get 0 A.
+#[derive(Clone, Debug)]
+pub struct PlanarRobot<L: LegLaw = ForceLeg> {
+    lp: PlanarLoop<L>,
+    port: PlanarPort,
+    held: bool,
+    /// Robot time since the machine was last let go, s.
+    since_release_s: f64,
+}
+
+impl<L: LegLaw> PlanarRobot<L> {
+    /// `lp`'s machine held with the toe `toe_m` up until armed, its port
+    /// the simulator's (the e-stop and the hoist simulated) with the
+    /// arming's defaults.
+    pub fn new(mut lp: PlanarLoop<L>, toe_m: f64) -> Result<Self, PlanarError> {
+        lp.remount(toe_m)?;
+        let port = PlanarPort::new(ArmingConfig::default(), DT_S as f32, true)
+            .map_err(|e| PlanarError::OutOfRange(e.0))?;
+        Ok(Self {
+            lp,
+            port,
+            held: true,
+            since_release_s: 0.0,
+        })
+    }
+
+    /// The loop (the plant and the firmware's period).
+    pub fn planar_loop(&self) -> &PlanarLoop<L> {
+        &self.lp
+    }
+
+    /// Whether the body is held.
+    pub fn held(&self) -> bool {
+        self.held
+    }
+
+    /// Robot time since the body was last let go, s (0 while held): what
+    /// a speed profile runs on.
+    pub fn since_release_s(&self) -> f64 {
+        self.since_release_s
+    }
+
+    /// One period: the host's bytes `rx` to the port, the firmware's
+    /// period at the commanded speed, the port's decision over both
+    /// amplifiers, then the plant over the period (frozen while held).
+    pub fn period(
+        &mut self,
+        rx: impl IntoIterator<Item = u8>,
+        speed_mps: f64,
+        tx: &mut impl Tx,
+    ) -> Result<Output, PlanarError> {
+        self.port.receive(rx, tx);
+        match self.port.take_mount() {
+            Some(Mount::Hoist(toe_m)) => {
+                self.lp.remount(f64::from(toe_m))?;
+                self.held = true;
+            }
+            Some(Mount::Release) => self.held = false,
+            None => {}
+        }
+        let r = self.lp.sense();
+        let out = self
+            .port
+            .period(self.lp.period_mut(), &r, speed_mps as f32, DT_S as f32, tx);
+        if out.armed_now && self.held {
+            self.held = false;
+            self.since_release_s = 0.0;
+        }
+        if !self.held {
+            self.lp.advance(out.cmd, 0.0, &mut |_| {});
+            self.since_release_s += DT_S;
+        }
+        Ok(out)
     }
 }

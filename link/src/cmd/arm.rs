@@ -63,21 +63,33 @@ pub(crate) fn disarm(c: &mut Client) -> Result<()> {
     c.discard_events();
     c.expect_ok(Request::Disarm)?;
     let deadline = Instant::now() + Duration::from_secs(3);
+    // The first record disarmed, and what its amplifiers are told.
     let next = loop {
         match c.next_event(deadline.saturating_duration_since(Instant::now()))? {
-            Some(RobotMsg::Telemetry(t)) if !t.armed => break Some(t),
+            Some(RobotMsg::Telemetry(t)) if !t.armed => {
+                break Some((
+                    t.step,
+                    format!("command {:.3} A", t.command_a),
+                    t.command_a == 0.0,
+                ))
+            }
+            Some(RobotMsg::Planar(t)) if !t.armed => {
+                break Some((
+                    t.step,
+                    format!("hip {:.3} A, leg {:.3} A", t.hip_current_a, t.leg_current_a),
+                    t.hip_current_a == 0.0 && t.leg_current_a == 0.0,
+                ))
+            }
             Some(_) => {}
             None => break None,
         }
     };
     c.expect_ok(Request::Telemetry { every: 0 })?;
-    let t = next.ok_or_else(|| anyhow!("no disarmed telemetry record within 3 s"))?;
-    println!(
-        "disarmed; next record: step {}, armed {}, command {:.3} A",
-        t.step, t.armed, t.command_a
-    );
-    if t.command_a != 0.0 {
-        bail!("the record after the disarm commands {} A", t.command_a);
+    let (step, told, zero) =
+        next.ok_or_else(|| anyhow!("no disarmed telemetry record within 3 s"))?;
+    println!("disarmed; next record: step {step}, armed false, {told}");
+    if !zero {
+        bail!("the record after the disarm still drives the motor: {told}");
     }
     Ok(())
 }
@@ -93,10 +105,21 @@ pub(crate) fn reset_faults(c: &mut Client, retry: Option<f64>) -> Result<()> {
             println!("faults reset; latched now: {}", names::faults(st.faults));
             Ok(())
         }
-        Response::Refused(why) => bail!(
-            "reset refused: {why}; still latched: {}",
-            names::faults(st.faults)
-        ),
+        Response::Refused(why) => {
+            // The planar machine's posture faults have no bit: its
+            // telemetry names them.
+            let planar = match super::status::one_record(c) {
+                Ok(super::status::Record::Planar(t)) => format!(
+                    "; the planar machine's guard: {}",
+                    super::status::planar_fault(t.fault)
+                ),
+                _ => String::new(),
+            };
+            bail!(
+                "reset refused: {why}; still latched: {}{planar}",
+                names::faults(st.faults)
+            )
+        }
         r => bail!("unexpected answer {r:?}"),
     }
 }

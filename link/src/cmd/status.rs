@@ -4,14 +4,19 @@
 use super::common::{cost_lines, cost_of, flag, get, status_of, stored_line, stored_of, timing_of};
 use anyhow::{anyhow, bail, Result};
 use hopper_link::{names, Client};
-use hopper_protocol::{Request, Response, RobotMsg, Telemetry, ThermalStatus};
+use hopper_protocol::{
+    PlanarTelemetry, Request, Response, RobotMsg, Status, Telemetry, ThermalStatus,
+};
 use std::time::{Duration, Instant};
 
 pub(crate) fn status(c: &mut Client) -> Result<()> {
     let s = status_of(c)?;
     let t = timing_of(c)?;
-    let r = one_record(c)?;
     let period = f64::from(t.period_s);
+    let r = match one_record(c)? {
+        Record::Vertical(r) => r,
+        Record::Planar(r) => return planar_status(c, &s, period, &r),
+    };
     println!(
         "state: {}: {}",
         names::arm_state(s.arm),
@@ -250,7 +255,15 @@ fn thermal_of(c: &mut Client) -> Result<ThermalStatus> {
 }
 
 /// One telemetry record now (telemetry is switched on for it, then off).
-fn one_record(c: &mut Client) -> Result<Telemetry> {
+/// One record of the robot's telemetry, of either machine.
+pub(crate) enum Record {
+    /// The vertical hopper's.
+    Vertical(Telemetry),
+    /// The planar machine's.
+    Planar(PlanarTelemetry),
+}
+
+pub(crate) fn one_record(c: &mut Client) -> Result<Record> {
     // Every 100th period: any line carries that. Records queued before
     // the answer may be stale (an earlier stream): only later ones count.
     c.expect_ok(Request::Telemetry { every: 100 })?;
@@ -258,13 +271,80 @@ fn one_record(c: &mut Client) -> Result<Telemetry> {
     let deadline = Instant::now() + Duration::from_secs(3);
     let found = loop {
         match c.next_event(deadline.saturating_duration_since(Instant::now()))? {
-            Some(RobotMsg::Telemetry(t)) => break Some(t),
+            Some(RobotMsg::Telemetry(t)) => break Some(Record::Vertical(t)),
+            Some(RobotMsg::Planar(t)) => break Some(Record::Planar(t)),
             Some(_) => {}
             None => break None,
         }
     };
     c.expect_ok(Request::Telemetry { every: 0 })?;
     found.ok_or_else(|| anyhow!("no telemetry record within 3 s"))
+}
+
+/// The planar guard's latch by name (`none` for nothing).
+pub(crate) fn planar_fault(code: u8) -> String {
+    match code {
+        0 => "none".to_string(),
+        c => hopper_protocol::vocab::PlanarFault::from_code(c)
+            .map_or_else(|| format!("planar fault {c}"), |f| f.name().to_string()),
+    }
+}
+
+/// `status` of the planar machine: its state, what its guard latched,
+/// the machine as its firmware estimates it, and the link's counts.
+fn planar_status(c: &mut Client, s: &Status, period_s: f64, r: &PlanarTelemetry) -> Result<()> {
+    println!(
+        "state: {}: {}",
+        names::arm_state(s.arm),
+        names::advice(s.arm)
+    );
+    println!(
+        "faults: {}; the planar machine's guard: {}",
+        names::faults(s.faults),
+        planar_fault(r.fault)
+    );
+    println!(
+        "planar machine: hip at x {:.3} m, height {:.4} m, pitch {:.2} deg, leg {:.2} deg and {:.4} m, {}; speed {:.3} m/s (command {:.2}); hip {:.2} A, leg {:.2} A",
+        r.x_m,
+        r.z_m,
+        r.pitch_rad.to_degrees(),
+        r.leg_angle_rad.to_degrees(),
+        r.leg_length_m,
+        if r.stance { "stance" } else { "flight" },
+        r.speed_mps,
+        r.speed_command_mps,
+        r.hip_current_a,
+        r.leg_current_a
+    );
+    println!(
+        "periods: {} ({:.3} s at {:.0} Hz)",
+        s.periods,
+        f64::from(s.periods) * period_s,
+        1.0 / period_s
+    );
+    println!(
+        "link: {} frames in, {} bad; {} telemetry records not sent; host got {} frames, {} bad",
+        s.frames_ok,
+        s.frames_bad,
+        s.telemetry_dropped,
+        c.stats().ok,
+        c.stats().bad()
+    );
+    if s.last_apex_m.is_finite() {
+        println!("last apex: {:.4} m", s.last_apex_m);
+    } else {
+        println!("last apex: none yet");
+    }
+    if let Response::Thermal(th) = c.request(Request::Thermal)? {
+        println!(
+            "motors: the hotter winding at {:.1} C (derates at {:.0} C, trips at {:.0} C), its current limit at {:.0}%",
+            th.winding_c,
+            th.derate_c,
+            th.trip_c,
+            100.0 * th.limit_scale
+        );
+    }
+    Ok(())
 }
 
 #[cfg(test)]

@@ -217,6 +217,7 @@ pub(crate) fn ui(
         record_dir: record_dir.to_path_buf(),
         recording: None,
         batch: Vec::new(),
+        planar: Vec::new(),
         calibrating: None,
         capturing: None,
         target_apex_m: None,
@@ -329,6 +330,8 @@ struct Session {
     recording: Option<(Streamed, PathBuf)>,
     /// Telemetry for the pages, sent about 30 times a second.
     batch: Vec<serde_json::Value>,
+    /// The planar machine's records not yet sent to the pages.
+    planar: Vec<serde_json::Value>,
     /// The bring-up routine running, polled while the pages' other
     /// commands (Disarm above all, which aborts a driving routine) still
     /// run, and whom to answer when it ends.
@@ -381,6 +384,27 @@ impl Session {
                     r.energy_j,
                 ]));
                 self.recording.as_mut().map(|(rec, _)| rec.record(r))
+            }
+            RobotMsg::Planar(t) => {
+                // The drawing's frame (`drawPlanar`: t, x, z, pitch, leg
+                // angle, leg length, stance), then the speed, its command,
+                // both currents, the guard's latch and the arming.
+                self.planar.push(serde_json::json!([
+                    f64::from(t.step) * self.period_s,
+                    t.x_m,
+                    t.z_m,
+                    t.pitch_rad,
+                    t.leg_angle_rad,
+                    t.leg_length_m,
+                    u8::from(t.stance),
+                    t.speed_mps,
+                    t.speed_command_mps,
+                    t.hip_current_a,
+                    t.leg_current_a,
+                    super::status::planar_fault(t.fault),
+                    t.armed,
+                ]));
+                None
             }
             RobotMsg::Hop(h) => {
                 broadcast(
@@ -539,12 +563,22 @@ fn robot(
             }
         }
         // About 30 frames a second to the pages.
-        if last_send.elapsed() >= Duration::from_millis(33) && !session.batch.is_empty() {
+        if last_send.elapsed() >= Duration::from_millis(33)
+            && !(session.batch.is_empty() && session.planar.is_empty())
+        {
             last_send = Instant::now();
-            broadcast(
-                pages,
-                &serde_json::json!({ "type": "telemetry", "records": std::mem::take(&mut session.batch) }),
-            );
+            if !session.batch.is_empty() {
+                broadcast(
+                    pages,
+                    &serde_json::json!({ "type": "telemetry", "records": std::mem::take(&mut session.batch) }),
+                );
+            }
+            if !session.planar.is_empty() {
+                broadcast(
+                    pages,
+                    &serde_json::json!({ "type": "planar", "records": std::mem::take(&mut session.planar) }),
+                );
+            }
         }
     }
 }

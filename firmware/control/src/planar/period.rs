@@ -31,6 +31,12 @@ pub trait LegDrive: Clone + core::fmt::Debug {
         faulted: bool,
         dt_s: f32,
     ) -> f32;
+
+    /// Where the leg's nut stands by the readings `r`, m below its upper
+    /// stop (0 for a leg driven by force: it has no nut).
+    fn nut_position_m(&self, _r: &PlanarReadings) -> f32 {
+        0.0
+    }
 }
 
 /// The leg driven by the controller's force along it.
@@ -57,6 +63,10 @@ impl LegDrive for ScrewThrust {
         dt_s: f32,
     ) -> f32 {
         self.current_a(est, r.leg_length_m, r.leg_motor_rad, faulted, dt_s)
+    }
+
+    fn nut_position_m(&self, r: &PlanarReadings) -> f32 {
+        self.nut_position_m(r.leg_motor_rad)
     }
 }
 
@@ -174,11 +184,26 @@ impl<L: LegDrive> PlanarPeriod<L> {
     /// the current its amplifier is told to drive gives it (within the
     /// current limit, derated when the winding is hot), the leg motor's
     /// current likewise.
+    #[inline(always)]
     pub fn control(
         &mut self,
         est: &PlanarEstimate,
         speed_command_mps: f32,
         dt_s: f32,
+    ) -> PlanarCommand {
+        self.control_armed(est, speed_command_mps, dt_s, true)
+    }
+
+    /// [`control`](Self::control) with both amplifiers enabled only if
+    /// `armed`: disarmed, both are told 0 (the guard still watches, and
+    /// the windings' heat counts the current they drive, none), and the
+    /// leg's law learns nothing from the hops.
+    pub fn control_armed(
+        &mut self,
+        est: &PlanarEstimate,
+        speed_command_mps: f32,
+        dt_s: f32,
+        armed: bool,
     ) -> PlanarCommand {
         let mut cmd = self.controller.step(est, speed_command_mps, dt_s);
         if L::SCREW {
@@ -191,7 +216,7 @@ impl<L: LegDrive> PlanarPeriod<L> {
             if self.leg_thermal.tripped() {
                 self.guard.latch(PlanarFault::LegOvertemperature);
             }
-            let faulted = self.guard.fault().is_some();
+            let faulted = self.guard.fault().is_some() || !armed;
             cmd.leg_current_a = self.leg.leg_current_a(est, &self.readings, faulted, dt_s);
             cmd.leg_thrust_n = 0.0;
         }
@@ -201,6 +226,7 @@ impl<L: LegDrive> PlanarPeriod<L> {
             self.guard.latch(PlanarFault::HipOvertemperature);
         }
         let cmd = self.guard.filter(est, cmd);
+        let cmd = if armed { cmd } else { PlanarCommand::default() };
         let current_a = self
             .hip
             .current_a(cmd.hip_torque_nm, self.hip_thermal.limit_scale());
@@ -260,6 +286,35 @@ impl<L: LegDrive> PlanarPeriod<L> {
     /// What the guard latched, if anything.
     pub fn fault(&self) -> Option<PlanarFault> {
         self.guard.fault()
+    }
+
+    /// The hotter motor's thermal estimate (the hip's, or the leg's when
+    /// the leg is driven through its screw and its winding is hotter).
+    pub fn hotter_winding(&self) -> &MotorThermal {
+        if L::SCREW && self.leg_thermal.winding_c() > self.hip_thermal.winding_c() {
+            &self.leg_thermal
+        } else {
+            &self.hip_thermal
+        }
+    }
+
+    /// Clears what the guard latched, if `est` is within every limit and
+    /// neither winding is at its trip temperature; else what remains, and
+    /// nothing is cleared.
+    pub fn reset_fault(&mut self, est: &PlanarEstimate) -> Result<(), PlanarFault> {
+        if self.hip_thermal.tripped() {
+            return Err(PlanarFault::HipOvertemperature);
+        }
+        if L::SCREW && self.leg_thermal.tripped() {
+            return Err(PlanarFault::LegOvertemperature);
+        }
+        self.guard.reset(est)
+    }
+
+    /// Where the leg's nut stands by this period's readings, m below its
+    /// upper stop (0 for a leg driven by force).
+    pub fn nut_position_m(&self) -> f32 {
+        self.leg.nut_position_m(&self.readings)
     }
 }
 

@@ -167,6 +167,12 @@ impl ScrewThrust {
         &self.controller
     }
 
+    /// Where the nut stands with the motor at `motor_angle_rad`, m below
+    /// its upper stop.
+    pub fn nut_position_m(&self, motor_angle_rad: f32) -> f32 {
+        self.screw_m_per_rad * motor_angle_rad
+    }
+
     /// The last apex's toe height the law saw, m.
     pub fn last_apex_m(&self) -> Option<f32> {
         self.last_apex_m
@@ -248,7 +254,7 @@ impl ScrewThrust {
             .motor_rate
             .update(motor_angle_rad, dt_s)
             .unwrap_or(f32::NAN);
-        let nut_position_m = r * motor_angle_rad;
+        let nut_position_m = self.nut_position_m(motor_angle_rad);
         let compression_m = if est.stance {
             crate::num::max(self.model.leg_length_m - leg_length_m, 0.0)
         } else {

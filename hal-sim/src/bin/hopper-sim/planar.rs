@@ -204,10 +204,20 @@ pub(crate) enum PlanarCmd {
     /// by the wall clock, and serve a page that draws it as it runs (the
     /// drawing of `planar run --out`'s run.html), with its speed against
     /// the command, its pitch and its strides. Prints the page's address.
+    /// With --tcp, the machine behind the host link instead, for
+    /// `hopper-link` and its cockpit.
     Serve {
         /// Where the page listens, ADDR:PORT (port 0: any free one).
         #[arg(long, default_value = "127.0.0.1:8090")]
         http: String,
+        /// Serve the machine behind the host link on this socket,
+        /// HOST:PORT, in place of the page (port 0: any free one; the
+        /// address taken is printed): disarmed, its body held on the boom
+        /// with the toe at the target apex until `hopper-link --tcp ADDR
+        /// arm` lets it go; the speed profile runs from then, and the run
+        /// ends after --duration of robot time.
+        #[arg(long, value_name = "HOST:PORT")]
+        tcp: Option<String>,
         /// How many times faster than real time the run goes.
         #[arg(long, default_value_t = 1.0)]
         time_scale: f64,
@@ -633,6 +643,7 @@ pub(crate) fn cmd_planar(cmd: &PlanarCmd) -> Result<()> {
         #[cfg(feature = "live-page")]
         PlanarCmd::Serve {
             http,
+            tcp,
             time_scale,
             speed_profile,
             target_apex,
@@ -650,7 +661,10 @@ pub(crate) fn cmd_planar(cmd: &PlanarCmd) -> Result<()> {
                 thrust,
             };
             let spec = raibert_setup(robot.as_deref(), &plan, cfg)?;
-            crate::planar_serve::serve(http, *time_scale, spec)?;
+            match tcp {
+                Some(tcp) => crate::planar_serve::serve_link(tcp, *time_scale, spec)?,
+                None => crate::planar_serve::serve(http, *time_scale, spec)?,
+            }
         }
         PlanarCmd::Run {
             speed,

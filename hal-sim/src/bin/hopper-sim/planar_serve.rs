@@ -12,7 +12,9 @@ use axum::http::{header, Uri};
 use axum::response::{Html, IntoResponse};
 use axum::routing::get;
 use axum::Router;
-use hal_sim::planar_raibert::{self as pr, PlanarRunSpec, Stride};
+use hal_sim::planar_raibert::{self as pr, PlanarRunSpec, SpeedProfile, Stride, Thrust};
+use hal_sim::serve::{Queue, Served};
+use hopper_sil::planar::{LegLaw, PlanarLoop, PlanarRobot, DT_S};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
@@ -58,6 +60,76 @@ pub(crate) fn serve(addr: &str, time_scale: f64, run: PlanarRunSpec) -> Result<(
     rt.block_on(async { axum::serve(listener, app).await })
         .context("the page's server stopped")?;
     Ok(())
+}
+
+/// The machine behind the host link, its speed command from the run's
+/// profile, on robot time since it was let go.
+struct Linked<L: LegLaw> {
+    robot: PlanarRobot<L>,
+    profile: SpeedProfile,
+}
+
+impl<L: LegLaw> Served for Linked<L> {
+    fn period(&mut self, rx: Vec<u8>, tx: &mut Queue) -> Result<(), String> {
+        let speed_mps = self.profile.at(self.robot.since_release_s());
+        self.robot
+            .period(rx, speed_mps, tx)
+            .map(|_| ())
+            .map_err(|e| format!("the planar machine failed: {e:?}"))
+    }
+}
+
+/// Serves `run`'s machine behind the host link on `addr` at `time_scale`
+/// times real time, for `run.duration_s` of robot time.
+pub(crate) fn serve_link(addr: &str, time_scale: f64, run: PlanarRunSpec) -> Result<()> {
+    if !(time_scale.is_finite() && (0.01..=100.0).contains(&time_scale)) {
+        bail!("--time-scale {time_scale} must be within 0.01 ..= 100");
+    }
+    if !run.pushes.is_empty() {
+        bail!("--inject is not for --tcp: the machine behind the link is pushed by nobody (`planar serve` without --tcp, or `planar run`, pushes it)");
+    }
+    run.check().map_err(anyhow::Error::msg)?;
+    let lp = PlanarLoop::of(&run.machine, run.cfg, 0.0)
+        .map_err(|e| anyhow::anyhow!("the planar machine cannot start: {e:?}"))?;
+    let toe_m = f64::from(run.cfg.target_apex_m);
+    let profile = run.profile.clone();
+    let held = |e| anyhow::anyhow!("the planar machine cannot be held: {e:?}");
+    let mut robot: Box<dyn Served> = match run.thrust {
+        Thrust::Force => Box::new(Linked {
+            robot: PlanarRobot::new(lp, toe_m).map_err(held)?,
+            profile,
+        }),
+        Thrust::Screw(strategy) => {
+            let lp = lp
+                .with_screw(&strategy)
+                .map_err(|e| anyhow::anyhow!("the leg's law cannot start: {e:?}"))?;
+            Box::new(Linked {
+                robot: PlanarRobot::new(lp, toe_m).map_err(held)?,
+                profile,
+            })
+        }
+    };
+    let listener = std::net::TcpListener::bind(addr)
+        .with_context(|| format!("--tcp {addr}: cannot listen there"))?;
+    let local = listener.local_addr()?;
+    say!(
+        "hopper-sim: planar robot listening on {local} (Raibert's controller, the leg by {}, {time_scale}x real time, held {toe_m:.3} m up until armed, for {} s of robot time); connect with `hopper-link --tcp {local} ui`",
+        match run.thrust {
+            Thrust::Force => "force".to_string(),
+            Thrust::Screw(s) => s.kind().name().to_string(),
+        },
+        run.duration_s
+    );
+    hal_sim::serve::serve_robot(
+        robot.as_mut(),
+        &listener,
+        hal_sim::serve::ServeOptions {
+            speed: time_scale,
+            limit_s: Some(run.duration_s),
+            dt_s: DT_S,
+        },
+    )
+    .map_err(anyhow::Error::msg)
 }
 
 /// Runs the machine, each frame shown when the wall clock reaches its

@@ -223,6 +223,12 @@ fn page_html() -> &'static str {
             "/*BRINGUP_STEPS*/[]",
             &hopper_link::bringup::cockpit_steps_js(),
         )
+        // The planar machine's drawing: the one of `hopper-sim planar`'s
+        // recorded and live pages.
+        .replace(
+            "/*PLANAR_DRAW*/",
+            include_str!("../../../../study/src/planar_draw.js"),
+        )
     })
 }
 
