@@ -21,6 +21,23 @@ impl Drop for Served {
     }
 }
 
+/// `hopper-sim planar serve` with `args` and `run`: the server and the
+/// first line it printed (where it listens).
+fn serve(args: &[&str], run: &[&str]) -> (Served, String) {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_hopper-sim"))
+        .args(["planar", "serve"])
+        .args(args)
+        .args(run)
+        .stdout(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut line = String::new();
+    BufReader::new(child.stdout.take().unwrap())
+        .read_line(&mut line)
+        .unwrap();
+    (Served(child), line)
+}
+
 /// `GET path` on `addr`: the status line and the body.
 fn get(addr: &str, path: &str) -> (String, String) {
     let mut s = TcpStream::connect(addr).unwrap();
@@ -40,25 +57,8 @@ const RUN: [&str; 4] = ["--speed-profile", "0:0.5", "--duration", "4"];
 
 #[test]
 fn the_live_page_draws_the_recorded_runs_frames_paced_by_the_clock() {
-    let mut child = Command::new(env!("CARGO_BIN_EXE_hopper-sim"))
-        .args([
-            "planar",
-            "serve",
-            "--http",
-            "127.0.0.1:0",
-            "--time-scale",
-            "4",
-        ])
-        .args(RUN)
-        .stdout(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let mut line = String::new();
-    BufReader::new(child.stdout.take().unwrap())
-        .read_line(&mut line)
-        .unwrap();
+    let (_served, line) = serve(&["--http", "127.0.0.1:0", "--time-scale", "4"], &RUN);
     let started = Instant::now();
-    let _served = Served(child);
     // "planar: http://127.0.0.1:PORT/ (...)"
     let addr = line
         .split("http://")
@@ -234,17 +234,10 @@ fn planar(msgs: &[hopper_protocol::RobotMsg]) -> Vec<hopper_protocol::PlanarTele
 fn the_planar_robot_on_the_link_moves_only_while_armed() {
     use hopper_protocol::vocab::Refusal;
     use hopper_protocol::{ArmState, HostMsg, Request, Response, RobotMsg};
-    let mut child = Command::new(env!("CARGO_BIN_EXE_hopper-sim"))
-        .args(["planar", "serve", "--tcp", "127.0.0.1:0"])
-        .args(["--speed-profile", "0:0.5", "--duration", "60"])
-        .stdout(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let mut line = String::new();
-    BufReader::new(child.stdout.take().unwrap())
-        .read_line(&mut line)
-        .unwrap();
-    let _served = Served(child);
+    let (_served, line) = serve(
+        &["--tcp", "127.0.0.1:0"],
+        &["--speed-profile", "0:0.5", "--duration", "60"],
+    );
     let addr = line
         .split("listening on ")
         .nth(1)

@@ -223,17 +223,7 @@ pub fn run(root: &Path) -> Result<(), String> {
             .map_err(|e| format!("cannot start hopper-sim serve: {e}"))?,
     );
     crate::session::wait_listening(&robot)?;
-    let mut ui = Command::new(&link);
-    ui.args([
-        "--tcp",
-        &robot,
-        "ui",
-        "--http",
-        "127.0.0.1:0",
-        "--record-dir",
-    ])
-    .arg(&recordings);
-    let (_ui, url) = crate::session::spawn_server(&mut ui, "hopper-link ui", "cockpit: ")?;
+    let (_ui, url) = cockpit(&link, &robot, &recordings)?;
     let port = free_addr()?
         .rsplit(':')
         .next()
@@ -476,6 +466,25 @@ pub fn run(root: &Path) -> Result<(), String> {
     }
 }
 
+/// `hopper-link ui` on the robot at `robot`, recording into
+/// `recordings`: the cockpit (killed when dropped) and its address.
+fn cockpit(link: &Path, robot: &str, recordings: &Path) -> Result<(Reaped, String), String> {
+    crate::session::spawn_server(
+        Command::new(link)
+            .args([
+                "--tcp",
+                robot,
+                "ui",
+                "--http",
+                "127.0.0.1:0",
+                "--record-dir",
+            ])
+            .arg(recordings),
+        "hopper-link ui",
+        "cockpit: ",
+    )
+}
+
 /// Over a second, `expr` (the drawing's `HEIGHT PHASE`) read 40 times
 /// in `page`: the heights and the phases it showed.
 fn sample_drawing(
@@ -515,20 +524,7 @@ fn planar_drawn(
         "hopper-sim planar serve --tcp",
         "listening on ",
     )?;
-    let (_ui, url) = crate::session::spawn_server(
-        Command::new(link)
-            .args([
-                "--tcp",
-                &robot,
-                "ui",
-                "--http",
-                "127.0.0.1:0",
-                "--record-dir",
-            ])
-            .arg(out_dir.join("planar-recordings")),
-        "hopper-link ui (planar)",
-        "cockpit: ",
-    )?;
+    let (_ui, url) = cockpit(link, &robot, &out_dir.join("planar-recordings"))?;
     page.call("Page.navigate", serde_json::json!({ "url": url }))?;
     let state = "document.getElementById('armstate').textContent";
     page.until(state, |s| s.starts_with("disarmed"))?;

@@ -447,6 +447,7 @@ impl PlanarPort {
 mod tests {
     extern crate std;
     use super::*;
+    use crate::tests::VecTx;
     use hopper_control::planar::raibert::RaibertConfig;
     use hopper_control::planar::{HipDrive, TABLE_2_2_LEG_LENGTH_M};
     use hopper_protocol::{encode, MAX_FRAME};
@@ -454,19 +455,6 @@ mod tests {
     use std::vec::Vec;
 
     const DT_S: f32 = 1e-4;
-
-    struct VecTx {
-        bytes: Vec<u8>,
-        cap: usize,
-    }
-    impl Tx for VecTx {
-        fn room(&self) -> usize {
-            self.cap.saturating_sub(self.bytes.len())
-        }
-        fn put(&mut self, frame: &[u8]) {
-            self.bytes.extend_from_slice(frame);
-        }
-    }
 
     /// The planar machine's firmware behind a byte link.
     struct Robot {

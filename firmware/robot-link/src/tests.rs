@@ -24,9 +24,9 @@ impl HopperIo for Io {
 }
 
 /// The transmit queue: a byte vector with a fixed room.
-struct VecTx {
-    bytes: Vec<u8>,
-    cap: usize,
+pub(crate) struct VecTx {
+    pub(crate) bytes: Vec<u8>,
+    pub(crate) cap: usize,
 }
 impl Tx for VecTx {
     fn room(&self) -> usize {

@@ -34,10 +34,10 @@ pub(crate) fn calibrate(c: &mut Client, routine: &str, seconds: f32) -> Result<(
 /// `calibrate ROUTINE`, what it found written to `out` (also when it
 /// fails: the results say why).
 pub(crate) fn run(c: &mut Client, routine: &str, seconds: f32, out: &mut String) -> Result<()> {
-    let s = start(c, routine, seconds)?;
+    let mut s = start(c, routine, seconds)?;
     loop {
         std::thread::sleep(Duration::from_millis(100));
-        if poll(c, &s, out)?.is_some() {
+        if poll(c, &mut s, out)?.is_some() {
             return Ok(());
         }
     }
@@ -63,7 +63,7 @@ struct RobotClock {
     period_s: f64,
     start: u32,
     /// The last period count read and when it was read.
-    last: std::cell::Cell<(u32, Instant)>,
+    last: (u32, Instant),
 }
 
 /// Wall time without a new period count before the host gives up on a
@@ -79,16 +79,16 @@ impl RobotClock {
         Ok(Self {
             period_s: f64::from(t.period_s),
             start: t.periods,
-            last: std::cell::Cell::new((t.periods, Instant::now())),
+            last: (t.periods, Instant::now()),
         })
     }
 
     /// Robot seconds since the start; an error when the periods stopped.
-    fn elapsed_s(&self, c: &mut Client) -> Result<f64> {
+    fn elapsed_s(&mut self, c: &mut Client) -> Result<f64> {
         let now = timing_of(c)?.periods;
-        let (last, at) = self.last.get();
+        let (last, at) = self.last;
         if now != last {
-            self.last.set((now, Instant::now()));
+            self.last = (now, Instant::now());
         } else if at.elapsed().as_secs_f64() > STALL_S {
             bail!(
                 "the robot's control periods stopped at period {now} ({STALL_S:.0} s without one): read `status`"
@@ -108,6 +108,11 @@ pub(crate) fn start(c: &mut Client, routine: &str, seconds: f32) -> Result<Start
         .find(|r| r.name() == routine)
         .unwrap_or(Routine::SensorCheck);
     let code = r.code();
+    // A robot without bring-up routines (the planar machine) says so
+    // before its calibration parameters are read.
+    if let Response::Refused(why) = c.request(Request::CalibrationReport)? {
+        bail!("calibrate {routine} refused: {why}");
+    }
     let was = (
         get(c, "calibration.loadcell_offset_code")?,
         get(c, "calibration.pot_offset_code")?,
@@ -148,7 +153,7 @@ pub(crate) fn start(c: &mut Client, routine: &str, seconds: f32) -> Result<Start
 
 /// `None` while the routine runs; once it ended, what it found written to
 /// `out` (an error if it did not pass).
-pub(crate) fn poll(c: &mut Client, s: &Started, out: &mut String) -> Result<Option<()>> {
+pub(crate) fn poll(c: &mut Client, s: &mut Started, out: &mut String) -> Result<Option<()>> {
     use hopper_protocol::vocab::{CalState, Routine};
     let Started {
         routine,

@@ -43,6 +43,16 @@ pub(crate) fn flag(c: &mut Client, name: &str) -> Option<bool> {
     get(c, name).ok().map(|v| v != 0.0)
 }
 
+/// Whether the robot is the planar machine: it has no bring-up routines
+/// (its answer to their report is `not-on-this-machine`).
+pub(crate) fn is_planar(c: &mut Client) -> Result<bool> {
+    Ok(matches!(
+        c.request(Request::CalibrationReport)?,
+        Response::Refused(why)
+            if why.refusal() == Some(hopper_protocol::vocab::Refusal::NotThisMachine)
+    ))
+}
+
 pub(crate) fn timing_of(c: &mut Client) -> Result<TimingStats> {
     match c.request(Request::Timing)? {
         Response::Timing(t) => Ok(t),

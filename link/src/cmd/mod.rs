@@ -8,6 +8,7 @@ pub(crate) mod dump;
 pub(crate) mod flood;
 pub(crate) mod params;
 pub(crate) mod record;
+pub(crate) mod record_planar;
 pub(crate) mod robot;
 pub(crate) mod save;
 pub(crate) mod silence;

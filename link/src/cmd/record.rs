@@ -29,6 +29,9 @@ pub(crate) fn record(
         );
     }
     let every = (1.0 / (rate_hz * period)).round().clamp(1.0, 65535.0) as u16;
+    if super::common::is_planar(c)? {
+        return super::record_planar::record(c, duration_s, every, period, out);
+    }
     let target = get(c, "target_apex_m").ok().map(f64::from);
     let controllers = names::controller_names(c)?;
     let controller = get(c, names::CONTROLLER)
@@ -175,7 +178,7 @@ pub(crate) fn all_parameters(c: &mut Client) -> Result<Vec<(String, f32)>> {
 
 /// A flag Ctrl-C sets while a recording runs (one handler for the
 /// process: a shell's later recordings share it; each clears it first).
-fn interrupt_flag() -> Arc<AtomicBool> {
+pub(crate) fn interrupt_flag() -> Arc<AtomicBool> {
     static FLAG: OnceLock<Arc<AtomicBool>> = OnceLock::new();
     let flag = FLAG.get_or_init(|| {
         let f = Arc::new(AtomicBool::new(false));

@@ -39,14 +39,7 @@ pub(crate) fn status(c: &mut Client) -> Result<()> {
         1.0 / period,
         t.missed
     );
-    println!(
-        "link: {} frames in, {} bad; {} telemetry records not sent; host got {} frames, {} bad",
-        s.frames_ok,
-        s.frames_bad,
-        s.telemetry_dropped,
-        c.stats().ok,
-        c.stats().bad()
-    );
+    link_line(c, &s);
     let l = match c.request(Request::LinkCounts)? {
         Response::LinkCounts(l) => l,
         r => bail!("unexpected answer {r:?}"),
@@ -255,6 +248,18 @@ fn thermal_of(c: &mut Client) -> Result<ThermalStatus> {
 }
 
 /// One telemetry record now (telemetry is switched on for it, then off).
+/// The link's counts, both ends.
+fn link_line(c: &Client, s: &Status) {
+    println!(
+        "link: {} frames in, {} bad; {} telemetry records not sent; host got {} frames, {} bad",
+        s.frames_ok,
+        s.frames_bad,
+        s.telemetry_dropped,
+        c.stats().ok,
+        c.stats().bad()
+    );
+}
+
 /// One record of the robot's telemetry, of either machine.
 pub(crate) enum Record {
     /// The vertical hopper's.
@@ -322,14 +327,7 @@ fn planar_status(c: &mut Client, s: &Status, period_s: f64, r: &PlanarTelemetry)
         f64::from(s.periods) * period_s,
         1.0 / period_s
     );
-    println!(
-        "link: {} frames in, {} bad; {} telemetry records not sent; host got {} frames, {} bad",
-        s.frames_ok,
-        s.frames_bad,
-        s.telemetry_dropped,
-        c.stats().ok,
-        c.stats().bad()
-    );
+    link_line(c, s);
     if s.last_apex_m.is_finite() {
         println!("last apex: {:.4} m", s.last_apex_m);
     } else {

@@ -513,7 +513,7 @@ fn robot(
         if session.calibrating.is_some() && last_poll.elapsed() >= Duration::from_millis(100) {
             last_poll = Instant::now();
             let mut out = String::new();
-            let ended = match &session.calibrating {
+            let ended = match &mut session.calibrating {
                 Some((started, _)) => super::calibrate::poll(c, started, &mut out).transpose(),
                 None => None,
             };

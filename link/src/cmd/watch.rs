@@ -44,6 +44,31 @@ pub(crate) fn watch(c: &mut Client, duration: Option<f64>) -> Result<()> {
                 }
                 let _ = std::io::stdout().flush();
             }
+            Some(RobotMsg::Planar(r)) => {
+                if let Some(p) = last_seq {
+                    drops += u64::from(r.seq.wrapping_sub(p).saturating_sub(1));
+                }
+                last_seq = Some(r.seq);
+                let line = format!(
+                    "{:<22} guard {:<19} x {:>7.3} m  z {:.4} m  pitch {:>6.2} deg  speed {:>6.3} m/s (command {:.2})  hip {:>6.2} A  leg {:>6.2} A  drops {}",
+                    if r.armed { "armed".to_string() } else { state.clone() },
+                    super::status::planar_fault(r.fault),
+                    r.x_m,
+                    r.z_m,
+                    r.pitch_rad.to_degrees(),
+                    r.speed_mps,
+                    r.speed_command_mps,
+                    r.hip_current_a,
+                    r.leg_current_a,
+                    drops
+                );
+                if tty {
+                    print!("\r{line}");
+                } else if r.seq.is_multiple_of(10) {
+                    println!("{line}");
+                }
+                let _ = std::io::stdout().flush();
+            }
             Some(RobotMsg::Hop(h)) => last_apex = h.apex_height_m,
             Some(RobotMsg::State(s)) => state = names::arm_state(s),
             Some(RobotMsg::Faults { step, bits }) => {

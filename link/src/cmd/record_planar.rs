@@ -1,0 +1,212 @@
+//! `record` of the planar machine: its telemetry records into
+//! `planar.csv` (units in the header) as they arrive, and a plot of the
+//! speed against its command, the pitch and the hip's height
+//! (`planar.png`).
+
+use super::common::print_written;
+use super::status::planar_fault;
+use anyhow::{bail, Context, Result};
+use hopper_link::{names, Client};
+use hopper_protocol::{PlanarTelemetry, Request, RobotMsg};
+use plotters::prelude::*;
+use std::io::IsTerminal;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::Ordering;
+use std::time::{Duration, Instant};
+
+/// The CSV's columns, units in the names.
+const HEADER: [&str; 13] = [
+    "t_s",
+    "x_m",
+    "z_m",
+    "pitch_rad",
+    "leg_angle_rad",
+    "leg_length_m",
+    "stance",
+    "speed_mps",
+    "speed_command_mps",
+    "hip_current_a",
+    "leg_current_a",
+    "armed",
+    "guard",
+];
+
+/// Records `duration_s` of robot time, a record every `every` periods of
+/// `period_s`, into `out`.
+pub(crate) fn record(
+    c: &mut Client,
+    duration_s: f64,
+    every: u16,
+    period_s: f64,
+    out: &Path,
+) -> Result<()> {
+    std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
+    let csv_path = out.join("planar.csv");
+    let mut csv = csv::Writer::from_path(&csv_path)
+        .with_context(|| format!("cannot write {}", csv_path.display()))?;
+    csv.write_record(HEADER)?;
+    let span = (duration_s / period_s).round() as u64;
+    let bar = indicatif::ProgressBar::new(span);
+    if !std::io::stderr().is_terminal() {
+        bar.set_draw_target(indicatif::ProgressDrawTarget::hidden());
+    }
+    let interrupted = super::record::interrupt_flag();
+    c.discard_events();
+    c.expect_ok(Request::Telemetry { every })?;
+    c.discard_queued();
+    let mut records: Vec<PlanarTelemetry> = Vec::new();
+    let mut dropped = 0u64;
+    let mut quiet = Instant::now();
+    let mut ended: Option<(String, bool)> = None;
+    loop {
+        if interrupted.swap(false, Ordering::Relaxed) {
+            ended = Some(("interrupted (Ctrl-C)".into(), false));
+            break;
+        }
+        let event = match c.next_event(Duration::from_millis(200)) {
+            Ok(e) => e,
+            Err(e) => {
+                ended = Some((format!("{e:#}"), true));
+                break;
+            }
+        };
+        match event {
+            Some(RobotMsg::Planar(t)) => {
+                quiet = Instant::now();
+                if let Some(l) = records.last() {
+                    if t.step < l.step {
+                        ended = Some((
+                            format!(
+                                "the robot restarted (its period count went back from {} to {})",
+                                l.step, t.step
+                            ),
+                            true,
+                        ));
+                        break;
+                    }
+                    dropped += u64::from(t.seq.wrapping_sub(l.seq).saturating_sub(1));
+                }
+                let first = records.first().map_or(t.step, |f| f.step);
+                let spanned = u64::from(t.step.wrapping_sub(first));
+                csv.write_record(row(&t, period_s))?;
+                records.push(t);
+                bar.set_position(spanned.min(span));
+                if spanned + u64::from(every) > span {
+                    break;
+                }
+            }
+            Some(RobotMsg::State(s)) => bar.suspend(|| println!("state: {}", names::arm_state(s))),
+            Some(_) => {}
+            None if quiet.elapsed() > Duration::from_secs(3) => {
+                ended = Some((
+                    "no telemetry for 3 s: the robot stopped streaming (a reset, or its link timed out)".into(),
+                    true,
+                ));
+                break;
+            }
+            None => csv.flush()?,
+        }
+    }
+    if !ended.as_ref().is_some_and(|(_, failed)| *failed) {
+        c.expect_ok(Request::Telemetry { every: 0 })?;
+    }
+    bar.finish_and_clear();
+    csv.flush()?;
+    let mut written = vec![csv_path];
+    if records.len() >= 2 {
+        let png = out.join("planar.png");
+        plot(&records, period_s, &png, &c.target().to_string())
+            .map_err(|e| anyhow::anyhow!("cannot draw {}: {e}", png.display()))?;
+        written.push(png);
+    }
+    let seconds = records.len() as f64 * f64::from(every) * period_s;
+    println!(
+        "recorded {seconds:.3} s of the planar machine: {} records at {:.0} Hz, {dropped} dropped",
+        records.len(),
+        1.0 / (f64::from(every) * period_s),
+    );
+    print_written(&written);
+    match ended {
+        Some((why, failed)) => {
+            let saved = format!(
+                "{seconds:.3} s of {duration_s} s saved in {}",
+                out.display()
+            );
+            if failed {
+                bail!("the recording ended early: {why} ({saved})")
+            }
+            println!("the recording ended early: {why} ({saved})");
+            Ok(())
+        }
+        None => Ok(()),
+    }
+}
+
+/// One record as the CSV's row.
+fn row(t: &PlanarTelemetry, period_s: f64) -> [String; 13] {
+    [
+        format!("{:.4}", f64::from(t.step) * period_s),
+        t.x_m.to_string(),
+        t.z_m.to_string(),
+        t.pitch_rad.to_string(),
+        t.leg_angle_rad.to_string(),
+        t.leg_length_m.to_string(),
+        u8::from(t.stance).to_string(),
+        t.speed_mps.to_string(),
+        t.speed_command_mps.to_string(),
+        t.hip_current_a.to_string(),
+        t.leg_current_a.to_string(),
+        u8::from(t.armed).to_string(),
+        planar_fault(t.fault),
+    ]
+}
+
+/// The speed against its command, the pitch and the hip's height over
+/// the recording, one panel each.
+fn plot(
+    records: &[PlanarTelemetry],
+    period_s: f64,
+    png: &PathBuf,
+    robot: &str,
+) -> Result<(), Box<dyn std::error::Error>> {
+    hopper_plot::ensure_font()?;
+    let t0 = f64::from(records[0].step) * period_s;
+    let t = |r: &PlanarTelemetry| f64::from(r.step) * period_s - t0;
+    let t_hi = records.last().map_or(1.0, t).max(1e-3);
+    let root = BitMapBackend::new(png, (1000, 820)).into_drawing_area();
+    root.fill(&WHITE)?;
+    let root = root.titled(
+        &format!("the planar machine on the robot ({robot})"),
+        ("sans-serif", 20),
+    )?;
+    let panels = root.split_evenly((3, 1));
+    let blue = RGBColor(21, 101, 192);
+    let grey = RGBColor(120, 120, 120);
+    let series = |f: fn(&PlanarTelemetry) -> f64| -> Vec<(f64, f64)> {
+        records.iter().map(|r| (t(r), f(r))).collect()
+    };
+    let speed = series(|r| f64::from(r.speed_mps));
+    let command = series(|r| f64::from(r.speed_command_mps));
+    let (lo, hi) = hopper_plot::extent(speed.iter().chain(&command).map(|p| p.1));
+    let mut ch = hopper_plot::time_chart(&panels[0], t_hi, lo, hi, "speed [m/s]")?;
+    ch.draw_series(LineSeries::new(speed, blue.stroke_width(2)))?
+        .label("speed (estimate)")
+        .legend(move |(x, y)| PathElement::new([(x, y), (x + 20, y)], blue.stroke_width(2)));
+    ch.draw_series(DashedLineSeries::new(command, 6, 4, grey.stroke_width(2)))?
+        .label("command")
+        .legend(move |(x, y)| PathElement::new([(x, y), (x + 20, y)], grey.stroke_width(2)));
+    ch.configure_series_labels()
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .draw()?;
+    let pitch = series(|r| f64::from(r.pitch_rad).to_degrees());
+    let (lo, hi) = hopper_plot::extent(pitch.iter().map(|p| p.1));
+    let mut ch = hopper_plot::time_chart(&panels[1], t_hi, lo, hi, "pitch [deg]")?;
+    ch.draw_series(LineSeries::new(pitch, RED.stroke_width(2)))?;
+    let z = series(|r| f64::from(r.z_m));
+    let (lo, hi) = hopper_plot::extent(z.iter().map(|p| p.1));
+    let mut ch = hopper_plot::time_chart(&panels[2], t_hi, lo, hi, "hip height [m]")?;
+    ch.draw_series(LineSeries::new(z, BLACK.stroke_width(1)))?;
+    root.present()?;
+    Ok(())
+}
