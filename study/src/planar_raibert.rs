@@ -320,6 +320,12 @@ impl PlanarRunSpec {
         if !(d.is_finite() && d > 0.0 && d <= 600.0) {
             return Err(format!("--duration {d} must be in (0, 600] s"));
         }
+        if let Some(p) = self.pushes.iter().find(|p| p.at_s >= d) {
+            return Err(format!(
+                "--inject push@{}:{} is at or after the end of the run ({d} s)",
+                p.at_s, p.impulse_ns
+            ));
+        }
         self.cfg
             .validate()
             .map_err(|e| format!("the controller's `{}` is out of its range", e.0))
@@ -1026,5 +1032,32 @@ mod tests {
             r.stopped_by
         );
         assert!(r.fell_at_s.is_some_and(|t| t > push.at_s));
+    }
+
+    /// A push at or after the run's end would never happen: refused,
+    /// naming it and the run's length, as the vertical runs refuse such a
+    /// fault injection.
+    #[test]
+    fn a_push_after_the_runs_end_is_refused() {
+        let profile = SpeedProfile::parse("0:0").unwrap_or_else(|e| panic!("{e}"));
+        for at_s in [10.0, 30.0] {
+            let spec = PlanarRunSpec {
+                pushes: vec![Push {
+                    at_s,
+                    impulse_ns: 20.0,
+                }],
+                ..PlanarRunSpec::new(
+                    PlanarMachine::design(),
+                    profile.clone(),
+                    10.0,
+                    RaibertConfig::table_2_2(),
+                )
+            };
+            let e = spec.check().err().unwrap_or_default();
+            assert_eq!(
+                e,
+                format!("--inject push@{at_s}:20 is at or after the end of the run (10 s)")
+            );
+        }
     }
 }
