@@ -12,7 +12,8 @@
 
 use anyhow::{anyhow, bail, Context, Result};
 use hopper_protocol::{
-    encode, Decoder, HostMsg, LinkStats, Request, Response, RobotMsg, MAX_FRAME, PROTOCOL_VERSION,
+    encode, Decoder, HostMsg, LinkStats, PlanarTelemetry, Request, Response, RobotMsg, Telemetry,
+    MAX_FRAME, PROTOCOL_VERSION,
 };
 use std::collections::VecDeque;
 use std::io::{Read, Write};
@@ -89,6 +90,17 @@ impl RoundTrip {
         })
     }
 }
+/// The telemetry records missing between the last sequence number
+/// `last` and `seq` (none when `seq` went back: a restarted robot).
+pub fn seq_gap(last: Option<u32>, seq: u32) -> u32 {
+    let gap = last.map_or(0, |l| seq.wrapping_sub(l).wrapping_sub(1));
+    if gap < 1 << 30 {
+        gap
+    } else {
+        0
+    }
+}
+
 /// How often the hello is repeated until the robot answers it.
 pub const HELLO_RETRY: Duration = Duration::from_millis(200);
 
@@ -226,18 +238,16 @@ impl Client {
                                     RobotMsg::Response { id, resp } if URGENT_IDS.contains(&id) => {
                                         let _ = urgent_tx.send((id, resp));
                                     }
-                                    RobotMsg::Telemetry(r) => {
-                                        let gap = last_seq
-                                            .map_or(0, |l| r.seq.wrapping_sub(l).wrapping_sub(1));
-                                        // (A sequence that went back: a
-                                        // restarted robot, no gap.)
-                                        if gap > 0 && gap < 1 << 30 {
+                                    RobotMsg::Telemetry(Telemetry { seq, .. })
+                                    | RobotMsg::Planar(PlanarTelemetry { seq, .. }) => {
+                                        let gap = seq_gap(last_seq, seq);
+                                        if gap > 0 {
                                             if let Ok(mut c) = counts.lock() {
                                                 c.telemetry_gaps += u64::from(gap);
                                             }
                                         }
-                                        last_seq = Some(r.seq);
-                                        if tx.send(RobotMsg::Telemetry(r)).is_err() {
+                                        last_seq = Some(seq);
+                                        if tx.send(m).is_err() {
                                             return;
                                         }
                                     }

@@ -71,7 +71,7 @@ pub struct Endpoint<H = Owned> {
     /// heard no answer sends the same request again, and a repeat is
     /// answered from here, never run again (at most once). Cleared by a
     /// new session's hello (its ids start again).
-    memo: heapless::Deque<(u16, Memo), MEMO>,
+    memo: Memos,
     /// Repeats answered from [`memo`](Self::memo), and dropped while
     /// their first was in flight; second answers from the control period
     /// to one request ([`LinkCounts`]).
@@ -87,7 +87,7 @@ const MEMO: usize = 16;
 
 /// A request that acts, as answered.
 #[derive(Debug, Clone, Copy, PartialEq)]
-enum Memo {
+pub(crate) enum Memo {
     /// Being carried out: its answer comes from the control period.
     InFlight,
     /// Done.
@@ -96,9 +96,25 @@ enum Memo {
     Refused(hopper_protocol::vocab::RefusalCode),
 }
 
+/// The requests that act, by id, as answered.
+pub(crate) type Memos = heapless::Deque<(u16, Memo), MEMO>;
+
+/// Remembers in `memos` a request that acts and its answer (the oldest
+/// forgotten when full).
+pub(crate) fn remember(memos: &mut Memos, id: u16, memo: Memo) {
+    if let Some(slot) = memos.iter_mut().find(|(i, _)| *i == id) {
+        slot.1 = memo;
+        return;
+    }
+    if memos.is_full() {
+        let _ = memos.pop_front();
+    }
+    let _ = memos.push_back((id, memo));
+}
+
 impl Memo {
     /// An answer as remembered (`None`: not one a request that acts gets).
-    fn of(resp: &Response) -> Option<Self> {
+    pub(crate) fn of(resp: &Response) -> Option<Self> {
         match resp {
             Response::Ok => Some(Memo::Ok),
             Response::Refused(why) => Some(Memo::Refused(*why)),
@@ -634,7 +650,7 @@ impl<H: HopperSlot> Endpoint<H> {
                 what: Query::BringupResults,
             }),
             Request::SimulateMount { hoisted, lift_m } if self.simulated => {
-                if (0.0..=0.5).contains(lift_m) {
+                if crate::LIFT_RANGE_M.contains(lift_m) {
                     command(Command::SimulateMount {
                         id,
                         hoisted: *hoisted,
@@ -911,17 +927,9 @@ impl<H: HopperSlot> Endpoint<H> {
         }
     }
 
-    /// Remembers a request that acts and its answer (the oldest
-    /// forgotten when full).
+    /// Remembers a request that acts and its answer.
     fn remember(&mut self, id: u16, memo: Memo) {
-        if let Some(slot) = self.memo.iter_mut().find(|(i, _)| *i == id) {
-            slot.1 = memo;
-            return;
-        }
-        if self.memo.is_full() {
-            let _ = self.memo.pop_front();
-        }
-        let _ = self.memo.push_back((id, memo));
+        remember(&mut self.memo, id, memo);
     }
 
     /// The serial line's losses, as the application counts them (the

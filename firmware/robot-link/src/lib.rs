@@ -72,6 +72,10 @@ pub use wire::{
 // The wire's forms, for the two ends.
 use wire::{bringup_info, calibration_info, late_cause, pacing, refused, weighing_info};
 
+/// The simulated hoist's lift of the toe above the ground, m: the range a
+/// [`Request::SimulateMount`] takes.
+pub const LIFT_RANGE_M: core::ops::RangeInclusive<f32> = 0.0..=0.5;
+
 /// A transmit queue of bytes (the board's UART ring, a socket buffer).
 pub trait Tx {
     /// Bytes it can take now.

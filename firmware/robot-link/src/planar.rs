@@ -13,10 +13,12 @@
 //!
 //! The same [`Arming`] as the vertical hopper's decides: disarmed at boot,
 //! armed only on request with the link alive, no latched fault, the
-//! e-stop released, the readings finite, the leg's nut home and the body
-//! still; disarmed by a request, the e-stop, a fault the guard latches
-//! (the pitch, the leg's angle, a fall, a winding's trip) or link loss,
-//! in the same period, before its output. Disarmed, both amplifiers get
+//! e-stop released, the readings finite, the leg's nut home and still and
+//! the body still; disarmed by a request, the e-stop (its press latched
+//! until released and reset), a fault the guard latches (the pitch, the
+//! leg's angle, a fall, a winding's trip) or link loss, in the same
+//! period, before its output. A request that acts is remembered by its
+//! id, so that a host's retry is answered again, never carried out twice. Disarmed, both amplifiers get
 //! 0 A and their enables are off; the estimator and the controller keep
 //! running, so the readings can be watched.
 //!
@@ -25,14 +27,14 @@
 //! [`crate::Endpoint`]): the simulator runs it between two periods. A
 //! board would split it the same way.
 
-use crate::endpoint::send;
+use crate::endpoint::{remember, send, Memo, Memos};
 use crate::{refused, Tx};
-use hopper_control::arming::{ArmEvent, ArmInput, Arming, ArmingConfig};
+use hopper_control::arming::{ArmEvent, ArmInput, ArmState, Arming, ArmingConfig};
 use hopper_control::param::InvalidField;
 use hopper_control::planar::estimator::PlanarReadings;
 use hopper_control::planar::guard::PlanarFault;
 use hopper_control::planar::period::{LegDrive, PlanarPeriod};
-use hopper_control::planar::PlanarCommand;
+use hopper_control::planar::{PlanarCommand, PlanarEstimate};
 use hopper_control::supervisor::{Fault, Faults};
 use hopper_protocol::vocab::{self, Refusal};
 use hopper_protocol::{
@@ -40,17 +42,16 @@ use hopper_protocol::{
     TimingStats, PROTOCOL_VERSION,
 };
 
-/// The hoist's lift of the toe above the ground, m: the range a
-/// [`Request::SimulateMount`] takes.
-pub const LIFT_RANGE_M: core::ops::RangeInclusive<f32> = 0.0..=0.5;
-
 /// What the simulated machine is asked to do with its body
 /// ([`Request::SimulateMount`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Mount {
-    /// Hold the body upright, the toe this high above the ground, m,
-    /// until armed.
-    Hoist(f32),
+    /// Hold the body upright, the toe `toe_m` above the ground, until
+    /// armed.
+    Hoist {
+        /// The toe's height above the ground, m.
+        toe_m: f32,
+    },
     /// Let go of it.
     Release,
 }
@@ -70,7 +71,8 @@ pub struct Output {
     pub cmd: PlanarCommand,
     /// Both amplifiers enabled.
     pub enabled: bool,
-    /// The period armed the machine (a held body is let go).
+    /// The period armed the machine and it stays armed (a held body is
+    /// let go).
     pub armed_now: bool,
 }
 
@@ -82,8 +84,14 @@ pub struct PlanarPort {
     period_s: f32,
     /// The simulator's robot: the e-stop and the hoist are simulated.
     simulated: bool,
+    /// The e-stop input now, and whether its press is latched (cleared by
+    /// a reset once released).
     estop_pressed: bool,
+    estop_latched: bool,
     pending: Option<(u16, Pending)>,
+    /// The requests that act, by id: a host's retry is answered from
+    /// here, never carried out twice.
+    memo: Memos,
     mount: Option<Mount>,
     /// Telemetry every this many periods (0: off), and the count since.
     every: u16,
@@ -93,8 +101,7 @@ pub struct PlanarPort {
     periods: u32,
     /// The last period's telemetry, what the state answers read.
     last: PlanarTelemetry,
-    /// The highest toe in this flight, and the last flight's, m.
-    flight_top_m: f32,
+    /// The last apex's toe height, m (NaN before the first).
     last_apex_m: f32,
     /// The hotter winding's estimate, as the last period left it.
     thermal: ThermalStatus,
@@ -102,15 +109,10 @@ pub struct PlanarPort {
     fault_latched: Option<PlanarFault>,
 }
 
-/// The guard's latch as the arming sees it: any latched fault disarms
-/// and refuses arming. The posture's faults have no bit of the vertical
-/// supervisor's; they take the one no fault of it uses.
-fn arming_faults(fault: Option<PlanarFault>) -> Faults {
-    match fault {
-        None => Faults::NONE,
-        Some(f) => Faults(status_faults(Some(f)) | 1 << 15),
-    }
-}
+/// The posture's faults (the pitch, the leg's angle, a fall) have no bit
+/// among the vertical supervisor's: they take the one it leaves free, for
+/// the arming, which only asks whether any is latched.
+const POSTURE_BIT: u16 = 1 << 15;
 
 /// The guard's latch in [`Status::faults`]: the vertical supervisor's
 /// bit of the same meaning, where it has one (the posture's faults are
@@ -149,7 +151,9 @@ impl PlanarPort {
             period_s,
             simulated,
             estop_pressed: false,
+            estop_latched: false,
             pending: None,
+            memo: Memos::new(),
             mount: None,
             every: 0,
             since: 0,
@@ -172,7 +176,6 @@ impl PlanarPort {
                 hip_current_a: 0.0,
                 leg_current_a: 0.0,
             },
-            flight_top_m: f32::NEG_INFINITY,
             last_apex_m: f32::NAN,
             thermal: ThermalStatus {
                 winding_c: f32::NAN,
@@ -189,6 +192,13 @@ impl PlanarPort {
     /// Whether both amplifiers may be on.
     pub fn armed(&self) -> bool {
         self.arming.is_armed()
+    }
+
+    /// The e-stop input (a board's, debounced); the simulated robot's is
+    /// set by [`Request::SimulateEstop`]. A press disarms at the next
+    /// period and stays latched until released and reset.
+    pub fn set_estop(&mut self, pressed: bool) {
+        self.estop_pressed = pressed;
     }
 
     /// What the host asked of the simulated body since the last call.
@@ -214,33 +224,87 @@ impl PlanarPort {
                         false,
                     );
                 }
-                HostMsg::Request { id, req } => {
-                    if let Some(resp) = self.answer(id, &req, tx) {
+                HostMsg::Request { id, req } if req.acts() => {
+                    let known = self.memo.iter().find(|(i, _)| *i == id).map(|m| m.1);
+                    let resp = match known {
+                        // A retry of what waits for its period: its answer
+                        // comes then.
+                        Some(Memo::InFlight) => None,
+                        Some(Memo::Ok) => Some(Response::Ok),
+                        Some(Memo::Refused(why)) => Some(Response::Refused(why)),
+                        None => {
+                            let resp = self.act(id, &req, tx);
+                            let memo = resp.as_ref().map_or(Some(Memo::InFlight), Memo::of);
+                            if let Some(m) = memo {
+                                remember(&mut self.memo, id, m);
+                            }
+                            resp
+                        }
+                    };
+                    if let Some(resp) = resp {
                         send(tx, &RobotMsg::Response { id, resp }, false);
                     }
+                }
+                HostMsg::Request { id, req } => {
+                    let resp = self.query(&req);
+                    send(tx, &RobotMsg::Response { id, resp }, false);
                 }
                 HostMsg::Heartbeat | HostMsg::HilSample(_) => {}
             }
         }
     }
 
-    /// The answer to `req`, or `None` when the next period decides it.
-    fn answer<T: Tx>(&mut self, id: u16, req: &Request, tx: &mut T) -> Option<Response> {
+    /// Answers the request `id` with `resp`, remembered for its retries.
+    fn answer<T: Tx>(&mut self, id: u16, resp: Response, tx: &mut T) {
+        if let Some(m) = Memo::of(&resp) {
+            remember(&mut self.memo, id, m);
+        }
+        send(tx, &RobotMsg::Response { id, resp }, false);
+    }
+
+    /// A request that acts: its answer, or `None` when the next period
+    /// decides it.
+    fn act<T: Tx>(&mut self, id: u16, req: &Request, tx: &mut T) -> Option<Response> {
         let decided = match req {
             Request::Arm => Pending::Arm,
             Request::Disarm => Pending::Disarm,
             Request::ResetFaults if self.armed() => return Some(refused(Refusal::DisarmFirst)),
             Request::ResetFaults => Pending::Reset,
-            _ => return Some(self.query(req)),
+            Request::SimulateEstop { pressed } if self.simulated => {
+                self.estop_pressed = *pressed;
+                return Some(Response::Ok);
+            }
+            Request::SimulateMount { .. } | Request::SimulateEstop { .. } if !self.simulated => {
+                return Some(refused(Refusal::NotSimulated));
+            }
+            Request::SimulateMount { .. } if self.armed() => {
+                return Some(refused(Refusal::DisarmFirst))
+            }
+            Request::SimulateMount { hoisted, lift_m } => {
+                return Some(if !*hoisted {
+                    self.mount = Some(Mount::Release);
+                    Response::Ok
+                } else if crate::LIFT_RANGE_M.contains(lift_m) {
+                    self.mount = Some(Mount::Hoist { toe_m: *lift_m });
+                    Response::Ok
+                } else {
+                    refused(Refusal::LiftOutOfRange)
+                });
+            }
+            Request::ParamSet { .. } => return Some(refused(Refusal::UnknownParameter)),
+            _ => return Some(refused(Refusal::NotThisMachine)),
         };
         match self.pending {
-            // The same request again (the host's retry): its answer comes.
-            Some((old, _)) if old == id => None,
             // A disarm is never refused as busy: what waited is answered
-            // now, the disarm decided instead.
-            Some((old, _)) if decided == Pending::Disarm => {
-                let resp = refused(Refusal::DisarmRequested);
-                send(tx, &RobotMsg::Response { id: old, resp }, false);
+            // now (a disarm like it, done; anything else, superseded) and
+            // the disarm decided instead.
+            Some((old, was)) if decided == Pending::Disarm => {
+                let resp = if was == Pending::Disarm {
+                    Response::Ok
+                } else {
+                    refused(Refusal::DisarmRequested)
+                };
+                self.answer(old, resp, tx);
                 self.pending = Some((id, decided));
                 None
             }
@@ -252,12 +316,12 @@ impl PlanarPort {
         }
     }
 
-    /// The answer to a request that changes nothing the period decides.
+    /// The answer to a request that only reads.
     fn query(&mut self, req: &Request) -> Response {
         match req {
             Request::Status => Response::Status(Status {
                 arm: crate::arm_state(self.arming.state()),
-                faults: status_faults(self.fault_latched),
+                faults: self.status_faults(),
                 periods: self.periods,
                 frames_ok: self.rx.stats().ok,
                 frames_bad: self.rx.stats().bad(),
@@ -279,40 +343,54 @@ impl PlanarPort {
                 link_max: 0,
             }),
             Request::Thermal => Response::Thermal(self.thermal),
-            Request::SimulateEstop { pressed } if self.simulated => {
-                self.estop_pressed = *pressed;
-                Response::Ok
-            }
-            Request::SimulateMount { .. } | Request::SimulateEstop { .. } if !self.simulated => {
-                refused(Refusal::NotSimulated)
-            }
-            Request::SimulateMount { .. } if self.armed() => refused(Refusal::DisarmFirst),
-            Request::SimulateMount { hoisted, lift_m } => {
-                if !*hoisted {
-                    self.mount = Some(Mount::Release);
-                    Response::Ok
-                } else if LIFT_RANGE_M.contains(lift_m) {
-                    self.mount = Some(Mount::Hoist(*lift_m));
-                    Response::Ok
-                } else {
-                    refused(Refusal::LiftOutOfRange)
-                }
-            }
             Request::ParamCount => Response::ParamCount(0),
             Request::ParamInfo { .. } => refused(Refusal::NoSuchIndex),
-            Request::ParamGet { .. }
-            | Request::ParamSet { .. }
-            | Request::ParamMeta { .. }
-            | Request::ParamChoice { .. } => refused(Refusal::UnknownParameter),
+            Request::ParamGet { .. } | Request::ParamMeta { .. } | Request::ParamChoice { .. } => {
+                refused(Refusal::UnknownParameter)
+            }
             _ => refused(Refusal::NotThisMachine),
+        }
+    }
+
+    /// The latched faults as [`Status::faults`] has them.
+    fn status_faults(&self) -> u16 {
+        status_faults(self.fault_latched) | self.estop_bit()
+    }
+
+    /// The e-stop's latch as a fault bit.
+    fn estop_bit(&self) -> u16 {
+        if self.estop_latched {
+            Fault::Estop.bit()
+        } else {
+            0
+        }
+    }
+
+    /// What the arming decides on: this period's estimate, the guard's
+    /// latch, the e-stop, the nut.
+    fn arm_input<L: LegDrive>(&self, period: &PlanarPeriod<L>, est: &PlanarEstimate) -> ArmInput {
+        let posture = match period.fault() {
+            Some(_) => POSTURE_BIT,
+            None => 0,
+        };
+        ArmInput {
+            faults: Faults(status_faults(period.fault()) | posture | self.estop_bit()),
+            estop_pressed: self.estop_pressed,
+            sensors_ok: est.is_finite(),
+            nut_position_m: period.nut_position_m(),
+            nut_velocity_mps: period.nut_velocity_mps(),
+            // Still means still both ways.
+            body_velocity_mps: libm::fabsf(est.x_dot_mps).max(libm::fabsf(est.z_dot_mps)),
+            calibrating: false,
         }
     }
 
     /// One period of the machine: its readings `readings` through the
     /// estimator; what waited decided on that estimate (an arm, a
     /// disarm, a reset); the controller at the commanded speed with both
-    /// amplifiers enabled only if armed; then the state's changes, the
-    /// answers and the telemetry sent.
+    /// amplifiers enabled only if armed, and disarmed in the same period
+    /// if its guard latches; then the state's changes, the answers and
+    /// the telemetry sent.
     pub fn period<L: LegDrive, T: Tx>(
         &mut self,
         period: &mut PlanarPeriod<L>,
@@ -324,28 +402,24 @@ impl PlanarPort {
         let est = period.estimate_from(readings, dt_s);
         let est = &est;
         let pending = self.pending.take();
-        let mut reset = None;
+        let mut reset_ok = false;
         match pending {
             Some((_, Pending::Arm)) => self.arming.request_arm(),
             Some((_, Pending::Disarm)) => self.arming.request_disarm(),
-            Some((_, Pending::Reset)) => reset = Some(period.reset_fault(est)),
-            None => {}
+            // All or nothing: the e-stop released, then the guard's
+            // latch with its cause gone.
+            Some((_, Pending::Reset)) if !self.estop_pressed => {
+                reset_ok = period.reset_fault(est).is_ok();
+                if reset_ok {
+                    self.estop_latched = false;
+                }
+            }
+            Some((_, Pending::Reset)) | None => {}
         }
-        let fault = period.fault();
-        self.fault_latched = fault;
-        let input = ArmInput {
-            faults: arming_faults(fault),
-            estop_pressed: self.estop_pressed,
-            sensors_ok: est.is_finite(),
-            nut_position_m: period.nut_position_m(),
-            nut_velocity_mps: 0.0,
-            // Still means still both ways.
-            body_velocity_mps: libm::fabsf(est.x_dot_mps).max(libm::fabsf(est.z_dot_mps)),
-            calibrating: false,
-        };
+        self.estop_latched |= self.estop_pressed;
+        let input = self.arm_input(period, est);
         let event = self.arming.period(dt_s, &input);
-        let decided = self.arming.is_armed();
-        let out = period.control_armed(est, speed_command_mps, dt_s, decided);
+        let out = period.control_armed(est, speed_command_mps, dt_s, self.arming.is_armed());
         // A limit the guard latched in this period's control disarms now:
         // its command is zero already, and the enables go off with it.
         let latched = match period.fault() {
@@ -353,23 +427,35 @@ impl PlanarPort {
             None => None,
         };
         let armed = self.arming.is_armed();
+        self.fault_latched = period.fault();
         if let Some((id, p)) = pending {
-            let resp = match (p, event, reset) {
-                (Pending::Arm, Some(ArmEvent::Refused(r)), _) => refused(crate::arm_refusal(r)),
-                (Pending::Arm, _, _) if !decided => refused(Refusal::DisarmRequested),
-                (Pending::Reset, _, Some(Err(_))) => refused(Refusal::FaultsRemain),
-                _ => Response::Ok,
+            let resp = match p {
+                Pending::Arm if armed => Response::Ok,
+                Pending::Arm => {
+                    let why = match event {
+                        Some(ArmEvent::Refused(r)) => Some(r),
+                        // Armed and disarmed again in this period, or a
+                        // disarm in the same interval: why it is not armed
+                        // now.
+                        _ => self.arming.refusal(&self.arm_input(period, est)),
+                    };
+                    refused(why.map_or(Refusal::DisarmRequested, crate::arm_refusal))
+                }
+                // A reset whose cause came back within the period did not
+                // take.
+                Pending::Reset if reset_ok && period.fault().is_none() => Response::Ok,
+                Pending::Reset => refused(Refusal::FaultsRemain),
+                Pending::Disarm => Response::Ok,
             };
-            send(tx, &RobotMsg::Response { id, resp }, false);
+            self.answer(id, resp, tx);
         }
         for e in [event, latched] {
-            if let Some(ArmEvent::Armed | ArmEvent::Disarmed(_)) = e {
-                let state = match e {
-                    Some(ArmEvent::Disarmed(r)) => hopper_control::arming::ArmState::Disarmed(r),
-                    _ => hopper_control::arming::ArmState::Armed,
-                };
-                send(tx, &RobotMsg::State(crate::arm_state(state)), false);
-            }
+            let state = match e {
+                Some(ArmEvent::Armed) => ArmState::Armed,
+                Some(ArmEvent::Disarmed(r)) => ArmState::Disarmed(r),
+                _ => continue,
+            };
+            send(tx, &RobotMsg::State(crate::arm_state(state)), false);
         }
         self.note(period, est, readings, &out, armed, speed_command_mps);
         if self.every > 0 {
@@ -390,7 +476,7 @@ impl PlanarPort {
         Output {
             cmd: out,
             enabled: armed,
-            armed_now: matches!(event, Some(ArmEvent::Armed)),
+            armed_now: armed && matches!(event, Some(ArmEvent::Armed)),
         }
     }
 
@@ -398,22 +484,14 @@ impl PlanarPort {
     fn note<L: LegDrive>(
         &mut self,
         period: &PlanarPeriod<L>,
-        est: &hopper_control::planar::PlanarEstimate,
+        est: &PlanarEstimate,
         r: &PlanarReadings,
         out: &PlanarCommand,
         armed: bool,
         speed_command_mps: f32,
     ) {
-        // The toe's apex as the runs measure it: its highest point in a
-        // flight, kept at the touchdown.
-        let toe_m = est.z_m - r.leg_length_m * libm::cosf(est.theta_rad);
-        if est.stance {
-            if self.flight_top_m.is_finite() {
-                self.last_apex_m = self.flight_top_m;
-            }
-            self.flight_top_m = f32::NEG_INFINITY;
-        } else if toe_m > self.flight_top_m {
-            self.flight_top_m = toe_m;
+        if let Some(apex_m) = period.last_apex_m() {
+            self.last_apex_m = apex_m;
         }
         let hot = period.hotter_winding();
         self.thermal = ThermalStatus {
@@ -437,7 +515,7 @@ impl PlanarPort {
             leg_length_m: r.leg_length_m,
             speed_mps: est.x_dot_mps,
             speed_command_mps,
-            hip_current_a: if armed { period.hip_current_a() } else { 0.0 },
+            hip_current_a: period.hip_current_a(),
             leg_current_a: out.leg_current_a,
         };
     }
@@ -630,10 +708,13 @@ mod tests {
         assert_eq!(r.answer(7), no(Refusal::DisarmFirst));
     }
 
-    /// The e-stop disarms, refuses arming while pressed; a disarm while an
-    /// arm waits answers the arm and is never refused as busy.
+    /// The e-stop disarms and refuses arming while pressed; released, its
+    /// press stays latched (arming refused `faulted`) until the faults are
+    /// reset, as on the vertical hopper. A disarm while an arm waits
+    /// answers the arm and is never refused as busy; a second disarm is
+    /// answered done.
     #[test]
-    fn the_estop_and_a_disarm_win() {
+    fn the_estop_latches_and_a_disarm_wins() {
         let mut r = Robot::new(true);
         r.request(1, Request::Arm);
         r.period();
@@ -645,9 +726,25 @@ mod tests {
         r.request(3, Request::Arm);
         r.period();
         assert_eq!(r.answer(3), no(Refusal::EstopPressed));
-        r.request(4, Request::SimulateEstop { pressed: false });
-        r.request(5, Request::Arm);
-        r.request(6, Request::Disarm);
+        r.request(4, Request::ResetFaults);
+        r.period();
+        assert_eq!(r.answer(4), no(Refusal::FaultsRemain));
+        r.request(5, Request::SimulateEstop { pressed: false });
+        r.request(6, Request::Arm);
+        r.period();
+        assert_eq!(r.answer(6), no(Refusal::Faulted));
+        r.request(7, Request::Status);
+        r.period();
+        match r.answer(7) {
+            Response::Status(s) => assert_eq!(s.faults, Fault::Estop.bit()),
+            a => panic!("{a:?}"),
+        }
+        r.request(8, Request::ResetFaults);
+        r.period();
+        assert_eq!(r.answer(8), Response::Ok);
+        r.request(9, Request::Arm);
+        r.request(10, Request::Disarm);
+        r.request(11, Request::Disarm);
         let out = r.period();
         let sent = r.sent();
         let answer = |id| {
@@ -656,9 +753,109 @@ mod tests {
                 _ => None,
             })
         };
-        assert_eq!(answer(5), Some(no(Refusal::DisarmRequested)));
-        assert_eq!(answer(6), Some(Response::Ok));
+        assert_eq!(answer(9), Some(no(Refusal::DisarmRequested)));
+        assert_eq!(answer(10), Some(Response::Ok));
+        assert_eq!(answer(11), Some(Response::Ok));
         assert!(!out.enabled);
+    }
+
+    /// A host's retry of a request that acts (its answer lost, or late)
+    /// is answered from the robot's memory of its id, never carried out
+    /// again: an arm refused stays refused when the cause is gone, and an
+    /// arm done is not done again after a disarm.
+    #[test]
+    fn a_retried_arm_is_answered_again_never_carried_out_twice() {
+        let mut r = Robot::new(true);
+        r.request(1, Request::SimulateEstop { pressed: true });
+        r.request(2, Request::Arm);
+        r.period();
+        assert_eq!(r.answer(2), no(Refusal::EstopPressed));
+        r.request(3, Request::SimulateEstop { pressed: false });
+        r.request(4, Request::ResetFaults);
+        r.period();
+        assert_eq!(r.answer(4), Response::Ok);
+        // The retry of the refused arm: the same refusal, still disarmed.
+        r.request(2, Request::Arm);
+        let out = r.period();
+        assert_eq!(r.answer(2), no(Refusal::EstopPressed));
+        assert!(!out.enabled);
+        // Armed, disarmed, then the arm's retry: answered, not re-armed.
+        r.request(5, Request::Arm);
+        r.period();
+        assert_eq!(r.answer(5), Response::Ok);
+        r.request(6, Request::Disarm);
+        r.period();
+        assert_eq!(r.answer(6), Response::Ok);
+        r.request(5, Request::Arm);
+        let out = r.periods(3);
+        assert_eq!(r.answer(5), Response::Ok);
+        assert!(!out.enabled);
+        // A retry while its period has not come yet gets one answer.
+        r.request(7, Request::Arm);
+        r.request(7, Request::Arm);
+        r.period();
+        let answers = r
+            .sent()
+            .into_iter()
+            .filter(|m| matches!(m, RobotMsg::Response { id: 7, .. }))
+            .count();
+        assert_eq!(answers, 1);
+    }
+
+    /// An arm decided in the period whose control latches a limit is
+    /// refused (`faulted`), and the held body is not let go.
+    #[test]
+    fn an_arm_in_the_period_a_limit_latches_is_refused() {
+        let mut r = Robot::new(false);
+        r.periods(10);
+        r.request(1, Request::Arm);
+        r.readings.pitch_rad = 0.6;
+        let out = r.period();
+        assert_eq!(r.answer(1), no(Refusal::Faulted));
+        assert!(!out.enabled && !out.armed_now);
+        assert_eq!(out.cmd, PlanarCommand::default());
+    }
+
+    /// A winding's trip resets only once it has cooled below its
+    /// derating temperature (135 C), not as soon as it is below its trip
+    /// (150 C): the hip held at its current limit against a lean until
+    /// its winding trips, then left to cool, disarmed.
+    #[test]
+    fn an_overtemperature_resets_only_once_cooled() {
+        let mut r = Robot::new(false);
+        r.request(1, Request::Arm);
+        r.period();
+        assert_eq!(r.answer(1), Response::Ok);
+        // Leaning, standing: the hip pushes its limit.
+        r.readings.pitch_rad = 0.4;
+        let mut heated = 0;
+        while r.period.fault().is_none() && heated < 20_000_000 {
+            // The link kept alive.
+            if heated % 1000 == 0 {
+                r.inbox.extend_from_slice(&[0]);
+                r.request(2, Request::Status);
+            }
+            r.period();
+            heated += 1;
+        }
+        assert_eq!(r.period.fault(), Some(PlanarFault::HipOvertemperature));
+        let trip_c = r.period.hotter_winding().config().trip_winding_c;
+        let derate_c = r.period.hotter_winding().config().derate_winding_c;
+        r.readings.pitch_rad = 0.0;
+        // Below its trip, above its derating: refused.
+        while r.period.hip_winding_c() >= trip_c - 1.0 {
+            r.period();
+        }
+        r.sent();
+        r.request(3, Request::ResetFaults);
+        r.period();
+        assert_eq!(r.answer(3), no(Refusal::FaultsRemain));
+        while r.period.hip_winding_c() >= derate_c {
+            r.period();
+        }
+        r.request(4, Request::ResetFaults);
+        r.period();
+        assert_eq!(r.answer(4), Response::Ok);
     }
 
     /// What the planar robot has not is refused by name; the hoist is the
@@ -703,7 +900,7 @@ mod tests {
         );
         r.period();
         assert_eq!(r.answer(2), Response::Ok);
-        assert_eq!(r.port.take_mount(), Some(Mount::Hoist(0.1)));
+        assert_eq!(r.port.take_mount(), Some(Mount::Hoist { toe_m: 0.1 }));
         r.request(3, Request::Arm);
         r.period();
         r.request(

@@ -513,11 +513,15 @@ impl<L: LegLaw> PlanarRobot<L> {
     ) -> Result<Output, PlanarError> {
         self.port.receive(rx, tx);
         match self.port.take_mount() {
-            Some(Mount::Hoist(toe_m)) => {
+            Some(Mount::Hoist { toe_m }) => {
                 self.lp.remount(f64::from(toe_m))?;
                 self.held = true;
+                self.since_release_s = 0.0;
             }
-            Some(Mount::Release) => self.held = false,
+            Some(Mount::Release) => {
+                self.held = false;
+                self.since_release_s = 0.0;
+            }
             None => {}
         }
         let r = self.lp.sense();

@@ -110,8 +110,11 @@ pub(crate) fn start(c: &mut Client, routine: &str, seconds: f32) -> Result<Start
     let code = r.code();
     // A robot without bring-up routines (the planar machine) says so
     // before its calibration parameters are read.
-    if let Response::Refused(why) = c.request(Request::CalibrationReport)? {
-        bail!("calibrate {routine} refused: {why}");
+    if super::common::is_planar(c)? {
+        bail!(
+            "calibrate {routine} refused: {}",
+            hopper_protocol::vocab::Refusal::NotThisMachine.name()
+        );
     }
     let was = (
         get(c, "calibration.loadcell_offset_code")?,

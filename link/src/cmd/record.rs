@@ -41,74 +41,8 @@ pub(crate) fn record(
     let parameters = all_parameters(c)?;
     let mut out_files = Streamed::create(out, period, &parameters)?;
     let span = (duration_s / period).round() as u64;
-    let bar = indicatif::ProgressBar::new(span);
-    if !std::io::stderr().is_terminal() {
-        bar.set_draw_target(indicatif::ProgressDrawTarget::hidden());
-    }
-    let interrupted = interrupt_flag();
-    c.discard_events();
-    c.expect_ok(Request::Telemetry { every })?;
-    // Records before the answer may be from an earlier stream.
-    c.discard_queued();
-    let mut quiet = Instant::now();
-    // Why the recording ended before its duration, and whether that is a
-    // failure (the link or the robot) or the operator's choice (Ctrl-C).
-    let mut ended: Option<(String, bool)> = None;
-    loop {
-        if interrupted.swap(false, Ordering::Relaxed) {
-            ended = Some(("interrupted (Ctrl-C)".into(), false));
-            break;
-        }
-        let event = match c.next_event(Duration::from_millis(200)) {
-            Ok(e) => e,
-            Err(e) => {
-                ended = Some((format!("{e:#}"), true));
-                break;
-            }
-        };
-        match event {
-            Some(RobotMsg::Telemetry(t)) => {
-                quiet = Instant::now();
-                let rec = &out_files.rec;
-                let first = rec.records.first().map_or(t.step, |f| f.step);
-                let spanned = u64::from(t.step.wrapping_sub(first));
-                if rec.records.last().is_some_and(|l| t.step < l.step) {
-                    ended = Some((
-                        format!(
-                            "the robot restarted (its period count went back from {} to {})",
-                            rec.records.last().map_or(0, |l| l.step),
-                            t.step
-                        ),
-                        true,
-                    ));
-                    break;
-                }
-                out_files.record(t)?;
-                bar.set_position(spanned.min(span));
-                if spanned + u64::from(every) > span {
-                    break;
-                }
-            }
-            Some(RobotMsg::Hop(h)) => out_files.hop(h)?,
-            Some(RobotMsg::Faults { step, bits }) => {
-                bar.suspend(|| {
-                    println!("fault at step {step}: {}", names::faults(bits));
-                });
-                out_files.fault(step, bits)?;
-            }
-            Some(RobotMsg::State(s)) => bar.suspend(|| println!("state: {}", names::arm_state(s))),
-            Some(_) => {}
-            None if quiet.elapsed() > Duration::from_secs(3) => {
-                ended = Some((
-                    "no telemetry for 3 s: the robot stopped streaming (a reset, or its link timed out)".into(),
-                    true,
-                ));
-                break;
-            }
-            // Idle: what came so far is on disk.
-            None => out_files.flush()?,
-        }
-    }
+    let bar = progress(span);
+    let ended = stream(c, every, span, &mut Vertical(&mut out_files), &bar)?;
     // Stop the stream, unless the link is what ended the recording.
     if !ended.as_ref().is_some_and(|(_, failed)| *failed) {
         c.expect_ok(Request::Telemetry { every: 0 })?;
@@ -158,6 +92,118 @@ pub(crate) fn record(
             Ok(())
         }
         None => Ok(()),
+    }
+}
+
+/// A progress bar over `span` periods, drawn on a terminal only.
+pub(crate) fn progress(span: u64) -> indicatif::ProgressBar {
+    let bar = indicatif::ProgressBar::new(span);
+    if !std::io::stderr().is_terminal() {
+        bar.set_draw_target(indicatif::ProgressDrawTarget::hidden());
+    }
+    bar
+}
+
+/// Where a recording's messages go.
+pub(crate) trait Sink {
+    /// The period number of `m` if it is one of this recording's records.
+    fn step(m: &RobotMsg) -> Option<u32>;
+    /// Takes a message: a record (after [`Sink::step`] named it), or
+    /// another the recording keeps (a hop, a fault).
+    fn take(&mut self, m: RobotMsg, bar: &indicatif::ProgressBar) -> Result<()>;
+    /// What came so far, on disk.
+    fn flush(&mut self) -> Result<()>;
+}
+
+/// The vertical hopper's records, hops and faults into its files.
+struct Vertical<'a>(&'a mut Streamed);
+
+impl Sink for Vertical<'_> {
+    fn step(m: &RobotMsg) -> Option<u32> {
+        match m {
+            RobotMsg::Telemetry(t) => Some(t.step),
+            _ => None,
+        }
+    }
+
+    fn take(&mut self, m: RobotMsg, bar: &indicatif::ProgressBar) -> Result<()> {
+        match m {
+            RobotMsg::Telemetry(t) => self.0.record(t),
+            RobotMsg::Hop(h) => self.0.hop(h),
+            RobotMsg::Faults { step, bits } => {
+                bar.suspend(|| {
+                    println!("fault at step {step}: {}", names::faults(bits));
+                });
+                self.0.fault(step, bits)
+            }
+            _ => Ok(()),
+        }
+    }
+
+    fn flush(&mut self) -> Result<()> {
+        self.0.flush()
+    }
+}
+
+/// Streams telemetry every `every` periods into `sink` until `span`
+/// periods are recorded, the operator's Ctrl-C, or the link or the
+/// robot ends it: why it ended early and whether that is a failure (the
+/// link or the robot) rather than the operator's choice.
+pub(crate) fn stream<S: Sink>(
+    c: &mut Client,
+    every: u16,
+    span: u64,
+    sink: &mut S,
+    bar: &indicatif::ProgressBar,
+) -> Result<Option<(String, bool)>> {
+    let interrupted = interrupt_flag();
+    c.discard_events();
+    c.expect_ok(Request::Telemetry { every })?;
+    // Records before the answer may be from an earlier stream.
+    c.discard_queued();
+    let mut quiet = Instant::now();
+    let (mut first, mut last): (Option<u32>, Option<u32>) = (None, None);
+    loop {
+        if interrupted.swap(false, Ordering::Relaxed) {
+            return Ok(Some(("interrupted (Ctrl-C)".into(), false)));
+        }
+        let event = match c.next_event(Duration::from_millis(200)) {
+            Ok(e) => e,
+            Err(e) => return Ok(Some((format!("{e:#}"), true))),
+        };
+        let Some(m) = event else {
+            if quiet.elapsed() > Duration::from_secs(3) {
+                return Ok(Some((
+                    "no telemetry for 3 s: the robot stopped streaming (a reset, or its link timed out)".into(),
+                    true,
+                )));
+            }
+            // Idle: what came so far is on disk.
+            sink.flush()?;
+            continue;
+        };
+        if let RobotMsg::State(s) = m {
+            bar.suspend(|| println!("state: {}", names::arm_state(s)));
+            continue;
+        }
+        let Some(step) = S::step(&m) else {
+            sink.take(m, bar)?;
+            continue;
+        };
+        quiet = Instant::now();
+        if let Some(l) = last.filter(|&l| step < l) {
+            return Ok(Some((
+                format!("the robot restarted (its period count went back from {l} to {step})"),
+                true,
+            )));
+        }
+        sink.take(m, bar)?;
+        last = Some(step);
+        let spanned = u64::from(step.wrapping_sub(*first.get_or_insert(step)));
+        bar.set_position(spanned.min(span));
+        if spanned + u64::from(every) > span {
+            return Ok(None);
+        }
     }
 }
 

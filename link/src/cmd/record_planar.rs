@@ -4,15 +4,13 @@
 //! (`planar.png`).
 
 use super::common::print_written;
+use super::record::Sink;
 use super::status::planar_fault;
 use anyhow::{bail, Context, Result};
-use hopper_link::{names, Client};
+use hopper_link::Client;
 use hopper_protocol::{PlanarTelemetry, Request, RobotMsg};
 use plotters::prelude::*;
-use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
-use std::sync::atomic::Ordering;
-use std::time::{Duration, Instant};
 
 /// The CSV's columns, units in the names.
 const HEADER: [&str; 13] = [
@@ -46,67 +44,20 @@ pub(crate) fn record(
         .with_context(|| format!("cannot write {}", csv_path.display()))?;
     csv.write_record(HEADER)?;
     let span = (duration_s / period_s).round() as u64;
-    let bar = indicatif::ProgressBar::new(span);
-    if !std::io::stderr().is_terminal() {
-        bar.set_draw_target(indicatif::ProgressDrawTarget::hidden());
-    }
-    let interrupted = super::record::interrupt_flag();
-    c.discard_events();
-    c.expect_ok(Request::Telemetry { every })?;
-    c.discard_queued();
-    let mut records: Vec<PlanarTelemetry> = Vec::new();
-    let mut dropped = 0u64;
-    let mut quiet = Instant::now();
-    let mut ended: Option<(String, bool)> = None;
-    loop {
-        if interrupted.swap(false, Ordering::Relaxed) {
-            ended = Some(("interrupted (Ctrl-C)".into(), false));
-            break;
-        }
-        let event = match c.next_event(Duration::from_millis(200)) {
-            Ok(e) => e,
-            Err(e) => {
-                ended = Some((format!("{e:#}"), true));
-                break;
-            }
-        };
-        match event {
-            Some(RobotMsg::Planar(t)) => {
-                quiet = Instant::now();
-                if let Some(l) = records.last() {
-                    if t.step < l.step {
-                        ended = Some((
-                            format!(
-                                "the robot restarted (its period count went back from {} to {})",
-                                l.step, t.step
-                            ),
-                            true,
-                        ));
-                        break;
-                    }
-                    dropped += u64::from(t.seq.wrapping_sub(l.seq).saturating_sub(1));
-                }
-                let first = records.first().map_or(t.step, |f| f.step);
-                let spanned = u64::from(t.step.wrapping_sub(first));
-                csv.write_record(row(&t, period_s))?;
-                records.push(t);
-                bar.set_position(spanned.min(span));
-                if spanned + u64::from(every) > span {
-                    break;
-                }
-            }
-            Some(RobotMsg::State(s)) => bar.suspend(|| println!("state: {}", names::arm_state(s))),
-            Some(_) => {}
-            None if quiet.elapsed() > Duration::from_secs(3) => {
-                ended = Some((
-                    "no telemetry for 3 s: the robot stopped streaming (a reset, or its link timed out)".into(),
-                    true,
-                ));
-                break;
-            }
-            None => csv.flush()?,
-        }
-    }
+    let bar = super::record::progress(span);
+    let mut sink = Planar {
+        csv,
+        records: Vec::new(),
+        dropped: 0,
+        period_s,
+    };
+    let ended = super::record::stream(c, every, span, &mut sink, &bar)?;
+    let Planar {
+        mut csv,
+        records,
+        dropped,
+        ..
+    } = sink;
     if !ended.as_ref().is_some_and(|(_, failed)| *failed) {
         c.expect_ok(Request::Telemetry { every: 0 })?;
     }
@@ -139,6 +90,38 @@ pub(crate) fn record(
             Ok(())
         }
         None => Ok(()),
+    }
+}
+
+/// The planar machine's records into the CSV as they come.
+struct Planar {
+    csv: csv::Writer<std::fs::File>,
+    records: Vec<PlanarTelemetry>,
+    /// Records the sequence numbers skip.
+    dropped: u64,
+    period_s: f64,
+}
+
+impl Sink for Planar {
+    fn step(m: &RobotMsg) -> Option<u32> {
+        match m {
+            RobotMsg::Planar(t) => Some(t.step),
+            _ => None,
+        }
+    }
+
+    fn take(&mut self, m: RobotMsg, _: &indicatif::ProgressBar) -> Result<()> {
+        if let RobotMsg::Planar(t) = m {
+            let last = self.records.last().map(|l| l.seq);
+            self.dropped += u64::from(hopper_link::seq_gap(last, t.seq));
+            self.csv.write_record(row(&t, self.period_s))?;
+            self.records.push(t);
+        }
+        Ok(())
+    }
+
+    fn flush(&mut self) -> Result<()> {
+        Ok(self.csv.flush()?)
     }
 }
 

@@ -247,7 +247,6 @@ fn thermal_of(c: &mut Client) -> Result<ThermalStatus> {
     }
 }
 
-/// One telemetry record now (telemetry is switched on for it, then off).
 /// The link's counts, both ends.
 fn link_line(c: &Client, s: &Status) {
     println!(
@@ -268,6 +267,7 @@ pub(crate) enum Record {
     Planar(PlanarTelemetry),
 }
 
+/// One telemetry record now (telemetry is switched on for it, then off).
 pub(crate) fn one_record(c: &mut Client) -> Result<Record> {
     // Every 100th period: any line carries that. Records queued before
     // the answer may be stale (an earlier stream): only later ones count.

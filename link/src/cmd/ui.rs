@@ -216,6 +216,7 @@ pub(crate) fn ui(
         period_s: 0.0,
         record_dir: record_dir.to_path_buf(),
         recording: None,
+        planar_machine: false,
         batch: Vec::new(),
         planar: Vec::new(),
         calibrating: None,
@@ -324,6 +325,8 @@ fn broadcast(pages: &Pages, msg: &serde_json::Value) {
 struct Session {
     /// The control period, s.
     period_s: f64,
+    /// The robot is the planar machine.
+    planar_machine: bool,
     /// Recordings and captures go in numbered folders here.
     record_dir: PathBuf,
     /// The recording in progress and its folder.
@@ -477,6 +480,7 @@ fn robot(
     let every = (1.0 / (TELEMETRY_HZ * period)).round().clamp(1.0, 65535.0) as u16;
     c.expect_ok(Request::Telemetry { every })?;
     session.period_s = period;
+    session.planar_machine = super::common::is_planar(c)?;
     session.target_apex_m = super::common::get(c, "target_apex_m").ok().map(f64::from);
     let session = &mut *session;
     let mut last_poll = Instant::now();
@@ -738,6 +742,9 @@ fn run(
             }
         }
         "record-start" => {
+            if session.planar_machine {
+                bail!("the planar machine is recorded by `hopper-link record` (planar.csv and planar.png), not from the cockpit yet");
+            }
             if let Some((_, dir)) = &session.recording {
                 bail!("already recording into {}", dir.display());
             }

@@ -22,9 +22,7 @@ pub(crate) fn watch(c: &mut Client, duration: Option<f64>) -> Result<()> {
     while duration.is_none_or(|d| start.elapsed().as_secs_f64() < d) {
         match c.next_event(Duration::from_millis(500))? {
             Some(RobotMsg::Telemetry(r)) => {
-                if let Some(p) = last_seq {
-                    drops += u64::from(r.seq.wrapping_sub(p).saturating_sub(1));
-                }
+                drops += u64::from(hopper_link::seq_gap(last_seq, r.seq));
                 last_seq = Some(r.seq);
                 let line = format!(
                     "{:<22} faults {:<16} apex {:>7.4} m  z {:.4} m  nut {:>6.2} mm  F {:>6.1} N  I {:>6.2} A  drops {}",
@@ -37,17 +35,10 @@ pub(crate) fn watch(c: &mut Client, duration: Option<f64>) -> Result<()> {
                     r.command_a,
                     drops
                 );
-                if tty {
-                    print!("\r{line}");
-                } else if r.seq.is_multiple_of(10) {
-                    println!("{line}");
-                }
-                let _ = std::io::stdout().flush();
+                show(&line, tty, r.seq);
             }
             Some(RobotMsg::Planar(r)) => {
-                if let Some(p) = last_seq {
-                    drops += u64::from(r.seq.wrapping_sub(p).saturating_sub(1));
-                }
+                drops += u64::from(hopper_link::seq_gap(last_seq, r.seq));
                 last_seq = Some(r.seq);
                 let line = format!(
                     "{:<22} guard {:<19} x {:>7.3} m  z {:.4} m  pitch {:>6.2} deg  speed {:>6.3} m/s (command {:.2})  hip {:>6.2} A  leg {:>6.2} A  drops {}",
@@ -62,12 +53,7 @@ pub(crate) fn watch(c: &mut Client, duration: Option<f64>) -> Result<()> {
                     r.leg_current_a,
                     drops
                 );
-                if tty {
-                    print!("\r{line}");
-                } else if r.seq.is_multiple_of(10) {
-                    println!("{line}");
-                }
-                let _ = std::io::stdout().flush();
+                show(&line, tty, r.seq);
             }
             Some(RobotMsg::Hop(h)) => last_apex = h.apex_height_m,
             Some(RobotMsg::State(s)) => state = names::arm_state(s),
@@ -82,4 +68,14 @@ pub(crate) fn watch(c: &mut Client, duration: Option<f64>) -> Result<()> {
         println!();
     }
     Ok(())
+}
+
+/// The status line: in place on a terminal, every tenth otherwise.
+fn show(line: &str, tty: bool, seq: u32) {
+    if tty {
+        print!("\r{line}");
+    } else if seq.is_multiple_of(10) {
+        println!("{line}");
+    }
+    let _ = std::io::stdout().flush();
 }

@@ -37,6 +37,18 @@ pub trait LegDrive: Clone + core::fmt::Debug {
     fn nut_position_m(&self, _r: &PlanarReadings) -> f32 {
         0.0
     }
+
+    /// The nut's speed as the leg's drive last estimated it, m/s (0 for a
+    /// leg driven by force).
+    fn nut_velocity_mps(&self) -> f32 {
+        0.0
+    }
+
+    /// The last hop's apex, the toe's height, m, as the leg's law took it
+    /// (`None` before the first, and for a leg driven by force).
+    fn last_apex_m(&self) -> Option<f32> {
+        None
+    }
 }
 
 /// The leg driven by the controller's force along it.
@@ -67,6 +79,14 @@ impl LegDrive for ScrewThrust {
 
     fn nut_position_m(&self, r: &PlanarReadings) -> f32 {
         self.nut_position_m(r.leg_motor_rad)
+    }
+
+    fn nut_velocity_mps(&self) -> f32 {
+        self.nut_velocity_mps()
+    }
+
+    fn last_apex_m(&self) -> Option<f32> {
+        self.last_apex_m()
     }
 }
 
@@ -302,11 +322,24 @@ impl<L: LegDrive> PlanarPeriod<L> {
     /// neither winding is at its trip temperature; else what remains, and
     /// nothing is cleared.
     pub fn reset_fault(&mut self, est: &PlanarEstimate) -> Result<(), PlanarFault> {
-        if self.hip_thermal.tripped() {
-            return Err(PlanarFault::HipOvertemperature);
-        }
-        if L::SCREW && self.leg_thermal.tripped() {
-            return Err(PlanarFault::LegOvertemperature);
+        // A winding's trip clears once it has cooled below the derating
+        // temperature, as the vertical hopper's does; neither winding
+        // may be at its trip whatever latched.
+        let (hip, leg) = (&self.hip_thermal, &self.leg_thermal);
+        match self.guard.fault() {
+            Some(PlanarFault::HipOvertemperature) if !hip.cool() => {
+                return Err(PlanarFault::HipOvertemperature)
+            }
+            Some(PlanarFault::LegOvertemperature) if !leg.cool() => {
+                return Err(PlanarFault::LegOvertemperature)
+            }
+            _ if hip.tripped() => return Err(PlanarFault::HipOvertemperature),
+            _ if L::SCREW && leg.tripped() => return Err(PlanarFault::LegOvertemperature),
+            // The leg motor's encoder, which the estimator does not read.
+            _ if L::SCREW && !self.readings.leg_motor_rad.is_finite() => {
+                return Err(PlanarFault::NonFinite)
+            }
+            _ => {}
         }
         self.guard.reset(est)
     }
@@ -315,6 +348,18 @@ impl<L: LegDrive> PlanarPeriod<L> {
     /// upper stop (0 for a leg driven by force).
     pub fn nut_position_m(&self) -> f32 {
         self.leg.nut_position_m(&self.readings)
+    }
+
+    /// The leg's nut's speed as last estimated, m/s (0 for a leg driven
+    /// by force).
+    pub fn nut_velocity_mps(&self) -> f32 {
+        self.leg.nut_velocity_mps()
+    }
+
+    /// The last hop's apex, the toe's height, m, as the leg's law took it
+    /// (`None` before the first, and for a leg driven by force).
+    pub fn last_apex_m(&self) -> Option<f32> {
+        self.leg.last_apex_m()
     }
 }
 

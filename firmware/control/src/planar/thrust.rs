@@ -173,6 +173,11 @@ impl ScrewThrust {
         self.screw_m_per_rad * motor_angle_rad
     }
 
+    /// The nut's speed by the motor's filtered rate (eq 4.1), m/s.
+    pub fn nut_velocity_mps(&self) -> f32 {
+        self.screw_m_per_rad * self.motor_rate.value()
+    }
+
     /// The last apex's toe height the law saw, m.
     pub fn last_apex_m(&self) -> Option<f32> {
         self.last_apex_m
