@@ -18,9 +18,10 @@
 //! until released and reset), a fault the guard latches (the pitch, the
 //! leg's angle, a fall, a winding's trip) or link loss, in the same
 //! period, before its output. A request that acts is remembered by its
-//! id, so that a host's retry is answered again, never carried out twice. Disarmed, both amplifiers get
-//! 0 A and their enables are off; the estimator and the controller keep
-//! running, so the readings can be watched.
+//! id, so that a host's retry is answered again, never carried out
+//! twice. Disarmed, both amplifiers get 0 A and their enables are off;
+//! the estimator and the controller keep running, so the readings can be
+//! watched.
 //!
 //! One type does the two halves the vertical hopper splits between the
 //! control interrupt and the link task ([`crate::ControlPort`],
@@ -199,6 +200,8 @@ impl PlanarPort {
     /// period and stays latched until released and reset.
     pub fn set_estop(&mut self, pressed: bool) {
         self.estop_pressed = pressed;
+        // A press released before the next period still counts.
+        self.estop_latched |= pressed;
     }
 
     /// What the host asked of the simulated body since the last call.
@@ -216,6 +219,9 @@ impl PlanarPort {
             self.arming.link_frame();
             match msg {
                 HostMsg::Hello { .. } => {
+                    // A new session numbers its requests from the start
+                    // again: the last session's answers are not its own.
+                    self.memo.clear();
                     send(
                         tx,
                         &RobotMsg::Hello {
@@ -271,7 +277,7 @@ impl PlanarPort {
             Request::ResetFaults if self.armed() => return Some(refused(Refusal::DisarmFirst)),
             Request::ResetFaults => Pending::Reset,
             Request::SimulateEstop { pressed } if self.simulated => {
-                self.estop_pressed = *pressed;
+                self.set_estop(*pressed);
                 return Some(Response::Ok);
             }
             Request::SimulateMount { .. } | Request::SimulateEstop { .. } if !self.simulated => {
@@ -295,6 +301,9 @@ impl PlanarPort {
             _ => return Some(refused(Refusal::NotThisMachine)),
         };
         match self.pending {
+            // The retry of what waits (its memory forgotten): its answer
+            // comes with its period.
+            Some((old, _)) if old == id => None,
             // A disarm is never refused as busy: what waited is answered
             // now (a disarm like it, done; anything else, superseded) and
             // the disarm decided instead.
@@ -451,6 +460,9 @@ impl PlanarPort {
         }
         for e in [event, latched] {
             let state = match e {
+                // (Armed and disarmed again in this period: only the
+                // disarm is news.)
+                Some(ArmEvent::Armed) if !armed => continue,
                 Some(ArmEvent::Armed) => ArmState::Armed,
                 Some(ArmEvent::Disarmed(r)) => ArmState::Disarmed(r),
                 _ => continue,
@@ -802,6 +814,36 @@ mod tests {
         assert_eq!(answers, 1);
     }
 
+    /// A new session (its hello) numbers its requests from 1 again: its
+    /// disarm is carried out, not answered from the last session's
+    /// memory of the same id.
+    #[test]
+    fn a_new_sessions_requests_are_its_own() {
+        let mut r = Robot::new(false);
+        r.request(1, Request::Arm);
+        r.period();
+        r.request(2, Request::Disarm);
+        r.period();
+        assert_eq!(r.answer(2), Response::Ok);
+        let mut f = [0u8; MAX_FRAME];
+        let n = encode(
+            &HostMsg::Hello {
+                version: PROTOCOL_VERSION,
+            },
+            &mut f,
+        )
+        .unwrap_or_else(|e| panic!("{e:?}"));
+        r.inbox.extend_from_slice(&f[..n]);
+        r.request(1, Request::Arm);
+        let out = r.period();
+        assert_eq!(r.answer(1), Response::Ok);
+        assert!(out.enabled);
+        r.request(2, Request::Disarm);
+        let out = r.period();
+        assert_eq!(r.answer(2), Response::Ok);
+        assert!(!out.enabled);
+    }
+
     /// An arm decided in the period whose control latches a limit is
     /// refused (`faulted`), and the held body is not let go.
     #[test]
@@ -811,9 +853,22 @@ mod tests {
         r.request(1, Request::Arm);
         r.readings.pitch_rad = 0.6;
         let out = r.period();
-        assert_eq!(r.answer(1), no(Refusal::Faulted));
+        let sent = r.sent();
+        assert!(sent.contains(&RobotMsg::Response {
+            id: 1,
+            resp: no(Refusal::Faulted)
+        }));
         assert!(!out.enabled && !out.armed_now);
         assert_eq!(out.cmd, PlanarCommand::default());
+        // No state says armed: only the disarm is sent.
+        let states: Vec<&RobotMsg> = sent
+            .iter()
+            .filter(|m| matches!(m, RobotMsg::State(_)))
+            .collect();
+        assert_eq!(
+            states,
+            [&RobotMsg::State(hopper_protocol::ArmState::Disarmed(4))]
+        );
     }
 
     /// A winding's trip resets only once it has cooled below its

@@ -14,6 +14,7 @@ pub(crate) mod save;
 pub(crate) mod silence;
 pub(crate) mod sim;
 pub(crate) mod status;
+pub(crate) mod stream;
 pub(crate) mod ui;
 pub(crate) mod wait;
 pub(crate) mod watch;

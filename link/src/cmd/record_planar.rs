@@ -4,8 +4,8 @@
 //! (`planar.png`).
 
 use super::common::print_written;
-use super::record::Sink;
 use super::status::planar_fault;
+use super::stream::{progress, stream, Sink};
 use anyhow::{bail, Context, Result};
 use hopper_link::Client;
 use hopper_protocol::{PlanarTelemetry, Request, RobotMsg};
@@ -44,14 +44,14 @@ pub(crate) fn record(
         .with_context(|| format!("cannot write {}", csv_path.display()))?;
     csv.write_record(HEADER)?;
     let span = (duration_s / period_s).round() as u64;
-    let bar = super::record::progress(span);
+    let bar = progress(span);
     let mut sink = Planar {
         csv,
         records: Vec::new(),
         dropped: 0,
         period_s,
     };
-    let ended = super::record::stream(c, every, span, &mut sink, &bar)?;
+    let ended = stream(c, every, span, &mut sink, &bar)?;
     let Planar {
         mut csv,
         records,

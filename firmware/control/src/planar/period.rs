@@ -118,6 +118,10 @@ pub struct PlanarPeriod<L: LegDrive = ForceLeg> {
     readings: PlanarReadings,
     /// What drives the leg.
     leg: L,
+    /// Each winding reached its trip temperature since the last reset:
+    /// it must cool below its derating temperature before one.
+    hip_tripped: bool,
+    leg_tripped: bool,
 }
 
 impl PlanarPeriod {
@@ -159,6 +163,8 @@ impl PlanarPeriod {
             leg_current_limit_a: 0.0,
             readings: PlanarReadings::default(),
             leg: ForceLeg,
+            hip_tripped: false,
+            leg_tripped: false,
         })
     }
 
@@ -185,6 +191,8 @@ impl PlanarPeriod {
             leg_current_limit_a: model.current_limit_a,
             readings: self.readings,
             leg,
+            hip_tripped: self.hip_tripped,
+            leg_tripped: self.leg_tripped,
         })
     }
 }
@@ -234,6 +242,7 @@ impl<L: LegDrive> PlanarPeriod<L> {
                 self.guard.latch(PlanarFault::NonFinite);
             }
             if self.leg_thermal.tripped() {
+                self.leg_tripped = true;
                 self.guard.latch(PlanarFault::LegOvertemperature);
             }
             let faulted = self.guard.fault().is_some() || !armed;
@@ -243,6 +252,7 @@ impl<L: LegDrive> PlanarPeriod<L> {
         // A winding at its trip temperature stops the machine, as the leg
         // motor's stops the vertical hopper.
         if self.hip_thermal.tripped() {
+            self.hip_tripped = true;
             self.guard.latch(PlanarFault::HipOvertemperature);
         }
         let cmd = self.guard.filter(est, cmd);
@@ -319,29 +329,27 @@ impl<L: LegDrive> PlanarPeriod<L> {
     }
 
     /// Clears what the guard latched, if `est` is within every limit and
-    /// neither winding is at its trip temperature; else what remains, and
-    /// nothing is cleared.
+    /// every winding that tripped since the last reset has cooled below
+    /// its derating temperature; else what remains, and nothing is
+    /// cleared.
     pub fn reset_fault(&mut self, est: &PlanarEstimate) -> Result<(), PlanarFault> {
         // A winding's trip clears once it has cooled below the derating
-        // temperature, as the vertical hopper's does; neither winding
-        // may be at its trip whatever latched.
-        let (hip, leg) = (&self.hip_thermal, &self.leg_thermal);
-        match self.guard.fault() {
-            Some(PlanarFault::HipOvertemperature) if !hip.cool() => {
-                return Err(PlanarFault::HipOvertemperature)
-            }
-            Some(PlanarFault::LegOvertemperature) if !leg.cool() => {
-                return Err(PlanarFault::LegOvertemperature)
-            }
-            _ if hip.tripped() => return Err(PlanarFault::HipOvertemperature),
-            _ if L::SCREW && leg.tripped() => return Err(PlanarFault::LegOvertemperature),
-            // The leg motor's encoder, which the estimator does not read.
-            _ if L::SCREW && !self.readings.leg_motor_rad.is_finite() => {
-                return Err(PlanarFault::NonFinite)
-            }
-            _ => {}
+        // temperature, as the vertical hopper's does, whichever fault the
+        // guard holds.
+        if self.hip_tripped && !self.hip_thermal.cool() {
+            return Err(PlanarFault::HipOvertemperature);
         }
-        self.guard.reset(est)
+        if self.leg_tripped && !self.leg_thermal.cool() {
+            return Err(PlanarFault::LegOvertemperature);
+        }
+        // The leg motor's encoder, which the estimator does not read.
+        if L::SCREW && !self.readings.leg_motor_rad.is_finite() {
+            return Err(PlanarFault::NonFinite);
+        }
+        self.guard.reset(est)?;
+        self.hip_tripped = false;
+        self.leg_tripped = false;
+        Ok(())
     }
 
     /// Where the leg's nut stands by this period's readings, m below its
