@@ -15,9 +15,10 @@
 //! `target/cockpit/cockpit.png`. Then, in the same browser, the planar
 //! machine behind the link (`hopper-sim planar serve --tcp`) in the
 //! cockpit: disarmed, Arm lets it go, its hip drawn at many heights and its
-//! leg on the ground and off it within a second, Disarm stops it; prints
-//! `cockpit-planar: drawn_heights=N drawn_phases=2 armed="armed"
-//! disarmed="disarmed (command)"` and leaves `target/cockpit/planar.png`.
+//! leg on the ground and off it within a second, recorded meanwhile
+//! (planar.csv, planar.png), Disarm stops it; prints `cockpit-planar:
+//! drawn_heights=N drawn_phases=2 armed="armed" disarmed="disarmed
+//! (command)" recorded_files=2` and leaves `target/cockpit/planar.png`.
 
 use std::collections::BTreeSet;
 use std::io::Read;
@@ -524,7 +525,9 @@ fn planar_drawn(
         "hopper-sim planar serve --tcp",
         "listening on ",
     )?;
-    let (_ui, url) = cockpit(link, &robot, &out_dir.join("planar-recordings"))?;
+    let recordings = out_dir.join("planar-recordings");
+    let _ = std::fs::remove_dir_all(&recordings);
+    let (_ui, url) = cockpit(link, &robot, &recordings)?;
     page.call("Page.navigate", serde_json::json!({ "url": url }))?;
     let state = "document.getElementById('armstate').textContent";
     page.until(state, |s| s.starts_with("disarmed"))?;
@@ -536,6 +539,11 @@ fn planar_drawn(
     let armed = page.until(state, |s| s == "armed")?;
     // Let go, it lands and hops: the first stance comes within 0.3 s.
     std::thread::sleep(Duration::from_millis(500));
+    // Recorded while it is drawn.
+    page.eval("document.getElementById('record').click(), ''")?;
+    page.until("document.getElementById('recording').textContent", |s| {
+        s.contains("recording-1")
+    })?;
     let (heights, phases) = sample_drawing(
         page,
         "document.querySelector('#planar #p-hip').getAttribute('cy') + ' ' + \
@@ -547,17 +555,27 @@ fn planar_drawn(
         info.as_str().unwrap_or_default()
     );
     page.screenshot(&out_dir.join("planar.png"))?;
+    page.eval("document.getElementById('record').click(), ''")?;
+    let message = "document.getElementById('message').textContent";
+    let recorded = page.until(message, |s| s.starts_with("recorded"))?;
+    eprintln!("xtask: cockpit: {recorded}");
+    let folder = recordings.join("recording-1");
+    let files = ["planar.csv", "planar.png"]
+        .iter()
+        .filter(|f| folder.join(f).is_file())
+        .count();
     page.eval("document.getElementById('disarm').click(), ''")?;
     let disarmed = page.until(state, |s| s.starts_with("disarmed ("))?;
     Ok((
         format!(
-            "cockpit-planar: drawn_heights={} drawn_phases={} armed=\"{armed}\" disarmed=\"{disarmed}\"",
+            "cockpit-planar: drawn_heights={} drawn_phases={} armed=\"{armed}\" disarmed=\"{disarmed}\" recorded_files={files}",
             heights.len(),
             phases.len()
         ),
         heights.len() >= 10
             && phases.len() == 2
             && armed == "armed"
-            && disarmed == "disarmed (command)",
+            && disarmed == "disarmed (command)"
+            && files == 2,
     ))
 }

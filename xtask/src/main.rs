@@ -80,8 +80,8 @@
 //!   refused=... disarm=...`, then the planar machine behind the link
 //!   (`hopper-sim planar serve --tcp`) in the same cockpit and browser:
 //!   `cockpit-planar: drawn_heights=N drawn_phases=2 armed="armed"
-//!   disarmed="disarmed (command)"` (`cargo xtask test` runs it after the
-//!   session).
+//!   disarmed="disarmed (command)" recorded_files=2` (`cargo xtask test`
+//!   runs it after the session).
 //! * `cargo xtask slurm`: a sharded sweep on a one-node Slurm cluster
 //!   (Debian's slurmctld, slurmd and MUNGE, installed when missing and
 //!   started by hand): the job array `hopper-sim sweep --slurm` writes,

@@ -38,42 +38,19 @@ pub(crate) fn record(
     period_s: f64,
     out: &Path,
 ) -> Result<()> {
-    std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
-    let csv_path = out.join("planar.csv");
-    let mut csv = csv::Writer::from_path(&csv_path)
-        .with_context(|| format!("cannot write {}", csv_path.display()))?;
-    csv.write_record(HEADER)?;
+    let mut files = PlanarFiles::create(out, period_s)?;
     let span = (duration_s / period_s).round() as u64;
     let bar = progress(span);
-    let mut sink = Planar {
-        csv,
-        records: Vec::new(),
-        dropped: 0,
-        period_s,
-    };
-    let ended = stream(c, every, span, &mut sink, &bar)?;
-    let Planar {
-        mut csv,
-        records,
-        dropped,
-        ..
-    } = sink;
+    let ended = stream(c, every, span, &mut files, &bar)?;
     if !ended.as_ref().is_some_and(|(_, failed)| *failed) {
         c.expect_ok(Request::Telemetry { every: 0 })?;
     }
     bar.finish_and_clear();
-    csv.flush()?;
-    let mut written = vec![csv_path];
-    if records.len() >= 2 {
-        let png = out.join("planar.png");
-        plot(&records, period_s, &png, &c.target().to_string())
-            .map_err(|e| anyhow::anyhow!("cannot draw {}: {e}", png.display()))?;
-        written.push(png);
-    }
-    let seconds = records.len() as f64 * f64::from(every) * period_s;
+    let title = format!("the planar machine on the robot ({})", c.target());
+    let (records, dropped, written) = files.finish(&title)?;
+    let seconds = records as f64 * f64::from(every) * period_s;
     println!(
-        "recorded {seconds:.3} s of the planar machine: {} records at {:.0} Hz, {dropped} dropped",
-        records.len(),
+        "recorded {seconds:.3} s of the planar machine: {records} records at {:.0} Hz, {dropped} dropped",
         1.0 / (f64::from(every) * period_s),
     );
     print_written(&written);
@@ -93,8 +70,10 @@ pub(crate) fn record(
     }
 }
 
-/// The planar machine's records into the CSV as they come.
-struct Planar {
+/// The planar machine's records into `planar.csv` as they come, and
+/// their plot at the end: `record`'s and the cockpit's.
+pub(crate) struct PlanarFiles {
+    dir: PathBuf,
     csv: csv::Writer<std::fs::File>,
     records: Vec<PlanarTelemetry>,
     /// Records the sequence numbers skip.
@@ -102,7 +81,55 @@ struct Planar {
     period_s: f64,
 }
 
-impl Sink for Planar {
+impl PlanarFiles {
+    /// `dir` (created if missing) with `planar.csv`'s header written, for
+    /// a machine whose control period is `period_s`.
+    pub(crate) fn create(dir: &Path, period_s: f64) -> Result<Self> {
+        std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+        let path = dir.join("planar.csv");
+        let mut csv = csv::Writer::from_path(&path)
+            .with_context(|| format!("cannot write {}", path.display()))?;
+        csv.write_record(HEADER)?;
+        Ok(Self {
+            dir: dir.to_path_buf(),
+            csv,
+            records: Vec::new(),
+            dropped: 0,
+            period_s,
+        })
+    }
+
+    /// One record, written.
+    pub(crate) fn record(&mut self, t: PlanarTelemetry) -> Result<()> {
+        let last = self.records.last().map(|l| l.seq);
+        self.dropped += u64::from(hopper_link::seq_gap(last, t.seq));
+        self.csv.write_record(row(&t, self.period_s))?;
+        self.records.push(t);
+        Ok(())
+    }
+
+    /// The folder.
+    pub(crate) fn dir(&self) -> &Path {
+        &self.dir
+    }
+
+    /// The CSV completed and, from two records on, the plot titled
+    /// `title` drawn: the records, the ones the sequence skipped, and
+    /// the files written.
+    pub(crate) fn finish(mut self, title: &str) -> Result<(usize, u64, Vec<PathBuf>)> {
+        self.csv.flush()?;
+        let mut written = vec![self.dir.join("planar.csv")];
+        if self.records.len() >= 2 {
+            let png = self.dir.join("planar.png");
+            plot(&self.records, self.period_s, &png, title)
+                .map_err(|e| anyhow::anyhow!("cannot draw {}: {e}", png.display()))?;
+            written.push(png);
+        }
+        Ok((self.records.len(), self.dropped, written))
+    }
+}
+
+impl Sink for PlanarFiles {
     fn step(m: &RobotMsg) -> Option<u32> {
         match m {
             RobotMsg::Planar(t) => Some(t.step),
@@ -111,13 +138,10 @@ impl Sink for Planar {
     }
 
     fn take(&mut self, m: RobotMsg, _: &indicatif::ProgressBar) -> Result<()> {
-        if let RobotMsg::Planar(t) = m {
-            let last = self.records.last().map(|l| l.seq);
-            self.dropped += u64::from(hopper_link::seq_gap(last, t.seq));
-            self.csv.write_record(row(&t, self.period_s))?;
-            self.records.push(t);
+        match m {
+            RobotMsg::Planar(t) => self.record(t),
+            _ => Ok(()),
         }
-        Ok(())
     }
 
     fn flush(&mut self) -> Result<()> {
@@ -149,8 +173,8 @@ fn row(t: &PlanarTelemetry, period_s: f64) -> [String; 13] {
 fn plot(
     records: &[PlanarTelemetry],
     period_s: f64,
-    png: &PathBuf,
-    robot: &str,
+    png: &Path,
+    title: &str,
 ) -> Result<(), Box<dyn std::error::Error>> {
     hopper_plot::ensure_font()?;
     let t0 = f64::from(records[0].step) * period_s;
@@ -158,10 +182,7 @@ fn plot(
     let t_hi = records.last().map_or(1.0, t).max(1e-3);
     let root = BitMapBackend::new(png, (1000, 820)).into_drawing_area();
     root.fill(&WHITE)?;
-    let root = root.titled(
-        &format!("the planar machine on the robot ({robot})"),
-        ("sans-serif", 20),
-    )?;
+    let root = root.titled(title, ("sans-serif", 20))?;
     let panels = root.split_evenly((3, 1));
     let blue = RGBColor(21, 101, 192);
     let grey = RGBColor(120, 120, 120);

@@ -28,6 +28,8 @@
 //! say so, and the cockpit connects again when the robot comes back.
 
 use super::common::wire_name;
+use super::record_planar::PlanarFiles;
+use super::stream::Sink;
 use anyhow::{bail, Context, Result};
 use hopper_link::record::{Recording, Streamed};
 use hopper_link::{names, Client, Urgent};
@@ -216,6 +218,7 @@ pub(crate) fn ui(
         period_s: 0.0,
         record_dir: record_dir.to_path_buf(),
         recording: None,
+        planar_recording: None,
         planar_machine: false,
         batch: Vec::new(),
         planar: Vec::new(),
@@ -263,25 +266,30 @@ fn lost(
             .reply
             .send(answer(&cap.cmd.json, Err(anyhow::anyhow!("{text}"))).to_string());
     }
+    let lost = |pages: Pages| {
+        move |r: Result<String>| {
+            let (ok, text) = match r {
+                Ok(t) => (true, format!("the robot was lost; {t}")),
+                Err(e) => (false, format!("the robot was lost; the recording: {e:#}")),
+            };
+            broadcast(
+                &pages,
+                &serde_json::json!({ "type": "notice", "ok": ok, "text": text, "recording_finished": true }),
+            );
+        }
+    };
     if let Some((rec, dir)) = session.recording.take() {
-        let pages = pages.clone();
         finish_recording(
             rec,
             dir,
             session.period_s,
             session.target_apex_m,
             c.target().to_string(),
-            move |r| {
-                let (ok, text) = match r {
-                    Ok(t) => (true, format!("the robot was lost; {t}")),
-                    Err(e) => (false, format!("the robot was lost; the recording: {e:#}")),
-                };
-                broadcast(
-                    &pages,
-                    &serde_json::json!({ "type": "notice", "ok": ok, "text": text, "recording_finished": true }),
-                );
-            },
+            lost(pages.clone()),
         );
+    }
+    if let Some(rec) = session.planar_recording.take() {
+        finish_planar(rec, c.target().to_string(), lost(pages.clone()));
     }
     let target = c.target().clone();
     loop {
@@ -331,6 +339,8 @@ struct Session {
     record_dir: PathBuf,
     /// The recording in progress and its folder.
     recording: Option<(Streamed, PathBuf)>,
+    /// The planar machine's recording in progress.
+    planar_recording: Option<PlanarFiles>,
     /// Telemetry for the pages, sent about 30 times a second.
     batch: Vec<serde_json::Value>,
     /// The planar machine's records not yet sent to the pages.
@@ -407,7 +417,7 @@ impl Session {
                     super::status::planar_fault(t.fault),
                     t.armed,
                 ]));
-                None
+                self.planar_recording.as_mut().map(|rec| rec.record(t))
             }
             RobotMsg::Hop(h) => {
                 broadcast(
@@ -444,10 +454,11 @@ impl Session {
     /// pages say so; the cockpit, its Disarm first, goes on.
     fn check(&mut self, pages: &Pages, written: Option<Result<()>>) {
         if let Some(Err(e)) = written {
-            let dir = self
-                .recording
-                .take()
-                .map_or_else(String::new, |(_, d)| d.display().to_string());
+            let dir = match (self.recording.take(), self.planar_recording.take()) {
+                (Some((_, d)), _) => d.display().to_string(),
+                (None, Some(p)) => p.dir().display().to_string(),
+                (None, None) => String::new(),
+            };
             broadcast(
                 pages,
                 &serde_json::json!({ "type": "notice", "ok": false, "text": format!("recording into {dir} stopped: {e:#}") }),
@@ -534,7 +545,11 @@ fn robot(
         }
         if last_state.elapsed() >= Duration::from_millis(100) {
             last_state = Instant::now();
-            let recording = session.recording.as_ref().map(|(_, d)| d.as_path());
+            let recording = session
+                .recording
+                .as_ref()
+                .map(|(_, d)| d.as_path())
+                .or_else(|| session.planar_recording.as_ref().map(PlanarFiles::dir));
             broadcast(pages, &state(c, recording, session.target_apex_m, shared)?);
         }
         if last_thermal.elapsed() >= Duration::from_millis(500) {
@@ -563,6 +578,8 @@ fn robot(
             // Idle: what is recorded so far is on disk.
             None => {
                 let flushed = session.recording.as_mut().map(|(rec, _)| rec.flush());
+                session.check(pages, flushed);
+                let flushed = session.planar_recording.as_mut().map(Sink::flush);
                 session.check(pages, flushed);
             }
         }
@@ -742,11 +759,16 @@ fn run(
             }
         }
         "record-start" => {
-            if session.planar_machine {
-                bail!("the planar machine is recorded by `hopper-link record` (planar.csv and planar.png), not from the cockpit yet");
-            }
             if let Some((_, dir)) = &session.recording {
                 bail!("already recording into {}", dir.display());
+            }
+            if let Some(rec) = &session.planar_recording {
+                bail!("already recording into {}", rec.dir().display());
+            }
+            if session.planar_machine {
+                let dir = session.folder("recording");
+                session.planar_recording = Some(PlanarFiles::create(&dir, session.period_s)?);
+                return Ok(format!("recording into {}", dir.display()));
             }
             let dir = session.folder("recording");
             let parameters = super::record::all_parameters(c)?;
@@ -922,6 +944,12 @@ fn progress_capture(c: &mut Client, pages: &Pages, session: &mut Session) {
 /// thread of their own (a long recording's plot takes a while, and the
 /// link's thread must stay free for Disarm), which answers the page.
 fn stop_recording(c: &mut Client, cmd: Command, session: &mut Session) {
+    if let Some(rec) = session.planar_recording.take() {
+        finish_planar(rec, c.target().to_string(), move |result| {
+            let _ = cmd.reply.send(answer(&cmd.json, result).to_string());
+        });
+        return;
+    }
     let Some((rec, dir)) = session.recording.take() else {
         let _ = cmd
             .reply
@@ -942,6 +970,31 @@ fn stop_recording(c: &mut Client, cmd: Command, session: &mut Session) {
             let _ = cmd.reply.send(answer(&cmd.json, result).to_string());
         },
     );
+}
+
+/// Completes the planar machine's recording and draws its plot on a
+/// thread of its own, then calls `done` with its summary.
+fn finish_planar(
+    rec: PlanarFiles,
+    robot: String,
+    done: impl FnOnce(Result<String>) + Send + 'static,
+) {
+    let title = format!("the planar machine, recorded from the cockpit ({robot})");
+    std::thread::spawn(move || {
+        let dir = rec.dir().to_path_buf();
+        let result = rec.finish(&title).map(|(records, dropped, written)| {
+            format!(
+                "recorded the planar machine: {records} records, {dropped} dropped, into {}: {}",
+                dir.display(),
+                written
+                    .iter()
+                    .filter_map(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            )
+        });
+        done(result);
+    });
 }
 
 /// Completes a recording's files and draws its plot on a thread of its
