@@ -155,6 +155,17 @@ fn unsafe_value(name: &str, value: f32) -> bool {
         .any(|(p, safe)| p.name == name && value != *safe)
 }
 
+/// The answer to a host's hello: this robot's protocol version.
+pub(crate) fn send_hello<T: Tx>(tx: &mut T) {
+    send(
+        tx,
+        &RobotMsg::Hello {
+            version: PROTOCOL_VERSION,
+        },
+        false,
+    );
+}
+
 /// Frames `msg` into `tx` if it has room for it (plus one more frame when
 /// `bulk`); whether it went.
 pub(crate) fn send<T: Tx>(tx: &mut T, msg: &RobotMsg, bulk: bool) -> bool {
@@ -480,13 +491,7 @@ impl<H: HopperSlot> Endpoint<H> {
             HostMsg::Hello { .. } => {
                 // A new session: its ids start again.
                 self.memo.clear();
-                send(
-                    tx,
-                    &RobotMsg::Hello {
-                        version: PROTOCOL_VERSION,
-                    },
-                    false,
-                );
+                send_hello(tx);
                 return false;
             }
             HostMsg::Heartbeat => return false,

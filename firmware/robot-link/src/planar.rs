@@ -28,7 +28,7 @@
 //! [`crate::Endpoint`]): the simulator runs it between two periods. A
 //! board would split it the same way.
 
-use crate::endpoint::{remember, send, Memo, Memos};
+use crate::endpoint::{remember, send, send_hello, Memo, Memos};
 use crate::{refused, Tx};
 use hopper_control::arming::{ArmEvent, ArmInput, ArmState, Arming, ArmingConfig};
 use hopper_control::param::InvalidField;
@@ -40,7 +40,7 @@ use hopper_control::supervisor::{Fault, Faults};
 use hopper_protocol::vocab::{self, Refusal};
 use hopper_protocol::{
     Decoder, HostMsg, PlanarTelemetry, Request, Response, RobotMsg, Status, ThermalStatus,
-    TimingStats, PROTOCOL_VERSION,
+    TimingStats,
 };
 
 /// What the simulated machine is asked to do with its body
@@ -222,13 +222,7 @@ impl PlanarPort {
                     // A new session numbers its requests from the start
                     // again: the last session's answers are not its own.
                     self.memo.clear();
-                    send(
-                        tx,
-                        &RobotMsg::Hello {
-                            version: PROTOCOL_VERSION,
-                        },
-                        false,
-                    );
+                    send_hello(tx);
                 }
                 HostMsg::Request { id, req } if req.acts() => {
                     let known = self.memo.iter().find(|(i, _)| *i == id).map(|m| m.1);
@@ -540,7 +534,7 @@ mod tests {
     use crate::tests::VecTx;
     use hopper_control::planar::raibert::RaibertConfig;
     use hopper_control::planar::{HipDrive, TABLE_2_2_LEG_LENGTH_M};
-    use hopper_protocol::{encode, MAX_FRAME};
+    use hopper_protocol::{encode, MAX_FRAME, PROTOCOL_VERSION};
     use proptest::prelude::*;
     use std::vec::Vec;
 

@@ -2,7 +2,7 @@
 //! they arrive, and a plot of what was saved.
 
 use super::common::{get, print_written, timing_of};
-use super::stream::{progress, stream, Sink};
+use super::stream::{report_end, stream, Sink};
 use anyhow::{bail, Result};
 use hopper_link::record::Streamed;
 use hopper_link::{names, Client};
@@ -38,13 +38,7 @@ pub(crate) fn record(
     let parameters = all_parameters(c)?;
     let mut out_files = Streamed::create(out, period, &parameters)?;
     let span = (duration_s / period).round() as u64;
-    let bar = progress(span);
-    let ended = stream(c, every, span, &mut Vertical(&mut out_files), &bar)?;
-    // Stop the stream, unless the link is what ended the recording.
-    if !ended.as_ref().is_some_and(|(_, failed)| *failed) {
-        c.expect_ok(Request::Telemetry { every: 0 })?;
-    }
-    bar.finish_and_clear();
+    let ended = stream(c, every, span, &mut Vertical(&mut out_files))?;
     let title = format!("{controller} on the robot ({})", c.target());
     let (rec, written) = out_files.finish("hop.png", &title, target)?;
     let apexes = rec.apexes_m();
@@ -75,21 +69,12 @@ pub(crate) fn record(
         );
     }
     print_written(&written);
-    match ended {
-        Some((why, failed)) => {
-            let saved = format!(
-                "{:.3} s of {duration_s} s saved in {}",
-                rec.records.len() as f64 * f64::from(every) * period,
-                out.display()
-            );
-            if failed {
-                bail!("the recording ended early: {why} ({saved})")
-            }
-            println!("the recording ended early: {why} ({saved})");
-            Ok(())
-        }
-        None => Ok(()),
-    }
+    let saved = format!(
+        "{:.3} s of {duration_s} s saved in {}",
+        rec.records.len() as f64 * f64::from(every) * period,
+        out.display()
+    );
+    report_end(ended, &saved)
 }
 
 /// The vertical hopper's records, hops and faults into its files.

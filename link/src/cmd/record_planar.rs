@@ -5,10 +5,10 @@
 
 use super::common::print_written;
 use super::status::planar_fault;
-use super::stream::{progress, stream, Sink};
-use anyhow::{bail, Context, Result};
+use super::stream::{report_end, stream, Sink};
+use anyhow::{Context, Result};
 use hopper_link::Client;
-use hopper_protocol::{PlanarTelemetry, Request, RobotMsg};
+use hopper_protocol::{PlanarTelemetry, RobotMsg};
 use plotters::prelude::*;
 use std::path::{Path, PathBuf};
 
@@ -40,12 +40,7 @@ pub(crate) fn record(
 ) -> Result<()> {
     let mut files = PlanarFiles::create(out, period_s)?;
     let span = (duration_s / period_s).round() as u64;
-    let bar = progress(span);
-    let ended = stream(c, every, span, &mut files, &bar)?;
-    if !ended.as_ref().is_some_and(|(_, failed)| *failed) {
-        c.expect_ok(Request::Telemetry { every: 0 })?;
-    }
-    bar.finish_and_clear();
+    let ended = stream(c, every, span, &mut files)?;
     let title = format!("the planar machine on the robot ({})", c.target());
     let (records, dropped, written) = files.finish(&title)?;
     let seconds = records as f64 * f64::from(every) * period_s;
@@ -54,20 +49,11 @@ pub(crate) fn record(
         1.0 / (f64::from(every) * period_s),
     );
     print_written(&written);
-    match ended {
-        Some((why, failed)) => {
-            let saved = format!(
-                "{seconds:.3} s of {duration_s} s saved in {}",
-                out.display()
-            );
-            if failed {
-                bail!("the recording ended early: {why} ({saved})")
-            }
-            println!("the recording ended early: {why} ({saved})");
-            Ok(())
-        }
-        None => Ok(()),
-    }
+    let saved = format!(
+        "{seconds:.3} s of {duration_s} s saved in {}",
+        out.display()
+    );
+    report_end(ended, &saved)
 }
 
 /// The planar machine's records into `planar.csv` as they come, and

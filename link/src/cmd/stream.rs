@@ -2,7 +2,7 @@
 //! streamed into a recording until its span, the operator's Ctrl-C, or
 //! the link or the robot ends it, with its progress bar.
 
-use anyhow::Result;
+use anyhow::{bail, Result};
 use hopper_link::{names, Client};
 use hopper_protocol::{Request, RobotMsg};
 use std::io::IsTerminal;
@@ -11,7 +11,7 @@ use std::sync::{Arc, OnceLock};
 use std::time::{Duration, Instant};
 
 /// A progress bar over `span` periods, drawn on a terminal only.
-pub(crate) fn progress(span: u64) -> indicatif::ProgressBar {
+fn progress(span: u64) -> indicatif::ProgressBar {
     let bar = indicatif::ProgressBar::new(span);
     if !std::io::stderr().is_terminal() {
         bar.set_draw_target(indicatif::ProgressDrawTarget::hidden());
@@ -32,9 +32,41 @@ pub(crate) trait Sink {
 
 /// Streams telemetry every `every` periods into `sink` until `span`
 /// periods are recorded, the operator's Ctrl-C, or the link or the
-/// robot ends it: why it ended early and whether that is a failure (the
-/// link or the robot) rather than the operator's choice.
+/// robot ends it, with a progress bar on a terminal; then stops the
+/// stream, unless the link is what ended it. Why it ended early and
+/// whether that is a failure (the link or the robot) rather than the
+/// operator's choice.
 pub(crate) fn stream<S: Sink>(
+    c: &mut Client,
+    every: u16,
+    span: u64,
+    sink: &mut S,
+) -> Result<Option<(String, bool)>> {
+    let bar = progress(span);
+    let ended = stream_into(c, every, span, sink, &bar)?;
+    if !ended.as_ref().is_some_and(|(_, failed)| *failed) {
+        c.expect_ok(Request::Telemetry { every: 0 })?;
+    }
+    bar.finish_and_clear();
+    Ok(ended)
+}
+
+/// How a recording that ended early is reported, `saved` saying what was
+/// kept: an error when the link or the robot ended it, a line when the
+/// operator did.
+pub(crate) fn report_end(ended: Option<(String, bool)>, saved: &str) -> Result<()> {
+    match ended {
+        Some((why, true)) => bail!("the recording ended early: {why} ({saved})"),
+        Some((why, false)) => {
+            println!("the recording ended early: {why} ({saved})");
+            Ok(())
+        }
+        None => Ok(()),
+    }
+}
+
+/// [`stream`]'s loop.
+fn stream_into<S: Sink>(
     c: &mut Client,
     every: u16,
     span: u64,

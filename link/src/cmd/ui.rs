@@ -972,6 +972,15 @@ fn stop_recording(c: &mut Client, cmd: Command, session: &mut Session) {
     );
 }
 
+/// The files' names, `a, b, c`.
+fn file_names(paths: &[PathBuf]) -> String {
+    paths
+        .iter()
+        .filter_map(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
 /// Completes the planar machine's recording and draws its plot on a
 /// thread of its own, then calls `done` with its summary.
 fn finish_planar(
@@ -986,11 +995,7 @@ fn finish_planar(
             format!(
                 "recorded the planar machine: {records} records, {dropped} dropped, into {}: {}",
                 dir.display(),
-                written
-                    .iter()
-                    .filter_map(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
-                    .collect::<Vec<_>>()
-                    .join(", ")
+                file_names(&written)
             )
         });
         done(result);
@@ -1023,11 +1028,7 @@ fn finish_recording(
                 rec.dropped(),
                 rec.hops.len(),
                 dir.display(),
-                written
-                    .iter()
-                    .filter_map(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
-                    .collect::<Vec<_>>()
-                    .join(", ")
+                file_names(&written)
             )
         });
         done(result);
